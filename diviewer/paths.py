@@ -1,0 +1,34 @@
+"""Where the shipped shaders and assets live: inside the wheel, or beside the package in a checkout."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+_PKG = Path(__file__).resolve().parent
+
+
+@lru_cache(maxsize=None)
+def _root(name: str) -> Path:
+    for candidate in (_PKG / "_shipped" / name, _PKG.parent / name):
+        if candidate.is_dir():
+            return candidate
+    raise FileNotFoundError(f"diviewer's '{name}' folder is missing from {_PKG} (broken install?)")
+
+
+def shaders_dir() -> Path:
+    """The folder of GLSL programs, one file per program."""
+    return _root("shaders")
+
+
+def assets_dir() -> Path:
+    """The folder of shipped scenes and models."""
+    return _root("assets")
+
+
+def scenes_dir() -> Path:
+    return assets_dir() / "scenes"
+
+
+def models_dir() -> Path:
+    return assets_dir() / "models"
