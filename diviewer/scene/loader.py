@@ -1,0 +1,332 @@
+"""TOML scene files: parse, validate every field (unknown keys are errors), build a Scene."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from diviewer.errors import DiviewerError
+from diviewer.paths import scenes_dir
+from diviewer.scene import shapes
+from diviewer.scene.model import (
+    Camera, CameraRange, DirectionalLight, FrameConfig, LightRange, Material, Object, ObjectRange,
+    PointLight, Ranges, Scene,
+)
+
+
+class _Table:
+    """One TOML table being read: typed getters that name the file and field in every error."""
+
+    def __init__(self, data, path, where: str):
+        if not isinstance(data, dict):
+            raise DiviewerError(f"expected a table, got {type(data).__name__}", path=path, field=where)
+        self.data, self.path, self.where, self.used = data, path, where, set()
+
+    def _field(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def err(self, key: str, msg: str) -> DiviewerError:
+        return DiviewerError(msg, path=self.path, field=self._field(key))
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, default=None):
+        self.used.add(key)
+        return self.data.get(key, default)
+
+    def str(self, key: str, default=None, choices=None) -> str:
+        v = self.raw(key, default)
+        if v is None:
+            raise self.err(key, "missing required field")
+        if not isinstance(v, str):
+            raise self.err(key, f"expected a string, got {v!r}")
+        if choices is not None and v not in choices:
+            raise self.err(key, f"'{v}' is not one of {', '.join(choices)}")
+        return v
+
+    def num(self, key: str, default=None, lo=None, hi=None, lo_open=False, hi_open=False) -> float:
+        v = self.raw(key, default)
+        if v is None:
+            raise self.err(key, "missing required field")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.err(key, f"expected a finite number, got {v!r}")
+        v = float(v)
+        if lo is not None and (v < lo or (lo_open and v == lo)):
+            raise self.err(key, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
+        if hi is not None and (v > hi or (hi_open and v == hi)):
+            raise self.err(key, f"must be {'<' if hi_open else '<='} {hi}, got {v}")
+        return v
+
+    def vec(self, key: str, n: int = 3, default=None, lo=None, hi=None):
+        v = self.raw(key, default)
+        if v is None:
+            raise self.err(key, "missing required field")
+        if (not isinstance(v, (list, tuple)) or len(v) != n
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
+            raise self.err(key, f"expected {n} finite numbers, got {v!r}")
+        if lo is not None and min(v) < lo:
+            raise self.err(key, f"values must be >= {lo}, got {v}")
+        if hi is not None and max(v) > hi:
+            raise self.err(key, f"values must be <= {hi}, got {v}")
+        return tuple(float(x) for x in v)
+
+    def vecs(self, key: str, n: int = 3, default=None) -> tuple:
+        v = self.raw(key, default)
+        if v is None:
+            raise self.err(key, "missing required field")
+        if not isinstance(v, (list, tuple)):
+            raise self.err(key, f"expected a list of {n}-vectors, got {v!r}")
+        sub = _Table({str(i): x for i, x in enumerate(v)}, self.path, self._field(key))
+        return tuple(sub.vec(str(i), n) for i in range(len(v)))
+
+    def strs(self, key: str, default=()) -> tuple[str, ...]:
+        v = self.raw(key, default)
+        if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) for x in v):
+            raise self.err(key, f"expected a list of strings, got {v!r}")
+        return tuple(v)
+
+    def table(self, key: str, default=None) -> "_Table":
+        v = self.raw(key, default if default is not None else {})
+        return _Table(v, self.path, self._field(key))
+
+    def finish(self) -> None:
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            raise self.err(unknown[0], f"unknown key '{unknown[0]}'" + (f" (and {unknown[1:]})" if unknown[1:] else ""))
+
+
+def resolve_scene_path(scene: str | Path) -> Path:
+    """A shipped scene's name (``cornell``) or a path to a .toml file."""
+    p = Path(scene)
+    if p.suffix == ".toml" or p.exists() or len(p.parts) > 1:
+        if not p.is_file():
+            raise DiviewerError(f"scene file not found: {p}")
+        return p
+    shipped = scenes_dir() / f"{scene}.toml"
+    if not shipped.is_file():
+        names = sorted(x.stem for x in scenes_dir().glob("*.toml"))
+        raise DiviewerError(f"no shipped scene named '{scene}'; shipped scenes: {', '.join(names)}; or pass a path to a .toml file")
+    return shipped
+
+
+def load_scene(scene: str | Path) -> Scene:
+    """Load and validate a scene by shipped name or path."""
+    path = resolve_scene_path(scene)
+    blob = path.read_bytes()
+    try:
+        data = tomllib.loads(blob.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise DiviewerError(f"not valid TOML: {exc}", path=path) from exc
+    return parse_scene(data, path=path, file_hash=hashlib.sha256(blob).hexdigest())
+
+
+def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") -> Scene:
+    root = _Table(data, path, "")
+    base = path.parent if path is not None else Path.cwd()
+
+    head = root.table("scene")
+    name = head.str("name", path.stem if path else "scene")
+    exposure = head.num("exposure", 0.0, lo=-40, hi=40)
+    ambient = head.vec("ambient", 3, (0.0, 0.0, 0.0), lo=0.0)
+    head.finish()
+
+    camera = _camera(root.table("camera"))
+
+    materials: dict[str, Material] = {}
+    mats = root.table("materials")
+    for key in list(mats.data):
+        t = mats.table(key)
+        texture, tex_src = None, ""
+        if t.has("texture"):
+            tex_path = base / t.str("texture")
+            texture, tex_src = _load_texture(tex_path, path, t._field("texture")), str(tex_path)
+        materials[key] = Material(key, albedo=t.vec("albedo", 3, (0.8, 0.8, 0.8), lo=0.0, hi=1.0),
+                                  emission=t.vec("emission", 3, (0.0, 0.0, 0.0), lo=0.0),
+                                  texture=texture, texture_source=tex_src)
+        t.finish()
+    mats.finish()
+
+    meshes = {}
+    mtab = root.table("meshes")
+    for key in list(mtab.data):
+        t = mtab.table(key)
+        if t.has("file") == t.has("shape"):
+            raise t.err("shape", "a mesh needs exactly one of 'shape' (procedural) or 'file'")
+        if t.has("shape"):
+            shape = t.str("shape")
+            params = {k: t.raw(k) for k in list(t.data) if k != "shape"}
+            meshes[key] = shapes.procedural(key, shape, params, path=path, field=t.where)
+        else:
+            mesh, color, texture = shapes.load_file(key, base / t.str("file"), path=path, field=t.where)
+            meshes[key] = mesh
+            if (color is not None or texture is not None) and f"mesh:{key}" not in materials:
+                # The file's own material, used by objects that name no material.
+                materials[f"mesh:{key}"] = Material(f"mesh:{key}", albedo=color or (1.0, 1.0, 1.0), texture=texture,
+                                                    texture_source=str(base / t.data["file"]))
+        t.finish()
+    mtab.finish()
+
+    objects = []
+    raw_objects = root.raw("objects", [])
+    if not isinstance(raw_objects, list):
+        raise root.err("objects", "expected an array of tables ([[objects]])")
+    names = set()
+    for i, o in enumerate(raw_objects):
+        t = _Table(o, path, f"objects[{i}]")
+        oname = t.str("name", f"object{i}")
+        if oname in names:
+            raise t.err("name", f"duplicate object name '{oname}'")
+        names.add(oname)
+        mesh = t.str("mesh")
+        if mesh not in meshes:
+            raise t.err("mesh", f"unknown mesh '{mesh}'; meshes: {', '.join(meshes)}")
+        default_mat = f"mesh:{mesh}" if f"mesh:{mesh}" in materials else None
+        mat = t.str("material", default_mat)
+        if mat not in materials:
+            raise t.err("material", f"unknown material '{mat}'; materials: {', '.join(materials)}")
+        scale = t.vec("scale", 3, (1.0, 1.0, 1.0))
+        if min(abs(s) for s in scale) < 1e-9:
+            raise t.err("scale", f"scale must be non-zero on every axis, got {scale}")
+        objects.append(Object(oname, mesh, mat, position=t.vec("position", 3, (0.0, 0.0, 0.0)),
+                              rotation=t.vec("rotation", 3, (0.0, 0.0, 0.0)), scale=scale))
+        t.finish()
+    if not objects:
+        raise DiviewerError("a scene needs at least one object ([[objects]])", path=path, field="objects")
+
+    lights = []
+    raw_lights = root.raw("lights", [])
+    if not isinstance(raw_lights, list):
+        raise root.err("lights", "expected an array of tables ([[lights]])")
+    for i, l in enumerate(raw_lights):
+        lights.append(_light(_Table(l, path, f"lights[{i}]"), i))
+    if len({l.name for l in lights}) != len(lights):
+        raise DiviewerError("light names must be unique", path=path, field="lights")
+
+    default = FrameConfig(camera=camera, lights=tuple(lights), objects=tuple(objects))
+    ranges = _ranges(root.table("ranges"), default, meshes)
+    root.finish()
+    return Scene(name=name, path=path, file_hash=file_hash, meshes=meshes, materials=materials, default=default,
+                 ranges=ranges, exposure=exposure, ambient=ambient)
+
+
+def _camera(t: _Table) -> Camera:
+    c = Camera(position=t.vec("position", 3, (0.0, 0.0, 5.0)), target=t.vec("target", 3, (0.0, 0.0, 0.0)),
+               up=t.vec("up", 3, (0.0, 1.0, 0.0)), fov=t.num("fov", 45.0, lo=0.0, hi=180.0, lo_open=True, hi_open=True),
+               near=t.num("near", 0.05, lo=0.0, lo_open=True), far=t.num("far", 100.0, lo=0.0, lo_open=True))
+    if c.near >= c.far:
+        raise t.err("near", f"near ({c.near}) must be less than far ({c.far})")
+    d = np.subtract(c.target, c.position)
+    if np.linalg.norm(d) < 1e-9:
+        raise t.err("target", "camera target equals its position")
+    if np.linalg.norm(np.cross(d, c.up)) < 1e-9 * np.linalg.norm(d) * max(np.linalg.norm(c.up), 1e-30):
+        raise t.err("up", "camera 'up' is zero or parallel to the viewing direction")
+    t.finish()
+    return c
+
+
+def _light(t: _Table, i: int):
+    kind = t.str("type", choices=("directional", "point"))
+    name = t.str("name", f"light{i}")
+    color = t.vec("color", 3, (1.0, 1.0, 1.0), lo=0.0)
+    if kind == "directional":
+        direction = t.vec("direction", 3)
+        if np.linalg.norm(direction) < 1e-9:
+            raise t.err("direction", "direction must be non-zero")
+        light = DirectionalLight(name, direction=tuple(float(x) for x in np.divide(direction, np.linalg.norm(direction))),
+                                 color=color, irradiance=t.num("irradiance", 1.0, lo=0.0))
+    else:
+        light = PointLight(name, position=t.vec("position", 3), color=color, intensity=t.num("intensity", 1.0, lo=0.0))
+    t.finish()
+    return light
+
+
+def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
+    lights, objects, camera = {}, {}, None
+    lt = t.table("lights")
+    known_lights = {l.name for l in default.lights}
+    for key in list(lt.data):
+        if key not in known_lights:
+            raise lt.err(key, f"no light named '{key}'")
+        r = lt.table(key)
+        angle = r.vec("angle", 2, (0.0, 0.0))
+        inten = r.vec("intensity", 2, (1.0, 1.0), lo=0.0)
+        if angle[0] > angle[1] or inten[0] > inten[1]:
+            raise r.err("angle", "ranges are [min, max] with min <= max")
+        if inten[0] <= 0.0:
+            raise r.err("intensity", "the intensity multiplier range must be positive (drawn log-uniformly)")
+        lights[key] = LightRange(axis=r.vec("axis", 3, (0.0, 1.0, 0.0)), angle=angle, intensity=inten)
+        r.finish()
+    lt.finish()
+    ot = t.table("objects")
+    known_objects = {o.name for o in default.objects}
+    for key in list(ot.data):
+        if key not in known_objects:
+            raise ot.err(key, f"no object named '{key}'")
+        r = ot.table(key)
+        train, test = r.strs("train_meshes"), r.strs("test_meshes")
+        for field_name, lst in (("train_meshes", train), ("test_meshes", test)):
+            for m in lst:
+                if m not in meshes:
+                    raise r.err(field_name, f"unknown mesh '{m}'")
+        if set(train) & set(test):
+            raise r.err("test_meshes", f"meshes in both train and test: {sorted(set(train) & set(test))}")
+        offset = r.vecs("offset", 3) if r.has("offset") else None
+        if offset is not None and len(offset) != 2:
+            raise r.err("offset", "expected [[min x, y, z], [max x, y, z]]")
+        objects[key] = ObjectRange(axes=r.vecs("axes", 3, []), angle=r.vec("angle", 2, (0.0, 360.0)),
+                                   offset=offset, train_meshes=train, test_meshes=test)
+        r.finish()
+    ot.finish()
+    if t.has("camera"):
+        r = t.table("camera")
+        positions, targets = r.vecs("positions", 3), r.vecs("targets", 3)
+        if len(positions) < 2 or len(positions) != len(targets):
+            raise r.err("positions", "a camera path needs at least 2 keyframes and as many targets as positions")
+        stretches = r.vecs("test_stretches", 2, [])
+        for a, b in stretches:
+            if not 0.0 <= a < b <= 1.0:
+                raise r.err("test_stretches", f"each stretch is [start, end] with 0 <= start < end <= 1, got {[a, b]}")
+        camera = CameraRange(positions=positions, targets=targets, closed=bool(r.raw("closed", False)),
+                             test_stretches=stretches)
+        r.finish()
+    t.finish()
+    return Ranges(lights=lights, objects=objects, camera=camera)
+
+
+def _load_texture(file: Path, path, field: str) -> np.ndarray:
+    from PIL import Image
+
+    if not file.is_file():
+        raise DiviewerError(f"texture file not found: {file}", path=path, field=field)
+    try:
+        img = Image.open(file).convert("RGB")
+    except Exception as exc:
+        raise DiviewerError(f"cannot read texture {file}: {exc}", path=path, field=field) from exc
+    return shapes.srgb_to_linear(np.asarray(img, dtype=np.float32) / 255.0).astype(np.float32)
+
+
+def config_from_dict(scene: Scene, data: dict, *, path=None) -> FrameConfig:
+    """Rebuild a FrameConfig written by FrameConfig.to_dict, checked against the scene."""
+    t = _Table(data, path, "")
+    camera = _camera(t.table("camera"))
+    lights = []
+    for i, l in enumerate(t.raw("lights", [])):
+        lights.append(_light(_Table(l, path, f"lights[{i}]"), i))
+    objects = []
+    for i, o in enumerate(t.raw("objects", [])):
+        ot = _Table(o, path, f"objects[{i}]")
+        mesh, mat = ot.str("mesh"), ot.str("material")
+        if mesh not in scene.meshes:
+            raise ot.err("mesh", f"scene '{scene.name}' has no mesh '{mesh}'")
+        if mat not in scene.materials:
+            raise ot.err("material", f"scene '{scene.name}' has no material '{mat}'")
+        objects.append(Object(ot.str("name"), mesh, mat, position=ot.vec("position"), rotation=ot.vec("rotation"),
+                              scale=ot.vec("scale")))
+        ot.finish()
+    t.finish()
+    return FrameConfig(camera=camera, lights=tuple(lights), objects=tuple(objects))

@@ -1,0 +1,233 @@
+"""Scene data: frozen dataclasses with no GL and no torch; a frame's state is a FrameConfig."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Union
+
+import numpy as np
+
+from diviewer.scene import camera as cam
+
+Vec3 = tuple[float, float, float]
+
+
+def _vec3(v) -> Vec3:
+    return tuple(float(x) for x in v)  # type: ignore[return-value]
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """Triangle geometry in object space, with per-vertex normals (creases already split)."""
+
+    name: str
+    """Key of this mesh in the scene's mesh library."""
+    vertices: np.ndarray
+    """(N, 3) float32 positions."""
+    normals: np.ndarray
+    """(N, 3) float32 unit normals."""
+    faces: np.ndarray
+    """(M, 3) uint32 vertex indices, counter-clockwise seen from outside."""
+    uvs: np.ndarray | None = None
+    """(N, 2) float32 texture coordinates, or None."""
+    source: str = ""
+    """Where it came from: a procedural shape name or a file path (for messages and reports)."""
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) object-space bounding box."""
+        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+
+@dataclass(frozen=True, eq=False)
+class Material:
+    """A diffuse (Lambertian) material, optionally textured and emissive."""
+
+    name: str
+    albedo: Vec3 = (0.8, 0.8, 0.8)
+    """Diffuse reflectance (linear RGB, each in [0, 1]); multiplies the texture when there is one."""
+    emission: Vec3 = (0.0, 0.0, 0.0)
+    """Emitted radiance (linear RGB, W/(m^2 sr)); zero for non-emitters."""
+    texture: np.ndarray | None = None
+    """(H, W, 3) float32 linear base-colour texture, top row first, or None."""
+    texture_source: str = ""
+    """The file the texture came from."""
+
+    @property
+    def is_emissive(self) -> bool:
+        return max(self.emission) > 0.0
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera; see diviewer.scene.camera for the conventions."""
+
+    position: Vec3 = (0.0, 0.0, 5.0)
+    target: Vec3 = (0.0, 0.0, 0.0)
+    up: Vec3 = (0.0, 1.0, 0.0)
+    fov: float = 45.0
+    """Vertical field of view in degrees, in (0, 180)."""
+    near: float = 0.05
+    far: float = 100.0
+
+    def view_matrix(self) -> np.ndarray:
+        return cam.look_at(self.position, self.target, self.up)
+
+    def projection(self, aspect: float) -> np.ndarray:
+        return cam.perspective(self.fov, aspect, self.near, self.far)
+
+
+@dataclass(frozen=True)
+class DirectionalLight:
+    """A distant light (the sun): irradiance ``irradiance * color`` on a surface facing it."""
+
+    name: str
+    direction: Vec3 = (0.0, -1.0, 0.0)
+    """Direction in which the light travels (from the light into the scene), world space."""
+    color: Vec3 = (1.0, 1.0, 1.0)
+    irradiance: float = 1.0
+    """Irradiance (W/m^2) on a surface perpendicular to the light; >= 0."""
+    kind: str = field(default="directional", init=False)
+
+
+@dataclass(frozen=True)
+class PointLight:
+    """An isotropic point light of radiant intensity ``intensity * color`` (W/sr)."""
+
+    name: str
+    position: Vec3 = (0.0, 1.0, 0.0)
+    color: Vec3 = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+    """Radiant intensity (W/sr); >= 0."""
+    kind: str = field(default="point", init=False)
+
+
+Light = Union[DirectionalLight, PointLight]
+
+
+@dataclass(frozen=True)
+class Object:
+    """An instance of a mesh with a material and a pose (translate @ rotate xyz @ scale)."""
+
+    name: str
+    mesh: str
+    """Key in Scene.meshes."""
+    material: str
+    """Key in Scene.materials."""
+    position: Vec3 = (0.0, 0.0, 0.0)
+    rotation: Vec3 = (0.0, 0.0, 0.0)
+    """Euler angles in degrees, applied about x, then y, then z."""
+    scale: Vec3 = (1.0, 1.0, 1.0)
+
+    def matrix(self) -> np.ndarray:
+        return cam.trs(self.position, self.rotation, self.scale)
+
+
+@dataclass(frozen=True)
+class LightRange:
+    """How the sampler may move one light."""
+
+    axis: Vec3 = (0.0, 1.0, 0.0)
+    """The light's direction (or position, about the scene centre) rotates about this axis."""
+    angle: tuple[float, float] = (0.0, 0.0)
+    """Rotation range in degrees."""
+    intensity: tuple[float, float] = (1.0, 1.0)
+    """Multiplier of the light's irradiance/intensity, drawn log-uniformly."""
+
+
+@dataclass(frozen=True)
+class ObjectRange:
+    """How the sampler may move one object and which meshes it may wear."""
+
+    axes: tuple[Vec3, ...] = ()
+    """The object rotates about each of these axes by an angle drawn from ``angle``."""
+    angle: tuple[float, float] = (0.0, 360.0)
+    offset: tuple[Vec3, Vec3] | None = None
+    """Box (min, max) of translations added to the object's position, or None."""
+    train_meshes: tuple[str, ...] = ()
+    """Meshes the object may wear in training and validation frames."""
+    test_meshes: tuple[str, ...] = ()
+    """Meshes only test frames use: never seen in training."""
+
+
+@dataclass(frozen=True)
+class CameraRange:
+    """The camera path (keyframes, interpolated) and which stretches of it are held out for test."""
+
+    positions: tuple[Vec3, ...] = ()
+    targets: tuple[Vec3, ...] = ()
+    closed: bool = False
+    """Whether the path loops back to its first keyframe."""
+    test_stretches: tuple[tuple[float, float], ...] = ()
+    """Intervals of the path parameter in [0, 1] used only for test frames."""
+
+
+@dataclass(frozen=True)
+class Ranges:
+    """Everything the sampler may vary, declared by the scene file."""
+
+    lights: dict[str, LightRange] = field(default_factory=dict)
+    objects: dict[str, ObjectRange] = field(default_factory=dict)
+    camera: CameraRange | None = None
+
+
+@dataclass(frozen=True)
+class FrameConfig:
+    """The state of one frame: camera, lights and object poses. Rendering needs Scene + FrameConfig."""
+
+    camera: Camera
+    lights: tuple[Light, ...]
+    objects: tuple[Object, ...]
+
+    def to_dict(self) -> dict:
+        def light(l):
+            d = dataclasses.asdict(l)
+            d["type"] = d.pop("kind")
+            return d
+
+        return {
+            "camera": dataclasses.asdict(self.camera),
+            "lights": [light(l) for l in self.lights],
+            "objects": [dataclasses.asdict(o) for o in self.objects],
+        }
+
+    def replace_light(self, name: str, **changes) -> "FrameConfig":
+        return dataclasses.replace(
+            self, lights=tuple(dataclasses.replace(l, **changes) if l.name == name else l for l in self.lights)
+        )
+
+    def replace_object(self, name: str, **changes) -> "FrameConfig":
+        return dataclasses.replace(
+            self, objects=tuple(dataclasses.replace(o, **changes) if o.name == name else o for o in self.objects)
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A loaded scene: the mesh and material libraries, the default frame, and the sampling ranges."""
+
+    name: str
+    path: Path | None
+    file_hash: str
+    """sha256 of the scene file's bytes (models and datasets record it)."""
+    meshes: dict[str, Mesh]
+    materials: dict[str, Material]
+    default: FrameConfig
+    ranges: Ranges = field(default_factory=Ranges)
+    exposure: float = 0.0
+    """Display exposure in stops (EV) used by the composite pass."""
+    ambient: Vec3 = (0.0, 0.0, 0.0)
+    """Constant background radiance seen where no geometry is (the sky); black by default."""
+
+    def bounds(self, config: FrameConfig | None = None) -> np.ndarray:
+        """(2, 3) world-space bounding box of the objects in a frame."""
+        config = config or self.default
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for o in config.objects:
+            b = self.meshes[o.mesh].bounds
+            corners = np.array([[b[i, 0], b[j, 1], b[k, 2], 1.0] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+            w = (o.matrix() @ corners.T).T[:, :3]
+            lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
+        return np.stack([lo, hi])

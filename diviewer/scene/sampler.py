@@ -1,0 +1,128 @@
+"""Seeded configuration sampling from the ranges a scene file declares, and camera paths."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from diviewer.scene import camera as cam
+from diviewer.scene.model import CameraRange, DirectionalLight, FrameConfig, PointLight, Scene
+
+SPLITS = ("train", "val", "test")
+
+
+def matrix_to_euler_xyz(r: np.ndarray) -> tuple[float, float, float]:
+    """Euler angles (degrees) with ``euler_xyz(angles) == r`` for a rotation matrix r = Rz Ry Rx."""
+    sy = -float(np.clip(r[2, 0], -1.0, 1.0))
+    ay = math.asin(sy)
+    if abs(sy) < 1.0 - 1e-9:
+        ax = math.atan2(r[2, 1], r[2, 2])
+        az = math.atan2(r[1, 0], r[0, 0])
+    else:  # gimbal lock: put all of the remaining rotation into x
+        az = 0.0
+        ax = math.atan2(-r[1, 2], r[1, 1])
+    return (math.degrees(ax), math.degrees(ay), math.degrees(az))
+
+
+def _catmull_rom(points: np.ndarray, s: float, closed: bool) -> np.ndarray:
+    """Point at parameter s in [0, 1] on a uniform Catmull-Rom spline through ``points``."""
+    n = len(points)
+    segments = n if closed else n - 1
+    x = min(max(s, 0.0), 1.0) * segments
+    i = min(int(x), segments - 1)
+    t = x - i
+
+    def p(k):
+        return points[k % n] if closed else points[min(max(k, 0), n - 1)]
+
+    p0, p1, p2, p3 = p(i - 1), p(i), p(i + 1), p(i + 2)
+    return 0.5 * ((2 * p1) + (-p0 + p2) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t * t + (-p0 + 3 * p1 - 3 * p2 + p3) * t ** 3)
+
+
+def camera_on_path(scene: Scene, s: float):
+    """The default camera moved to parameter s in [0, 1] of the scene's camera path."""
+    path = scene.ranges.camera
+    if path is None:
+        return scene.default.camera
+    pos = _catmull_rom(np.asarray(path.positions), s, path.closed)
+    tgt = _catmull_rom(np.asarray(path.targets), s, path.closed)
+    return dataclasses.replace(scene.default.camera, position=tuple(map(float, pos)), target=tuple(map(float, tgt)))
+
+
+def in_test_stretch(path: CameraRange, s: float) -> bool:
+    return any(a <= s <= b for a, b in path.test_stretches)
+
+
+def _draw_path_parameter(rng: np.random.Generator, path: CameraRange, split: str) -> float:
+    """Train frames avoid the test stretches, test frames lie inside them, validation uses both."""
+    if split == "val" or not path.test_stretches:
+        return float(rng.uniform(0.0, 1.0))
+    test = path.test_stretches
+    if split == "test":
+        lengths = np.array([b - a for a, b in test])
+        k = rng.choice(len(test), p=lengths / lengths.sum())
+        return float(rng.uniform(*test[k]))
+    # train: the complement of the test stretches
+    edges = sorted(test)
+    gaps, start = [], 0.0
+    for a, b in edges:
+        if a > start:
+            gaps.append((start, a))
+        start = max(start, b)
+    if start < 1.0:
+        gaps.append((start, 1.0))
+    lengths = np.array([b - a for a, b in gaps])
+    k = rng.choice(len(gaps), p=lengths / lengths.sum())
+    a, b = gaps[k]
+    # open interval: the test stretch's end points belong to test
+    return float(a + (b - a) * rng.uniform(1e-6, 1.0 - 1e-6))
+
+
+def sample_config(scene: Scene, seed: int, split: str = "train") -> FrameConfig:
+    """One configuration drawn from the scene's ranges; the same (scene, seed, split) gives the same one."""
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    rng = np.random.default_rng([int(seed), SPLITS.index(split)])
+    config = scene.default
+    centre = scene.bounds().mean(axis=0)
+
+    lights = []
+    for light in config.lights:
+        r = scene.ranges.lights.get(light.name)
+        if r is None:
+            lights.append(light)
+            continue
+        rot = cam.axis_angle(r.axis, float(rng.uniform(*r.angle)))
+        scale = float(math.exp(rng.uniform(math.log(r.intensity[0]), math.log(r.intensity[1]))))
+        if isinstance(light, DirectionalLight):
+            d = rot @ np.asarray(light.direction)
+            lights.append(dataclasses.replace(light, direction=tuple(map(float, d / np.linalg.norm(d))),
+                                              irradiance=light.irradiance * scale))
+        else:
+            assert isinstance(light, PointLight)
+            p = centre + rot @ (np.asarray(light.position) - centre)
+            lights.append(dataclasses.replace(light, position=tuple(map(float, p)), intensity=light.intensity * scale))
+
+    objects = []
+    for obj in config.objects:
+        r = scene.ranges.objects.get(obj.name)
+        if r is None:
+            objects.append(obj)
+            continue
+        choices = r.test_meshes if (split == "test" and r.test_meshes) else r.train_meshes
+        mesh = str(rng.choice(choices)) if choices else obj.mesh
+        rot = cam.euler_xyz(obj.rotation)
+        for axis in r.axes:
+            rot = cam.axis_angle(axis, float(rng.uniform(*r.angle))) @ rot
+        pos = np.asarray(obj.position)
+        if r.offset is not None:
+            pos = pos + rng.uniform(r.offset[0], r.offset[1])
+        objects.append(dataclasses.replace(obj, mesh=mesh, rotation=matrix_to_euler_xyz(rot),
+                                           position=tuple(map(float, pos))))
+
+    camera = config.camera
+    if scene.ranges.camera is not None:
+        camera = camera_on_path(scene, _draw_path_parameter(rng, scene.ranges.camera, split))
+    return FrameConfig(camera=camera, lights=tuple(lights), objects=tuple(objects))
