@@ -45,9 +45,11 @@ def main() -> None:
         "[meshes.cloth_z]", 'shape = "box"', "size = [0.04, 2.4, 1.4]", "",
     ]
 
-    def obj(name, mesh, mat, pos):
+    def obj(name, mesh, mat, pos, rotation=None):
         lines.extend(["[[objects]]", f'name = "{name}"', f'mesh = "{mesh}"', f'material = "{mat}"',
                       f"position = [{pos[0]:.3f}, {pos[1]:.3f}, {pos[2]:.3f}]"])
+        if rotation:
+            lines.append(f"rotation = [{rotation[0]:.1f}, {rotation[1]:.1f}, {rotation[2]:.1f}]")
 
     obj("ground", "ground", "paving", (0.0, -0.1, 0.0))
     for sx, name in ((1, "n"), (-1, "s")):
@@ -59,15 +61,16 @@ def main() -> None:
             obj(f"slab{storey}_{name}", "slab_x", "stone", (0.0, y, s * (HALF + DEPTH / 2)))
         for s, name in ((1, "e"), (-1, "w")):
             obj(f"slab{storey}_{name}", "slab_z", "stone", (s * (HALF + DEPTH / 2), y, 0.0))
+    upright = (90.0, 0.0, 0.0)  # trimesh cylinders run along z
     cols = [-HALF + 2 * HALF * i / (COLUMNS - 1) for i in range(COLUMNS)]
     for storey in (0, 1):
         y = storey * STOREY + (STOREY - SLAB) / 2
         for i, c in enumerate(cols):
-            obj(f"col{storey}_n{i}", "column", "stone", (c, y, HALF))
-            obj(f"col{storey}_s{i}", "column", "stone", (c, y, -HALF))
+            obj(f"col{storey}_n{i}", "column", "stone", (c, y, HALF), upright)
+            obj(f"col{storey}_s{i}", "column", "stone", (c, y, -HALF), upright)
             if 0 < i < COLUMNS - 1:
-                obj(f"col{storey}_e{i}", "column", "stone", (HALF, y, c))
-                obj(f"col{storey}_w{i}", "column", "stone", (-HALF, y, c))
+                obj(f"col{storey}_e{i}", "column", "stone", (HALF, y, c), upright)
+                obj(f"col{storey}_w{i}", "column", "stone", (-HALF, y, c), upright)
     # Cloth hangs from the upper gallery's edge, between the upper columns.
     colours = ["cloth_red", "cloth_blue", "cloth_yellow", "cloth_green"]
     y = 2 * STOREY - SLAB - 1.2

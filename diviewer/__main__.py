@@ -1,0 +1,5 @@
+import sys
+
+from diviewer.cli import main
+
+sys.exit(main())

@@ -1,0 +1,37 @@
+"""The one place GL contexts are created: EGL standalone (headless) or a GLFW window's."""
+
+from __future__ import annotations
+
+import moderngl
+
+from diviewer.errors import DiviewerError
+
+GL_VERSION = 430
+
+
+def create_context(backend: str = "egl") -> moderngl.Context:
+    """A moderngl context of at least OpenGL 4.3 core.
+
+    Args:
+        backend: ``"egl"`` for a headless standalone context, ``"window"`` to wrap the context
+            current on this thread (a GLFW window's).
+    """
+    try:
+        if backend == "window":
+            ctx = moderngl.create_context(require=GL_VERSION)
+        elif backend == "egl":
+            ctx = moderngl.create_context(standalone=True, backend="egl", require=GL_VERSION)
+        else:
+            raise ValueError(f"unknown GL backend {backend!r}")
+    except DiviewerError:
+        raise
+    except Exception as exc:
+        raise DiviewerError(
+            f"cannot create an OpenGL {GL_VERSION // 100}.{GL_VERSION // 10 % 10} context ({backend}): {exc}. "
+            "Headless rendering needs EGL with Mesa (Debian: apt-get install libegl1 libgl1-mesa-dri)"
+        ) from exc
+    return ctx
+
+
+def describe(ctx: moderngl.Context) -> str:
+    return f"{ctx.info['GL_RENDERER']} / OpenGL {ctx.info['GL_VERSION']}"

@@ -1,0 +1,327 @@
+"""The deferred GL renderer: named passes (shadow, G-buffer, direct, composite); a frame is named buffers."""
+
+from __future__ import annotations
+
+import math
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from diviewer.gl.resources import GpuScene, set_uniform
+from diviewer.gl.shaders import ShaderCache
+from diviewer.scene import camera as cam
+from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
+
+BUFFERS = ("depth", "normal", "albedo", "direct")
+"""The buffers a frame returns, in the network's input order."""
+
+TONEMAPS = {"clamp": 0, "reinhard": 1, "aces": 2}
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """Settings of the GL renderer (recorded with every capture and benchmark)."""
+
+    shadows: bool = True
+    """Shadow-map the lights; off gives unshadowed Lambert."""
+    shadow_size: int = 2048
+    """Directional shadow map resolution (texels per side); point lights use this per cube face / 2."""
+    pcf_radius: int = 1
+    """PCF kernel radius: (2r+1)^2 taps."""
+    bias: float = 0.5
+    """Constant depth bias, in shadow-map texels."""
+    slope_bias: float = 1.0
+    """Slope-scaled bias, in texels per unit tan(theta) (theta: angle of incidence)."""
+    normal_offset: float = 1.5
+    """Offset of the lookup point along the surface normal, in shadow-map texels."""
+
+
+def _fit_directional(bounds: np.ndarray, direction) -> tuple[np.ndarray, float, float]:
+    """Light view-projection covering the scene's bounding sphere; also the texel-free extents."""
+    centre = bounds.mean(axis=0)
+    radius = max(float(np.linalg.norm(bounds[1] - bounds[0])) / 2.0, 1e-6)
+    d = cam.normalize(direction)
+    up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
+    eye = centre - d * 2.0 * radius
+    view = cam.look_at(eye, centre, up)
+    near, far = 0.5 * radius, 3.5 * radius
+    return cam.orthographic(radius, radius, near, far) @ view, 2.0 * radius, far - near
+
+
+# Cube-face (forward, up) pairs for point-light shadows; the lookup uses the same matrices.
+_FACES = (((1, 0, 0), (0, -1, 0)), ((-1, 0, 0), (0, -1, 0)), ((0, 1, 0), (0, 0, 1)),
+          ((0, -1, 0), (0, 0, -1)), ((0, 0, 1), (0, -1, 0)), ((0, 0, -1), (0, -1, 0)))
+
+
+def _point_faces(position, bounds: np.ndarray) -> np.ndarray:
+    p = np.asarray(position, dtype=np.float64)
+    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    far = float(np.linalg.norm(corners - p, axis=1).max()) * 1.01 + 1e-3
+    near = max(far * 1e-4, 1e-4)
+    proj = cam.perspective(90.0, 1.0, near, far)
+    return np.stack([proj @ cam.look_at(p, p + np.array(f), u) for f, u in _FACES])
+
+
+class Renderer:
+    """Renders a Scene's frames at a fixed resolution; textures stay on the GPU until read."""
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene, width: int, height: int,
+                 settings: RenderSettings = RenderSettings(), shaders: ShaderCache | None = None):
+        self.ctx, self.scene, self.settings = ctx, scene, settings
+        self.shaders = shaders or ShaderCache(ctx)
+        self.gpu = GpuScene(ctx, scene.meshes, scene.materials)
+        self._screen_vaos: dict[int, moderngl.VertexArray] = {}
+        self.timings: dict[str, float] = {}
+        self.timing = False
+        self._shadow_dir = ctx.depth_texture((settings.shadow_size, settings.shadow_size))
+        self._shadow_dir.compare_func = "<="
+        self._shadow_dir.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self._shadow_dir.repeat_x = self._shadow_dir.repeat_y = False
+        self._shadow_dir_fbo = ctx.framebuffer(depth_attachment=self._shadow_dir)
+        face = max(settings.shadow_size // 2, 16)
+        self._face_size = face
+        self._shadow_pt = ctx.texture((3 * face, 2 * face), 1, dtype="f4")
+        self._shadow_pt.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._shadow_pt_depth = ctx.depth_renderbuffer((3 * face, 2 * face))
+        self._shadow_pt_fbo = ctx.framebuffer([self._shadow_pt], self._shadow_pt_depth)
+        self.width = self.height = 0
+        self.resize(width, height)
+
+    # --- resources ------------------------------------------------------------------------------
+    def resize(self, width: int, height: int) -> None:
+        """(Re)allocate the screen-sized targets."""
+        if (width, height) == (self.width, self.height):
+            return
+        if width < 1 or height < 1:
+            raise ValueError(f"render size must be at least 1x1, got {width}x{height}")
+        if self.width:
+            self._release_targets()
+        self.width, self.height = width, height
+        size = (width, height)
+        ctx = self.ctx
+        self.textures = {
+            "depth": ctx.texture(size, 1, dtype="f4"),
+            "normal": ctx.texture(size, 4, dtype="f4"),
+            "albedo": ctx.texture(size, 4, dtype="f4"),
+            "emission": ctx.texture(size, 4, dtype="f4"),
+            "direct": ctx.texture(size, 4, dtype="f4"),
+        }
+        for t in self.textures.values():
+            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._zbuffer = ctx.depth_renderbuffer(size)
+        self._gbuffer_fbo = ctx.framebuffer(
+            [self.textures[k] for k in ("depth", "normal", "albedo", "emission")], self._zbuffer)
+        self._direct_fbo = ctx.framebuffer([self.textures["direct"]])
+
+    def _release_targets(self) -> None:
+        for t in self.textures.values():
+            t.release()
+        self._zbuffer.release()
+        self._gbuffer_fbo.release()
+        self._direct_fbo.release()
+
+    def release(self) -> None:
+        self._release_targets()
+        for r in (self._shadow_dir_fbo, self._shadow_dir, self._shadow_pt_fbo, self._shadow_pt, self._shadow_pt_depth,
+                  *self._screen_vaos.values()):
+            r.release()
+        self.gpu.release()
+
+    # --- passes ---------------------------------------------------------------------------------
+    @contextmanager
+    def _timed(self, name: str):
+        if not self.timing:
+            yield
+            return
+        self.ctx.finish()
+        t0 = time.perf_counter()
+        yield
+        self.ctx.finish()
+        self.timings[name] = self.timings.get(name, 0.0) + (time.perf_counter() - t0) * 1000.0
+
+    def render(self, config: FrameConfig | None = None) -> dict[str, moderngl.Texture]:
+        """Render one frame; returns the named textures (depth, normal, albedo, emission, direct)."""
+        config = config or self.scene.default
+        self.timings = {}
+        aspect = self.width / self.height
+        view = config.camera.view_matrix()
+        proj = config.camera.projection(aspect)
+        with self._timed("gbuffer"):
+            self._gbuffer_pass(config, view, proj)
+        bounds = self.scene.bounds(config)
+        self._direct_fbo.use()
+        self._direct_fbo.clear(0.0, 0.0, 0.0, 0.0)
+        for light in config.lights:
+            with self._timed("shadows"):
+                shadow = self._shadow_pass(config, light, bounds) if self.settings.shadows else None
+            with self._timed("direct"):
+                self._light_pass(config, light, view, shadow)
+        with self._timed("direct"):
+            self._emission_pass()
+        return self.textures
+
+    def _draw_objects(self, prog: moderngl.Program, config: FrameConfig, view: np.ndarray | None) -> None:
+        for obj in config.objects:
+            model = obj.matrix()
+            set_uniform(prog, "m_model", model)
+            if view is not None:
+                set_uniform(prog, "m_normal", cam.normal_matrix(view @ model))
+                mat = self.scene.materials[obj.material]
+                set_uniform(prog, "u_albedo", tuple(mat.albedo))
+                set_uniform(prog, "u_emission", tuple(mat.emission))
+                tex = self.gpu.textures.get(obj.material)
+                set_uniform(prog, "u_has_texture", tex is not None)
+                if tex is not None:
+                    tex.use(location=0)
+                    set_uniform(prog, "u_albedo_map", 0)
+            self.gpu.meshes[obj.mesh].vao(prog).render(moderngl.TRIANGLES)
+
+    def _gbuffer_pass(self, config: FrameConfig, view: np.ndarray, proj: np.ndarray) -> None:
+        ctx = self.ctx
+        self._gbuffer_fbo.use()
+        self._gbuffer_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        ctx.enable_only(moderngl.DEPTH_TEST)
+        prog = self.shaders.program("gbuffer.glsl")
+        set_uniform(prog, "m_proj", proj)
+        set_uniform(prog, "m_view", view)
+        self._draw_objects(prog, config, view)
+
+    def _shadow_pass(self, config: FrameConfig, light, bounds: np.ndarray) -> dict:
+        ctx = self.ctx
+        ctx.enable_only(moderngl.DEPTH_TEST)
+        if isinstance(light, DirectionalLight):
+            m_light, extent, depth_range = _fit_directional(bounds, light.direction)
+            self._shadow_dir_fbo.use()
+            self._shadow_dir_fbo.clear(depth=1.0)
+            prog = self.shaders.program("shadow.glsl")
+            set_uniform(prog, "m_light", m_light)
+            self._draw_objects(prog, config, None)
+            return {"m_light": m_light, "texel_world": extent / self.settings.shadow_size, "depth_range": depth_range}
+        faces = _point_faces(light.position, bounds)
+        self._shadow_pt_fbo.use()
+        self._shadow_pt_fbo.clear(1e30, 1e30, 1e30, 1e30, depth=1.0)
+        prog = self.shaders.program("shadow.glsl", {"POINT_LIGHT": 1})
+        set_uniform(prog, "u_light_pos", tuple(light.position))
+        s = self._face_size
+        for i, m in enumerate(faces):
+            self._shadow_pt_fbo.viewport = ((i % 3) * s, (i // 3) * s, s, s)
+            set_uniform(prog, "m_light", m)
+            self._draw_objects(prog, config, None)
+        self._shadow_pt_fbo.viewport = (0, 0, 3 * s, 2 * s)
+        return {"faces": faces}
+
+    def _screen_program(self, defines: dict) -> moderngl.Program:
+        prog = self.shaders.program("direct.glsl", defines)
+        for i, name in enumerate(("depth", "normal", "albedo", "emission")):
+            self.textures[name].use(location=i)
+            set_uniform(prog, f"u_{name}", i)
+        return prog
+
+    def _fullscreen(self, prog: moderngl.Program) -> None:
+        """Draw the one-triangle screen cover (shaders/fullscreen.glsl) with ``prog``."""
+        if prog.glo not in self._screen_vaos:
+            self._screen_vaos[prog.glo] = self.ctx.vertex_array(prog, [])
+        self._screen_vaos[prog.glo].render(moderngl.TRIANGLES, vertices=3)
+
+    def _light_pass(self, config: FrameConfig, light, view: np.ndarray, shadow: dict | None) -> None:
+        ctx = self.ctx
+        self._direct_fbo.use()
+        ctx.enable_only(moderngl.BLEND)
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        directional = isinstance(light, DirectionalLight)
+        prog = self._screen_program({"DIRECTIONAL": 1} if directional else {"POINT_LIGHT": 1})
+        t = math.tan(math.radians(config.camera.fov) / 2.0)
+        set_uniform(prog, "m_inv_view", cam.view_to_world(view))
+        set_uniform(prog, "u_tan_half_fov", (t * self.width / self.height, t))
+        s = self.settings
+        set_uniform(prog, "u_shadows", shadow is not None)
+        set_uniform(prog, "u_pcf_radius", int(s.pcf_radius))
+        set_uniform(prog, "u_bias", float(s.bias))
+        set_uniform(prog, "u_slope_bias", float(s.slope_bias))
+        set_uniform(prog, "u_normal_offset", float(s.normal_offset))
+        if directional:
+            set_uniform(prog, "u_light_color", tuple(float(c) * light.irradiance for c in light.color))
+            set_uniform(prog, "u_light_dir", tuple(light.direction))
+            if shadow is not None:
+                self._shadow_dir.use(location=4)
+                set_uniform(prog, "u_shadow_map", 4)
+                set_uniform(prog, "m_light", shadow["m_light"])
+                set_uniform(prog, "u_texel_world", float(shadow["texel_world"]))
+                set_uniform(prog, "u_depth_range", float(shadow["depth_range"]))
+        else:
+            assert isinstance(light, PointLight)
+            set_uniform(prog, "u_light_color", tuple(float(c) * light.intensity for c in light.color))
+            set_uniform(prog, "u_light_pos", tuple(light.position))
+            if shadow is not None:
+                self._shadow_pt.use(location=4)
+                set_uniform(prog, "u_shadow_atlas", 4)
+                set_uniform(prog, "m_faces", shadow["faces"])
+                set_uniform(prog, "u_face_size", float(self._face_size))
+        self._fullscreen(prog)
+        ctx.disable(moderngl.BLEND)
+
+    def _emission_pass(self) -> None:
+        ctx = self.ctx
+        self._direct_fbo.use()
+        ctx.enable_only(moderngl.BLEND)
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        self._fullscreen(self._screen_program({"EMISSION": 1}))
+        ctx.disable(moderngl.BLEND)
+
+    # --- read-back ------------------------------------------------------------------------------
+    def read(self, name: str) -> np.ndarray:
+        """A buffer as float32, top row first: depth (H, W), the others (H, W, 3)."""
+        tex = self.textures[name]
+        comps = 1 if name == "depth" else 3
+        raw = np.frombuffer(tex.read(), dtype="f4").reshape(self.height, self.width, tex.components)
+        return np.ascontiguousarray(np.flipud(raw[..., 0] if comps == 1 else raw[..., :3]))
+
+    def frame(self, config: FrameConfig | None = None) -> dict[str, np.ndarray]:
+        """Render and read back the network's input buffers."""
+        self.render(config)
+        with self._timed("readback"):
+            return {name: self.read(name) for name in BUFFERS}
+
+
+class Compositor:
+    """Exposure, tone map and sRGB: an HDR texture to a display framebuffer (any size)."""
+
+    def __init__(self, ctx: moderngl.Context, shaders: ShaderCache):
+        self.ctx = ctx
+        self.prog = shaders.program("composite.glsl")
+        self.vao = ctx.vertex_array(self.prog, [])
+        self._ldr: dict[tuple[int, int], tuple] = {}
+
+    def run(self, hdr: moderngl.Texture, target: moderngl.Framebuffer, exposure: float = 0.0,
+            tonemap: str = "aces") -> None:
+        target.use()
+        self.ctx.enable_only(moderngl.NOTHING)
+        hdr.use(location=0)
+        set_uniform(self.prog, "u_hdr", 0)
+        set_uniform(self.prog, "u_exposure", float(exposure))
+        set_uniform(self.prog, "u_tonemap", TONEMAPS[tonemap])
+        self.vao.render(moderngl.TRIANGLES, vertices=3)
+
+    def to_ldr(self, image: np.ndarray, exposure: float = 0.0, tonemap: str = "aces") -> np.ndarray:
+        """Tone-map a linear (H, W, 3) image to uint8 sRGB through the same shader as the display."""
+        h, w = image.shape[:2]
+        if (w, h) not in self._ldr:
+            # Kept per size: releasing a still-bound framebuffer breaks the next framebuffer moderngl makes.
+            src = self.ctx.texture((w, h), 3, dtype="f4")
+            src.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            dst = self.ctx.texture((w, h), 4)
+            self._ldr[(w, h)] = (src, dst, self.ctx.framebuffer([dst]))
+        src, _, fbo = self._ldr[(w, h)]
+        src.write(np.ascontiguousarray(np.flipud(image), dtype="f4").tobytes())
+        self.run(src, fbo, exposure, tonemap)
+        out = np.frombuffer(fbo.read(components=3), dtype=np.uint8).reshape(h, w, 3)
+        return np.ascontiguousarray(np.flipud(out))
+
+    def release(self) -> None:
+        for targets in self._ldr.values():
+            for t in reversed(targets):
+                t.release()
+        self.vao.release()

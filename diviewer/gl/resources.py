@@ -1,0 +1,79 @@
+"""GPU copies of scene data (meshes, textures) and uniform helpers; scene/ stays GL-free."""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from diviewer.scene.model import Material, Mesh
+
+
+def set_uniform(prog: moderngl.Program, name: str, value) -> None:
+    """Set a uniform if the program uses it (GLSL compilers drop unused ones)."""
+    member = prog.get(name, None) if hasattr(prog, "get") else (prog[name] if name in prog else None)
+    if member is None:
+        return
+    if isinstance(value, np.ndarray) and value.ndim == 2:
+        member.write(np.ascontiguousarray(value.T, dtype="f4").tobytes())  # GL is column-major
+    elif isinstance(value, np.ndarray) and value.ndim == 3:
+        member.write(np.ascontiguousarray(value.transpose(0, 2, 1), dtype="f4").tobytes())
+    else:
+        member.value = value
+
+
+class GpuMesh:
+    """One mesh's vertex buffer (position, normal, uv interleaved) and index buffer."""
+
+    STRIDE_FORMAT = "3f 3f 2f"
+
+    def __init__(self, ctx: moderngl.Context, mesh: Mesh):
+        uv = mesh.uvs if mesh.uvs is not None else np.zeros((len(mesh.vertices), 2), np.float32)
+        data = np.hstack([mesh.vertices, mesh.normals, uv]).astype("f4")
+        self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
+        self.ibo = ctx.buffer(np.ascontiguousarray(mesh.faces, dtype="u4").tobytes())
+        self.ctx = ctx
+        self._vaos: dict[int, moderngl.VertexArray] = {}
+
+    def vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
+        """A vertex array for ``prog``, binding only the attributes it declares."""
+        key = prog.glo
+        if key not in self._vaos:
+            names = [n for n in ("in_position", "in_normal", "in_uv") if n in prog]
+            fmt = " ".join(f if n in names else f"{f[0]}x4" for f, n in zip(("3f", "3f", "2f"), ("in_position", "in_normal", "in_uv")))
+            self._vaos[key] = self.ctx.vertex_array(prog, [(self.vbo, fmt, *names)], self.ibo, index_element_size=4)
+        return self._vaos[key]
+
+    def release(self) -> None:
+        for v in self._vaos.values():
+            v.release()
+        self.vbo.release()
+        self.ibo.release()
+
+
+def upload_texture(ctx: moderngl.Context, image: np.ndarray) -> moderngl.Texture:
+    """An RGB float texture from a top-row-first image; GL's t = 0 is the image's bottom row."""
+    img = np.ascontiguousarray(np.flipud(image), dtype="f4")
+    tex = ctx.texture((img.shape[1], img.shape[0]), img.shape[2], img.tobytes(), dtype="f4")
+    tex.build_mipmaps()
+    tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+    tex.repeat_x = tex.repeat_y = True
+    return tex
+
+
+class GpuScene:
+    """All meshes of a scene's library and all material textures, uploaded once."""
+
+    def __init__(self, ctx: moderngl.Context, meshes: dict[str, Mesh], materials: dict[str, Material]):
+        self.meshes = {k: GpuMesh(ctx, m) for k, m in meshes.items()}
+        self.textures = {k: upload_texture(ctx, m.texture) for k, m in materials.items() if m.texture is not None}
+
+    def add_mesh(self, ctx: moderngl.Context, mesh: Mesh) -> None:
+        if mesh.name in self.meshes:
+            self.meshes[mesh.name].release()
+        self.meshes[mesh.name] = GpuMesh(ctx, mesh)
+
+    def release(self) -> None:
+        for m in self.meshes.values():
+            m.release()
+        for t in self.textures.values():
+            t.release()

@@ -1,0 +1,27 @@
+"""What made an artifact: library versions and settings, recorded in manifests, checkpoints and models."""
+
+from __future__ import annotations
+
+import dataclasses
+import platform
+from importlib import metadata
+
+import diviewer
+
+_PACKAGES = ("numpy", "moderngl", "trimesh", "onnxruntime", "OpenEXR", "torch", "mitsuba", "onnx")
+
+
+def versions() -> dict[str, str]:
+    """Versions of diviewer, Python and the installed libraries that matter (missing ones omitted)."""
+    out = {"diviewer": diviewer.__version__, "python": platform.python_version()}
+    for name in _PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+def settings_dict(settings) -> dict:
+    """A frozen settings dataclass as a plain dict."""
+    return dataclasses.asdict(settings)

@@ -1,0 +1,118 @@
+// Direct light, deferred: one additive pass per light (Lambert, shadow-mapped with PCF), plus one
+// EMISSION pass. Radiance of a diffuse surface: albedo / pi * E * cos(theta) for a directional light
+// of irradiance E; albedo / pi * I * cos(theta) / r^2 for a point light of intensity I (Mitsuba's).
+#if defined VERTEX_SHADER
+#include "fullscreen.glsl"
+#elif defined FRAGMENT_SHADER
+
+const float PI = 3.14159265358979;
+
+in vec2 v_uv;
+
+uniform sampler2D u_depth;
+uniform sampler2D u_normal;
+uniform sampler2D u_albedo;
+uniform sampler2D u_emission;
+
+uniform mat4 m_inv_view;          // camera to world
+uniform vec2 u_tan_half_fov;      // (tan(fov_y / 2) * aspect, tan(fov_y / 2))
+
+uniform vec3 u_light_color;       // colour * irradiance (directional) or colour * intensity (point)
+uniform vec3 u_light_dir;         // directional: the direction the light travels, world space
+uniform vec3 u_light_pos;         // point: position, world space
+uniform bool u_shadows;
+uniform int u_pcf_radius;         // PCF kernel is (2r+1)^2 taps
+uniform float u_bias;             // constant bias, in shadow-map texels
+uniform float u_slope_bias;       // slope-scaled bias, in texels per unit tan(theta)
+uniform float u_normal_offset;    // offset along the normal, in shadow-map texels
+
+#if defined DIRECTIONAL
+uniform sampler2DShadow u_shadow_map;
+uniform mat4 m_light;             // world -> light clip (orthographic)
+uniform float u_texel_world;      // world size of one shadow texel
+uniform float u_depth_range;      // light-space depth range (far - near), world units
+#elif defined POINT_LIGHT
+uniform sampler2D u_shadow_atlas; // 3x2 tiles of distances to the light
+uniform mat4 m_faces[6];          // world -> clip of each cube face
+uniform float u_face_size;        // tile size in texels
+#endif
+
+out vec4 out_color;
+
+#if defined DIRECTIONAL
+float visibility(vec3 p, vec3 n, float cos_t) {
+    float tan_t = sqrt(max(1.0 - cos_t * cos_t, 0.0)) / max(cos_t, 1e-3);
+    vec3 q = p + n * (u_normal_offset * u_texel_world);
+    vec4 c = m_light * vec4(q, 1.0);
+    vec3 s = c.xyz * 0.5 + 0.5;
+    if (any(lessThan(s.xy, vec2(0.0))) || any(greaterThan(s.xy, vec2(1.0))) || s.z > 1.0) return 1.0;
+    float bias = (u_bias + u_slope_bias * min(tan_t, 10.0)) * u_texel_world / u_depth_range;
+    vec2 texel = 1.0 / vec2(textureSize(u_shadow_map, 0));
+    float sum = 0.0;
+    int taps = 0;
+    for (int y = -u_pcf_radius; y <= u_pcf_radius; ++y)
+        for (int x = -u_pcf_radius; x <= u_pcf_radius; ++x) {
+            sum += texture(u_shadow_map, vec3(s.xy + vec2(x, y) * texel, s.z - bias));
+            ++taps;
+        }
+    return sum / float(taps);
+}
+#elif defined POINT_LIGHT
+float visibility(vec3 p, vec3 n, float cos_t) {
+    vec3 d = p - u_light_pos;
+    float dist = length(d);
+    vec3 a = abs(d);
+    int face = (a.x >= a.y && a.x >= a.z) ? (d.x > 0.0 ? 0 : 1) : (a.y >= a.z ? (d.y > 0.0 ? 2 : 3) : (d.z > 0.0 ? 4 : 5));
+    // world size of a texel at this distance for a 90-degree face
+    float texel_world = 2.0 * dist / u_face_size;
+    float tan_t = sqrt(max(1.0 - cos_t * cos_t, 0.0)) / max(cos_t, 1e-3);
+    vec3 q = p + n * (u_normal_offset * texel_world);
+    vec4 c = m_faces[face] * vec4(q, 1.0);
+    vec2 uv = c.xy / c.w * 0.5 + 0.5;
+    float bias = (u_bias + u_slope_bias * min(tan_t, 10.0)) * texel_world;
+    float qd = length(q - u_light_pos) - bias;
+    vec2 tile = vec2(face % 3, face / 3);
+    vec2 atlas = vec2(3.0, 2.0) * u_face_size;
+    float sum = 0.0;
+    int taps = 0;
+    for (int y = -u_pcf_radius; y <= u_pcf_radius; ++y)
+        for (int x = -u_pcf_radius; x <= u_pcf_radius; ++x) {
+            vec2 t = clamp(uv * u_face_size + vec2(x, y), vec2(0.5), vec2(u_face_size - 0.5));
+            float stored = texture(u_shadow_atlas, (tile * u_face_size + t) / atlas).r;
+            sum += qd <= stored ? 1.0 : 0.0;
+            ++taps;
+        }
+    return sum / float(taps);
+}
+#endif
+
+void main() {
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    float depth = texelFetch(u_depth, px, 0).r;
+    if (depth <= 0.0) discard;    // background: no surface
+#if defined EMISSION
+    out_color = vec4(texelFetch(u_emission, px, 0).rgb, 1.0);
+#else
+    vec3 n_view = texelFetch(u_normal, px, 0).xyz;
+    vec3 albedo = texelFetch(u_albedo, px, 0).rgb;
+    vec2 ndc = (gl_FragCoord.xy / vec2(textureSize(u_depth, 0))) * 2.0 - 1.0;
+    vec3 p_view = depth * vec3(ndc * u_tan_half_fov, -1.0);
+    vec3 p = (m_inv_view * vec4(p_view, 1.0)).xyz;
+    vec3 n = normalize(mat3(m_inv_view) * n_view);
+#if defined DIRECTIONAL
+    vec3 l = -normalize(u_light_dir);
+    vec3 e = u_light_color;
+#else
+    vec3 to_light = u_light_pos - p;
+    float r2 = max(dot(to_light, to_light), 1e-12);
+    vec3 l = to_light * inversesqrt(r2);
+    vec3 e = u_light_color / r2;
+#endif
+    float cos_t = dot(n, l);
+    if (cos_t <= 0.0) discard;
+    float v = u_shadows ? visibility(p, n, cos_t) : 1.0;
+    out_color = vec4(albedo / PI * e * (cos_t * v), 1.0);
+#endif
+}
+
+#endif

@@ -1,0 +1,53 @@
+// G-buffer: linear view-space depth, view-space normal (facing the camera), albedo, emission.
+#if defined VERTEX_SHADER
+
+in vec3 in_position;
+in vec3 in_normal;
+in vec2 in_uv;
+
+uniform mat4 m_proj;
+uniform mat4 m_view;
+uniform mat4 m_model;
+uniform mat3 m_normal;   // inverse transpose of (m_view * m_model), upper 3x3
+
+out vec3 v_pos;          // view space
+out vec3 v_normal;       // view space
+out vec2 v_uv;
+
+void main() {
+    vec4 p = m_view * m_model * vec4(in_position, 1.0);
+    v_pos = p.xyz;
+    v_normal = m_normal * in_normal;
+    v_uv = in_uv;
+    gl_Position = m_proj * p;
+}
+
+#elif defined FRAGMENT_SHADER
+
+in vec3 v_pos;
+in vec3 v_normal;
+in vec2 v_uv;
+
+uniform vec3 u_albedo;
+uniform vec3 u_emission;
+uniform bool u_has_texture;
+uniform sampler2D u_albedo_map;
+
+layout(location = 0) out float out_depth;
+layout(location = 1) out vec4 out_normal;
+layout(location = 2) out vec4 out_albedo;
+layout(location = 3) out vec4 out_emission;
+
+void main() {
+    vec3 n = normalize(v_normal);
+    // Surfaces are two-sided: a back face is lit and shaded as the side the camera sees.
+    if (!gl_FrontFacing) n = -n;
+    vec3 albedo = u_albedo;
+    if (u_has_texture) albedo *= texture(u_albedo_map, v_uv).rgb;
+    out_depth = -v_pos.z;
+    out_normal = vec4(n, 1.0);
+    out_albedo = vec4(albedo, 1.0);
+    out_emission = vec4(u_emission, 1.0);
+}
+
+#endif
