@@ -25,7 +25,8 @@ void main() {
     vec3 c = texture(u_hdr, v_uv).rgb;
     // Non-finite input (a broken buffer) shows as magenta rather than poisoning the display.
     if (any(isnan(c)) || any(isinf(c))) { out_color = vec4(1.0, 0.0, 1.0, 1.0); return; }
-    c = max(c, 0.0) * exp2(u_exposure);
+    // Clamped before the curve: x * (2.51 x + ...) overflows to inf / inf = NaN for huge radiance.
+    c = min(max(c, 0.0) * exp2(u_exposure), vec3(1e4));
     if (u_tonemap == 1) c = c / (1.0 + c);
     else if (u_tonemap == 2) c = aces(c);
     out_color = vec4(srgb(c), 1.0);

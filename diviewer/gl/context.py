@@ -35,3 +35,12 @@ def create_context(backend: str = "egl") -> moderngl.Context:
 
 def describe(ctx: moderngl.Context) -> str:
     return f"{ctx.info['GL_RENDERER']} / OpenGL {ctx.info['GL_VERSION']}"
+
+
+def unbind_framebuffer(ctx: moderngl.Context) -> None:
+    """Bind the default framebuffer (0), so releasing ours leaves no dead binding behind.
+
+    moderngl restores the previously bound framebuffer after creating a new one; if that one was
+    released while bound, the restore raises GL_INVALID_OPERATION.
+    """
+    ctx.detect_framebuffer(0).use()

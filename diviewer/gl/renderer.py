@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shaders import ShaderCache
 from diviewer.scene import camera as cam
@@ -117,6 +118,7 @@ class Renderer:
         self._direct_fbo = ctx.framebuffer([self.textures["direct"]])
 
     def _release_targets(self) -> None:
+        unbind_framebuffer(self.ctx)
         for t in self.textures.values():
             t.release()
         self._zbuffer.release()
@@ -309,7 +311,7 @@ class Compositor:
         """Tone-map a linear (H, W, 3) image to uint8 sRGB through the same shader as the display."""
         h, w = image.shape[:2]
         if (w, h) not in self._ldr:
-            # Kept per size: releasing a still-bound framebuffer breaks the next framebuffer moderngl makes.
+            # Kept per size: no allocation per call.
             src = self.ctx.texture((w, h), 3, dtype="f4")
             src.filter = (moderngl.NEAREST, moderngl.NEAREST)
             dst = self.ctx.texture((w, h), 4)
@@ -321,6 +323,7 @@ class Compositor:
         return np.ascontiguousarray(np.flipud(out))
 
     def release(self) -> None:
+        unbind_framebuffer(self.ctx)
         for targets in self._ldr.values():
             for t in reversed(targets):
                 t.release()

@@ -1,0 +1,355 @@
+"""The network's channel layout and the encoding of its inputs and outputs, defined once.
+
+Training, ONNX export and the runtime all use these functions, so the exported graph can carry the
+encoding: the runtime feeds raw linear buffers and receives linear radiance. Every function here is
+elementwise (plus one concatenation), works on numpy arrays and on torch tensors alike, and uses
+only operators the ONNX exporter maps one-to-one (Log, Exp, Abs, Sign, Where, Clip, IsNaN, IsInf,
+Concat). This module never imports torch: the viewer and the benchmark run without it.
+
+Radiance curve (used for the direct-light input and for the network's output)::
+
+    t = x * exposure                        # exposed linear radiance, NaN -> 0
+    y = sign(t) * log1p(min(|t|, R)) / log1p(R)      # R = radiance_max, y in [-1, 1]
+    x = sign(y) * expm1(|y| * log1p(R)) / exposure   # the exact inverse
+
+Why this curve:
+
+- Absolute intensity is kept: the curve is a fixed function of each pixel, with one exposure per
+  dataset, so twice the light decodes to twice the light and nothing depends on the other pixels.
+- It is odd (sign-preserving) and maps 0 to exactly 0, where tanh is linear and float32 is at its
+  most precise. Indirect-light targets can be slightly negative from Monte-Carlo noise, and the
+  very common black pixels (shadow, background) would otherwise sit at a saturated end of tanh.
+- It is linear below |t| ~ 1 and logarithmic above, like a tone curve: dark noise is not amplified
+  (a pure log curve would give 1e-5 the same weight as 1) while highlights up to R are compressed
+  into the top of the range instead of being clipped.
+- Float32: near y = 0 the relative precision of y is that of x, because log1p and expm1 are
+  evaluated with Kahan's exact-cancellation trick instead of log(1 + t) (which loses all digits of
+  t below 6e-8, and which is how the ONNX exporter lowers log1p; expm1 it does not export at all).
+  Near |y| = 1 the absolute spacing of float32 is 6e-8, i.e. a relative error of log1p(R) * 6e-8
+  (7e-7 at R = 1e5) after decoding. Measured float32 round trip: relative error below 2e-6 for
+  every |t| in [1e-30, R], 0 exact. tanh reaches 1.0 in float32 (for pre-activations above ~9), so
+  R itself is reachable by the network. In float16 the spacing near 1 is 5e-4, a relative error of
+  ~0.3 % after decoding: fine for an image, but keep encode/decode in float32 in an fp16 export.
+- NaN maps to 0 and +-Inf to +-1 when encoding; decoding clamps y to [-1, 1] first, so it never
+  produces NaN or Inf (the largest output is radiance_max / exposure, checked to fit in float32).
+
+Inputs: depth 0 (and NaN, Inf, negative) means no geometry and encodes to -1, while geometry maps
+into [0, 1] (depth / depth_scale), so background stays distinct even next to the near plane.
+Normals are in [-1, 1] already (background (0, 0, 0) stays 0); albedo [0, 1] maps to [-1, 1].
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from diviewer.errors import DiviewerError
+
+INPUT_CHANNELS: tuple[tuple[str, int], ...] = (("depth", 1), ("normal", 3), ("albedo", 3), ("direct", 3))
+"""Network input buffers and their channel counts, in the order they are stacked."""
+
+INPUT_CHANNEL_COUNT: int = sum(n for _, n in INPUT_CHANNELS)
+"""Total number of network input channels (10)."""
+
+OUTPUT_CHANNELS: int = 3
+"""Network output channels: linear RGB radiance (full GI or indirect only), encoded."""
+
+ENCODING_VERSION: int = 1
+"""Version of the encoding functions below; bump it whenever a curve or the layout changes."""
+
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+# Rec. 709 / sRGB primaries: relative luminance of linear RGB.
+_LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+
+
+def input_channel_slices() -> dict[str, slice]:
+    """Where each input buffer lies along the channel axis of the stacked network input."""
+    slices: dict[str, slice] = {}
+    start = 0
+    for name, n in INPUT_CHANNELS:
+        slices[name] = slice(start, start + n)
+        start += n
+    return slices
+
+
+@dataclass(frozen=True)
+class Encoding:
+    """Settings of the input/output encoding, fixed per dataset and recorded in every artifact."""
+
+    exposure: float = 1.0
+    """Multiplier applied to linear HDR radiance before the curve; fixed per dataset, see
+    `fit_exposure`. It sets which radiance lands in the linear part of the curve (~1)."""
+
+    depth_scale: float = 1.0
+    """View-space depth (scene units) is divided by this before encoding; use the camera's far
+    plane, so all visible geometry maps into [0, 1]."""
+
+    radiance_max: float = 1e5
+    """Largest exposed radiance (radiance * exposure) that maps to the top of the network range
+    (+-1); brighter values saturate there but stay finite. The default spans 10 orders of
+    magnitude above 1e-5 (and float32 keeps relative precision far below that)."""
+
+    version: int = ENCODING_VERSION
+    """Version of the encoding functions that produced the data; see `ENCODING_VERSION`."""
+
+    def __post_init__(self) -> None:
+        for name in ("exposure", "depth_scale", "radiance_max"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise DiviewerError(f"must be a number, got {value!r}", field=f"encoding.{name}")
+            if not (math.isfinite(value) and value > 0):
+                raise DiviewerError(f"must be finite and > 0, got {value!r}", field=f"encoding.{name}")
+        if self.radiance_max / self.exposure > 1e37:
+            # decode_radiance returns up to radiance_max / exposure, which must stay finite in float32.
+            raise DiviewerError(
+                f"radiance_max / exposure = {self.radiance_max / self.exposure:.3g} does not fit "
+                "in float32; raise the exposure or lower radiance_max",
+                field="encoding.exposure",
+            )
+        if isinstance(self.version, bool) or not isinstance(self.version, int) or self.version < 1:
+            raise DiviewerError(f"must be an integer >= 1, got {self.version!r}", field="encoding.version")
+        if self.version > ENCODING_VERSION:
+            raise DiviewerError(
+                f"encoding version {self.version} is newer than this diviewer understands "
+                f"(version {ENCODING_VERSION}); upgrade diviewer to read this data or model",
+                field="encoding.version",
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict for JSON manifests, checkpoints and ONNX metadata."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Encoding:
+        """Rebuild from `to_dict()` output; unknown keys, missing version or a newer version are errors."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise DiviewerError(
+                f"unknown key(s) {unknown}; known keys are {sorted(known)} "
+                "(data written by a newer diviewer? upgrade diviewer)",
+                field="encoding",
+            )
+        if "version" not in data:
+            raise DiviewerError("missing 'version'; cannot tell how the data was encoded", field="encoding")
+        return cls(**dict(data))
+
+
+# ---------------------------------------------------------------------------------------------
+# Namespace dispatch: numpy arrays or torch tensors, without importing torch here.
+
+
+def _is_torch(x: Any) -> bool:
+    return type(x).__module__.startswith("torch")
+
+
+def _prepare(x: Any, name: str) -> Any:
+    """Return x as a floating-point array/tensor; integer buffers are refused (their scale is unknown)."""
+    if _is_torch(x):
+        if not x.is_floating_point():
+            raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
+        return x
+    if not isinstance(x, np.ndarray):
+        return np.asarray(x, dtype=np.float64)  # Python numbers and lists
+    if x.dtype.kind != "f":
+        raise TypeError(
+            f"{name}: expected a floating-point array, got {x.dtype} "
+            "(convert to float32 first, e.g. albedo / 255 for 8-bit colour)"
+        )
+    if x.dtype.itemsize < 4:
+        return x.astype(np.float32)  # float16 in, float32 math: see the module docstring
+    return x
+
+
+def _where(cond: Any, a: Any, b: Any) -> Any:
+    if _is_torch(cond):
+        import torch  # only reached with torch tensors, so torch is installed
+
+        return torch.where(cond, a, b)
+    return np.where(cond, a, b).astype(np.result_type(a, b), copy=False)
+
+
+def _clip(x: Any, lo: float, hi: float) -> Any:
+    return x.clamp(lo, hi) if _is_torch(x) else np.clip(x, lo, hi)
+
+
+def _xp(x: Any) -> Any:
+    """The module holding abs/sign/log/exp/isnan/isinf for x: numpy or torch."""
+    if _is_torch(x):
+        import torch
+
+        return torch
+    return np
+
+
+def _nan_to_zero(x: Any) -> Any:
+    return _where(_xp(x).isnan(x), 0.0, x)
+
+
+def _log1p(a: Any) -> Any:
+    """log(1 + a) for a >= 0, accurate for tiny a, from Log/Where only (exports to any ONNX opset).
+
+    Goldberg/Kahan: with u = fl(1 + a), log(u) * a / (u - 1) cancels the rounding of 1 + a.
+    """
+    xp = _xp(a)
+    u = a + 1.0
+    d = u - 1.0
+    tiny = d == 0
+    safe_d = _where(tiny, 1.0, d)  # no 0/0 even in the branch that is not taken (NaN gradients)
+    return _where(tiny, a, xp.log(u) * (a / safe_d))
+
+
+def _expm1(z: Any) -> Any:
+    """exp(z) - 1 for z >= 0, accurate for tiny z, from Exp/Log/Where only (Kahan's trick)."""
+    xp = _xp(z)
+    u = xp.exp(z)
+    d = u - 1.0
+    tiny = d == 0
+    safe_log = _where(tiny, 1.0, xp.log(u))
+    return _where(tiny, z, d * (z / safe_log))
+
+
+# ---------------------------------------------------------------------------------------------
+# Encodings
+
+
+def encode_radiance(x: Any, enc: Encoding) -> Any:
+    """Linear HDR radiance (any sign) -> network range [-1, 1], elementwise; see the module docstring.
+
+    NaN maps to 0 and +-Inf (or anything beyond radiance_max once exposed) to +-1.
+    """
+    x = _prepare(x, "radiance")
+    xp = _xp(x)
+    t = _nan_to_zero(x * enc.exposure)
+    a = _clip(xp.abs(t), 0.0, enc.radiance_max)  # also turns +-Inf into radiance_max
+    y = xp.sign(t) * (_log1p(a) / math.log1p(enc.radiance_max))
+    return _clip(y, -1.0, 1.0)  # log1p(R) rounded to float32 may exceed the float64 constant by an ulp
+
+
+def decode_radiance(y: Any, enc: Encoding) -> Any:
+    """Network range [-1, 1] -> linear HDR radiance, the inverse of `encode_radiance`; never NaN/Inf.
+
+    Values outside [-1, 1] are clamped and NaN decodes to 0, so a misbehaving network cannot put
+    NaN or Inf into the frame.
+    """
+    y = _prepare(y, "encoded radiance")
+    xp = _xp(y)
+    y = _clip(_nan_to_zero(y), -1.0, 1.0)
+    a = _expm1(xp.abs(y) * math.log1p(enc.radiance_max))
+    return xp.sign(y) * a * (1.0 / enc.exposure)
+
+
+def encode_depth(depth: Any, enc: Encoding) -> Any:
+    """View-space depth -> [0, 1] for geometry (depth / depth_scale, clamped), -1 for no geometry.
+
+    Depth <= 0, NaN and +-Inf all mean "no geometry": background stays distinct from near geometry.
+    """
+    depth = _prepare(depth, "depth")
+    xp = _xp(depth)
+    d = depth * (1.0 / enc.depth_scale)
+    geometry = (d > 0) & ~xp.isinf(d)  # NaN compares false
+    return _where(geometry, _clip(_nan_to_zero(d), 0.0, 1.0), -1.0)
+
+
+def encode_normal(normal: Any) -> Any:
+    """Unit normals are already in [-1, 1]; NaN -> 0 and clamping keep the network input bounded."""
+    normal = _prepare(normal, "normal")
+    return _clip(_nan_to_zero(normal), -1.0, 1.0)
+
+
+def encode_albedo(albedo: Any) -> Any:
+    """Diffuse albedo [0, 1] -> [-1, 1] (NaN -> black)."""
+    albedo = _prepare(albedo, "albedo")
+    return _clip(_nan_to_zero(albedo), 0.0, 1.0) * 2.0 - 1.0
+
+
+def encode_inputs(depth: Any, normal: Any, albedo: Any, direct: Any, enc: Encoding, *, channel_axis: int) -> Any:
+    """Raw linear G-buffers + direct light -> the stacked network input in [-1, 1].
+
+    Args:
+        depth: view-space depth, with a channel axis of size 1 or without one (then it is added).
+        normal: view- or world-space unit normals (whichever the dataset uses), 3 channels.
+        albedo: diffuse albedo, linear, 3 channels.
+        direct: linear direct radiance (unexposed), 3 channels.
+        enc: the dataset's encoding.
+        channel_axis: where the channels are: -1 for numpy HWC frames, 1 for torch NCHW batches.
+
+    Returns:
+        The encoded buffers concatenated along channel_axis in `INPUT_CHANNELS` order (10 channels).
+    """
+    depth = _prepare(depth, "depth")
+    normal = _prepare(normal, "normal")
+    ndim = normal.ndim
+    axis = channel_axis % ndim if -ndim <= channel_axis < ndim else None
+    if axis is None:
+        raise ValueError(f"channel_axis={channel_axis} is out of range for {ndim}-d buffers")
+    if depth.ndim == ndim - 1:
+        depth = depth.unsqueeze(axis) if _is_torch(depth) else np.expand_dims(depth, axis)
+    buffers = {"depth": depth, "normal": normal, "albedo": albedo, "direct": direct}
+    for name, n in INPUT_CHANNELS:
+        shape = tuple(buffers[name].shape)
+        if len(shape) != ndim or shape[axis] != n:
+            raise ValueError(
+                f"{name}: expected {ndim}-d with {n} channel(s) on axis {channel_axis}, got shape {shape}"
+            )
+    parts = [
+        encode_depth(depth, enc),
+        encode_normal(normal),
+        encode_albedo(albedo),
+        encode_radiance(direct, enc),
+    ]
+    if _is_torch(depth):
+        import torch
+
+        return torch.cat(parts, dim=axis)
+    return np.concatenate(parts, axis=axis)
+
+
+def fit_exposure(direct_images: Any, *, percentile: float = 99.0, target: float = 1.0, max_samples: int = 1 << 22) -> float:
+    """Dataset exposure that maps the given percentile of lit-pixel luminance to `target`.
+
+    Only finite, positive luminances count (shadow, background and NaN pixels are ignored), so the
+    exposure describes the light, not the fraction of the frame it covers. An all-black or all-NaN
+    dataset gets exposure 1.0.
+
+    Args:
+        direct_images: linear direct-light images, RGB on the last axis: one (H, W, 3) array, an
+            (N, H, W, 3) array, or a list of such arrays (sizes may differ).
+        percentile: which luminance maps to `target`; 99 keeps a few highlights above it.
+        target: the exposed luminance that percentile should have (the curve's knee is at ~1).
+        max_samples: at most this many pixels are used (a fixed stride), to bound memory.
+
+    Returns:
+        The exposure, a finite positive float.
+    """
+    if isinstance(direct_images, np.ndarray) or _is_torch(direct_images):
+        images = [np.asarray(direct_images)]
+    else:
+        images = [np.asarray(im) for im in direct_images]
+    total = sum(im.size // 3 for im in images)
+    if total == 0:
+        return 1.0
+    stride = max(1, math.ceil(total / max_samples))
+    samples = []
+    for im in images:
+        if im.ndim < 1 or im.shape[-1] != 3:
+            raise ValueError(f"fit_exposure: expected RGB on the last axis, got shape {im.shape}")
+        rgb = im.reshape(-1, 3)[::stride].astype(np.float64)
+        with np.errstate(invalid="ignore", over="ignore"):
+            lum = rgb @ _LUMINANCE_WEIGHTS
+        samples.append(lum[np.isfinite(lum) & (lum > 0)])
+    lum = np.concatenate(samples)
+    if lum.size == 0:
+        return 1.0
+    level = float(np.percentile(lum, percentile))
+    exposure = target / level
+    # A level so small or large that the exposure itself is not a usable float32: fall back to 1.
+    if not (math.isfinite(exposure) and 0 < exposure < _FLOAT32_MAX):
+        return 1.0
+    return exposure

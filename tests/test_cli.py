@@ -1,0 +1,95 @@
+"""The `diviewer` command: render writes the buffers; user errors exit 2 without a traceback."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from diviewer.cli import main
+from diviewer.imageio import read_exr, read_png
+
+ROOT = Path(__file__).resolve().parents[1]
+FILES = ["depth.exr", "normal.exr", "albedo.exr", "direct.exr", "depth.png", "normal.png", "albedo.png",
+         "direct.png", "frame.json"]
+
+
+@pytest.mark.parametrize("scene", ["cornell", "atrium"])
+def test_render_writes_buffers_and_frame_json(gl_context, tmp_path, scene):
+    out = tmp_path / scene
+    assert main(["render", "--scene", scene, "--res", "64", "--out", str(out)]) == 0
+    for f in FILES:
+        assert (out / f).is_file(), f
+    depth, normal, albedo, direct = (read_exr(out / f"{n}.exr") for n in ("depth", "normal", "albedo", "direct"))
+    assert depth.shape == (64, 64) and normal.shape == albedo.shape == direct.shape == (64, 64, 3)
+    assert np.all(np.isfinite(direct)) and direct.max() > 0
+    valid = depth > 0
+    np.testing.assert_allclose(np.linalg.norm(normal[valid], axis=-1), 1.0, atol=1e-3)
+    assert read_png(out / "direct.png").shape == (64, 64, 3)
+    record = json.loads((out / "frame.json").read_text())
+    assert record["scene"] == scene and record["resolution"] == [64, 64]
+    assert {"camera", "lights", "objects"} <= set(record["config"])
+
+
+def test_render_again_from_frame_json_gives_same_buffers(gl_context, tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert main(["render", "--scene", "cornell", "--res", "48x32", "--seed", "11", "--out", str(a)]) == 0
+    assert main(["render", "--scene", "cornell", "--res", "48x32", "--config", str(a / "frame.json"),
+                 "--out", str(b)]) == 0
+    for n in ("depth", "normal", "albedo", "direct"):
+        np.testing.assert_array_equal(read_exr(a / f"{n}.exr"), read_exr(b / f"{n}.exr"))
+    assert read_exr(a / "depth.exr").shape == (32, 48)
+    # a different seed is a different frame
+    c = tmp_path / "c"
+    assert main(["render", "--scene", "cornell", "--res", "48x32", "--seed", "12", "--out", str(c)]) == 0
+    assert not np.array_equal(read_exr(a / "direct.exr"), read_exr(c / "direct.exr"))
+
+
+def test_bad_scene_exits_2_with_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[camera]\nfov = 200\n")
+    r = subprocess.run([sys.executable, "-m", "diviewer", "render", "--scene", str(bad), "--out", str(tmp_path / "o")],
+                       capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert str(bad) in r.stderr and "camera.fov" in r.stderr
+    assert not (tmp_path / "o").exists(), "nothing is written for a bad scene"
+
+
+def test_bad_resolution_and_unknown_scene(tmp_path, capsys):
+    assert main(["render", "--scene", "cornell", "--res", "0", "--out", str(tmp_path)]) == 2
+    assert "--res" in capsys.readouterr().err
+    assert main(["render", "--scene", "nope", "--out", str(tmp_path)]) == 2
+    assert "cornell" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_wheel_installs_and_renders_from_another_directory(tmp_path):
+    """`pip install .` (not editable) gives a diviewer that finds its shaders and scenes."""
+    wheels = tmp_path / "wheels"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(wheels),
+                    str(ROOT)], check=True)
+    (wheel,) = wheels.glob("diviewer-*.whl")
+    env_dir = tmp_path / "venv"
+    venv.create(env_dir, with_pip=True)
+    py = env_dir / "bin" / "python"
+    # Dependencies come from this environment (no download); the project itself only from the wheel.
+    site = next(Path(p) for p in sys.path if p.endswith("site-packages"))
+    (next((env_dir / "lib").glob("python*/site-packages")) / "deps.pth").write_text(str(site) + "\n")
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--no-index", str(wheel)], check=True)
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    where = subprocess.run([str(py), "-c", "import diviewer, sys; print(diviewer.__file__)"], cwd=work, env=env,
+                           capture_output=True, text=True, check=True).stdout.strip()
+    assert where.startswith(str(env_dir)), f"diviewer imported from {where}, not the wheel"
+    r = subprocess.run([str(env_dir / "bin" / "diviewer"), "render", "--scene", "atrium", "--res", "32", "--out", "o"],
+                       cwd=work, env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert (work / "o" / "direct.exr").is_file() and (work / "o" / "frame.json").is_file()

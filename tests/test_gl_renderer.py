@@ -1,0 +1,232 @@
+"""Analytic checks of the G-buffer, shadow and direct passes on a headless EGL context."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from diviewer.gl.renderer import Compositor, Renderer, RenderSettings
+from diviewer.scene import camera as cam
+from scenes import facing_plane
+
+RES = 48
+
+
+def render(ctx, scene, settings=RenderSettings(), config=None, size=(RES, RES)):
+    r = Renderer(ctx, scene, *size, settings)
+    try:
+        return r.frame(config)
+    finally:
+        r.release()
+
+
+def world_points(frame, camera, w, h):
+    """World-space positions of each pixel from linear depth (the inverse of the G-buffer pass)."""
+    rays = cam.pixel_rays_view(w, h, camera.fov)
+    p_view = rays * frame["depth"][..., None]
+    m = cam.view_to_world(camera.view_matrix())
+    return p_view @ m[:3, :3].T + m[:3, 3]
+
+
+@pytest.mark.parametrize("distance", [0.5, 3.0, 40.0])
+def test_plane_depth_normal_albedo(ctx, distance):
+    scene = facing_plane(distance=distance)
+    f = render(ctx, scene)
+    np.testing.assert_allclose(f["depth"], distance, rtol=1e-5)
+    np.testing.assert_allclose(f["normal"], np.broadcast_to([0, 0, 1], f["normal"].shape), atol=1e-5)
+    np.testing.assert_allclose(f["albedo"], np.broadcast_to([0.5, 0.25, 0.75], f["albedo"].shape), atol=1e-6)
+
+
+def test_tilted_plane_depth_matches_ray_geometry(ctx):
+    """A plane tilted 30 degrees about y: depth per pixel equals the ray/plane intersection."""
+    scene = facing_plane(distance=3.0)
+    obj = dataclasses.replace(scene.default.objects[0], position=(0, 0, -3.0), rotation=(0, 30, 0))
+    cfg = dataclasses.replace(scene.default, objects=(obj,))
+    f = render(ctx, scene, config=cfg)
+    # front face of the box: plane through (0,0,-3 + 0.25 along its normal) with normal R @ (0,0,1)
+    n = cam.euler_xyz((0, 30, 0)) @ np.array([0, 0, 1.0])
+    p0 = np.array([0, 0, -3.0]) + 0.25 * n
+    rays = cam.pixel_rays_view(RES, RES, 40.0)  # unit -z: depth = t
+    t = (p0 @ n) / (rays @ n)
+    np.testing.assert_allclose(f["depth"], t, rtol=1e-4)
+    np.testing.assert_allclose(f["normal"], np.broadcast_to(n, f["normal"].shape), atol=1e-4)
+
+
+def test_background_is_zero(ctx):
+    scene = facing_plane(distance=3.0)
+    cfg = scene.default
+    cfg = dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, target=(0, 0, 1)))  # look away
+    f = render(ctx, scene, config=cfg)
+    for name in ("depth", "normal", "albedo", "direct"):
+        assert np.all(f[name] == 0.0), name
+
+
+@pytest.mark.parametrize("theta", [0.0, 30.0, 60.0, 85.0])
+def test_lambert_cosine_law_directional(ctx, theta):
+    """Radiance = albedo / pi * E * cos(theta), with shadows on (no acne on a lit plane)."""
+    E = 2.5
+    d = (-math.sin(math.radians(theta)), 0.0, -math.cos(math.radians(theta)))  # travels into the plane
+    scene = facing_plane(lights=[{"name": "sun", "type": "directional", "direction": list(d), "irradiance": E}])
+    f = render(ctx, scene)
+    expected = np.array([0.5, 0.25, 0.75]) / math.pi * E * math.cos(math.radians(theta))
+    np.testing.assert_allclose(f["direct"], np.broadcast_to(expected, f["direct"].shape), rtol=1e-4, atol=1e-7)
+
+
+def test_point_light_inverse_square(ctx):
+    I = 7.0
+    scene = facing_plane(distance=2.0, lights=[{"name": "bulb", "type": "point", "position": [0.3, -0.2, -0.5],
+                                                "intensity": I, "color": [1, 0.5, 0.25]}])
+    f = render(ctx, scene)
+    p = world_points(f, scene.default.camera, RES, RES)
+    to_l = np.array([0.3, -0.2, -0.5]) - p
+    r2 = (to_l ** 2).sum(-1)
+    cos_t = to_l[..., 2] / np.sqrt(r2)  # plane normal is +z
+    expected = np.array([0.5, 0.25, 0.75]) * np.array([1, 0.5, 0.25]) / math.pi * I * (cos_t / r2)[..., None]
+    np.testing.assert_allclose(f["direct"], expected, rtol=2e-3)
+
+
+BLOCKER = (np.array([-0.3, -0.3, -1.8]), np.array([0.3, 0.3, -1.2]))  # a 0.6 m box at z = -1.5
+
+
+def _occluded_scene(light):
+    return facing_plane(
+        distance=3.0, fov=70.0, lights=[light],
+        extra_meshes={"blocker": {"shape": "box", "size": [0.6, 0.6, 0.6]}},
+        extra_objects=[{"name": "blocker", "mesh": "blocker", "material": "occ", "position": [0, 0, -1.5]}])
+
+
+def _segment_hits_box(p, q, lo, hi):
+    """Whether the segments p -> q (arrays of points) pass through the box [lo, hi] (slab test)."""
+    d = q - p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (lo - p) / d, (hi - p) / d
+    tmin = np.nanmax(np.where(d != 0, np.minimum(t1, t2), -np.inf), axis=-1)
+    tmax = np.nanmin(np.where(d != 0, np.maximum(t1, t2), np.inf), axis=-1)
+    inside_parallel = np.all((d != 0) | ((p >= lo) & (p <= hi)), axis=-1)
+    return inside_parallel & (tmax >= np.maximum(tmin, 0.0)) & (tmin <= 1.0)
+
+
+@pytest.mark.parametrize("light", [
+    {"name": "sun", "type": "directional", "direction": [0.7071, 0.0, -0.7071], "irradiance": 3.0},
+    {"name": "bulb", "type": "point", "position": [1.2, 0.3, -0.5], "intensity": 5.0},
+])
+def test_shadow_behind_occluder(ctx, light):
+    """Shadowed pixels are exactly those whose path to the light crosses the box (edges aside)."""
+    scene = _occluded_scene(light)
+    w = 96
+    f = render(ctx, scene, size=(w, w))
+    p = world_points(f, scene.default.camera, w, w)
+    on_wall = np.abs(p[..., 2] + 3.0) < 1e-3
+    if light["type"] == "directional":
+        to_light = lambda x: x - 100.0 * np.asarray(light["direction"])
+    else:
+        to_light = lambda x: np.broadcast_to(np.asarray(light["position"], float), x.shape)
+    margin = 0.06  # PCF (3x3 texels) and biases blur the edge by a few centimetres here
+    hits = [_segment_hits_box(p + np.array([dx, dy, 0.0]), to_light(p + np.array([dx, dy, 0.0])), *BLOCKER)
+            for dx in (-margin, 0, margin) for dy in (-margin, 0, margin)]
+    behind = on_wall & np.all(hits, axis=0)
+    open_ = on_wall & ~np.any(hits, axis=0)
+    assert behind.sum() > 50 and open_.sum() > 50
+    lum = f["direct"].sum(-1)
+    assert np.all(lum[behind] == 0.0), "a point behind the occluder is lit"
+    assert np.all(lum[open_] > 0.0), "a point in the open is in shadow"
+    # without shadows the same points are lit
+    f2 = render(ctx, scene, RenderSettings(shadows=False), size=(w, w))
+    assert np.all(f2["direct"].sum(-1)[behind] > 0.0)
+
+
+@pytest.mark.parametrize("light", [
+    {"name": "sun", "type": "directional", "direction": [0.2, -0.3, -1.0], "irradiance": 0.0},
+    {"name": "bulb", "type": "point", "position": [0.0, 0.0, -1.0], "intensity": 0.0},
+])
+def test_zero_intensity_gives_black(ctx, light):
+    f = render(ctx, facing_plane(lights=[light]))
+    assert np.all(f["direct"] == 0.0)
+
+
+def test_emission_is_added_to_direct(ctx):
+    scene = facing_plane()
+    mat = dataclasses.replace(scene.materials["m"], emission=(1.5, 0.0, 3.0))
+    scene = dataclasses.replace(scene, materials={**scene.materials, "m": mat})
+    f = render(ctx, scene)
+    np.testing.assert_allclose(f["direct"], np.broadcast_to([1.5, 0.0, 3.0], f["direct"].shape), rtol=1e-6)
+
+
+@pytest.mark.parametrize("scale", [1e-6, 1.0, 1e6])
+def test_direct_is_linear_in_light_intensity(ctx, scale):
+    """Over twelve orders of magnitude the direct buffer scales exactly with the light."""
+    base = {"name": "sun", "type": "directional", "direction": [0.3, -0.2, -1.0], "irradiance": 1.0}
+    f1 = render(ctx, facing_plane(lights=[base]))
+    f2 = render(ctx, facing_plane(lights=[{**base, "irradiance": scale}]))
+    np.testing.assert_allclose(f2["direct"], f1["direct"] * scale, rtol=1e-5)
+
+
+@pytest.mark.parametrize("near,far", [(1e-4, 1e4), (2.9, 3.1)])
+def test_extreme_near_far_planes(ctx, near, far):
+    f = render(ctx, facing_plane(distance=3.0, near=near, far=far))
+    np.testing.assert_allclose(f["depth"], 3.0, rtol=1e-4)
+
+
+def test_non_square_and_resize(ctx):
+    scene = facing_plane(distance=2.0)
+    r = Renderer(ctx, scene, 40, 24)
+    try:
+        f = r.frame()
+        assert f["depth"].shape == (24, 40) and f["normal"].shape == (24, 40, 3)
+        r.resize(16, 32)
+        f = r.frame()
+        assert f["direct"].shape == (32, 16, 3)
+        np.testing.assert_allclose(f["depth"], 2.0, rtol=1e-5)
+    finally:
+        r.release()
+
+
+def test_image_rows_run_top_to_bottom(ctx):
+    """A box above the camera's axis appears in the top rows of the returned image."""
+    scene = facing_plane(distance=3.0, extra_meshes={"b": {"shape": "box", "size": [0.5, 0.5, 0.5]}},
+                         extra_objects=[{"name": "b", "mesh": "b", "material": "occ", "position": [0.6, 0.6, -2.0]}])
+    f = render(ctx, scene)
+    near = f["depth"] < 2.9
+    rows, cols = np.nonzero(near)
+    assert rows.mean() < RES / 2, "an object above the axis must be in the top half"
+    assert cols.mean() > RES / 2, "an object right of the axis must be in the right half"
+
+
+def test_composite_tonemaps_and_flags_non_finite(ctx):
+    r = Renderer(ctx, facing_plane(), 8, 8)
+    comp = Compositor(ctx, r.shaders)
+    try:
+        img = np.zeros((8, 8, 3), np.float32)
+        img[0, 0] = [np.nan, 0, 0]
+        img[1, 1] = [np.inf, np.inf, np.inf]
+        img[2, 2] = [1e30, 1e30, 1e30]
+        img[3, 3] = [0.18, 0.18, 0.18]
+        out = comp.to_ldr(img)
+        assert out.dtype == np.uint8 and out.shape == (8, 8, 3)
+        assert tuple(out[0, 0]) == (255, 0, 255) and tuple(out[1, 1]) == (255, 0, 255)
+        assert tuple(out[2, 2]) == (255, 255, 255)
+        assert tuple(out[4, 4]) == (0, 0, 0)
+        assert 0 < out[3, 3, 0] < 255
+        brighter = comp.to_ldr(img, exposure=1.0)
+        assert brighter[3, 3, 0] > out[3, 3, 0]
+    finally:
+        comp.release()
+        r.release()
+
+
+@pytest.mark.parametrize("name", ["cornell", "atrium"])
+def test_shipped_scenes_render_finite_and_lit(ctx, name):
+    from diviewer.scene import load_scene, sample_config
+
+    scene = load_scene(name)
+    for config in (scene.default, sample_config(scene, 7, "train"), sample_config(scene, 7, "test")):
+        f = render(ctx, scene, config=config, size=(64, 64))
+        for k, v in f.items():
+            assert np.all(np.isfinite(v)), k
+        assert (f["depth"] > 0).mean() > 0.5
+        assert f["direct"].max() > 0.0
+        n = np.linalg.norm(f["normal"], axis=-1)
+        np.testing.assert_allclose(n[f["depth"] > 0], 1.0, atol=1e-3)

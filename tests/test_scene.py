@@ -1,0 +1,208 @@
+"""Scene files: the shipped scenes load cleanly; bad files give one clear error naming file and field."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from diviewer.errors import DiviewerError
+from diviewer.scene import camera as cam
+from diviewer.scene import load_scene, sample_config
+from diviewer.scene.loader import config_from_dict
+from diviewer.scene.sampler import matrix_to_euler_xyz
+
+SHIPPED = ["cornell", "atrium"]
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_scene_loads_with_clean_geometry(name):
+    scene = load_scene(name)
+    assert scene.name == name and len(scene.file_hash) == 64
+    for mesh in scene.meshes.values():
+        assert np.all(np.isfinite(mesh.vertices)), mesh.name
+        np.testing.assert_allclose(np.linalg.norm(mesh.normals, axis=1), 1.0, atol=1e-5, err_msg=mesh.name)
+        assert mesh.faces.max() < len(mesh.vertices)
+        v = mesh.vertices[mesh.faces.astype(np.int64)]
+        area = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+        assert area.min() > 0, mesh.name
+    for obj in scene.default.objects:
+        assert obj.mesh in scene.meshes and obj.material in scene.materials
+        assert np.all(np.isfinite(obj.matrix()))
+
+
+def test_cornell_has_its_parts():
+    scene = load_scene("cornell")
+    mats = {o.name: scene.materials[o.material].albedo for o in scene.default.objects}
+    assert mats["left"][0] > 3 * mats["left"][1], "left wall is red"
+    assert mats["right"][1] > 2 * mats["right"][0], "right wall is green"
+    r = scene.ranges.objects["center"]
+    assert not set(r.train_meshes) & set(r.test_meshes)
+    assert len(r.axes) >= 2
+
+
+def test_box_is_faceted_and_sphere_is_smooth():
+    scene = load_scene("cornell")
+    box = scene.meshes["cube"]
+    assert len(box.vertices) == 24  # creases split: one normal per face corner
+    sphere = scene.meshes["sphere"]
+    # on a sphere centred at the origin the smooth normal is the position direction
+    d = sphere.vertices / np.linalg.norm(sphere.vertices, axis=1, keepdims=True)
+    assert np.min(np.sum(d * sphere.normals, axis=1)) > 0.999
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_sampler_is_reproducible_and_respects_splits(name):
+    scene = load_scene(name)
+    a = [sample_config(scene, s, "train").to_dict() for s in range(20)]
+    b = [sample_config(scene, s, "train").to_dict() for s in range(20)]
+    assert a == b
+    assert a[0] != a[1]
+    r = scene.ranges.objects.get("center")
+    if r is not None:
+        train_meshes = {sample_config(scene, s, "train").objects[-1].mesh for s in range(50)}
+        test_meshes = {sample_config(scene, s, "test").objects[-1].mesh for s in range(50)}
+        assert train_meshes <= set(r.train_meshes) and test_meshes <= set(r.test_meshes)
+        assert len(train_meshes) > 2 and len(test_meshes) > 1
+
+
+def test_config_round_trips_through_json_dict():
+    scene = load_scene("cornell")
+    cfg = sample_config(scene, 5, "test")
+    assert config_from_dict(scene, cfg.to_dict()).to_dict() == cfg.to_dict()
+
+
+def test_euler_round_trip():
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        r = cam.axis_angle(rng.normal(size=3), rng.uniform(-180, 180))
+        np.testing.assert_allclose(cam.euler_xyz(matrix_to_euler_xyz(r)), r, atol=1e-9)
+
+
+def test_camera_view_matrix_conventions():
+    v = cam.look_at((0, 0, 5), (0, 0, 0), (0, 1, 0))
+    np.testing.assert_allclose(v @ [0, 0, 0, 1], [0, 0, -5, 1])   # target straight ahead (-z)
+    np.testing.assert_allclose(v @ [1, 0, 5, 1], [1, 0, 0, 1])    # world +x is to the right
+    np.testing.assert_allclose(cam.view_to_world(v) @ v, np.identity(4), atol=1e-12)
+    p = cam.perspective(90, 2.0, 1.0, 10.0)
+    clip = p @ [2.0, 1.0, -1.0, 1.0]
+    np.testing.assert_allclose(clip[:3] / clip[3], [1.0, 1.0, -1.0])  # near plane corner
+
+
+# --- bad input ------------------------------------------------------------------------------------
+
+BASE = """
+[camera]
+position = [0, 0, 5]
+fov = 45
+near = 0.1
+far = 50
+
+[materials.m]
+albedo = [0.5, 0.5, 0.5]
+
+[meshes.b]
+shape = "box"
+
+[[objects]]
+name = "o"
+mesh = "b"
+material = "m"
+
+[[lights]]
+name = "sun"
+type = "directional"
+direction = [0, -1, 0]
+irradiance = 1.0
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def _obj_file(tmp_path: Path, vertices: str) -> Path:
+    p = tmp_path / "m.obj"
+    p.write_text(vertices)
+    return p
+
+
+BAD = {
+    "toml_syntax": (BASE + "\n[oops\n", None, "not valid TOML"),
+    "unknown_key": (BASE.replace("fov = 45", "fov = 45\nfocal = 3"), "camera.focal", "unknown key"),
+    "unknown_table": (BASE + "\n[lighting]\nx = 1\n", "lighting", "unknown key"),
+    "missing_mesh_file": (BASE + '\n[meshes.f]\nfile = "nope.obj"\n', "meshes.f.file", "not found"),
+    "negative_intensity": (BASE.replace("irradiance = 1.0", "irradiance = -2.0"), "lights[0].irradiance", ">= 0"),
+    "fov_zero": (BASE.replace("fov = 45", "fov = 0"), "camera.fov", "> 0"),
+    "fov_180": (BASE.replace("fov = 45", "fov = 180"), "camera.fov", "< 180"),
+    "near_ge_far": (BASE.replace("near = 0.1", "near = 60"), "camera.near", "less than far"),
+    "unknown_shape": (BASE.replace('shape = "box"', 'shape = "teapot"'), "meshes.b.shape", "unknown shape"),
+    "bad_albedo": (BASE.replace("albedo = [0.5, 0.5, 0.5]", "albedo = [0.5, 1.5, 0.5]"), "materials.m.albedo", "<= 1"),
+    "unknown_material": (BASE.replace('material = "m"', 'material = "x"'), "objects[0].material", "unknown material"),
+    "light_type": (BASE.replace('type = "directional"', 'type = "spot"'), "lights[0].type", "not one of"),
+    "zero_scale": (BASE.replace('material = "m"', 'material = "m"\nscale = [1, 0, 1]'), "objects[0].scale", "non-zero"),
+    "string_for_number": (BASE.replace("fov = 45", 'fov = "wide"'), "camera.fov", "finite number"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_scene_file_names_file_and_field(tmp_path, case):
+    text, field, words = BAD[case]
+    path = write(tmp_path, text)
+    with pytest.raises(DiviewerError) as info:
+        load_scene(path)
+    msg = str(info.value)
+    assert str(path) in msg
+    if field:
+        assert field in msg
+    assert words in msg
+
+
+def test_mesh_with_nan_vertices_is_refused(tmp_path):
+    _obj_file(tmp_path, "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n")
+    path = write(tmp_path, BASE + '\n[meshes.f]\nfile = "m.obj"\n')
+    with pytest.raises(DiviewerError, match=r"meshes\.f.*NaN"):
+        load_scene(path)
+
+
+def test_mesh_with_zero_area_faces_is_refused(tmp_path):
+    _obj_file(tmp_path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 4\n")
+    path = write(tmp_path, BASE + '\n[meshes.f]\nfile = "m.obj"\n')
+    with pytest.raises(DiviewerError, match=r"meshes\.f.*zero-area"):
+        load_scene(path)
+
+
+def test_mesh_files_load(tmp_path):
+    import trimesh
+
+    trimesh.creation.icosphere(2).export(tmp_path / "ball.ply")
+    trimesh.creation.box().export(tmp_path / "cube.obj")
+    path = write(tmp_path, BASE + '\n[meshes.ball]\nfile = "ball.ply"\n[meshes.cube]\nfile = "cube.obj"\n')
+    scene = load_scene(path)
+    assert len(scene.meshes["ball"].faces) == 320
+    assert np.all(np.isfinite(scene.meshes["cube"].normals))
+
+
+def test_glb_with_base_colour_texture(tmp_path):
+    import trimesh
+    from PIL import Image
+
+    tex = np.zeros((4, 4, 3), np.uint8)
+    tex[:2] = [255, 0, 0]  # top half red
+    tex[2:] = [0, 0, 255]  # bottom half blue
+    img = Image.fromarray(tex)
+    box = trimesh.creation.box()
+    uv = np.clip(box.vertices[:, :2] + 0.5, 0, 1)
+    box.visual = trimesh.visual.TextureVisuals(uv=uv, material=trimesh.visual.material.PBRMaterial(baseColorTexture=img))
+    box.export(tmp_path / "tex.glb")
+    path = write(tmp_path, BASE + '\n[meshes.t]\nfile = "tex.glb"\n\n[[objects]]\nname = "t"\nmesh = "t"\n')
+    scene = load_scene(path)
+    mat = scene.materials["mesh:t"]
+    assert mat.texture is not None and mat.texture.shape == (4, 4, 3)
+    assert scene.meshes["t"].uvs is not None
+    obj = next(o for o in scene.default.objects if o.name == "t")
+    assert obj.material == "mesh:t"
