@@ -20,6 +20,46 @@ def _cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_capture(args: argparse.Namespace) -> int:
+    from diviewer.data.capture import CaptureSettings, capture, parse_shard
+    from diviewer.render import parse_resolution
+
+    width, height = parse_resolution(args.res)
+    fractions = tuple(float(x) for x in args.splits.split(","))
+    if len(fractions) != 3:
+        raise DiviewerError(f"--splits takes three fractions train,val,test, got '{args.splits}'", field="--splits")
+    settings = CaptureSettings(frames=args.frames, width=width, height=height, gt=args.gt, spp=args.spp,
+                               max_depth=args.max_depth, seed=args.seed, split_fractions=fractions, dtype=args.dtype,
+                               thumbs=args.thumbs)
+    capture(args.scene, args.out, settings, parse_shard(args.shard))
+    return 0
+
+
+def _cmd_data_check(args: argparse.Namespace) -> int:
+    from diviewer.data.capture import summarize
+    from diviewer.data.dataset import Dataset
+
+    ds = Dataset(args.dir)
+    problems = ds.check(verify_checksum=not args.fast)
+    s = summarize(ds)
+    print(f"{args.dir}: {ds.manifest['scene']} {ds.width}x{ds.height}, {s['present']}/{s['planned']} frames present "
+          f"({', '.join(f'{k} {v}' for k, v in s['per_split'].items())}), {s['disk_mb']:.1f} MB")
+    for p in problems:
+        print(f"frame {p.index:6d}: {p.problem}")
+    if problems:
+        print(f"{len(problems)} frame(s) missing or bad; run the same `diviewer capture` again to render them")
+        return 1
+    print("all frames present and sound")
+    return 0
+
+
+def _cmd_data_merge(args: argparse.Namespace) -> int:
+    from diviewer.data.capture import merge
+
+    merge(args.sources, args.out)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="diviewer", description="Real-time OpenGL viewer with a neural GI pass.")
     ap.add_argument("--version", action="version", version=f"diviewer {__version__}")
@@ -35,6 +75,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--exposure", type=float, default=None, help="display exposure in stops (PNG previews)")
     p.add_argument("--tonemap", default="aces", choices=("clamp", "reinhard", "aces"))
     p.set_defaults(func=_cmd_render)
+
+    p = sub.add_parser("capture", help="render a dataset: GL inputs and path-traced ground truth (resumable)")
+    p.add_argument("--scene", default="cornell", help="shipped scene name or a .toml path")
+    p.add_argument("--frames", type=int, default=100, help="frames over all splits")
+    p.add_argument("--res", default="128", help="N or WxH; default 128")
+    p.add_argument("--gt", default="pt", choices=("pt", "vxgi"), help="ground truth: pt (Mitsuba path tracer)")
+    p.add_argument("--spp", type=int, default=256, help="path-tracing samples per pixel (default 256)")
+    p.add_argument("--max-depth", type=int, default=16, help="path length limit of the full render")
+    p.add_argument("--seed", type=int, default=0, help="base seed of configurations and path-tracer seeds")
+    p.add_argument("--splits", default="0.8,0.1,0.1", help="fractions train,val,test")
+    p.add_argument("--dtype", default="float16", choices=("float16", "float32"), help="frame storage type")
+    p.add_argument("--thumbs", type=int, default=2, help="PNG thumbnails per split")
+    p.add_argument("--shard", default=None, help="k/n: render every n-th frame starting at the k-th")
+    p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
+    p.set_defaults(func=_cmd_capture)
+
+    p = sub.add_parser("data", help="inspect datasets")
+    data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")
+    q = data.add_parser("check", help="verify every frame: present, readable, finite, shapes, checksum")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--fast", action="store_true", help="skip checksums")
+    q.set_defaults(func=_cmd_data_check)
+    q = data.add_parser("merge", help="merge shards captured into separate folders")
+    q.add_argument("sources", type=Path, nargs="+")
+    q.add_argument("--out", type=Path, required=True)
+    q.set_defaults(func=_cmd_data_merge)
     return ap
 
 

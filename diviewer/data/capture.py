@@ -1,0 +1,269 @@
+"""`diviewer capture`: GL inputs + path-traced ground truth for sampled configurations.
+
+Resumable (a killed capture, run again, finishes with exactly the frames an uninterrupted run
+writes) and shardable (``--shard k/n`` renders every n-th frame; shards written into one folder,
+or copied together, form one dataset).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from diviewer import imageio
+from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
+from diviewer.errors import DiviewerError
+from diviewer.progress import Progress
+from diviewer.provenance import versions
+from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
+from diviewer.scene.sampler import SPLITS
+
+FLOAT16_MAX = 65504.0
+
+
+@dataclass(frozen=True)
+class CaptureSettings:
+    """What a capture renders; recorded in the manifest."""
+
+    frames: int = 100
+    """Number of frames over all splits."""
+    width: int = 128
+    height: int = 128
+    gt: str = "pt"
+    """Ground truth: 'pt' (Mitsuba path tracing). 'vxgi' is reserved for the VXGI pass."""
+    spp: int = 256
+    """Path-tracing samples per pixel."""
+    max_depth: int = 16
+    """Path length limit of the full render (the direct-only render uses 2)."""
+    seed: int = 0
+    """Base seed: frame configurations and the path tracer's seeds derive from it."""
+    split_fractions: tuple[float, float, float] = (0.8, 0.1, 0.1)
+    """Fractions of frames in train, val, test."""
+    dtype: str = "float16"
+    """Storage type of the frame arrays: float16 (half the disk) or float32 (for radiance over 65504)."""
+    thumbs: int = 2
+    """PNG thumbnails for the first frames of each split."""
+
+
+def parse_shard(text: str | None) -> tuple[int, int]:
+    """``k/n`` (1-based) to (k, n); None means the whole dataset."""
+    if text is None:
+        return 1, 1
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        k = n = 0
+    if not (n >= 1 and 1 <= k <= n):
+        raise DiviewerError(f"--shard must be k/n with 1 <= k <= n, got '{text}'", field="--shard")
+    return k, n
+
+
+def plan_frames(scene: Scene, settings: CaptureSettings) -> list[dict]:
+    """Every frame's index, split, seed and configuration: a pure function of scene and settings."""
+    n = settings.frames
+    fr = np.asarray(settings.split_fractions, dtype=np.float64)
+    if fr.shape != (3,) or np.any(fr < 0) or fr.sum() <= 0:
+        raise DiviewerError(f"split fractions must be 3 non-negative numbers, got {settings.split_fractions}")
+    counts = np.floor(fr / fr.sum() * n).astype(int)
+    counts[0] += n - counts.sum()
+    order = np.random.default_rng([settings.seed, 0x5EED]).permutation(n)
+    split_of = np.empty(n, dtype=object)
+    start = 0
+    for name, c in zip(SPLITS, counts):
+        split_of[order[start:start + c]] = name
+        start += c
+    plan = []
+    for i in range(n):
+        seed = int(np.random.SeedSequence([settings.seed, i]).generate_state(1)[0] & 0x7FFFFFFF)
+        config = sample_config(scene, seed, str(split_of[i]))
+        plan.append({"index": i, "split": str(split_of[i]), "seed": seed, "config": config.to_dict()})
+    return plan
+
+
+def build_manifest(scene: Scene, settings: CaptureSettings) -> dict:
+    from diviewer.gl.renderer import RenderSettings
+
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "scene": scene.name,
+        "scene_hash": scene.file_hash,
+        "scene_file": str(scene.path) if scene.path else None,
+        "scene_toml": scene.path.read_text() if scene.path else None,
+        "resolution": [settings.width, settings.height],
+        "channels": [list(c) for c in CHANNELS],
+        "dtype": settings.dtype,
+        "gt": settings.gt,
+        "spp": settings.spp,
+        "max_depth": settings.max_depth,
+        "seed": settings.seed,
+        "frames": settings.frames,
+        "split_fractions": list(settings.split_fractions),
+        "render_settings": asdict(RenderSettings()),
+        "settings": asdict(settings),
+        "versions": versions(),
+        "frame_list": plan_frames(scene, settings),
+    }
+
+
+def _same_identity(a: dict, b: dict) -> list[str]:
+    return [k for k in IDENTITY if json.loads(json.dumps(a.get(k))) != json.loads(json.dumps(b.get(k)))]
+
+
+def open_or_create(out: Path, manifest: dict) -> Dataset:
+    """Create the dataset folder, or check that the one there is the same dataset (to resume)."""
+    path = out / "manifest.json"
+    if path.is_file():
+        existing = json.loads(path.read_text())
+        diff = _same_identity(existing, manifest)
+        if diff:
+            raise DiviewerError(f"a different dataset is already there (differs in: {', '.join(diff)}); "
+                                f"use another --out or the same settings to resume", path=out)
+    else:
+        imageio.write_text(path, json.dumps(manifest, indent=1))
+    (out / "frames").mkdir(parents=True, exist_ok=True)
+    return Dataset(out)
+
+
+class PathTracedGT:
+    """Ground truth from Mitsuba: the full image and the direct-only image of a frame."""
+
+    def __init__(self, scene: Scene, settings: CaptureSettings):
+        from diviewer.reference import mitsuba as ref
+
+        self.ref, self.scene, self.settings = ref, scene, settings
+        self.variant = ref.select_variant()
+
+    def __call__(self, config: FrameConfig, seed: int) -> dict[str, np.ndarray]:
+        s = self.settings
+        # One loaded Mitsuba scene for both renders; the same seed correlates their noise, which
+        # lowers the variance of indirect = full - direct.
+        frame = self.ref.load_frame(self.scene, config, s.width, s.height)
+        return {"pt": frame.full(spp=s.spp, seed=seed, max_depth=s.max_depth), "pt_direct": frame.direct(spp=s.spp, seed=seed)}
+
+
+def _clean_stale(ds: Dataset, mine: set[int]) -> None:
+    """Remove temporary files a killed run of this shard left (never another shard's)."""
+    for p in (ds.root / "frames").glob(".*"):
+        stem = p.name[1:].split(".")[0]
+        if stem.isdigit() and int(stem) in mine:
+            p.unlink(missing_ok=True)
+
+
+def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard: tuple[int, int] = (1, 1),
+            log=print) -> dict:
+    """Render the frames of this shard that are not already complete; returns a summary."""
+    if settings.gt == "vxgi":
+        raise DiviewerError("VXGI ground truth is not available yet (no VXGI pass); use --gt pt", field="--gt")
+    if settings.gt != "pt":
+        raise DiviewerError(f"unknown ground truth '{settings.gt}'; choose pt", field="--gt")
+    if settings.dtype not in ("float16", "float32"):
+        raise DiviewerError(f"--dtype must be float16 or float32, got {settings.dtype}", field="--dtype")
+    if settings.frames < 1 or settings.spp < 1 or settings.max_depth < 2:
+        raise DiviewerError("frames and spp must be >= 1, max_depth >= 2")
+    scene = load_scene(scene_name)
+    manifest = build_manifest(scene, settings)
+    ds = open_or_create(out, manifest)
+    k, n = shard
+    mine = [f for f in ds.frames if f["index"] % n == k - 1]
+    _clean_stale(ds, {f["index"] for f in mine})
+    todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
+    log(f"capture {scene.name}: {len(mine) - len(todo)} of {len(mine)} frames of shard {k}/{n} already done, "
+        f"{len(todo)} to render at {settings.width}x{settings.height}, {settings.spp} spp")
+    t0 = time.perf_counter()
+    if todo:
+        _render_frames(scene, ds, todo, settings, log)
+    summary = summarize(ds)
+    summary["seconds"] = round(time.perf_counter() - t0, 2)
+    summary["rendered"] = len(todo)
+    log(f"done: {summary['present']}/{summary['planned']} frames present "
+        f"({', '.join(f'{s} {c}' for s, c in summary['per_split'].items())}), "
+        f"{summary['disk_mb']:.1f} MB, {summary['seconds']:.0f} s")
+    return summary
+
+
+def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: CaptureSettings, log) -> None:
+    from diviewer.gl.context import create_context, describe
+    from diviewer.gl.renderer import BUFFERS, Compositor, Renderer
+    from diviewer.scene.loader import config_from_dict
+
+    gt = PathTracedGT(scene, settings)
+    ctx = create_context()
+    renderer = Renderer(ctx, scene, settings.width, settings.height)
+    compositor = Compositor(ctx, renderer.shaders)
+    gl_name = describe(ctx)
+    thumbs = {i for s in SPLITS for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
+    progress = Progress(len(todo), label="capture")
+    try:
+        for f in todo:
+            config = config_from_dict(scene, f["config"])
+            t0 = time.perf_counter()
+            buffers = renderer.frame(config)
+            t1 = time.perf_counter()
+            truth = gt(config, f["seed"])
+            t2 = time.perf_counter()
+            planes = {**buffers, **truth}
+            arr = np.concatenate([planes[name].reshape(settings.height, settings.width, c) for name, c in CHANNELS],
+                                 axis=-1)
+            bad = [name for name, c in CHANNELS if not np.all(np.isfinite(planes[name]))]
+            if bad:
+                raise DiviewerError(f"frame {f['index']}: non-finite values in {', '.join(bad)} "
+                                    f"(configuration in the manifest); nothing was written for it")
+            if settings.dtype == "float16" and np.abs(arr).max() > FLOAT16_MAX:
+                raise DiviewerError(f"frame {f['index']}: radiance {np.abs(arr).max():.3g} exceeds float16's range; "
+                                    f"capture with --dtype float32 (into a new --out)")
+            write_frame(ds, f["index"], arr.astype(settings.dtype),
+                         {"index": f["index"], "split": f["split"], "variant": gt.variant, "gl_renderer": gl_name,
+                          "seconds": {"gl": round(t1 - t0, 4), "gt": round(t2 - t1, 3)}})
+            if f["index"] in thumbs:
+                row = [compositor.to_ldr(planes["direct"], scene.exposure), compositor.to_ldr(planes["pt"], scene.exposure),
+                       compositor.to_ldr(planes["pt"] - planes["pt_direct"], scene.exposure)]
+                imageio.write_png(ds.root / "thumbs" / f"{frame_name(f['index'])}_{f['split']}.png",
+                                  np.concatenate(row, axis=1))
+            progress.update(extra=f"gt {t2 - t1:.1f}s/frame ({gt.variant})")
+    finally:
+        compositor.release()
+        renderer.release()
+        ctx.release()
+    assert all(b in dict(CHANNELS) for b in BUFFERS)
+
+
+def summarize(ds: Dataset) -> dict:
+    present = ds.indices()
+    per_split = {s: len(ds.indices(s)) for s in SPLITS}
+    disk = sum(p.stat().st_size for p in ds.root.rglob("*") if p.is_file())
+    return {"planned": len(ds.frames), "present": len(present), "per_split": per_split, "disk_mb": disk / 2**20}
+
+
+def merge(sources: list[Path], out: Path, log=print) -> dict:
+    """Merge shards captured into separate folders (e.g. on several machines) into one dataset."""
+    if not sources:
+        raise DiviewerError("nothing to merge")
+    manifests = [Dataset(s).manifest for s in sources]
+    for s, m in zip(sources[1:], manifests[1:]):
+        diff = _same_identity(manifests[0], m)
+        if diff:
+            raise DiviewerError(f"not shards of the same dataset (differs in: {', '.join(diff)})", path=s)
+    ds = open_or_create(out, manifests[0])
+    copied = 0
+    for src in sources:
+        sds = Dataset(src)
+        for i in sds.indices():
+            if ds.check_frame(i) is None or sds.check_frame(i) is not None:
+                continue
+            for suffix in (".npy", ".json"):  # the sidecar last: it marks the frame complete
+                with imageio.atomic_path(ds.path(i, suffix)) as tmp:
+                    shutil.copyfile(sds.path(i, suffix), tmp)
+            copied += 1
+        for t in (Path(src) / "thumbs").glob("*.png"):
+            (out / "thumbs").mkdir(exist_ok=True)
+            if not (out / "thumbs" / t.name).exists():
+                shutil.copyfile(t, out / "thumbs" / t.name)
+    summary = summarize(ds)
+    log(f"merged {copied} frames: {summary['present']}/{summary['planned']} present")
+    return summary

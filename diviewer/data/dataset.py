@@ -1,0 +1,182 @@
+"""The dataset on disk and its reader (torch-free).
+
+Layout of a dataset folder::
+
+    manifest.json         what was captured and how: scene (hash and text), resolution, channels,
+                          ground truth settings, seeds, library versions, every frame's split and
+                          configuration
+    frames/000042.npy     one frame: (H, W, C) float16 (or float32), channels as in the manifest,
+                          top row first
+    frames/000042.json    written after the .npy: its sha256, the Mitsuba variant, render times
+    thumbs/000042.png     a few frames for people: GL direct | path traced | indirect
+
+A frame counts as present only when both files exist and the checksum matches, so a frame whose
+writing was interrupted is never read (and a resumed capture renders it again).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from diviewer import imageio
+from diviewer.errors import DiviewerError
+
+FORMAT = "diviewer-dataset"
+FORMAT_VERSION = 1
+CHANNELS = (("depth", 1), ("normal", 3), ("albedo", 3), ("direct", 3), ("pt", 3), ("pt_direct", 3))
+"""Stored channels: the network inputs (GL) then the path-traced ground truth (full, direct only)."""
+
+# Manifest fields that define a dataset: a resumed capture or a shard must agree on all of them.
+IDENTITY = ("format", "format_version", "scene", "scene_hash", "resolution", "channels", "dtype", "gt", "spp",
+            "max_depth", "seed", "frames", "split_fractions", "render_settings")
+
+
+def channel_slices(channels=CHANNELS) -> dict[str, slice]:
+    out, start = {}, 0
+    for name, n in channels:
+        out[name] = slice(start, start + n)
+        start += n
+    return out
+
+
+def frame_name(index: int) -> str:
+    return f"{index:06d}"
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def read_manifest(root: Path) -> dict:
+    path = Path(root) / "manifest.json"
+    if not path.is_file():
+        raise DiviewerError(f"not a dataset (no manifest.json): {root}")
+    try:
+        manifest = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise DiviewerError(f"manifest is not valid JSON: {exc}", path=path) from exc
+    if manifest.get("format") != FORMAT:
+        raise DiviewerError(f"not a diviewer dataset manifest (format is {manifest.get('format')!r})", path=path,
+                            field="format")
+    if int(manifest.get("format_version", 0)) > FORMAT_VERSION:
+        raise DiviewerError(f"dataset format {manifest['format_version']} is newer than this diviewer reads "
+                            f"({FORMAT_VERSION}); upgrade diviewer", path=path, field="format_version")
+    return manifest
+
+
+@dataclass(frozen=True)
+class FrameProblem:
+    index: int
+    problem: str
+
+
+class Dataset:
+    """A captured dataset: manifest, frame listing per split, frame loading with checks."""
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+        self.manifest = read_manifest(self.root)
+        self.width, self.height = self.manifest["resolution"]
+        self.channels = tuple((str(n), int(c)) for n, c in self.manifest["channels"])
+        self.slices = channel_slices(self.channels)
+        self.num_channels = sum(c for _, c in self.channels)
+        self.dtype = np.dtype(self.manifest["dtype"])
+        self.frames = self.manifest["frame_list"]
+
+    @property
+    def hash(self) -> str:
+        """Identity of the dataset: sha256 of its identity fields (checkpoints record it)."""
+        ident = {k: self.manifest.get(k) for k in IDENTITY}
+        return hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()
+
+    def path(self, index: int, suffix: str = ".npy") -> Path:
+        return self.root / "frames" / (frame_name(index) + suffix)
+
+    def indices(self, split: str | None = None, present_only: bool = True) -> list[int]:
+        out = [f["index"] for f in self.frames if split is None or f["split"] == split]
+        if present_only:
+            out = [i for i in out if self.path(i).is_file() and self.path(i, ".json").is_file()]
+        return out
+
+    def check_frame(self, index: int, verify_checksum: bool = True) -> str | None:
+        """None if the frame is complete and sound, else what is wrong with it."""
+        npy, meta = self.path(index), self.path(index, ".json")
+        if not npy.is_file():
+            return "missing"
+        if not meta.is_file():
+            return "incomplete (no .json sidecar: its writing was interrupted)"
+        try:
+            info = json.loads(meta.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            return f"unreadable sidecar: {exc}"
+        if verify_checksum and sha256_file(npy) != info.get("sha256"):
+            return "checksum mismatch (corrupted or truncated)"
+        try:
+            arr = np.load(npy, mmap_mode="r")
+        except Exception as exc:  # numpy raises ValueError/OSError/EOFError for broken files
+            return f"unreadable: {exc}"
+        expected = (self.height, self.width, self.num_channels)
+        if arr.shape != expected:
+            return f"shape {arr.shape}, expected {expected}"
+        if arr.dtype != self.dtype:
+            return f"dtype {arr.dtype}, expected {self.dtype}"
+        bad = ~np.isfinite(np.asarray(arr))
+        if bad.any():
+            names = [n for n, s in self.slices.items() if bad[..., s].any()]
+            return f"non-finite values in {', '.join(names)}"
+        return None
+
+    def load(self, index: int) -> dict[str, np.ndarray]:
+        """One frame as float32 arrays by channel name, plus ``pt_indirect`` (full minus direct)."""
+        problem = self.check_frame(index, verify_checksum=False)
+        if problem:
+            raise DiviewerError(f"frame {index}: {problem}", path=self.path(index))
+        arr = np.load(self.path(index)).astype(np.float32)
+        out = {name: arr[..., s] for name, s in self.slices.items()}
+        out["depth"] = out["depth"][..., 0]
+        if "pt" in out and "pt_direct" in out:
+            out["pt_indirect"] = out["pt"] - out["pt_direct"]
+        return out
+
+    def array(self, split: str) -> tuple[list[int], np.ndarray]:
+        """All present frames of a split stacked in RAM: (N, H, W, C) in the stored dtype, checked."""
+        idx = self.indices(split)
+        if not idx:
+            raise DiviewerError(f"dataset has no '{split}' frames yet", path=self.root)
+        out = np.empty((len(idx), self.height, self.width, self.num_channels), self.dtype)
+        for k, i in enumerate(idx):
+            problem = self.check_frame(i, verify_checksum=False)
+            if problem:
+                raise DiviewerError(f"frame {i}: {problem}; run `diviewer data check {self.root}`", path=self.path(i))
+            out[k] = np.load(self.path(i))
+        return idx, out
+
+    def check(self, verify_checksum: bool = True) -> list[FrameProblem]:
+        """Every frame the manifest lists: present, readable, right shape and dtype, finite, checksum."""
+        problems = []
+        for f in self.frames:
+            p = self.check_frame(f["index"], verify_checksum)
+            if p:
+                problems.append(FrameProblem(f["index"], p))
+        return problems
+
+
+def write_frame(ds: Dataset, index: int, arr: np.ndarray, info: dict) -> None:
+    """Write one frame atomically: the array, then its sidecar (with the checksum) marking it complete."""
+    with imageio.atomic_path(ds.path(index)) as tmp:
+        with open(tmp, "wb") as f:
+            np.save(f, arr)
+            f.flush()
+            os.fsync(f.fileno())
+    info = {**info, "sha256": sha256_file(ds.path(index))}
+    imageio.write_text(ds.path(index, ".json"), json.dumps(info, indent=1))
