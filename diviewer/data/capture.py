@@ -21,7 +21,7 @@ from diviewer.errors import DiviewerError
 from diviewer.progress import Progress
 from diviewer.provenance import versions
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
-from diviewer.scene.sampler import SPLITS
+from diviewer.scene.sampler import SPLITS, path_parameter
 
 FLOAT16_MAX = 65504.0
 
@@ -81,7 +81,11 @@ def plan_frames(scene: Scene, settings: CaptureSettings) -> list[dict]:
     for i in range(n):
         seed = int(np.random.SeedSequence([settings.seed, i]).generate_state(1)[0] & 0x7FFFFFFF)
         config = sample_config(scene, seed, str(split_of[i]))
-        plan.append({"index": i, "split": str(split_of[i]), "seed": seed, "config": config.to_dict()})
+        entry = {"index": i, "split": str(split_of[i]), "seed": seed}
+        s = path_parameter(scene, seed, str(split_of[i]))
+        if s is not None:
+            entry["path_s"] = s  # where on the camera path: the split rule is checkable from the manifest
+        plan.append({**entry, "config": config.to_dict()})
     return plan
 
 

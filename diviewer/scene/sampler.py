@@ -122,7 +122,15 @@ def sample_config(scene: Scene, seed: int, split: str = "train") -> FrameConfig:
         objects.append(dataclasses.replace(obj, mesh=mesh, rotation=matrix_to_euler_xyz(rot),
                                            position=tuple(map(float, pos))))
 
-    camera = config.camera
-    if scene.ranges.camera is not None:
-        camera = camera_on_path(scene, _draw_path_parameter(rng, scene.ranges.camera, split))
+    s = path_parameter(scene, seed, split)
+    camera = config.camera if s is None else camera_on_path(scene, s)
     return FrameConfig(camera=camera, lights=tuple(lights), objects=tuple(objects))
+
+
+def path_parameter(scene: Scene, seed: int, split: str = "train") -> float | None:
+    """Where on the camera path sample_config(scene, seed, split) puts the camera (None: no path)."""
+    if scene.ranges.camera is None:
+        return None
+    # A stream of its own, so the path parameter can be recomputed without drawing the rest.
+    rng = np.random.default_rng([int(seed), SPLITS.index(split), 1])
+    return _draw_path_parameter(rng, scene.ranges.camera, split)
