@@ -9,6 +9,7 @@ in vec2 v_uv;
 uniform sampler2D u_hdr;
 uniform float u_exposure;   // stops
 uniform int u_tonemap;      // 0: clamp, 1: Reinhard, 2: ACES (Narkowicz fit)
+uniform bool u_flip_y;      // the image's rows run top first (the neural pass's output)
 
 out vec4 out_color;
 
@@ -22,7 +23,7 @@ vec3 aces(vec3 x) {
 }
 
 void main() {
-    vec3 c = texture(u_hdr, v_uv).rgb;
+    vec3 c = texture(u_hdr, u_flip_y ? vec2(v_uv.x, 1.0 - v_uv.y) : v_uv).rgb;
     // Non-finite input (a broken buffer) shows as magenta rather than poisoning the display.
     if (any(isnan(c)) || any(isinf(c))) { out_color = vec4(1.0, 0.0, 1.0, 1.0); return; }
     // Clamped before the curve: x * (2.51 x + ...) overflows to inf / inf = NaN for huge radiance.

@@ -298,13 +298,14 @@ class Compositor:
         self._ldr: dict[tuple[int, int], tuple] = {}
 
     def run(self, hdr: moderngl.Texture, target: moderngl.Framebuffer, exposure: float = 0.0,
-            tonemap: str = "aces") -> None:
+            tonemap: str = "aces", flip_y: bool = False) -> None:
         target.use()
         self.ctx.enable_only(moderngl.NOTHING)
         hdr.use(location=0)
         set_uniform(self.prog, "u_hdr", 0)
         set_uniform(self.prog, "u_exposure", float(exposure))
         set_uniform(self.prog, "u_tonemap", TONEMAPS[tonemap])
+        set_uniform(self.prog, "u_flip_y", bool(flip_y))
         self.vao.render(moderngl.TRIANGLES, vertices=3)
 
     def to_ldr(self, image: np.ndarray, exposure: float = 0.0, tonemap: str = "aces") -> np.ndarray:

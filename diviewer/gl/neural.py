@@ -1,0 +1,68 @@
+"""The per-frame neural GI pass: pack the G-buffer on the GPU, one read-back, onnxruntime, one upload."""
+
+from __future__ import annotations
+
+import time
+
+import moderngl
+import numpy as np
+
+from diviewer.gl.renderer import Renderer
+from diviewer.gl.resources import set_uniform
+
+CHANNELS = 10
+
+
+class NeuralPass:
+    """Runs a model (diviewer.runtime.NeuralGI) on a Renderer's buffers; the result is a GL texture.
+
+    Per frame it makes exactly one GPU->CPU copy (the packed buffer, read into a preallocated
+    array) and one CPU->GPU copy (the model's output into ``self.texture``); the model's input and
+    output layouts are the arrays' own, so nothing is transposed on the CPU. The texture holds
+    rows top first: display it with ``flip_y`` (the Compositor does).
+    """
+
+    def __init__(self, ctx: moderngl.Context, renderer: Renderer, model):
+        self.ctx, self.renderer, self.model = ctx, renderer, model
+        model.check_size(renderer.width, renderer.height)
+        self.program = renderer.shaders.compute("pack.glsl")
+        w, h = renderer.width, renderer.height
+        self.packed = np.empty((1, h, w, CHANNELS), np.float32)
+        self.ssbo = ctx.buffer(reserve=self.packed.nbytes)
+        self.texture = ctx.texture((w, h), 3, dtype="f4")
+        self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.texture.repeat_x = self.texture.repeat_y = False
+        self.output: np.ndarray | None = None
+        self.timings: dict[str, float] = {}
+        self.copies = {"download_bytes": self.packed.nbytes, "upload_bytes": 0}
+
+    def run(self) -> moderngl.Texture:
+        """Infer the GI image from the renderer's current textures (call after renderer.render)."""
+        r = self.renderer
+        t0 = time.perf_counter()
+        for i, name in enumerate(("depth", "normal", "albedo", "direct")):
+            r.textures[name].use(location=i)
+            set_uniform(self.program, f"u_{name}", i)
+        set_uniform(self.program, "u_size", (r.width, r.height))
+        self.ssbo.bind_to_storage_buffer(0)
+        self.program.run((r.width + 7) // 8, (r.height + 7) // 8, 1)
+        self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
+        self.ssbo.read_into(self.packed)
+        t1 = time.perf_counter()
+        self.output = self.model.run(self.packed)
+        t2 = time.perf_counter()
+        self.texture.write(self.output)  # (1, H, W, 3) float32, contiguous: uploaded as is
+        self.copies["upload_bytes"] = self.output.nbytes
+        t3 = time.perf_counter()
+        self.timings = {"readback": (t1 - t0) * 1e3, "inference": (t2 - t1) * 1e3, "upload": (t3 - t2) * 1e3}
+        return self.texture
+
+    def image(self) -> np.ndarray:
+        """The last output as (H, W, 3) float32 linear radiance, top row first."""
+        if self.output is None:
+            raise RuntimeError("NeuralPass.run has not been called")
+        return self.output[0]
+
+    def release(self) -> None:
+        self.ssbo.release()
+        self.texture.release()

@@ -1,0 +1,177 @@
+"""The per-frame neural GI model in onnxruntime: load, check its metadata against the scene, run.
+
+The model contract (written by ``diviewer export``, read here; torch-free):
+
+- one input ``buffers``: float32 (N, H, W, 10), NHWC, linear and raw, channels in
+  ``diviewer.encoding.INPUT_CHANNELS`` order (depth, normal xyz, albedo rgb, direct rgb), rows top
+  first; H and W multiples of the model's ``multiple``;
+- one output ``radiance``: float32 (N, H, W, 3) linear radiance of the final image (for a model of
+  the ``indirect`` target the exact direct light is already added inside the graph);
+- the encoding and decoding live inside the graph; the metadata key ``diviewer`` holds a JSON
+  object describing the model (see REQUIRED_META).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNELS, OUTPUT_CHANNELS
+from diviewer.errors import DiviewerError
+
+INPUT_NAME = "buffers"
+OUTPUT_NAME = "radiance"
+META_KEY = "diviewer"
+MODEL_FORMAT = 1
+REQUIRED_META = ("format", "input", "output", "layout", "channels", "resolution", "multiple", "K", "levels",
+                 "target", "encoding", "precision", "scene", "scene_hash", "dataset_hash")
+PROVIDER_ORDER = ("TensorrtExecutionProvider", "CUDAExecutionProvider", "CPUExecutionProvider")
+
+
+def read_metadata(path: str | Path) -> dict:
+    """The model's diviewer metadata (without running it); refuses files that lack it."""
+    import onnxruntime as ort
+
+    path = Path(path)
+    if not path.is_file():
+        raise DiviewerError(f"model file not found: {path}")
+    try:
+        session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    except Exception as exc:
+        raise DiviewerError(f"cannot load the ONNX model (truncated or not ONNX?): {exc}", path=path) from exc
+    return _metadata(session, path)
+
+
+def _metadata(session, path: Path) -> dict:
+    props = session.get_modelmeta().custom_metadata_map
+    if META_KEY not in props:
+        raise DiviewerError("the model has no diviewer metadata (was it made by `diviewer export`?)", path=path,
+                            field=META_KEY)
+    try:
+        meta = json.loads(props[META_KEY])
+    except json.JSONDecodeError as exc:
+        raise DiviewerError(f"the model's metadata is not valid JSON: {exc}", path=path, field=META_KEY) from exc
+    missing = [k for k in REQUIRED_META if k not in meta]
+    if missing:
+        raise DiviewerError(f"the model's metadata lacks {', '.join(missing)}", path=path, field=META_KEY)
+    return meta
+
+
+def check_compatible(meta: dict, path: Path, scene=None) -> None:
+    """Refuse a model that does not fit this diviewer, these buffers or this scene, saying why."""
+    if int(meta["format"]) > MODEL_FORMAT:
+        raise DiviewerError(f"model format {meta['format']} is newer than this diviewer reads ({MODEL_FORMAT})",
+                            path=path, field="format")
+    enc_version = int(meta["encoding"].get("version", 0))
+    if enc_version > ENCODING_VERSION:
+        raise DiviewerError(f"the model uses encoding version {enc_version}, newer than this diviewer's "
+                            f"({ENCODING_VERSION}); upgrade diviewer", path=path, field="encoding.version")
+    expected = [list(c) for c in INPUT_CHANNELS]
+    if [list(c) for c in meta["channels"]] != expected:
+        raise DiviewerError(f"the model expects input channels {meta['channels']}, the renderer provides {expected}",
+                            path=path, field="channels")
+    if meta["layout"] != "NHWC" or meta["input"] != INPUT_NAME or meta["output"] != OUTPUT_NAME:
+        raise DiviewerError(f"the model's inputs/outputs ({meta['input']} -> {meta['output']}, {meta['layout']}) "
+                            f"are not diviewer's ({INPUT_NAME} -> {OUTPUT_NAME}, NHWC)", path=path, field="layout")
+    if scene is not None and meta["scene_hash"] != scene.file_hash:
+        same_name = meta["scene"] == scene.name
+        raise DiviewerError(
+            f"the model was trained for scene '{meta['scene']}'"
+            + (" as it was in another version of its file" if same_name else "")
+            + f", not for '{scene.name}' (scene file hash {meta['scene_hash'][:12]}... != {scene.file_hash[:12]}...)",
+            path=path, field="scene_hash")
+
+
+PROVIDER_ALIASES = {"cpu": "CPUExecutionProvider", "cuda": "CUDAExecutionProvider",
+                    "tensorrt": "TensorrtExecutionProvider"}
+
+
+def choose_providers(available: list[str], requested: str | None = None) -> list[str]:
+    """The best available execution providers (TensorRT, CUDA, CPU), or the one requested first."""
+    if not requested:
+        return [p for p in PROVIDER_ORDER if p in available] or list(available)
+    name = PROVIDER_ALIASES.get(requested.lower(), requested)
+    if name not in available:
+        raise DiviewerError(f"execution provider '{requested}' is not available; available: {', '.join(available)}",
+                            field="--provider")
+    return [name] + (["CPUExecutionProvider"] if name != "CPUExecutionProvider" else [])
+
+
+@dataclass
+class StageTimes:
+    """Milliseconds of the last frame's stages."""
+
+    inference: float = 0.0
+    history: list = field(default_factory=list)
+
+
+class NeuralGI:
+    """One loaded model: checks, then turns (N, H, W, 10) raw buffers into (N, H, W, 3) radiance."""
+
+    def __init__(self, path: str | Path, scene=None, provider: str | None = None, threads: int = 0):
+        import onnxruntime as ort
+
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise DiviewerError(f"model file not found: {self.path}")
+        opts = ort.SessionOptions()
+        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        if threads:
+            opts.intra_op_num_threads = threads
+        providers = choose_providers(ort.get_available_providers(), provider)
+        try:
+            self.session = ort.InferenceSession(str(self.path), sess_options=opts, providers=providers)
+        except Exception as exc:
+            raise DiviewerError(f"cannot load the ONNX model (truncated or not ONNX?): {exc}", path=self.path) from exc
+        self.meta = _metadata(self.session, self.path)
+        check_compatible(self.meta, self.path, scene)
+        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        if [i.name for i in inputs] != [INPUT_NAME] or OUTPUT_NAME not in [o.name for o in outputs]:
+            raise DiviewerError(f"the graph's inputs {[i.name for i in inputs]} / outputs {[o.name for o in outputs]} "
+                                f"are not diviewer's", path=self.path)
+        channels = inputs[0].shape[-1]
+        if channels != sum(n for _, n in INPUT_CHANNELS):
+            raise DiviewerError(f"the graph takes {channels} input channels, the renderer provides "
+                                f"{sum(n for _, n in INPUT_CHANNELS)}", path=self.path, field="input")
+        self.provider = self.session.get_providers()[0]
+        self.multiple = int(self.meta["multiple"])
+        self.resolution = tuple(int(x) for x in self.meta["resolution"])
+        self.times = StageTimes()
+
+    @property
+    def file_sha256(self) -> str:
+        return hashlib.sha256(self.path.read_bytes()).hexdigest()
+
+    def check_size(self, width: int, height: int) -> None:
+        if width % self.multiple or height % self.multiple:
+            raise DiviewerError(f"the model needs width and height that are multiples of {self.multiple}, "
+                                f"got {width}x{height} (it was trained at {self.resolution[0]}x{self.resolution[1]})",
+                                path=self.path)
+
+    def run(self, buffers: np.ndarray) -> np.ndarray:
+        """(N, H, W, 10) or (H, W, 10) float32 raw buffers to radiance of the same leading shape."""
+        single = buffers.ndim == 3
+        x = buffers[None] if single else buffers
+        if x.dtype != np.float32 or not x.flags.c_contiguous:
+            x = np.ascontiguousarray(x, dtype=np.float32)
+        self.check_size(x.shape[2], x.shape[1])
+        t0 = time.perf_counter()
+        (y,) = self.session.run([OUTPUT_NAME], {INPUT_NAME: x})
+        self.times.inference = (time.perf_counter() - t0) * 1000.0
+        return y[0] if single else y
+
+
+def pack_buffers(frame: dict[str, np.ndarray]) -> np.ndarray:
+    """GL frame buffers (depth (H, W), others (H, W, 3)) to the model's (H, W, 10) input, on the CPU."""
+    depth = frame["depth"][..., None] if frame["depth"].ndim == 2 else frame["depth"]
+    parts = [depth] + [frame[name] for name, _ in INPUT_CHANNELS[1:]]
+    return np.ascontiguousarray(np.concatenate(parts, axis=-1), dtype=np.float32)
+
+
+__all__ = ["NeuralGI", "pack_buffers", "read_metadata", "check_compatible", "choose_providers", "INPUT_NAME",
+           "OUTPUT_NAME", "META_KEY", "OUTPUT_CHANNELS"]
