@@ -1,0 +1,206 @@
+"""`diviewer export`: a checkpoint's generator to ONNX with encoding and decoding inside the graph,
+verified against PyTorch in onnxruntime before it is written.
+
+The graph follows the model contract in diviewer/runtime.py: input ``buffers`` (N, H, W, 10) raw
+linear buffers, output ``radiance`` (N, H, W, 3) linear radiance of the final image. For a model of
+the ``indirect`` target the exact GL direct light is added inside the graph, so the runtime never
+needs to know the target. Spatial size is dynamic (any multiple of 2**levels) and so is the batch;
+the metadata records the resolution the model was trained at, which the viewer uses.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from diviewer import imageio
+from diviewer.encoding import INPUT_CHANNELS
+from diviewer.errors import DiviewerError, missing_extra
+from diviewer.metrics import psnr
+from diviewer.provenance import versions
+from diviewer.runtime import INPUT_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
+
+OPSET = 17
+FP32_TOLERANCE = 1e-4
+"""fp32 export fails if max |onnx - torch| exceeds this fraction of the reference's peak radiance."""
+
+
+@dataclass(frozen=True)
+class ExportSettings:
+    """How a checkpoint is exported."""
+
+    fp16: bool = False
+    """Store weights and run the generator in float16; encoding and decoding stay float32."""
+    verify_frames: int = 4
+    """Frames compared between onnxruntime and PyTorch before the file is written."""
+
+
+def _torch():
+    try:
+        import torch
+    except ImportError as exc:
+        raise missing_extra("torch") from exc
+    return torch
+
+
+def gi_module(netG, encoding, meta: dict, fp16: bool = False):
+    """The exported computation as a torch module: raw NHWC buffers -> linear radiance NHWC."""
+    torch = _torch()
+    from diviewer.encoding import decode_radiance, encode_inputs
+    from diviewer.train.trainer import compose_radiance
+
+    class GIModel(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.netG = netG.half() if fp16 else netG
+
+        def forward(self, buffers):
+            x = buffers.permute(0, 3, 1, 2)
+            depth, normal, albedo, direct = x[:, 0:1], x[:, 1:4], x[:, 4:7], x[:, 7:10]
+            inp = encode_inputs(depth, normal, albedo, direct, encoding, channel_axis=1)
+            y = self.netG(inp.half() if fp16 else inp)
+            radiance = decode_radiance(y.float() if fp16 else y, encoding)
+            out = compose_radiance(radiance, direct, albedo, meta["target"], meta["divide_albedo"])
+            return out.permute(0, 2, 3, 1)
+
+    return GIModel().eval()
+
+
+def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[int, int]) -> tuple[np.ndarray, str]:
+    """Real frames from the training dataset's val split when it is there, else procedural buffers."""
+    from diviewer.data.dataset import Dataset
+
+    if data_dir and (Path(data_dir) / "manifest.json").is_file():
+        ds = Dataset(data_dir)
+        idx = (ds.indices("val") or ds.indices())[:n]
+        if idx:
+            frames = []
+            for i in idx:
+                f = ds.load(i)
+                frames.append(np.concatenate([f["depth"][..., None], f["normal"], f["albedo"], f["direct"]], -1))
+            return np.stack(frames).astype(np.float32), f"{len(idx)} frames of {data_dir}"
+    # No dataset: smooth synthetic buffers with plausible ranges (depth 1..far, unit normals).
+    rng = np.random.default_rng(0)
+    w, h = res
+    yy, xx = np.mgrid[0:h, 0:w] / max(w, h)
+    frames = []
+    for _ in range(n):
+        a = rng.uniform(0.5, 2.0, 4)
+        depth = 1.0 + a[0] * (1 + np.sin(3 * xx + a[1]))
+        normal = np.stack([np.sin(xx * a[2]), np.cos(yy * a[3]), np.ones_like(xx)], -1)
+        normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+        albedo = np.stack([0.2 + 0.6 * xx, 0.5 + 0.0 * yy, 0.8 - 0.6 * yy], -1)
+        direct = albedo * np.maximum(0, np.sin(5 * xx * a[0]) * np.cos(4 * yy * a[1]))[..., None] * a[2]
+        frames.append(np.concatenate([depth[..., None], normal, albedo, direct], -1))
+    return np.stack(frames).astype(np.float32), f"{n} synthetic frames (dataset {data_dir} not found)"
+
+
+def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = ExportSettings(), log=print) -> dict:
+    """Export, verify, and write the model and its model card (``out`` with .json); returns the card."""
+    torch = _torch()
+    import onnx
+    import onnxruntime as ort
+
+    from diviewer.train.trainer import build_generator_from_checkpoint, load_checkpoint
+
+    ckpt_path, out = Path(ckpt_path), Path(out)
+    ckpt = load_checkpoint(ckpt_path)
+    netG, encoding, meta = build_generator_from_checkpoint(ckpt)
+    levels = int(meta["model_args"]["levels"])
+    res = tuple(int(x) for x in meta["resolution"])
+    ref_module = gi_module(netG, encoding, meta, fp16=False)
+    frames, source = _verification_frames(meta, meta["config"].get("data"), settings.verify_frames, res)
+    with torch.no_grad():
+        reference = ref_module(torch.from_numpy(frames)).numpy()
+        module = gi_module(build_generator_from_checkpoint(ckpt)[0], encoding, meta, fp16=settings.fp16)
+        buf = io.BytesIO()
+        torch.onnx.export(module, (torch.from_numpy(frames[:1]),), buf, input_names=[INPUT_NAME],
+                          output_names=[OUTPUT_NAME], opset_version=OPSET, dynamo=False,
+                          dynamic_axes={INPUT_NAME: {0: "N", 1: "H", 2: "W"}, OUTPUT_NAME: {0: "N", 1: "H", 2: "W"}})
+    model = onnx.load_from_string(buf.getvalue())
+    session = ort.InferenceSession(buf.getvalue(), providers=["CPUExecutionProvider"])
+    got = np.concatenate([session.run([OUTPUT_NAME], {INPUT_NAME: f[None]})[0] for f in frames])
+    diff = np.abs(got.astype(np.float64) - reference)
+    peak = float(np.abs(reference).max()) or 1.0
+    check = {
+        "frames": source,
+        "max_abs_diff": float(diff.max()),
+        "mean_abs_diff": float(diff.mean()),
+        "max_rel_to_peak": float(diff.max() / peak),
+        "psnr_db": float(np.mean([psnr(g, r, peak=peak) for g, r in zip(got, reference)])),
+        "onnx_finite": bool(np.isfinite(got).all()),
+    }
+    precision = "fp16" if settings.fp16 else "fp32"
+    log(f"verify {precision} against torch on {source}: max |diff| {check['max_abs_diff']:.3g} "
+        f"({check['max_rel_to_peak']:.2g} of peak {peak:.3g}), mean {check['mean_abs_diff']:.3g}, "
+        f"PSNR {check['psnr_db']:.1f} dB")
+    if np.isfinite(reference).all() and not check["onnx_finite"]:
+        raise DiviewerError(f"the {precision} ONNX model produced NaN/Inf where PyTorch did not "
+                            f"(overflow?); not written", path=out)
+    if not settings.fp16 and check["max_rel_to_peak"] > FP32_TOLERANCE:
+        raise DiviewerError(f"the ONNX model differs from PyTorch by {check['max_rel_to_peak']:.2g} of peak "
+                            f"(tolerance {FP32_TOLERANCE}); not written", path=out)
+    card = {
+        "format": MODEL_FORMAT,
+        "input": INPUT_NAME,
+        "output": OUTPUT_NAME,
+        "layout": "NHWC",
+        "channels": [list(c) for c in INPUT_CHANNELS],
+        "resolution": list(res),
+        "multiple": 2 ** levels,
+        "K": int(meta["K"]),
+        "levels": levels,
+        "target": meta["target"],
+        "divide_albedo": meta["divide_albedo"],
+        "encoding": encoding.to_dict(),
+        "precision": precision,
+        "scene": meta["scene"],
+        "scene_hash": meta["scene_hash"],
+        "dataset_hash": meta["dataset_hash"],
+        "epochs": int(meta["epoch"]),
+        "steps": int(meta["step"]),
+        "validation": meta["val"],
+        "checkpoint_sha256": hashlib.sha256(ckpt_path.read_bytes()).hexdigest(),
+        "trained_with": meta["versions"],
+        "exported_with": versions(),
+        "verification": check,
+        "opset": OPSET,
+    }
+    onnx.helper.set_model_props(model, {META_KEY: json.dumps(card, sort_keys=True)})
+    model.producer_name, model.producer_version = "diviewer", card["exported_with"]["diviewer"]
+    with imageio.atomic_path(out) as tmp:
+        onnx.save(model, str(tmp))
+    imageio.write_text(out.with_suffix(".json"), json.dumps(card, indent=2, sort_keys=True))
+    log(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB) and {out.with_suffix('.json').name}")
+    return card
+
+
+def info(path: str | Path) -> str:
+    """A readable summary of a model's metadata (`diviewer export --info`)."""
+    from diviewer.runtime import read_metadata
+
+    m = read_metadata(path)
+    val = m.get("validation") or {}
+    lines = [f"{path}",
+             f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",
+             f"  network      U-Net K={m['K']} levels={m['levels']} ({m['precision']}), target {m['target']}"
+             + (" / albedo" if m.get("divide_albedo") else ""),
+             f"  trained at   {m['resolution'][0]}x{m['resolution'][1]}; sizes must be multiples of {m['multiple']}",
+             f"  training     {m.get('epochs')} epochs, {m.get('steps')} steps, dataset {m['dataset_hash'][:16]}...",
+             f"  input        {m['input']} {m['layout']} channels "
+             + ", ".join(f"{n}({c})" for n, c in m["channels"]),
+             f"  output       {m['output']} (N, H, W, 3) linear radiance",
+             f"  encoding     " + ", ".join(f"{k}={v}" for k, v in m["encoding"].items())]
+    if val:
+        lines.append("  validation   " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                                                for k, v in val.items()))
+    if "verification" in m:
+        v = m["verification"]
+        lines.append(f"  verified     max |onnx - torch| {v['max_abs_diff']:.3g}, PSNR {v['psnr_db']:.1f} dB on {v['frames']}")
+    lines.append(f"  exported by  diviewer {m.get('exported_with', {}).get('diviewer', '?')}")
+    return "\n".join(lines)
