@@ -13,11 +13,29 @@ from diviewer.errors import DiviewerError
 def _cmd_render(args: argparse.Namespace) -> int:
     from diviewer.render import render_to_dir
 
+    if args.reference:
+        from diviewer.render import check_reference
+
+        check_reference(args.reference)  # a missing extra fails before any GL work
     record = render_to_dir(args.scene, args.out, res=args.res, seed=args.seed, split=args.split,
                            config_file=args.config, exposure=args.exposure, tonemap=args.tonemap)
     w, h = record["resolution"]
     print(f"rendered {record['scene']} at {w}x{h} into {args.out}")
+    if args.reference:
+        _render_reference(args)
     return 0
+
+
+def _render_reference(args: argparse.Namespace) -> None:
+    from diviewer.render import render_reference_to_dir
+
+    ref = render_reference_to_dir(args.scene, args.out, args.reference, spp=args.spp, max_depth=args.max_depth,
+                                  noise_floor=args.noise_floor, pt_seed=args.pt_seed)
+    line = (f"path-traced reference ({ref['variant']}, {ref['spp']} spp, max depth {ref['max_depth']}) "
+            f"in {ref['seconds']['full'] + ref['seconds']['direct']:.1f} s")
+    if "noise_floor" in ref:
+        line += f"; noise floor PSNR {ref['noise_floor']['psnr']:.2f} dB, SSIM {ref['noise_floor']['ssim']:.4f}"
+    print(line)
 
 
 def _cmd_capture(args: argparse.Namespace) -> int:
@@ -60,6 +78,30 @@ def _cmd_data_merge(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_reference_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("path-traced reference (needs the 'train' extra: mitsuba)")
+    g.add_argument("--reference", default=None, choices=("pt",),
+                   help="also write the ground truth: pt = Mitsuba path tracer (pt.exr, pt_direct.exr, pt_indirect.exr)")
+    g.add_argument("--spp", type=int, default=256, help="samples per pixel of the reference (default 256)")
+    g.add_argument("--max-depth", type=int, default=None,
+                   help="path length limit of the reference (default 16; 2 = direct light only)")
+    g.add_argument("--pt-seed", type=int, default=0, help="the path tracer's sampler seed (default 0)")
+    g.add_argument("--noise-floor", action="store_true",
+                   help="render a second time with the next seed and record PSNR/SSIM between the two in frame.json")
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from diviewer.train.export import ExportSettings, export, info
+
+    if args.info:
+        print(info(args.info))
+        return 0
+    if args.checkpoint is None or args.out is None:
+        raise DiviewerError("give a checkpoint and --out (or --info MODEL)", field="export")
+    export(args.checkpoint, args.out, ExportSettings(fp16=args.fp16, verify_frames=args.verify_frames))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="diviewer", description="Real-time OpenGL viewer with a neural GI pass.")
     ap.add_argument("--version", action="version", version=f"diviewer {__version__}")
@@ -74,6 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", type=Path, default=None, help="render the configuration stored in a frame.json")
     p.add_argument("--exposure", type=float, default=None, help="display exposure in stops (PNG previews)")
     p.add_argument("--tonemap", default="aces", choices=("clamp", "reinhard", "aces"))
+    _add_reference_args(p)
     p.set_defaults(func=_cmd_render)
 
     p = sub.add_parser("capture", help="render a dataset: GL inputs and path-traced ground truth (resumable)")
@@ -90,6 +133,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--shard", default=None, help="k/n: render every n-th frame starting at the k-th")
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.set_defaults(func=_cmd_capture)
+
+    p = sub.add_parser("export", help="checkpoint to ONNX (encoding inside the graph), verified against PyTorch")
+    p.add_argument("checkpoint", type=Path, nargs="?", help="RUN/best.ckpt")
+    p.add_argument("--out", type=Path, help="model.onnx (a model card model.json is written beside it)")
+    p.add_argument("--fp16", action="store_true", help="float16 weights and generator (encoding stays float32)")
+    p.add_argument("--verify-frames", type=int, default=4, help="frames compared with PyTorch before writing")
+    p.add_argument("--info", type=Path, metavar="MODEL", help="print a model's metadata and exit")
+    p.set_defaults(func=_cmd_export)
+
+    from diviewer.viewer.app import add_view_parser
+
+    add_view_parser(sub)
 
     p = sub.add_parser("data", help="inspect datasets")
     data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")

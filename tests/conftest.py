@@ -27,7 +27,11 @@ def gl_context():
 
 @pytest.fixture
 def ctx(gl_context):
-    """The session context, with GL_NO_ERROR required before and after the test."""
-    assert gl_context.error == "GL_NO_ERROR", "a GL error was left over before this test"
-    yield gl_context
-    assert gl_context.error == "GL_NO_ERROR", "the test left a GL error"
+    """The session context, made current, with GL_NO_ERROR required before and after the test.
+
+    `with` makes it current even if code under test created (and released) a context of its own.
+    """
+    with gl_context:
+        assert gl_context.error == "GL_NO_ERROR", "a GL error was left over before this test"
+        yield gl_context
+        assert gl_context.error == "GL_NO_ERROR", "the test left a GL error"

@@ -230,3 +230,16 @@ def test_shipped_scenes_render_finite_and_lit(ctx, name):
         assert f["direct"].max() > 0.0
         n = np.linalg.norm(f["normal"], axis=-1)
         np.testing.assert_allclose(n[f["depth"] > 0], 1.0, atol=1e-3)
+
+
+def test_mirrored_object_faces_outwards(ctx):
+    """A negative scale flips the triangle winding; the G-buffer must still see the outside."""
+    scene = facing_plane(distance=3.0, extra_meshes={"b": {"shape": "box", "size": [0.8, 0.8, 0.8]}},
+                         extra_objects=[{"name": "b", "mesh": "b", "material": "occ", "position": [0, 0, -1.5],
+                                         "scale": [-1, 1, 1]}],
+                         lights=[{"name": "sun", "type": "directional", "direction": [0, 0, -1], "irradiance": 1.0}])
+    f = render(ctx, scene)
+    box = np.abs(f["depth"] - 1.1) < 1e-3  # its front face, 1.5 - 0.4 in front of the camera
+    assert box.sum() > 20
+    np.testing.assert_allclose(f["normal"][box], np.broadcast_to([0, 0, 1], f["normal"][box].shape), atol=1e-5)
+    np.testing.assert_allclose(f["direct"][box], 0.5 / np.pi, rtol=1e-4)

@@ -192,15 +192,20 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
 
 
 def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: CaptureSettings, log) -> None:
-    from diviewer.gl.context import create_context, describe
-    from diviewer.gl.renderer import BUFFERS, Compositor, Renderer
-    from diviewer.scene.loader import config_from_dict
+    from diviewer.gl.context import describe, headless_context
 
     gt = PathTracedGT(scene, settings)
-    ctx = create_context()
+    with headless_context() as ctx:
+        _render_frames_gl(ctx, scene, ds, todo, settings, gt, describe(ctx), log)
+
+
+def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings: CaptureSettings, gt, gl_name: str,
+                      log) -> None:
+    from diviewer.gl.renderer import Compositor, Renderer
+    from diviewer.scene.loader import config_from_dict
+
     renderer = Renderer(ctx, scene, settings.width, settings.height)
     compositor = Compositor(ctx, renderer.shaders)
-    gl_name = describe(ctx)
     thumbs = {i for s in SPLITS for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
     progress = Progress(len(todo), label="capture")
     try:
@@ -233,8 +238,6 @@ def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: Captur
     finally:
         compositor.release()
         renderer.release()
-        ctx.release()
-    assert all(b in dict(CHANNELS) for b in BUFFERS)
 
 
 def summarize(ds: Dataset) -> dict:

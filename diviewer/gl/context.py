@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import moderngl
 
 from diviewer.errors import DiviewerError
@@ -31,6 +34,21 @@ def create_context(backend: str = "egl") -> moderngl.Context:
             "Headless rendering needs EGL with Mesa (Debian: apt-get install libegl1 libgl1-mesa-dri)"
         ) from exc
     return ctx
+
+
+@contextmanager
+def headless_context() -> Iterator[moderngl.Context]:
+    """A standalone EGL context, current inside the block and released after it.
+
+    The context that was current before (a caller's own) is current again afterwards: releasing a
+    context while it is current would leave a dead one current for the caller's later GL calls.
+    """
+    ctx = create_context("egl")
+    try:
+        with ctx:
+            yield ctx
+    finally:
+        ctx.release()
 
 
 def describe(ctx: moderngl.Context) -> str:

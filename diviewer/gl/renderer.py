@@ -168,6 +168,8 @@ class Renderer:
     def _draw_objects(self, prog: moderngl.Program, config: FrameConfig, view: np.ndarray | None) -> None:
         for obj in config.objects:
             model = obj.matrix()
+            # A mirroring pose (negative scale) flips the winding: keep its outside front-facing.
+            self.ctx.front_face = "cw" if np.linalg.det(model[:3, :3]) < 0 else "ccw"
             set_uniform(prog, "m_model", model)
             if view is not None:
                 set_uniform(prog, "m_normal", cam.normal_matrix(view @ model))
@@ -180,6 +182,7 @@ class Renderer:
                     tex.use(location=0)
                     set_uniform(prog, "u_albedo_map", 0)
             self.gpu.meshes[obj.mesh].vao(prog).render(moderngl.TRIANGLES)
+        self.ctx.front_face = "ccw"
 
     def _gbuffer_pass(self, config: FrameConfig, view: np.ndarray, proj: np.ndarray) -> None:
         ctx = self.ctx

@@ -1,0 +1,4 @@
+"""Ground truth renderers. ``diviewer.reference.mitsuba``: the Mitsuba 3 path tracer (needs the 'train' extra).
+
+Nothing here imports mitsuba at package import time: the viewer and the benchmark run without it.
+"""

@@ -1,0 +1,551 @@
+"""The viewer's state and the actions the panel, the keyboard and scripts apply to it. Pure data: no GL.
+
+A frame is drawn from ``ViewerState.scene`` and ``ViewerState.config`` (a frozen FrameConfig that each
+action replaces); everything else here says how to show it (view mode, exposure) and what was
+measured (``Stats``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+from diviewer.errors import DiviewerError
+from diviewer.scene import camera as cam
+from diviewer.scene.model import DirectionalLight, FrameConfig, Material, PointLight, Scene
+from diviewer.scene.sampler import camera_on_path
+from diviewer.viewer.controls import Controller, make_controller, pixel_ray
+
+TONEMAPS = ("aces", "reinhard", "clamp")
+"""Display curves (the Compositor's names)."""
+
+STAGES = ("gbuffer", "shadows", "direct", "readback", "inference", "upload", "composite")
+"""Per-frame stages the stats record, in pipeline order (ms each)."""
+
+
+# --- view modes ---------------------------------------------------------------------------------
+
+class Unavailable(Exception):
+    """A view mode's image cannot be produced now; the message says why (shown in the panel)."""
+
+
+class FrameSources(Protocol):
+    """What a view mode draws from; the app implements it (the images are GL textures there)."""
+
+    has_model: bool
+
+    def buffer(self, name: str) -> Any:
+        """A G-buffer channel of this frame: depth, normal, albedo, direct."""
+
+    def network_output(self) -> Any:
+        """The model's output for this frame (raises Unavailable without a model)."""
+
+    def reference(self) -> Any:
+        """The latest path-traced reference of this view (raises Unavailable while none is ready)."""
+
+
+@dataclass(frozen=True)
+class ViewMode:
+    """One entry of the view-mode registry: what the window shows and how to produce it."""
+
+    name: str
+    label: str
+    produce: Callable[[FrameSources], Any] | None
+    """Gets the image from the frame's sources; None for the two-image layouts (split, difference)."""
+    display: str = "radiance"
+    """How values become pixels: radiance (exposure + tone map), raw (linear clamped to [0, 1]),
+    depth (near bright, far dark), normal (n / 2 + 1/2), albedo (sRGB of the linear value)."""
+    layout: str = "single"
+    """single, split (A left, B right) or difference (|A - B|)."""
+    key: str = ""
+    """Keyboard shortcut."""
+    help: str = ""
+
+
+def _final(s: FrameSources):
+    # The model's output is the final image's radiance (an ``indirect`` model adds the exact direct
+    # light inside its graph); without a model the frame has direct light only.
+    return s.network_output() if s.has_model else s.buffer("direct")
+
+
+VIEW_MODES: tuple[ViewMode, ...] = (
+    ViewMode("final", "Final (neural GI)", _final, "radiance", key="1",
+             help="the network's image: direct + indirect light (direct light only when no model is loaded)"),
+    ViewMode("direct", "Direct light only", lambda s: s.buffer("direct"), "radiance", key="2",
+             help="the GL renderer's shadow-mapped direct light and emission"),
+    ViewMode("reference", "Path-traced reference", lambda s: s.reference(), "radiance", key="3",
+             help="Mitsuba 3, rendered progressively in the background; restarts when anything changes"),
+    ViewMode("depth", "G-buffer: depth", lambda s: s.buffer("depth"), "depth", key="4"),
+    ViewMode("normal", "G-buffer: normal", lambda s: s.buffer("normal"), "normal", key="5",
+             help="view-space normals"),
+    ViewMode("albedo", "G-buffer: albedo", lambda s: s.buffer("albedo"), "albedo", key="6"),
+    ViewMode("net_input", "Network input: direct (raw)", lambda s: s.buffer("direct"), "raw", key="7",
+             help="the direct-light channel the network reads, linear values clamped to [0, 1]"),
+    ViewMode("net_output", "Network output: raw GI", lambda s: s.network_output(), "raw", key="8",
+             help="the network's output, linear values clamped to [0, 1]"),
+    ViewMode("split", "Split screen (A | B)", None, layout="split", key="9",
+             help="mode A left of the divider, mode B right of it"),
+    ViewMode("difference", "Difference |A - B|", None, layout="difference", key="0",
+             help="absolute difference of modes A and B, with a gain"),
+)
+"""All view modes, in panel order; adding one (VXGI) is one entry here plus its source in the app."""
+
+VIEW_MODE_NAMES = tuple(m.name for m in VIEW_MODES)
+
+
+def view_mode(name: str) -> ViewMode:
+    for m in VIEW_MODES:
+        if m.name == name:
+            return m
+    raise DiviewerError(f"unknown view mode '{name}'; view modes: {', '.join(VIEW_MODE_NAMES)}", field="view mode")
+
+
+def single_modes() -> tuple[ViewMode, ...]:
+    """The modes that show one image (those split screen and difference combine)."""
+    return tuple(m for m in VIEW_MODES if m.layout == "single")
+
+
+# --- stats --------------------------------------------------------------------------------------
+
+class Stats:
+    """Frame and per-stage times (ms) over the last ``window_s`` seconds."""
+
+    def __init__(self, window_s: float = 5.0):
+        self.window_s = window_s
+        self.history: deque[tuple[float, float, dict[str, float]]] = deque()
+        self.frames = 0
+
+    def record(self, frame_ms: float, stages: dict[str, float], now: float | None = None) -> None:
+        now = time.perf_counter() if now is None else now
+        self.history.append((now, float(frame_ms), dict(stages)))
+        self.frames += 1
+        while self.history and now - self.history[0][0] > self.window_s:
+            self.history.popleft()
+
+    def series(self, name: str = "frame") -> np.ndarray:
+        """The recorded values of ``frame`` or a stage, oldest first (0 where a frame lacked the stage)."""
+        if name == "frame":
+            return np.array([f for _, f, _ in self.history], np.float32)
+        return np.array([s.get(name, 0.0) for _, _, s in self.history], np.float32)
+
+    def mean(self, name: str = "frame") -> float:
+        v = self.series(name)
+        return float(v.mean()) if len(v) else 0.0
+
+    def last(self) -> dict[str, float]:
+        if not self.history:
+            return {}
+        _, f, s = self.history[-1]
+        return {"frame": f, **s}
+
+    @property
+    def fps(self) -> float:
+        m = self.mean("frame")
+        return 1000.0 / m if m > 0 else 0.0
+
+
+# --- picking ------------------------------------------------------------------------------------
+
+def _ray_triangles(origin: np.ndarray, d: np.ndarray, tri: np.ndarray) -> float:
+    """Nearest positive ray parameter hitting any triangle of ``tri`` (M, 3, 3), or inf (Moller-Trumbore)."""
+    v0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    p = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    ok = np.abs(det) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = origin - v0
+    u = np.einsum("ij,ij->i", s, p) * inv
+    q = np.cross(s, e1)
+    v = (q @ d) * inv
+    t = np.einsum("ij,ij->i", e2, q) * inv
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-6)
+    return float(t[hit].min()) if hit.any() else math.inf
+
+
+def _ray_box(origin: np.ndarray, d: np.ndarray, box: np.ndarray) -> bool:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        t0, t1 = (box[0] - origin) * inv, (box[1] - origin) * inv
+    lo = np.nanmax(np.minimum(t0, t1))
+    hi = np.nanmin(np.maximum(t0, t1))
+    return bool(hi >= max(lo, 0.0))
+
+
+def pick_object(scene: Scene, config: FrameConfig, origin, direction) -> tuple[str, float] | None:
+    """The object a world-space ray hits first, and the distance along the ray; None for the sky."""
+    best: tuple[str, float] | None = None
+    o_w, d_w = np.asarray(origin, np.float64), np.asarray(direction, np.float64)
+    for obj in config.objects:
+        mesh = scene.meshes[obj.mesh]
+        inv = np.linalg.inv(obj.matrix())
+        # Object-space ray with an unnormalised direction: t stays the world-space parameter.
+        o = inv[:3, :3] @ o_w + inv[:3, 3]
+        d = inv[:3, :3] @ d_w
+        if not _ray_box(o, d, mesh.bounds.astype(np.float64)):
+            continue
+        t = _ray_triangles(o, d, mesh.vertices.astype(np.float64)[mesh.faces])
+        if t < math.inf and (best is None or t < best[1]):
+            best = (obj.name, t)
+    return best
+
+
+# --- light angles -------------------------------------------------------------------------------
+
+def angles_to_vector(azimuth: float, elevation: float) -> np.ndarray:
+    """Unit vector (y up) at ``azimuth`` degrees about +y (from +z towards +x), ``elevation`` degrees above the
+    horizon."""
+    a, e = math.radians(azimuth), math.radians(elevation)
+    return np.array([math.cos(e) * math.sin(a), math.sin(e), math.cos(e) * math.cos(a)])
+
+
+def vector_to_angles(v) -> tuple[float, float]:
+    x, y, z = cam.normalize(v)
+    return math.degrees(math.atan2(x, z)), math.degrees(math.asin(float(np.clip(y, -1.0, 1.0))))
+
+
+# --- the state ----------------------------------------------------------------------------------
+
+class ViewerState:
+    """Scene, current frame configuration, camera controller, selection and display settings.
+
+    Each action replaces ``config`` (frozen) and returns it. ``scene`` is replaced too when a mesh
+    is loaded from a file (``scene_revision`` counts those changes, so the GPU copy can follow).
+    """
+
+    def __init__(self, scene: Scene, controller: str = "fly"):
+        self.base_scene = scene
+        self.scene = scene
+        self.scene_revision = 0
+        self.user_meshes: dict[str, str] = {}
+        """Meshes loaded from files: key -> path (recorded with screenshots)."""
+        self.config: FrameConfig = scene.default
+        self.controller: Controller = make_controller(controller, scene.default.camera, self.scene_centre())
+        self.selected: str | None = None
+        self.selected_light: str | None = scene.default.lights[0].name if scene.default.lights else None
+        self.view_mode = "final"
+        self.compare = ("final", "reference")
+        """Modes A and B of the split-screen and difference layouts."""
+        self.split_position = 0.5
+        """Where the split-screen divider is, as a fraction of the width."""
+        self.diff_gain_ev = 2.0
+        """The difference image is brightened by this many stops."""
+        self.exposure = float(scene.exposure)
+        self.tonemap = "aces"
+        self.animate_light = False
+        self.light_time = 0.0
+        self.light_period = 10.0
+        """Seconds for one sweep of the light across its range and back."""
+        self.play_path = False
+        self.path_time = 0.0
+        self.path_period = 30.0
+        """Seconds to play the camera path once."""
+        self.model_name: str | None = None
+        """The model requested: a file name in the models folder, a path, or None for no model."""
+        self.model_meta: dict | None = None
+        self.model_message = ""
+        """Why there is no neural GI (no model for this scene, or the model's refusal)."""
+        self.provider = ""
+        self.stats = Stats()
+        self.show_panel = True
+        self.message = ""
+        """The last action's outcome for the panel (a loaded mesh, a saved screenshot, an error)."""
+
+    # --- helpers ---------------------------------------------------------------------------------
+    def scene_centre(self) -> np.ndarray:
+        return self.base_scene.bounds(self.base_scene.default).mean(axis=0)
+
+    def _set(self, config: FrameConfig) -> FrameConfig:
+        self.config = config
+        return config
+
+    def object(self, name: str):
+        for o in self.config.objects:
+            if o.name == name:
+                return o
+        raise DiviewerError(f"no object named '{name}'; objects: {', '.join(o.name for o in self.config.objects)}")
+
+    def light(self, name: str | None = None):
+        name = name or self.selected_light
+        for l in self.config.lights:
+            if l.name == name:
+                return l
+        names = ", ".join(l.name for l in self.config.lights) or "none"
+        raise DiviewerError(f"no light named '{name}'; lights: {names}")
+
+    def _default_light(self, name: str):
+        for l in self.scene.default.lights:
+            if l.name == name:
+                return l
+        return self.light(name)
+
+    # --- camera ----------------------------------------------------------------------------------
+    def _sync_camera(self) -> FrameConfig:
+        return self._set(dataclasses.replace(self.config, camera=self.controller.camera()))
+
+    def set_controller(self, kind: str) -> FrameConfig:
+        """Switch between 'fly' and 'orbit', keeping the view (orbit turns about the scene centre)."""
+        self.controller = make_controller(kind, self.config.camera, self.scene_centre())
+        return self._sync_camera()
+
+    def toggle_controller(self) -> FrameConfig:
+        return self.set_controller("orbit" if self.controller.kind == "fly" else "fly")
+
+    def reset_camera(self) -> FrameConfig:
+        """Back to the scene's camera, with the current controller kind."""
+        self.play_path = False
+        self.controller = make_controller(self.controller.kind, self.scene.default.camera, self.scene_centre())
+        return self._sync_camera()
+
+    def set_camera(self, camera) -> FrameConfig:
+        self.controller = make_controller(self.controller.kind, camera, self.scene_centre())
+        return self._sync_camera()
+
+    def fly(self, forward: float = 0.0, right: float = 0.0, up: float = 0.0, dt: float = 1.0 / 60,
+            fast: bool = False) -> FrameConfig:
+        """WASD/QE movement (each input in [-1, 1]) for ``dt`` seconds."""
+        self.play_path = False
+        self.controller.move(forward, right, up, dt, fast)
+        return self._sync_camera()
+
+    def look(self, dx: float, dy: float) -> FrameConfig:
+        """Mouse look (right button held), in pixels."""
+        self.play_path = False
+        self.controller.look(dx, dy)
+        return self._sync_camera()
+
+    def drag(self, dx: float, dy: float) -> FrameConfig:
+        """Left-button drag: orbit (orbit mode) or look (fly mode), in pixels."""
+        self.play_path = False
+        self.controller.drag(dx, dy)
+        return self._sync_camera()
+
+    def scroll(self, dy: float) -> FrameConfig:
+        """Wheel: zoom (orbit) or change the flying speed (fly)."""
+        self.controller.scroll(dy)
+        return self._sync_camera()
+
+    def set_fov(self, fov: float) -> FrameConfig:
+        self.controller.fov = float(min(max(fov, 5.0), 150.0))
+        return self._sync_camera()
+
+    # --- objects ---------------------------------------------------------------------------------
+    def select_object(self, name: str | None) -> str | None:
+        if name is not None:
+            self.object(name)  # raises for an unknown name
+        self.selected = name
+        return name
+
+    def pick(self, x: float, y: float, width: int, height: int) -> str | None:
+        """Select the object under image point (x, y) (pixels, y down) of a width x height view; None: sky."""
+        origin, d = pixel_ray(self.config.camera, x, y, width, height)
+        hit = pick_object(self.scene, self.config, origin, d)
+        return self.select_object(hit[0] if hit else None)
+
+    def move_object(self, name: str, position) -> FrameConfig:
+        return self._set(self.config.replace_object(name, position=tuple(float(v) for v in position)))
+
+    def translate_object(self, name: str, delta) -> FrameConfig:
+        p = np.add(self.object(name).position, delta)
+        return self.move_object(name, p)
+
+    def rotate_object(self, name: str, rotation) -> FrameConfig:
+        """Set the Euler angles (degrees, about x then y then z)."""
+        return self._set(self.config.replace_object(name, rotation=tuple(float(v) for v in rotation)))
+
+    def scale_object(self, name: str, scale) -> FrameConfig:
+        """Set the scale: one number (uniform) or three; zero is refused (it would flatten the normals)."""
+        s = (float(scale),) * 3 if np.ndim(scale) == 0 else tuple(float(v) for v in scale)
+        if len(s) != 3 or min(abs(v) for v in s) < 1e-6:
+            raise DiviewerError(f"scale must be three non-zero numbers, got {scale}", field="scale")
+        return self._set(self.config.replace_object(name, scale=s))
+
+    def swap_mesh(self, name: str, mesh: str) -> FrameConfig:
+        """Give an object another mesh from the scene's library (or one loaded with load_mesh)."""
+        if mesh not in self.scene.meshes:
+            raise DiviewerError(f"scene '{self.scene.name}' has no mesh '{mesh}'; "
+                                f"meshes: {', '.join(self.scene.meshes)}", field="mesh")
+        return self._set(self.config.replace_object(name, mesh=mesh))
+
+    def reset_object(self, name: str) -> FrameConfig:
+        for o in self.scene.default.objects:
+            if o.name == name:
+                return self._set(dataclasses.replace(
+                    self.config, objects=tuple(o if x.name == name else x for x in self.config.objects)))
+        raise DiviewerError(f"object '{name}' is not in the scene's default frame")
+
+    def load_mesh(self, path: str | Path, name: str | None = None) -> str:
+        """Add a mesh file (OBJ, PLY, glTF, ...) to the scene's library and give it to object ``name``.
+
+        Returns the new mesh's key (``file:<stem>``). The file's own base colour or texture becomes the
+        object's material; otherwise the object keeps its material.
+        """
+        from diviewer.scene import shapes
+
+        path = Path(path).expanduser()
+        key = f"file:{path.stem}"
+        mesh, color, texture = shapes.load_file(key, path)
+        meshes = {**self.scene.meshes, key: mesh}
+        materials = dict(self.scene.materials)
+        material = None
+        if color is not None or texture is not None:
+            material = f"mesh:{key}"
+            materials[material] = Material(material, albedo=tuple(color or (1.0, 1.0, 1.0)), texture=texture,
+                                           texture_source=str(path))
+        self.scene = dataclasses.replace(self.scene, meshes=meshes, materials=materials)
+        self.scene_revision += 1
+        self.user_meshes[key] = str(path)
+        if name is not None:
+            self.swap_mesh(name, key)
+            if material is not None:
+                self._set(self.config.replace_object(name, material=material))
+        return key
+
+    # --- lights ----------------------------------------------------------------------------------
+    def light_angles(self, name: str | None = None) -> tuple[float, float]:
+        """(azimuth, elevation) in degrees of the direction towards the light (a sun), or of its position about
+        the scene centre (a point light)."""
+        l = self.light(name)
+        if isinstance(l, DirectionalLight):
+            return vector_to_angles(-np.asarray(l.direction))
+        return vector_to_angles(np.asarray(l.position) - self.scene_centre())
+
+    def set_light_direction(self, azimuth: float, elevation: float, name: str | None = None) -> FrameConfig:
+        """Put the light at (azimuth, elevation): a sun shines from there; a point light moves there, keeping its
+        distance to the scene centre."""
+        l = self.light(name)
+        self.animate_light = False
+        v = angles_to_vector(azimuth, elevation)
+        if isinstance(l, DirectionalLight):
+            return self._set(self.config.replace_light(l.name, direction=tuple(map(float, -v))))
+        c = self.scene_centre()
+        r = float(np.linalg.norm(np.asarray(l.position) - c))
+        return self._set(self.config.replace_light(l.name, position=tuple(map(float, c + r * v))))
+
+    def set_light_position(self, position, name: str | None = None) -> FrameConfig:
+        l = self.light(name)
+        if not isinstance(l, PointLight):
+            raise DiviewerError(f"light '{l.name}' is directional: set its direction, not its position")
+        self.animate_light = False
+        return self._set(self.config.replace_light(l.name, position=tuple(float(v) for v in position)))
+
+    @staticmethod
+    def _power_field(light) -> str:
+        return "irradiance" if isinstance(light, DirectionalLight) else "intensity"
+
+    def light_intensity_ev(self, name: str | None = None) -> float:
+        """The light's irradiance (sun) or intensity (point) in stops relative to the scene file's value."""
+        l = self.light(name)
+        f = self._power_field(l)
+        base, now = getattr(self._default_light(l.name), f), getattr(l, f)
+        if base <= 0.0 or now <= 0.0:
+            return -math.inf if now <= 0.0 else 0.0
+        return math.log2(now / base)
+
+    def set_light_intensity(self, ev: float, name: str | None = None) -> FrameConfig:
+        """Log scale: the scene file's irradiance/intensity times 2**ev (ev = -inf turns the light off)."""
+        l = self.light(name)
+        f = self._power_field(l)
+        base = getattr(self._default_light(l.name), f) or 1.0
+        value = 0.0 if ev == -math.inf else base * 2.0 ** float(ev)
+        return self._set(self.config.replace_light(l.name, **{f: value}))
+
+    def set_light_color(self, color, name: str | None = None) -> FrameConfig:
+        c = tuple(float(v) for v in color)
+        if len(c) != 3 or min(c) < 0.0:
+            raise DiviewerError(f"a light colour is three non-negative numbers, got {color}", field="color")
+        return self._set(self.config.replace_light(self.light(name).name, color=c))
+
+    def toggle_animation(self) -> bool:
+        self.animate_light = not self.animate_light
+        return self.animate_light
+
+    def toggle_path(self) -> bool:
+        """Play or stop the scene's camera path (scenes without one have nothing to play)."""
+        self.play_path = not self.play_path and self.scene.ranges.camera is not None
+        return self.play_path
+
+    def _animated_lights(self) -> tuple:
+        """Each light turned about its range axis: swept across the range angle, or all round without one."""
+        phase = 2.0 * math.pi * self.light_time / self.light_period
+        centre = self.scene_centre()
+        out = []
+        for light in self.config.lights:
+            base = self._default_light(light.name)
+            r = self.scene.ranges.lights.get(light.name)
+            if r is not None and r.angle[1] > r.angle[0]:
+                lo, hi = r.angle
+                angle = 0.5 * (lo + hi) + 0.5 * (hi - lo) * math.sin(phase)
+                axis = r.axis
+            else:
+                angle = math.degrees(phase) % 360.0
+                axis = r.axis if r is not None else (0.0, 1.0, 0.0)
+            rot = cam.axis_angle(axis, angle)
+            if isinstance(light, DirectionalLight):
+                d = rot @ np.asarray(base.direction)
+                out.append(dataclasses.replace(light, direction=tuple(map(float, d / np.linalg.norm(d)))))
+            else:
+                p = centre + rot @ (np.asarray(base.position) - centre)
+                out.append(dataclasses.replace(light, position=tuple(map(float, p))))
+        return tuple(out)
+
+    def step(self, dt: float) -> FrameConfig:
+        """Advance time: animate the lights and play the camera path when those are on."""
+        if self.animate_light and self.config.lights:
+            self.light_time += dt
+            self._set(dataclasses.replace(self.config, lights=self._animated_lights()))
+        if self.play_path and self.scene.ranges.camera is not None:
+            self.path_time += dt
+            u = self.path_time / self.path_period
+            s = u % 1.0 if self.scene.ranges.camera.closed else 1.0 - abs(u % 2.0 - 1.0)
+            camera = camera_on_path(self.scene, s)
+            self.controller = make_controller(self.controller.kind, camera, self.scene_centre())
+            self._sync_camera()
+        return self.config
+
+    # --- display ---------------------------------------------------------------------------------
+    def set_view_mode(self, name: str, a: str | None = None, b: str | None = None) -> ViewMode:
+        """Show a view mode; ``a`` and ``b`` choose the two modes of split screen and difference."""
+        mode = view_mode(name)
+        if a is not None or b is not None:
+            self.set_compare(a or self.compare[0], b or self.compare[1])
+        self.view_mode = mode.name
+        return mode
+
+    def set_compare(self, a: str, b: str) -> tuple[str, str]:
+        for m in (a, b):
+            if view_mode(m).layout != "single":
+                raise DiviewerError(f"split screen and difference combine single-image modes, not '{m}'",
+                                    field="view mode")
+        self.compare = (a, b)
+        return self.compare
+
+    def modes_shown(self) -> tuple[ViewMode, ...]:
+        """The single-image modes the current view mode draws."""
+        mode = view_mode(self.view_mode)
+        if mode.layout == "single":
+            return (mode,)
+        return (view_mode(self.compare[0]), view_mode(self.compare[1]))
+
+    def set_exposure(self, ev: float) -> float:
+        self.exposure = float(ev)
+        return self.exposure
+
+    def set_tonemap(self, name: str) -> str:
+        if name not in TONEMAPS:
+            raise DiviewerError(f"unknown tone map '{name}'; use one of {', '.join(TONEMAPS)}", field="tonemap")
+        self.tonemap = name
+        return name
+
+    def reset(self) -> FrameConfig:
+        """Back to the scene's default frame (lights, objects, camera); loaded meshes stay in the library."""
+        self.animate_light = self.play_path = False
+        self.light_time = self.path_time = 0.0
+        self._set(self.scene.default)
+        return self.reset_camera()

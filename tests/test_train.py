@@ -1,0 +1,366 @@
+"""Tests for diviewer.train.trainer: the pix2pix loop shrunk to a few steps on a synthetic dataset."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, Dataset, write_frame  # noqa: E402
+from diviewer.encoding import fit_exposure  # noqa: E402
+from diviewer.errors import DiviewerError  # noqa: E402
+from diviewer.train import trainer  # noqa: E402
+from diviewer.train.trainer import (  # noqa: E402
+    CSV_COLUMNS,
+    TrainConfig,
+    add_train_parser,
+    build_generator_from_checkpoint,
+    compose_radiance,
+    epoch_batches,
+    load_checkpoint,
+    run_train,
+    target_radiance,
+    train,
+    validate,
+)
+
+RES = 32
+FAR = 10.0
+SPLITS = ["train"] * 8 + ["val"] * 2
+
+
+def _frame(seed: int) -> np.ndarray:
+    """Smooth analytic buffers: a curved surface facing the camera, lit by a light that moves with the seed."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:RES, 0:RES] / (RES - 1.0)
+    geometry = (xx - 0.1) ** 2 + (yy - 0.1) ** 2 > 0.04  # a background corner
+    depth = np.where(geometry, 2.0 + xx + 0.5 * yy, 0.0)
+    n = np.stack([xx - 0.5, yy - 0.5, np.ones_like(xx)], -1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    angle = rng.uniform(-0.8, 0.8)
+    light = np.array([math.sin(angle), 0.3, math.cos(angle)])
+    light /= np.linalg.norm(light)
+    albedo = np.stack([0.2 + 0.6 * xx, np.full_like(xx, 0.5), 0.2 + 0.6 * yy], -1)
+    direct = albedo * np.clip(n @ light, 0, None)[..., None] * 2.0
+    pt_direct = direct * 0.97
+    pt = pt_direct + 0.3 * albedo * (0.5 + 0.5 * np.sin(angle + 3 * xx))[..., None]
+    g = geometry[..., None]
+    planes = [depth[..., None], n * g, albedo * g, direct * g, pt * g, pt_direct * g]
+    return np.concatenate(planes, -1).astype(np.float16)
+
+
+def make_dataset(root: Path, scene: str = "synthetic", seed0: int = 0) -> Dataset:
+    """A dataset folder like `diviewer capture` writes, with analytic frames (no GL, no Mitsuba)."""
+    root.mkdir(parents=True)
+    frames = [{"index": i, "split": s, "seed": seed0 + i,
+               "config": {"camera": {"position": [0, 0, 5], "near": 0.05, "far": FAR}, "lights": [], "objects": []}}
+              for i, s in enumerate(SPLITS)]
+    manifest = {
+        "format": FORMAT, "format_version": FORMAT_VERSION, "scene": scene, "scene_hash": f"hash-of-{scene}",
+        "resolution": [RES, RES], "channels": [list(c) for c in CHANNELS], "dtype": "float16", "gt": "pt",
+        "spp": 4, "max_depth": 4, "seed": seed0, "frames": len(frames), "split_fractions": [0.8, 0.2, 0.0],
+        "render_settings": {}, "frame_list": frames,
+    }
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    ds = Dataset(root)
+    for f in frames:
+        write_frame(ds, f["index"], _frame(f["seed"]), {"index": f["index"], "split": f["split"]})
+    return ds
+
+
+def tiny(data: Path, out: Path, **kw) -> TrainConfig:
+    """A shrunk run: K=4, a small discriminator, 2 steps per epoch (8 train frames, batch 4), CPU."""
+    return TrainConfig(**{"data": data, "out": out, "K": 4, "ndf": 8, "epochs": 2, "batch_size": 4,
+                          "device": "cpu", **kw})
+
+
+def quiet(*_args) -> None:
+    pass
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _one_thread():
+    """Tiny tensors gain nothing from threads, and a busy machine makes OpenMP's spinning threads crawl."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("train") / "data"
+    make_dataset(root)
+    return root
+
+
+@pytest.fixture(scope="module")
+def run(data, tmp_path_factory):
+    """One finished 2-epoch run shared by the tests that only read its files."""
+    out = tmp_path_factory.mktemp("run") / "run"
+    result = train(tiny(data, out), log=quiet)
+    return out, result
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_run_writes_metrics_curves_and_checkpoints(run):
+    out, result = run
+    assert result["epoch"] == 2 and result["step"] == 4 and len(result["losses"]) == 4
+    rows = read_csv(out / "metrics.csv")
+    assert list(rows[0]) == list(CSV_COLUMNS)
+    assert [(float(r["epoch"]), int(r["step"])) for r in rows] == [(1.0, 2), (2.0, 4)]
+    for r in rows:
+        for k in ("loss_D", "loss_G_GAN", "loss_G_L1", "val_mse", "val_ssim", "val_mse_tm", "val_psnr_tm",
+                  "val_ssim_tm"):
+            assert math.isfinite(float(r[k])), k
+        assert 0 < float(r["val_ssim_tm"]) <= 1 and float(r["val_mse_tm"]) > 0
+    from PIL import Image
+
+    with Image.open(out / "curves.png") as im:
+        assert im.format == "PNG" and im.width > 2 * im.height
+        colours = np.unique(np.asarray(im.convert("RGB")).reshape(-1, 3), axis=0)
+        assert len(colours) > 3  # axes, labels and coloured lines were drawn
+    assert (out / "last.ckpt").is_file() and (out / "best.ckpt").is_file()
+    assert result["best"] == pytest.approx(max(float(r["val_ssim_tm"]) for r in rows))
+
+
+def test_checkpoints_are_self_describing_and_weights_only(run, data):
+    out, _ = run
+    ds = Dataset(data)
+    for name in ("last.ckpt", "best.ckpt"):
+        ckpt = torch.load(out / name, weights_only=True)
+        assert ckpt["format"] == "diviewer-checkpoint"
+        assert ckpt["dataset"]["hash"] == ds.hash
+        assert ckpt["dataset"]["scene"] == "synthetic" and ckpt["dataset"]["scene_hash"] == "hash-of-synthetic"
+        assert ckpt["model_args"]["K"] == 4 and ckpt["model_args"]["levels"] == 5  # 32 px -> 1x1 bottleneck
+        assert ckpt["net_config"]["target"] == "full" and ckpt["config"]["K"] == 4
+        assert {"netG", "netD", "optG", "optD", "rng", "data_order", "versions", "val", "encoding"} <= set(ckpt)
+        assert set(ckpt["rng"][0]) == {"torch", "cuda", "numpy", "python"}
+        assert "torch" in ckpt["versions"] and "diviewer" in ckpt["versions"]
+    last = load_checkpoint(out / "last.ckpt")
+    assert last["epoch"] == 2 and last["step"] == 4 and last["data_order"] == {
+        "seed": 0, "epoch": 2, "batch": 0, "world": 1, "batch_size": 4}
+    # The encoding was fixed from the train split: exposure from its GL direct light, depth from the far plane.
+    _, train_arr = ds.array("train")
+    assert last["encoding"]["exposure"] == pytest.approx(fit_exposure([f[..., ds.slices["direct"]] for f in train_arr]))
+    assert last["encoding"]["depth_scale"] == FAR
+
+
+def test_rebuilt_generator_reproduces_the_recorded_validation(run, data):
+    out, _ = run
+    ckpt = load_checkpoint(out / "best.ckpt")
+    netG, enc, meta = build_generator_from_checkpoint(ckpt)
+    assert not netG.training and meta["target"] == "full" and meta["scene"] == "synthetic"
+    assert enc.to_dict() == ckpt["encoding"]
+    ds = Dataset(data)
+    _, val = ds.array("val")
+    cfg = TrainConfig.from_dict(ckpt["config"])
+    again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"), amp=False)
+    assert again == pytest.approx(ckpt["val"], rel=1e-6)  # the weights that produced the recorded metrics
+    x = torch.randn(2, 10, RES, RES)
+    netG2, _, _ = build_generator_from_checkpoint(out / "best.ckpt")
+    with torch.no_grad():
+        assert torch.equal(netG(x), netG2(x))  # eval mode: deterministic, no dropout
+
+
+def test_resume_equals_continuous_training(data, tmp_path):
+    # 3 epochs of 2 steps straight, against: stop after 3 steps (inside epoch 2), resume to the end.
+    straight = train(tiny(data, tmp_path / "a", epochs=3), log=quiet)
+    first = train(tiny(data, tmp_path / "b", epochs=3, max_steps=3), log=quiet)
+    mid = load_checkpoint(tmp_path / "b" / "last.ckpt")
+    assert first["step"] == 3 and mid["data_order"]["epoch"] == 1 and mid["data_order"]["batch"] == 1
+    second = train(tiny(data, tmp_path / "b", epochs=3), resume=True, log=quiet)
+    assert second["step"] == 6 and [r["step"] for r in second["losses"]] == [4, 5, 6]
+
+    def curve(losses):
+        return np.array([[r["loss_D"], r["loss_G_GAN"], r["loss_G_L1"]] for r in losses])
+
+    np.testing.assert_allclose(curve(first["losses"] + second["losses"]), curve(straight["losses"]),
+                               rtol=1e-5, atol=1e-6)
+    a, b = load_checkpoint(tmp_path / "a" / "last.ckpt"), load_checkpoint(tmp_path / "b" / "last.ckpt")
+    for net in ("netG", "netD"):
+        for k, v in a[net].items():
+            torch.testing.assert_close(b[net][k], v, rtol=1e-5, atol=1e-6, msg=f"{net}.{k}")
+    for opt in ("optG", "optD"):
+        for i, s in a[opt]["state"].items():
+            torch.testing.assert_close(b[opt]["state"][i]["exp_avg_sq"], s["exp_avg_sq"], rtol=1e-4, atol=1e-9)
+    assert b["val"] == pytest.approx(a["val"], rel=1e-5)
+    # metrics.csv: the resumed run has the same epoch rows, plus the row where the first part stopped.
+    rows_a, rows_b = read_csv(tmp_path / "a" / "metrics.csv"), read_csv(tmp_path / "b" / "metrics.csv")
+    assert [r["step"] for r in rows_b] == ["2", "3", "4", "6"]
+    ends = [r for r in rows_b if r["step"] != "3"]
+    for ra, rb in zip(rows_a, ends, strict=True):
+        for k in ("epoch", "step", "loss_D", "loss_G_GAN", "loss_G_L1", "val_ssim_tm"):
+            assert float(rb[k]) == pytest.approx(float(ra[k]), rel=1e-5), k
+
+
+def test_ctrl_c_saves_at_a_step_boundary_and_resumes_exactly(run, data, tmp_path, monkeypatch):
+    straight_out, straight = run  # the same settings, run straight through
+    calls = []
+    real_split = trainer.split_batch
+
+    def split_then_interrupt(*args, **kw):
+        calls.append(1)
+        if len(calls) == 4:  # steps 1, 2, the validation after epoch 1, then inside step 3
+            os.kill(os.getpid(), signal.SIGINT)
+        return real_split(*args, **kw)
+
+    monkeypatch.setattr(trainer, "split_batch", split_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        train(tiny(data, tmp_path / "b", epochs=2), log=quiet)
+    monkeypatch.setattr(trainer, "split_batch", real_split)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handlers restored
+    assert load_checkpoint(tmp_path / "b" / "last.ckpt")["step"] == 3  # step 3 finished, then saved
+    rest = train(tiny(data, tmp_path / "b", epochs=2), resume=True, log=quiet)
+    assert [r["step"] for r in rest["losses"]] == [4]
+    assert rest["losses"][0] == pytest.approx(straight["losses"][3], rel=1e-5)
+    a, b = load_checkpoint(straight_out / "last.ckpt"), load_checkpoint(tmp_path / "b" / "last.ckpt")
+    for k, v in a["netG"].items():
+        torch.testing.assert_close(b["netG"][k], v, rtol=1e-5, atol=1e-6)
+
+
+DDP_SCRIPT = """
+import json, os, sys, torch, torch.distributed as dist
+from diviewer.train import trainer
+params = []
+class Adam(torch.optim.Adam):  # remember each rank's parameters to compare them afterwards
+    def __init__(self, p, **kw):
+        p = list(p); super().__init__(p, **kw); params.append(p)
+torch.optim.Adam = Adam
+dist.init_process_group("gloo")  # kept open across the runs below
+data, out = sys.argv[1], sys.argv[2]
+def run(name, resume=False, **kw):
+    params.clear()
+    cfg = trainer.TrainConfig(data=data, out=f"{out}/{name}", K=4, ndf=8, epochs=3, batch_size=2, device="cpu", **kw)
+    r = trainer.train(cfg, resume=resume, log=lambda *a: None)
+    return {"step": r["step"], "sums": [sum(float(x.detach().double().sum()) for x in p) for p in params]}
+res = {"straight": run("a"), "first": run("b", max_steps=3), "resumed": run("b", resume=True)}
+with open(f"{out}/rank{dist.get_rank()}.json", "w") as f:
+    json.dump(res, f)
+dist.destroy_process_group()
+"""
+
+
+@pytest.mark.slow
+def test_torchrun_two_cpu_processes_stay_in_sync_and_resume_exactly(data, tmp_path):
+    script = tmp_path / "ddp.py"
+    script.write_text(DDP_SCRIPT)
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script),
+           str(data), str(tmp_path)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-4000:]
+    r0, r1 = (json.loads((tmp_path / f"rank{r}.json").read_text()) for r in (0, 1))
+    assert r0 == r1  # gradients are all-reduced: both ranks hold the same weights after every run
+    assert r0["straight"]["step"] == 6  # 8 frames over 2 ranks at batch 2: 2 steps per epoch
+    assert r0["resumed"]["step"] == 6 and r0["resumed"]["sums"] == pytest.approx(r0["straight"]["sums"], rel=1e-6)
+    ckpt = load_checkpoint(tmp_path / "a" / "last.ckpt")
+    assert ckpt["data_order"]["world"] == 2 and len(ckpt["rng"]) == 2  # every rank's random state
+    assert [r["step"] for r in read_csv(tmp_path / "a" / "metrics.csv")] == ["2", "4", "6"]  # rank 0 alone writes
+
+
+def test_indirect_target_divided_by_albedo_trains(data, tmp_path):
+    result = train(tiny(data, tmp_path / "ind", epochs=1, target="indirect", divide_albedo=True), log=quiet)
+    assert result["step"] == 2 and math.isfinite(result["val"]["ssim_tm"])
+    netG, enc, meta = build_generator_from_checkpoint(tmp_path / "ind" / "last.ckpt")
+    assert meta["target"] == "indirect" and meta["divide_albedo"] is True and meta["net_config"]["target"] == "indirect"
+
+
+def test_target_and_composition_invert_each_other():
+    rng = np.random.default_rng(1)
+    albedo = rng.uniform(0, 1, (4, 4, 3)) * (rng.uniform(size=(4, 4, 1)) > 0.3)  # some albedo-0 pixels
+    pt_direct = rng.uniform(0, 2, (4, 4, 3))
+    pt = pt_direct + rng.uniform(0, 1, (4, 4, 3))
+    for target, divide in (("full", False), ("indirect", False), ("indirect", True)):
+        y = target_radiance(pt, pt_direct, albedo, target, divide)
+        np.testing.assert_allclose(compose_radiance(y, pt_direct, albedo, target, divide), pt, rtol=1e-12)
+        as_torch = (torch.from_numpy(a) for a in (pt, pt_direct, albedo))
+        yt = target_radiance(*as_torch, target, divide)
+        np.testing.assert_allclose(yt.numpy(), y, rtol=1e-12)
+    # divided by albedo: where the albedo is tiny the divisor is the floor, so noise is not amplified
+    y = target_radiance(pt, pt_direct, albedo, "indirect", True)
+    assert np.abs(y).max() <= np.abs(pt - pt_direct).max() / trainer.ALBEDO_FLOOR + 1e-12
+
+
+def test_epoch_batches_are_a_pure_function_and_ranks_partition_them():
+    a = epoch_batches(10, 3, seed=7, batch_size=4)
+    assert a == epoch_batches(10, 3, seed=7, batch_size=4) and a != epoch_batches(10, 4, seed=7, batch_size=4)
+    assert [len(b) for b in a] == [4, 4, 2] and sorted(sum(a, [])) == list(range(10))
+    ranks = [epoch_batches(10, 3, seed=7, batch_size=2, rank=r, world=2) for r in (0, 1)]
+    assert len(ranks[0]) == len(ranks[1]) == 3  # equal step counts: no rank waits on a collective
+    assert set(sum(ranks[0], [])) | set(sum(ranks[1], [])) == set(range(10))
+
+
+def test_bad_checkpoints_are_user_errors_naming_the_file(run, tmp_path):
+    out, _ = run
+    missing = tmp_path / "nope.ckpt"
+    with pytest.raises(DiviewerError, match="nope.ckpt"):
+        load_checkpoint(missing)
+    truncated = tmp_path / "truncated.ckpt"
+    blob = (out / "last.ckpt").read_bytes()
+    truncated.write_bytes(blob[: len(blob) // 2])
+    with pytest.raises(DiviewerError, match="truncated.ckpt"):
+        load_checkpoint(truncated)
+    garbage = tmp_path / "garbage.ckpt"
+    garbage.write_bytes(b"not a checkpoint at all")
+    with pytest.raises(DiviewerError, match="garbage.ckpt"):
+        build_generator_from_checkpoint(garbage)
+    foreign = tmp_path / "foreign.ckpt"
+    torch.save({"state_dict": {"w": torch.zeros(1)}}, foreign)
+    with pytest.raises(DiviewerError, match="foreign.ckpt.*not a diviewer checkpoint"):
+        load_checkpoint(foreign)
+
+
+def test_cli_trains_resumes_and_refuses_conflicts(data, tmp_path):
+    ap = argparse.ArgumentParser()
+    add_train_parser(ap.add_subparsers(dest="command"))
+    out = tmp_path / "cli"
+    common = ["train", "--data", str(data), "--out", str(out), "--device", "cpu", "--ndf", "8"]
+    args = ap.parse_args([*common, "--k", "4", "--epochs", "1", "--seed", "3"])
+    assert args.func is run_train
+    assert run_train(args) == 0
+    assert load_checkpoint(out / "last.ckpt")["step"] == 2
+    # a second fresh run into the same folder would overwrite it
+    with pytest.raises(DiviewerError, match="--resume"):
+        run_train(ap.parse_args([*common, "--k", "4", "--epochs", "2"]))
+    # --resume inherits --epochs: the run is complete, nothing more to do
+    assert run_train(ap.parse_args([*common, "--resume"])) == 0
+    assert load_checkpoint(out / "last.ckpt")["step"] == 2
+    # --resume without --k/--seed takes them from the checkpoint and trains one more epoch
+    assert run_train(ap.parse_args([*common, "--epochs", "2", "--resume"])) == 0
+    ckpt = load_checkpoint(out / "last.ckpt")
+    assert ckpt["step"] == 4 and ckpt["config"]["K"] == 4 and ckpt["config"]["seed"] == 3
+    assert [r["step"] for r in read_csv(out / "metrics.csv")] == ["2", "4"]
+    with pytest.raises(DiviewerError, match="K: 4 -> 8"):
+        run_train(ap.parse_args([*common, "--epochs", "3", "--resume", "--k", "8"]))
+
+
+def test_resume_refuses_another_dataset(run, tmp_path):
+    out, _ = run
+    other = tmp_path / "other"
+    make_dataset(other, scene="elsewhere", seed0=100)
+    with pytest.raises(DiviewerError, match="another dataset"):
+        train(tiny(other, out, epochs=3), resume=True, log=quiet)
+
+
+def test_config_validation_names_the_field(tmp_path):
+    with pytest.raises(DiviewerError, match="train.divide_albedo"):
+        TrainConfig(data=tmp_path, out=tmp_path, divide_albedo=True)
+    with pytest.raises(DiviewerError, match="train.batch_size"):
+        TrainConfig(data=tmp_path, out=tmp_path, batch_size=0)
+    cfg = TrainConfig(data=tmp_path, out=tmp_path / "r", K=16, max_steps=5)
+    assert TrainConfig.from_dict(cfg.to_dict()) == cfg

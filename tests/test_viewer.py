@@ -1,0 +1,696 @@
+"""The interactive viewer: state actions and camera math without pixels, then scripted window sessions.
+
+The window tests need a display: an existing DISPLAY, or Xvfb started here for the session. Without
+either they skip, unless DIVIEWER_REQUIRE_GL=1 (CI), where they fail.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from diviewer.errors import DiviewerError
+from diviewer.scene import load_scene
+from diviewer.scene.model import Camera
+from diviewer.viewer.controls import FlyController, OrbitController, direction, pixel_ray, yaw_pitch
+from diviewer.viewer.state import (
+    VIEW_MODE_NAMES, VIEW_MODES, Stats, ViewerState, angles_to_vector, single_modes, vector_to_angles,
+    view_mode,
+)
+
+REQUIRE_GL = os.environ.get("DIVIEWER_REQUIRE_GL", "") not in ("", "0")
+
+
+@pytest.fixture(scope="module")
+def cornell():
+    return load_scene("cornell")
+
+
+@pytest.fixture
+def state(cornell):
+    return ViewerState(cornell)
+
+
+# --- view modes -----------------------------------------------------------------------------------
+
+def test_view_mode_registry_is_complete():
+    from diviewer.viewer.app import DISPLAY_KINDS, LAYOUTS
+
+    expected = {"final", "direct", "reference", "depth", "normal", "albedo", "net_input", "net_output", "split",
+                "difference"}
+    assert expected <= set(VIEW_MODE_NAMES)
+    assert len(set(VIEW_MODE_NAMES)) == len(VIEW_MODES)
+    keys = [m.key for m in VIEW_MODES if m.key]
+    assert len(keys) == len(set(keys))
+    for m in VIEW_MODES:
+        assert m.layout in LAYOUTS and m.label
+        if m.layout == "single":
+            assert callable(m.produce) and m.display in DISPLAY_KINDS
+        else:
+            assert m.produce is None
+    assert {m.name for m in single_modes()} == expected - {"split", "difference"}
+    with pytest.raises(DiviewerError, match="unknown view mode"):
+        view_mode("vxgi-not-yet")
+
+
+def test_view_mode_produces_from_its_sources():
+    class Sources:
+        has_model = False
+
+        def buffer(self, name):
+            return ("buffer", name)
+
+        def network_output(self):
+            return ("net",)
+
+        def reference(self):
+            return ("ref",)
+
+    s = Sources()
+    assert view_mode("final").produce(s) == ("buffer", "direct")  # no model: direct light only
+    s.has_model = True
+    assert view_mode("final").produce(s) == ("net",)
+    assert view_mode("depth").produce(s) == ("buffer", "depth")
+    assert view_mode("reference").produce(s) == ("ref",)
+    assert view_mode("net_output").produce(s) == ("net",)
+
+
+def test_set_view_mode_and_compare(state):
+    state.set_view_mode("split", a="direct", b="normal")
+    assert state.view_mode == "split" and state.compare == ("direct", "normal")
+    assert [m.name for m in state.modes_shown()] == ["direct", "normal"]
+    state.set_view_mode("depth")
+    assert [m.name for m in state.modes_shown()] == ["depth"]
+    with pytest.raises(DiviewerError, match="single-image"):
+        state.set_compare("split", "final")
+    with pytest.raises(DiviewerError):
+        state.set_tonemap("filmic")
+    state.set_tonemap("reinhard")
+    assert state.tonemap == "reinhard"
+
+
+# --- lights ---------------------------------------------------------------------------------------
+
+def test_light_direction_from_azimuth_and_elevation(state):
+    state.set_light_direction(0.0, 90.0)
+    np.testing.assert_allclose(state.light().direction, (0.0, -1.0, 0.0), atol=1e-12)  # sun overhead
+    state.set_light_direction(90.0, 0.0)
+    np.testing.assert_allclose(state.light().direction, (-1.0, 0.0, 0.0), atol=1e-12)  # from +x, travels -x
+    state.set_light_direction(-30.0, 45.0)
+    az, el = state.light_angles()
+    assert az == pytest.approx(-30.0) and el == pytest.approx(45.0)
+    for az, el in ((10.0, 20.0), (170.0, -60.0), (-120.0, 5.0)):
+        assert vector_to_angles(angles_to_vector(az, el)) == pytest.approx((az, el))
+
+
+def test_light_intensity_is_a_log_scale_and_colour_is_set(state, cornell):
+    base = cornell.default.lights[0].irradiance
+    old = state.config
+    state.set_light_intensity(1.0)
+    assert state.light().irradiance == pytest.approx(2 * base)
+    state.set_light_intensity(-2.0)
+    assert state.light().irradiance == pytest.approx(base / 4)
+    assert state.light_intensity_ev() == pytest.approx(-2.0)
+    assert old.lights[0].irradiance == base  # configs are replaced, never changed
+    state.set_light_color((0.2, 0.4, 1.0))
+    assert state.light().color == (0.2, 0.4, 1.0)
+    with pytest.raises(DiviewerError):
+        state.set_light_color((-1.0, 0.0, 0.0))
+
+
+def test_animation_step_turns_the_light_within_its_range(state, cornell):
+    d0 = np.array(cornell.default.lights[0].direction)
+    assert state.step(0.5).lights[0].direction == tuple(d0)  # off: nothing moves
+    assert state.toggle_animation()
+    seen = []
+    for _ in range(20):
+        d = np.array(state.step(0.5).lights[0].direction)
+        seen.append(math.degrees(math.acos(np.clip(d @ d0, -1, 1))))
+        assert d[1] == pytest.approx(d0[1])  # about the y axis
+    assert max(seen) > 5.0 and max(seen) <= 40.0 + 1e-6  # cornell's range: -40..40 degrees
+    state.set_light_direction(0.0, 30.0)  # a manual change stops the animation
+    assert not state.animate_light
+
+
+def test_camera_path_plays(state):
+    atrium = ViewerState(load_scene("atrium"))
+    assert atrium.toggle_path()
+    c0 = atrium.config.camera
+    c1 = atrium.step(3.0).camera
+    assert not np.allclose(c0.position, c1.position)
+    assert not state.toggle_path()  # cornell has no camera path
+
+
+# --- objects --------------------------------------------------------------------------------------
+
+def test_object_actions(state, cornell):
+    old = state.config
+    state.move_object("center", (0.1, 0.8, -0.2))
+    state.rotate_object("center", (10.0, 20.0, 30.0))
+    state.scale_object("center", 1.5)
+    state.swap_mesh("center", "sphere")
+    o = state.object("center")
+    assert o.position == (0.1, 0.8, -0.2) and o.rotation == (10.0, 20.0, 30.0)
+    assert o.scale == (1.5, 1.5, 1.5) and o.mesh == "sphere"
+    state.translate_object("center", (0.0, 0.1, 0.0))
+    assert state.object("center").position == pytest.approx((0.1, 0.9, -0.2))
+    state.scale_object("center", (1.0, 2.0, 0.5))
+    assert state.object("center").scale == (1.0, 2.0, 0.5)
+    assert old.objects == cornell.default.objects  # the old configuration is untouched
+    with pytest.raises(DiviewerError, match="no mesh"):
+        state.swap_mesh("center", "teapot")
+    with pytest.raises(DiviewerError, match="non-zero"):
+        state.scale_object("center", 0.0)
+    state.reset_object("center")
+    assert state.object("center") == [o for o in cornell.default.objects if o.name == "center"][0]
+
+
+def test_load_mesh_file_adds_it_to_the_scene(state, tmp_path):
+    import trimesh
+
+    path = tmp_path / "wedge.obj"
+    trimesh.creation.cone(radius=0.3, height=0.5, sections=12).export(path)
+    key = state.load_mesh(path, "center")
+    assert key == "file:wedge" and key in state.scene.meshes and state.scene_revision == 1
+    assert state.object("center").mesh == key and state.user_meshes[key] == str(path)
+    assert state.base_scene.meshes.keys() != state.scene.meshes.keys()
+    with pytest.raises(DiviewerError, match="not found"):
+        state.load_mesh(tmp_path / "missing.obj", "center")
+
+
+def test_picking_selects_the_object_under_the_cursor(state):
+    w, h = 128, 128
+    assert state.pick(w / 2, h / 2 + 10, w, h) == "center"
+    assert state.selected == "center"
+    assert state.pick(3, h / 2, w, h) == "left"
+    assert state.pick(w / 2, 2, w, h) == "ceiling"
+    state.set_camera(Camera(position=(0.0, 1.0, 6.0), target=(0.0, 1.0, 10.0)))  # facing away from the box
+    assert state.pick(w / 2, h / 2, w, h) is None and state.selected is None
+
+
+# --- camera controllers ---------------------------------------------------------------------------
+
+def test_yaw_pitch_round_trip():
+    for up in ((0, 1, 0), (0, 0, 1)):
+        for yaw, pitch in ((0.0, 0.0), (35.0, -20.0), (-150.0, 60.0)):
+            assert yaw_pitch(up, direction(up, yaw, pitch)) == pytest.approx((yaw, pitch))
+
+
+def test_fly_controller(cornell):
+    cam0 = cornell.default.camera
+    fly = FlyController.from_camera(cam0, speed=1.0)
+    c = fly.camera()
+    np.testing.assert_allclose(c.position, cam0.position)
+    d0 = np.subtract(cam0.target, cam0.position)
+    np.testing.assert_allclose(np.subtract(c.target, c.position) / fly.focus, d0 / np.linalg.norm(d0), atol=1e-12)
+    fly.move(1.0, 0.0, 0.0, dt=1.0)  # W for one second at 1 m/s: one metre down -z
+    np.testing.assert_allclose(fly.position, np.add(cam0.position, (0, 0, -1)), atol=1e-12)
+    fly.move(0.0, 1.0, 1.0, dt=0.5)  # D + E: right and up
+    np.testing.assert_allclose(fly.position, np.add(cam0.position, (0.5, 0.5, -1)), atol=1e-12)
+    fly.move(1.0, 0.0, 0.0, dt=0.25, fast=True)  # shift: 4x
+    np.testing.assert_allclose(fly.position, np.add(cam0.position, (0.5, 0.5, -2)), atol=1e-12)
+    fly.look(100.0, 0.0)  # mouse right: turn right (towards +x)
+    assert fly.forward()[0] > 0.3
+    fly.look(0.0, -1e5)  # far up: pitch clamped below the pole
+    assert fly.pitch == pytest.approx(89.0)
+    fly.camera().view_matrix()  # still a valid camera
+    s = fly.speed
+    fly.scroll(2.0)
+    assert fly.speed == pytest.approx(s * 1.25 ** 2)
+
+
+def test_orbit_controller(cornell):
+    centre = np.array([0.0, 1.0, 0.0])
+    orbit = OrbitController.from_camera(cornell.default.camera, centre)
+    assert orbit.distance == pytest.approx(3.4)
+    np.testing.assert_allclose(orbit.camera().position, cornell.default.camera.position, atol=1e-12)
+    orbit.drag(300.0, 0.0)  # 90 degrees at 0.3 deg/px: the camera swings to -x, still looking at the centre
+    c = orbit.camera()
+    np.testing.assert_allclose(c.position, (-3.4, 1.0, 0.0), atol=1e-9)
+    np.testing.assert_allclose(c.target, centre)
+    orbit.drag(0.0, 100.0)  # drag down: the camera rises
+    assert orbit.camera().position[1] > 1.0
+    assert np.linalg.norm(np.subtract(orbit.camera().position, centre)) == pytest.approx(3.4)
+    orbit.scroll(1.0)
+    assert orbit.distance == pytest.approx(3.4 * 0.9)
+
+
+def test_controller_switch_and_reset(state, cornell):
+    state.fly(forward=1.0, right=0.5, dt=1.0)
+    state.look(40.0, 10.0)
+    assert state.config.camera != cornell.default.camera
+    state.set_controller("orbit")
+    assert state.controller.kind == "orbit"
+    np.testing.assert_allclose(state.controller.centre, state.scene_centre())
+    state.drag(50.0, 0.0)
+    state.scroll(3.0)
+    state.reset_camera()
+    c, c0 = state.config.camera, cornell.default.camera
+    np.testing.assert_allclose(c.position, c0.position, atol=1e-9)
+    d, d0 = np.subtract(c.target, c.position), np.subtract(c0.target, c0.position)
+    np.testing.assert_allclose(d / np.linalg.norm(d), d0 / np.linalg.norm(d0), atol=1e-9)
+    state.toggle_controller()
+    assert state.controller.kind == "fly"
+
+
+def test_pixel_ray_matches_the_camera_convention(cornell):
+    from diviewer.scene import camera as cam
+
+    c = cornell.default.camera
+    o, d = pixel_ray(c, 64.0, 64.0, 128, 128)
+    np.testing.assert_allclose(d, cam.normalize(np.subtract(c.target, c.position)), atol=1e-12)
+    rays = cam.pixel_rays_view(4, 3, c.fov)  # pixel (i, j) centre is (j + 0.5, i + 0.5)
+    _, d = pixel_ray(c, 2.5, 0.5, 4, 3)
+    world = cam.view_to_world(c.view_matrix())[:3, :3] @ rays[0, 2]
+    np.testing.assert_allclose(d, world / np.linalg.norm(world), atol=1e-12)
+
+
+def test_stats_keep_the_last_seconds():
+    s = Stats(window_s=1.0)
+    for i in range(30):
+        s.record(10.0 + i, {"gbuffer": 1.0, "inference": 2.0}, now=i * 0.125)
+    assert s.series().tolist() == [float(10 + i) for i in range(21, 30)]  # 2.625 .. 3.625 s
+    assert s.series("gbuffer").tolist() == [1.0] * 9
+    assert s.mean("inference") == pytest.approx(2.0)
+    assert s.last()["frame"] == 39.0 and s.fps == pytest.approx(1000.0 / s.mean("frame"))
+
+
+def test_letterbox_keeps_the_gi_aspect():
+    from diviewer.viewer.app import letterbox
+
+    assert letterbox(200, 100, 1.0) == (50, 0, 100, 100)
+    assert letterbox(100, 200, 2.0) == (0, 75, 100, 50)
+    assert letterbox(128, 128, 1.0) == (0, 0, 128, 128)
+    assert letterbox(1, 1, 4 / 3) == (0, 0, 1, 1)
+    assert letterbox(0, 0, 1.0) == (0, 0, 0, 0)
+
+
+def test_view_command_line():
+    import argparse
+
+    from diviewer.viewer.app import add_view_parser, run_view
+
+    ap = argparse.ArgumentParser()
+    add_view_parser(ap.add_subparsers(dest="command"))
+    args = ap.parse_args(["view", "--model", "none", "--size", "320x240", "--no-vsync", "--frames", "3",
+                          "--screenshot", "x.png", "--provider", "cpu"])
+    assert args.func is run_view and args.scene == "cornell" and args.model == "none" and args.no_vsync
+    assert args.frames == 3 and args.screenshot == Path("x.png") and args.provider == "cpu"
+    args = ap.parse_args(["view"])
+    assert args.model == "auto" and args.frames is None and not args.no_vsync
+    with pytest.raises(SystemExit):
+        ap.parse_args(["view", "--provider", "opengl"])
+
+
+def test_viewer_imports_no_torch():
+    code = ("import sys, diviewer.viewer.app, diviewer.viewer.imgui_gl, diviewer.viewer.reference, "
+            "diviewer.gl.neural, diviewer.runtime; assert 'torch' not in sys.modules, 'torch was imported'")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+
+
+def test_model_card_rows():
+    from diviewer.viewer.app import meta_lines
+
+    rows = dict(meta_lines({"K": 8, "resolution": [64, 48], "target": "indirect", "dataset_hash": "ab" * 32,
+                            "val": {"psnr": 31.5, "ssim": 0.91234}}))
+    assert rows["K"] == "8" and rows["resolution"] == "[64, 48]" and rows["target"] == "indirect"
+    assert rows["val.psnr"] == "31.5" and rows["val.ssim"] == "0.9123" and rows["dataset_hash"].endswith("...")
+
+
+# --- window sessions ------------------------------------------------------------------------------
+#
+# Each session runs in a child process: a window's GLX context cannot be made current on a thread
+# where an EGL context is current (the session's headless one: Mesa answers with an X error that
+# ends the process), and a crash in a window session then fails one test instead of the run.
+
+def _fail_or_skip(why: str):
+    if REQUIRE_GL:
+        pytest.fail(f"DIVIEWER_REQUIRE_GL is set and the viewer cannot open a window: {why}")
+    pytest.skip(why)
+
+
+@pytest.fixture(scope="session")
+def display():
+    """A display for GLFW: the existing DISPLAY, or an Xvfb started for this session."""
+    proc = None
+    if not os.environ.get("DISPLAY"):
+        xvfb = shutil.which("Xvfb")
+        if xvfb is None:
+            _fail_or_skip("no DISPLAY and no Xvfb to make one")
+        n = next(n for n in range(120, 200) if not os.path.exists(f"/tmp/.X{n}-lock"))
+        proc = subprocess.Popen([xvfb, f":{n}", "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.time() + 15
+        while not os.path.exists(f"/tmp/.X11-unix/X{n}") and time.time() < deadline and proc.poll() is None:
+            time.sleep(0.05)
+        if proc.poll() is not None or not os.path.exists(f"/tmp/.X11-unix/X{n}"):
+            proc.kill()
+            _fail_or_skip(f"Xvfb :{n} did not start")
+        os.environ["DISPLAY"] = f":{n}"
+    probe = "import glfw, sys; ok = glfw.init(); glfw.terminate(); sys.exit(0 if ok else 1)"
+    r = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
+    if r.returncode != 0:
+        _fail_or_skip(f"GLFW cannot initialise on DISPLAY={os.environ.get('DISPLAY')}: {r.stderr.strip()[-300:]}")
+    yield os.environ["DISPLAY"]
+    if proc is not None:
+        proc.terminate()
+        proc.wait(10)
+        del os.environ["DISPLAY"]
+
+
+def _child(fn, args, queue) -> None:
+    import traceback
+
+    try:
+        fn(*args)
+        queue.put("")
+    except BaseException:  # noqa: BLE001 (reported to the parent, which fails the test with it)
+        queue.put(traceback.format_exc())
+
+
+def _in_window_process(fn, *args, timeout: float = 180.0) -> None:
+    """Run ``fn(*args)`` (a module-level function) in a fresh process; fail with its traceback."""
+    import multiprocessing
+    import queue as queue_module
+
+    mp = multiprocessing.get_context("spawn")
+    q = mp.Queue()
+    p = mp.Process(target=_child, args=(fn, args, q))
+    p.start()
+    p.join(timeout)
+    if p.is_alive():
+        p.kill()
+        p.join()
+        pytest.fail(f"the viewer session did not finish within {timeout:.0f} s")
+    try:
+        error = q.get(timeout=5)
+    except queue_module.Empty:
+        error = f"the viewer process died without a report (exit code {p.exitcode})"
+    if error:
+        pytest.fail(error, pytrace=False)
+
+
+def _settings(**changes):
+    from diviewer.gl.renderer import RenderSettings
+    from diviewer.viewer.app import ViewerSettings
+    from diviewer.viewer.reference import ReferenceSettings
+
+    base = dict(size=(128, 128), vsync=False, model="none", render=RenderSettings(shadow_size=256),
+                reference=ReferenceSettings(variant="scalar_rgb", max_spp=2, pass_spp=1, max_depth=4))
+    return ViewerSettings(**{**base, **changes})
+
+
+def _wait_for_reference(viewer, timeout: float = 60.0):
+    deadline = time.time() + timeout
+    while viewer.reference.latest() is None and viewer.reference.available and time.time() < deadline:
+        time.sleep(0.05)
+
+
+def _png(path) -> np.ndarray:
+    from diviewer.imageio import read_png
+
+    return read_png(path).astype(np.float32)
+
+
+def _check_image(img: np.ndarray, size) -> None:
+    assert img.shape == (size[1], size[0], 3)
+    assert img.std() > 5.0, "the screenshot is (nearly) uniform"
+
+
+def _scripted_session(tmp_path: Path) -> None:
+    from diviewer.render import load_frame_json
+    from diviewer.viewer.app import run_viewer
+    from diviewer.viewer.reference import mitsuba_missing
+
+    cornell = load_scene("cornell")
+    script = [
+        (1, "screenshot", {"path": tmp_path / "before.png"}),
+        (2, "set_light_direction", {"azimuth": 15.0, "elevation": 20.0}),
+        (3, "screenshot", {"path": tmp_path / "light.png"}),
+        (3, "pick_window_point", {"x": 64.0, "y": 74.0}),
+        (4, "fly", {"forward": 1.0, "right": 0.3, "dt": 0.5}),
+        (4, "look", {"dx": 20.0, "dy": 5.0}),
+        (5, "screenshot", {"path": tmp_path / "moved.png"}),
+    ]
+    f = 6
+    for name in VIEW_MODE_NAMES:
+        script.append((f, "set_view_mode", {"name": name, "a": "final", "b": "normal"}))
+        if name == "reference":
+            script.append((f + 1, _wait_for_reference))
+            f += 1
+        script.append((f + 1, "screenshot", {"path": tmp_path / f"mode_{name}.png"}))
+        f += 2
+    script.append((f, "window_screenshot", {"path": tmp_path / "window.png"}))
+    script.append((f, "set_view_mode", {"name": "final"}))
+    picked = {}
+    script.append((f, lambda v: picked.update(selected=v.state.selected)))
+    frames = f + 2
+    summary = run_viewer(cornell, frames=frames, screenshot=tmp_path / "last.png", script=script,
+                         settings=_settings())
+    assert summary["frames"] == frames and summary["gl_error"] == "GL_NO_ERROR"
+    assert summary["model"] is None and "no model" in summary["model_message"]
+    assert picked["selected"] == "center"
+    size = summary["gi_size"]
+    assert size == (128, 128)
+    before, light, moved = (_png(tmp_path / f"{n}.png") for n in ("before", "light", "moved"))
+    for img in (before, light, moved):
+        _check_image(img, size)
+    assert np.abs(before - light).mean() > 2.0, "moving the light did not change the image"
+    assert np.abs(light - moved).mean() > 2.0, "moving the camera did not change the image"
+    images = {name: _png(tmp_path / f"mode_{name}.png") for name in VIEW_MODE_NAMES}
+    for name in ("final", "direct", "depth", "normal", "albedo", "net_input", "split", "difference"):
+        _check_image(images[name], size)
+    assert np.abs(images["depth"] - images["normal"]).mean() > 10.0
+    assert np.abs(images["albedo"] - images["direct"]).mean() > 10.0
+    # No model: the network's output says why and shows black; the final image is the direct light.
+    assert "net_output" in summary["unavailable"] and images["net_output"].max() == 0
+    np.testing.assert_array_equal(images["final"], images["direct"])
+    if mitsuba_missing() is None:
+        assert "reference" in summary["modes_drawn"]
+        _check_image(images["reference"], size)
+    else:
+        assert "Mitsuba" in summary["unavailable"]["reference"]
+    # Split screen: final on the left, normals on the right.
+    half = size[0] // 2
+    assert np.abs(images["split"][:, : half - 2] - images["final"][:, : half - 2]).max() <= 1.0
+    assert np.abs(images["split"][:, half + 2:] - images["normal"][:, half + 2:]).max() <= 1.0
+    # The window shot has the panel on top of the image; its size is the framebuffer's.
+    window = _png(tmp_path / "window.png")
+    assert window.shape == (128, 128, 3) and np.abs(window - images["final"]).mean() > 1.0
+    # The screenshot's JSON is a frame.json that `diviewer render --config` reads back.
+    record = json.loads((tmp_path / "moved.json").read_text())
+    assert record["scene"] == "cornell" and record["view_mode"] == "final"
+    config = load_frame_json(cornell, tmp_path / "moved.json")
+    np.testing.assert_allclose(config.lights[0].direction, -angles_to_vector(15.0, 20.0), atol=1e-9)
+    assert config.camera != cornell.default.camera
+    last, now = load_frame_json(cornell, tmp_path / "last.json"), summary["config"]
+    assert last.camera == now.camera and last.objects == now.objects
+    np.testing.assert_allclose(last.lights[0].direction, now.lights[0].direction, atol=1e-9)
+
+
+def test_scripted_session(display, tmp_path):
+    """Camera moves, light moves, every view mode, picking, screenshots, a clean exit."""
+    _in_window_process(_scripted_session, tmp_path)
+
+
+def _resize_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    sizes = {}
+    script = [(1, "resize", {"width": 8, "height": 8}), (3, "resize", {"width": 1, "height": 1}),
+              (5, "resize", {"width": 96, "height": 64}), (4, "set_view_mode", {"name": "split"}),
+              (2, lambda v: sizes.setdefault(2, v.gi_size)), (4, lambda v: sizes.setdefault(4, v.gi_size)),
+              (7, lambda v: sizes.setdefault(7, v.gi_size)), (7, "set_view_mode", {"name": "final"})]
+    summary = run_viewer("cornell", frames=8, screenshot=tmp_path / "after.png", script=script, settings=_settings())
+    assert summary["gl_error"] == "GL_NO_ERROR" and summary["frames"] == 8
+    assert sizes == {2: (8, 8), 4: (1, 1), 7: (96, 64)}
+    _check_image(_png(tmp_path / "after.png"), (96, 64))
+
+
+def test_resize_to_tiny_and_back(display, tmp_path):
+    _in_window_process(_resize_session, tmp_path)
+
+
+def _cornell_model(path: Path, **meta_changes) -> Path:
+    from onnx_models import base_meta, direct_times
+
+    cornell = load_scene("cornell")
+    meta = base_meta(scene_hash=cornell.file_hash, scene="cornell")
+    meta.update(resolution=[64, 48], multiple=16, val={"psnr": 31.5, "ssim": 0.91}, **meta_changes)
+    return direct_times(path, factor=2.0, meta=meta)
+
+
+def _neural_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    model = _cornell_model(tmp_path / "cornell_k8.onnx")
+    script = [(1, "screenshot", {"path": tmp_path / "final.png"}),
+              (2, "set_view_mode", {"name": "direct"}), (3, "screenshot", {"path": tmp_path / "direct.png"}),
+              (4, "set_view_mode", {"name": "net_output"}), (5, "screenshot", {"path": tmp_path / "raw.png"}),
+              (6, "set_view_mode", {"name": "difference", "a": "final", "b": "direct"}),
+              (7, "screenshot", {"path": tmp_path / "diff.png"}),
+              (8, "window_screenshot", {"path": tmp_path / "window.png"}),
+              (8, "set_view_mode", {"name": "final"})]
+    summary = run_viewer("cornell", model=model, frames=9, script=script, settings=_settings(size=(128, 128)))
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    assert summary["model"] == "cornell_k8.onnx" and summary["provider"] == "CPUExecutionProvider"
+    assert summary["gi_size"] == (64, 48)
+    assert summary["stages_ms"]["inference"] > 0.0 and summary["stages_ms"]["upload"] > 0.0
+    final, direct = _png(tmp_path / "final.png"), _png(tmp_path / "direct.png")
+    _check_image(final, (64, 48))
+    _check_image(direct, (64, 48))
+    lit = direct.sum(axis=-1) > 30
+    assert (final[lit] >= direct[lit] - 1).all() and final[lit].mean() > direct[lit].mean() + 5  # 2 x direct
+    _check_image(_png(tmp_path / "raw.png"), (64, 48))
+    assert _png(tmp_path / "diff.png").mean() > 1.0
+    # The 4:3 image is letterboxed in the square window: bars above and below.
+    window = _png(tmp_path / "window.png")
+    bar = window[-8:, -40:]  # bottom right corner: below the image, away from the panel
+    assert bar.std(axis=(0, 1)).max() < 1.0 and bar.mean() < 40
+    record = json.loads((tmp_path / "final.json").read_text())
+    assert record["model"].endswith("cornell_k8.onnx") and record["provider"] == "CPUExecutionProvider"
+    assert record["resolution"] == [64, 48]
+
+
+def test_neural_gi_every_frame(display, tmp_path):
+    """A tiny ONNX model (2 x direct) runs each frame at its own resolution, letterboxed in the window."""
+    pytest.importorskip("onnx")
+    _in_window_process(_neural_session, tmp_path)
+
+
+def _refused_session(tmp_path: Path) -> None:
+    from onnx_models import base_meta, direct_times
+
+    from diviewer.viewer.app import run_viewer
+
+    path = direct_times(tmp_path / "other.onnx", meta=base_meta(scene_hash="f" * 64, scene="atrium"))
+    summary = run_viewer("cornell", model=path, frames=2, settings=_settings())
+    assert summary["model"] is None and "trained for scene 'atrium'" in summary["model_message"]
+    assert summary["gi_size"] == (128, 128) and summary["gl_error"] == "GL_NO_ERROR"
+
+
+def test_a_model_for_another_scene_is_refused_in_the_panel(display, tmp_path):
+    pytest.importorskip("onnx")
+    _in_window_process(_refused_session, tmp_path)
+
+
+def _input_session(tmp_path: Path) -> None:
+    import glfw
+    import trimesh
+
+    from diviewer.viewer.app import run_viewer
+
+    cornell = load_scene("cornell")
+
+    trimesh.creation.torus(major_radius=0.3, minor_radius=0.1).export(tmp_path / "ring.ply")
+    seen = {}
+
+    def keys(v):
+        st = v.state
+        for key, mode in ((glfw.KEY_4, "depth"), (glfw.KEY_9, "split"), (glfw.KEY_1, "final")):
+            v.on_key(key, glfw.PRESS, 0)
+            seen[mode] = st.view_mode
+        az = st.light_angles()[0]
+        v.on_key(glfw.KEY_RIGHT, glfw.PRESS, 0)
+        seen["azimuth"] = st.light_angles()[0] - az
+        v.on_key(glfw.KEY_C, glfw.PRESS, 0)
+        seen["controller"] = st.controller.kind
+        v.on_key(glfw.KEY_L, glfw.PRESS, 0)
+        seen["animate"] = st.animate_light
+        v.on_key(glfw.KEY_TAB, glfw.PRESS, 0)
+        seen["tab"] = st.selected
+        v.on_key(glfw.KEY_EQUAL, glfw.PRESS, 0)
+        seen["exposure"] = st.exposure
+
+    def mouse(v):
+        st = v.state
+        cam0 = st.config.camera
+        v.on_cursor(64.0, 64.0)
+        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+        v.on_cursor(90.0, 70.0)  # a drag: orbit, no picking
+        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+        seen["orbited"] = st.config.camera != cam0
+        seen["after_drag"] = st.selected
+        v.on_scroll(0.0, 2.0)
+        seen["zoom"] = st.controller.distance
+        v.on_key(glfw.KEY_R, glfw.PRESS, 0)  # reset the camera, then click the centre object
+        v.on_cursor(64.0, 74.0)
+        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+        seen["clicked"] = st.selected
+
+    script = [(1, keys), (2, mouse), (3, "load_mesh", {"path": tmp_path / "ring.ply", "name": "center"}),
+              (4, "screenshot", {"path": tmp_path / "ring.png"}),
+              (5, lambda v: seen.update(gpu="file:ring" in v.renderer.gpu.meshes))]
+    summary = run_viewer(cornell, frames=6, script=script, settings=_settings())
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    assert (seen["depth"], seen["split"], seen["final"]) == ("depth", "split", "final")
+    assert seen["azimuth"] == pytest.approx(5.0) and seen["controller"] == "orbit" and seen["animate"]
+    assert seen["tab"] == cornell.default.objects[0].name and seen["exposure"] == pytest.approx(0.5)
+    assert seen["orbited"] and seen["after_drag"] == seen["tab"]
+    assert seen["zoom"] == pytest.approx(3.4 * 0.81)
+    assert seen["clicked"] == "center" and seen["gpu"]
+    assert summary["config"].objects[-1].mesh == "file:ring"
+    record = json.loads((tmp_path / "ring.json").read_text())
+    assert record["user_meshes"] == {"file:ring": str(tmp_path / "ring.ply")}
+
+
+def test_keyboard_mouse_and_mesh_loading(display, tmp_path):
+    """The input handlers (as GLFW calls them) drive the state; a mesh file loaded mid-session is drawn."""
+    _in_window_process(_input_session, tmp_path)
+
+
+# --- the background reference ---------------------------------------------------------------------
+
+def test_progressive_reference_refines_restarts_and_never_blocks(cornell):
+    from diviewer.viewer.reference import ProgressiveReference, ReferenceSettings, mitsuba_missing
+
+    if mitsuba_missing():
+        pytest.skip("Mitsuba is not installed")
+    ref = ProgressiveReference(ReferenceSettings(variant="scalar_rgb", max_spp=3, pass_spp=2, max_depth=3,
+                                                 threads=os.cpu_count()))
+    try:
+        t0 = time.perf_counter()
+        ref.request(cornell, cornell.default, 24, 16)
+        assert time.perf_counter() - t0 < 0.5  # the frame loop only hands the job over
+        deadline = time.time() + 60
+        while (ref.latest() is None or ref.latest().spp < 3) and time.time() < deadline:
+            time.sleep(0.02)
+        img = ref.latest()
+        assert img is not None and img.spp == 3 and img.image.shape == (16, 24, 3)  # 1 + 2 spp
+        assert np.isfinite(img.image).all() and img.image.mean() > 0.0 and "done" in ref.status()
+        moved = cornell.default.replace_light("sun", direction=(-0.3, -0.42, -0.86))
+        t0 = time.perf_counter()
+        ref.request(cornell, moved, 24, 16)
+        assert time.perf_counter() - t0 < 0.5
+        assert ref.latest() is None or ref.latest().generation != img.generation  # the old image is dropped
+        while ref.latest() is None and time.time() < deadline:
+            time.sleep(0.02)
+        assert ref.latest() is not None and not np.allclose(ref.latest().image, img.image)
+    finally:
+        ref.close()
+    assert ref._thread is None
+
+
+def test_reference_without_mitsuba_says_why(monkeypatch, cornell):
+    import importlib.util
+
+    from diviewer.viewer import reference
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(reference.importlib.util, "find_spec",
+                        lambda name, *a: None if name == "mitsuba" else real(name, *a))
+    ref = reference.ProgressiveReference()
+    ref.request(cornell, cornell.default, 8, 8)
+    assert not ref.available and "Mitsuba" in ref.status() and ref.latest() is None and ref._thread is None
+    ref.close()
