@@ -93,3 +93,22 @@ def test_wheel_installs_and_renders_from_another_directory(tmp_path):
                        cwd=work, env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert (work / "o" / "direct.exr").is_file() and (work / "o" / "frame.json").is_file()
+
+
+def test_viewer_runtime_and_render_work_without_torch(gl_context, tmp_path):
+    """The viewer and the runtime install and run without the train extra (torch, mitsuba)."""
+    code = (
+        "import sys\n"
+        "sys.modules['torch'] = None\n"  # any `import torch` now raises ImportError
+        "sys.modules['mitsuba'] = None\n"
+        "import diviewer.viewer.app, diviewer.runtime, diviewer.gl.neural, diviewer.encoding\n"
+        "from diviewer.cli import main\n"
+        f"rc = main(['render', '--scene', 'cornell', '--res', '32', '--out', {str(tmp_path / 'o')!r}])\n"
+        "assert rc == 0, rc\n"
+        f"rc = main(['export', {str(tmp_path / 'x.ckpt')!r}, '--out', {str(tmp_path / 'x.onnx')!r}])\n"
+        "assert rc == 2, rc\n"
+        "assert 'torch' not in [m for m in sys.modules if sys.modules[m] is not None]\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "pip install 'diviewer[train]'" in r.stderr, "export names the extra to install"

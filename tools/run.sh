@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Set up (tools/setup.sh) and run the main job on the shipped default scene (cornell).
-# Extra arguments go to `diviewer render`.
+# Set up (tools/setup.sh) and run the main job: the viewer on the shipped default scene (cornell)
+# with its shipped model. Extra arguments go to `diviewer view` (e.g. --frames 60 --screenshot s.png).
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 cd "$ROOT"
-diviewer render --scene cornell --res 256 --out out/cornell "$@"
-echo "images in $ROOT/out/cornell"
+if [ -z "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ]; then
+  echo "[run] no display: the viewer needs one (e.g. run under 'xvfb-run -a bash tools/run.sh --frames 60 --screenshot view.png')" >&2
+fi
+exec diviewer view --scene cornell --model auto "$@"
