@@ -18,7 +18,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
         check_reference(args.reference)  # a missing extra fails before any GL work
     record = render_to_dir(args.scene, args.out, res=args.res, seed=args.seed, split=args.split,
-                           config_file=args.config, exposure=args.exposure, tonemap=args.tonemap)
+                           config_file=args.config, exposure=args.exposure, tonemap=args.tonemap, model=args.model,
+                           provider=args.provider)
     w, h = record["resolution"]
     print(f"rendered {record['scene']} at {w}x{h} into {args.out}")
     if args.reference:
@@ -109,13 +110,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("render", help="render one configuration of a scene to image files")
     p.add_argument("--scene", default="cornell", help="shipped scene name (cornell, atrium) or a .toml path")
-    p.add_argument("--res", default="256", help="N (square) or WxH; default 256")
+    p.add_argument("--res", default=None, help="N (square) or WxH; default the model's resolution, else 256")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--seed", type=int, default=None, help="draw the configuration from the scene's ranges")
     p.add_argument("--split", default="train", choices=("train", "val", "test"), help="split to draw from (with --seed)")
     p.add_argument("--config", type=Path, default=None, help="render the configuration stored in a frame.json")
     p.add_argument("--exposure", type=float, default=None, help="display exposure in stops (PNG previews)")
     p.add_argument("--tonemap", default="aces", choices=("clamp", "reinhard", "aces"))
+    p.add_argument("--model", type=Path, default=None, help="an ONNX model (diviewer export): also write neural.exr")
+    p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"), help="onnxruntime provider")
     _add_reference_args(p)
     p.set_defaults(func=_cmd_render)
 

@@ -61,21 +61,49 @@ def frame_record(scene: Scene, config: FrameConfig, size: tuple[int, int], **ext
     }
 
 
-def render_to_dir(scene_name: str, out: Path, res: str = "256", seed: int | None = None, split: str = "train",
-                  config_file: Path | None = None, exposure: float | None = None, tonemap: str = "aces") -> dict:
-    """Render one frame's GL buffers and write them; returns the frame record."""
+def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int | None = None, split: str = "train",
+                  config_file: Path | None = None, exposure: float | None = None, tonemap: str = "aces",
+                  model: Path | None = None, provider: str | None = None) -> dict:
+    """Render one frame's GL buffers (and, with a model, its neural GI image) and write them.
+
+    Args:
+        res: N or WxH; None means the model's training resolution (or 256 without a model).
+        model: an ONNX model from `diviewer export`, checked against the scene; writes neural.exr.
+
+    Returns:
+        The frame record written to frame.json.
+    """
     from diviewer.gl.context import describe, headless_context
     from diviewer.gl.renderer import BUFFERS, Compositor, Renderer, RenderSettings
 
     scene = load_scene(scene_name)
+    net = None
+    if model is not None:
+        from diviewer.runtime import NeuralGI
+
+        net = NeuralGI(model, scene=scene, provider=provider)
+    if res is None:
+        res = "x".join(str(x) for x in net.resolution) if net else "256"
     width, height = parse_resolution(res)
+    if net is not None:
+        net.check_size(width, height)
     config = choose_config(scene, seed, split, config_file)
     settings = RenderSettings()
+    neural_info = None
     with headless_context() as ctx:
         renderer = Renderer(ctx, scene, width, height, settings)
         compositor = Compositor(ctx, renderer.shaders)
+        neural = None
         try:
             frame = renderer.frame(config)
+            if net is not None:
+                from diviewer.gl.neural import NeuralPass
+
+                neural = NeuralPass(ctx, renderer, net)
+                neural.run()
+                frame["neural"] = neural.image()
+                neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
+                               "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}
             ev = scene.exposure if exposure is None else exposure
             out.mkdir(parents=True, exist_ok=True)
             for name in BUFFERS:
@@ -84,14 +112,19 @@ def render_to_dir(scene_name: str, out: Path, res: str = "256", seed: int | None
             imageio.write_png(out / "normal.png", imageio.normal_preview(frame["normal"]))
             imageio.write_png(out / "albedo.png", imageio.srgb8(frame["albedo"]))
             imageio.write_png(out / "direct.png", compositor.to_ldr(frame["direct"], ev, tonemap))
+            if "neural" in frame:
+                imageio.write_exr(out / "neural.exr", frame["neural"])
+                imageio.write_png(out / "neural.png", compositor.to_ldr(frame["neural"], ev, tonemap))
             record = frame_record(scene, config, (width, height), seed=seed, split=split if seed is not None else None,
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
-                                  display={"exposure": ev, "tonemap": tonemap})
+                                  display={"exposure": ev, "tonemap": tonemap}, neural=neural_info)
         finally:
+            if neural is not None:
+                neural.release()
             compositor.release()
             renderer.release()
     imageio.write_text(out / "frame.json", json.dumps(record, indent=2))
-    bad = [n for n in BUFFERS if not np.all(np.isfinite(frame[n]))]
+    bad = [n for n in (*BUFFERS, "neural") if n in frame and not np.all(np.isfinite(frame[n]))]
     if bad:
         raise DiviewerError(f"the GL renderer produced non-finite values in {', '.join(bad)}")
     return record

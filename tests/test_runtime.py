@@ -123,3 +123,22 @@ def test_nan_and_inf_in_buffers_stay_visible_not_fatal(ctx, tmp_path):
     x[1, 1, 8] = np.inf
     y = model.run(x)
     assert y.shape == (16, 16, 3) and np.isfinite(y[2:, 2:]).all()
+
+
+def test_render_with_model_writes_neural_exr(gl_context, tmp_path):
+    """`diviewer render --model` writes neural.exr beside the buffers; another scene's model is refused."""
+    from diviewer.cli import main
+    from diviewer.imageio import read_exr
+    from diviewer.scene import load_scene
+
+    cornell = load_scene("cornell")
+    path = direct_times(tmp_path / "m.onnx", meta={**base_meta(scene_hash=cornell.file_hash, scene="cornell"),
+                                                    "resolution": [48, 32]})
+    out = tmp_path / "r"
+    assert main(["render", "--scene", "cornell", "--model", str(path), "--out", str(out)]) == 0
+    neural, direct = read_exr(out / "neural.exr"), read_exr(out / "direct.exr")
+    assert neural.shape == (32, 48, 3), "defaults to the model's resolution"
+    np.testing.assert_allclose(neural, 2 * direct, rtol=1e-6)
+    assert (out / "neural.png").is_file()
+    assert main(["render", "--scene", "atrium", "--model", str(path), "--out", str(tmp_path / "a")]) == 2
+    assert main(["render", "--scene", "cornell", "--model", str(path), "--res", "40", "--out", str(tmp_path / "b")]) == 2
