@@ -27,7 +27,23 @@ def parse_resolution(text: str) -> tuple[int, int]:
 
 
 def load_frame_json(scene: Scene, path: Path) -> FrameConfig:
-    """The configuration stored in a frame.json (or a viewer screenshot's JSON)."""
+    """The configuration stored in a frame.json (or a viewer screenshot's JSON).
+
+    ``scene`` must hold the mesh files the frame uses (``scene_for_frame_json`` adds them).
+    """
+    return config_from_dict(scene, _read_frame_json(scene, path)["config"], path=path)
+
+
+def scene_for_frame_json(scene: Scene, path: Path) -> Scene:
+    """The scene with the mesh files a frame.json records (``user_meshes``, from the viewer) added."""
+    from diviewer.scene.loader import add_mesh_file
+
+    for key, file in (_read_frame_json(scene, path).get("user_meshes") or {}).items():
+        scene, _, _ = add_mesh_file(scene, file, key)
+    return scene
+
+
+def _read_frame_json(scene: Scene, path: Path) -> dict:
     try:
         data = json.loads(Path(path).read_text())
     except (OSError, json.JSONDecodeError) as exc:
@@ -37,7 +53,7 @@ def load_frame_json(scene: Scene, path: Path) -> FrameConfig:
     if data.get("scene_hash") and data["scene_hash"] != scene.file_hash:
         raise DiviewerError(f"this frame was made with another version of scene '{data.get('scene')}' "
                             f"(scene file hash differs)", path=path, field="scene_hash")
-    return config_from_dict(scene, data["config"], path=path)
+    return data
 
 
 def choose_config(scene: Scene, seed: int | None, split: str, config_file: Path | None) -> FrameConfig:
@@ -87,6 +103,10 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     width, height = parse_resolution(res)
     if net is not None:
         net.check_size(width, height)
+    user_meshes = None
+    if config_file is not None:
+        scene = scene_for_frame_json(scene, config_file)
+        user_meshes = _read_frame_json(scene, config_file).get("user_meshes")
     config = choose_config(scene, seed, split, config_file)
     settings = RenderSettings()
     neural_info = None
@@ -117,7 +137,8 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 imageio.write_png(out / "neural.png", compositor.to_ldr(frame["neural"], ev, tonemap))
             record = frame_record(scene, config, (width, height), seed=seed, split=split if seed is not None else None,
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
-                                  display={"exposure": ev, "tonemap": tonemap}, neural=neural_info)
+                                  display={"exposure": ev, "tonemap": tonemap}, neural=neural_info,
+                                  user_meshes=user_meshes)
         finally:
             if neural is not None:
                 neural.release()

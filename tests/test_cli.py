@@ -112,3 +112,28 @@ def test_viewer_runtime_and_render_work_without_torch(gl_context, tmp_path):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "pip install 'diviewer[train]'" in r.stderr, "export names the extra to install"
+
+
+def test_frame_json_with_a_loaded_mesh_file_renders_again(gl_context, tmp_path):
+    """A viewer screenshot after loading a mesh file records it; render --config loads it again."""
+    import trimesh
+
+    from diviewer.render import scene_for_frame_json
+    from diviewer.scene import load_scene
+    from diviewer.scene.loader import add_mesh_file
+
+    trimesh.creation.icosphere(2, radius=0.3).export(tmp_path / "ball.ply")
+    scene = load_scene("cornell")
+    scene2, key, _ = add_mesh_file(scene, tmp_path / "ball.ply")
+    config = scene2.default.replace_object("center", mesh=key)
+    a = tmp_path / "a"
+    a.mkdir()
+    record = {"scene": "cornell", "scene_hash": scene.file_hash, "config": config.to_dict(),
+              "user_meshes": {key: str(tmp_path / "ball.ply")}}
+    (a / "shot.json").write_text(json.dumps(record))
+    assert key in scene_for_frame_json(scene, a / "shot.json").meshes
+    out = tmp_path / "b"
+    assert main(["render", "--scene", "cornell", "--res", "32", "--config", str(a / "shot.json"), "--out", str(out)]) == 0
+    assert json.loads((out / "frame.json").read_text())["config"]["objects"][-1]["mesh"] == key
+    again = tmp_path / "c"  # and the frame.json it wrote renders again too
+    assert main(["render", "--scene", "cornell", "--res", "32", "--config", str(out / "frame.json"), "--out", str(again)]) == 0

@@ -310,6 +310,27 @@ def _load_texture(file: Path, path, field: str) -> np.ndarray:
     return shapes.srgb_to_linear(np.asarray(img, dtype=np.float32) / 255.0).astype(np.float32)
 
 
+def add_mesh_file(scene: Scene, path: str | Path, key: str | None = None) -> tuple[Scene, str, str | None]:
+    """The scene with a mesh file (OBJ, PLY, glTF, ...) added to its mesh library.
+
+    Returns:
+        The new scene, the mesh's key (``file:<stem>`` unless given) and the key of the file's own
+        material (base colour or texture) or None when the file has none.
+    """
+    import dataclasses
+
+    path = Path(path).expanduser()
+    key = key or f"file:{path.stem}"
+    mesh, color, texture = shapes.load_file(key, path)
+    materials = dict(scene.materials)
+    material = None
+    if color is not None or texture is not None:
+        material = f"mesh:{key}"
+        materials[material] = Material(material, albedo=tuple(color or (1.0, 1.0, 1.0)), texture=texture,
+                                       texture_source=str(path))
+    return dataclasses.replace(scene, meshes={**scene.meshes, key: mesh}, materials=materials), key, material
+
+
 def config_from_dict(scene: Scene, data: dict, *, path=None) -> FrameConfig:
     """Rebuild a FrameConfig written by FrameConfig.to_dict, checked against the scene."""
     t = _Table(data, path, "")

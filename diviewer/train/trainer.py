@@ -568,13 +568,13 @@ def draw_curves(rows: list[Mapping[str, Any]], path: Path) -> None:
         ("train losses (log)", [("D", "loss_D"), ("G GAN", "loss_G_GAN"), ("G L1", "loss_G_L1")], True),
     ]
     colors = [(31, 119, 180), (255, 127, 14), (44, 160, 44)]
-    pw, ph, ml, mr, mt, mb = 420, 320, 64, 14, 28, 38
+    pw, ph, ml, mr, mt, mb = 420, 330, 64, 14, 42, 38
     img = Image.new("RGB", (pw * len(panels), ph), "white")
     draw = ImageDraw.Draw(img)
     font = ImageFont.load_default()
     for k, (title, series, log_y) in enumerate(panels):
         x0, x1, y0, y1 = k * pw + ml, (k + 1) * pw - mr, mt, ph - mb
-        draw.text((k * pw + ml, 8), title, fill="black", font=font)
+        draw.text((k * pw + ml, 6), title, fill="black", font=font)
         draw.rectangle([x0, y0, x1, y1], outline="black")
         pts = {}
         for label, key in series:
@@ -605,6 +605,7 @@ def draw_curves(rows: list[Mapping[str, Any]], path: Path) -> None:
             draw.line([x0 - 4, py, x0, py], fill="black")
             draw.text((k * pw + 4, py - 6), f"{10 ** fy if log_y else fy:.3g}", fill="black", font=font)
         draw.text(((x0 + x1) // 2 - 14, ph - 14), "epoch", fill="black", font=font)
+        lx = x0  # the legend: one row between the title and the plot
         for j, (label, p) in enumerate(pts.items()):
             color = colors[j % len(colors)]
             xy = [to_px(x, y) for x, y in p]
@@ -612,9 +613,9 @@ def draw_curves(rows: list[Mapping[str, Any]], path: Path) -> None:
                 draw.line(xy, fill=color, width=2)
             for px, py in xy:
                 draw.ellipse([px - 2, py - 2, px + 2, py + 2], fill=color)
-            draw.rectangle([x1 - 100, y0 + 5 + 14 * j, x1 - 4, y0 + 19 + 14 * j], fill="white")
-            draw.line([x1 - 96, y0 + 12 + 14 * j, x1 - 80, y0 + 12 + 14 * j], fill=color, width=2)
-            draw.text((x1 - 76, y0 + 6 + 14 * j), label, fill="black", font=font)
+            draw.line([lx, 28, lx + 16, 28], fill=color, width=2)
+            draw.text((lx + 20, 22), label, fill="black", font=font)
+            lx += 20 + int(draw.textlength(label, font=font)) + 18
     with imageio.atomic_path(path) as tmp:
         img.save(tmp, format="PNG")
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.scene import camera as cam
-from diviewer.scene.model import DirectionalLight, FrameConfig, Material, PointLight, Scene
+from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
 from diviewer.scene.sampler import camera_on_path
 from diviewer.viewer.controls import Controller, make_controller, pixel_ray
 
@@ -386,19 +386,10 @@ class ViewerState:
         Returns the new mesh's key (``file:<stem>``). The file's own base colour or texture becomes the
         object's material; otherwise the object keeps its material.
         """
-        from diviewer.scene import shapes
+        from diviewer.scene.loader import add_mesh_file
 
         path = Path(path).expanduser()
-        key = f"file:{path.stem}"
-        mesh, color, texture = shapes.load_file(key, path)
-        meshes = {**self.scene.meshes, key: mesh}
-        materials = dict(self.scene.materials)
-        material = None
-        if color is not None or texture is not None:
-            material = f"mesh:{key}"
-            materials[material] = Material(material, albedo=tuple(color or (1.0, 1.0, 1.0)), texture=texture,
-                                           texture_source=str(path))
-        self.scene = dataclasses.replace(self.scene, meshes=meshes, materials=materials)
+        self.scene, key, material = add_mesh_file(self.scene, path)
         self.scene_revision += 1
         self.user_meshes[key] = str(path)
         if name is not None:
