@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from diviewer.errors import DiviewerError
+from diviewer.provenance import check_known_keys
 
 INPUT_CHANNELS: tuple[tuple[str, int], ...] = (("depth", 1), ("normal", 3), ("albedo", 3), ("direct", 3))
 """Network input buffers and their channel counts, in the order they are stacked."""
@@ -128,14 +129,7 @@ class Encoding:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Encoding:
         """Rebuild from `to_dict()` output; unknown keys, missing version or a newer version are errors."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise DiviewerError(
-                f"unknown key(s) {unknown}; known keys are {sorted(known)} "
-                "(data written by a newer diviewer? upgrade diviewer)",
-                field="encoding",
-            )
+        check_known_keys(cls, data, "encoding", "data written by a newer diviewer? upgrade diviewer")
         if "version" not in data:
             raise DiviewerError("missing 'version'; cannot tell how the data was encoded", field="encoding")
         return cls(**dict(data))

@@ -25,3 +25,14 @@ def versions() -> dict[str, str]:
 def settings_dict(settings) -> dict:
     """A frozen settings dataclass as a plain dict."""
     return dataclasses.asdict(settings)
+
+
+def check_known_keys(cls, data, field: str, hint: str = "") -> None:
+    """Refuse keys that are not fields of the settings dataclass ``cls`` (a newer or foreign file)."""
+    from diviewer.errors import DiviewerError
+
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise DiviewerError(f"unknown key(s) {unknown}; known keys are {sorted(known)}" + (f" ({hint})" if hint else ""),
+                            field=field)

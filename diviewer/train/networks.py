@@ -17,6 +17,7 @@ from torch import nn
 
 from diviewer.encoding import INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
+from diviewer.provenance import check_known_keys
 
 LAMBDA_L1: float = 100.0
 """Weight of the L1 term against the adversarial term (pix2pix's default, used by the paper)."""
@@ -293,8 +294,5 @@ class NetConfig:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> NetConfig:
         """Rebuild from `to_dict()` output; unknown keys are an error, missing ones take defaults."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise DiviewerError(f"unknown key(s) {unknown}; known keys are {sorted(known)}", field="net")
+        check_known_keys(cls, data, "net")
         return cls(**dict(data))

@@ -46,6 +46,7 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.errors import DiviewerError, missing_extra
+from diviewer.provenance import check_known_keys
 
 if TYPE_CHECKING:
     import torch
@@ -166,10 +167,7 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TrainConfig:
         """Rebuild from `to_dict()` output; unknown keys are an error."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise DiviewerError(f"unknown key(s) {unknown}; known keys are {sorted(known)}", field="train")
+        check_known_keys(cls, data, "train")
         return cls(**dict(data))
 
 
