@@ -148,7 +148,7 @@ def _prepare(x: Any, name: str) -> Any:
     if _is_torch(x):
         if not x.is_floating_point():
             raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
-        return x
+        return x.float() if x.element_size() < 4 else x  # float16/bfloat16 in, float32 math
     if not isinstance(x, np.ndarray):
         return np.asarray(x, dtype=np.float64)  # Python numbers and lists
     if x.dtype.kind != "f":

@@ -233,3 +233,14 @@ def test_fit_exposure() -> None:
     # All black or all NaN: nothing to fit, a neutral exposure.
     assert fit_exposure([np.zeros((4, 4, 3), np.float32)]) == 1.0
     assert fit_exposure(np.full((4, 4, 3), np.nan, np.float32)) == 1.0
+
+
+def test_half_precision_tensors_are_encoded_in_float32():
+    torch = pytest.importorskip("torch")
+    from diviewer.encoding import Encoding, decode_radiance, encode_radiance
+
+    enc = Encoding(exposure=1.0, depth_scale=10.0)
+    x = torch.tensor([1e-4, 0.5, 300.0], dtype=torch.float16)
+    y = encode_radiance(x, enc)
+    assert y.dtype == torch.float32
+    assert decode_radiance(y.half(), enc).dtype == torch.float32
