@@ -137,3 +137,14 @@ def test_frame_json_with_a_loaded_mesh_file_renders_again(gl_context, tmp_path):
     assert json.loads((out / "frame.json").read_text())["config"]["objects"][-1]["mesh"] == key
     again = tmp_path / "c"  # and the frame.json it wrote renders again too
     assert main(["render", "--scene", "cornell", "--res", "32", "--config", str(out / "frame.json"), "--out", str(again)]) == 0
+
+
+def test_written_files_get_ordinary_permissions(tmp_path):
+    from diviewer.imageio import write_text
+
+    old = os.umask(0o022)
+    try:
+        write_text(tmp_path / "a.txt", "x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
