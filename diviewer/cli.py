@@ -79,6 +79,13 @@ def _cmd_data_merge(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from diviewer.evaluate import evaluate
+
+    evaluate(args.model, args.data, split=args.split, provider=args.provider, out=args.out)
+    return 0
+
+
 def _add_reference_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("path-traced reference (needs the 'train' extra: mitsuba)")
     g.add_argument("--reference", default=None, choices=("pt",),
@@ -150,6 +157,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_train_parser(sub)
     add_view_parser(sub)
+
+    p = sub.add_parser("eval", help="a model against a dataset split, beside direct light alone (PSNR, SSIM)")
+    p.add_argument("--model", type=Path, required=True, help="an ONNX model (diviewer export)")
+    p.add_argument("--data", type=Path, required=True, help="a dataset of the model's scene (diviewer capture)")
+    p.add_argument("--split", default="test", choices=("train", "val", "test"))
+    p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
+    p.add_argument("--out", type=Path, default=None, help="write the results as JSON")
+    p.set_defaults(func=_cmd_eval)
 
     p = sub.add_parser("data", help="inspect datasets")
     data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")

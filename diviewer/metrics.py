@@ -84,3 +84,18 @@ def ssim_map(a, b, data_range: float = 1.0, win_size: int = 11, sigma: float = 1
 def ssim(a, b, data_range: float = 1.0) -> float:
     """Mean structural similarity (1 for identical images); see the module docstring for the conventions."""
     return float(np.mean(ssim_map(a, b, data_range)))
+
+
+TONEMAP_GAMMA = 2.2
+"""Display gamma of the metrics' tone map."""
+
+
+def tonemap(x: np.ndarray, exposure: float) -> np.ndarray:
+    """The fixed tone map of the tone-mapped metrics: y = max(x * exposure, 0), then (y / (1 + y)) ** (1 / 2.2).
+
+    Reinhard's curve at the dataset exposure (which maps the 99th percentile of lit direct light to 1,
+    i.e. to 0.5 before gamma), then a display gamma: values in [0, 1), compared with data_range 1.
+    It weighs errors as a viewer sees them, where linear metrics are dominated by highlights.
+    """
+    y = np.maximum(np.asarray(x, dtype=np.float64) * exposure, 0.0)
+    return (y / (1.0 + y)) ** (1.0 / TONEMAP_GAMMA)

@@ -113,3 +113,19 @@ def test_bad_checkpoint_is_refused(tmp_path, capsys):
         export(bad, tmp_path / "x.onnx", log=quiet)
     assert main(["export", str(bad), "--out", str(tmp_path / "y.onnx")]) == 2
     assert not (tmp_path / "y.onnx").exists()
+
+
+def test_eval_of_the_exported_model_reproduces_training_validation(checkpoints, tmp_path):
+    """`diviewer eval` (onnxruntime, torch-free) scores the val split as training's validation did."""
+    from diviewer.evaluate import evaluate
+    from diviewer.train.trainer import load_checkpoint
+
+    out = tmp_path / "m.onnx"
+    export(checkpoints["indirect"], out, log=quiet)
+    result = evaluate(out, checkpoints["data"], split="val", out=tmp_path / "eval.json", log=quiet)
+    recorded = load_checkpoint(checkpoints["indirect"])["val"]
+    for key in ("psnr", "ssim", "psnr_tm", "ssim_tm"):
+        assert result["methods"]["neural"][key]["mean"] == pytest.approx(recorded[key], rel=1e-3), key
+    assert set(result["methods"]) == {"neural", "direct"}
+    assert json.loads((tmp_path / "eval.json").read_text())["frames"] == 2
+    assert main(["eval", "--model", str(out), "--data", str(checkpoints["data"]), "--split", "val"]) == 0

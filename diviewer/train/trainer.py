@@ -46,6 +46,7 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.errors import DiviewerError, missing_extra
+from diviewer.metrics import tonemap  # noqa: F401  (re-exported: the validation tone map)
 from diviewer.provenance import check_known_keys
 
 if TYPE_CHECKING:
@@ -186,8 +187,6 @@ ALBEDO_FLOOR: float = 0.05
 """With divide_albedo, indirect light is divided by max(albedo, ALBEDO_FLOOR) and multiplied back by
 the same: exactly invertible, and dark or background pixels (albedo 0) do not amplify noise."""
 
-TONEMAP_GAMMA: float = 2.2
-"""Display gamma of the validation tone map (see `tonemap`)."""
 
 METRIC_KEYS: tuple[str, ...] = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 """Validation metrics: on linear radiance, then on tone-mapped images (suffix _tm)."""
@@ -237,17 +236,6 @@ def _albedo_floor(albedo: Any) -> Any:
     if type(albedo).__module__.startswith("torch"):
         return albedo.clamp(min=ALBEDO_FLOOR)
     return np.maximum(albedo, ALBEDO_FLOOR)
-
-
-def tonemap(x: np.ndarray, exposure: float) -> np.ndarray:
-    """The fixed validation tone map: y = max(x * exposure, 0), then (y / (1 + y)) ** (1 / 2.2).
-
-    Reinhard's curve at the dataset exposure (which maps the 99th percentile of lit direct light to 1,
-    i.e. to 0.5 before gamma), then a display gamma: values in [0, 1), compared with data_range 1.
-    It weighs errors as a viewer sees them, where linear metrics are dominated by highlights.
-    """
-    y = np.maximum(np.asarray(x, dtype=np.float64) * exposure, 0.0)
-    return (y / (1.0 + y)) ** (1.0 / TONEMAP_GAMMA)
 
 
 def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray) -> Encoding:
