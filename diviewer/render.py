@@ -36,9 +36,13 @@ def load_frame_json(scene: Scene, path: Path) -> FrameConfig:
 
 def scene_for_frame_json(scene: Scene, path: Path) -> Scene:
     """The scene with the mesh files a frame.json records (``user_meshes``, from the viewer) added."""
+    return _with_user_meshes(scene, _read_frame_json(scene, path))
+
+
+def _with_user_meshes(scene: Scene, data: dict) -> Scene:
     from diviewer.scene.loader import add_mesh_file
 
-    for key, file in (_read_frame_json(scene, path).get("user_meshes") or {}).items():
+    for key, file in (data.get("user_meshes") or {}).items():
         scene, _, _ = add_mesh_file(scene, file, key)
     return scene
 
@@ -56,12 +60,16 @@ def _read_frame_json(scene: Scene, path: Path) -> dict:
     return data
 
 
-def choose_config(scene: Scene, seed: int | None, split: str, config_file: Path | None) -> FrameConfig:
+def choose_config(scene: Scene, seed: int | None, split: str, config_file: Path | None) -> tuple[Scene, FrameConfig, dict]:
+    """The frame to render: a stored frame.json (its scene gains the mesh files it records), the
+    default pose, or one drawn with ``seed``. Also returns what the frame.json recorded ({} otherwise)."""
     if config_file is not None:
-        return load_frame_json(scene, config_file)
+        data = _read_frame_json(scene, config_file)  # read once: meshes, configuration, record
+        scene = _with_user_meshes(scene, data)
+        return scene, config_from_dict(scene, data["config"], path=config_file), data
     if seed is None:
-        return scene.default
-    return sample_config(scene, seed, split)
+        return scene, scene.default, {}
+    return scene, sample_config(scene, seed, split), {}
 
 
 def frame_record(scene: Scene, config: FrameConfig, size: tuple[int, int], **extra) -> dict:
@@ -103,11 +111,8 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     width, height = parse_resolution(res)
     if net is not None:
         net.check_size(width, height)
-    user_meshes = None
-    if config_file is not None:
-        scene = scene_for_frame_json(scene, config_file)
-        user_meshes = _read_frame_json(scene, config_file).get("user_meshes")
-    config = choose_config(scene, seed, split, config_file)
+    scene, config, stored = choose_config(scene, seed, split, config_file)
+    user_meshes = stored.get("user_meshes")
     settings = RenderSettings()
     neural_info = None
     with headless_context() as ctx:
