@@ -99,6 +99,13 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_baseline(args: argparse.Namespace) -> int:
+    from diviewer.baseline import build_baseline
+
+    build_baseline(args.data, args.out, split=args.split, max_frames=args.max_frames)
+    return 0
+
+
 def _cmd_evalset(args: argparse.Namespace) -> int:
     from diviewer.evalset import EvalSetSettings, build_evalset
     from diviewer.render import parse_resolution
@@ -196,6 +203,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
     p.add_argument("--out", type=Path, default=None, help="write the results as JSON (strict: no NaN/Infinity)")
     p.set_defaults(func=_cmd_eval)
+
+    p = sub.add_parser("baseline", help="fit the per-pixel linear-regression baseline on a dataset; write it as "
+                                        "an ONNX model that eval, bench and view run like any model")
+    p.add_argument("--data", type=Path, required=True, help="a dataset (diviewer capture)")
+    p.add_argument("--out", type=Path, required=True, help="model.onnx (a model card model.json beside it)")
+    p.add_argument("--split", default="train", choices=("train", "val", "test"), help="split to fit on (train)")
+    p.add_argument("--max-frames", type=int, default=None, help="fit on the first N present frames only")
+    p.set_defaults(func=_cmd_baseline)
 
     p = sub.add_parser("evalset", help="render a scene's fixed evaluation set: >= 1024-spp truth, its noise floor "
                                        "and a ladder of lower sample counts (resumable)")

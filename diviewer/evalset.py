@@ -225,7 +225,7 @@ def load_evalset(path: str | Path) -> Dataset:
     return ds
 
 
-def configs_apart(ds: Dataset, other: Dataset) -> bool:
-    """True when no configuration of ``ds`` appears in ``other`` (an evaluation set against a training capture)."""
-    mine = {json.dumps(f["config"], sort_keys=True) for f in ds.frames}
-    return not any(json.dumps(f["config"], sort_keys=True) in mine for f in other.frames)
+def configs_apart(frames: list[dict], others: list[dict]) -> bool:
+    """True when no configuration of one frame list (an evaluation set's) appears in the other (a capture's)."""
+    mine = {json.dumps(f["config"], sort_keys=True) for f in frames}
+    return not any(json.dumps(f["config"], sort_keys=True) in mine for f in others)

@@ -62,10 +62,10 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
                         for k in KEYS} for m, rs in rows.items()},
     }
     log(f"{summary['scene']} {split} split, {len(idx)} frames, against path tracing at {summary['reference_spp']} spp")
-    log(f"{'method':<22} {'PSNR':>7} {'SSIM':>7} {'PSNR tm':>8} {'SSIM tm':>8}")
-    for m, label in (("neural", f"neural K={model.meta['K']} {model.meta['precision']}"), ("direct", "direct light only")):
+    log(f"{'method':<34} {'PSNR':>7} {'SSIM':>7} {'PSNR tm':>8} {'SSIM tm':>8}")
+    for m, label in (("neural", _model_label(model.meta, Path(model_path))), ("direct", "direct light only")):
         s = summary["methods"][m]
-        log(f"{label:<22} {s['psnr']['mean']:7.2f} {s['ssim']['mean']:7.4f} {s['psnr_tm']['mean']:8.2f} "
+        log(f"{label:<34} {s['psnr']['mean']:7.2f} {s['ssim']['mean']:7.4f} {s['psnr_tm']['mean']:8.2f} "
             f"{s['ssim_tm']['mean']:8.4f}")
     log(f"inference {summary['inference_ms']['median']:.1f} ms median ({model.provider})")
     if out is not None:

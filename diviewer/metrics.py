@@ -213,7 +213,11 @@ def highpass_power(image, mask) -> float:
 def checkerboard_ratio(image, reference, mask) -> float:
     """The image's high-frequency power over flat regions divided by the reference's (1: as much as the
     reference; a checkerboard makes it large). ``inf`` when only the reference is perfectly smooth."""
-    p, q = highpass_power(image, mask), highpass_power(reference, mask)
+    return power_ratio(highpass_power(image, mask), highpass_power(reference, mask))
+
+
+def power_ratio(p: float, q: float) -> float:
+    """p / q for powers (pooled over frames by the caller); 1 when both are 0, inf when only q is."""
     if q == 0.0:
         return 1.0 if p == 0.0 else math.inf
     return p / q
