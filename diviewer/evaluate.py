@@ -154,7 +154,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
         flat = 0
         for i in idx:
             f = ds.load(i)
-            mask = flat_mask(f["depth"], f["normal"], f["albedo"])
+            mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # flat and no shadow edge
             flat += int(mask.sum())
             for key, net in models.items():
                 t0 = time.perf_counter()
@@ -191,7 +191,7 @@ def format_tables(result: dict) -> list[str]:
     """The per-split tables for people."""
     lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; tm = tone-mapped at "
              f"exposure {result['tonemap_exposure']:.3g}; FLIP-HDR on linear radiance, FLIP-LDR on tone-mapped; "
-             f"eq. spp from PSNR tm; checker = high-frequency power over flat regions / the reference's"]
+             f"eq. spp from PSNR tm; checker = high-frequency power over flat, shadow-edge-free regions / the reference's"]
     for split, r in result["splits"].items():
         lines.append("")
         lines.append(f"{split} ({r['frames']} frames)")
