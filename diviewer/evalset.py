@@ -88,7 +88,8 @@ def channels(settings: EvalSetSettings) -> tuple[tuple[str, int], ...]:
 
 
 def _seeds(settings: EvalSetSettings, split_index: int, i: int) -> dict:
-    state = np.random.SeedSequence([EVAL_STREAM, settings.seed, split_index, i]).generate_state(3 + len(settings.ladder))
+    seq = np.random.SeedSequence([EVAL_STREAM, settings.seed, split_index, i])
+    state = seq.generate_state(3 + len(settings.ladder))
     s = [int(x & 0x7FFFFFFF) for x in state]
     return {"config": s[0], "reference": s[1], "second": s[2], "ladder": s[3:]}
 
