@@ -206,7 +206,7 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
             f"{settings.width}x{settings.height} ({settings.spp} spp twice + direct + ladder "
             f"{'/'.join(map(str, settings.ladder))}: {per_frame} full samples per pixel per frame, {truth.variant})")
         if todo:
-            _render_frames_gl(ctx, scene, ds, todo, settings, truth, describe(ctx), log)
+            _render_frames_gl(ctx, scene, ds, todo, settings, truth, describe(ctx), log, label="evalset")
     summary = {"planned": len(plan), "present": len(ds.indices()), "seconds": round(time.perf_counter() - t0, 1)}
     if summary["present"] == len(plan):
         from diviewer.evaluate import evaluate_evalset

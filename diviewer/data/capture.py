@@ -200,7 +200,7 @@ def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: Captur
 
 
 def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings, gt, gl_name: str,
-                      log) -> None:
+                      log, label: str = "capture") -> None:
     """Render and write ``todo``: GL buffers plus ``gt(config, frame entry)``, stored in the manifest's channels.
 
     Shared with the evaluation set (diviewer.evalset), whose ground truth adds channels; ``settings``
@@ -213,7 +213,7 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
     compositor = Compositor(ctx, renderer.shaders)
     splits = dict.fromkeys(f["split"] for f in ds.frames)  # in order of first appearance
     thumbs = {i for s in splits for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
-    progress = Progress(len(todo), label="capture")
+    progress = Progress(len(todo), label=label)
     try:
         for f in todo:
             config = config_from_dict(scene, f["config"])
