@@ -41,7 +41,7 @@ def _render_reference(args: argparse.Namespace) -> None:
 
 def _cmd_capture(args: argparse.Namespace) -> int:
     from diviewer.data.capture import CaptureSettings, capture, parse_shard
-    from diviewer.render import parse_resolution
+    from diviewer.frames import parse_resolution
 
     width, height = parse_resolution(args.res)
     fractions = tuple(float(x) for x in args.splits.split(","))

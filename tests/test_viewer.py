@@ -428,7 +428,7 @@ def _check_image(img: np.ndarray, size) -> None:
 
 
 def _scripted_session(tmp_path: Path) -> None:
-    from diviewer.render import load_frame_json
+    from diviewer.frames import load_frame_json
     from diviewer.viewer.app import run_viewer
     from diviewer.viewer.reference import mitsuba_missing
 

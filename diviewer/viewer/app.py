@@ -515,7 +515,7 @@ class Viewer:
 
     def _save_screenshot(self, path: Path, images: list[_Image]) -> Path:
         from diviewer import imageio
-        from diviewer.render import frame_record
+        from diviewer.frames import frame_record
 
         gw, gh = self.gi_size
         if self._shot_fbo is None or self._shot_fbo[0].size != (gw, gh):
@@ -1199,7 +1199,7 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run_view(args: argparse.Namespace) -> int:
-    from diviewer.render import parse_resolution
+    from diviewer.frames import parse_resolution
 
     if args.frames is not None and args.frames < 1:
         raise DiviewerError(f"--frames must be at least 1, got {args.frames}", field="--frames")
