@@ -27,7 +27,7 @@ def choose_config(scene: Scene, seed: int | None, split: str, config_file: Path 
 
 
 def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int | None = None, split: str = "train",
-                  config_file: Path | None = None, exposure: float | None = None, tonemap: str = "aces",
+                  config_file: Path | None = None, exposure: float | None = None, tonemap: str | None = None,
                   model: Path | None = None, provider: str | None = None) -> dict:
     """Render one frame's GL buffers (and, with a model, its neural GI image) and write them.
 
@@ -39,7 +39,10 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
         The frame record written to frame.json.
     """
     from diviewer.gl.context import describe, headless_context
-    from diviewer.gl.renderer import BUFFERS, Compositor, Renderer, RenderSettings
+    from diviewer.gl.display import DEFAULT_TONEMAP, DisplayPass
+    from diviewer.gl.renderer import BUFFERS, Renderer, RenderSettings
+
+    tonemap = tonemap or DEFAULT_TONEMAP
 
     scene = load_scene(scene_name)
     net = None
@@ -58,7 +61,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     neural_info = None
     with headless_context() as ctx:
         renderer = Renderer(ctx, scene, width, height, settings)
-        compositor = Compositor(ctx, renderer.shaders)
+        compositor = DisplayPass(ctx, renderer.shaders)
         neural = None
         try:
             frame = renderer.frame(config)
@@ -124,7 +127,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     import time
 
     from diviewer.gl.context import headless_context
-    from diviewer.gl.renderer import Compositor
+    from diviewer.gl.display import DEFAULT_TONEMAP, DisplayPass
     from diviewer.gl.shaders import ShaderCache
     from diviewer.reference import mitsuba as ref
 
@@ -172,9 +175,9 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     for name, im in images.items():
         imageio.write_exr(out / f"{name}.exr", im)
     display = record.get("display") or {}
-    ev, tonemap = float(display.get("exposure", scene.exposure)), display.get("tonemap", "aces")
+    ev, tonemap = float(display.get("exposure", scene.exposure)), display.get("tonemap", DEFAULT_TONEMAP)
     with headless_context() as ctx:
-        compositor = Compositor(ctx, ShaderCache(ctx))
+        compositor = DisplayPass(ctx, ShaderCache(ctx))
         try:
             for name, im in images.items():
                 # Noise can make single indirect pixels slightly negative; the preview clamps, the EXR does not.

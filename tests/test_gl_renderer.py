@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from diviewer.gl.renderer import Compositor, Renderer, RenderSettings
+from diviewer.gl.display import DisplayPass
+from diviewer.gl.renderer import Renderer, RenderSettings
 from diviewer.scene import camera as cam
 from scenes import facing_plane
 
@@ -197,7 +198,7 @@ def test_image_rows_run_top_to_bottom(ctx):
 
 def test_composite_tonemaps_and_flags_non_finite(ctx):
     r = Renderer(ctx, facing_plane(), 8, 8)
-    comp = Compositor(ctx, r.shaders)
+    comp = DisplayPass(ctx, r.shaders)
     try:
         img = np.zeros((8, 8, 3), np.float32)
         img[0, 0] = [np.nan, 0, 0]

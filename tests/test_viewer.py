@@ -21,11 +21,12 @@ import pytest
 from diviewer.errors import DiviewerError
 from diviewer.scene import load_scene
 from diviewer.scene.model import Camera
-from diviewer.viewer.controls import FlyController, OrbitController, direction, pixel_ray, yaw_pitch
-from diviewer.viewer.state import (
-    VIEW_MODE_NAMES, VIEW_MODES, Stats, ViewerState, angles_to_vector, single_modes, vector_to_angles,
-    view_mode,
-)
+from diviewer.scene.lights import angles_to_vector, vector_to_angles
+from diviewer.scene.picking import pixel_ray
+from diviewer.viewer.controls import FlyController, OrbitController, direction, yaw_pitch
+from diviewer.viewer.state import ViewerState
+from diviewer.viewer.stats import Stats
+from diviewer.viewer.view_modes import VIEW_MODE_NAMES, VIEW_MODES, single_modes, view_mode
 
 REQUIRE_GL = os.environ.get("DIVIEWER_REQUIRE_GL", "") not in ("", "0")
 
@@ -43,7 +44,7 @@ def state(cornell):
 # --- view modes -----------------------------------------------------------------------------------
 
 def test_view_mode_registry_is_complete():
-    from diviewer.viewer.app import DISPLAY_KINDS, LAYOUTS
+    from diviewer.gl.display import KINDS, LAYOUTS
 
     expected = {"final", "direct", "reference", "depth", "normal", "albedo", "net_input", "net_output", "split",
                 "difference"}
@@ -54,7 +55,7 @@ def test_view_mode_registry_is_complete():
     for m in VIEW_MODES:
         assert m.layout in LAYOUTS and m.label
         if m.layout == "single":
-            assert callable(m.produce) and m.display in DISPLAY_KINDS
+            assert callable(m.produce) and m.display in KINDS
         else:
             assert m.produce is None
     assert {m.name for m in single_modes()} == expected - {"split", "difference"}
@@ -285,7 +286,7 @@ def test_stats_keep_the_last_seconds():
 
 
 def test_letterbox_keeps_the_gi_aspect():
-    from diviewer.viewer.app import letterbox
+    from diviewer.viewer.window import letterbox
 
     assert letterbox(200, 100, 1.0) == (50, 0, 100, 100)
     assert letterbox(100, 200, 2.0) == (0, 75, 100, 50)
@@ -312,14 +313,14 @@ def test_view_command_line():
 
 
 def test_viewer_imports_no_torch():
-    code = ("import sys, diviewer.viewer.app, diviewer.viewer.imgui_gl, diviewer.viewer.reference, "
-            "diviewer.gl.neural, diviewer.runtime; assert 'torch' not in sys.modules, 'torch was imported'")
+    code = ("import sys, diviewer.viewer.app, diviewer.viewer.imgui_gl, diviewer.reference.progressive, "
+            "diviewer.viewer.panel, diviewer.gl.neural, diviewer.runtime; assert 'torch' not in sys.modules, 'torch was imported'")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
 
 
 def test_model_card_rows():
-    from diviewer.viewer.app import meta_lines
+    from diviewer.viewer.panel import meta_lines
 
     rows = dict(meta_lines({"K": 8, "resolution": [64, 48], "target": "indirect", "dataset_hash": "ab" * 32,
                             "val": {"psnr": 31.5, "ssim": 0.91234}}))
@@ -403,7 +404,7 @@ def _in_window_process(fn, *args, timeout: float = 180.0) -> None:
 def _settings(**changes):
     from diviewer.gl.renderer import RenderSettings
     from diviewer.viewer.app import ViewerSettings
-    from diviewer.viewer.reference import ReferenceSettings
+    from diviewer.reference.progressive import ReferenceSettings
 
     base = dict(size=(128, 128), vsync=False, model="none", render=RenderSettings(shadow_size=256),
                 reference=ReferenceSettings(variant="scalar_rgb", max_spp=2, pass_spp=1, max_depth=4))
@@ -430,7 +431,7 @@ def _check_image(img: np.ndarray, size) -> None:
 def _scripted_session(tmp_path: Path) -> None:
     from diviewer.frames import load_frame_json
     from diviewer.viewer.app import run_viewer
-    from diviewer.viewer.reference import mitsuba_missing
+    from diviewer.reference.progressive import mitsuba_missing
 
     cornell = load_scene("cornell")
     script = [
@@ -598,35 +599,35 @@ def _input_session(tmp_path: Path) -> None:
     def keys(v):
         st = v.state
         for key, mode in ((glfw.KEY_4, "depth"), (glfw.KEY_9, "split"), (glfw.KEY_1, "final")):
-            v.on_key(key, glfw.PRESS, 0)
+            v.input.on_key(key, glfw.PRESS, 0)
             seen[mode] = st.view_mode
         az = st.light_angles()[0]
-        v.on_key(glfw.KEY_RIGHT, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_RIGHT, glfw.PRESS, 0)
         seen["azimuth"] = st.light_angles()[0] - az
-        v.on_key(glfw.KEY_C, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_C, glfw.PRESS, 0)
         seen["controller"] = st.controller.kind
-        v.on_key(glfw.KEY_L, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_L, glfw.PRESS, 0)
         seen["animate"] = st.animate_light
-        v.on_key(glfw.KEY_TAB, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_TAB, glfw.PRESS, 0)
         seen["tab"] = st.selected
-        v.on_key(glfw.KEY_EQUAL, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_EQUAL, glfw.PRESS, 0)
         seen["exposure"] = st.exposure
 
     def mouse(v):
         st = v.state
         cam0 = st.config.camera
-        v.on_cursor(64.0, 64.0)
-        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
-        v.on_cursor(90.0, 70.0)  # a drag: orbit, no picking
-        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+        v.input.on_cursor(64.0, 64.0)
+        v.input.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+        v.input.on_cursor(90.0, 70.0)  # a drag: orbit, no picking
+        v.input.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
         seen["orbited"] = st.config.camera != cam0
         seen["after_drag"] = st.selected
-        v.on_scroll(0.0, 2.0)
+        v.input.on_scroll(0.0, 2.0)
         seen["zoom"] = st.controller.distance
-        v.on_key(glfw.KEY_R, glfw.PRESS, 0)  # reset the camera, then click the centre object
-        v.on_cursor(64.0, 74.0)
-        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
-        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+        v.input.on_key(glfw.KEY_R, glfw.PRESS, 0)  # reset the camera, then click the centre object
+        v.input.on_cursor(64.0, 74.0)
+        v.input.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+        v.input.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
         seen["clicked"] = st.selected
 
     script = [(1, keys), (2, mouse), (3, "load_mesh", {"path": tmp_path / "ring.ply", "name": "center"}),
@@ -653,7 +654,7 @@ def test_keyboard_mouse_and_mesh_loading(display, tmp_path):
 # --- the background reference ---------------------------------------------------------------------
 
 def test_progressive_reference_refines_restarts_and_never_blocks(cornell):
-    from diviewer.viewer.reference import ProgressiveReference, ReferenceSettings, mitsuba_missing
+    from diviewer.reference.progressive import ProgressiveReference, ReferenceSettings, mitsuba_missing
 
     if mitsuba_missing():
         pytest.skip("Mitsuba is not installed")
@@ -685,7 +686,7 @@ def test_progressive_reference_refines_restarts_and_never_blocks(cornell):
 def test_reference_without_mitsuba_says_why(monkeypatch, cornell):
     import importlib.util
 
-    from diviewer.viewer import reference
+    from diviewer.reference import progressive as reference
 
     real = importlib.util.find_spec
     monkeypatch.setattr(reference.importlib.util, "find_spec",
