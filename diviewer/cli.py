@@ -155,7 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_export)
 
     from diviewer.train.trainer import add_train_parser
-    from diviewer.viewer.app import add_view_parser
+    from diviewer.viewer.command import add_view_parser
 
     add_train_parser(sub)
     add_view_parser(sub)

@@ -298,7 +298,7 @@ def test_letterbox_keeps_the_gi_aspect():
 def test_view_command_line():
     import argparse
 
-    from diviewer.viewer.app import add_view_parser, run_view
+    from diviewer.viewer.command import add_view_parser, run_view
 
     ap = argparse.ArgumentParser()
     add_view_parser(ap.add_subparsers(dest="command"))

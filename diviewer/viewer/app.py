@@ -15,7 +15,6 @@ textures), models.py (which model), state.py (what is shown, no GL).
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import time
@@ -113,8 +112,6 @@ class Viewer:
         self.shots = Screenshots(self.ctx)
         self.shot_path = f"diviewer_{scene.name}.png"
         self._scene_revision = 0
-        self._uploaded: dict[str, object] = {}
-        """Meshes and materials uploaded after the start (loaded files), to spot replacements."""
         self.model = None
         self.neural = None
         self.imgui_ctx = imgui.create_context()
@@ -181,24 +178,10 @@ class Viewer:
 
     def _sync_scene(self) -> None:
         """Upload meshes and textures added to the scene (a mesh file loaded from the panel)."""
-        from diviewer.gl.resources import upload_texture
-
-        if self.state.scene_revision == self._scene_revision:
-            return
-        scene, gpu = self.state.scene, self.renderer.gpu
-        for key, mesh in scene.meshes.items():
-            # A file loaded again under the same key replaces the mesh: compare the objects, not the keys.
-            if key not in gpu.meshes or (key in self._uploaded and self._uploaded[key] is not mesh):
-                gpu.add_mesh(self.ctx, mesh)
-                self._uploaded[key] = mesh
-        for key, mat in scene.materials.items():
-            if mat.texture is not None and (key not in gpu.textures or self._uploaded.get(key) is not mat):
-                if key in gpu.textures:
-                    gpu.textures[key].release()
-                gpu.textures[key] = upload_texture(self.ctx, mat.texture)
-                self._uploaded[key] = mat
-        self.renderer.scene = scene
-        self._scene_revision = self.state.scene_revision
+        if self.state.scene_revision != self._scene_revision:
+            self.renderer.gpu.sync(self.ctx, self.state.scene)
+            self.renderer.scene = self.state.scene
+            self._scene_revision = self.state.scene_revision
 
     # --- actions (the panel's, the keys', scripts') --------------------------------------------------
     def request_model(self, spec: str) -> None:
@@ -457,41 +440,3 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
     finally:
         viewer.close()
     return summary
-
-
-# --- command line ---------------------------------------------------------------------------------
-
-def add_view_parser(subparsers) -> argparse.ArgumentParser:
-    """Define ``diviewer view`` on the CLI's subparsers."""
-    p = subparsers.add_parser("view", help="fly through a scene with neural GI every frame (window + panel)",
-                              description="Open a window on a scene with its neural GI model; "
-                                          "the panel lists the keyboard shortcuts.")
-    p.add_argument("--scene", default="cornell", help="shipped scene name (cornell, atrium) or a .toml path")
-    p.add_argument("--model", default="auto",
-                   help="model file, 'auto' (assets/models/<scene>*.onnx, the first that fits) or 'none'")
-    p.add_argument("--size", default="768x768", help="window size WxH (or N); default 768x768")
-    p.add_argument("--no-vsync", action="store_true", help="do not wait for the display's refresh")
-    p.add_argument("--frames", type=int, default=None, help="render N frames, then exit (with --screenshot)")
-    p.add_argument("--screenshot", type=Path, default=None, help="on exit, save the view as PNG (+ frame JSON)")
-    p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"),
-                   help="onnxruntime execution provider (default: the fastest available)")
-    p.add_argument("--camera", default="fly", choices=("fly", "orbit"), help="camera controller at start")
-    p.set_defaults(func=run_view)
-    return p
-
-
-def run_view(args: argparse.Namespace) -> int:
-    from diviewer.frames import parse_resolution
-
-    if args.frames is not None and args.frames < 1:
-        raise DiviewerError(f"--frames must be at least 1, got {args.frames}", field="--frames")
-    size = parse_resolution(args.size)
-    settings = ViewerSettings(size=size, vsync=not args.no_vsync, model=args.model, provider=args.provider,
-                              controller=args.camera)
-    summary = run_viewer(args.scene, frames=args.frames, screenshot=args.screenshot, settings=settings)
-    if args.frames is not None:
-        gw, gh = summary["gi_size"]
-        print(f"viewer: {summary['frames']} frames at GI {gw}x{gh}, "
-              f"{summary['stages_ms']['frame']:.1f} ms/frame"
-              + (f", saved {args.screenshot}" if args.screenshot else ""))
-    return 0
