@@ -428,6 +428,75 @@ def _check_image(img: np.ndarray, size) -> None:
     assert img.std() > 5.0, "the screenshot is (nearly) uniform"
 
 
+# What a screenshot must show, made without the window: the frame its JSON records, rendered again on the
+# session's headless context and drawn by the display pass. Arguments a and b pick a buffer of that
+# frame and how it is shown: (buffer, display kind, factor).
+DIRECT = ("direct", "radiance", 1.0)
+
+
+def _offscreen_view(ctx, shot: Path, a=DIRECT, b=None, layout: str = "single", window=None,
+                    linear: bool = False) -> np.ndarray:
+    """The view a screenshot (``shot``: its PNG path) recorded, re-rendered offscreen, (H, W, 3) float.
+
+    Args:
+        window: (w, h): draw it letterboxed into a window-sized target cleared with the viewer's background
+            (what the window shows with the panel hidden), else at the frame's own resolution.
+        linear: sample the image bilinearly (the neural pass's texture) rather than nearest (the G-buffer's).
+    """
+    import moderngl
+
+    from diviewer.frames import load_frame_json, scene_for_frame_json
+    from diviewer.gl.context import unbind_framebuffer
+    from diviewer.gl.display import DisplayPass, Image, Look, depth_range, read_rgb8
+    from diviewer.gl.renderer import Renderer, RenderSettings
+    from diviewer.viewer.app import BACKGROUND
+    from diviewer.viewer.window import letterbox
+
+    path = shot.with_suffix(".json")
+    record = json.loads(path.read_text())
+    scene = scene_for_frame_json(load_scene(record["scene"]), path)
+    config = load_frame_json(scene, path)
+    w, h = record["resolution"]
+    renderer = Renderer(ctx, scene, w, h, RenderSettings(shadow_size=256))  # as _settings()
+    display = DisplayPass(ctx, renderer.shaders)
+    frame = renderer.frame(config)
+    made = []
+
+    def image(spec) -> Image:
+        name, kind, factor = spec
+        arr = np.ascontiguousarray(np.flipud(frame[name] * factor), dtype="f4")
+        tex = ctx.texture((w, h), 1 if arr.ndim == 2 else 3, arr.tobytes(), dtype="f4")
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR) if linear else (moderngl.NEAREST, moderngl.NEAREST)
+        tex.repeat_x = tex.repeat_y = False
+        made.append(tex)
+        return Image(tex, False, kind)
+
+    tw, th = window or (w, h)
+    target = ctx.texture((tw, th), 4)
+    fbo = ctx.framebuffer([target])
+    try:
+        fbo.use()
+        fbo.clear(*BACKGROUND, 1.0)
+        rect = letterbox(tw, th, w / h) if window else (0, 0, w, h)
+        look = Look(record["display"]["exposure"], record["display"]["tonemap"], depth_range(scene, config),
+                    split=0.5, diff_gain=2.0 ** 2.0)  # the state's defaults
+        display.show(fbo, rect, image(a), image(b) if b else None, layout, look)
+        return read_rgb8(fbo).astype(np.float32)
+    finally:
+        unbind_framebuffer(ctx)
+        for r in (fbo, target, *made):
+            r.release()
+        display.release()
+        renderer.release()
+
+
+def _same(shown: np.ndarray, expected: np.ndarray, what: str) -> None:
+    """The window's image equals the offscreen one (both llvmpipe: at most one step of rounding apart)."""
+    assert shown.shape == expected.shape, f"{what}: {shown.shape} != {expected.shape}"
+    diff = np.abs(shown - expected)
+    assert diff.max() <= 1.0, f"{what}: differs from the offscreen render by up to {diff.max():.0f} ({diff.mean():.3f} mean)"
+
+
 def _scripted_session(tmp_path: Path) -> None:
     from diviewer.frames import load_frame_json
     from diviewer.viewer.app import run_viewer
@@ -455,6 +524,8 @@ def _scripted_session(tmp_path: Path) -> None:
     script.append((f, "set_view_mode", {"name": "final"}))
     picked = {}
     script.append((f, lambda v: picked.update(selected=v.state.selected)))
+    script.append((f + 1, lambda v: setattr(v.state, "show_panel", False)))
+    script.append((f + 1, "window_screenshot", {"path": tmp_path / "window_nopanel.png"}))
     frames = f + 2
     summary = run_viewer(cornell, frames=frames, screenshot=tmp_path / "last.png", script=script,
                          settings=_settings())
@@ -464,13 +535,9 @@ def _scripted_session(tmp_path: Path) -> None:
     size = summary["gi_size"]
     assert size == (128, 128)
     before, light, moved = (_png(tmp_path / f"{n}.png") for n in ("before", "light", "moved"))
-    for img in (before, light, moved):
-        _check_image(img, size)
     assert np.abs(before - light).mean() > 2.0, "moving the light did not change the image"
     assert np.abs(light - moved).mean() > 2.0, "moving the camera did not change the image"
     images = {name: _png(tmp_path / f"mode_{name}.png") for name in VIEW_MODE_NAMES}
-    for name in ("final", "direct", "depth", "normal", "albedo", "net_input", "split", "difference"):
-        _check_image(images[name], size)
     assert np.abs(images["depth"] - images["normal"]).mean() > 10.0
     assert np.abs(images["albedo"] - images["direct"]).mean() > 10.0
     # No model: the network's output says why and shows black; the final image is the direct light.
@@ -485,9 +552,9 @@ def _scripted_session(tmp_path: Path) -> None:
     half = size[0] // 2
     assert np.abs(images["split"][:, : half - 2] - images["final"][:, : half - 2]).max() <= 1.0
     assert np.abs(images["split"][:, half + 2:] - images["normal"][:, half + 2:]).max() <= 1.0
-    # The window shot has the panel on top of the image; its size is the framebuffer's.
+    # The window shot has the panel on top of the image (compared with the image in the test itself).
     window = _png(tmp_path / "window.png")
-    assert window.shape == (128, 128, 3) and np.abs(window - images["final"]).mean() > 1.0
+    assert window.shape == (128, 128, 3)
     # The screenshot's JSON is a frame.json that `diviewer render --config` reads back.
     record = json.loads((tmp_path / "moved.json").read_text())
     assert record["scene"] == "cornell" and record["view_mode"] == "final"
@@ -499,9 +566,25 @@ def _scripted_session(tmp_path: Path) -> None:
     np.testing.assert_allclose(last.lights[0].direction, now.lights[0].direction, atol=1e-9)
 
 
-def test_scripted_session(display, tmp_path):
-    """Camera moves, light moves, every view mode, picking, screenshots, a clean exit."""
+def test_scripted_session(display, tmp_path, ctx):
+    """Camera moves, light moves, every view mode, picking, screenshots, a clean exit; each screenshot is the
+    frame its JSON records, rendered again offscreen, and so is the window with the panel hidden."""
     _in_window_process(_scripted_session, tmp_path)
+    for name in ("before", "light", "moved", "last"):
+        _same(_png(tmp_path / f"{name}.png"), _offscreen_view(ctx, tmp_path / f"{name}.png"), name)
+    normal = ("normal", "normal", 1.0)
+    modes = {"final": (DIRECT,), "direct": (DIRECT,), "depth": (("depth", "depth", 1.0),), "normal": (normal,),
+             "albedo": (("albedo", "albedo", 1.0),), "net_input": (("direct", "raw", 1.0),),
+             "split": (DIRECT, normal, "split"), "difference": (DIRECT, normal, "difference")}
+    for name, args in modes.items():
+        shot = tmp_path / f"mode_{name}.png"
+        _same(_png(shot), _offscreen_view(ctx, shot, *args), f"view mode {name}")
+    # What the window showed (no model: the direct light fills the square window) with the panel hidden ...
+    alone = _offscreen_view(ctx, tmp_path / "last.png", window=(128, 128))
+    _same(_png(tmp_path / "window_nopanel.png"), alone, "the window without the panel")
+    # ... and with it: the panel covers its top left corner, the rest is the image.
+    window = _png(tmp_path / "window.png")
+    assert np.abs(window[:24, :24] - alone[:24, :24]).mean() > 10.0, "no panel in the window shot"
 
 
 def _resize_session(tmp_path: Path) -> None:
@@ -515,11 +598,11 @@ def _resize_session(tmp_path: Path) -> None:
     summary = run_viewer("cornell", frames=8, screenshot=tmp_path / "after.png", script=script, settings=_settings())
     assert summary["gl_error"] == "GL_NO_ERROR" and summary["frames"] == 8
     assert sizes == {2: (8, 8), 4: (1, 1), 7: (96, 64)}
-    _check_image(_png(tmp_path / "after.png"), (96, 64))
 
 
-def test_resize_to_tiny_and_back(display, tmp_path):
+def test_resize_to_tiny_and_back(display, tmp_path, ctx):
     _in_window_process(_resize_session, tmp_path)
+    _same(_png(tmp_path / "after.png"), _offscreen_view(ctx, tmp_path / "after.png"), "after resizing")
 
 
 def _cornell_model(path: Path, **meta_changes) -> Path:
@@ -541,32 +624,38 @@ def _neural_session(tmp_path: Path) -> None:
               (6, "set_view_mode", {"name": "difference", "a": "final", "b": "direct"}),
               (7, "screenshot", {"path": tmp_path / "diff.png"}),
               (8, "window_screenshot", {"path": tmp_path / "window.png"}),
-              (8, "set_view_mode", {"name": "final"})]
-    summary = run_viewer("cornell", model=model, frames=9, script=script, settings=_settings(size=(128, 128)))
+              (8, "set_view_mode", {"name": "final"}),
+              (9, lambda v: setattr(v.state, "show_panel", False)),
+              (9, "window_screenshot", {"path": tmp_path / "window_nopanel.png"})]
+    summary = run_viewer("cornell", model=model, frames=10, script=script, settings=_settings(size=(128, 128)))
     assert summary["gl_error"] == "GL_NO_ERROR"
     assert summary["model"] == "cornell_k8.onnx" and summary["provider"] == "CPUExecutionProvider"
     assert summary["gi_size"] == (64, 48)
     assert summary["stages_ms"]["inference"] > 0.0 and summary["stages_ms"]["upload"] > 0.0
     final, direct = _png(tmp_path / "final.png"), _png(tmp_path / "direct.png")
-    _check_image(final, (64, 48))
-    _check_image(direct, (64, 48))
     lit = direct.sum(axis=-1) > 30
     assert (final[lit] >= direct[lit] - 1).all() and final[lit].mean() > direct[lit].mean() + 5  # 2 x direct
-    _check_image(_png(tmp_path / "raw.png"), (64, 48))
-    assert _png(tmp_path / "diff.png").mean() > 1.0
-    # The 4:3 image is letterboxed in the square window: bars above and below.
-    window = _png(tmp_path / "window.png")
-    bar = window[-8:, -40:]  # bottom right corner: below the image, away from the panel
-    assert bar.std(axis=(0, 1)).max() < 1.0 and bar.mean() < 40
     record = json.loads((tmp_path / "final.json").read_text())
     assert record["model"].endswith("cornell_k8.onnx") and record["provider"] == "CPUExecutionProvider"
     assert record["resolution"] == [64, 48]
 
 
-def test_neural_gi_every_frame(display, tmp_path):
+def test_neural_gi_every_frame(display, tmp_path, ctx):
     """A tiny ONNX model (2 x direct) runs each frame at its own resolution, letterboxed in the window."""
     pytest.importorskip("onnx")
     _in_window_process(_neural_session, tmp_path)
+    # The model doubles the direct light: each view is the offscreen render's direct light times two.
+    twice = ("direct", "radiance", 2.0)
+    for name, args in {"final": (twice,), "direct": (DIRECT,), "raw": (("direct", "raw", 2.0),),
+                       "diff": (twice, DIRECT, "difference")}.items():
+        shot = tmp_path / f"{name}.png"
+        _same(_png(shot), _offscreen_view(ctx, shot, *args), name)
+    # The window with the panel hidden: the 4:3 image letterboxed in the square window, bars above and below,
+    # the network's 64x48 output scaled bilinearly.
+    shown = _png(tmp_path / "window_nopanel.png")
+    _same(shown, _offscreen_view(ctx, tmp_path / "final.png", twice, window=(128, 128), linear=True), "the window")
+    bars = np.concatenate([shown[:16], shown[-16:]]).reshape(-1, 3)
+    assert (bars == bars[0]).all() and shown[16:-16].std() > 5.0
 
 
 def _refused_session(tmp_path: Path) -> None:
