@@ -125,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", default="train", choices=("train", "val", "test"), help="split to draw from (with --seed)")
     p.add_argument("--config", type=Path, default=None, help="render the configuration stored in a frame.json")
     p.add_argument("--exposure", type=float, default=None, help="display exposure in stops (PNG previews)")
-    p.add_argument("--tonemap", default=DEFAULT_TONEMAP, choices=tuple(TONEMAPS), help="display tone curve (PNG previews)")
+    p.add_argument("--tonemap", default=DEFAULT_TONEMAP, choices=tuple(TONEMAPS),
+                   help="display tone curve of the PNG previews")
     p.add_argument("--model", type=Path, default=None, help="an ONNX model (diviewer export): also write neural.exr")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"), help="onnxruntime provider")
     _add_reference_args(p)

@@ -64,9 +64,11 @@ class StageTimer:
         self.add(name, (time.perf_counter() - t0) * 1e3)
 
     def release(self) -> None:
-        """Release the timer queries (GL objects)."""
+        """Release the timer queries where they can be (moderngl 5's Query cannot: its GL query lives as long
+        as the context, which is why one is kept per stage name rather than made per frame)."""
         for q in self._queries.values():
-            q.release()
+            if hasattr(q, "release"):
+                q.release()
         self._queries.clear()
 
 

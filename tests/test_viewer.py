@@ -295,6 +295,30 @@ def test_letterbox_keeps_the_gi_aspect():
     assert letterbox(0, 0, 1.0) == (0, 0, 0, 0)
 
 
+def test_shortcut_list_comes_from_the_key_table():
+    from diviewer.viewer.input import BINDINGS, SHORTCUTS, shortcuts_markdown
+
+    chords = [c for b in BINDINGS for c in b.chords]
+    assert len(chords) == len(set(chords)), "a key bound twice"
+    assert all(b.run is not None for b in BINDINGS if b.chords)
+    assert {m.key for m in VIEW_MODES if m.key} <= set(chords)
+    assert ("Shift+R", "reset the whole frame (lights, objects, camera)") in SHORTCUTS
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert shortcuts_markdown() in readme, "README's controls differ from viewer/input.py (paste shortcuts_markdown())"
+
+
+def test_one_tone_map_list():
+    from diviewer.cli import build_parser
+    from diviewer.gl.display import DEFAULT_TONEMAP, TONEMAPS
+
+    render = build_parser()._subparsers._group_actions[0].choices["render"]
+    tonemap = next(a for a in render._actions if a.dest == "tonemap")
+    assert tuple(tonemap.choices) == tuple(TONEMAPS) and tonemap.default == DEFAULT_TONEMAP
+    shader = (Path(__file__).resolve().parents[1] / "shaders" / "tonemap.glsl").read_text()
+    for name, code in TONEMAPS.items():  # the codes the shader's comment documents
+        assert f"{code}: " in shader and (name[:4].lower() in shader.lower())
+
+
 def test_view_command_line():
     import argparse
 
@@ -701,6 +725,13 @@ def _input_session(tmp_path: Path) -> None:
         seen["tab"] = st.selected
         v.input.on_key(glfw.KEY_EQUAL, glfw.PRESS, 0)
         seen["exposure"] = st.exposure
+        st.set_light_direction(40.0, 30.0)
+        v.input.on_key(glfw.KEY_R, glfw.PRESS, 0)  # R: the camera only
+        seen["light_kept"] = st.light_angles()
+        v.input.on_key(glfw.KEY_R, glfw.PRESS, glfw.MOD_SHIFT)  # Shift+R: the whole frame
+        seen["frame_reset"] = st.config.lights == cornell.default.lights
+        v.input.on_key(glfw.KEY_C, glfw.PRESS, glfw.MOD_CONTROL)  # Ctrl+C is bound to nothing
+        seen["ctrl_c"] = st.controller.kind
 
     def mouse(v):
         st = v.state
@@ -727,6 +758,7 @@ def _input_session(tmp_path: Path) -> None:
     assert (seen["depth"], seen["split"], seen["final"]) == ("depth", "split", "final")
     assert seen["azimuth"] == pytest.approx(5.0) and seen["controller"] == "orbit" and seen["animate"]
     assert seen["tab"] == cornell.default.objects[0].name and seen["exposure"] == pytest.approx(0.5)
+    assert seen["light_kept"] == pytest.approx((40.0, 30.0)) and seen["frame_reset"] and seen["ctrl_c"] == "orbit"
     assert seen["orbited"] and seen["after_drag"] == seen["tab"]
     assert seen["zoom"] == pytest.approx(3.4 * 0.81)
     assert seen["clicked"] == "center" and seen["gpu"]

@@ -89,6 +89,11 @@ SHORTCUTS: tuple[tuple[str, str], ...] = tuple((b.label, b.help) for b in BINDIN
 """(keys, what they do) for the panel and the README."""
 
 
+def shortcuts_markdown() -> str:
+    """The shortcut list as the README's Markdown table (a test keeps the README equal to it)."""
+    return "\n".join(["| keys | action |", "| --- | --- |", *(f"| {k} | {what} |" for k, what in SHORTCUTS)])
+
+
 def _split(chord: str) -> tuple[str, bool, bool]:
     """(key name, needs Ctrl, needs Shift) of a chord such as ``Ctrl+S``."""
     *mods, key = chord.split("+")
