@@ -201,6 +201,11 @@ def info(path: str | Path) -> str:
     from diviewer.runtime import read_metadata
 
     m = read_metadata(path)
+    if m.get("kind") == "linear_baseline":
+        return "\n".join([f"{path}", f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",
+                          f"  baseline     {m['description']}",
+                          f"  parameters   {m['parameters']}, fitted on {m['fit']['frames']} frames "
+                          f"({m['fit']['split']} split of {m['fit']['data']}), train RMSE {m['fit']['train_rmse']:.4g}"])
     val = m.get("validation") or {}
     lines = [f"{path}",
              f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",
