@@ -11,6 +11,7 @@ from diviewer import imageio
 from diviewer.errors import DiviewerError
 from diviewer.provenance import settings_dict, versions
 from diviewer.scene import FrameConfig, Scene, config_from_dict, load_scene, sample_config
+from diviewer.scene.colour import srgb8
 
 
 def parse_resolution(text: str) -> tuple[int, int]:
@@ -135,7 +136,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 imageio.write_exr(out / f"{name}.exr", frame[name])
             imageio.write_png(out / "depth.png", imageio.depth_preview(frame["depth"]))
             imageio.write_png(out / "normal.png", imageio.normal_preview(frame["normal"]))
-            imageio.write_png(out / "albedo.png", imageio.srgb8(frame["albedo"]))
+            imageio.write_png(out / "albedo.png", srgb8(frame["albedo"]))
             imageio.write_png(out / "direct.png", compositor.to_ldr(frame["direct"], ev, tonemap))
             if "neural" in frame:
                 imageio.write_exr(out / "neural.exr", frame["neural"])

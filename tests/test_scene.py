@@ -206,3 +206,14 @@ def test_glb_with_base_colour_texture(tmp_path):
     assert scene.meshes["t"].uvs is not None
     obj = next(o for o in scene.default.objects if o.name == "t")
     assert obj.material == "mesh:t"
+
+
+def test_srgb_curve_round_trips_and_hits_known_values():
+    from diviewer.scene.colour import linear_to_srgb, srgb8, srgb_to_linear
+
+    x = np.linspace(0.0, 1.0, 1001)
+    np.testing.assert_allclose(srgb_to_linear(linear_to_srgb(x)), x, atol=1e-12)
+    # IEC 61966-2-1: 8-bit 128 is linear 0.2158605; the linear segment ends at 0.0031308 -> 0.04045.
+    assert srgb_to_linear(128 / 255) == pytest.approx(0.2158605, abs=1e-7)
+    assert linear_to_srgb(0.0031308) == pytest.approx(0.04045, abs=1e-6)
+    assert srgb8(np.array([np.nan, -1.0, 0.2158605, 2.0])).tolist() == [0, 0, 128, 255]
