@@ -10,14 +10,15 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shaders import ShaderCache
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
 
-BUFFERS = ("depth", "normal", "albedo", "direct")
-"""The buffers a frame returns, in the network's input order."""
+BUFFERS = INPUT_NAMES
+"""The buffers a frame returns, in the network's input order (diviewer.encoding.INPUT_CHANNELS)."""
 
 TONEMAPS = {"clamp": 0, "reinhard": 1, "aces": 2}
 
