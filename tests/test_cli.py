@@ -96,14 +96,26 @@ def test_wheel_installs_and_renders_from_another_directory(tmp_path):
 
 
 def test_viewer_runtime_and_render_work_without_torch(gl_context, tmp_path):
-    """The viewer and the runtime install and run without the train extra (torch, mitsuba)."""
+    """Everything outside train/ (viewer, runtime, render, gl, scene, data, metrics) imports and runs
+    without the train extra (torch, mitsuba): every such module is imported with both blocked, and
+    the shipped model renders a frame through the runtime."""
+    from diviewer.paths import models_dir
+
+    model = Path(models_dir()) / "cornell.onnx"
     code = (
-        "import sys\n"
+        "import importlib, pkgutil, sys\n"
         "sys.modules['torch'] = None\n"  # any `import torch` now raises ImportError
         "sys.modules['mitsuba'] = None\n"
-        "import diviewer.viewer.app, diviewer.runtime, diviewer.gl.neural, diviewer.encoding\n"
+        "import diviewer\n"
+        "names = [m.name for m in pkgutil.walk_packages(diviewer.__path__, 'diviewer.')\n"
+        "         if not m.name.startswith('diviewer.train') and not m.name.endswith('__main__')]\n"
+        "assert {'diviewer.viewer.app', 'diviewer.runtime', 'diviewer.render'} <= set(names), names\n"
+        "for name in names:\n"
+        "    importlib.import_module(name)\n"
         "from diviewer.cli import main\n"
         f"rc = main(['render', '--scene', 'cornell', '--res', '32', '--out', {str(tmp_path / 'o')!r}])\n"
+        "assert rc == 0, rc\n"
+        f"rc = main(['render', '--scene', 'cornell', '--model', {str(model)!r}, '--out', {str(tmp_path / 'n')!r}])\n"
         "assert rc == 0, rc\n"
         f"rc = main(['export', {str(tmp_path / 'x.ckpt')!r}, '--out', {str(tmp_path / 'x.onnx')!r}])\n"
         "assert rc == 2, rc\n"
@@ -112,6 +124,7 @@ def test_viewer_runtime_and_render_work_without_torch(gl_context, tmp_path):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "pip install 'diviewer[train]'" in r.stderr, "export names the extra to install"
+    assert (tmp_path / "n" / "neural.exr").is_file()
 
 
 def test_frame_json_with_a_loaded_mesh_file_renders_again(gl_context, tmp_path):
