@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
@@ -161,3 +162,21 @@ def test_written_files_get_ordinary_permissions(tmp_path):
     finally:
         os.umask(old)
     assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(any(importlib.util.find_spec(m) is None for m in ("torch", "mitsuba", "onnx")),
+                    reason="the pipeline needs the train extra: pip install 'diviewer[train]'")
+def test_capture_train_export_runtime_smoke(gl_context, tmp_path):
+    """The whole pipeline shrunk, through the CLI: capture -> train a few steps -> export -> a runtime frame."""
+    data, run, model, out = tmp_path / "data", tmp_path / "run", tmp_path / "m.onnx", tmp_path / "frame"
+    assert main(["capture", "--scene", "cornell", "--frames", "6", "--res", "32", "--spp", "4", "--max-depth", "3",
+                 "--splits", "0.5,0.25,0.25", "--out", str(data)]) == 0
+    assert main(["train", "--data", str(data), "--out", str(run), "--k", "4", "--ndf", "8", "--batch-size", "2",
+                 "--epochs", "1", "--device", "cpu"]) == 0
+    assert (run / "best.ckpt").is_file() and (run / "metrics.csv").is_file()
+    assert main(["export", str(run / "best.ckpt"), "--out", str(model), "--verify-frames", "1"]) == 0
+    assert main(["render", "--scene", "cornell", "--model", str(model), "--out", str(out)]) == 0
+    neural, direct = read_exr(out / "neural.exr"), read_exr(out / "direct.exr")
+    assert neural.shape == direct.shape == (32, 32, 3), "rendered at the model's resolution"
+    assert np.isfinite(neural).all()
