@@ -18,7 +18,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
 from diviewer.errors import DiviewerError
-from diviewer.progress import Progress
+from diviewer.console import progress_bar
 from diviewer.provenance import versions
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
 from diviewer.scene.sampler import SPLITS, path_parameter
@@ -214,7 +214,7 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
     compositor = DisplayPass(ctx, renderer.shaders)
     splits = dict.fromkeys(f["split"] for f in ds.frames)  # in order of first appearance
     thumbs = {i for s in splits for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
-    progress = Progress(len(todo), label="capture")
+    progress = progress_bar(len(todo), "capture", "frame")
     try:
         for f in todo:
             config = config_from_dict(scene, f["config"])
@@ -241,8 +241,10 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
                        compositor.to_ldr(planes["pt"] - planes["pt_direct"], scene.exposure)]
                 imageio.write_png(ds.root / "thumbs" / f"{frame_name(f['index'])}_{f['split']}.png",
                                   np.concatenate(row, axis=1))
-            progress.update(extra=f"gt {t2 - t1:.1f}s/frame ({gt.variant})")
+            progress.set_postfix_str(f"gt {t2 - t1:.1f}s/frame ({gt.variant})", refresh=False)
+            progress.update()
     finally:
+        progress.close()
         compositor.release()
         renderer.release()
 
