@@ -123,7 +123,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
                      out: Path | None = None, log=print) -> dict:
     """Score models, direct light, the noise floor and the path-tracer ladder on an evaluation set, per split."""
     from diviewer.evalset import EVAL_SPLITS, load_evalset
-    from diviewer.progress import Progress
+    from diviewer.console import progress_bar
 
     ds = load_evalset(evalset_dir)
     info = ds.manifest["evalset"]
@@ -144,7 +144,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
               "flip": {"flip_hdr": "HDR-FLIP on linear radiance (negative values clamped to 0)",
                        "flip_ldr": "LDR-FLIP on the tone-mapped images"},
               "equivalent_spp_by": EQUIVALENT_BY[0], "splits": {}}
-    progress = Progress(len(ds.indices()), label="eval")
+    progress = progress_bar(len(ds.indices()), "eval", "frame")
     for split in EVAL_SPLITS:
         idx = ds.indices(split)
         if not idx:
@@ -180,6 +180,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
             else:
                 m.update(kind="path_tracer", label=f"path traced {key[6:]} spp")
         result["splits"][split] = {"frames": len(idx), "flat_pixels_per_frame": flat / len(idx), "methods": methods}
+    progress.close()
     for line in format_tables(result):
         log(line)
     if out is not None:

@@ -18,7 +18,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
 from diviewer.errors import DiviewerError
-from diviewer.progress import Progress
+from diviewer.console import progress_bar
 from diviewer.provenance import versions
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
 from diviewer.scene.sampler import SPLITS, path_parameter
@@ -206,14 +206,15 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
     Shared with the evaluation set (diviewer.evalset), whose ground truth adds channels; ``settings``
     needs ``width``, ``height``, ``dtype`` and ``thumbs``.
     """
-    from diviewer.gl.renderer import Compositor, Renderer
+    from diviewer.gl.display import DisplayPass
+    from diviewer.gl.renderer import Renderer
     from diviewer.scene.loader import config_from_dict
 
     renderer = Renderer(ctx, scene, settings.width, settings.height)
-    compositor = Compositor(ctx, renderer.shaders)
+    compositor = DisplayPass(ctx, renderer.shaders)
     splits = dict.fromkeys(f["split"] for f in ds.frames)  # in order of first appearance
     thumbs = {i for s in splits for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
-    progress = Progress(len(todo), label=label)
+    progress = progress_bar(len(todo), label, "frame")
     try:
         for f in todo:
             config = config_from_dict(scene, f["config"])
@@ -240,8 +241,10 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
                        compositor.to_ldr(planes["pt"] - planes["pt_direct"], scene.exposure)]
                 imageio.write_png(ds.root / "thumbs" / f"{frame_name(f['index'])}_{f['split']}.png",
                                   np.concatenate(row, axis=1))
-            progress.update(extra=f"gt {t2 - t1:.1f}s/frame ({gt.variant})")
+            progress.set_postfix_str(f"gt {t2 - t1:.1f}s/frame ({gt.variant})", refresh=False)
+            progress.update()
     finally:
+        progress.close()
         compositor.release()
         renderer.release()
 
