@@ -251,8 +251,8 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
 
 def summarize(ds: Dataset) -> dict:
     present = ds.indices()
-    splits = [s for s in SPLITS if any(f["split"] == s for f in ds.frames)] or list(SPLITS)
-    splits += [s for s in dict.fromkeys(f["split"] for f in ds.frames) if s not in splits]  # an evaluation set's
+    own = [s for s in dict.fromkeys(f["split"] for f in ds.frames) if s not in SPLITS]
+    splits = own or SPLITS  # an evaluation set has splits of its own (unseen_configs, unseen_objects)
     per_split = {s: len(ds.indices(s)) for s in splits}
     disk = sum(p.stat().st_size for p in ds.root.rglob("*") if p.is_file())
     return {"planned": len(ds.frames), "present": len(present), "per_split": per_split, "disk_mb": disk / 2**20}
