@@ -72,13 +72,30 @@ def ssim_map(a, b, data_range: float = 1.0, win_size: int = 11, sigma: float = 1
         raise ValueError(f"SSIM needs images of at least {win_size}x{win_size} pixels, got {a.shape[1]}x{a.shape[0]}")
     if data_range <= 0:
         raise ValueError(f"data_range must be positive, got {data_range}")
+    # SSIM(a, b, L) = SSIM(a/s, b/s, L/s): computing at a scale where the largest value is 1
+    # keeps squares of huge radiance (1e30) from overflowing float64.
+    scale = max(1.0, float(np.abs(a).max()), float(np.abs(b).max()))
+    a, b, data_range = a / scale, b / scale, data_range / scale
     w = gaussian_window(win_size, sigma)
     c1, c2 = (0.01 * data_range) ** 2, (0.03 * data_range) ** 2
     mu_a, mu_b = _filter_valid(a, w), _filter_valid(b, w)
-    var_a = _filter_valid(a * a, w) - mu_a * mu_a
-    var_b = _filter_valid(b * b, w) - mu_b * mu_b
-    cov = _filter_valid(a * b, w) - mu_a * mu_b
-    return ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a ** 2 + mu_b ** 2 + c1) * (var_a + var_b + c2))
+    # (Co)variances are shift-invariant: computing them about a common per-channel offset avoids the
+    # cancellation of E[x^2] - mu^2 when the mean dwarfs the spread (a bright flat region), which
+    # otherwise gives negative variances and SSIM outside [-1, 1]. The means keep their true values.
+    m = 0.5 * (a.mean(axis=(0, 1)) + b.mean(axis=(0, 1)))
+    da, db = a - m, b - m
+    mu_da, mu_db = mu_a - m, mu_b - m
+    var_a = np.maximum(_filter_valid(da * da, w) - mu_da * mu_da, 0.0)
+    var_b = np.maximum(_filter_valid(db * db, w) - mu_db * mu_db, 0.0)
+    bound = np.sqrt(var_a * var_b)  # |cov| <= sqrt(var_a var_b) holds exactly; rounding can break it
+    cov = np.clip(_filter_valid(da * db, w) - mu_da * mu_db, -bound, bound)
+    num_l, den_l = 2 * mu_a * mu_b + c1, mu_a ** 2 + mu_b ** 2 + c1
+    num_s, den_s = 2 * cov + c2, var_a + var_b + c2
+    # At scales where c1, c2 underflow, two all-zero windows are identical: 0/0 there means 1.
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lum = np.where(den_l > 0, num_l / den_l, 1.0)
+        struct = np.where(den_s > 0, num_s / den_s, 1.0)
+    return np.clip(lum * struct, -1.0, 1.0)
 
 
 def ssim(a, b, data_range: float = 1.0) -> float:

@@ -9,12 +9,13 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.errors import DiviewerError
+from diviewer.outputs import check_output_dir, dumps, staged
 from diviewer.provenance import settings_dict, versions
 from diviewer.scene import FrameConfig, Scene, config_from_dict, load_scene, sample_config
 
 
-def parse_resolution(text: str) -> tuple[int, int]:
-    """``256`` (square) or ``320x240`` (width x height)."""
+def parse_resolution(text: str, field: str = "--res") -> tuple[int, int]:
+    """``256`` (square) or ``320x240`` (width x height); errors name ``field``, the option the user typed."""
     try:
         parts = [int(p) for p in str(text).lower().split("x")]
     except ValueError:
@@ -22,7 +23,7 @@ def parse_resolution(text: str) -> tuple[int, int]:
     if len(parts) == 1:
         parts = parts * 2
     if len(parts) != 2 or min(parts) < 1 or max(parts) > 16384:
-        raise DiviewerError(f"resolution must be N or WxH with 1 <= N <= 16384, got '{text}'", field="--res")
+        raise DiviewerError(f"resolution must be N or WxH with 1 <= N <= 16384, got '{text}'", field=field)
     return parts[0], parts[1]
 
 
@@ -50,10 +51,15 @@ def _with_user_meshes(scene: Scene, data: dict) -> Scene:
 def _read_frame_json(scene: Scene, path: Path) -> dict:
     try:
         data = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DiviewerError(f"cannot read frame configuration: {exc}", path=path) from exc
+    if not isinstance(data, dict):
+        raise DiviewerError(f"expected a JSON object, got {type(data).__name__}", path=path)
     if "config" not in data:
         raise DiviewerError("missing the 'config' table written by diviewer render", path=path, field="config")
+    meshes = data.get("user_meshes")
+    if meshes is not None and not (isinstance(meshes, dict) and all(isinstance(v, str) for v in meshes.values())):
+        raise DiviewerError("expected a table of mesh file names", path=path, field="user_meshes")
     if data.get("scene_hash") and data["scene_hash"] != scene.file_hash:
         raise DiviewerError(f"this frame was made with another version of scene '{data.get('scene')}' "
                             f"(scene file hash differs)", path=path, field="scene_hash")
@@ -97,9 +103,12 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     Returns:
         The frame record written to frame.json.
     """
-    from diviewer.gl.context import describe, headless_context
+    from diviewer.gl.context import check_render_size, describe, headless_context
     from diviewer.gl.renderer import BUFFERS, Compositor, Renderer, RenderSettings
 
+    out = check_output_dir(out, "--out")
+    if exposure is not None and not np.isfinite(exposure):
+        raise DiviewerError(f"must be a finite number of stops, got {exposure}", field="--exposure")
     scene = load_scene(scene_name)
     net = None
     if model is not None:
@@ -116,6 +125,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     settings = RenderSettings()
     neural_info = None
     with headless_context() as ctx:
+        check_render_size(ctx, width, height, "--res")
         renderer = Renderer(ctx, scene, width, height, settings)
         compositor = Compositor(ctx, renderer.shaders)
         neural = None
@@ -129,31 +139,51 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 frame["neural"] = neural.image()
                 neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
                                "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}
+            # Known good before anything is written: an earlier render in --out stays as it was otherwise.
+            _check_finite(scene, config, frame, (*BUFFERS, "neural"))
             ev = scene.exposure if exposure is None else exposure
-            out.mkdir(parents=True, exist_ok=True)
-            for name in BUFFERS:
-                imageio.write_exr(out / f"{name}.exr", frame[name])
-            imageio.write_png(out / "depth.png", imageio.depth_preview(frame["depth"]))
-            imageio.write_png(out / "normal.png", imageio.normal_preview(frame["normal"]))
-            imageio.write_png(out / "albedo.png", imageio.srgb8(frame["albedo"]))
-            imageio.write_png(out / "direct.png", compositor.to_ldr(frame["direct"], ev, tonemap))
-            if "neural" in frame:
-                imageio.write_exr(out / "neural.exr", frame["neural"])
-                imageio.write_png(out / "neural.png", compositor.to_ldr(frame["neural"], ev, tonemap))
             record = frame_record(scene, config, (width, height), seed=seed, split=split if seed is not None else None,
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
                                   display={"exposure": ev, "tonemap": tonemap}, neural=neural_info,
                                   user_meshes=user_meshes)
+            # All files under temporary names first, then renamed together: a failure part-way
+            # (a full disk) leaves the folder as it was.
+            with staged() as stage:
+                for name in BUFFERS:
+                    imageio.write_exr(stage(out / f"{name}.exr"), frame[name])
+                imageio.write_png(stage(out / "depth.png"), imageio.depth_preview(frame["depth"]))
+                imageio.write_png(stage(out / "normal.png"), imageio.normal_preview(frame["normal"]))
+                imageio.write_png(stage(out / "albedo.png"), imageio.srgb8(frame["albedo"]))
+                imageio.write_png(stage(out / "direct.png"), compositor.to_ldr(frame["direct"], ev, tonemap))
+                if "neural" in frame:
+                    imageio.write_exr(stage(out / "neural.exr"), frame["neural"])
+                    imageio.write_png(stage(out / "neural.png"), compositor.to_ldr(frame["neural"], ev, tonemap))
+                imageio.write_text(stage(out / "frame.json"), dumps(record, indent=2))
         finally:
             if neural is not None:
                 neural.release()
             compositor.release()
             renderer.release()
-    imageio.write_text(out / "frame.json", json.dumps(record, indent=2))
-    bad = [n for n in (*BUFFERS, "neural") if n in frame and not np.all(np.isfinite(frame[n]))]
-    if bad:
-        raise DiviewerError(f"the GL renderer produced non-finite values in {', '.join(bad)}")
     return record
+
+
+def _check_finite(scene: Scene, config: FrameConfig, frame: dict, names) -> None:
+    """Refuse a frame with NaN/Inf in any buffer, naming the light or material that overflowed float32."""
+    bad = [n for n in names if n in frame and not np.all(np.isfinite(frame[n]))]
+    if not bad:
+        return
+    # The loader keeps every field within float32, but products (intensity / distance^2) can still
+    # overflow: point at the strongest emitter, which is what the user can change.
+    strengths = [(max(l.color) * (l.irradiance if hasattr(l, "irradiance") else l.intensity),
+                  f"lights[{i}].{'irradiance' if hasattr(l, 'irradiance') else 'intensity'}")
+                 for i, l in enumerate(config.lights)]
+    strengths += [(max(m.emission), f"materials.{k}.emission") for k, m in scene.materials.items()]
+    hint = ""
+    if strengths:
+        value, field = max(strengths)
+        hint = f"; the strongest emitter is {field} = {value:.3g}: lower it"
+    raise DiviewerError(f"the GL renderer produced non-finite values in {', '.join(bad)} (float32 overflow){hint}; "
+                        f"nothing was written", path=scene.path)
 
 
 REFERENCES = ("pt",)
@@ -195,9 +225,13 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         raise DiviewerError(f"must be at least 2 (2 = direct light only), got {depth}", field="--max-depth")
     scene = load_scene(scene_name)
     frame_json = out / "frame.json"
-    config = load_frame_json(scene, frame_json)
-    record = json.loads(frame_json.read_text())
-    width, height = record["resolution"]
+    data = _read_frame_json(scene, frame_json)
+    config = config_from_dict(scene, data["config"], path=frame_json)
+    record = data
+    res = record.get("resolution")
+    if not (isinstance(res, list) and len(res) == 2 and all(isinstance(x, int) and x >= 1 for x in res)):
+        raise DiviewerError(f"expected [width, height], got {res!r}", path=frame_json, field="resolution")
+    width, height = res
 
     ref.select_variant()
     t0 = time.perf_counter()
@@ -228,18 +262,21 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         table["seconds"]["noise_floor"] = round(time.perf_counter() - t0, 4)
         table["noise_floor"] = ref.compare_renders(full, second, spp=table["spp"], seeds=(pt_seed, pt_seed + 1))
 
-    for name, im in images.items():
-        imageio.write_exr(out / f"{name}.exr", im)
-    display = record.get("display") or {}
-    ev, tonemap = float(display.get("exposure", scene.exposure)), display.get("tonemap", "aces")
-    with headless_context() as ctx:
+    display = record.get("display") if isinstance(record.get("display"), dict) else {}
+    ev, tonemap = display.get("exposure", scene.exposure), display.get("tonemap", "aces")
+    if isinstance(ev, bool) or not isinstance(ev, (int, float)) or not np.isfinite(ev):
+        raise DiviewerError(f"expected a finite number, got {ev!r}", path=frame_json, field="display.exposure")
+    if tonemap not in ("clamp", "reinhard", "aces"):
+        raise DiviewerError(f"expected clamp, reinhard or aces, got {tonemap!r}", path=frame_json, field="display.tonemap")
+    record["reference"] = table
+    with headless_context() as ctx, staged() as stage:
         compositor = Compositor(ctx, ShaderCache(ctx))
         try:
             for name, im in images.items():
+                imageio.write_exr(stage(out / f"{name}.exr"), im)
                 # Noise can make single indirect pixels slightly negative; the preview clamps, the EXR does not.
-                imageio.write_png(out / f"{name}.png", compositor.to_ldr(np.maximum(im, 0.0), ev, tonemap))
+                imageio.write_png(stage(out / f"{name}.png"), compositor.to_ldr(np.maximum(im, 0.0), float(ev), tonemap))
         finally:
             compositor.release()
-    record["reference"] = table
-    imageio.write_text(frame_json, json.dumps(record, indent=2))
+        imageio.write_text(stage(frame_json), dumps(record, indent=2))
     return table

@@ -56,10 +56,41 @@ def _metadata(session, path: Path) -> dict:
         meta = json.loads(props[META_KEY])
     except json.JSONDecodeError as exc:
         raise DiviewerError(f"the model's metadata is not valid JSON: {exc}", path=path, field=META_KEY) from exc
+    if not isinstance(meta, dict):
+        raise DiviewerError(f"the model's metadata is not a JSON object", path=path, field=META_KEY)
     missing = [k for k in REQUIRED_META if k not in meta]
     if missing:
         raise DiviewerError(f"the model's metadata lacks {', '.join(missing)}", path=path, field=META_KEY)
+    _check_meta_types(meta, path)
     return meta
+
+
+def _is_int(v, lo: int = 0) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= lo
+
+
+def _check_meta_types(meta: dict, path: Path) -> None:
+    """Refuse metadata of the wrong types (a hand-edited or foreign model) before anything divides by it."""
+    checks = {
+        "format": _is_int(meta["format"]),
+        "input": isinstance(meta["input"], str), "output": isinstance(meta["output"], str),
+        "layout": isinstance(meta["layout"], str),
+        "channels": isinstance(meta["channels"], list) and all(isinstance(c, (list, tuple)) for c in meta["channels"]),
+        "resolution": isinstance(meta["resolution"], list) and len(meta["resolution"]) == 2
+        and all(_is_int(x, 1) for x in meta["resolution"]),
+        # sizes are checked modulo this: zero would divide by zero, and the U-Net halves it per level
+        "multiple": _is_int(meta["multiple"], 1) and meta["multiple"] & (meta["multiple"] - 1) == 0,
+        "K": _is_int(meta["K"], 1), "levels": _is_int(meta["levels"], 1),
+        "target": meta["target"] in ("full", "indirect"),
+        "encoding": isinstance(meta["encoding"], dict) and _is_int(meta["encoding"].get("version", 0)),
+        "precision": meta["precision"] in ("fp32", "fp16"),
+        "scene": isinstance(meta["scene"], str), "scene_hash": isinstance(meta["scene_hash"], str),
+        "dataset_hash": isinstance(meta["dataset_hash"], str),
+    }
+    bad = [k for k, ok in checks.items() if not ok]
+    if bad:
+        raise DiviewerError(f"the model's metadata has a wrong value for {bad[0]}: {meta[bad[0]]!r}", path=path,
+                            field=f"{META_KEY}.{bad[0]}")
 
 
 def check_compatible(meta: dict, path: Path, scene=None) -> None:
@@ -108,6 +139,10 @@ class StageTimes:
 
     inference: float = 0.0
     history: list = field(default_factory=list)
+    nonfinite_inputs: int = 0
+    """Input values of the last frame that were NaN or infinite (replaced by 0, the background's value)."""
+    nonfinite_outputs: int = 0
+    """Output values of the last frame that were NaN or infinite (replaced by 0)."""
 
 
 class NeuralGI:
@@ -160,10 +195,26 @@ class NeuralGI:
         if x.dtype != np.float32 or not x.flags.c_contiguous:
             x = np.ascontiguousarray(x, dtype=np.float32)
         self.check_size(x.shape[2], x.shape[1])
+        x, self.times.nonfinite_inputs = sanitize(x)
         t0 = time.perf_counter()
         (y,) = self.session.run([OUTPUT_NAME], {INPUT_NAME: x})
         self.times.inference = (time.perf_counter() - t0) * 1000.0
+        y, self.times.nonfinite_outputs = sanitize(y)
+        # Radiance is never negative: the runtime clamps (models exported before the graph did so,
+        # e.g. an indirect-target model's undershoot, would otherwise darken the composite below 0).
+        np.maximum(y, 0.0, out=y)
         return y[0] if single else y
+
+
+def sanitize(x: np.ndarray) -> tuple[np.ndarray, int]:
+    """``x`` with NaN and infinite values replaced by 0, and how many there were (a copy only when any were)."""
+    # A float64 sum of float32 values cannot overflow, and it is NaN/Inf exactly when an element is:
+    # one pass without a mask array in the common, clean case.
+    if np.isfinite(np.add.reduce(x, axis=None, dtype=np.float64)):
+        return x, 0
+    bad = ~np.isfinite(x)
+    x = np.where(bad, np.float32(0), x).astype(x.dtype, copy=False)
+    return np.ascontiguousarray(x), int(bad.sum())
 
 
 def pack_buffers(frame: dict[str, np.ndarray]) -> np.ndarray:
