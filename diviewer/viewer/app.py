@@ -1203,7 +1203,15 @@ def run_view(args: argparse.Namespace) -> int:
 
     if args.frames is not None and args.frames < 1:
         raise DiviewerError(f"--frames must be at least 1, got {args.frames}", field="--frames")
-    size = parse_resolution(args.size)
+    size = parse_resolution(args.size, "--size")
+    if args.frames is not None and str(args.model).lower() not in ("auto", "none"):
+        # Scripted mode: a model the user named and the viewer refuses is a user error (exit 2),
+        # found before a window opens; interactively the panel says why and offers the others.
+        from diviewer.scene import load_scene
+
+        model, message = open_model(args.model, load_scene(args.scene), args.provider)
+        if model is None:
+            raise DiviewerError(message, field="--model")
     settings = ViewerSettings(size=size, vsync=not args.no_vsync, model=args.model, provider=args.provider,
                               controller=args.camera)
     summary = run_viewer(args.scene, frames=args.frames, screenshot=args.screenshot, settings=settings)
