@@ -164,7 +164,7 @@ class Dataset:
             return "incomplete (no .json sidecar: its writing was interrupted)"
         try:
             info = json.loads(meta.read_text())
-        except (OSError, json.JSONDecodeError) as exc:
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             return f"unreadable sidecar: {exc}"
         if not isinstance(info, dict):
             return "unreadable sidecar: not a JSON object"

@@ -366,6 +366,9 @@ def config_from_dict(scene: Scene, data: dict, *, path=None) -> FrameConfig:
     """Rebuild a FrameConfig written by FrameConfig.to_dict, checked against the scene."""
     t = _Table(data, path, "")
     camera = _camera(t.table("camera"))
+    for key in ("lights", "objects"):
+        if not isinstance(t.data.get(key, []), list):
+            raise t.err(key, f"expected a list of tables, got {t.data[key]!r}")
     lights = []
     for i, l in enumerate(t.raw("lights", [])):
         lights.append(_light(_Table(l, path, f"lights[{i}]"), i))
