@@ -19,6 +19,8 @@ from diviewer.metrics import mse, psnr, ssim, tonemap
 from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
 
+SSIM_MIN = 11
+"""SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
 KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 
 
@@ -33,6 +35,9 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
     if out is not None:
         check_output_file(out, "--out", protect=(model_path, Path(model_path).with_suffix(".json")))
     ds = Dataset(data_dir)
+    if min(ds.width, ds.height) < SSIM_MIN:
+        raise DiviewerError(f"SSIM needs frames of at least {SSIM_MIN}x{SSIM_MIN} pixels, the dataset's are "
+                            f"{ds.width}x{ds.height}", path=Path(data_dir) / "manifest.json", field="resolution")
     model = NeuralGI(model_path, provider=provider)
     if model.meta["scene_hash"] != ds.manifest["scene_hash"]:
         raise DiviewerError(f"the model was trained for scene '{model.meta['scene']}' (another scene file than "

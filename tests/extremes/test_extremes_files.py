@@ -16,16 +16,16 @@ from diviewer.errors import DiviewerError
 from diviewer.scene import load_scene
 
 
-def make_dataset(root, frames: int = 6) -> Dataset:
+def make_dataset(root, frames: int = 6, width: int = 8, height: int = 4) -> Dataset:
     """A small sound dataset written without GL or Mitsuba: the real manifest, synthetic frames."""
-    settings = CaptureSettings(frames=frames, width=8, height=4, split_fractions=(0.5, 0.25, 0.25))
+    settings = CaptureSettings(frames=frames, width=width, height=height, split_fractions=(0.5, 0.25, 0.25))
     manifest = build_manifest(load_scene("cornell"), settings)
     root.mkdir(parents=True, exist_ok=True)
     (root / "manifest.json").write_text(json.dumps(manifest))
     ds = Dataset(root)
     rng = np.random.default_rng(0)
     for f in ds.frames:
-        arr = rng.uniform(0, 1, (4, 8, ds.num_channels)).astype(ds.dtype)
+        arr = rng.uniform(0, 1, (height, width, ds.num_channels)).astype(ds.dtype)
         write_frame(ds, f["index"], arr, {"index": f["index"], "split": f["split"]})
     return ds
 
