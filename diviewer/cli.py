@@ -56,7 +56,7 @@ def _render_reference(args: argparse.Namespace) -> None:
 
 def _cmd_capture(args: argparse.Namespace) -> int:
     from diviewer.data.capture import CaptureSettings, capture, parse_shard
-    from diviewer.render import parse_resolution
+    from diviewer.frames import parse_resolution
 
     width, height = parse_resolution(args.res)
     fractions = parse_splits(args.splits)
@@ -140,6 +140,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from diviewer.gl.display import DEFAULT_TONEMAP, TONEMAPS
+
     ap = argparse.ArgumentParser(prog="diviewer", description="Real-time OpenGL viewer with a neural GI pass.")
     ap.add_argument("--version", action="version", version=f"diviewer {__version__}")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -152,7 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", default="train", choices=("train", "val", "test"), help="split to draw from (with --seed)")
     p.add_argument("--config", type=Path, default=None, help="render the configuration stored in a frame.json")
     p.add_argument("--exposure", type=float, default=None, help="display exposure in stops (PNG previews)")
-    p.add_argument("--tonemap", default="aces", choices=("clamp", "reinhard", "aces"))
+    p.add_argument("--tonemap", default=DEFAULT_TONEMAP, choices=tuple(TONEMAPS),
+                   help="display tone curve of the PNG previews")
     p.add_argument("--model", type=Path, default=None, help="an ONNX model (diviewer export): also write neural.exr")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"), help="onnxruntime provider")
     _add_reference_args(p)
@@ -182,7 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_export)
 
     from diviewer.train.trainer import add_train_parser
-    from diviewer.viewer.app import add_view_parser
+    from diviewer.viewer.command import add_view_parser
 
     add_train_parser(sub)
     add_view_parser(sub)

@@ -10,89 +10,25 @@ import numpy as np
 from diviewer import imageio
 from diviewer.errors import DiviewerError
 from diviewer.outputs import check_output_dir, dumps, staged
-from diviewer.provenance import settings_dict, versions
+from diviewer.frames import frame_record, load_frame_json, parse_resolution, read_frame_json, with_user_meshes
+from diviewer.provenance import settings_dict
 from diviewer.scene import FrameConfig, Scene, config_from_dict, load_scene, sample_config
-
-
-def parse_resolution(text: str, field: str = "--res") -> tuple[int, int]:
-    """``256`` (square) or ``320x240`` (width x height); errors name ``field``, the option the user typed."""
-    try:
-        parts = [int(p) for p in str(text).lower().split("x")]
-    except ValueError:
-        parts = []
-    if len(parts) == 1:
-        parts = parts * 2
-    if len(parts) != 2 or min(parts) < 1 or max(parts) > 16384:
-        raise DiviewerError(f"resolution must be N or WxH with 1 <= N <= 16384, got '{text}'", field=field)
-    return parts[0], parts[1]
-
-
-def load_frame_json(scene: Scene, path: Path) -> FrameConfig:
-    """The configuration stored in a frame.json (or a viewer screenshot's JSON).
-
-    ``scene`` must hold the mesh files the frame uses (``scene_for_frame_json`` adds them).
-    """
-    return config_from_dict(scene, _read_frame_json(scene, path)["config"], path=path)
-
-
-def scene_for_frame_json(scene: Scene, path: Path) -> Scene:
-    """The scene with the mesh files a frame.json records (``user_meshes``, from the viewer) added."""
-    return _with_user_meshes(scene, _read_frame_json(scene, path))
-
-
-def _with_user_meshes(scene: Scene, data: dict) -> Scene:
-    from diviewer.scene.loader import add_mesh_file
-
-    for key, file in (data.get("user_meshes") or {}).items():
-        scene, _, _ = add_mesh_file(scene, file, key)
-    return scene
-
-
-def _read_frame_json(scene: Scene, path: Path) -> dict:
-    try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise DiviewerError(f"cannot read frame configuration: {exc}", path=path) from exc
-    if not isinstance(data, dict):
-        raise DiviewerError(f"expected a JSON object, got {type(data).__name__}", path=path)
-    if "config" not in data:
-        raise DiviewerError("missing the 'config' table written by diviewer render", path=path, field="config")
-    meshes = data.get("user_meshes")
-    if meshes is not None and not (isinstance(meshes, dict) and all(isinstance(v, str) for v in meshes.values())):
-        raise DiviewerError("expected a table of mesh file names", path=path, field="user_meshes")
-    if data.get("scene_hash") and data["scene_hash"] != scene.file_hash:
-        raise DiviewerError(f"this frame was made with another version of scene '{data.get('scene')}' "
-                            f"(scene file hash differs)", path=path, field="scene_hash")
-    return data
 
 
 def choose_config(scene: Scene, seed: int | None, split: str, config_file: Path | None) -> tuple[Scene, FrameConfig, dict]:
     """The frame to render: a stored frame.json (its scene gains the mesh files it records), the
     default pose, or one drawn with ``seed``. Also returns what the frame.json recorded ({} otherwise)."""
     if config_file is not None:
-        data = _read_frame_json(scene, config_file)  # read once: meshes, configuration, record
-        scene = _with_user_meshes(scene, data)
+        data = read_frame_json(scene, config_file)  # read once: meshes, configuration, record
+        scene = with_user_meshes(scene, data)
         return scene, config_from_dict(scene, data["config"], path=config_file), data
     if seed is None:
         return scene, scene.default, {}
     return scene, sample_config(scene, seed, split), {}
 
 
-def frame_record(scene: Scene, config: FrameConfig, size: tuple[int, int], **extra) -> dict:
-    """The frame.json content: enough to render the same frame again."""
-    return {
-        "scene": scene.name,
-        "scene_file": str(scene.path) if scene.path else None,
-        "scene_hash": scene.file_hash,
-        "resolution": list(size),
-        **extra,
-        "config": config.to_dict(),
-        "versions": versions(),
-    }
-
-
 def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int | None = None, split: str = "train",
-                  config_file: Path | None = None, exposure: float | None = None, tonemap: str = "aces",
+                  config_file: Path | None = None, exposure: float | None = None, tonemap: str | None = None,
                   model: Path | None = None, provider: str | None = None) -> dict:
     """Render one frame's GL buffers (and, with a model, its neural GI image) and write them.
 
@@ -104,7 +40,10 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
         The frame record written to frame.json.
     """
     from diviewer.gl.context import check_render_size, describe, headless_context
-    from diviewer.gl.renderer import BUFFERS, Compositor, Renderer, RenderSettings
+    from diviewer.gl.display import DEFAULT_TONEMAP, DisplayPass
+    from diviewer.gl.renderer import BUFFERS, Renderer, RenderSettings
+
+    tonemap = tonemap or DEFAULT_TONEMAP
 
     out = check_output_dir(out, "--out")
     if exposure is not None and not np.isfinite(exposure):
@@ -127,7 +66,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     with headless_context() as ctx:
         check_render_size(ctx, width, height, "--res")
         renderer = Renderer(ctx, scene, width, height, settings)
-        compositor = Compositor(ctx, renderer.shaders)
+        compositor = DisplayPass(ctx, renderer.shaders)
         neural = None
         try:
             frame = renderer.frame(config)
@@ -213,7 +152,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     import time
 
     from diviewer.gl.context import headless_context
-    from diviewer.gl.renderer import Compositor
+    from diviewer.gl.display import DEFAULT_TONEMAP, DisplayPass
     from diviewer.gl.shaders import ShaderCache
     from diviewer.reference import mitsuba as ref
 
@@ -225,7 +164,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         raise DiviewerError(f"must be at least 2 (2 = direct light only), got {depth}", field="--max-depth")
     scene = load_scene(scene_name)
     frame_json = out / "frame.json"
-    data = _read_frame_json(scene, frame_json)
+    data = read_frame_json(scene, frame_json)
     config = config_from_dict(scene, data["config"], path=frame_json)
     record = data
     res = record.get("resolution")
@@ -263,14 +202,14 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         table["noise_floor"] = ref.compare_renders(full, second, spp=table["spp"], seeds=(pt_seed, pt_seed + 1))
 
     display = record.get("display") if isinstance(record.get("display"), dict) else {}
-    ev, tonemap = display.get("exposure", scene.exposure), display.get("tonemap", "aces")
+    ev, tonemap = display.get("exposure", scene.exposure), display.get("tonemap", DEFAULT_TONEMAP)
     if isinstance(ev, bool) or not isinstance(ev, (int, float)) or not np.isfinite(ev):
         raise DiviewerError(f"expected a finite number, got {ev!r}", path=frame_json, field="display.exposure")
     if tonemap not in ("clamp", "reinhard", "aces"):
         raise DiviewerError(f"expected clamp, reinhard or aces, got {tonemap!r}", path=frame_json, field="display.tonemap")
     record["reference"] = table
     with headless_context() as ctx, staged() as stage:
-        compositor = Compositor(ctx, ShaderCache(ctx))
+        compositor = DisplayPass(ctx, ShaderCache(ctx))
         try:
             for name, im in images.items():
                 imageio.write_exr(stage(out / f"{name}.exr"), im)

@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNELS, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
+from diviewer.timing import StageTimer
 
 INPUT_NAME = "buffers"
 OUTPUT_NAME = "radiance"
@@ -133,18 +132,6 @@ def choose_providers(available: list[str], requested: str | None = None) -> list
     return [name] + (["CPUExecutionProvider"] if name != "CPUExecutionProvider" else [])
 
 
-@dataclass
-class StageTimes:
-    """Milliseconds of the last frame's stages."""
-
-    inference: float = 0.0
-    history: list = field(default_factory=list)
-    nonfinite_inputs: int = 0
-    """Input values of the last frame that were NaN or infinite (replaced by 0, the background's value)."""
-    nonfinite_outputs: int = 0
-    """Output values of the last frame that were NaN or infinite (replaced by 0)."""
-
-
 class NeuralGI:
     """One loaded model: checks, then turns (N, H, W, 10) raw buffers into (N, H, W, 3) radiance."""
 
@@ -176,7 +163,12 @@ class NeuralGI:
         self.provider = self.session.get_providers()[0]
         self.multiple = int(self.meta["multiple"])
         self.resolution = tuple(int(x) for x in self.meta["resolution"])
-        self.times = StageTimes()
+        self.timer = StageTimer()
+        """Times ``inference`` (the session's run alone) unless ``run`` is given the caller's timer."""
+        self.nonfinite_inputs = 0
+        """Input values of the last frame that were NaN or infinite (replaced by 0, the background's value)."""
+        self.nonfinite_outputs = 0
+        """Output values of the last frame that were NaN or infinite (replaced by 0)."""
 
     @property
     def file_sha256(self) -> str:
@@ -188,18 +180,17 @@ class NeuralGI:
                                 f"got {width}x{height} (it was trained at {self.resolution[0]}x{self.resolution[1]})",
                                 path=self.path)
 
-    def run(self, buffers: np.ndarray) -> np.ndarray:
+    def run(self, buffers: np.ndarray, timer: StageTimer | None = None) -> np.ndarray:
         """(N, H, W, 10) or (H, W, 10) float32 raw buffers to radiance of the same leading shape."""
         single = buffers.ndim == 3
         x = buffers[None] if single else buffers
         if x.dtype != np.float32 or not x.flags.c_contiguous:
             x = np.ascontiguousarray(x, dtype=np.float32)
         self.check_size(x.shape[2], x.shape[1])
-        x, self.times.nonfinite_inputs = sanitize(x)
-        t0 = time.perf_counter()
-        (y,) = self.session.run([OUTPUT_NAME], {INPUT_NAME: x})
-        self.times.inference = (time.perf_counter() - t0) * 1000.0
-        y, self.times.nonfinite_outputs = sanitize(y)
+        x, self.nonfinite_inputs = sanitize(x)
+        with (timer or self.timer).stage("inference"):
+            (y,) = self.session.run([OUTPUT_NAME], {INPUT_NAME: x})
+        y, self.nonfinite_outputs = sanitize(y)
         # Radiance is never negative: the runtime clamps (models exported before the graph did so,
         # e.g. an indirect-target model's undershoot, would otherwise darken the composite below 0).
         np.maximum(y, 0.0, out=y)

@@ -118,7 +118,7 @@ def test_frame_json_with_a_loaded_mesh_file_renders_again(gl_context, tmp_path):
     """A viewer screenshot after loading a mesh file records it; render --config loads it again."""
     import trimesh
 
-    from diviewer.render import scene_for_frame_json
+    from diviewer.frames import scene_for_frame_json
     from diviewer.scene import load_scene
     from diviewer.scene.loader import add_mesh_file
 

@@ -83,14 +83,15 @@ def test_provider_choice():
 def test_gl_neural_pass_end_to_end(ctx, tmp_path):
     """scene -> GL buffers -> packed on the GPU -> ONNX -> texture -> composite: finite, right size."""
     from diviewer.gl.neural import NeuralPass
-    from diviewer.gl.renderer import Compositor, Renderer
+    from diviewer.gl.display import DisplayPass
+    from diviewer.gl.renderer import Renderer
 
     scene = facing_plane(lights=[{"name": "sun", "type": "directional", "direction": [0.3, -0.4, -1.0],
                                   "irradiance": 2.0}])
     model = NeuralGI(direct_times(tmp_path / "m.onnx", meta=base_meta(scene_hash=scene.file_hash)), scene=scene)
     renderer = Renderer(ctx, scene, 48, 32)
     neural = NeuralPass(ctx, renderer, model)
-    comp = Compositor(ctx, renderer.shaders)
+    comp = DisplayPass(ctx, renderer.shaders)
     try:
         frame = renderer.frame()
         tex = neural.run()

@@ -212,11 +212,12 @@ def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: Captur
 
 def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings: CaptureSettings, gt, gl_name: str,
                       log) -> None:
-    from diviewer.gl.renderer import Compositor, Renderer
+    from diviewer.gl.display import DisplayPass
+    from diviewer.gl.renderer import Renderer
     from diviewer.scene.loader import config_from_dict
 
     renderer = Renderer(ctx, scene, settings.width, settings.height)
-    compositor = Compositor(ctx, renderer.shaders)
+    compositor = DisplayPass(ctx, renderer.shaders)
     thumbs = {i for s in SPLITS for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
     progress = Progress(len(todo), label="capture")
     try:

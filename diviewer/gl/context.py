@@ -8,6 +8,7 @@ from contextlib import contextmanager
 import moderngl
 
 from diviewer.errors import DiviewerError
+from diviewer.timing import StageTimer
 
 GL_VERSION = 430
 
@@ -99,3 +100,10 @@ def check_render_size(ctx: moderngl.Context, width: int, height: int, option: st
             if r is not None:
                 r.release()
         ctx.error  # a failed allocation leaves GL_OUT_OF_MEMORY behind: read (and clear) it
+
+
+def stage_timer(ctx: moderngl.Context, sync: bool = False, queries: bool = False) -> StageTimer:
+    """The program's stage timer for GL work on ``ctx``: waits for the GPU around each GL stage (``sync``), or
+    reads GL timer queries (``queries``; ARB_timer_query, which llvmpipe has), or leaves GL stages untimed."""
+    return StageTimer(sync=ctx.finish if sync else None,
+                      gpu_query=(lambda: ctx.query(time=True)) if queries else None)
