@@ -68,8 +68,7 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False):
             y = self.netG(inp.half() if fp16 else inp)
             radiance = decode_radiance(y.float() if fp16 else y, encoding)
             out = compose_radiance(radiance, direct, albedo, meta["target"], meta["divide_albedo"])
-            # Radiance is never negative (an indirect-target model's prediction can undershoot).
-            return torch.clamp(out, min=0.0).permute(0, 2, 3, 1)
+            return out.permute(0, 2, 3, 1)  # clamped at 0 by compose_radiance
 
     return GIModel().eval()
 
