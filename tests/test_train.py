@@ -7,6 +7,7 @@ import csv
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -34,10 +35,10 @@ FAR = 10.0
 SPLITS = ["train"] * 8 + ["val"] * 2
 
 
-def _frame(seed: int) -> np.ndarray:
+def _frame(seed: int, res: int = RES) -> np.ndarray:
     """Smooth analytic buffers: a curved surface facing the camera, lit by a light that moves with the seed."""
     rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:RES, 0:RES] / (RES - 1.0)
+    yy, xx = np.mgrid[0:res, 0:res] / (res - 1.0)
     geometry = (xx - 0.1) ** 2 + (yy - 0.1) ** 2 > 0.04  # a background corner
     depth = np.where(geometry, 2.0 + xx + 0.5 * yy, 0.0)
     n = np.stack([xx - 0.5, yy - 0.5, np.ones_like(xx)], -1)
@@ -54,22 +55,23 @@ def _frame(seed: int) -> np.ndarray:
     return np.concatenate(planes, -1).astype(np.float16)
 
 
-def make_dataset(root: Path, scene: str = "synthetic", seed0: int = 0) -> Dataset:
+def make_dataset(root: Path, scene: str = "synthetic", seed0: int = 0, res: int = RES,
+                 splits: list[str] = SPLITS) -> Dataset:
     """A dataset folder like `diviewer capture` writes, with analytic frames (no GL, no Mitsuba)."""
     root.mkdir(parents=True)
     frames = [{"index": i, "split": s, "seed": seed0 + i,
                "config": {"camera": {"position": [0, 0, 5], "near": 0.05, "far": FAR}, "lights": [], "objects": []}}
-              for i, s in enumerate(SPLITS)]
+              for i, s in enumerate(splits)]
     manifest = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "scene": scene, "scene_hash": f"hash-of-{scene}",
-        "resolution": [RES, RES], "channels": [list(c) for c in CHANNELS], "dtype": "float16", "gt": "pt",
+        "resolution": [res, res], "channels": [list(c) for c in CHANNELS], "dtype": "float16", "gt": "pt",
         "spp": 4, "max_depth": 4, "seed": seed0, "frames": len(frames), "split_fractions": [0.8, 0.2, 0.0],
         "render_settings": {}, "frame_list": frames,
     }
     (root / "manifest.json").write_text(json.dumps(manifest))
     ds = Dataset(root)
     for f in frames:
-        write_frame(ds, f["index"], _frame(f["seed"]), {"index": f["index"], "split": f["split"]})
+        write_frame(ds, f["index"], _frame(f["seed"], res), {"index": f["index"], "split": f["split"]})
     return ds
 
 
@@ -359,3 +361,44 @@ def test_config_validation_names_the_field(tmp_path):
         TrainConfig(data=tmp_path, out=tmp_path, batch_size=0)
     cfg = TrainConfig(data=tmp_path, out=tmp_path / "r", K=16, max_steps=5)
     assert TrainConfig.from_dict(cfg.to_dict()) == cfg
+
+
+def test_a_folder_left_from_an_earlier_run_is_not_replaced(run, data, tmp_path, capsys):
+    """best.ckpt (or metrics.csv, curves.png) without last.ckpt: refused, with or without --resume."""
+    from diviewer.cli import main
+
+    out = tmp_path / "old"
+    out.mkdir()
+    best = out / "best.ckpt"
+    shutil.copyfile(run[0] / "best.ckpt", best)
+    before = best.read_bytes()
+    for resume in (False, True):
+        with pytest.raises(DiviewerError, match="best.ckpt.*earlier run"):
+            train(tiny(data, out, epochs=1), resume=resume, log=quiet)
+    argv = ["train", "--data", str(data), "--out", str(out), "--k", "4", "--ndf", "8", "--device", "cpu"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "best.ckpt" in err[0] and "Traceback" not in err[0]
+    assert best.read_bytes() == before and sorted(p.name for p in out.iterdir()) == ["best.ckpt"]
+
+
+def test_an_untrainable_dataset_is_refused_before_the_run_folder_exists(tmp_path):
+    small = tmp_path / "small"
+    make_dataset(small, res=16)
+    out = tmp_path / "run16"
+    with pytest.raises(DiviewerError, match=r"16x16.*at least 24 px"):
+        train(tiny(small, out), log=quiet)
+    assert not out.exists()
+
+
+def test_resumed_epoch_rows_average_only_their_own_epoch(run, data, tmp_path):
+    """After a resume from an epoch end, the next row's losses are that epoch's alone (issue 17 #10)."""
+    straight_out, _ = run
+    train(tiny(data, tmp_path / "r", epochs=1), log=quiet)
+    assert load_checkpoint(tmp_path / "r" / "last.ckpt")["accum"]["n"] == 0  # saved after the sums were reset
+    train(tiny(data, tmp_path / "r", epochs=2), resume=True, log=quiet)
+    rows_a, rows_b = read_csv(straight_out / "metrics.csv"), read_csv(tmp_path / "r" / "metrics.csv")
+    assert [r["step"] for r in rows_b] == ["2", "4"]
+    for ra, rb in zip(rows_a, rows_b, strict=True):
+        for k in ("loss_D", "loss_G_GAN", "loss_G_L1"):
+            assert float(rb[k]) == pytest.approx(float(ra[k]), rel=1e-5), k

@@ -176,6 +176,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
         ckpt = _open_run(cfg, ds, resume, say)
         enc = Encoding.from_dict(ckpt["encoding"]) if ckpt else fit_encoding(ds, train_idx, train_arr)
         net_cfg = _net_config(cfg, ds)
+        _check_trainable(net_cfg, cfg, ds, len(train_idx))
         nets = _build_nets(cfg, net_cfg, dev, say)
         st = TrainState()
         if ckpt:
@@ -235,7 +236,6 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
                     due = st.epoch % cfg.val_every == 0 or st.epoch == cfg.epochs or st.step >= total
                     line = f"epoch {st.epoch}/{cfg.epochs} step {st.step} | {_fmt(st.means())}"
                     val = _end_of_stretch(run, nets, st, due)
-                    st.accum = _empty_accum()
                     if val:
                         line += (f" | val PSNR {val['psnr']:.2f} dB SSIM {val['ssim']:.4f}"
                                  f" (tone-mapped {val['psnr_tm']:.2f} dB {val['ssim_tm']:.4f})")
@@ -283,11 +283,17 @@ def _open_run(cfg: TrainConfig, ds: Dataset, resume: bool, say) -> dict[str, Any
         ckpt = load_checkpoint(last)
         check_resume(cfg, ckpt, ds, last)
         return ckpt
-    if resume:
-        say(f"no {last} yet: starting a new run")
-    elif last.is_file():
+    if last.is_file():
         raise DiviewerError("already holds a run (last.ckpt); pass --resume to continue it or choose another --out",
                             path=cfg.out)
+    # Without last.ckpt there is nothing to resume, and a new run would replace these files.
+    for name in ("best.ckpt", "metrics.csv", "curves.png"):
+        path = cfg.out / name
+        if path.is_file() and not (name == "metrics.csv" and not read_metrics(path)):
+            raise DiviewerError("is left from an earlier run (no last.ckpt to resume); a new run would replace it: "
+                                "move it away or choose another --out", path=path)
+    if resume:
+        say(f"no {last} yet: starting a new run")
     return None
 
 
@@ -302,6 +308,29 @@ def _net_config(cfg: TrainConfig, ds: Dataset) -> NetConfig:
                             path=ds.root) from None
     return NetConfig(K=cfg.K, levels=levels, resolution=min(ds.width, ds.height), dropout=cfg.dropout,
                      ndf=cfg.ndf, lambda_L1=cfg.lambda_L1, target=cfg.target)
+
+
+def _check_trainable(net_cfg: NetConfig, cfg: TrainConfig, ds: Dataset, n_train: int) -> None:
+    """Refuse, before any file is written, a dataset these networks cannot train on.
+
+    One forward pass of both networks on the "meta" device (shapes only: no memory, no weights,
+    no random numbers drawn) in training mode, at the smallest batch the epoch will see: it fails
+    exactly where training would, e.g. a PatchGAN kernel larger than its input (frames under
+    3 * 2**n_layers_D px) or BatchNorm over a single value (a one-frame batch at a 1x1 map).
+    """
+    import torch
+
+    smallest = n_train % cfg.batch_size or cfg.batch_size if n_train >= cfg.batch_size else n_train
+    try:
+        with torch.device("meta"):
+            netG, netD = net_cfg.build_generator().train(), net_cfg.build_discriminator().train()
+            real_A = torch.zeros(smallest, netG.in_channels, ds.height, ds.width)
+            netD(torch.cat([real_A, netG(real_A)], 1))
+    except (RuntimeError, ValueError) as exc:
+        reason = str(exc).splitlines()[0]
+        raise DiviewerError(f"cannot train on {n_train} frame(s) of {ds.width}x{ds.height} at batch size "
+                            f"{cfg.batch_size}: {reason}; capture at least {3 * 2 ** net_cfg.n_layers_D} px per side "
+                            "and more train frames", path=ds.root) from None
 
 
 def _build_nets(cfg: TrainConfig, net_cfg: NetConfig, dev: Dist, say) -> Nets:
@@ -454,6 +483,8 @@ def _end_of_stretch(run: Run, nets: Nets, st: TrainState, do_val: bool) -> dict[
         rows = read_metrics(run.out / "metrics.csv") + [row]
         write_metrics(run.out / "metrics.csv", rows)
         draw_curves(rows, run.out / "curves.png")
+    if st.batch_in_epoch == 0:  # an epoch ended: its sums are written; the checkpoint starts the next
+        st.accum = _empty_accum()
     _save(run, nets, st, val, is_best)
     if run.dev.world > 1:
         dist.barrier()
