@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,6 +72,21 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False):
     return GIModel().eval()
 
 
+def onnx_bytes(module, example) -> bytes:
+    """`module` (NHWC buffers -> NHWC radiance) as ONNX bytes: the legacy TorchScript exporter at
+    `OPSET`, dynamic batch, height and width. `example` is a (1, H, W, 10) float32 tensor."""
+    torch = _torch()
+    buf = io.BytesIO()
+    with torch.no_grad(), warnings.catch_warnings():
+        # InstanceNorm without running statistics normalises with each image's own statistics in
+        # eval mode too, which is what it should export; the exporter warns about exactly that.
+        warnings.filterwarnings("ignore", message=r".*operator 'instance_norm' is set to train=True")
+        torch.onnx.export(module, (example,), buf, input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
+                          opset_version=OPSET, dynamo=False,
+                          dynamic_axes={INPUT_NAME: {0: "N", 1: "H", 2: "W"}, OUTPUT_NAME: {0: "N", 1: "H", 2: "W"}})
+    return buf.getvalue()
+
+
 def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[int, int]) -> tuple[np.ndarray, str]:
     """Real frames from the training dataset's val split when it is there, else procedural buffers."""
     from diviewer.data.dataset import Dataset
@@ -118,12 +134,9 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     with torch.no_grad():
         reference = ref_module(torch.from_numpy(frames)).numpy()
         module = gi_module(build_generator_from_checkpoint(ckpt)[0], encoding, meta, fp16=settings.fp16)
-        buf = io.BytesIO()
-        torch.onnx.export(module, (torch.from_numpy(frames[:1]),), buf, input_names=[INPUT_NAME],
-                          output_names=[OUTPUT_NAME], opset_version=OPSET, dynamo=False,
-                          dynamic_axes={INPUT_NAME: {0: "N", 1: "H", 2: "W"}, OUTPUT_NAME: {0: "N", 1: "H", 2: "W"}})
-    model = onnx.load_from_string(buf.getvalue())
-    session = ort.InferenceSession(buf.getvalue(), providers=["CPUExecutionProvider"])
+    data = onnx_bytes(module, torch.from_numpy(frames[:1]))
+    model = onnx.load_from_string(data)
+    session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
     got = np.concatenate([session.run([OUTPUT_NAME], {INPUT_NAME: f[None]})[0] for f in frames])
     diff = np.abs(got.astype(np.float64) - reference)
     peak = float(np.abs(reference).max()) or 1.0
@@ -155,6 +168,9 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "multiple": 2 ** levels,
         "K": int(meta["K"]),
         "levels": levels,
+        # absent from checkpoints made before these options existed, which were transpose/batch
+        "upsample": meta["model_args"].get("upsample", "transpose"),
+        "norm": meta["model_args"].get("norm", "batch"),
         "target": meta["target"],
         "divide_albedo": meta["divide_albedo"],
         "encoding": encoding.to_dict(),
@@ -201,7 +217,8 @@ def info(path: str | Path) -> str:
     val = m.get("validation") or {}
     lines = [f"{path}",
              f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",
-             f"  network      U-Net K={m['K']} levels={m['levels']} ({m['precision']}), target {m['target']}"
+             f"  network      U-Net K={m['K']} levels={m['levels']} upsample={m.get('upsample', 'transpose')} "
+             f"norm={m.get('norm', 'batch')} ({m['precision']}), target {m['target']}"
              + (" / albedo" if m.get("divide_albedo") else ""),
              f"  trained at   {m['resolution'][0]}x{m['resolution'][1]}; sizes must be multiples of {m['multiple']}",
              f"  training     {m.get('epochs')} epochs, {m.get('steps')} steps, dataset {m['dataset_hash'][:16]}...",
