@@ -166,7 +166,7 @@ def test_rebuilt_generator_reproduces_the_recorded_validation(run, data):
     ds = Dataset(data)
     _, val = ds.array("val")
     cfg = TrainConfig.from_dict(ckpt["config"])
-    again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"), amp=False)
+    again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"))
     assert again == pytest.approx(ckpt["val"], rel=1e-6)  # the weights that produced the recorded metrics
     x = torch.randn(2, 10, RES, RES)
     netG2, _, _ = build_generator_from_checkpoint(out / "best.ckpt")

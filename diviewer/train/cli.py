@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from diviewer.errors import DiviewerError
-from diviewer.train.config import RESUME_INHERITED, TrainConfig
+from diviewer.train.config import CHOICES, RESUME_INHERITED, TrainConfig
 
 
 def add_train_parser(subparsers) -> argparse.ArgumentParser:
@@ -41,7 +41,31 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--val-every", type=int, default=None, help="validate every N epochs (default 1)")
     p.add_argument("--save-every", type=int, default=None,
                    help="also save last.ckpt every N steps (default 0: epoch ends only)")
-    p.add_argument("--amp", action="store_true", help="mixed precision (CUDA only)")
+    p.add_argument("--precision", choices=CHOICES["precision"], default=None,
+                   help="autocast: auto (bf16 on CUDA, fp32 on the CPU; default), fp32, bf16, fp16 (CUDA only)")
+    p.add_argument("--amp", action="store_true", help="the same as --precision fp16")
+    g = p.add_argument_group("losses and discriminator (ablations; the defaults are the paper's)")
+    g.add_argument("--gan-weight", type=float, default=None,
+                   help=f"weight of the adversarial term (default {d['gan_weight']}; 0: reconstruction only)")
+    g.add_argument("--gan-mode", choices=CHOICES["gan_mode"], default=None, help="adversarial objective (default vanilla)")
+    g.add_argument("--recon-loss", choices=CHOICES["recon_loss"], default=None, help="reconstruction norm (default l1)")
+    g.add_argument("--recon-space", choices=CHOICES["recon_space"], default=None,
+                   help="reconstruction on encoded values (default) or linear radiance x exposure (l2 there: unbiased)")
+    g.add_argument("--n-layers-d", dest="n_layers_D", type=int, default=None,
+                   help=f"discriminator stride layers (default {d['n_layers_D']}: 70x70 patches)")
+    g.add_argument("--norm-d", dest="norm_D", choices=CHOICES["norm_D"], default=None,
+                   help="discriminator normalisation (default batch)")
+    g.add_argument("--d-lr", type=float, default=None, help="discriminator learning rate (default: --lr)")
+    g = p.add_argument_group("generator (ablations; the defaults are the paper's)")
+    g.add_argument("--upsample", choices=CHOICES["upsample"], default=None, help="decoder upsampling (default transpose)")
+    g.add_argument("--norm", choices=CHOICES["norm"], default=None, help="normalisation (default batch)")
+    g = p.add_argument_group("data and stopping")
+    g.add_argument("--train-frames", type=int, default=None,
+                   help="use only the first N train frames by index (default: all present)")
+    g.add_argument("--patience", type=int, default=None,
+                   help="stop after N validations without a better tone-mapped SSIM (default 0: never)")
+    g.add_argument("--val-every-steps", type=int, default=None,
+                   help="also validate (and save) every N steps (default 0: epoch ends only)")
     p.add_argument("--num-workers", type=int, default=d["num_workers"], help="DataLoader workers (default 0)")
     p.add_argument("--device", default=d["device"], help="auto, cpu, cuda or cuda:N (default auto)")
     p.set_defaults(func=run_train)
@@ -61,7 +85,8 @@ def run_train(args: argparse.Namespace) -> int:
         old = load_checkpoint(last, mmap=True)["config"]
         base = {k: old[k] for k in RESUME_INHERITED if k in old}
     fields = {**base, **{k: v for k, v in given.items() if v is not None}}
-    cfg = TrainConfig(data=args.data, out=args.out, max_steps=args.max_steps, amp=bool(args.amp),
+    precision = args.precision or ("fp16" if args.amp else "auto")
+    cfg = TrainConfig(data=args.data, out=args.out, max_steps=args.max_steps, precision=precision,
                       num_workers=args.num_workers, device=args.device, **fields)
     result = train(cfg, resume=bool(getattr(args, "resume", False)))
     if result["best"] is not None:

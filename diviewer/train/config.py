@@ -61,8 +61,9 @@ class TrainConfig:
     ndf: int = 64
     """Discriminator base width (the paper: 64)."""
 
-    amp: bool = False
-    """Mixed precision (float16 autocast + gradient scaling); CUDA only, ignored on CPU."""
+    precision: str = "auto"
+    """Autocast: "auto" (bfloat16 on CUDA, float32 on the CPU), "fp32", "bf16" (no loss scaling
+    needed: float32's range), or "fp16" (float16 with gradient scaling; CUDA only)."""
 
     num_workers: int = 0
     """DataLoader workers. The train split lives in RAM, so workers only overlap the host-to-GPU
@@ -80,6 +81,47 @@ class TrainConfig:
     device: str = "auto"
     """"auto" (CUDA if available, else CPU), "cpu", "cuda" or "cuda:N"."""
 
+    gan_weight: float = 1.0
+    """Weight of netG's adversarial term (1: pix2pix and the paper; 0: reconstruction only, netD
+    is then neither trained nor run)."""
+
+    gan_mode: str = "vanilla"
+    """Adversarial objective: "vanilla" (BCE on logits, the paper) or "lsgan" (least squares)."""
+
+    recon_loss: str = "l1"
+    """Reconstruction norm, weighted by lambda_L1: "l1" (the paper) or "l2"."""
+
+    recon_space: str = "encoded"
+    """Where the reconstruction loss is taken: "encoded" (the network's values, the paper) or
+    "linear" (radiance times the dataset exposure; with l2 the one unbiased choice under
+    Monte-Carlo noise, see `diviewer.train.losses`)."""
+
+    n_layers_D: int = 3
+    """Discriminator stride layers (3: the paper's 70x70 PatchGAN; 4 sees 142x142 patches)."""
+
+    norm_D: str = "batch"
+    """Discriminator normalisation: "batch" (the paper), "instance" or "none"."""
+
+    d_lr: float | None = None
+    """netD's Adam learning rate (None: the same as lr); a higher one rebalances a netD at chance."""
+
+    upsample: str = "transpose"
+    """Generator decoder upsampling: "transpose" (the paper), "resize" or "shuffle"."""
+
+    norm: str = "batch"
+    """Generator normalisation: "batch" (the paper), "instance" or "none"."""
+
+    train_frames: int | None = None
+    """Train on only the first N train frames by index (None: all present), so runs can share a
+    dataset whose capture is still adding frames."""
+
+    patience: int = 0
+    """Early stopping: stop when validation tone-mapped SSIM has not improved for this many
+    validations in a row (0: never; train all epochs)."""
+
+    val_every_steps: int = 0
+    """Also validate (and write a row, and save) every this many steps (0: at epoch ends only)."""
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", Path(self.data))
         object.__setattr__(self, "out", Path(self.out))
@@ -87,19 +129,30 @@ class TrainConfig:
         def fail(name: str, message: str) -> None:
             raise DiviewerError(message, field=f"train.{name}")
 
-        for name in ("K", "epochs", "batch_size", "ndf", "val_every"):
+        for name in ("K", "epochs", "batch_size", "ndf", "val_every", "n_layers_D"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 fail(name, f"must be a positive integer, got {v!r}")
-        for name in ("num_workers", "save_every", "seed"):
+        for name in ("num_workers", "save_every", "seed", "patience", "val_every_steps"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 fail(name, f"must be an integer >= 0, got {v!r}")
         if self.max_steps is not None and (isinstance(self.max_steps, bool) or not isinstance(self.max_steps, int)
                                            or self.max_steps < 1):
             fail("max_steps", f"must be a positive integer or None, got {self.max_steps!r}")
-        if not (isinstance(self.lr, (int, float)) and math.isfinite(self.lr) and self.lr > 0):
-            fail("lr", f"must be a positive number, got {self.lr!r}")
+        if self.train_frames is not None and (isinstance(self.train_frames, bool)
+                                              or not isinstance(self.train_frames, int) or self.train_frames < 1):
+            fail("train_frames", f"must be a positive integer or None, got {self.train_frames!r}")
+        for name in ("lr", *(("d_lr",) if self.d_lr is not None else ())):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                fail(name, f"must be a positive number, got {v!r}")
+        if isinstance(self.gan_weight, bool) or not (isinstance(self.gan_weight, (int, float))
+                                                     and math.isfinite(self.gan_weight) and self.gan_weight >= 0):
+            fail("gan_weight", f"must be a number >= 0, got {self.gan_weight!r}")
+        for name, choices in CHOICES.items():
+            if getattr(self, name) not in choices:
+                fail(name, f"must be one of {', '.join(choices)}, got {getattr(self, name)!r}")
         for name in ("beta1", "beta2"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 <= v < 1.0):
@@ -124,15 +177,27 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TrainConfig:
-        """Rebuild from `to_dict()` output; unknown keys are an error."""
+        """Rebuild from `to_dict()` output; unknown keys are an error (checkpoints written before
+        `precision` recorded `amp`: True meant float16 autocast)."""
+        data = dict(data)
+        if "amp" in data and "precision" not in data:
+            data["precision"] = "fp16" if data.pop("amp") else "auto"
         check_known_keys(cls, data, "train")
-        return cls(**dict(data))
+        return cls(**data)
 
+
+CHOICES: dict[str, tuple[str, ...]] = {
+    "precision": ("auto", "fp32", "bf16", "fp16"), "gan_mode": ("vanilla", "lsgan"), "recon_loss": ("l1", "l2"),
+    "recon_space": ("encoded", "linear"), "norm_D": ("batch", "instance", "none"),
+    "upsample": ("transpose", "resize", "shuffle"), "norm": ("batch", "instance", "none"),
+}
+"""The settings that take one of a few names (the network ones are `networks.UPSAMPLES`/`NORMS`)."""
 
 RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "beta1", "beta2", "lambda_L1", "target", "divide_albedo",
-                                 "seed", "dropout", "ndf")
+                                 "seed", "dropout", "ndf", "gan_weight", "gan_mode", "recon_loss", "recon_space",
+                                 "n_layers_D", "norm_D", "d_lr", "upsample", "norm", "train_frames")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change)."""
 
-RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save_every")
-"""Settings `diviewer train --resume` takes from the checkpoint unless given again (max_steps, amp,
+RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save_every", "patience", "val_every_steps")
+"""Settings `diviewer train --resume` takes from the checkpoint unless given again (max_steps, precision,
 device and num_workers describe this invocation and this machine, so they are not inherited)."""

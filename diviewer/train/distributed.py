@@ -139,16 +139,21 @@ def seed_all(seed: int) -> None:
 # Checkpoints
 
 
-def stop_requested(flag: dict[str, bool], dev: Dist) -> bool:
-    """Whether any process was asked to stop; every rank must agree, or the next collective hangs."""
+def agree_max(value: int, dev: Dist) -> int:
+    """The largest of every rank's value (rank 0 alone decides some things, e.g. early stopping)."""
     if dev.world == 1:
-        return flag["stop"]
+        return value
     import torch
     import torch.distributed as dist
 
-    t = torch.tensor([1.0 if flag["stop"] else 0.0], device=dev.device)
+    t = torch.tensor([float(value)], device=dev.device)
     dist.all_reduce(t, op=dist.ReduceOp.MAX)
-    return bool(t.item())
+    return int(t.item())
+
+
+def stop_requested(flag: dict[str, bool], dev: Dist) -> bool:
+    """Whether any process was asked to stop; every rank must agree, or the next collective hangs."""
+    return bool(agree_max(int(flag["stop"]), dev))
 
 
 def install_stop_handlers(flag: dict[str, bool], log: Callable[[str], None]) -> Callable[[], None]:

@@ -197,7 +197,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     return card
 
 
-_RUN_ONLY = ("data", "out", "max_steps", "device", "num_workers", "amp")
+_RUN_ONLY = ("data", "out", "max_steps", "device", "num_workers", "precision")
 """TrainConfig fields that describe one invocation on one machine, not how the model was made."""
 
 
@@ -206,7 +206,7 @@ def _recipe(meta: dict) -> dict:
     (`tools/build_shipped_model.py` rebuilds a shipped model from it)."""
     return {"capture": meta.get("capture"),
             "train": {k: v for k, v in meta["config"].items() if k not in _RUN_ONLY},
-            "net": meta["net_config"]}
+            "net": meta["net_config"], "loss": meta.get("loss_config")}
 
 
 def info(path: str | Path) -> str:

@@ -22,20 +22,23 @@ if TYPE_CHECKING:
 METRIC_KEYS: tuple[str, ...] = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 """Validation metrics: on linear radiance, then on tone-mapped images (suffix _tm)."""
 
-CSV_COLUMNS: tuple[str, ...] = ("epoch", "step", "loss_D", "loss_G_GAN", "loss_G_L1",
+CSV_COLUMNS: tuple[str, ...] = ("epoch", "step", "loss_D", "loss_G_GAN", "loss_G_L1", "D_acc_real", "D_acc_fake",
                                 *(f"val_{k}" for k in METRIC_KEYS), "seconds")
 """metrics.csv columns: fractional epoch, global step, mean train losses over the epoch so far
-(loss_G_L1 already times lambda_L1, as pix2pix reports it), validation metrics (empty when not
-validated) and wall-clock seconds since the run began (summed over resumed parts)."""
+(loss_G_L1: the reconstruction term, L1 or L2, already times lambda_L1, as pix2pix reports it;
+loss_G_GAN unweighted), netD's accuracy on real and on generated pairs over the same steps (0.5:
+at chance; the adversarial columns are empty when gan_weight is 0), validation metrics (empty when
+not validated) and wall-clock seconds since the run began (summed over resumed parts)."""
 
 
 def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, cfg: TrainConfig, device,
-             amp: bool) -> dict[str, float]:
+             dtype=None) -> dict[str, float]:
     """Mean per-frame metrics of the composed image against the path-traced `pt`, netG in eval mode.
 
     Linear: MSE, PSNR (peak 1) and SSIM (data_range 1) on radiance as stored, as `diviewer.metrics`
     defines them. Tone-mapped (_tm): the same on `tonemap(x, enc.exposure)`. With target
-    "indirect" the image is GL direct + predicted indirect, as the viewer composes it.
+    "indirect" the image is GL direct + predicted indirect, as the viewer composes it. dtype: the
+    autocast dtype netG runs in (None: float32).
     """
     import torch
 
@@ -49,7 +52,7 @@ def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, 
         for start in range(0, len(val), cfg.batch_size):
             x16 = torch.from_numpy(val[start:start + cfg.batch_size]).to(device)
             b = split_batch(x16, slices, enc, cfg)
-            with torch.autocast(device.type, dtype=torch.float16, enabled=amp):
+            with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
                 fake_B = netG(b["real_A"])
             pred = compose_radiance(decode_radiance(fake_B.float(), enc), b["direct"], b["albedo"], cfg.target,
                                     cfg.divide_albedo)
@@ -83,14 +86,17 @@ def write_metrics(path: Path, rows: list[dict[str, Any]]) -> None:
     imageio.write_text(path, "\n".join(lines) + "\n")
 
 
-def draw_curves(rows: list[Mapping[str, Any]], path: Path) -> None:
-    """curves.png: validation MSE and SSIM per epoch (linear and tone-mapped) and the train losses."""
+def draw_curves(rows: list[Mapping[str, Any]], path: Path, best_epoch: float | None = None,
+                stop_epoch: float | None = None) -> None:
+    """curves.png: validation MSE and SSIM per epoch (linear and tone-mapped), the train losses and
+    netD's accuracy; a grey line marks the best validation, a red one where early stopping stopped."""
     from PIL import Image, ImageDraw, ImageFont
 
     panels = [
         ("validation MSE (log)", [("linear", "val_mse"), ("tone-mapped", "val_mse_tm")], True),
         ("validation SSIM", [("linear", "val_ssim"), ("tone-mapped", "val_ssim_tm")], False),
-        ("train losses (log)", [("D", "loss_D"), ("G GAN", "loss_G_GAN"), ("G L1", "loss_G_L1")], True),
+        ("train losses (log)", [("D", "loss_D"), ("G GAN", "loss_G_GAN"), ("G rec", "loss_G_L1")], True),
+        ("netD accuracy (0.5: chance)", [("real", "D_acc_real"), ("fake", "D_acc_fake")], False),
     ]
     colors = [(31, 119, 180), (255, 127, 14), (44, 160, 44)]
     pw, ph, ml, mr, mt, mb = 420, 330, 64, 14, 42, 38
@@ -130,6 +136,11 @@ def draw_curves(rows: list[Mapping[str, Any]], path: Path) -> None:
             draw.line([x0 - 4, py, x0, py], fill="black")
             draw.text((k * pw + 4, py - 6), f"{10 ** fy if log_y else fy:.3g}", fill="black", font=font)
         draw.text(((x0 + x1) // 2 - 14, ph - 14), "epoch", fill="black", font=font)
+        for mark, color, label in ((best_epoch, (150, 150, 150), "best"), (stop_epoch, (214, 39, 40), "stop")):
+            if mark is not None and xlo <= mark <= xhi:
+                px, _ = to_px(mark, ylo)
+                draw.line([px, y0, px, y1], fill=color, width=1)
+                draw.text((px + 3, y0 + 3), label, fill=color, font=font)
         lx = x0  # the legend: one row between the title and the plot
         for j, (label, p) in enumerate(pts.items()):
             color = colors[j % len(colors)]
