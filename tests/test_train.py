@@ -402,3 +402,92 @@ def test_resumed_epoch_rows_average_only_their_own_epoch(run, data, tmp_path):
     for ra, rb in zip(rows_a, rows_b, strict=True):
         for k in ("loss_D", "loss_G_GAN", "loss_G_L1"):
             assert float(rb[k]) == pytest.approx(float(ra[k]), rel=1e-5), k
+
+
+@pytest.mark.parametrize("options", [
+    {"gan_weight": 0.0},
+    {"gan_weight": 0.5, "gan_mode": "lsgan"},
+    {"recon_loss": "l2", "recon_space": "linear"},
+    {"recon_loss": "l1", "recon_space": "linear"},
+    {"n_layers_D": 2, "norm_D": "instance", "d_lr": 8e-4},
+    {"upsample": "resize", "norm": "instance"},
+    {"upsample": "shuffle", "norm": "none"},
+    {"precision": "bf16"},
+], ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()))
+def test_each_training_option_trains_and_is_recorded(data, tmp_path, options):
+    result = train(tiny(data, tmp_path / "o", epochs=1, **options), log=quiet)
+    assert result["step"] == 2 and math.isfinite(result["val"]["ssim_tm"])
+    ckpt = load_checkpoint(tmp_path / "o" / "last.ckpt")
+    for k, v in options.items():
+        assert ckpt["config"][k] == v, k
+    net = ckpt["net_config"]
+    assert (net["upsample"], net["norm"], net["norm_D"], net["n_layers_D"]) == (
+        options.get("upsample", "transpose"), options.get("norm", "batch"), options.get("norm_D", "batch"),
+        options.get("n_layers_D", 3))
+    assert ckpt["loss_config"]["reconstruction"] == options.get("recon_loss", "l1")
+    rows = read_csv(tmp_path / "o" / "metrics.csv")
+    adversarial = options.get("gan_weight", 1.0) > 0
+    for k in ("loss_D", "loss_G_GAN", "D_acc_real", "D_acc_fake"):
+        assert (rows[-1][k] != "") == adversarial, k
+    if adversarial:
+        assert 0 <= float(rows[-1]["D_acc_real"]) <= 1 and 0 <= float(rows[-1]["D_acc_fake"]) <= 1
+    netG, _, _ = build_generator_from_checkpoint(ckpt)  # the generator rebuilds with its options
+    assert (netG.upsample, netG.norm) == (net["upsample"], net["norm"])
+
+
+def test_gan_weight_zero_leaves_netD_untouched(data, tmp_path):
+    train(tiny(data, tmp_path / "g0", epochs=1, gan_weight=0.0), log=quiet)
+    ckpt = load_checkpoint(tmp_path / "g0" / "last.ckpt")
+    assert ckpt["optD"]["state"] == {}  # netD never stepped
+
+
+def test_train_frames_uses_the_first_frames_and_is_checked_on_resume(data, tmp_path):
+    out = tmp_path / "tf"
+    train(tiny(data, out, epochs=1, train_frames=4), log=quiet)
+    ckpt = load_checkpoint(out / "last.ckpt")
+    assert ckpt["dataset"]["train_indices"] == sorted(Dataset(data).indices("train"))[:4]
+    assert ckpt["step"] == 1 and ckpt["config"]["train_frames"] == 4  # 4 frames at batch 4: one step per epoch
+    with pytest.raises(DiviewerError, match="train_frames: 4 -> None"):
+        train(tiny(data, out, epochs=2), resume=True, log=quiet)
+    with pytest.raises(DiviewerError, match="only 8 train frames"):
+        train(tiny(data, tmp_path / "many", train_frames=9), log=quiet)
+    assert not (tmp_path / "many").exists()
+
+
+def test_a_shape_option_cannot_change_on_resume(data, tmp_path):
+    out = tmp_path / "shape"
+    train(tiny(data, out, epochs=1), log=quiet)
+    for change, text in (({"upsample": "resize"}, "upsample: 'transpose' -> 'resize'"),
+                         ({"n_layers_D": 2}, "n_layers_D: 3 -> 2"), ({"norm": "none"}, "norm: 'batch' -> 'none'")):
+        with pytest.raises(DiviewerError, match=text):
+            train(tiny(data, out, epochs=2, **change), resume=True, log=quiet)
+
+
+def test_early_stopping_stops_and_marks_the_curve(data, tmp_path):
+    # Validate every step; with patience 1 the run stops at the first validation that is not better.
+    out = tmp_path / "es"
+    result = train(tiny(data, out, epochs=20, val_every_steps=1, patience=1, lr=0.05), log=quiet)
+    rows = read_csv(out / "metrics.csv")
+    ssim = [float(r["val_ssim_tm"]) for r in rows]
+    assert result["stopped_early"] and result["step"] < 40
+    assert ssim[-1] <= max(ssim[:-1])  # the last validation did not improve ...
+    assert all(b > a for a, b in zip(ssim[:-2], ssim[1:-1]))  # ... and every one before it did
+    assert result["best"] == pytest.approx(max(ssim))
+    again = train(tiny(data, out, epochs=20, val_every_steps=1, patience=1, lr=0.05), resume=True, log=quiet)
+    assert again["step"] == result["step"]  # stopped early stays stopped
+
+
+def test_cli_maps_the_options_onto_the_config(data, tmp_path):
+    ap = argparse.ArgumentParser()
+    add_train_parser(ap.add_subparsers(dest="command"))
+    out = tmp_path / "cli_opts"
+    args = ap.parse_args(["train", "--data", str(data), "--out", str(out), "--device", "cpu", "--k", "4", "--ndf", "8",
+                          "--epochs", "1", "--gan-weight", "0", "--recon-loss", "l2", "--recon-space", "linear",
+                          "--n-layers-d", "2", "--d-lr", "1e-3", "--upsample", "resize", "--norm", "instance",
+                          "--train-frames", "8", "--patience", "3", "--val-every-steps", "1", "--precision", "fp32"])
+    assert run_train(args) == 0
+    cfg = load_checkpoint(out / "last.ckpt")["config"]
+    assert (cfg["gan_weight"], cfg["recon_loss"], cfg["recon_space"], cfg["n_layers_D"], cfg["d_lr"]) == (
+        0.0, "l2", "linear", 2, 1e-3)
+    assert (cfg["upsample"], cfg["norm"], cfg["train_frames"], cfg["patience"], cfg["val_every_steps"]) == (
+        "resize", "instance", 8, 3, 1)
