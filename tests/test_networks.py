@@ -319,7 +319,8 @@ def test_checkpoints_without_the_options_rebuild_the_paper_network() -> None:
     config = NetConfig.from_dict(old_config)
     assert (config.upsample, config.norm, config.norm_D) == ("transpose", "batch", "batch")
     netD = NLayerDiscriminator(ndf=8)
-    NLayerDiscriminator(**{k: v for k, v in netD.model_args().items() if k != "norm"}).load_state_dict(netD.state_dict())
+    old_netD_args = {k: v for k, v in netD.model_args().items() if k != "norm"}
+    NLayerDiscriminator(**old_netD_args).load_state_dict(netD.state_dict())
 
 
 def test_net_config_options_are_validated_by_name() -> None:
