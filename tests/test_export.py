@@ -153,11 +153,12 @@ def test_each_option_exports_and_matches_torch(upsample, norm):
     peak for the full target and for indirect / albedo, whose composition the graph must carry."""
     import onnxruntime as ort
 
-    from diviewer.encoding import Encoding, decode_radiance, encode_inputs
+    from diviewer.encoding import Encoding
+    from diviewer.train.encoding_torch import decode_radiance, encode_inputs
     from diviewer.train.export import OPSET, onnx_bytes
     from diviewer.train.losses import reconstruction_loss
     from diviewer.train.networks import NetConfig, init_weights
-    from diviewer.train.trainer import ALBEDO_FLOOR
+    from diviewer.train.targets import ALBEDO_FLOOR
 
     torch.manual_seed(0)
     netG = init_weights(NetConfig(K=4, resolution=32, upsample=upsample, norm=norm).build_generator())
@@ -199,7 +200,7 @@ def _rewrite_checkpoint(src, dst, upsample=None, norm=None, drop_options=False, 
     """A copy of a trained checkpoint whose generator is rebuilt with other options (or whose records
     lack the option keys, as checkpoints written before they existed do)."""
     from diviewer.train.networks import UnetGenerator, init_weights
-    from diviewer.train.trainer import load_checkpoint
+    from diviewer.train.checkpoint import load_checkpoint
 
     ckpt = load_checkpoint(src)
     args = dict(ckpt["model_args"])
