@@ -70,6 +70,8 @@ def one(name: str, a: argparse.Namespace) -> dict:
     if not model.is_file():
         sh(dv + ["export", str(run / "best.ckpt"), "--out", str(model)], log)
     res = run / "eval.json"
+    if a.train_only:
+        return {}
     if not res.is_file():
         sh(dv + ["eval", "--model", str(model), "--evalset", str(a.evalset), "--out", str(res)], log)
     return {"name": name, "what": what, "args": BASE + ([] if name == "nodemod" else DEMODULATED) + extra, "train": json.loads((run / "done").read_text()),
@@ -85,11 +87,14 @@ def main() -> None:
     ap.add_argument("--train-frames", type=int, default=1000)
     ap.add_argument("--only", nargs="*", default=None, choices=sorted(ABLATIONS))
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--train-only", action="store_true", help="train and export only (score later)")
     ap.add_argument("--table", type=Path, default=None, help="write the markdown table here too")
     a = ap.parse_args()
     names = a.only or list(ABLATIONS)
     with ThreadPoolExecutor(a.jobs) as pool:
         results = list(pool.map(lambda n: one(n, a), names))
+    if a.train_only:
+        return
     (a.out / "ablate.json").write_text(json.dumps(results, indent=1))
     lines = table(results)
     print("\n".join(lines))
