@@ -9,10 +9,11 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.errors import DiviewerError
-from diviewer.outputs import check_output_dir, dumps, staged
 from diviewer.frames import frame_record, load_frame_json, parse_resolution, read_frame_json, with_user_meshes
+from diviewer.outputs import check_output_dir, dumps, staged
 from diviewer.provenance import settings_dict
 from diviewer.scene import FrameConfig, Scene, config_from_dict, load_scene, sample_config
+from diviewer.scene.colour import srgb8
 
 
 def choose_config(scene: Scene, seed: int | None, split: str, config_file: Path | None) -> tuple[Scene, FrameConfig, dict]:
@@ -92,7 +93,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                     imageio.write_exr(stage(out / f"{name}.exr"), frame[name])
                 imageio.write_png(stage(out / "depth.png"), imageio.depth_preview(frame["depth"]))
                 imageio.write_png(stage(out / "normal.png"), imageio.normal_preview(frame["normal"]))
-                imageio.write_png(stage(out / "albedo.png"), imageio.srgb8(frame["albedo"]))
+                imageio.write_png(stage(out / "albedo.png"), srgb8(frame["albedo"]))
                 imageio.write_png(stage(out / "direct.png"), compositor.to_ldr(frame["direct"], ev, tonemap))
                 if "neural" in frame:
                     imageio.write_exr(stage(out / "neural.exr"), frame["neural"])

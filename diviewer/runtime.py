@@ -210,8 +210,7 @@ def sanitize(x: np.ndarray) -> tuple[np.ndarray, int]:
 
 def pack_buffers(frame: dict[str, np.ndarray]) -> np.ndarray:
     """GL frame buffers (depth (H, W), others (H, W, 3)) to the model's (H, W, 10) input, on the CPU."""
-    depth = frame["depth"][..., None] if frame["depth"].ndim == 2 else frame["depth"]
-    parts = [depth] + [frame[name] for name, _ in INPUT_CHANNELS[1:]]
+    parts = [frame[name].reshape(*frame[name].shape[:2], n) for name, n in INPUT_CHANNELS]
     return np.ascontiguousarray(np.concatenate(parts, axis=-1), dtype=np.float32)
 
 

@@ -218,6 +218,22 @@ def test_composite_tonemaps_and_flags_non_finite(ctx):
         r.release()
 
 
+def test_display_srgb_matches_scene_colour(ctx):
+    """The display's sRGB curve (shaders/tonemap.glsl) and diviewer.scene.colour are the same curve."""
+    from diviewer.scene.colour import srgb8
+
+    r = Renderer(ctx, facing_plane(), 16, 16)
+    comp = DisplayPass(ctx, r.shaders)
+    try:
+        ramp = np.linspace(0.0, 1.0, 16 * 16 * 3, dtype=np.float32).reshape(16, 16, 3) ** 2  # dense in the dark end
+        out = comp.to_ldr(ramp, exposure=0.0, tonemap="clamp")
+        # The GPU rounds float to unorm8 itself: allow one step.
+        assert np.abs(out.astype(int) - srgb8(ramp).astype(int)).max() <= 1
+    finally:
+        comp.release()
+        r.release()
+
+
 @pytest.mark.parametrize("name", ["cornell", "atrium"])
 def test_shipped_scenes_render_finite_and_lit(ctx, name):
     from diviewer.scene import load_scene, sample_config

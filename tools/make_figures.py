@@ -18,6 +18,7 @@ from diviewer.gl.display import DisplayPass
 from diviewer.gl.renderer import Renderer
 from diviewer.paths import models_dir
 from diviewer.scene import load_scene, sample_config
+from diviewer.scene.colour import srgb8
 
 OUT = Path(__file__).resolve().parents[1] / "assets" / "figures"
 GAP = 4
@@ -36,7 +37,7 @@ def main() -> None:
         comp = DisplayPass(ctx, renderer.shaders)
         f = renderer.frame()
         tiles = [imageio.depth_preview(f["depth"])[..., None].repeat(3, -1), imageio.normal_preview(f["normal"]),
-                 imageio.srgb8(f["albedo"]), comp.to_ldr(f["direct"], scene.exposure)]
+                 srgb8(f["albedo"]), comp.to_ldr(f["direct"], scene.exposure)]
         imageio.write_png(OUT / "cornell_buffers.png", row(tiles))
         print(f"wrote {OUT / 'cornell_buffers.png'}")
         renderer.release()

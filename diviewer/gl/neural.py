@@ -5,11 +5,18 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, INPUT_NAMES, input_channel_slices
 from diviewer.gl.renderer import Renderer
 from diviewer.gl.resources import set_uniform
 from diviewer.timing import StageTimer
 
-CHANNELS = 10
+PACK_DEFINES = {
+    "IN_CHANNELS": INPUT_CHANNEL_COUNT,
+    **{f"IN_{name.upper()}": s.start for name, s in input_channel_slices().items()},
+    **{f"IN_{name.upper()}_N": n for name, n in INPUT_CHANNELS},
+}
+"""The channel layout as pack.glsl reads it, from the encoding's table: the total, where each buffer
+starts, and its component count (which the shader checks against what it writes, at compile time)."""
 
 STAGES = ("readback", "inference", "upload")
 """The pass's stages, timed by the wall clock: the read-back waits for the GPU, so it is honest without a sync."""
@@ -29,9 +36,9 @@ class NeuralPass:
         self.ctx, self.renderer, self.model = ctx, renderer, model
         self.timer = timer or renderer.timer
         model.check_size(renderer.width, renderer.height)
-        self.program = renderer.shaders.compute("pack.glsl")
+        self.program = renderer.shaders.compute("pack.glsl", PACK_DEFINES)
         w, h = renderer.width, renderer.height
-        self.packed = np.empty((1, h, w, CHANNELS), np.float32)
+        self.packed = np.empty((1, h, w, INPUT_CHANNEL_COUNT), np.float32)
         self.ssbo = ctx.buffer(reserve=self.packed.nbytes)
         self.texture = ctx.texture((w, h), 3, dtype="f4")
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
@@ -46,7 +53,7 @@ class NeuralPass:
         r = self.renderer
         before = {k: self.timer.times.get(k, 0.0) for k in STAGES}
         with self.timer.stage("readback"):
-            for i, name in enumerate(("depth", "normal", "albedo", "direct")):
+            for i, name in enumerate(INPUT_NAMES):
                 r.textures[name].use(location=i)
                 set_uniform(self.program, f"u_{name}", i)
             set_uniform(self.program, "u_size", (r.width, r.height))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shaders import ShaderCache
@@ -19,8 +20,8 @@ from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
 from diviewer.timing import StageTimer
 
-BUFFERS = ("depth", "normal", "albedo", "direct")
-"""The buffers a frame returns, in the network's input order."""
+BUFFERS = INPUT_NAMES
+"""The buffers a frame returns, in the network's input order (diviewer.encoding.INPUT_CHANNELS)."""
 
 
 

@@ -14,6 +14,7 @@ from diviewer.scene.model import CameraRange, FrameConfig, Scene
 SPLITS = ("train", "val", "test")
 
 
+# pyrr builds rotations (scene.camera) but has no inverse for this Euler order, hence this one.
 def matrix_to_euler_xyz(r: np.ndarray) -> tuple[float, float, float]:
     """Euler angles (degrees) with ``euler_xyz(angles) == r`` for a rotation matrix r = Rz Ry Rx."""
     sy = -float(np.clip(r[2, 0], -1.0, 1.0))

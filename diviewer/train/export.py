@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer import imageio
-from diviewer.encoding import INPUT_CHANNELS
+from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
 from diviewer.outputs import check_output_file, dumps, staged
@@ -53,8 +53,8 @@ def _torch():
 def gi_module(netG, encoding, meta: dict, fp16: bool = False):
     """The exported computation as a torch module: raw NHWC buffers -> linear radiance NHWC."""
     torch = _torch()
-    from diviewer.encoding import decode_radiance, encode_inputs
-    from diviewer.train.trainer import compose_radiance
+    from diviewer.train.encoding_torch import decode_radiance, encode_inputs
+    from diviewer.train.targets import compose_radiance
 
     class GIModel(torch.nn.Module):
         def __init__(self):
@@ -63,7 +63,7 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False):
 
         def forward(self, buffers):
             x = buffers.permute(0, 3, 1, 2)
-            depth, normal, albedo, direct = x[:, 0:1], x[:, 1:4], x[:, 4:7], x[:, 7:10]
+            depth, normal, albedo, direct = (x[:, channel_slices()[k]] for k in ("depth", "normal", "albedo", "direct"))
             inp = encode_inputs(depth, normal, albedo, direct, encoding, channel_axis=1)
             y = self.netG(inp.half() if fp16 else inp)
             radiance = decode_radiance(y.float() if fp16 else y, encoding)
@@ -99,7 +99,7 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
             frames = []
             for i in idx:
                 f = ds.load(i)
-                frames.append(np.concatenate([f["depth"][..., None], f["normal"], f["albedo"], f["direct"]], -1))
+                frames.append(np.concatenate([f[name].reshape(*f[name].shape[:2], n) for name, n in INPUT_CHANNELS], -1))
             return np.stack(frames).astype(np.float32), f"{len(idx)} frames of {data_dir}"
     # No dataset: smooth synthetic buffers with plausible ranges (depth 1..far, unit normals).
     rng = np.random.default_rng(0)
@@ -132,7 +132,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     import onnx
     import onnxruntime as ort
 
-    from diviewer.train.trainer import build_generator_from_checkpoint, load_checkpoint
+    from diviewer.train.checkpoint import build_generator_from_checkpoint, load_checkpoint
 
     ckpt_path, out = Path(ckpt_path), Path(out)
     check_export_paths(ckpt_path, out)
@@ -197,6 +197,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "exported_with": versions(),
         "verification": check,
         "opset": OPSET,
+        "recipe": _recipe(meta),
     }
     onnx.helper.set_model_props(model, {META_KEY: dumps(card, sort_keys=True)})
     model.producer_name, model.producer_version = "diviewer", card["exported_with"]["diviewer"]
@@ -207,11 +208,28 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     return card
 
 
+_RUN_ONLY = ("data", "out", "max_steps", "device", "num_workers", "precision")
+"""TrainConfig fields that describe one invocation on one machine, not how the model was made."""
+
+
+def _recipe(meta: dict) -> dict:
+    """How the model was made, for the card: capture settings, training settings, network settings
+    (`tools/build_shipped_model.py` rebuilds a shipped model from it)."""
+    return {"capture": meta.get("capture"),
+            "train": {k: v for k, v in meta["config"].items() if k not in _RUN_ONLY},
+            "net": meta["net_config"], "loss": meta.get("loss_config")}
+
+
 def info(path: str | Path) -> str:
     """A readable summary of a model's metadata (`diviewer export --info`)."""
     from diviewer.runtime import read_metadata
 
     m = read_metadata(path)
+    if m.get("kind") == "linear_baseline":
+        return "\n".join([f"{path}", f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",
+                          f"  baseline     {m['description']}",
+                          f"  parameters   {m['parameters']}, fitted on {m['fit']['frames']} frames "
+                          f"({m['fit']['split']} split of {m['fit']['data']}), train RMSE {m['fit']['train_rmse']:.4g}"])
     val = m.get("validation") or {}
     lines = [f"{path}",
              f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",

@@ -77,7 +77,7 @@ def test_metric_values_in_json_are_strict():
 # --- the indirect target's division by albedo -----------------------------------------------------
 @pytest.mark.parametrize("albedo", [0.0, 1e-30, 1e-3, 1.0])
 def test_division_by_albedo_is_finite_and_invertible_where_it_can_be(albedo):
-    from diviewer.train.trainer import ALBEDO_FLOOR, compose_radiance, target_radiance
+    from diviewer.train.targets import ALBEDO_FLOOR, compose_radiance, target_radiance
 
     rng = np.random.default_rng(3)
     pt_direct = rng.random((4, 4, 3)).astype(np.float32)
