@@ -166,9 +166,9 @@ class NeuralGI:
         self.timer = StageTimer()
         """Times ``inference`` (the session's run alone) unless ``run`` is given the caller's timer."""
         self.nonfinite_inputs = 0
-        """Input values of the last frame that were NaN or infinite (replaced by 0, the background's value)."""
+        """Input values of the last frame that were NaN or infinite (the graph's encoding maps them to 0)."""
         self.nonfinite_outputs = 0
-        """Output values of the last frame that were NaN or infinite (replaced by 0)."""
+        """Output values of the last frame that were NaN or infinite (left in place: the display flags them)."""
 
     @property
     def file_sha256(self) -> str:
@@ -187,25 +187,26 @@ class NeuralGI:
         if x.dtype != np.float32 or not x.flags.c_contiguous:
             x = np.ascontiguousarray(x, dtype=np.float32)
         self.check_size(x.shape[2], x.shape[1])
-        x, self.nonfinite_inputs = sanitize(x)
+        # Counted, not replaced: the exported graph's encoding maps non-finite network inputs to 0, and
+        # what the graph returns non-finite (a NaN in the direct light it adds) stays visible where it
+        # arose (the display flags it) instead of being hidden; the counts say how many.
+        self.nonfinite_inputs = count_nonfinite(x)
         with (timer or self.timer).stage("inference"):
             (y,) = self.session.run([OUTPUT_NAME], {INPUT_NAME: x})
-        y, self.nonfinite_outputs = sanitize(y)
+        self.nonfinite_outputs = count_nonfinite(y)
         # Radiance is never negative: the runtime clamps (models exported before the graph did so,
         # e.g. an indirect-target model's undershoot, would otherwise darken the composite below 0).
+        # np.maximum keeps NaN, so a broken pixel stays broken.
         np.maximum(y, 0.0, out=y)
         return y[0] if single else y
 
 
-def sanitize(x: np.ndarray) -> tuple[np.ndarray, int]:
-    """``x`` with NaN and infinite values replaced by 0, and how many there were (a copy only when any were)."""
-    # A float64 sum of float32 values cannot overflow, and it is NaN/Inf exactly when an element is:
-    # one pass without a mask array in the common, clean case.
+def count_nonfinite(x: np.ndarray) -> int:
+    """How many values of ``x`` are NaN or infinite, in one pass without a mask when there are none."""
+    # A float64 sum of float32 values cannot overflow, and it is NaN/Inf exactly when an element is.
     if np.isfinite(np.add.reduce(x, axis=None, dtype=np.float64)):
-        return x, 0
-    bad = ~np.isfinite(x)
-    x = np.where(bad, np.float32(0), x).astype(x.dtype, copy=False)
-    return np.ascontiguousarray(x), int(bad.sum())
+        return 0
+    return int(x.size - np.count_nonzero(np.isfinite(x)))
 
 
 def pack_buffers(frame: dict[str, np.ndarray]) -> np.ndarray:

@@ -1,5 +1,6 @@
-"""The runtime at the extremes: NaN/Inf in each input channel (sanitised and counted), negative output
-(clamped), corrupt model metadata and files (one error naming the field), the shipped model at zero light."""
+"""The runtime at the extremes: NaN/Inf in each input channel (counted by the runtime, sanitised by the
+exported graph's encoding), negative output (clamped), corrupt model metadata and files (one error
+naming the field), the shipped model at zero light."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pytest
 
 from diviewer.encoding import INPUT_CHANNELS
 from diviewer.errors import DiviewerError
-from diviewer.runtime import NeuralGI, pack_buffers, read_metadata, sanitize
+from diviewer.runtime import NeuralGI, count_nonfinite, pack_buffers, read_metadata
 from onnx_models import base_meta, direct_times
 
 CHANNEL_NAMES = [f"{name}[{k}]" for name, n in INPUT_CHANNELS for k in range(n)]
@@ -30,14 +31,18 @@ def model(tmp_path_factory):
 
 @pytest.mark.parametrize("channel", range(10), ids=CHANNEL_NAMES)
 @pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
-def test_non_finite_input_is_sanitised_and_counted(model, channel, value):
+def test_non_finite_input_is_counted_and_stays_where_it_arose(model, channel, value):
+    """A toy graph (2 x direct) has no encoding: what it returns non-finite stays at that pixel, counted."""
     x = buffers()
     x[3, 5, channel] = value
     x[7, 1, channel] = value
     y = model.run(x)
-    assert np.all(np.isfinite(y)) and np.all(y >= 0)
     assert model.nonfinite_inputs == 2
-    assert model.nonfinite_outputs == 0
+    broken = ~np.isfinite(y).all(axis=-1)
+    # -inf radiance is clamped to 0 like any negative value; NaN and +inf stay visible
+    assert np.argwhere(broken).tolist() == ([[3, 5], [7, 1]] if channel >= 7 and value != -np.inf else [])
+    assert model.nonfinite_outputs == (2 if channel >= 7 else 0)
+    assert np.all(y[~broken] >= 0)
 
 
 @pytest.mark.parametrize("value", [1e30, 3e38, -3e38])
@@ -48,10 +53,11 @@ def test_huge_finite_input_is_passed_on_uncounted(model, value):
     assert model.nonfinite_inputs == 0
 
 
-def test_clean_input_is_not_copied():
+def test_count_of_clean_and_huge_input_is_zero():
     x = buffers()[None]
-    y, n = sanitize(x)
-    assert y is x and n == 0
+    assert count_nonfinite(x) == 0
+    x[0, 0, 0, :] = 3.4e38  # the float64 sum does not overflow
+    assert count_nonfinite(x) == 0
 
 
 def test_negative_model_output_is_clamped(tmp_path):
@@ -60,12 +66,12 @@ def test_negative_model_output_is_clamped(tmp_path):
     assert np.all(y == 0.0)
 
 
-def test_overflowing_model_output_is_sanitised_and_counted(tmp_path):
+def test_overflowing_model_output_is_counted(tmp_path):
     m = NeuralGI(direct_times(tmp_path / "big.onnx", factor=1e38))
     x = buffers()
     x[..., 7:10] = 100.0  # 1e40: float32 infinity
     y = m.run(x)
-    assert np.all(np.isfinite(y)) and m.nonfinite_outputs == y.size
+    assert m.nonfinite_outputs == y.size and m.nonfinite_inputs == 0
 
 
 # --- model metadata: wrong types, missing keys, zero divisors -----------------------------------
@@ -156,6 +162,17 @@ def shipped(cornell_frames):
     from diviewer.paths import models_dir
 
     return NeuralGI(models_dir() / "cornell.onnx", scene=cornell_frames[0])
+
+
+@pytest.mark.parametrize("channel", range(7), ids=CHANNEL_NAMES[:7])
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf, 1e30])
+def test_shipped_model_sanitises_bad_geometry_buffers(cornell_frames, shipped, channel, value):
+    """The exported graph's encoding keeps NaN/Inf/1e30 in depth, normal and albedo out of the output."""
+    x = cornell_frames[1][1.0].copy()
+    x[10:14, 20:30, channel] = value
+    y = shipped.run(x)
+    assert np.all(np.isfinite(y)) and np.all(y >= 0)
+    assert shipped.nonfinite_inputs == (0 if value == 1e30 else 40)
 
 
 @pytest.mark.parametrize("k", [0.0, 1e-8, 1.0, 8.0])
