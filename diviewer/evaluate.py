@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from diviewer import imageio
 from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
 from diviewer.metrics import (equivalent_spp, flat_mask, flip, highpass_power, mse, power_ratio, psnr, psnr_error,

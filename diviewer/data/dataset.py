@@ -106,8 +106,9 @@ def _check_manifest(m: dict, path: Path) -> None:
     seen = set()
     for k, f in enumerate(frames):
         where = f"frame_list[{k}]"
-        if not (isinstance(f, dict) and _is_int(f.get("index")) and f.get("split") in ("train", "val", "test")):
-            raise DiviewerError(f"expected {{index: whole number, split: train/val/test}}, got {repr(f)[:80]}",
+        # split: train/val/test in a capture, other names in an evaluation set (diviewer.evalset)
+        if not (isinstance(f, dict) and _is_int(f.get("index")) and isinstance(f.get("split"), str) and f["split"]):
+            raise DiviewerError(f"expected {{index: whole number, split: name}}, got {repr(f)[:80]}",
                                 path=path, field=where)
         if f["index"] in seen:
             raise DiviewerError(f"frame {f['index']} is listed twice", path=path, field=where)

@@ -116,7 +116,7 @@ MANIFEST_DAMAGE = {
     "no_frame_list": lambda m: {k: v for k, v in m.items() if k != "frame_list"},
     "frame_list_dict": lambda m: {**m, "frame_list": {}},
     "frame_index_str": lambda m: {**m, "frame_list": [{"index": "0", "split": "train"}]},
-    "frame_split_bad": lambda m: {**m, "frame_list": [{"index": 0, "split": "holdout"}]},
+    "frame_split_bad": lambda m: {**m, "frame_list": [{"index": 0, "split": 7}]},
     "frame_duplicate": lambda m: {**m, "frame_list": [m["frame_list"][0], m["frame_list"][0]]},
     "format_version_str": lambda m: {**m, "format_version": "1"},
     "format_version_new": lambda m: {**m, "format_version": 99},

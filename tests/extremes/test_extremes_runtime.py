@@ -77,7 +77,7 @@ def test_overflowing_model_output_is_counted(tmp_path):
 # --- model metadata: wrong types, missing keys, zero divisors -----------------------------------
 @pytest.mark.parametrize("key,value", [
     ("multiple", 0), ("multiple", 3), ("multiple", "16"), ("multiple", -16), ("resolution", [32]),
-    ("resolution", "32x32"), ("resolution", [0, 32]), ("K", -1), ("K", 1.5), ("levels", None),
+    ("resolution", "32x32"), ("resolution", [0, 32]), ("K", -1), ("K", 1.5), ("levels", None), ("levels", -2),
     ("target", "everything"), ("encoding", [1]), ("encoding", {"version": "1"}), ("format", "1"),
     ("precision", "int8"), ("scene_hash", 0), ("channels", "depth"),
 ])
