@@ -2,7 +2,13 @@
 // buffer, so the CPU reads it once and reshuffles nothing. The channel layout is not written here:
 // gl/neural.py injects it from diviewer.encoding.INPUT_CHANNELS as defines (IN_CHANNELS, the total,
 // IN_<NAME>, where each buffer starts, and IN_<NAME>_N, its component count, checked below).
+// PACK_STEP > 1 packs at 1/PACK_STEP of the G-buffer's resolution (the GI pass below frame resolution):
+// each packed pixel takes the texel at the centre of its PACK_STEP x PACK_STEP block.
 #if defined COMPUTE_SHADER
+
+#if !defined PACK_STEP
+#define PACK_STEP 1
+#endif
 
 #if !defined IN_CHANNELS || !defined IN_DEPTH || !defined IN_NORMAL || !defined IN_ALBEDO || !defined IN_DIRECT
 #error "pack.glsl needs the channel layout defines from diviewer.gl.neural"
@@ -25,10 +31,11 @@ void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= u_size.x || p.y >= u_size.y) return;
     int base = ((u_size.y - 1 - p.y) * u_size.x + p.x) * IN_CHANNELS;
-    vec3 n = texelFetch(u_normal, p, 0).xyz;
-    vec3 a = texelFetch(u_albedo, p, 0).rgb;
-    vec3 d = texelFetch(u_direct, p, 0).rgb;
-    data[base + IN_DEPTH] = texelFetch(u_depth, p, 0).r;
+    ivec2 s = p * PACK_STEP + PACK_STEP / 2;
+    vec3 n = texelFetch(u_normal, s, 0).xyz;
+    vec3 a = texelFetch(u_albedo, s, 0).rgb;
+    vec3 d = texelFetch(u_direct, s, 0).rgb;
+    data[base + IN_DEPTH] = texelFetch(u_depth, s, 0).r;
     data[base + IN_NORMAL] = n.x; data[base + IN_NORMAL + 1] = n.y; data[base + IN_NORMAL + 2] = n.z;
     data[base + IN_ALBEDO] = a.r; data[base + IN_ALBEDO + 1] = a.g; data[base + IN_ALBEDO + 2] = a.b;
     data[base + IN_DIRECT] = d.r; data[base + IN_DIRECT + 1] = d.g; data[base + IN_DIRECT + 2] = d.b;

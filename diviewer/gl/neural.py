@@ -18,6 +18,8 @@ PACK_DEFINES = {
 """The channel layout as pack.glsl reads it, from the encoding's table: the total, where each buffer
 starts, and its component count (which the shader checks against what it writes, at compile time)."""
 
+_DIRECT = input_channel_slices()["direct"]
+
 STAGES = ("readback", "inference", "upload")
 """The pass's stages, timed by the wall clock: the read-back waits for the GPU, so it is honest without a sync."""
 
@@ -30,14 +32,22 @@ class NeuralPass:
     output layouts are the arrays' own, so nothing is transposed on the CPU. The texture holds
     rows top first: display it with ``flip_y`` (the display pass does). Its stages go to the
     renderer's timer unless given one.
+
+    With ``step`` > 1 the model runs at 1/step of the renderer's resolution (the G-buffer is point-sampled
+    at block centres) and ``self.texture`` holds the indirect light only (the output minus the direct
+    light the model was given), for ``diviewer.gl.upsample.UpsamplePass`` to add to the frame's direct light.
     """
 
-    def __init__(self, ctx: moderngl.Context, renderer: Renderer, model, timer: StageTimer | None = None):
+    def __init__(self, ctx: moderngl.Context, renderer: Renderer, model, timer: StageTimer | None = None,
+                 step: int = 1):
         self.ctx, self.renderer, self.model = ctx, renderer, model
         self.timer = timer or renderer.timer
-        model.check_size(renderer.width, renderer.height)
-        self.program = renderer.shaders.compute("pack.glsl", PACK_DEFINES)
-        w, h = renderer.width, renderer.height
+        if step < 1 or renderer.width % step or renderer.height % step:
+            raise ValueError(f"the GI step {step} must divide the render size {renderer.width}x{renderer.height}")
+        self.step = step
+        w, h = renderer.width // step, renderer.height // step
+        model.check_size(w, h)
+        self.program = renderer.shaders.compute("pack.glsl", {**PACK_DEFINES, **({"PACK_STEP": step} if step > 1 else {})})
         self.packed = np.empty((1, h, w, INPUT_CHANNEL_COUNT), np.float32)
         self.ssbo = ctx.buffer(reserve=self.packed.nbytes)
         self.texture = ctx.texture((w, h), 3, dtype="f4")
@@ -56,14 +66,18 @@ class NeuralPass:
             for i, name in enumerate(INPUT_NAMES):
                 r.textures[name].use(location=i)
                 set_uniform(self.program, f"u_{name}", i)
-            set_uniform(self.program, "u_size", (r.width, r.height))
+            h, w = self.packed.shape[1:3]
+            set_uniform(self.program, "u_size", (w, h))
             self.ssbo.bind_to_storage_buffer(0)
-            self.program.run((r.width + 7) // 8, (r.height + 7) // 8, 1)
+            self.program.run((w + 7) // 8, (h + 7) // 8, 1)
             self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
             self.ssbo.read_into(self.packed)
         self.output = self.model.run(self.packed, timer=self.timer)  # the runtime times "inference"
         with self.timer.stage("upload"):
-            self.texture.write(self.output)  # (1, H, W, 3) float32, contiguous: uploaded as is
+            if self.step == 1:
+                self.texture.write(self.output)  # (1, H, W, 3) float32, contiguous: uploaded as is
+            else:
+                self.texture.write(np.ascontiguousarray(self.output - self.packed[..., _DIRECT]))
         self.copies["upload_bytes"] = self.output.nbytes
         self.timings = {k: self.timer.times.get(k, 0.0) - before[k] for k in STAGES}
         return self.texture
