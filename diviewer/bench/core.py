@@ -211,7 +211,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
                     onnx.save(untrained_generator(K, levels, scene, res), str(path))
                     net = NeuralGI(path, scene=scene, provider=settings.provider)
                     row = _row("untrained", f"untrained K={K} fp32", res, res, gb.time_model(net, configs, settings.warmup))
-                    row.update(K=K, levels=levels, precision="fp32", provider=net.provider, untrained=True,
+                    row.update(K=K, levels=levels, precision="fp32", provider=net.provider, untrained=True, step=1,
                                flops=generator_flops(K, levels, res, res)["flops"])
                     rows.append(row)
                     del net

@@ -14,6 +14,7 @@ generator's hundreds of thousands (see ``generator_flops``).
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -218,9 +219,15 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[np.ndarray]
             x = next(self.it, None)
             return None if x is None else {INPUT_NAME: x}
 
-    quantize_static(str(fp32_path), str(out_path), Reader(), quant_format=QuantFormat.QDQ,
-                    op_types_to_quantize=["Conv", "ConvTranspose"], per_channel=True,
-                    activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8)
+    root = logging.getLogger()
+    level = root.level
+    root.setLevel(logging.ERROR)  # quantize_static's advice to pre-process, at every call
+    try:
+        quantize_static(str(fp32_path), str(out_path), Reader(), quant_format=QuantFormat.QDQ,
+                        op_types_to_quantize=["Conv", "ConvTranspose"], per_channel=True,
+                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8)
+    finally:
+        root.setLevel(level)
     m = onnx.load(str(out_path))
     meta = get_meta(onnx.load(str(fp32_path)))
     set_meta(m, {**meta, "precision": "int8", "quantization": {"format": "QDQ", "ops": ["Conv", "ConvTranspose"],
