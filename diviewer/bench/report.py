@@ -12,7 +12,7 @@ from diviewer.bench.frontier import equal_error, equal_time, smallest_sufficient
 from diviewer.evaluate import EVAL_KEYS, EQUIVALENT_BY
 from diviewer.metrics import psnr_error
 
-PAPER_CLAIMS = {"vxgi": 10.0, "path_tracer": 100.0}
+PAPER_CLAIMS = {"VXGI": 10.0, "path tracing": 100.0}
 """Deep Illumination's claims, as ratios of frame time at similar quality: the network ~10x faster than VXGI
 and ~100x faster than path tracing."""
 ACCURACY_KEYS = EVAL_KEYS + ("checkerboard",)
@@ -203,7 +203,7 @@ def plot(result: dict, out: Path) -> Path:
             if r["kind"] == "neural" and r.get("step") == 1 and r.get("precision") in ("fp16", "fp32"):
                 for name, ratio in PAPER_CLAIMS.items():
                     ax.plot([x * ratio], [y], "x", color="grey")
-                    ax.annotate(f"paper: {name.replace('_', ' ')} ~{ratio:.0f}x", (x * ratio, y), fontsize=6,
+                    ax.annotate(f"paper: {name} ~{ratio:.0f}x", (x * ratio, y), fontsize=6,
                                 color="grey", xytext=(3, 3), textcoords="offset points")
                 if r["equal_error"]:
                     ax.plot([r["equal_error"]["pt_ms"]], [y], "*", color="black", ms=8)
