@@ -290,9 +290,8 @@ def _accuracy(settings, ds, variants, net_of, notes, log) -> dict | None:
         steps = [1] + (list(settings.gi_steps) if v["kind"] == "neural" else [])
         for step in steps:
             if ds.width % step or ds.height % step or (ds.width // step) % net.multiple or (ds.height // step) % net.multiple:
-                if step == 1:
-                    notes.append(f"{v['name']} {v['precision']}: no accuracy (the evaluation set's {E} px is not a "
-                                 f"multiple of {net.multiple})")
+                notes.append(f"{v['name']} {v['precision']}" + (f" GI 1/{step}" if step > 1 else "") +
+                             f": no accuracy (the evaluation set's {E} px / {step} is not a multiple of {net.multiple})")
                 continue
             models[f"{v['path']}|{step}"] = (net, step)
     log(f"scoring {len(models)} model variants on {ds.root} ({ds.width}x{ds.height})")
