@@ -73,13 +73,16 @@ def test_view_mode_produces_from_its_sources():
         def network_output(self):
             return ("net",)
 
+        def final(self):
+            return ("final",)
+
         def reference(self):
             return ("ref",)
 
     s = Sources()
     assert view_mode("final").produce(s) == ("buffer", "direct")  # no model: direct light only
     s.has_model = True
-    assert view_mode("final").produce(s) == ("net",)
+    assert view_mode("final").produce(s) == ("final",)  # full resolution, the network's GI upsampled into it
     assert view_mode("depth").produce(s) == ("buffer", "depth")
     assert view_mode("reference").produce(s) == ("ref",)
     assert view_mode("net_output").produce(s) == ("net",)

@@ -1,7 +1,8 @@
 """The deferred GL renderer: a list of named passes (shadows, G-buffer, direct light); a frame is named buffers.
 
 Each pass owns its targets and is timed as one stage by the shared ``StageTimer``. Shadow maps are
-kept per light, so a later frame can reuse the map of a light that did not move.
+kept per light and re-rendered only when what they depend on changed (the light, an object's pose or
+mesh, the shadow settings): a still scene seen from a moving camera renders no shadow map.
 """
 
 from __future__ import annotations
@@ -96,6 +97,10 @@ class Renderer:
         """Per light name: (kind, texture, framebuffer, depth renderbuffer or None)."""
         self._shadows: dict[str, dict] = {}
         """This frame's shadow lookup parameters per light (None entries: shadows off)."""
+        self._shadow_keys: dict[str, tuple] = {}
+        """Per light name: what its cached map was rendered from (``_shadow_key``)."""
+        self.shadow_renders = 0
+        """Shadow maps rendered so far (a cached map is not counted): the shadow cache's witness."""
         self.passes = (("shadows", self._shadow_pass), ("gbuffer", self._gbuffer_pass), ("direct", self._direct_pass))
         """The frame, in order: (stage name, pass(frame view)); each pass is one timed stage."""
         self.width = self.height = 0
@@ -163,6 +168,8 @@ class Renderer:
 
     def _release_shadow_target(self, name: str) -> None:
         unbind_framebuffer(self.ctx)
+        self._shadow_keys.pop(name, None)
+        self._shadows.pop(name, None)
         _, tex, fbo, depth = self._shadow_targets.pop(name)
         for r in (fbo, tex, depth):
             if r is not None:
@@ -216,12 +223,33 @@ class Renderer:
         set_uniform(prog, "m_view", view)
         self._draw_objects(prog, config, view)
 
+    def _shadow_key(self, config: FrameConfig, light, bounds: np.ndarray) -> tuple:
+        """Everything a light's shadow map depends on: the light, each object's pose and the GPU mesh it draws
+        (a mesh loaded again under the same name is a new one), the settings. Not the camera."""
+        objects = tuple((o, id(self.gpu.meshes.get(o.mesh))) for o in config.objects)
+        return (light, objects, tuple(np.asarray(bounds, float).ravel()), self.settings)
+
+    def invalidate_shadows(self) -> None:
+        """Forget the cached shadow maps: the next frame renders them all."""
+        self._shadow_keys.clear()
+
     def _shadow_pass(self, frame: "FrameView") -> None:
-        """Each light's shadow map (none with shadows off)."""
-        self._shadows = {}
+        """Each light's shadow map (none with shadows off), reused from an earlier frame when nothing it
+        depends on moved."""
+        shadows = {}
         for light in frame.config.lights:
-            self._shadows[light.name] = (self._render_shadow(frame.config, light, frame.bounds)
-                                         if self.settings.shadows else None)
+            if not self.settings.shadows:
+                shadows[light.name] = None
+                continue
+            key = self._shadow_key(frame.config, light, frame.bounds)
+            cached = self._shadows.get(light.name)
+            if cached is not None and self._shadow_keys.get(light.name) == key:
+                shadows[light.name] = cached
+                continue
+            shadows[light.name] = self._render_shadow(frame.config, light, frame.bounds)
+            self._shadow_keys[light.name] = key
+            self.shadow_renders += 1
+        self._shadows = shadows
 
     def _render_shadow(self, config: FrameConfig, light, bounds: np.ndarray) -> dict:
         ctx = self.ctx

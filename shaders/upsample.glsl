@@ -1,0 +1,96 @@
+// Neural GI composite at the window's resolution: the network's indirect light, predicted at the GI
+// resolution, upsampled with a joint bilateral filter guided by the full-resolution depth and normals,
+// then added to the full-resolution direct light.
+//
+// Per GI texel the indirect light is the network's output minus the direct light it was given (for an
+// `indirect` model that is exactly what its graph added; for a `full` model it is also the network's
+// own error in the direct light), divided by the texel's albedo (irradiance varies slowly, albedo does
+// not: textures and material edges stay sharp), upsampled, and multiplied by each pixel's own albedo.
+// The GI inputs (depth, normal, albedo, direct) are read from the packed storage buffer the network was
+// fed (rows top first, IN_* offsets as pack.glsl), so the filter sees exactly the texels it predicted.
+#if defined VERTEX_SHADER
+#include "fullscreen.glsl"
+#elif defined FRAGMENT_SHADER
+
+in vec2 v_uv;
+
+uniform sampler2D u_depth;      // full resolution
+uniform sampler2D u_normal;
+uniform sampler2D u_albedo;
+uniform sampler2D u_direct;
+uniform sampler2D u_output;     // the network's output at the GI resolution, rows top first
+uniform ivec2 u_gi_size;
+uniform float u_depth_sigma;    // relative depth difference at which a texel's weight falls to 1/e
+uniform float u_normal_power;   // exponent of the normals' cosine
+uniform bool u_indirect_only;   // write the upsampled indirect light (albedo x irradiance) alone
+
+layout(std430, binding = 0) readonly buffer Packed { float data[]; };
+
+out vec4 out_color;
+
+const float ALBEDO_FLOOR = 0.02;  // below it the demodulated irradiance is mostly the network's noise
+
+struct Texel { float depth; vec3 normal; vec3 albedo; vec3 indirect; };
+
+Texel gi_texel(ivec2 t) {
+    int base = ((u_gi_size.y - 1 - t.y) * u_gi_size.x + t.x) * IN_CHANNELS;
+    Texel g;
+    g.depth = data[base + IN_DEPTH];
+    g.normal = vec3(data[base + IN_NORMAL], data[base + IN_NORMAL + 1], data[base + IN_NORMAL + 2]);
+    g.albedo = vec3(data[base + IN_ALBEDO], data[base + IN_ALBEDO + 1], data[base + IN_ALBEDO + 2]);
+    vec3 direct = vec3(data[base + IN_DIRECT], data[base + IN_DIRECT + 1], data[base + IN_DIRECT + 2]);
+    vec3 out_rgb = texelFetch(u_output, ivec2(t.x, u_gi_size.y - 1 - t.y), 0).rgb;
+    g.indirect = (out_rgb - direct) / max(g.albedo, vec3(ALBEDO_FLOOR));
+    return g;
+}
+
+// How much a GI texel speaks for this pixel: same surface (depth within a fraction of the pixel's) and
+// same orientation. Background (depth 0) matches only background.
+float similarity(Texel g, float z, vec3 n) {
+    if (z <= 0.0 || g.depth <= 0.0) return (z <= 0.0 && g.depth <= 0.0) ? 1.0 : 0.0;
+    float dz = (g.depth - z) / (u_depth_sigma * z);
+    float cn = max(dot(g.normal, n), 0.0);
+    return exp(-dz * dz) * pow(cn, u_normal_power);
+}
+
+void main() {
+    ivec2 p = ivec2(gl_FragCoord.xy);
+    float z = texelFetch(u_depth, p, 0).r;
+    vec3 n = texelFetch(u_normal, p, 0).xyz;
+    vec3 albedo = texelFetch(u_albedo, p, 0).rgb;
+    vec3 direct = texelFetch(u_direct, p, 0).rgb;
+    // This pixel's centre in GI texel coordinates; its 2x2 bilinear neighbours, weighted by similarity.
+    vec2 g = v_uv * vec2(u_gi_size) - 0.5;
+    ivec2 g0 = ivec2(floor(g));
+    vec2 f = g - vec2(g0);
+    vec3 sum = vec3(0.0);
+    float wsum = 0.0;
+    for (int j = 0; j < 2; ++j)
+        for (int i = 0; i < 2; ++i) {
+            ivec2 t = clamp(g0 + ivec2(i, j), ivec2(0), u_gi_size - 1);
+            Texel gt = gi_texel(t);
+            float w = (i == 1 ? f.x : 1.0 - f.x) * (j == 1 ? f.y : 1.0 - f.y) * similarity(gt, z, n);
+            sum += w * gt.indirect;
+            wsum += w;
+        }
+    vec3 indirect;
+    if (wsum > 1e-4) {
+        indirect = sum / wsum;
+    } else {
+        // No neighbour is this surface (a thin object, a silhouette): the most similar texel of the 4x4
+        // around the pixel, else none (no light borrowed from another surface).
+        float best = 1e-6;
+        indirect = vec3(0.0);
+        for (int j = -1; j < 3; ++j)
+            for (int i = -1; i < 3; ++i) {
+                ivec2 t = clamp(g0 + ivec2(i, j), ivec2(0), u_gi_size - 1);
+                Texel gt = gi_texel(t);
+                float s = similarity(gt, z, n);
+                if (s > best) { best = s; indirect = gt.indirect; }
+            }
+    }
+    vec3 c = u_indirect_only ? albedo * indirect : direct + albedo * indirect;
+    out_color = vec4(max(c, vec3(0.0)), 1.0);
+}
+
+#endif
