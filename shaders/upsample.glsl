@@ -77,16 +77,18 @@ void main() {
     if (wsum > 1e-4) {
         indirect = sum / wsum;
     } else {
-        // No neighbour is this surface (a thin object, a silhouette): the most similar texel of the 4x4
-        // around the pixel, else none (no light borrowed from another surface).
-        float best = 1e-6;
+        // No neighbour is this surface (a thin object, a silhouette, a depth discontinuity at every texel):
+        // the closest texel of the 4x4 around the pixel in depth and orientation, never a background texel
+        // for a surface pixel (no light borrowed from the sky), none at all when there is no such texel.
+        float best = 1e30;
         indirect = vec3(0.0);
         for (int j = -1; j < 3; ++j)
             for (int i = -1; i < 3; ++i) {
                 ivec2 t = clamp(g0 + ivec2(i, j), ivec2(0), u_gi_size - 1);
                 Texel gt = gi_texel(t);
-                float s = similarity(gt, z, n);
-                if (s > best) { best = s; indirect = gt.indirect; }
+                if ((gt.depth <= 0.0) != (z <= 0.0)) continue;
+                float d = z > 0.0 ? abs(gt.depth - z) / (u_depth_sigma * z) + 4.0 * (1.0 - dot(gt.normal, n)) : 0.0;
+                if (d < best) { best = d; indirect = gt.indirect; }
             }
     }
     vec3 c = u_indirect_only ? albedo * indirect : direct + albedo * indirect;

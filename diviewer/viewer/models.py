@@ -90,7 +90,7 @@ def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], 
         raise DiviewerError(f"GI resolution '{spec}': use 'model', a fraction of the window (1/2, 1/4, 1/6) "
                             f"or WxH", field="--gi-res") from exc
     if w % m or h % m:
-        near = lambda s: f"{max(m, s // m * m)} or {(s // m + 1) * m}"
+        near = lambda s: f"{m}" if s < m else f"{s // m * m} or {(s // m + 1) * m}"
         raise DiviewerError(f"GI resolution {w}x{h} is not a multiple of the model's stride {m} "
                             f"(width {near(w)}, height {near(h)})", field="--gi-res")
     return w, h
