@@ -66,7 +66,7 @@ def _edge_case(ctx, tmp_path, which: str) -> None:
         np.testing.assert_allclose(got, expected, rtol=2e-3)
         # The GI grid itself straddles the edge: GI column 7 (pixels 28-31) sampled pixel 30, the right side,
         # so a bilinear upsample would have lit pixels 26-29 with the right side's light.
-        assert neural.packed[0][0, 0, 7, 7] == pytest.approx(ALBEDO * 3.0)
+        assert neural.packed[0, 0, 7, 7] == pytest.approx(ALBEDO * 3.0)
     finally:
         neural.release()
         renderer.release()
@@ -100,11 +100,11 @@ def test_final_frame_is_full_resolution_direct_plus_upsampled_indirect(ctx, tmp_
     try:
         frame = renderer.frame()
         neural.run()
-        assert neural.packed[0].shape == (1, H // F, W // F, 10)
+        assert neural.packed.shape == (1, H // F, W // F, 10)
         # Nearest: GI texel (i, j) holds the pixel at floor((i + 0.5) * F) (rows top first in both).
         idx = (np.arange(H // F) + 0.5) * F
         jdx = (np.arange(W // F) + 0.5) * F
-        np.testing.assert_array_equal(neural.packed[0][0, ..., 7:], frame["direct"][idx.astype(int)][:, jdx.astype(int)])
+        np.testing.assert_array_equal(neural.packed[0, ..., 7:], frame["direct"][idx.astype(int)][:, jdx.astype(int)])
         final = np.frombuffer(neural.composite().read(), np.float16).reshape(H, W, 4)[::-1, :, :3]
         # The model doubles the direct light, so the indirect light equals the direct light here (a plane
         # with smoothly varying light: the upsample interpolates it).
@@ -121,7 +121,7 @@ def test_area_downsample_averages_the_footprint(ctx, tmp_path):
         frame = renderer.frame()
         neural.run()
         mean = frame["direct"].reshape(H // F, F, W // F, F, 3).mean(axis=(1, 3))
-        np.testing.assert_allclose(neural.packed[0][0, ..., 7:], mean, rtol=1e-5)
+        np.testing.assert_allclose(neural.packed[0, ..., 7:], mean, rtol=1e-5)
     finally:
         neural.release()
         renderer.release()

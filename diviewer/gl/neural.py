@@ -83,8 +83,8 @@ class NeuralPass:
         self._vao = ctx.vertex_array(self.upsample, [])
         # Two input slots: with pipelining, frame N packs into one while frame N-1's (read by the upsample,
         # which must see the inputs its output was predicted from) stays in the other.
-        self.packed = [np.empty((1, h, w, INPUT_CHANNEL_COUNT), np.float32) for _ in range(2)]
-        self.ssbos = [ctx.buffer(reserve=self.packed[0].nbytes) for _ in range(2)]
+        self._packed = [np.empty((1, h, w, INPUT_CHANNEL_COUNT), np.float32) for _ in range(2)]
+        self.ssbos = [ctx.buffer(reserve=self._packed[0].nbytes) for _ in range(2)]
         self._slot = 0
         self.shown_slot = 0
         """The slot whose inputs the current ``texture`` was predicted from."""
@@ -96,11 +96,16 @@ class NeuralPass:
         self.output: np.ndarray | None = None
         self.timings: dict[str, float] = {}
         """The last frame's stage times (ms), also added to ``timer``."""
-        self.copies = {"download_bytes": self.packed[0].nbytes, "upload_bytes": 0}
+        self.copies = {"download_bytes": self._packed[0].nbytes, "upload_bytes": 0}
         self.latency_ms = 0.0
         """How old the shown GI is when composited: from its inputs' read-back to its upload (ms)."""
         self._worker: ThreadPoolExecutor | None = None
         self._inflight: tuple[Future, int, float] | None = None
+
+    @property
+    def packed(self) -> np.ndarray:
+        """The inputs (1, H, W, 10) the shown prediction was made from, as the network read them."""
+        return self._packed[self.shown_slot]
 
     @property
     def pipelined(self) -> bool:
@@ -118,12 +123,12 @@ class NeuralPass:
         self.ssbos[slot].bind_to_storage_buffer(0)
         self.program.run((w + 7) // 8, (h + 7) // 8, 1)
         self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
-        self.ssbos[slot].read_into(self.packed[slot])
+        self.ssbos[slot].read_into(self._packed[slot])
 
     def _infer(self, slot: int) -> tuple[np.ndarray, float]:
         """Run the model on a slot's inputs (on the worker thread when pipelined); its own timer, its wall ms."""
         t0 = time.perf_counter()
-        y = self.model.run(self.packed[slot], timer=StageTimer())
+        y = self.model.run(self._packed[slot], timer=StageTimer())
         return y, (time.perf_counter() - t0) * 1e3
 
     def run(self) -> moderngl.Texture:
