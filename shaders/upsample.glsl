@@ -1,13 +1,7 @@
 // Neural GI composite at the window's resolution: the network's indirect light, predicted at the GI
-// resolution, upsampled with a joint bilateral filter guided by the full-resolution depth and normals,
-// then added to the full-resolution direct light.
-//
-// Per GI texel the indirect light is the network's output minus the direct light it was given (for an
-// `indirect` model that is exactly what its graph added; for a `full` model it is also the network's
-// own error in the direct light), divided by the texel's albedo (irradiance varies slowly, albedo does
-// not: textures and material edges stay sharp), upsampled, and multiplied by each pixel's own albedo.
-// The GI inputs (depth, normal, albedo, direct) are read from the packed storage buffer the network was
-// fed (rows top first, IN_* offsets as pack.glsl), so the filter sees exactly the texels it predicted.
+// resolution and demodulated by gi_guide.glsl, upsampled with a joint bilateral filter guided by the
+// full-resolution depth and normals, multiplied by each pixel's albedo and added to the full-resolution
+// direct light.
 #if defined VERTEX_SHADER
 #include "fullscreen.glsl"
 #elif defined FRAGMENT_SHADER
@@ -18,30 +12,20 @@ uniform sampler2D u_depth;      // full resolution
 uniform sampler2D u_normal;
 uniform sampler2D u_albedo;
 uniform sampler2D u_direct;
-uniform sampler2D u_output;     // the network's output at the GI resolution, rows top first
+uniform sampler2D u_irradiance_depth;  // GI resolution (gi_guide.glsl): indirect / albedo, depth
+uniform sampler2D u_guide_normal;      // GI resolution: normal
 uniform ivec2 u_gi_size;
 uniform float u_depth_sigma;    // relative depth difference at which a texel's weight falls to 1/e
 uniform float u_normal_power;   // exponent of the normals' cosine
 uniform bool u_indirect_only;   // write the upsampled indirect light (albedo x irradiance) alone
 
-layout(std430, binding = 0) readonly buffer Packed { float data[]; };
-
 out vec4 out_color;
 
-const float ALBEDO_FLOOR = 0.02;  // below it the demodulated irradiance is mostly the network's noise
-
-struct Texel { float depth; vec3 normal; vec3 albedo; vec3 indirect; };
+struct Texel { float depth; vec3 normal; vec3 indirect; };
 
 Texel gi_texel(ivec2 t) {
-    int base = ((u_gi_size.y - 1 - t.y) * u_gi_size.x + t.x) * IN_CHANNELS;
-    Texel g;
-    g.depth = data[base + IN_DEPTH];
-    g.normal = vec3(data[base + IN_NORMAL], data[base + IN_NORMAL + 1], data[base + IN_NORMAL + 2]);
-    g.albedo = vec3(data[base + IN_ALBEDO], data[base + IN_ALBEDO + 1], data[base + IN_ALBEDO + 2]);
-    vec3 direct = vec3(data[base + IN_DIRECT], data[base + IN_DIRECT + 1], data[base + IN_DIRECT + 2]);
-    vec3 out_rgb = texelFetch(u_output, ivec2(t.x, u_gi_size.y - 1 - t.y), 0).rgb;
-    g.indirect = (out_rgb - direct) / max(g.albedo, vec3(ALBEDO_FLOOR));
-    return g;
+    vec4 a = texelFetch(u_irradiance_depth, t, 0);
+    return Texel(a.a, texelFetch(u_guide_normal, t, 0).xyz, a.rgb);
 }
 
 // How much a GI texel speaks for this pixel: same surface (depth within a fraction of the pixel's) and

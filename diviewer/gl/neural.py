@@ -79,7 +79,8 @@ class NeuralPass:
         self.gi_size = (w, h)
         defines = dict(PACK_DEFINES, **({"AREA": 1} if settings.downsample == "area" else {}))
         self.program = renderer.shaders.compute("pack.glsl", defines)
-        self.upsample = renderer.shaders.program("upsample.glsl", PACK_DEFINES)
+        self.guide = renderer.shaders.compute("gi_guide.glsl", PACK_DEFINES)
+        self.upsample = renderer.shaders.program("upsample.glsl")
         self._vao = ctx.vertex_array(self.upsample, [])
         # Two input slots: with pipelining, frame N packs into one while frame N-1's (read by the upsample,
         # which must see the inputs its output was predicted from) stays in the other.
@@ -91,6 +92,10 @@ class NeuralPass:
         self.texture = ctx.texture((w, h), 3, dtype="f4")
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
+        self.guides = [ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
+        """Per GI texel: (indirect light / albedo, depth) and (normal, 0), made by gi_guide.glsl."""
+        for t in self.guides:
+            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.final: moderngl.Texture | None = None
         self._final_fbo: moderngl.Framebuffer | None = None
         self.output: np.ndarray | None = None
@@ -194,19 +199,28 @@ class NeuralPass:
             raise RuntimeError("NeuralPass.run has not been called")
         r, prog, s = self.renderer, self.upsample, self.settings
         fbo = self._final_target()
+        w, h = self.gi_size
         with self.timer.stage("upsample", gpu=True):
+            self.ssbos[self.shown_slot].bind_to_storage_buffer(0)
+            self.texture.use(location=0)
+            set_uniform(self.guide, "u_output", 0)
+            set_uniform(self.guide, "u_gi_size", self.gi_size)
+            for i, t in enumerate(self.guides):
+                t.bind_to_image(i, read=False, write=True)
+            self.guide.run((w + 7) // 8, (h + 7) // 8, 1)
+            self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
             fbo.use()
             self.ctx.enable_only(moderngl.NOTHING)
             for i, name in enumerate(("depth", "normal", "albedo", "direct")):
                 r.textures[name].use(location=i)
                 set_uniform(prog, f"u_{name}", i)
-            self.texture.use(location=4)
-            set_uniform(prog, "u_output", 4)
+            for i, (name, t) in enumerate(zip(("u_irradiance_depth", "u_guide_normal"), self.guides)):
+                t.use(location=4 + i)
+                set_uniform(prog, name, 4 + i)
             set_uniform(prog, "u_gi_size", self.gi_size)
             set_uniform(prog, "u_depth_sigma", float(s.depth_sigma))
             set_uniform(prog, "u_normal_power", float(s.normal_power))
             set_uniform(prog, "u_indirect_only", bool(indirect_only))
-            self.ssbos[self.shown_slot].bind_to_storage_buffer(0)
             self._vao.render(moderngl.TRIANGLES, vertices=3)
         self.timings["upsample"] = self.timer.times.get("upsample", 0.0)
         return self.final
@@ -225,6 +239,6 @@ class NeuralPass:
         self._inflight = None
         self._release_final()
         self._vao.release()
-        for b in self.ssbos:
+        for b in (*self.ssbos, *self.guides):
             b.release()
         self.texture.release()
