@@ -348,8 +348,10 @@ def test_old_libllvm_is_not_tried(monkeypatch, tmp_path):
     old = tmp_path / "libLLVM-15.so"
     old.write_bytes(b"")
     monkeypatch.setenv("DRJIT_LIBLLVM_PATH", str(old))
-    monkeypatch.setattr(ref, "_probe_llvm", lambda path: pytest.fail("probed an LLVM 15"))
-    info = ref._choose_llvm(mitsuba)
+    from diviewer.reference import variant
+
+    monkeypatch.setattr(variant, "_probe_llvm", lambda path: pytest.fail("probed an LLVM 15"))
+    info = variant._choose_llvm(mitsuba)
     assert info.variant == "scalar_rgb" and "LLVM 15" in info.reason
 
 
