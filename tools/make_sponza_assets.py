@@ -1,6 +1,7 @@
 """Make assets/sponza/ from the full Sponza in shared/scenes/sponza: base-colour textures only, downscaled.
 
 Usage: python tools/make_sponza_assets.py [--src ../shared/scenes/sponza] [--size 512] [--quality 90]
+       python tools/make_sponza_assets.py --measure   (albedo error of the shipped textures vs full size)
 
 The renderers use diffuse albedo only, so normal maps are dropped. Each base-colour texture is resized
 (Lanczos, in sRGB as stored) so that its longer side is at most --size; textures without an alpha
@@ -81,13 +82,53 @@ def compact(src: Path, out: Path, size: int, quality: int) -> dict:
     return {str(p.relative_to(out)): p.stat().st_size for p in sorted(out.rglob("*")) if p.is_file()}
 
 
+def measure(src: Path, sizes=(256, 512), stops=(0.0, 0.3, 0.55, 0.8)) -> list[dict]:
+    """G-buffer albedo PSNR (linear and sRGB-encoded, peak 1) of the shipped textures against the full-size
+    ones, at camera path positions ``stops`` of the shipped scene, for each square render size."""
+    import dataclasses
+    import tomllib
+
+    import numpy as np
+
+    from diviewer.gl.context import create_context
+    from diviewer.gl.renderer import Renderer
+    from diviewer.metrics import psnr
+    from diviewer.scene.loader import parse_scene
+    from diviewer.scene.sampler import camera_on_path
+    from diviewer.scene.shapes import linear_to_srgb
+
+    toml = ROOT / "assets" / "scenes" / "sponza.toml"
+    data = tomllib.loads(toml.read_text())
+    shipped = parse_scene(data, path=toml)
+    full = parse_scene({**data, "gltf": {"file": str((src / "Sponza.gltf").resolve())}}, path=toml)
+    ctx = create_context("egl")
+    rows = []
+    for n in sizes:
+        ra, rb = Renderer(ctx, shipped, n, n), Renderer(ctx, full, n, n)
+        for s in stops:
+            config = dataclasses.replace(shipped.default, camera=camera_on_path(shipped, s))
+            a, b = ra.frame(config)["albedo"], rb.frame(config)["albedo"]
+            rows.append({"res": n, "path": s, "psnr_linear": psnr(a, b), "psnr_srgb": psnr(linear_to_srgb(a), linear_to_srgb(b)),
+                         "max_abs": float(np.abs(a - b).max())})
+            print(f"{n}x{n} path {s:.2f}: albedo PSNR {rows[-1]['psnr_linear']:.2f} dB linear, "
+                  f"{rows[-1]['psnr_srgb']:.2f} dB sRGB", flush=True)
+        ra.release()
+        rb.release()
+    return rows
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--src", type=Path, default=DEFAULT_SRC)
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
     ap.add_argument("--size", type=int, default=512, help="longest texture side, pixels")
     ap.add_argument("--quality", type=int, default=90, help="JPEG quality")
+    ap.add_argument("--measure", action="store_true",
+                    help="only measure: G-buffer albedo of the shipped textures against the full-size ones")
     a = ap.parse_args(argv)
+    if a.measure:
+        measure(a.src)
+        return
     files = compact(a.src, a.out, a.size, a.quality)
     print(f"{a.out}: {len(files)} files, {sum(files.values()) / 1e6:.2f} MB")
 
