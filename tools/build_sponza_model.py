@@ -119,7 +119,10 @@ def main() -> None:
     dst = ROOT / "assets" / "models" / "sponza.onnx"
     src = Path(chosen["model"])
     shutil.copyfile(src, dst)
-    shutil.copyfile(src.with_suffix(".json"), dst.with_suffix(".json"))
+    card = json.loads(src.with_suffix(".json").read_text())
+    card["ladder"] = {"chosen_K": chosen["K"], "why": record["why"], "noise_floor": record["noise_floor"],
+                      "rows": [{k: r[k] for k in ("K", "bytes", "inference_ms", "splits")} for r in ladder]}
+    dst.with_suffix(".json").write_text(json.dumps(card, indent=1))
     run_dir = work / f"train_k{chosen['K']}_{a.target}"
     shutil.copyfile(run_dir / "curves.png", dst.with_name("sponza_curves.png"))
     shutil.copyfile(run_dir / "metrics.csv", dst.with_name("sponza_metrics.csv"))
