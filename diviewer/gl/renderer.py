@@ -78,6 +78,7 @@ class Renderer:
         self.gpu = GpuScene(ctx, scene.meshes, scene.materials)
         self._screen_vaos: dict[int, moderngl.VertexArray] = {}
         self._draw_cache: tuple = (None, None, [])
+        self._bounds: tuple = (None, None, None)
         self.timings: dict[str, float] = {}
         self.timing = False
         self._shadow_dir = ctx.depth_texture((settings.shadow_size, settings.shadow_size))
@@ -156,7 +157,10 @@ class Renderer:
         proj = config.camera.projection(aspect)
         with self._timed("gbuffer"):
             self._gbuffer_pass(config, view, proj)
-        bounds = self.scene.bounds(config)
+        if self._bounds[0] is not self.scene or self._bounds[1] is not config.objects:
+            # The shadow maps' fit; a loop over the objects, so once per (scene, objects tuple).
+            self._bounds = (self.scene, config.objects, self.scene.bounds(config))
+        bounds = self._bounds[2]
         self._direct_fbo.use()
         self._direct_fbo.clear(0.0, 0.0, 0.0, 0.0)
         for light in config.lights:
