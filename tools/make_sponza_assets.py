@@ -95,7 +95,7 @@ def measure(src: Path, sizes=(256, 512), stops=(0.0, 0.3, 0.55, 0.8)) -> list[di
     from diviewer.metrics import psnr
     from diviewer.scene.loader import parse_scene
     from diviewer.scene.sampler import camera_on_path
-    from diviewer.scene.shapes import linear_to_srgb
+    from diviewer.scene.colour import linear_to_srgb
 
     toml = ROOT / "assets" / "scenes" / "sponza.toml"
     data = tomllib.loads(toml.read_text())

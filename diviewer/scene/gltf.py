@@ -17,7 +17,7 @@ import numpy as np
 from diviewer.errors import DiviewerError
 from diviewer.scene import camera as cam
 from diviewer.scene.model import Material, Mesh, Object
-from diviewer.scene.shapes import srgb_to_linear
+from diviewer.scene.colour import srgb_to_linear
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
