@@ -186,6 +186,20 @@ def test_alpha_cutout_mitsuba(tmp_path):
     check_shadow(ref.MitsubaFrame(scene, slanted(scene), 64, 64).direct(16, 0), 64)
 
 
+def test_alpha_cutout_mitsuba_scalar(tmp_path):
+    """The see-through AOVs also run one ray at a time under scalar_rgb (the variant without a libLLVM)."""
+    pytest.importorskip("mitsuba")
+    from diviewer.reference import mitsuba as ref
+
+    scene = checker_scene(tmp_path)
+    ref.select_variant("scalar_rgb")
+    try:
+        a = ref.MitsubaFrame(scene, scene.default, 16, 16).aovs(4, 0)
+    finally:
+        ref.select_variant()
+    check_cutout(a["albedo"], a["depth"], 16)
+
+
 # --- Sponza: the Mitsuba cross-checks of tests/test_reference.py, at tiny size -----------------------------------
 
 def test_sponza_mitsuba_matches_gl(ctx, sponza):

@@ -44,7 +44,7 @@ def _trace(mi, dr, scene, ray, u_stream):
         hit = active & si.is_valid()
         bsdf = si.bsdf(ray)
         through = hit & (u_stream() < bsdf.eval_null_transmission(si, hit)[0])
-        stop = hit & ~through
+        stop = dr.select(through, False, hit)  # hit & ~through; ~ on a Python bool (scalar_rgb) is an int
         out_t = dr.select(stop, total + si.t, out_t)
         out_sn = dr.select(stop, si.sh_frame.n, out_sn)
         out_gn = dr.select(stop, si.n, out_gn)
@@ -78,6 +78,6 @@ def trace_aovs(mi_scene, width: int, height: int, spp: int, seed: int) -> np.nda
                                    mi.Point2f(0.5, 0.5))
         pcg = mi.PCG32(size=len(xs), initstate=int(seed))
         t, sn, gn, al = _trace(mi, dr, mi_scene, mi.Ray3f(ray), pcg.next_float32)
-        flat = np.stack([np.asarray(t), *(np.asarray(v) for v in (sn.x, sn.y, sn.z, gn.x, gn.y, gn.z))
-                         , *(np.asarray(c) for c in (al.x, al.y, al.z))], axis=-1).astype(np.float32)
+        channels = (t, sn.x, sn.y, sn.z, gn.x, gn.y, gn.z, al.x, al.y, al.z)
+        flat = np.stack([np.asarray(c) for c in channels], axis=-1).astype(np.float32)
     return flat.reshape(height, width, spp, 10).mean(axis=2)
