@@ -218,7 +218,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
                     path.unlink()
             finally:
                 gb.release()
-        accuracy = _accuracy(settings, ds, variants, net_of, notes, log)
+        accuracy = _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log)
         temporal = _temporal(ctx, settings, scene, ds, variants, net_of, mode, notes, log)
     pt = _path_tracer_timing(settings, scene, ds, configs, notes, log, time_path_tracer)
     rows.extend(pt["rows"])
@@ -277,17 +277,18 @@ def _open_evalset(settings, scene, notes):
     return ds
 
 
-def _accuracy(settings, ds, variants, net_of, notes, log) -> dict | None:
+def _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log) -> dict | None:
     """Scores at the evaluation set's resolution, keyed like rows' ``accuracy_key``."""
     if ds is None:
         return None
-    from diviewer.bench.runner import score_evalset
+    from diviewer.bench.runner import GlBench, score_evalset
 
     E = ds.width
     models = {}
     for v in variants:
         net = net_of(v)
-        steps = [1] + (list(settings.gi_steps) if v["kind"] == "neural" else [])
+        steps = [1] + (list(settings.gi_steps) if v["kind"] == "neural" and v["precision"] == v["meta"]["precision"]
+                       else [])
         for step in steps:
             if ds.width % step or ds.height % step or (ds.width // step) % net.multiple or (ds.height // step) % net.multiple:
                 notes.append(f"{v['name']} {v['precision']}" + (f" GI 1/{step}" if step > 1 else "") +
@@ -295,7 +296,12 @@ def _accuracy(settings, ds, variants, net_of, notes, log) -> dict | None:
                 continue
             models[f"{v['path']}|{step}"] = (net, step)
     log(f"scoring {len(models)} model variants on {ds.root} ({ds.width}x{ds.height})")
-    scored = score_evalset(ds, models, settings.eval_frames, log)
+    gl = GlBench(ctx, scene, ds.width, ds.height, mode) if any(step > 1 for _, step in models.values()) else None
+    try:
+        scored = score_evalset(ds, models, settings.eval_frames, gl, log)
+    finally:
+        if gl is not None:
+            gl.release()
     scored["path"] = str(ds.root)
     scored["resolution"] = [ds.width, ds.height]
     scored["reference_spp"] = ds.manifest["spp"]

@@ -14,12 +14,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from diviewer.encoding import input_channel_slices
 from diviewer.timing import StageTimer
 
 STAGES = ("shadows", "gbuffer", "direct", "readback", "inference", "upload", "upsample", "composite")
 """Every stage a GL frame may have, in frame order; the path tracer's one stage is ``path_trace``."""
-_DIRECT = input_channel_slices()["direct"]
 
 
 def stats(values) -> dict[str, float]:
@@ -90,21 +88,22 @@ class GlBench:
         return self.run(configs, warmup, lambda c: (self.renderer.textures["direct"], False))
 
     def time_model(self, net, configs, warmup: int, step: int = 1) -> dict:
-        from diviewer.gl.neural import NeuralPass
-        from diviewer.gl.upsample import UpsamplePass
-
-        neural = NeuralPass(self.ctx, self.renderer, net, step=step)
-        up = UpsamplePass(self.ctx, neural) if step > 1 else None
+        """The viewer's neural frame: pack at the GI resolution (frame / step), infer, upload, the joint
+        bilateral upsample over the frame's direct light (diviewer.gl.neural), composite."""
+        neural = self.neural_pass(net, step)
         try:
             def frame(config):
-                tex = neural.run()
-                return (tex, True) if up is None else (up.run(), False)
+                neural.run()
+                return neural.composite(), False
 
             return self.run(configs, warmup, frame)
         finally:
-            if up is not None:
-                up.release()
             neural.release()
+
+    def neural_pass(self, net, step: int = 1):
+        from diviewer.gl.neural import NeuralPass
+
+        return NeuralPass(self.ctx, self.renderer, net, gi_size=(self.width // step, self.height // step))
 
     def buffers(self, config) -> np.ndarray:
         """The model input of one configuration at this resolution, (1, H, W, 10) (for calibration)."""
@@ -146,44 +145,22 @@ def time_path_tracer(scene, configs, width: int, height: int, ladder: list[int],
 
 # --- accuracy ------------------------------------------------------------------------------------------------------
 
-def gi_lowres(net, buffers: np.ndarray, step: int) -> np.ndarray:
-    """What NeuralPass(step) + UpsamplePass compute, on the CPU: the buffers point-sampled at block centres
-    (pack.glsl with PACK_STEP), the model, its indirect light bilinearly upsampled (clamped at the edges, as
-    GL's LINEAR filter) and added to the full-resolution direct light. ``buffers``: (H, W, 10), rows top first."""
-    if step == 1:
-        return net.run(buffers)
-    H, W = buffers.shape[:2]
-    h, w = H // step, W // step
-    # GL row (bottom first) p*step + step/2 is top-first row H-1-(p*step + step/2); pack.glsl writes row h-1-p.
-    rows = (H - 1 - (np.arange(h) * step + step // 2))[::-1]
-    cols = np.arange(w) * step + step // 2
-    lo = np.ascontiguousarray(buffers[rows][:, cols])
-    indirect = net.run(lo) - lo[..., _DIRECT]
-    return buffers[..., _DIRECT] + bilinear_upsample(indirect, step)
+def read_final(tex) -> np.ndarray:
+    """A NeuralPass's composited frame (half floats, rows bottom first) as (H, W, 3) float32, top row first."""
+    w, h = tex.size
+    raw = np.frombuffer(tex.read(), np.float16).reshape(h, w, 4)[..., :3]
+    return np.ascontiguousarray(np.flipud(raw), dtype=np.float32)
 
 
-def bilinear_upsample(img: np.ndarray, step: int) -> np.ndarray:
-    """(h, w, C) to (h*step, w*step, C) as GL's LINEAR filter samples it at the larger image's pixel centres."""
-    h, w = img.shape[:2]
-
-    def taps(n_out, n_in):
-        c = np.clip((np.arange(n_out) + 0.5) / step - 0.5, 0, n_in - 1)
-        i0 = np.floor(c).astype(int)
-        i1 = np.minimum(i0 + 1, n_in - 1)
-        return i0, i1, (c - i0)
-
-    y0, y1, fy = taps(h * step, h)
-    x0, x1, fx = taps(w * step, w)
-    top = img[y0][:, x0] * (1 - fx)[None, :, None] + img[y0][:, x1] * fx[None, :, None]
-    bot = img[y1][:, x0] * (1 - fx)[None, :, None] + img[y1][:, x1] * fx[None, :, None]
-    return (top * (1 - fy)[:, None, None] + bot * fy[:, None, None]).astype(np.float32)
-
-
-def score_evalset(ds, models: dict, frames_per_split: int | None, log=print) -> dict:
+def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | None = None, log=print) -> dict:
     """Every method's pooled metrics over the evaluation set's frames (both splits).
 
+    A model at its full resolution (step 1) is scored on its output for the stored buffers, as `diviewer eval`
+    does; below it (step > 1) on the frame the viewer shows: the configuration rendered again by ``gl`` (at
+    the set's resolution: the same buffers), packed at the GI resolution, upsampled and composited.
+
     Args:
-        models: key -> (NeuralGI, step); keys of models that cannot run at the set's resolution are skipped.
+        models: key -> (NeuralGI, step).
     Returns:
         ``{"frames", "ladder_spp", "methods": {key: aggregate}}`` with ``direct``, ``noise_floor`` and
         ``pt_spp<n>`` beside the models; each aggregate carries its ``equivalent_spp``.
@@ -199,20 +176,37 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, log=print) -> 
     channels = {"direct": "direct", "noise_floor": info["second_seed_channel"],
                 **{f"pt_spp{n}": ch for n, ch in zip(ladder_spp, info["ladder_channels"])}}
     idx = [i for s in EVAL_SPLITS for i in ds.indices(s)[:frames_per_split]]
+    from diviewer.scene.loader import config_from_dict
+
     rows = {k: [] for k in (*models, *channels)}
-    for i in idx:
-        f = ds.load(i)
-        mask = flat_mask(f["depth"], f["normal"], f["albedo"])
-        buffers = pack_buffers(f)
-        for key, (net, step) in models.items():
-            rows[key].append(score_frame(gi_lowres(net, buffers, step), f["pt"], exposure, mask))
-        for key, ch in channels.items():
-            rows[key].append(score_frame(f[ch], f["pt"], exposure, mask))
+    passes = {key: gl.neural_pass(net, step) for key, (net, step) in models.items() if step > 1}
+    try:
+        for i in idx:
+            f = ds.load(i)
+            mask = flat_mask(f["depth"], f["normal"], f["albedo"])
+            if passes:
+                gl.renderer.render(config_from_dict(gl.scene, _entry(ds, i)["config"]))
+            for key, (net, step) in models.items():
+                if step == 1:
+                    image = net.run(pack_buffers(f))
+                else:
+                    passes[key].run()
+                    image = read_final(passes[key].composite())
+                rows[key].append(score_frame(image, f["pt"], exposure, mask))
+            for key, ch in channels.items():
+                rows[key].append(score_frame(f[ch], f["pt"], exposure, mask))
+    finally:
+        for p in passes.values():
+            p.release()
     methods = {k: _aggregate(r) for k, r in rows.items() if r}
     ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
     for m in methods.values():
         m["equivalent_spp"] = _equivalent(m, ladder_spp, ladder)
     return {"frames": len(idx), "ladder_spp": ladder_spp, "exposure": exposure, "methods": methods}
+
+
+def _entry(ds, index: int) -> dict:
+    return next(f for f in ds.frames if f["index"] == index)
 
 
 # --- temporal stability --------------------------------------------------------------------------------------------

@@ -5,10 +5,11 @@ Usage::
     diviewer view --scene cornell                      # interactive, the scene's model if one is shipped
     diviewer view --frames 60 --screenshot shot.png    # scripted: 60 frames, save the last, exit
 
-Each frame: the GL renderer draws the G-buffer and direct light at the GI resolution (the model's
-training resolution when a model is loaded, else the window's framebuffer), the neural pass turns
-them into the final image, the display pass draws the view mode's image into the window (letterboxed
-to the GI aspect ratio), and the panel goes on top. Nothing here imports torch. The rooms: window.py
+Each frame: the GL renderer draws shadows (cached while nothing moves), the G-buffer and direct light
+at the window's framebuffer resolution; the neural pass reduces them to the GI resolution (``gi_res``:
+the model's training size or a fraction of the window), runs the network (optionally one frame
+behind, on a worker thread), and upsamples its indirect light over the full-resolution direct light;
+the display pass draws the view mode's image into the window, and the panel goes on top. Nothing here imports torch. The rooms: window.py
 (size, scale, letterbox), input.py (key table), panel.py, screenshots.py, sources.py (the view modes'
 textures), models.py (which model), state.py (what is shown, no GL).
 """
@@ -23,10 +24,11 @@ from pathlib import Path
 
 from diviewer.errors import DiviewerError
 from diviewer.gl.display import Image, Look, depth_range
+from diviewer.gl.neural import GISettings
 from diviewer.gl.renderer import RenderSettings
 from diviewer.reference.progressive import ReferenceSettings
 from diviewer.scene.model import Scene
-from diviewer.viewer.models import model_candidates, open_model
+from diviewer.viewer.models import gi_resolution, model_candidates, open_model
 from diviewer.viewer.stats import STAGES
 from diviewer.viewer.view_modes import Unavailable, view_mode
 
@@ -48,7 +50,13 @@ class ViewerSettings:
     controller: str = "fly"
     """Camera controller at start: fly or orbit."""
     timing: bool = True
-    """Time each stage (waits for the GPU between stages: the frame is a little slower, the numbers are honest)."""
+    """Time each stage: GL stages by GPU timer queries (by waiting for the GPU around them where the driver
+    has none), the rest by the wall clock."""
+    gi_res: str = "model"
+    """The neural GI's resolution: ``model`` (its training size), a fraction of the window (``1/4``: snapped
+    to the model's stride) or ``WxH`` (a multiple of the stride, else refused)."""
+    gi: GISettings = field(default_factory=GISettings)
+    """How the GI inputs are reduced, the output upsampled, and whether inference runs one frame behind."""
     panel: bool = True
     render: RenderSettings = field(default_factory=RenderSettings)
     reference: ReferenceSettings = field(default_factory=ReferenceSettings)
@@ -102,8 +110,9 @@ class Viewer:
         self.state = ViewerState(scene, controller=settings.controller)
         self.state.show_panel = settings.panel
         self.shaders = ShaderCache(self.ctx)
-        self.timer = stage_timer(self.ctx, sync=settings.timing)
+        self.timer = stage_timer(self.ctx)
         """One timer for every stage of a frame: renderer passes, neural pass, inference, display, panel."""
+        self.set_timing(settings.timing)
         fb_w, fb_h = (max(1, s) for s in self.window.fb_size)
         self.renderer = Renderer(self.ctx, scene, fb_w, fb_h, settings.render, self.shaders, timer=self.timer)
         self.display = DisplayPass(self.ctx, self.shaders)
@@ -134,34 +143,64 @@ class Viewer:
         self.set_model(settings.model)
 
     @property
-    def gi_size(self) -> tuple[int, int]:
+    def render_size(self) -> tuple[int, int]:
+        """The G-buffer's resolution: the window's framebuffer."""
         return self.renderer.width, self.renderer.height
+
+    @property
+    def gi_size(self) -> tuple[int, int]:
+        """The neural GI's resolution (the render size without a model)."""
+        return self.neural.gi_size if self.neural is not None else self.render_size
+
+    def _make_neural(self, model) -> None:
+        """The neural pass for ``model`` at the GI resolution the settings ask of this window."""
+        from diviewer.gl.neural import NeuralPass
+
+        size = gi_resolution(self.settings.gi_res, self.render_size, model.resolution, model.multiple)
+        self.neural = NeuralPass(self.ctx, self.renderer, model, size, self.settings.gi)
+        self.state.gi_res = self.settings.gi_res
+
+    def set_gi_res(self, spec: str) -> tuple[int, int]:
+        """Run the network at another GI resolution (``model``, ``1/4``, ``WxH``); refused sizes change nothing."""
+        old = self.settings
+        self.settings = dataclasses.replace(old, gi_res=str(spec))
+        if self.model is not None:
+            try:
+                gi_resolution(self.settings.gi_res, self.render_size, self.model.resolution, self.model.multiple)
+            except DiviewerError:
+                self.settings = old
+                raise
+            self.neural.release()
+            self._make_neural(self.model)
+        return self.gi_size
+
+    def set_pipelined(self, on: bool) -> None:
+        """Run inference one frame behind on a worker thread (GL and onnxruntime overlap) or in the frame."""
+        self.settings = dataclasses.replace(self.settings, gi=dataclasses.replace(self.settings.gi, pipelined=bool(on)))
+        if self.model is not None:
+            self.neural.release()
+            self._make_neural(self.model)
 
     def set_model(self, spec: str | Path | None) -> None:
         """Load a model (path, ``auto`` or ``none``); without one the viewer shows direct light and says why."""
-        from diviewer.gl.neural import NeuralPass
-
         self._drop_model()
         model, message = open_model(spec, self.state.scene, self.settings.provider)
         st = self.state
         st.model_message, st.model_meta, st.provider = message, None, ""
         st.model_name = None
+        self._fit_renderer_to_window()
         if model is not None:
-            w, h = model.resolution
+            # A GI resolution the model cannot run at is the user's request, not the model's fault: raised.
+            gi_resolution(self.settings.gi_res, self.render_size, model.resolution, model.multiple)
             try:
-                model.check_size(w, h)
-                self.renderer.resize(w, h)
-                self.neural = NeuralPass(self.ctx, self.renderer, model)
+                self._make_neural(model)
             except DiviewerError as exc:
                 st.model_message = f"model refused: {exc}"
-                self._fit_renderer_to_window()
                 return
             self.model = model
             st.model_name = model.path.name
             st.model_meta = dict(model.meta)
             st.provider = model.provider
-        else:
-            self._fit_renderer_to_window()
         if message and spec not in (None, "auto", "none"):
             print(f"diviewer view: {message}", file=sys.stderr)
 
@@ -190,11 +229,27 @@ class Viewer:
 
     @property
     def timer_sync(self) -> bool:
-        return self.timer.sync is not None
+        """Whether stages are timed (the panel's checkbox)."""
+        return self.timer.sync is not None or self.timer.gpu_query is not None
+
+    @property
+    def timing_method(self) -> str:
+        return "GPU timer queries" if self.timer.gpu_query is not None else (
+            "wall clock around a GPU sync" if self.timer.sync is not None else "off")
 
     def set_timing(self, on: bool) -> None:
-        """Wait for the GPU around each GL stage (honest stage times, a slower frame) or not."""
-        self.timer.sync = self.ctx.finish if on else None
+        """Time GL stages by timer queries (ARB_timer_query, core since GL 3.3), or by waiting for the GPU
+        around them where the driver lacks queries; or not at all."""
+        self.timer.release()
+        self.timer.sync = self.timer.gpu_query = None
+        if on:
+            try:
+                with self.ctx.query(time=True) as probe:
+                    pass
+                probe.elapsed  # noqa: B018 (raises where the driver has no timer queries)
+                self.timer.gpu_query = lambda: self.ctx.query(time=True)
+            except Exception:  # noqa: BLE001
+                self.timer.sync = self.ctx.finish
         self.settings = dataclasses.replace(self.settings, timing=bool(on))
 
     def set_vsync(self, on: bool) -> None:
@@ -205,23 +260,24 @@ class Viewer:
         self.window.resize(width, height)
 
     def view_rect(self) -> tuple[int, int, int, int]:
-        """Where the GI image is drawn in the framebuffer: (x, y, w, h), y from the bottom."""
-        return self.window.view_rect(self.gi_size)
+        """Where the image is drawn in the framebuffer: (x, y, w, h), y from the bottom (all of it, but for
+        the frame after a resize, still drawn at the old size and letterboxed)."""
+        return self.window.view_rect(self.render_size)
 
     def pick_window_point(self, x: float, y: float) -> str | None:
         """Select the object under window point (x, y) (screen units, y down)."""
-        point = self.window.to_image(x, y, self.gi_size)
+        point = self.window.to_image(x, y, self.render_size)
         if point is None:
             return self.state.select_object(None)
-        return self.state.pick(*point, *self.gi_size)
+        return self.state.pick(*point, *self.render_size)
 
     def screenshot(self, path: str | Path) -> Path:
-        """Save the view (without the panel) at the GI resolution as PNG, and the frame as JSON, at the
+        """Save the view (without the panel) at the render resolution as PNG, and the frame as JSON, at the
         end of the next frame (so image and configuration agree)."""
         return self.shots.request(path)
 
     def window_screenshot(self, path: str | Path) -> Path:
-        """Save the whole window (with the panel) as PNG at the end of the next frame."""
+        """Save what the window shows (with the panel), read back from its framebuffer before the swap."""
         return self.shots.request_window(path)
 
     # --- drawing -----------------------------------------------------------------------------------
@@ -250,8 +306,10 @@ class Viewer:
     def _save_view(self, path: Path, images: list[Image]) -> Path:
         from diviewer.viewer.screenshots import view_record
 
-        st, size = self.state, self.gi_size
-        record = view_record(st, size, self.model.path if self.model is not None else None, self.gl_renderer)
+        st, size = self.state, self.render_size
+        record = view_record(st, size, self.model.path if self.model is not None else None, self.gl_renderer,
+                             gi_size=self.gi_size if self.neural is not None else None,
+                             gi_settings=dataclasses.asdict(self.settings.gi) if self.neural is not None else None)
         self.shots.save_view(path, size, lambda fbo, rect: self._draw_view(fbo, rect, images), record)
         st.message = f"saved {path} and {path.with_suffix('.json').name}"
         return path
@@ -278,8 +336,13 @@ class Viewer:
         self.input.held_keys(dt)
         st.step(dt)
         self._sync_scene()
-        if self.neural is None and self.gi_size != (fb_w, fb_h):
+        if self.render_size != (fb_w, fb_h):
             self.renderer.resize(fb_w, fb_h)
+            if self.neural is not None and "/" in self.settings.gi_res:  # a fraction follows the window
+                size = gi_resolution(self.settings.gi_res, (fb_w, fb_h), self.model.resolution, self.model.multiple)
+                if size != self.neural.gi_size:
+                    self.neural.release()
+                    self._make_neural(self.model)
         self.timer.reset()
         self.renderer.render(st.config)
         if not any(m.name == "reference" for m in st.modes_shown()):
@@ -301,10 +364,11 @@ class Viewer:
             self.panel.overlay(rect, notes)
             imgui.render()
             self.imgui_renderer.render(imgui.get_draw_data())
-        while self.shots.pending_window:
-            self.shots.save_window(self.shots.pending_window.pop(0), (fb_w, fb_h), BACKGROUND, rect,
-                                   lambda fbo, r: self._draw_view(fbo, r, images),
-                                   lambda: self.imgui_renderer.render(imgui.get_draw_data()))
+        if self.shots.pending_window:
+            shown = self.window.read_pixels()  # the back buffer, as the swap will show it
+            screen.use()
+            while self.shots.pending_window:
+                self.shots.save_window(self.shots.pending_window.pop(0), shown)
         while self.shots.pending:
             self._save_view(self.shots.pending.pop(0), images)
         self.window.swap()
@@ -313,7 +377,8 @@ class Viewer:
         return True
 
     # --- scripts and shutdown ----------------------------------------------------------------------
-    SCRIPT_ACTIONS = ("resize", "screenshot", "window_screenshot", "set_model", "set_vsync", "pick_window_point")
+    SCRIPT_ACTIONS = ("resize", "screenshot", "window_screenshot", "set_model", "set_vsync", "pick_window_point",
+                      "set_gi_res", "set_pipelined", "set_timing")
 
     def apply(self, action) -> None:
         """Apply one script action: a callable(viewer), or (name, kwargs) naming a Viewer action
@@ -372,7 +437,8 @@ def _normalise_script(script) -> dict[int, list]:
 
 def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None = None, frames: int | None = None,
                screenshot: str | Path | None = None, script=None, size: tuple[int, int] = (768, 768),
-               vsync: bool = True, provider: str | None = None, settings: ViewerSettings | None = None) -> dict:
+               vsync: bool = True, provider: str | None = None, settings: ViewerSettings | None = None,
+               stats: str | Path | None = None) -> dict:
     """Open the viewer on a scene and run it until the window closes, or for ``frames`` frames.
 
     Args:
@@ -386,6 +452,8 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
             ``(frame, name, kwargs)`` or ``{"frame": i, "action": name, **kwargs}``; names are Viewer
             actions (resize, screenshot, window_screenshot, set_model, set_vsync, pick_window_point) or
             ViewerState methods (set_view_mode, set_light_direction, fly, drag, ...).
+        stats: write the per-stage times of every frame drawn (median, p95, mean ms), the frame rate, the
+            window and GI resolutions and how the stages were timed, as JSON, here.
 
     Returns:
         A summary: frames drawn, GI size, model, screenshots, view modes drawn, the reasons of those
@@ -410,12 +478,16 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
     steps = _normalise_script(script)
     viewer = Viewer(scene, settings)
     summary: dict = {}
+    per_frame: list[dict[str, float]] = []
     try:
         while frames is None or viewer.frame_index < frames:
             for action in steps.get(viewer.frame_index, ()):
                 viewer.apply(action)
+            drawn = viewer.frame_index
             if not viewer.frame():
                 break
+            if stats is not None and viewer.frame_index > drawn:
+                per_frame.append(viewer.state.stats.last())
         if screenshot is not None:
             if viewer.frame_index == 0:
                 viewer.frame()
@@ -425,6 +497,8 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
         summary = {
             "frames": viewer.frame_index,
             "gi_size": viewer.gi_size,
+            "render_size": viewer.render_size,
+            "shadow_renders": viewer.renderer.shadow_renders,
             "window_size": viewer.window.size,
             "model": st.model_name,
             "model_message": st.model_message,
@@ -437,6 +511,43 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
             "gl_error": viewer.ctx.error,
             "gl_renderer": viewer.gl_renderer,
         }
+        if stats is not None:
+            summary["stats"] = write_stats(Path(stats), viewer, per_frame)
     finally:
         viewer.close()
     return summary
+
+
+def write_stats(path: Path, viewer: Viewer, per_frame: list[dict[str, float]]) -> dict:
+    """The stage table of a scripted run as JSON: per stage median/p95/mean ms over the frames (the first,
+    which compiles shaders and warms onnxruntime, left out when there are others), fps, resolutions."""
+    import json
+    import os
+
+    from diviewer.timing import summarize
+
+    frames = per_frame[1:] if len(per_frame) > 1 else per_frame
+    table = summarize(frames)
+    frame_ms = table.get("frame", {}).get("median", 0.0)
+    neural = viewer.neural
+    record = {
+        "frames": len(frames),
+        "fps": 1000.0 / frame_ms if frame_ms > 0 else 0.0,
+        "stages_ms": table,
+        "render_size": list(viewer.render_size),
+        "gi_size": list(viewer.gi_size) if neural is not None else None,
+        "gi_res": viewer.settings.gi_res if neural is not None else None,
+        "gi": dataclasses.asdict(viewer.settings.gi),
+        "model": str(viewer.model.path) if viewer.model is not None else None,
+        "K": viewer.model.meta.get("K") if viewer.model is not None else None,
+        "provider": viewer.state.provider or None,
+        "gi_latency_ms": neural.latency_ms if neural is not None and neural.pipelined else None,
+        "timing": viewer.timing_method,
+        "shadow_renders": viewer.renderer.shadow_renders,
+        "vsync": viewer.window.vsync,
+        "gl_renderer": viewer.gl_renderer,
+        "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record, indent=2))
+    return record
