@@ -84,7 +84,9 @@ def test_fp16_export_is_finite_and_close(checkpoints, tmp_path):
     card = export(checkpoints["full"], out, ExportSettings(fp16=True), log=quiet)
     v = card["verification"]
     assert card["precision"] == "fp16" and v["onnx_finite"]
-    assert v["psnr_db"] > 30.0, v  # measured ~50 dB on the tiny model; fp16 must not be far off
+    # Measured 81.5 dB (max error 5.6e-4 of peak) on this tiny model: fp16 ONNX against the fp16 torch
+    # module. ~10 dB of margin for other CPUs and onnxruntime builds, no more: a real mismatch is far below.
+    assert v["psnr_db"] > 70.0 and v["max_rel_to_peak"] < 5e-3, v
     fp32 = tmp_path / "f.onnx"
     export(checkpoints["full"], fp32, log=quiet)
     assert out.stat().st_size < 0.75 * fp32.stat().st_size, "fp16 weights take about half the space"

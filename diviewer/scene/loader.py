@@ -11,7 +11,7 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.paths import scenes_dir
-from diviewer.scene import shapes
+from diviewer.scene import gltf, shapes
 from diviewer.scene.model import (
     Camera, CameraRange, DirectionalLight, FrameConfig, LightRange, Material, Object, ObjectRange,
     PointLight, Ranges, Scene,
@@ -138,23 +138,43 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
     camera = _camera(root.table("camera"))
 
     materials: dict[str, Material] = {}
+    meshes = {}
+    objects = []
+    if root.has("gltf"):
+        # A whole glTF scene: its meshes, materials and placed objects, before the file's own.
+        g = root.table("gltf")
+        meshes, materials, objects = gltf.load_gltf(base / g.str("file"), path=path, field="gltf.file")
+        g.finish()
+
     mats = root.table("materials")
     for key in list(mats.data):
         t = mats.table(key)
-        texture, tex_src = None, ""
+        if key in materials:
+            raise mats.err(key, f"material '{key}' is already defined by the glTF file")
+        texture, alpha, tex_src = None, None, ""
         if t.has("texture"):
             tex_path = base / t.str("texture")
-            texture, tex_src = _load_texture(tex_path, path, t._field("texture")), str(tex_path)
+            texture, alpha = gltf.load_texture(tex_path, path=path, field=t._field("texture"))
+            tex_src = str(tex_path)
+        cutoff = 0.5
+        if t.has("alpha_cutoff"):
+            # Alpha-tested: the texture's alpha channel is the cut-out mask (as glTF's alphaMode MASK).
+            cutoff = t.num("alpha_cutoff", lo=0.0, hi=1.0)
+            if alpha is None:
+                raise t.err("alpha_cutoff", "needs a 'texture' with an alpha channel (the cut-out mask)")
+        else:
+            alpha = None
         materials[key] = Material(key, albedo=t.vec("albedo", 3, (0.8, 0.8, 0.8), lo=0.0, hi=1.0),
                                   emission=t.vec("emission", 3, (0.0, 0.0, 0.0), lo=0.0),
-                                  texture=texture, texture_source=tex_src)
+                                  texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff)
         t.finish()
     mats.finish()
 
-    meshes = {}
     mtab = root.table("meshes")
     for key in list(mtab.data):
         t = mtab.table(key)
+        if key in meshes:
+            raise mtab.err(key, f"mesh '{key}' is already defined by the glTF file")
         if t.has("file") == t.has("shape"):
             raise t.err("shape", "a mesh needs exactly one of 'shape' (procedural) or 'file'")
         if t.has("shape"):
@@ -171,11 +191,10 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
         t.finish()
     mtab.finish()
 
-    objects = []
     raw_objects = root.raw("objects", [])
     if not isinstance(raw_objects, list):
         raise root.err("objects", "expected an array of tables ([[objects]])")
-    names = set()
+    names = {o.name for o in objects}
     for i, o in enumerate(raw_objects):
         t = _Table(o, path, f"objects[{i}]")
         oname = t.str("name", f"object{i}")
@@ -196,7 +215,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                               rotation=t.vec("rotation", 3, (0.0, 0.0, 0.0)), scale=scale))
         t.finish()
     if not objects:
-        raise DiviewerError("a scene needs at least one object ([[objects]])", path=path, field="objects")
+        raise DiviewerError("a scene needs at least one object ([[objects]] or [gltf])", path=path, field="objects")
 
     lights = []
     raw_lights = root.raw("lights", [])
@@ -296,18 +315,6 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
         r.finish()
     t.finish()
     return Ranges(lights=lights, objects=objects, camera=camera)
-
-
-def _load_texture(file: Path, path, field: str) -> np.ndarray:
-    from PIL import Image
-
-    if not file.is_file():
-        raise DiviewerError(f"texture file not found: {file}", path=path, field=field)
-    try:
-        img = Image.open(file).convert("RGB")
-    except Exception as exc:
-        raise DiviewerError(f"cannot read texture {file}: {exc}", path=path, field=field) from exc
-    return shapes.srgb_to_linear(np.asarray(img, dtype=np.float32) / 255.0).astype(np.float32)
 
 
 def add_mesh_file(scene: Scene, path: str | Path, key: str | None = None) -> tuple[Scene, str, str | None]:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer import imageio
-from diviewer.encoding import INPUT_CHANNELS
+from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
 from diviewer.provenance import versions
@@ -62,7 +62,7 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False):
 
         def forward(self, buffers):
             x = buffers.permute(0, 3, 1, 2)
-            depth, normal, albedo, direct = x[:, 0:1], x[:, 1:4], x[:, 4:7], x[:, 7:10]
+            depth, normal, albedo, direct = (x[:, channel_slices()[k]] for k in ("depth", "normal", "albedo", "direct"))
             inp = encode_inputs(depth, normal, albedo, direct, encoding, channel_axis=1)
             y = self.netG(inp.half() if fp16 else inp)
             radiance = decode_radiance(y.float() if fp16 else y, encoding)
@@ -98,7 +98,7 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
             frames = []
             for i in idx:
                 f = ds.load(i)
-                frames.append(np.concatenate([f["depth"][..., None], f["normal"], f["albedo"], f["direct"]], -1))
+                frames.append(np.concatenate([f[name].reshape(*f[name].shape[:2], n) for name, n in INPUT_CHANNELS], -1))
             return np.stack(frames).astype(np.float32), f"{len(idx)} frames of {data_dir}"
     # No dataset: smooth synthetic buffers with plausible ranges (depth 1..far, unit normals).
     rng = np.random.default_rng(0)
@@ -214,6 +214,11 @@ def info(path: str | Path) -> str:
     from diviewer.runtime import read_metadata
 
     m = read_metadata(path)
+    if m.get("kind") == "linear_baseline":
+        return "\n".join([f"{path}", f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",
+                          f"  baseline     {m['description']}",
+                          f"  parameters   {m['parameters']}, fitted on {m['fit']['frames']} frames "
+                          f"({m['fit']['split']} split of {m['fit']['data']}), train RMSE {m['fit']['train_rmse']:.4g}"])
     val = m.get("validation") or {}
     lines = [f"{path}",
              f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",

@@ -150,7 +150,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
     import torch.distributed as dist
 
     from diviewer.encoding import Encoding
-    from diviewer.progress import Progress
+    from diviewer.console import progress_bar
     from diviewer.train.step import build_nets, train_step
 
     dev = distributed.setup(cfg)
@@ -193,7 +193,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
             f"{dev.world} process(es) on {dev.device}{f' with {nets.dtype} autocast' if nets.dtype else ''}, "
             f"exposure {enc.exposure:.4g}, depth_scale {enc.depth_scale:.4g}")
 
-        progress = Progress(total - st.step, label="train", unit="steps") if dev.main else None
+        progress = progress_bar(total - st.step, "train", "step") if dev.main else None
         stop = {"stop": False}
         restore_handlers = distributed.install_stop_handlers(stop, say)
         nets.netG.train()
@@ -209,7 +209,8 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
                                             "--resume continues from last.ckpt; try a lower --lr", path=cfg.out)
                     st.add(numbers)
                     if progress:
-                        progress.update(extra=f"epoch {st.epoch + 1} {_fmt(numbers)}")
+                        progress.set_postfix_str(f"epoch {st.epoch + 1} {_fmt(numbers)}", refresh=False)
+                        progress.update()
                     if distributed.stop_requested(stop, dev):
                         save_run(run, nets, st, None, False)
                         say(f"stopped at epoch {st.epoch} + {st.batch_in_epoch} steps, step {st.step}; "
@@ -239,6 +240,8 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
                     f"validations; best {st.best['ssim_tm']:.4f} at step {st.best['step']} (best.ckpt)")
         finally:
             restore_handlers()
+            if progress:
+                progress.close()
         return _result(cfg, st)
     finally:
         if dev.initialized_here and dist.is_initialized():
