@@ -9,27 +9,26 @@ Each frame: the GL renderer draws shadows (cached while nothing moves), the G-bu
 at the window's framebuffer resolution; the neural pass reduces them to the GI resolution (``gi_res``:
 the model's training size or a fraction of the window), runs the network (optionally one frame
 behind, on a worker thread), and upsamples its indirect light over the full-resolution direct light;
-the display pass draws the view mode's image into the window, and the panel goes on top. Nothing here imports torch. The rooms: window.py
-(size, scale, letterbox), input.py (key table), panel.py, screenshots.py, sources.py (the view modes'
-textures), models.py (which model), state.py (what is shown, no GL).
+the display pass draws the view mode's image into the window, and the panel goes on top. Nothing here
+imports torch. The rooms: window.py (size, scale, letterbox), input.py (key table), panel.py,
+screenshots.py, sources.py (the view modes' textures), models.py (which model), gi.py (the model's neural
+pass and the GI resolution policy), script.py (scripted runs), report.py (the run's summary and stats
+JSON), state.py (what is shown, no GL).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from diviewer.errors import DiviewerError
 from diviewer.gl.display import Image, Look, depth_range
 from diviewer.gl.neural import GISettings
 from diviewer.gl.renderer import RenderSettings
 from diviewer.reference.progressive import ReferenceSettings
 from diviewer.scene.model import Scene
-from diviewer.viewer.models import gi_resolution, model_candidates, open_model
-from diviewer.viewer.stats import STAGES
+from diviewer.viewer.models import model_candidates
 from diviewer.viewer.view_modes import Unavailable, view_mode
 
 BACKGROUND = (0.08, 0.08, 0.09)
@@ -38,7 +37,8 @@ BACKGROUND = (0.08, 0.08, 0.09)
 
 @dataclass(frozen=True)
 class ViewerSettings:
-    """Settings of one viewer session."""
+    """Settings a viewer session opens with (the GI resolution, pipelining and timing then change live:
+    ``Viewer.gi`` and ``Viewer.timer`` hold the current ones)."""
 
     size: tuple[int, int] = (768, 768)
     """Window size in screen units (the framebuffer may be larger on HiDPI screens)."""
@@ -97,6 +97,7 @@ class Viewer:
         from diviewer.gl.display import DisplayPass
         from diviewer.gl.renderer import Renderer
         from diviewer.gl.shaders import ShaderCache
+        from diviewer.viewer.gi import GIControl
         from diviewer.viewer.imgui_gl import GlfwImgui, ImguiRenderer
         from diviewer.viewer.input import Input
         from diviewer.viewer.panel import Panel
@@ -121,8 +122,7 @@ class Viewer:
         self.shots = Screenshots(self.ctx)
         self.shot_path = f"diviewer_{scene.name}.png"
         self._scene_revision = 0
-        self.model = None
-        self.neural = None
+        self.gi = GIControl(self.ctx, self.renderer, self.state, settings.gi_res, settings.gi, settings.provider)
         self.imgui_ctx = imgui.create_context()
         imgui.get_io().set_ini_filename(None)  # no imgui.ini in the user's working folder
         self.input = Input(self.state, self, self.glfw)
@@ -150,70 +150,17 @@ class Viewer:
     @property
     def gi_size(self) -> tuple[int, int]:
         """The neural GI's resolution (the render size without a model)."""
-        return self.neural.gi_size if self.neural is not None else self.render_size
+        return self.gi.size
 
-    def _make_neural(self, model) -> None:
-        """The neural pass for ``model`` at the GI resolution the settings ask of this window."""
-        from diviewer.gl.neural import NeuralPass
+    @property
+    def model(self):
+        """The loaded ``runtime.NeuralGI``, or None."""
+        return self.gi.model
 
-        size = gi_resolution(self.settings.gi_res, self.render_size, model.resolution, model.multiple)
-        self.neural = NeuralPass(self.ctx, self.renderer, model, size, self.settings.gi)
-        self.state.gi_res = self.settings.gi_res
-
-    def set_gi_res(self, spec: str) -> tuple[int, int]:
-        """Run the network at another GI resolution (``model``, ``1/4``, ``WxH``); refused sizes change nothing."""
-        old = self.settings
-        self.settings = dataclasses.replace(old, gi_res=str(spec))
-        if self.model is not None:
-            try:
-                gi_resolution(self.settings.gi_res, self.render_size, self.model.resolution, self.model.multiple)
-            except DiviewerError:
-                self.settings = old
-                raise
-            self.neural.release()
-            self._make_neural(self.model)
-        return self.gi_size
-
-    def set_pipelined(self, on: bool) -> None:
-        """Run inference one frame behind on a worker thread (GL and onnxruntime overlap) or in the frame."""
-        self.settings = dataclasses.replace(self.settings, gi=dataclasses.replace(self.settings.gi, pipelined=bool(on)))
-        if self.model is not None:
-            self.neural.release()
-            self._make_neural(self.model)
-
-    def set_model(self, spec: str | Path | None) -> None:
-        """Load a model (path, ``auto`` or ``none``); without one the viewer shows direct light and says why."""
-        self._drop_model()
-        model, message = open_model(spec, self.state.scene, self.settings.provider)
-        st = self.state
-        st.model_message, st.model_meta, st.provider = message, None, ""
-        st.model_name = None
-        self._fit_renderer_to_window()
-        if model is not None:
-            # A GI resolution the model cannot run at is the user's request, not the model's fault: raised.
-            gi_resolution(self.settings.gi_res, self.render_size, model.resolution, model.multiple)
-            try:
-                self._make_neural(model)
-            except DiviewerError as exc:
-                st.model_message = f"model refused: {exc}"
-                return
-            self.model = model
-            st.model_name = model.path.name
-            st.model_meta = dict(model.meta)
-            st.provider = model.provider
-        if message and spec not in (None, "auto", "none"):
-            print(f"diviewer view: {message}", file=sys.stderr)
-
-    def _drop_model(self) -> None:
-        if self.neural is not None:
-            self.neural.release()
-        self.neural = None
-        self.model = None  # drops the onnxruntime session
-
-    def _fit_renderer_to_window(self) -> None:
-        fb_w, fb_h = self.window.fb_size
-        if fb_w > 0 and fb_h > 0:
-            self.renderer.resize(fb_w, fb_h)
+    @property
+    def neural(self):
+        """The ``gl.neural.NeuralPass`` of the model, or None."""
+        return self.gi.neural
 
     def _sync_scene(self) -> None:
         """Upload meshes and textures added to the scene (a mesh file loaded from the panel)."""
@@ -222,35 +169,41 @@ class Viewer:
             self.renderer.scene = self.state.scene
             self._scene_revision = self.state.scene_revision
 
-    # --- actions (the panel's, the keys', scripts') --------------------------------------------------
+    # --- actions (the panel's, the keys', scripts': script.SCRIPT_ACTIONS) ----------------------------
+    def set_model(self, spec: str | Path | None) -> None:
+        """Load a model (path, ``auto`` or ``none``); without one the viewer shows direct light and says why."""
+        self.gi.release()
+        fb_w, fb_h = self.window.fb_size
+        if fb_w > 0 and fb_h > 0:
+            self.renderer.resize(fb_w, fb_h)
+        self.gi.load(spec)
+
     def request_model(self, spec: str) -> None:
         """Switch models at the next frame's start (this frame's images are in use)."""
         self._pending_model = spec
 
+    def set_gi_res(self, spec: str) -> tuple[int, int]:
+        """Run the network at another GI resolution (``model``, ``1/4``, ``WxH``); refused sizes change nothing."""
+        return self.gi.set_gi_res(spec)
+
+    def set_pipelined(self, on: bool) -> None:
+        """Run inference one frame behind on a worker thread, or in the frame."""
+        self.gi.set_pipelined(on)
+
     @property
     def timer_sync(self) -> bool:
         """Whether stages are timed (the panel's checkbox)."""
-        return self.timer.sync is not None or self.timer.gpu_query is not None
+        return self.timer.enabled
 
     @property
     def timing_method(self) -> str:
-        return "GPU timer queries" if self.timer.gpu_query is not None else (
-            "wall clock around a GPU sync" if self.timer.sync is not None else "off")
+        return self.timer.method
 
     def set_timing(self, on: bool) -> None:
-        """Time GL stages by timer queries (ARB_timer_query, core since GL 3.3), or by waiting for the GPU
-        around them where the driver lacks queries; or not at all."""
-        self.timer.release()
-        self.timer.sync = self.timer.gpu_query = None
-        if on:
-            try:
-                with self.ctx.query(time=True) as probe:
-                    pass
-                probe.elapsed  # noqa: B018 (raises where the driver has no timer queries)
-                self.timer.gpu_query = lambda: self.ctx.query(time=True)
-            except Exception:  # noqa: BLE001
-                self.timer.sync = self.ctx.finish
-        self.settings = dataclasses.replace(self.settings, timing=bool(on))
+        """Time GL stages (by timer queries, or a GPU sync where the driver has none), or not at all."""
+        from diviewer.gl.context import set_stage_timing
+
+        set_stage_timing(self.timer, self.ctx, on)
 
     def set_vsync(self, on: bool) -> None:
         self.window.set_vsync(on)
@@ -309,7 +262,7 @@ class Viewer:
         st, size = self.state, self.render_size
         record = view_record(st, size, self.model.path if self.model is not None else None, self.gl_renderer,
                              gi_size=self.gi_size if self.neural is not None else None,
-                             gi_settings=dataclasses.asdict(self.settings.gi) if self.neural is not None else None)
+                             gi_settings=dataclasses.asdict(self.gi.settings) if self.neural is not None else None)
         self.shots.save_view(path, size, lambda fbo, rect: self._draw_view(fbo, rect, images), record)
         st.message = f"saved {path} and {path.with_suffix('.json').name}"
         return path
@@ -338,11 +291,7 @@ class Viewer:
         self._sync_scene()
         if self.render_size != (fb_w, fb_h):
             self.renderer.resize(fb_w, fb_h)
-            if self.neural is not None and "/" in self.settings.gi_res:  # a fraction follows the window
-                size = gi_resolution(self.settings.gi_res, (fb_w, fb_h), self.model.resolution, self.model.multiple)
-                if size != self.neural.gi_size:
-                    self.neural.release()
-                    self._make_neural(self.model)
+            self.gi.follow_window()
         self.timer.reset()
         self.renderer.render(st.config)
         if not any(m.name == "reference" for m in st.modes_shown()):
@@ -376,27 +325,7 @@ class Viewer:
         self.frame_index += 1
         return True
 
-    # --- scripts and shutdown ----------------------------------------------------------------------
-    SCRIPT_ACTIONS = ("resize", "screenshot", "window_screenshot", "set_model", "set_vsync", "pick_window_point",
-                      "set_gi_res", "set_pipelined", "set_timing")
-
-    def apply(self, action) -> None:
-        """Apply one script action: a callable(viewer), or (name, kwargs) naming a Viewer action
-        (resize, screenshot, window_screenshot, set_model, set_vsync, pick_window_point) or a ViewerState method."""
-        if callable(action):
-            action(self)
-            return
-        if isinstance(action, dict):
-            action = dict(action)
-            name, kwargs = action.pop("action"), action
-        else:
-            name, kwargs = action[0], (action[1] if len(action) > 1 else {})
-        target = self if name in self.SCRIPT_ACTIONS else self.state
-        fn = getattr(target, name, None)
-        if fn is None or name.startswith("_"):
-            raise DiviewerError(f"unknown viewer action '{name}'", field="script")
-        fn(**kwargs)
-
+    # --- shutdown ---------------------------------------------------------------------------------
     def close(self) -> None:
         """Release everything: the reference thread, the model, GL objects, imgui, the window, GLFW."""
         if self._closed:
@@ -404,7 +333,7 @@ class Viewer:
         self._closed = True
         self.reference.close()
         try:
-            self._drop_model()
+            self.gi.release()
             self.shots.release()
             self.reference_texture.release()
             self.gui.release()
@@ -418,21 +347,6 @@ class Viewer:
             self.ctx.release()
         finally:
             self.window.close()
-
-
-def _normalise_script(script) -> dict[int, list]:
-    """Script items (frame, action) / (frame, name, kwargs) / {"frame": i, "action": name, ...} by frame."""
-    out: dict[int, list] = {}
-    for item in script or ():
-        if isinstance(item, dict):
-            item = dict(item)
-            frame = int(item.pop("frame"))
-            out.setdefault(frame, []).append(item)
-        elif len(item) == 2:
-            out.setdefault(int(item[0]), []).append(item[1])
-        else:
-            out.setdefault(int(item[0]), []).append((item[1], item[2] if len(item) > 2 else {}))
-    return out
 
 
 def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None = None, frames: int | None = None,
@@ -460,6 +374,8 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
         that could not be, mean stage times, and the GL error state before shutdown.
     """
     from diviewer.scene import load_scene
+    from diviewer.viewer.report import run_summary, write_stats
+    from diviewer.viewer.script import apply_action, normalise_script
     from diviewer.viewer.sources import FrameImages
 
     if not isinstance(scene, Scene):
@@ -475,14 +391,14 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
         from diviewer.runtime import choose_providers
 
         choose_providers(ort.get_available_providers(), settings.provider)  # before a window opens
-    steps = _normalise_script(script)
+    steps = normalise_script(script)
     viewer = Viewer(scene, settings)
     summary: dict = {}
     per_frame: list[dict[str, float]] = []
     try:
         while frames is None or viewer.frame_index < frames:
             for action in steps.get(viewer.frame_index, ()):
-                viewer.apply(action)
+                apply_action(viewer, action)
             drawn = viewer.frame_index
             if not viewer.frame():
                 break
@@ -493,61 +409,10 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
                 viewer.frame()
             # The state is the last frame's: save its view now.
             viewer._save_view(Path(screenshot).with_suffix(".png"), viewer._images(FrameImages(viewer))[0])
-        st = viewer.state
-        summary = {
-            "frames": viewer.frame_index,
-            "gi_size": viewer.gi_size,
-            "render_size": viewer.render_size,
-            "shadow_renders": viewer.renderer.shadow_renders,
-            "window_size": viewer.window.size,
-            "model": st.model_name,
-            "model_message": st.model_message,
-            "provider": st.provider,
-            "screenshots": [str(p) for p in viewer.shots.saved],
-            "modes_drawn": sorted(viewer.modes_drawn),
-            "unavailable": dict(viewer.unavailable),
-            "stages_ms": {k: st.stats.mean(k) for k in ("frame",) + STAGES + ("panel",)},
-            "config": st.config,
-            "gl_error": viewer.ctx.error,
-            "gl_renderer": viewer.gl_renderer,
-        }
+        summary = run_summary(viewer)
         if stats is not None:
             summary["stats"] = write_stats(Path(stats), viewer, per_frame)
     finally:
         viewer.close()
     return summary
 
-
-def write_stats(path: Path, viewer: Viewer, per_frame: list[dict[str, float]]) -> dict:
-    """The stage table of a scripted run as JSON: per stage median/p95/mean ms over the frames (the first,
-    which compiles shaders and warms onnxruntime, left out when there are others), fps, resolutions."""
-    import json
-    import os
-
-    from diviewer.timing import summarize
-
-    frames = per_frame[1:] if len(per_frame) > 1 else per_frame
-    table = summarize(frames)
-    frame_ms = table.get("frame", {}).get("median", 0.0)
-    neural = viewer.neural
-    record = {
-        "frames": len(frames),
-        "fps": 1000.0 / frame_ms if frame_ms > 0 else 0.0,
-        "stages_ms": table,
-        "render_size": list(viewer.render_size),
-        "gi_size": list(viewer.gi_size) if neural is not None else None,
-        "gi_res": viewer.settings.gi_res if neural is not None else None,
-        "gi": dataclasses.asdict(viewer.settings.gi),
-        "model": str(viewer.model.path) if viewer.model is not None else None,
-        "K": viewer.model.meta.get("K") if viewer.model is not None else None,
-        "provider": viewer.state.provider or None,
-        "gi_latency_ms": neural.latency_ms if neural is not None and neural.pipelined else None,
-        "timing": viewer.timing_method,
-        "shadow_renders": viewer.renderer.shadow_renders,
-        "vsync": viewer.window.vsync,
-        "gl_renderer": viewer.gl_renderer,
-        "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
-    }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(record, indent=2))
-    return record
