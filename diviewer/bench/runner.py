@@ -166,7 +166,7 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
         ``pt_spp<n>`` beside the models; each aggregate carries its ``equivalent_spp``.
     """
     from diviewer.evalset import EVAL_SPLITS
-    from diviewer.evaluate import _aggregate, _equivalent, score_frame
+    from diviewer.evaluate import aggregate, equivalent, score_frame
     from diviewer.metrics import flat_mask
     from diviewer.runtime import pack_buffers
 
@@ -198,10 +198,10 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
     finally:
         for p in passes.values():
             p.release()
-    methods = {k: _aggregate(r) for k, r in rows.items() if r}
+    methods = {k: aggregate(r) for k, r in rows.items() if r}
     ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
     for m in methods.values():
-        m["equivalent_spp"] = _equivalent(m, ladder_spp, ladder)
+        m["equivalent_spp"] = equivalent(m, ladder_spp, ladder)
     return {"frames": len(idx), "ladder_spp": ladder_spp, "exposure": exposure, "methods": methods}
 
 

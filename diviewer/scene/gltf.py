@@ -31,6 +31,14 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _file_key(file: Path, what: str, path, field: str) -> tuple:
+    """The cache key of an existing file (its path, mtime and size: an edited file is read again)."""
+    if not file.is_file():
+        raise DiviewerError(f"{what} file not found: {file}", path=path, field=field)
+    st = file.stat()
+    return (str(file.resolve()), st.st_mtime_ns, st.st_size)
+
+
 def load_texture(file: Path, *, path=None, field: str = "") -> tuple[np.ndarray, np.ndarray | None]:
     """An image file as a linear (H, W, 3) float32 texture, top row first, and its alpha (H, W) or None.
 
@@ -42,10 +50,7 @@ def load_texture(file: Path, *, path=None, field: str = "") -> tuple[np.ndarray,
     from PIL import Image
 
     file = Path(file)
-    if not file.is_file():
-        raise DiviewerError(f"texture file not found: {file}", path=path, field=field)
-    st = file.stat()
-    key = (str(file.resolve()), st.st_mtime_ns, st.st_size)
+    key = _file_key(file, "texture", path, field)
     if key not in _texture_cache:
         try:
             with Image.open(file) as im:
@@ -176,10 +181,7 @@ def load_gltf(file: Path, *, path=None, field: str = "gltf.file") -> tuple[dict[
         DiviewerError: a missing or malformed file, buffer or texture, naming it.
     """
     file = Path(file)
-    if not file.is_file():
-        raise DiviewerError(f"glTF file not found: {file}", path=path, field=field)
-    st = file.stat()
-    key = (str(file.resolve()), st.st_mtime_ns, st.st_size)
+    key = _file_key(file, "glTF", path, field)
     if key not in _gltf_cache:
         try:
             doc = json.loads(file.read_text())

@@ -146,11 +146,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
         meshes, materials, objects = gltf.load_gltf(base / g.str("file"), path=path, field="gltf.file")
         g.finish()
 
-    mats = root.table("materials")
-    for key in list(mats.data):
-        t = mats.table(key)
-        if key in materials:
-            raise mats.err(key, f"material '{key}' is already defined by the glTF file")
+    for key, t in _entries(root.table("materials"), _not_in_gltf(materials, "material")):
         texture, alpha, tex_src = None, None, ""
         if t.has("texture"):
             tex_path = base / t.str("texture")
@@ -167,14 +163,8 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
         materials[key] = Material(key, albedo=t.vec("albedo", 3, (0.8, 0.8, 0.8), lo=0.0, hi=1.0),
                                   emission=t.vec("emission", 3, (0.0, 0.0, 0.0), lo=0.0),
                                   texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff)
-        t.finish()
-    mats.finish()
 
-    mtab = root.table("meshes")
-    for key in list(mtab.data):
-        t = mtab.table(key)
-        if key in meshes:
-            raise mtab.err(key, f"mesh '{key}' is already defined by the glTF file")
+    for key, t in _entries(root.table("meshes"), _not_in_gltf(meshes, "mesh")):
         if t.has("file") == t.has("shape"):
             raise t.err("shape", "a mesh needs exactly one of 'shape' (procedural) or 'file'")
         if t.has("shape"):
@@ -188,8 +178,6 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                 # The file's own material, used by objects that name no material.
                 materials[f"mesh:{key}"] = Material(f"mesh:{key}", albedo=color or (1.0, 1.0, 1.0), texture=texture,
                                                     texture_source=str(base / t.data["file"]))
-        t.finish()
-    mtab.finish()
 
     raw_objects = root.raw("objects", [])
     if not isinstance(raw_objects, list):
@@ -233,6 +221,25 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                  ranges=ranges, exposure=exposure, ambient=ambient)
 
 
+def _entries(tab: _Table, problem):
+    """Each entry of a table of tables (``[materials]``, ``[ranges.lights]``, ...) as (key, its table),
+    refusing a key for which ``problem(key)`` gives a reason; each entry, then the table, is checked for
+    unknown keys once the caller has read it."""
+    for key in list(tab.data):
+        why = problem(key)
+        if why:
+            raise tab.err(key, why)
+        t = tab.table(key)
+        yield key, t
+        t.finish()
+    tab.finish()
+
+
+def _not_in_gltf(defined: dict, what: str):
+    """``_entries``' check for a name the glTF file already defined."""
+    return lambda key: f"{what} '{key}' is already defined by the glTF file" if key in defined else None
+
+
 def _camera(t: _Table) -> Camera:
     c = Camera(position=t.vec("position", 3, (0.0, 0.0, 5.0)), target=t.vec("target", 3, (0.0, 0.0, 0.0)),
                up=t.vec("up", 3, (0.0, 1.0, 0.0)), fov=t.num("fov", 45.0, lo=0.0, hi=180.0, lo_open=True, hi_open=True),
@@ -266,12 +273,8 @@ def _light(t: _Table, i: int):
 
 def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
     lights, objects, camera = {}, {}, None
-    lt = t.table("lights")
     known_lights = {l.name for l in default.lights}
-    for key in list(lt.data):
-        if key not in known_lights:
-            raise lt.err(key, f"no light named '{key}'")
-        r = lt.table(key)
+    for key, r in _entries(t.table("lights"), lambda k: None if k in known_lights else f"no light named '{k}'"):
         angle = r.vec("angle", 2, (0.0, 0.0))
         inten = r.vec("intensity", 2, (1.0, 1.0), lo=0.0)
         if angle[0] > angle[1] or inten[0] > inten[1]:
@@ -279,14 +282,8 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
         if inten[0] <= 0.0:
             raise r.err("intensity", "the intensity multiplier range must be positive (drawn log-uniformly)")
         lights[key] = LightRange(axis=r.vec("axis", 3, (0.0, 1.0, 0.0)), angle=angle, intensity=inten)
-        r.finish()
-    lt.finish()
-    ot = t.table("objects")
     known_objects = {o.name for o in default.objects}
-    for key in list(ot.data):
-        if key not in known_objects:
-            raise ot.err(key, f"no object named '{key}'")
-        r = ot.table(key)
+    for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else f"no object named '{k}'"):
         train, test = r.strs("train_meshes"), r.strs("test_meshes")
         for field_name, lst in (("train_meshes", train), ("test_meshes", test)):
             for m in lst:
@@ -299,8 +296,6 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
             raise r.err("offset", "expected [[min x, y, z], [max x, y, z]]")
         objects[key] = ObjectRange(axes=r.vecs("axes", 3, []), angle=r.vec("angle", 2, (0.0, 360.0)),
                                    offset=offset, train_meshes=train, test_meshes=test)
-        r.finish()
-    ot.finish()
     if t.has("camera"):
         r = t.table("camera")
         positions, targets = r.vecs("positions", 3), r.vecs("targets", 3)
