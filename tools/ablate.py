@@ -29,6 +29,10 @@ ABLATIONS: dict[str, tuple[str, list[str]]] = {
     "resize": ("resize-conv decoder, L1 + GAN", ["--upsample", "resize"]),
     "shuffle": ("pixel-shuffle decoder, L1 + GAN", ["--upsample", "shuffle"]),
     "l1": ("resize, L1 alone (no GAN)", ["--upsample", "resize", "--gan-weight", "0"]),
+    "transpose_l1": ("transposed conv, L1 alone", ["--upsample", "transpose", "--gan-weight", "0"]),
+    "k8": ("resize, L1 alone, K=8", ["--upsample", "resize", "--gan-weight", "0", "--k", "8"]),
+    "k32": ("resize, L1 alone, K=32", ["--upsample", "resize", "--gan-weight", "0", "--k", "32"]),
+    "k64": ("resize, L1 alone, K=64", ["--upsample", "resize", "--gan-weight", "0", "--k", "64"]),
     "l2lin": ("resize, L2 on linear radiance alone", ["--upsample", "resize", "--gan-weight", "0",
                                                      "--recon-loss", "l2", "--recon-space", "linear"]),
     "l1lin": ("resize, L1 on linear radiance alone", ["--upsample", "resize", "--gan-weight", "0",
@@ -36,7 +40,8 @@ ABLATIONS: dict[str, tuple[str, list[str]]] = {
     "strongD": ("resize, L1 + LSGAN, netD lr x2", ["--upsample", "resize", "--gan-mode", "lsgan", "--d-lr", "4e-4"]),
     "instance": ("resize, instance norm, L1 + GAN", ["--upsample", "resize", "--norm", "instance"]),
     "nonorm": ("resize, no norm, L1 + GAN", ["--upsample", "resize", "--norm", "none"]),
-    "nodemod": ("resize, L1 + GAN, indirect radiance (no albedo demodulation)", ["--upsample", "resize"]),
+    "nodemod": ("resize, L1 alone, indirect radiance (no albedo demodulation)", ["--upsample", "resize",
+                                                                             "--gan-weight", "0"]),
 }
 
 
