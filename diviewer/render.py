@@ -87,12 +87,14 @@ def frame_record(scene: Scene, config: FrameConfig, size: tuple[int, int], **ext
 
 def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int | None = None, split: str = "train",
                   config_file: Path | None = None, exposure: float | None = None, tonemap: str = "aces",
-                  model: Path | None = None, provider: str | None = None) -> dict:
+                  model: Path | None = None, provider: str | None = None, vxgi=None) -> dict:
     """Render one frame's GL buffers (and, with a model, its neural GI image) and write them.
 
     Args:
         res: N or WxH; None means the model's training resolution (or 256 without a model).
         model: an ONNX model from `diviewer export`, checked against the scene; writes neural.exr.
+        vxgi: a VXGISettings: also run voxel cone tracing; writes vxgi.exr (direct + albedo x indirect)
+            and vxgi_indirect.exr (albedo x indirect, comparable with the path tracer's pt_indirect.exr).
 
     Returns:
         The frame record written to frame.json.
@@ -118,9 +120,19 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     with headless_context() as ctx:
         renderer = Renderer(ctx, scene, width, height, settings)
         compositor = Compositor(ctx, renderer.shaders)
-        neural = None
+        neural = vx = None
+        vxgi_info = None
         try:
             frame = renderer.frame(config)
+            if vxgi is not None:
+                from diviewer.gl.vxgi import VXGIPass
+
+                vx = VXGIPass(ctx, renderer, vxgi)
+                vx.timing = True
+                vx.run(config)
+                frame["vxgi"], frame["vxgi_indirect"] = vx.read("vxgi"), vx.read("vxgi_indirect")
+                vxgi_info = {"settings": settings_dict(vxgi), "fragments": vx.fragment_counts,
+                             "ms": {k: round(v, 3) for k, v in vx.timings.items()}}
             if net is not None:
                 from diviewer.gl.neural import NeuralPass
 
@@ -140,17 +152,23 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
             if "neural" in frame:
                 imageio.write_exr(out / "neural.exr", frame["neural"])
                 imageio.write_png(out / "neural.png", compositor.to_ldr(frame["neural"], ev, tonemap))
+            if "vxgi" in frame:
+                for name in ("vxgi", "vxgi_indirect"):
+                    imageio.write_exr(out / f"{name}.exr", frame[name])
+                    imageio.write_png(out / f"{name}.png", compositor.to_ldr(frame[name], ev, tonemap))
             record = frame_record(scene, config, (width, height), seed=seed, split=split if seed is not None else None,
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
                                   display={"exposure": ev, "tonemap": tonemap}, neural=neural_info,
-                                  user_meshes=user_meshes)
+                                  user_meshes=user_meshes, **({"vxgi": vxgi_info} if vxgi_info else {}))
         finally:
+            if vx is not None:
+                vx.release()
             if neural is not None:
                 neural.release()
             compositor.release()
             renderer.release()
     imageio.write_text(out / "frame.json", json.dumps(record, indent=2))
-    bad = [n for n in (*BUFFERS, "neural") if n in frame and not np.all(np.isfinite(frame[n]))]
+    bad = [n for n in (*BUFFERS, "neural", "vxgi", "vxgi_indirect") if n in frame and not np.all(np.isfinite(frame[n]))]
     if bad:
         raise DiviewerError(f"the GL renderer produced non-finite values in {', '.join(bad)}")
     return record

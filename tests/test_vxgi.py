@@ -185,3 +185,22 @@ def test_closer_to_the_path_tracer_than_direct_light(ctx, cornell, record_proper
     record_property("mse_vxgi", errors["vxgi"])
     print("MSE against the path tracer (32 spp, 32x32):", errors)
     assert np.mean(errors["vxgi"]) < np.mean(errors["direct"])
+
+
+@pytest.mark.parametrize("scene", ["cornell", "atrium"])
+def test_render_command_writes_vxgi(gl_context, tmp_path, scene):
+    """`diviewer render --vxgi` writes vxgi.exr = direct + vxgi_indirect.exr, and records the settings."""
+    import json
+
+    from diviewer.cli import main
+    from diviewer.imageio import read_exr
+
+    out = tmp_path / scene
+    assert main(["render", "--scene", scene, "--res", "32", "--out", str(out), "--vxgi", "--vxgi-res", "32"]) == 0
+    vxgi, indirect, direct = (read_exr(out / f"{n}.exr") for n in ("vxgi", "vxgi_indirect", "direct"))
+    assert vxgi.shape == indirect.shape == (32, 32, 3) and (out / "vxgi.png").is_file()
+    assert np.all(np.isfinite(vxgi)) and indirect.min() >= 0.0 and indirect.max() > 0.0
+    np.testing.assert_allclose(vxgi, direct + indirect, rtol=1e-5, atol=1e-6)
+    record = json.loads((out / "frame.json").read_text())
+    assert record["vxgi"]["settings"]["resolution"] == 32 and record["vxgi"]["fragments"]["static"] > 0
+    assert main(["render", "--scene", scene, "--res", "32", "--out", str(out), "--vxgi", "--vxgi-res", "48"]) == 2
