@@ -61,7 +61,7 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.gl.context import unbind_framebuffer
-from diviewer.gl.renderer import Renderer
+from diviewer.gl.renderer import Renderer, _fit_directional, _point_faces
 from diviewer.gl.resources import set_uniform
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, Object, PointLight
@@ -185,6 +185,7 @@ class VXGIPass:
         res = settings.resolution
         self.levels = int(math.log2(res)) + 1
         self.voxels = ctx.texture3d((res, res, res), 4, dtype="f2")
+        self.voxels.write(bytes(res ** 3 * 8))  # level 0 starts empty; resolve and clear keep it right
         self.voxels.build_mipmaps()  # allocates the levels; the mip pass fills them
         self.voxels.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.voxels.repeat_x = self.voxels.repeat_y = self.voxels.repeat_z = False
@@ -321,6 +322,7 @@ class VXGIPass:
 
     def _voxelize(self, lst: _FragmentList, objects: list[Object]) -> None:
         ctx = self.ctx
+        self._per_fragment("CLEAR", [lst])  # empty the voxels the list's old fragments filled
         prog = self.shaders.program("vxgi_voxelize.glsl")
         self._grid_uniforms(prog)
         self._raster_fbo.use()
@@ -355,13 +357,14 @@ class VXGIPass:
         bounds = self.scene.bounds(config)
         self._sums.bind_to_storage_buffer(2)
         first = True
-        for light in config.lights or (None,):
+        # The last light first: its shadow map is still the renderer's from this frame's direct pass.
+        for k, light in enumerate(reversed(config.lights or (None,))):
             shadow = None
             if light is None:
                 prog = self.shaders.compute("vxgi_inject.glsl")
             else:
                 if r.settings.shadows:
-                    shadow = r._shadow_pass(config, light, bounds)
+                    shadow = self._current_shadow(light, bounds) if k == 0 else r._shadow_pass(config, light, bounds)
                 directional = isinstance(light, DirectionalLight)
                 prog = self.shaders.compute("vxgi_inject.glsl", {"DIRECTIONAL": 1} if directional else {"POINT_LIGHT": 1})
                 self._light_uniforms(prog, light, shadow)
@@ -374,12 +377,29 @@ class VXGIPass:
                 prog.run(group_x=-(-lst.count // 64))
                 ctx.memory_barrier()
             first = False
-        res = self.settings.resolution
-        prog = self.shaders.compute("vxgi_resolve.glsl")
-        set_uniform(prog, "u_res", res)
+        self._per_fragment("RESOLVE")
+        self._per_fragment("ZERO")
+
+    def _per_fragment(self, mode: str, lists=None) -> None:
+        """Run vxgi_resolve.glsl in ``mode`` (RESOLVE, ZERO or CLEAR) over the voxels of fragment lists."""
+        prog = self.shaders.compute("vxgi_resolve.glsl", {mode: 1})
+        set_uniform(prog, "u_res", int(self.settings.resolution))
+        self._sums.bind_to_storage_buffer(2)
         self.voxels.bind_to_image(0, read=False, write=True, level=0)
-        prog.run(group_x=-(-res // 4), group_y=-(-res // 4), group_z=-(-res // 4))
-        ctx.memory_barrier()
+        for lst in lists or self._lists.values():
+            if lst.count:
+                lst.header.bind_to_storage_buffer(0)
+                lst.frags.bind_to_storage_buffer(1)
+                prog.run(group_x=-(-lst.count // 64))
+        self.ctx.memory_barrier()
+
+    def _current_shadow(self, light, bounds: np.ndarray) -> dict:
+        """The lookup parameters of the shadow map the renderer drew last (for ``light``), without drawing it."""
+        if isinstance(light, DirectionalLight):
+            m_light, extent, depth_range = _fit_directional(bounds, light.direction)
+            return {"m_light": m_light, "texel_world": extent / self.renderer.settings.shadow_size,
+                    "depth_range": depth_range}
+        return {"faces": _point_faces(light.position, bounds)}
 
     def _light_uniforms(self, prog, light, shadow: dict | None) -> None:
         """The uniforms of direct.glsl's visibility() and radiometry, as the renderer's light pass sets them."""
