@@ -1,9 +1,7 @@
 // VXGI light injection, one invocation per voxel fragment (vxgi_voxelize.glsl's list): the outgoing
 // radiance of its surface, albedo / pi * E * |cos| * shadow (two-sided, as the G-buffer and Mitsuba's
-// twosided BSDF shade) for one light, plus the emission once, added to its voxel's sums. The sums are
-// 64-bit fixed point (32 fractional bits) built from 32-bit integer atomics with an explicit carry:
-// integer addition is associative, so the grid is bitwise the same whatever order the objects are
-// drawn and the fragments run in. DIRECTIONAL or POINT_LIGHT select the light; with neither, only
+// twosided BSDF shade) for one light, plus the emission once, added to its voxel's fixed-point sums
+// (vxgi_fixed.glsl: independent of draw order). DIRECTIONAL or POINT_LIGHT select the light; with neither, only
 // emission and the fragment count are added. The shadow lookup is direct.glsl's own.
 #if defined COMPUTE_SHADER
 
@@ -14,19 +12,9 @@ layout(local_size_x = 64) in;
 
 layout(std430, binding = 0) readonly buffer Counter { uint count; uint capacity; };
 layout(std430, binding = 1) readonly buffer Fragments { vec4 frags[]; };
-// Per voxel: red lo/hi, green lo/hi, blue lo/hi, fragment count, unused.
-layout(std430, binding = 2) buffer Sums { uint sums[]; };
+#include "vxgi_fixed.glsl"
 
 uniform bool u_first;       // the first dispatch over this list: add emission and count the fragment
-
-void add_fixed(uint at, float value) {
-    float whole = floor(value);
-    uint lo = uint((value - whole) * 4294967296.0);
-    uint hi = uint(min(whole, 4294967295.0));
-    uint old = atomicAdd(sums[at], lo);
-    hi += (old + lo < old) ? 1u : 0u;   // the low word wrapped: carry into the high word
-    if (hi != 0u) atomicAdd(sums[at + 1u], hi);
-}
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
@@ -54,11 +42,8 @@ void main() {
         radiance += albedo / PI * e * (cos_t * v);
     }
 #endif
-    uint base = 8u * voxel;
-    add_fixed(base, max(radiance.r, 0.0));
-    add_fixed(base + 2u, max(radiance.g, 0.0));
-    add_fixed(base + 4u, max(radiance.b, 0.0));
-    if (u_first) atomicAdd(sums[base + 6u], 1u);
+    add_radiance(voxel, radiance);
+    if (u_first) atomicAdd(sums[8u * voxel + 6u], 1u);
 }
 
 #endif

@@ -10,14 +10,10 @@ layout(local_size_x = 64) in;
 
 layout(std430, binding = 0) readonly buffer Counter { uint count; uint capacity; };
 layout(std430, binding = 1) readonly buffer Fragments { vec4 frags[]; };
-layout(std430, binding = 2) buffer Sums { uint sums[]; };
+#include "vxgi_fixed.glsl"
 layout(rgba16f, binding = 0) writeonly uniform image3D u_level0;
 
 uniform int u_res;
-
-float fixed_value(uint at) {
-    return float(sums[at + 1u]) + float(sums[at]) * (1.0 / 4294967296.0);
-}
 
 void main() {
     uint i = gl_GlobalInvocationID.x;

@@ -69,8 +69,8 @@ from diviewer.scene.model import DirectionalLight, FrameConfig, Object, PointLig
 MAX_CONES = 16
 """Must match MAX_CONES in shaders/vxgi_trace.glsl."""
 
-STAGES = ("vxgi_voxelize", "vxgi_inject", "vxgi_mip", "vxgi_trace", "vxgi_upsample", "vxgi_composite")
-"""Timed stages (``VXGIPass.timings``); the first three run only when something changed."""
+STAGES = ("vxgi_voxelize", "vxgi_inject", "vxgi_mip", "vxgi_bounce", "vxgi_trace", "vxgi_upsample", "vxgi_composite")
+"""Timed stages (``VXGIPass.timings``); the first four run only when something changed."""
 
 _FRAG_BYTES = 48  # three vec4 per voxel fragment
 _SUM_UINTS = 8    # per voxel: r, g, b as (lo, hi) words, count, unused
@@ -97,6 +97,9 @@ class VXGISettings:
     """Longest cone, as a fraction of the grid's side."""
     ao_distance: float = 0.15
     """Ambient occlusion counts what a cone hits within this fraction of the grid's side."""
+    bounces: int = 1
+    """Bounces of indirect light: 1, or 2 (each voxel fragment gathers the first bounce through the same
+    cones before the screen trace; costs a trace per fragment whenever the grid is re-injected)."""
     trace_scale: int = 2
     """Trace one pixel per trace_scale x trace_scale block (1 = full resolution), then upsample."""
     depth_sigma: float = 0.05
@@ -120,6 +123,8 @@ class VXGISettings:
         if not (0.0 < self.max_distance <= 2.0 and 0.0 <= self.ao_distance <= 2.0):
             raise DiviewerError("max_distance must be in (0, 2] and ao_distance in [0, 2] (fractions of the grid)",
                                 field="vxgi.max_distance")
+        if self.bounces not in (1, 2):
+            raise DiviewerError(f"must be 1 or 2, got {self.bounces}", field="vxgi.bounces")
         if not (isinstance(self.trace_scale, int) and 1 <= self.trace_scale <= 8):
             raise DiviewerError(f"must be an integer from 1 to 8, got {self.trace_scale}", field="vxgi.trace_scale")
         if self.depth_sigma <= 0.0 or self.normal_power < 0.0:
@@ -289,6 +294,10 @@ class VXGIPass:
                 self._inject(config)
             with self._timed("vxgi_mip"):
                 self._build_mips()
+            if self.settings.bounces > 1:
+                with self._timed("vxgi_bounce"):
+                    self._bounce()
+            self._per_fragment("ZERO")
             self._keys["light"] = light_key
             updated.append("inject")
         self.updated = tuple(updated)
@@ -378,7 +387,6 @@ class VXGIPass:
                 ctx.memory_barrier()
             first = False
         self._per_fragment("RESOLVE")
-        self._per_fragment("ZERO")
 
     def _per_fragment(self, mode: str, lists=None) -> None:
         """Run vxgi_resolve.glsl in ``mode`` (RESOLVE, ZERO or CLEAR) over the voxels of fragment lists."""
@@ -446,22 +454,11 @@ class VXGIPass:
             self._vaos[prog.glo] = self.ctx.vertex_array(prog, [])
         self._vaos[prog.glo].render(moderngl.TRIANGLES, vertices=3)
 
-    def _trace(self, config: FrameConfig) -> None:
-        s, r = self.settings, self.renderer
-        prog = self.shaders.program("vxgi_trace.glsl")
-        self._trace_fbo.use()
-        self.ctx.enable_only(moderngl.NOTHING)
-        r.textures["depth"].use(location=0)
-        r.textures["normal"].use(location=1)
-        self.voxels.use(location=2)
-        set_uniform(prog, "u_depth", 0)
-        set_uniform(prog, "u_normal", 1)
-        set_uniform(prog, "u_voxels", 2)
-        view = config.camera.view_matrix()
-        t = math.tan(math.radians(config.camera.fov) / 2.0)
-        set_uniform(prog, "m_inv_view", cam.view_to_world(view))
-        set_uniform(prog, "u_tan_half_fov", (t * r.width / r.height, t))
-        set_uniform(prog, "u_scale", int(s.trace_scale))
+    def _cone_uniforms(self, prog, unit: int) -> None:
+        """The uniforms of vxgi_cone.glsl; the grid is bound to texture ``unit``."""
+        s = self.settings
+        self.voxels.use(location=unit)
+        set_uniform(prog, "u_voxels", unit)
         set_uniform(prog, "u_grid_min", tuple(float(x) for x in self.grid_min))
         set_uniform(prog, "u_grid_size", float(self.grid_size))
         set_uniform(prog, "u_voxel", float(self.grid_size / s.resolution))
@@ -480,6 +477,36 @@ class VXGIPass:
         set_uniform(prog, "u_max_dist", float(s.max_distance * self.grid_size))
         set_uniform(prog, "u_ao_dist", float(s.ao_distance * self.grid_size))
         set_uniform(prog, "u_ambient", tuple(float(x) for x in self.scene.ambient))
+
+    def _bounce(self) -> None:
+        """A second bounce: fragments gather the first-bounce grid, then resolve and filter again."""
+        prog = self.shaders.compute("vxgi_bounce.glsl")
+        self._cone_uniforms(prog, 0)
+        self._sums.bind_to_storage_buffer(2)
+        for lst in self._lists.values():
+            if lst.count:
+                lst.header.bind_to_storage_buffer(0)
+                lst.frags.bind_to_storage_buffer(1)
+                prog.run(group_x=-(-lst.count // 64))
+        self.ctx.memory_barrier()
+        self._per_fragment("RESOLVE")
+        self._build_mips()
+
+    def _trace(self, config: FrameConfig) -> None:
+        s, r = self.settings, self.renderer
+        prog = self.shaders.program("vxgi_trace.glsl")
+        self._trace_fbo.use()
+        self.ctx.enable_only(moderngl.NOTHING)
+        r.textures["depth"].use(location=0)
+        r.textures["normal"].use(location=1)
+        set_uniform(prog, "u_depth", 0)
+        set_uniform(prog, "u_normal", 1)
+        view = config.camera.view_matrix()
+        t = math.tan(math.radians(config.camera.fov) / 2.0)
+        set_uniform(prog, "m_inv_view", cam.view_to_world(view))
+        set_uniform(prog, "u_tan_half_fov", (t * r.width / r.height, t))
+        set_uniform(prog, "u_scale", int(s.trace_scale))
+        self._cone_uniforms(prog, 2)
         self._fullscreen(prog)
 
     def _upsample(self) -> None:
