@@ -33,7 +33,7 @@ def _vxgi_settings(args: argparse.Namespace):
         return None
     from diviewer.gl.vxgi import VXGISettings
 
-    settings = VXGISettings(resolution=args.vxgi_res, trace_scale=args.vxgi_trace_scale)
+    settings = VXGISettings(resolution=args.vxgi_res, trace_scale=args.vxgi_trace_scale, bounces=args.vxgi_bounces)
     settings.validate()
     return settings
 
@@ -143,6 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--vxgi-res", type=int, default=64, help="voxels per side of the VXGI grid (32, 64, 128; default 64)")
     g.add_argument("--vxgi-trace-scale", type=int, default=1,
                    help="trace one pixel per NxN block and upsample (default 1: full resolution)")
+    g.add_argument("--vxgi-bounces", type=int, default=1, choices=(1, 2), help="bounces of indirect light (default 1)")
     p.set_defaults(func=_cmd_render)
 
     p = sub.add_parser("capture", help="render a dataset: GL inputs and path-traced ground truth (resumable)")

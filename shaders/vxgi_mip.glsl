@@ -7,9 +7,50 @@
 // projected area (1/4, 1/16, ...). Radiance: the coverage-weighted mean of the children's, stored
 // premultiplied. A coarse voxel shows the same radiance in every direction (an isotropic mip, the root
 // of light leaking; see vxgi.py).
+//
+// ANISO: six directional grids instead (Crassin et al. 2011), each for cones travelling along one of
+// +x, -x, +y, -y, +z, -z: a parent is the mean over its 4 rows of children along that axis of the
+// row composited front to back (the child the cone reaches first in front). A wall then hides what is
+// behind it at every level, from whichever side it is seen (no leaking through walls at least a
+// level-0 voxel apart), and a cone running along a wall is not stopped by it. Level 1 (u_from_iso) is
+// built from the isotropic level 0.
 #if defined COMPUTE_SHADER
 
 layout(local_size_x = 4, local_size_y = 4, local_size_z = 4) in;
+
+#if defined ANISO
+
+uniform sampler3D u_iso;                        // the isotropic grid; level 0 is read
+uniform sampler3D u_src[6];                     // the directional grids; level u_level is read
+uniform bool u_from_iso;
+uniform int u_level;
+uniform int u_res;                              // side of the level written
+layout(rgba16f, binding = 0) writeonly uniform image3D u_dst[6];
+
+vec4 child(int dir, ivec3 p) {
+    return u_from_iso ? texelFetch(u_iso, p, 0) : texelFetch(u_src[dir], p, u_level);
+}
+
+void main() {
+    ivec3 v = ivec3(gl_GlobalInvocationID);
+    if (any(greaterThanEqual(v, ivec3(u_res)))) return;
+    for (int dir = 0; dir < 6; ++dir) {
+        int axis = dir >> 1;
+        bool forward = (dir & 1) == 0;
+        ivec3 e = ivec3(axis == 0, axis == 1, axis == 2);
+        ivec3 u = e.yzx, w = e.zxy;   // the two other axes
+        vec4 sum = vec4(0.0);
+        for (int k = 0; k < 4; ++k) {
+            ivec3 p = 2 * v + u * (k & 1) + w * (k >> 1);
+            vec4 a = child(dir, p), b = child(dir, p + e);
+            vec4 front = forward ? a : b, back = forward ? b : a;
+            sum += front + (1.0 - front.a) * back;
+        }
+        imageStore(u_dst[dir], v, sum * 0.25);
+    }
+}
+
+#else
 
 uniform sampler3D u_fine;                       // the whole grid; level u_level is read
 uniform int u_level;
@@ -39,4 +80,5 @@ void main() {
     imageStore(u_coarse, v, vec4(radiance * alpha, alpha));
 }
 
+#endif
 #endif

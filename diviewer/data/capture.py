@@ -35,8 +35,8 @@ class CaptureSettings:
     width: int = 128
     height: int = 128
     gt: str = "pt"
-    """Ground truth: 'pt' (Mitsuba path tracing) or 'vxgi' (voxel cone tracing at full trace resolution,
-    stored in the same channels: pt = the VXGI image, pt_direct = the GL direct light)."""
+    """Ground truth: 'pt' (Mitsuba path tracing) or 'vxgi' (voxel cone tracing, two bounces at full trace
+    resolution, stored in the same channels: pt = the VXGI image, pt_direct = the GL direct light)."""
     spp: int = 256
     """Path-tracing samples per pixel."""
     max_depth: int = 16
@@ -156,10 +156,11 @@ class PathTracedGT:
 
 
 def vxgi_settings(settings: CaptureSettings):
-    """The VXGI pass's settings for a VXGI-ground-truth capture: full trace resolution."""
+    """The VXGI pass's settings for a VXGI-ground-truth capture: full trace resolution, two bounces
+    (on cornell, MSE against the path tracer 0.0037 instead of one bounce's 0.0055)."""
     from diviewer.gl.vxgi import VXGISettings
 
-    return VXGISettings(resolution=settings.vxgi_resolution, trace_scale=1)
+    return VXGISettings(resolution=settings.vxgi_resolution, trace_scale=1, bounces=2)
 
 
 class VXGIGT:
