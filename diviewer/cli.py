@@ -52,7 +52,7 @@ def _render_reference(args: argparse.Namespace) -> None:
 
 def _cmd_capture(args: argparse.Namespace) -> int:
     from diviewer.data.capture import CaptureSettings, capture, parse_shard
-    from diviewer.render import parse_resolution
+    from diviewer.frames import parse_resolution
 
     width, height = parse_resolution(args.res)
     fractions = tuple(float(x) for x in args.splits.split(","))
@@ -91,9 +91,44 @@ def _cmd_data_merge(args: argparse.Namespace) -> int:
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from diviewer.evaluate import evaluate
+    from diviewer.evaluate import evaluate, evaluate_evalset, strict_json
 
-    evaluate(args.model, args.data, split=args.split, provider=args.provider, out=args.out)
+    if (args.evalset is None) == (args.data is None):
+        raise DiviewerError("give an evaluation set (--evalset DIR) or a dataset split (--data DIR), one of them",
+                            field="--evalset")
+    if args.evalset is not None:
+        evaluate_evalset(args.model, args.evalset, provider=args.provider, out=args.out)
+        return 0
+    if len(args.model) == 1:
+        evaluate(args.model[0], args.data, split=args.split, provider=args.provider, out=args.out)
+        return 0
+    results = [evaluate(m, args.data, split=args.split, provider=args.provider) for m in args.model]
+    if args.out is not None:
+        from diviewer import imageio
+
+        imageio.write_text(args.out, strict_json({"results": results}))
+    return 0
+
+
+def _cmd_baseline(args: argparse.Namespace) -> int:
+    from diviewer.baseline import build_baseline
+
+    build_baseline(args.data, args.out, split=args.split, max_frames=args.max_frames)
+    return 0
+
+
+def _cmd_evalset(args: argparse.Namespace) -> int:
+    from diviewer.evalset import EvalSetSettings, build_evalset
+    from diviewer.render import parse_resolution
+
+    width, height = parse_resolution(args.res)
+    try:
+        ladder = tuple(int(x) for x in args.ladder.split(","))
+    except ValueError:
+        raise DiviewerError(f"--ladder takes sample counts like 1,4,16, got '{args.ladder}'", field="--ladder") from None
+    settings = EvalSetSettings(frames_per_split=args.frames_per_split, width=width, height=height, spp=args.spp,
+                               ladder=ladder, max_depth=args.max_depth, seed=args.seed)
+    build_evalset(args.scene, args.out, settings)
     return 0
 
 
@@ -122,6 +157,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from diviewer.gl.display import DEFAULT_TONEMAP, TONEMAPS
+
     ap = argparse.ArgumentParser(prog="diviewer", description="Real-time OpenGL viewer with a neural GI pass.")
     ap.add_argument("--version", action="version", version=f"diviewer {__version__}")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -134,7 +171,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", default="train", choices=("train", "val", "test"), help="split to draw from (with --seed)")
     p.add_argument("--config", type=Path, default=None, help="render the configuration stored in a frame.json")
     p.add_argument("--exposure", type=float, default=None, help="display exposure in stops (PNG previews)")
-    p.add_argument("--tonemap", default="aces", choices=("clamp", "reinhard", "aces"))
+    p.add_argument("--tonemap", default=DEFAULT_TONEMAP, choices=tuple(TONEMAPS),
+                   help="display tone curve of the PNG previews")
     p.add_argument("--model", type=Path, default=None, help="an ONNX model (diviewer export): also write neural.exr")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"), help="onnxruntime provider")
     _add_reference_args(p)
@@ -172,18 +210,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_export)
 
     from diviewer.train.trainer import add_train_parser
-    from diviewer.viewer.app import add_view_parser
+    from diviewer.viewer.command import add_view_parser
 
     add_train_parser(sub)
     add_view_parser(sub)
 
-    p = sub.add_parser("eval", help="a model against a dataset split, beside direct light alone (PSNR, SSIM)")
-    p.add_argument("--model", type=Path, required=True, help="an ONNX model (diviewer export)")
-    p.add_argument("--data", type=Path, required=True, help="a dataset of the model's scene (diviewer capture)")
-    p.add_argument("--split", default="test", choices=("train", "val", "test"))
+    p = sub.add_parser("eval", help="models against an evaluation set (PSNR, SSIM, FLIP, equivalent spp) or a "
+                                    "dataset split, beside direct light alone")
+    p.add_argument("--model", type=Path, action="append", required=True,
+                   help="an ONNX model (diviewer export, or diviewer baseline); repeat for several")
+    p.add_argument("--evalset", type=Path, default=None, help="an evaluation set (diviewer evalset): both splits")
+    p.add_argument("--data", type=Path, default=None, help="or a dataset of the model's scene (diviewer capture)")
+    p.add_argument("--split", default="test", choices=("train", "val", "test"), help="with --data")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
-    p.add_argument("--out", type=Path, default=None, help="write the results as JSON")
+    p.add_argument("--out", type=Path, default=None, help="write the results as JSON (strict: no NaN/Infinity)")
     p.set_defaults(func=_cmd_eval)
+
+    p = sub.add_parser("baseline", help="fit the per-pixel linear-regression baseline on a dataset; write it as "
+                                        "an ONNX model that eval, bench and view run like any model")
+    p.add_argument("--data", type=Path, required=True, help="a dataset (diviewer capture)")
+    p.add_argument("--out", type=Path, required=True, help="model.onnx (a model card model.json beside it)")
+    p.add_argument("--split", default="train", choices=("train", "val", "test"), help="split to fit on (train)")
+    p.add_argument("--max-frames", type=int, default=None, help="fit on the first N present frames only")
+    p.set_defaults(func=_cmd_baseline)
+
+    p = sub.add_parser("evalset", help="render a scene's fixed evaluation set: >= 1024-spp truth, its noise floor "
+                                       "and a ladder of lower sample counts (resumable)")
+    p.add_argument("--scene", default="cornell", help="shipped scene name or a .toml path")
+    p.add_argument("--out", type=Path, required=True, help="evaluation set folder (created, or resumed)")
+    p.add_argument("--frames-per-split", type=int, default=24, help="frames in each split (default 24)")
+    p.add_argument("--res", default="128", help="N or WxH; default 128")
+    p.add_argument("--spp", type=int, default=1024, help="samples per pixel of the ground truth (default 1024)")
+    p.add_argument("--ladder", default=",".join(map(str, (1, 4, 16, 64, 256))),
+                   help="lower sample counts for the equivalent spp (default 1,4,16,64,256)")
+    p.add_argument("--max-depth", type=int, default=16, help="path length limit of the full renders")
+    p.add_argument("--seed", type=int, default=0, help="which evaluation set of its own seed stream (default 0)")
+    p.set_defaults(func=_cmd_evalset)
 
     p = sub.add_parser("data", help="inspect datasets")
     data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")

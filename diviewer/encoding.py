@@ -69,14 +69,23 @@ _FLOAT32_MAX = float(np.finfo(np.float32).max)
 _LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
 
 
-def input_channel_slices() -> dict[str, slice]:
-    """Where each input buffer lies along the channel axis of the stacked network input."""
+INPUT_NAMES: tuple[str, ...] = tuple(name for name, _ in INPUT_CHANNELS)
+"""The input buffers' names in stacking order: what the GL renderer returns and the pack shader writes."""
+
+
+def channel_slices(channels: Iterable[tuple[str, int]] = INPUT_CHANNELS) -> dict[str, slice]:
+    """Where each named buffer lies along the channel axis of a stack of ``channels`` (name, count)."""
     slices: dict[str, slice] = {}
     start = 0
-    for name, n in INPUT_CHANNELS:
+    for name, n in channels:
         slices[name] = slice(start, start + n)
         start += n
     return slices
+
+
+def input_channel_slices() -> dict[str, slice]:
+    """Where each input buffer lies along the channel axis of the stacked network input."""
+    return channel_slices(INPUT_CHANNELS)
 
 
 @dataclass(frozen=True)

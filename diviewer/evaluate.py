@@ -1,14 +1,18 @@
-"""`diviewer eval`: a model against a dataset split, beside the direct-light baseline (torch-free).
+"""`diviewer eval`: models against an evaluation set (or a dataset split), beside direct light (torch-free).
 
 Every method is scored against the path-traced image (`pt`) with the same metrics as training's
 validation: MSE, PSNR (peak 1) and SSIM on linear radiance, and the same on the tone-mapped image
-(diviewer.metrics.tonemap at the model's exposure). The reference's own noise bounds what any score
-can mean: `diviewer render --reference pt --noise-floor` measures it at the dataset's spp.
+(diviewer.metrics.tonemap). On an evaluation set (diviewer.evalset) also: HDR-FLIP on linear radiance,
+LDR-FLIP on the tone-mapped images, the checkerboard ratio over flat regions, and the equivalent sample
+count; beside the models, direct light alone, the noise floor (a second seed at the reference's spp)
+and the path tracer at each ladder count, per split. One tone map (the evaluation set's exposure)
+for every row. On a dataset split (``--data``) the tone map is the model's exposure, as in training.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -17,7 +21,8 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
-from diviewer.metrics import mse, psnr, ssim, tonemap
+from diviewer.metrics import (equivalent_spp, flat_mask, flip, highpass_power, mse, power_ratio, psnr, psnr_error,
+                              ssim, tonemap)
 from diviewer.runtime import NeuralGI, pack_buffers
 
 KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
@@ -57,12 +62,160 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
                         for k in KEYS} for m, rs in rows.items()},
     }
     log(f"{summary['scene']} {split} split, {len(idx)} frames, against path tracing at {summary['reference_spp']} spp")
-    log(f"{'method':<22} {'PSNR':>7} {'SSIM':>7} {'PSNR tm':>8} {'SSIM tm':>8}")
-    for m, label in (("neural", f"neural K={model.meta['K']} {model.meta['precision']}"), ("direct", "direct light only")):
+    log(f"{'method':<34} {'PSNR':>7} {'SSIM':>7} {'PSNR tm':>8} {'SSIM tm':>8}")
+    for m, label in (("neural", _model_label(model.meta, Path(model_path))), ("direct", "direct light only")):
         s = summary["methods"][m]
-        log(f"{label:<22} {s['psnr']['mean']:7.2f} {s['ssim']['mean']:7.4f} {s['psnr_tm']['mean']:8.2f} "
+        log(f"{label:<34} {s['psnr']['mean']:7.2f} {s['ssim']['mean']:7.4f} {s['psnr_tm']['mean']:8.2f} "
             f"{s['ssim_tm']['mean']:8.4f}")
     log(f"inference {summary['inference_ms']['median']:.1f} ms median ({model.provider})")
     if out is not None:
         imageio.write_text(out, json.dumps(summary, indent=1))
     return summary
+
+
+# --- evaluation sets ---------------------------------------------------------------------------------------------
+
+EVAL_KEYS = KEYS + ("flip_hdr", "flip_ldr")
+EQUIVALENT_BY = ("psnr_tm", "psnr", "flip_ldr")
+"""Metrics the equivalent sample count is read from; the first is the headline (tables, targets)."""
+
+
+def score_frame(image: np.ndarray, truth: np.ndarray, exposure: float, mask: np.ndarray) -> dict[str, float]:
+    """Every evaluation-set metric of one frame, plus the high-frequency powers of the checkerboard ratio."""
+    a, b = tonemap(image, exposure), tonemap(truth, exposure)
+    s = score(image, truth, exposure)
+    s["flip_hdr"] = flip(truth, image, "HDR")
+    s["flip_ldr"] = flip(b, a, "LDR")
+    s["hf_power"], s["hf_power_ref"] = highpass_power(a, mask), highpass_power(b, mask)
+    return s
+
+
+def _aggregate(rows: list[dict]) -> dict:
+    out = {k: {"mean": float(np.mean([r[k] for r in rows])), "std": float(np.std([r[k] for r in rows]))}
+           for k in EVAL_KEYS}
+    # Pooled over frames (each frame's flat pixels weigh alike), not a mean of per-frame ratios.
+    out["checkerboard"] = power_ratio(sum(r["hf_power"] for r in rows), sum(r["hf_power_ref"] for r in rows))
+    return out
+
+
+def _error(summary: dict, key: str) -> float:
+    v = summary[key]["mean"]
+    return psnr_error(v) if key.startswith("psnr") else v
+
+
+def _equivalent(summary: dict, ladder_spp: list[int], ladder: list[dict]) -> dict:
+    out = {}
+    for key in EQUIVALENT_BY:
+        try:
+            out[key] = equivalent_spp(ladder_spp, [_error(r, key) for r in ladder], _error(summary, key))
+        except ValueError:  # a perfect score (error 0) or a ladder with one: no sample count to read
+            out[key] = None
+    return out
+
+
+def _model_label(meta: dict, path: Path) -> str:
+    if meta.get("kind") == "linear_baseline":
+        return f"linear baseline ({meta.get('parameters', '?')} params)"
+    return f"neural K={meta['K']} {meta['precision']} ({path.stem})"
+
+
+def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str | None = None,
+                     out: Path | None = None, log=print) -> dict:
+    """Score models, direct light, the noise floor and the path-tracer ladder on an evaluation set, per split."""
+    from diviewer.evalset import EVAL_SPLITS, load_evalset
+    from diviewer.console import progress_bar
+
+    ds = load_evalset(evalset_dir)
+    info = ds.manifest["evalset"]
+    exposure = float(info["tonemap"]["exposure"])
+    ladder_spp, ladder_ch = [int(n) for n in info["ladder_spp"]], list(info["ladder_channels"])
+    models = {}
+    for path in model_paths:
+        net = NeuralGI(path, provider=provider)
+        if net.meta["scene_hash"] != ds.manifest["scene_hash"]:
+            raise DiviewerError(f"the model was made for scene '{net.meta['scene']}' (another scene file than the "
+                                f"evaluation set's '{ds.manifest['scene']}')", path=path, field="scene_hash")
+        key = path.stem if path.stem not in models else f"{path.stem}_{len(models)}"
+        models[key] = net
+    rows_of = {"direct": "direct", "noise_floor": info["second_seed_channel"],
+               **{f"pt_spp{n}": ch for n, ch in zip(ladder_spp, ladder_ch)}}
+    result = {"evalset": str(evalset_dir), "scene": ds.manifest["scene"], "reference_spp": ds.manifest["spp"],
+              "resolution": ds.manifest["resolution"], "tonemap_exposure": exposure, "ladder_spp": ladder_spp,
+              "flip": {"flip_hdr": "HDR-FLIP on linear radiance (negative values clamped to 0)",
+                       "flip_ldr": "LDR-FLIP on the tone-mapped images"},
+              "equivalent_spp_by": EQUIVALENT_BY[0], "splits": {}}
+    progress = progress_bar(len(ds.indices()), "eval", "frame")
+    for split in EVAL_SPLITS:
+        idx = ds.indices(split)
+        if not idx:
+            continue
+        rows = {k: [] for k in (*models, *rows_of)}
+        times = {k: [] for k in models}
+        flat = 0
+        for i in idx:
+            f = ds.load(i)
+            mask = flat_mask(f["depth"], f["normal"], f["albedo"])
+            flat += int(mask.sum())
+            for key, net in models.items():
+                t0 = time.perf_counter()
+                y = net.run(pack_buffers(f))
+                times[key].append((time.perf_counter() - t0) * 1e3)
+                rows[key].append(score_frame(y, f["pt"], exposure, mask))
+            for key, ch in rows_of.items():
+                rows[key].append(score_frame(f[ch], f["pt"], exposure, mask))
+            progress.update()
+        methods = {k: _aggregate(r) for k, r in rows.items()}
+        ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
+        for key, m in methods.items():
+            m["equivalent_spp"] = _equivalent(m, ladder_spp, ladder)
+            if key in models:
+                net = models[key]
+                m.update(kind=net.meta.get("kind", "neural"), label=_model_label(net.meta, net.path),
+                         model=str(net.path), provider=net.provider,
+                         inference_ms={"median": float(np.median(times[key]))})
+            elif key == "direct":
+                m.update(kind="direct", label="direct light only (GL)")
+            elif key == "noise_floor":
+                m.update(kind="noise_floor", label=f"noise floor ({ds.manifest['spp']} spp, 2nd seed)")
+            else:
+                m.update(kind="path_tracer", label=f"path traced {key[6:]} spp")
+        result["splits"][split] = {"frames": len(idx), "flat_pixels_per_frame": flat / len(idx), "methods": methods}
+    progress.close()
+    for line in format_tables(result):
+        log(line)
+    if out is not None:
+        imageio.write_text(out, strict_json(result))
+    return result
+
+
+def format_tables(result: dict) -> list[str]:
+    """The per-split tables for people."""
+    lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; tm = tone-mapped at "
+             f"exposure {result['tonemap_exposure']:.3g}; FLIP-HDR on linear radiance, FLIP-LDR on tone-mapped; "
+             f"eq. spp from PSNR tm; checker = high-frequency power over flat regions / the reference's"]
+    for split, r in result["splits"].items():
+        lines.append("")
+        lines.append(f"{split} ({r['frames']} frames)")
+        lines.append(f"{'method':<34} {'PSNR':>6} {'SSIM':>6} {'PSNR tm':>7} {'SSIM tm':>7} {'FLIP-HDR':>8} "
+                     f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7}")
+        for m in r["methods"].values():
+            eq = m["equivalent_spp"][EQUIVALENT_BY[0]]
+            lines.append(f"{m['label']:<34} {m['psnr']['mean']:6.2f} {m['ssim']['mean']:6.4f} {m['psnr_tm']['mean']:7.2f} "
+                         f"{m['ssim_tm']['mean']:7.4f} {m['flip_hdr']['mean']:8.4f} {m['flip_ldr']['mean']:8.4f} "
+                         f"{eq['text'] if eq else '-':>8} {m['checkerboard']:7.3g}")
+    return lines
+
+
+def _finite(obj):
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def strict_json(obj) -> str:
+    """JSON without NaN or Infinity (a perfect PSNR, a ratio over a perfectly smooth reference): they become null."""
+    return json.dumps(_finite(obj), indent=1, allow_nan=False)

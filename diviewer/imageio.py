@@ -115,9 +115,3 @@ def normal_preview(normal: np.ndarray) -> np.ndarray:
     valid = np.any(normal != 0, axis=-1, keepdims=True)
     return np.where(valid, np.clip(np.nan_to_num(normal) * 0.5 + 0.5, 0, 1) * 255, 0).astype(np.uint8)
 
-
-def srgb8(linear: np.ndarray) -> np.ndarray:
-    """A linear [0, 1] image (albedo) as uint8 sRGB."""
-    from diviewer.scene.shapes import linear_to_srgb
-
-    return (linear_to_srgb(np.nan_to_num(linear)) * 255 + 0.5).astype(np.uint8)

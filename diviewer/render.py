@@ -9,84 +9,26 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.errors import DiviewerError
-from diviewer.provenance import settings_dict, versions
+from diviewer.frames import frame_record, load_frame_json, parse_resolution, read_frame_json, with_user_meshes
+from diviewer.provenance import settings_dict
 from diviewer.scene import FrameConfig, Scene, config_from_dict, load_scene, sample_config
-
-
-def parse_resolution(text: str) -> tuple[int, int]:
-    """``256`` (square) or ``320x240`` (width x height)."""
-    try:
-        parts = [int(p) for p in str(text).lower().split("x")]
-    except ValueError:
-        parts = []
-    if len(parts) == 1:
-        parts = parts * 2
-    if len(parts) != 2 or min(parts) < 1 or max(parts) > 16384:
-        raise DiviewerError(f"resolution must be N or WxH with 1 <= N <= 16384, got '{text}'", field="--res")
-    return parts[0], parts[1]
-
-
-def load_frame_json(scene: Scene, path: Path) -> FrameConfig:
-    """The configuration stored in a frame.json (or a viewer screenshot's JSON).
-
-    ``scene`` must hold the mesh files the frame uses (``scene_for_frame_json`` adds them).
-    """
-    return config_from_dict(scene, _read_frame_json(scene, path)["config"], path=path)
-
-
-def scene_for_frame_json(scene: Scene, path: Path) -> Scene:
-    """The scene with the mesh files a frame.json records (``user_meshes``, from the viewer) added."""
-    return _with_user_meshes(scene, _read_frame_json(scene, path))
-
-
-def _with_user_meshes(scene: Scene, data: dict) -> Scene:
-    from diviewer.scene.loader import add_mesh_file
-
-    for key, file in (data.get("user_meshes") or {}).items():
-        scene, _, _ = add_mesh_file(scene, file, key)
-    return scene
-
-
-def _read_frame_json(scene: Scene, path: Path) -> dict:
-    try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise DiviewerError(f"cannot read frame configuration: {exc}", path=path) from exc
-    if "config" not in data:
-        raise DiviewerError("missing the 'config' table written by diviewer render", path=path, field="config")
-    if data.get("scene_hash") and data["scene_hash"] != scene.file_hash:
-        raise DiviewerError(f"this frame was made with another version of scene '{data.get('scene')}' "
-                            f"(scene file hash differs)", path=path, field="scene_hash")
-    return data
+from diviewer.scene.colour import srgb8
 
 
 def choose_config(scene: Scene, seed: int | None, split: str, config_file: Path | None) -> tuple[Scene, FrameConfig, dict]:
     """The frame to render: a stored frame.json (its scene gains the mesh files it records), the
     default pose, or one drawn with ``seed``. Also returns what the frame.json recorded ({} otherwise)."""
     if config_file is not None:
-        data = _read_frame_json(scene, config_file)  # read once: meshes, configuration, record
-        scene = _with_user_meshes(scene, data)
+        data = read_frame_json(scene, config_file)  # read once: meshes, configuration, record
+        scene = with_user_meshes(scene, data)
         return scene, config_from_dict(scene, data["config"], path=config_file), data
     if seed is None:
         return scene, scene.default, {}
     return scene, sample_config(scene, seed, split), {}
 
 
-def frame_record(scene: Scene, config: FrameConfig, size: tuple[int, int], **extra) -> dict:
-    """The frame.json content: enough to render the same frame again."""
-    return {
-        "scene": scene.name,
-        "scene_file": str(scene.path) if scene.path else None,
-        "scene_hash": scene.file_hash,
-        "resolution": list(size),
-        **extra,
-        "config": config.to_dict(),
-        "versions": versions(),
-    }
-
-
 def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int | None = None, split: str = "train",
-                  config_file: Path | None = None, exposure: float | None = None, tonemap: str = "aces",
+                  config_file: Path | None = None, exposure: float | None = None, tonemap: str | None = None,
                   model: Path | None = None, provider: str | None = None, vxgi=None) -> dict:
     """Render one frame's GL buffers (and, with a model, its neural GI image) and write them.
 
@@ -100,7 +42,10 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
         The frame record written to frame.json.
     """
     from diviewer.gl.context import describe, headless_context
-    from diviewer.gl.renderer import BUFFERS, Compositor, Renderer, RenderSettings
+    from diviewer.gl.display import DEFAULT_TONEMAP, DisplayPass
+    from diviewer.gl.renderer import BUFFERS, Renderer, RenderSettings
+
+    tonemap = tonemap or DEFAULT_TONEMAP
 
     scene = load_scene(scene_name)
     net = None
@@ -119,16 +64,16 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     neural_info = None
     with headless_context() as ctx:
         renderer = Renderer(ctx, scene, width, height, settings)
-        compositor = Compositor(ctx, renderer.shaders)
+        compositor = DisplayPass(ctx, renderer.shaders)
         neural = vx = None
         vxgi_info = None
         try:
             frame = renderer.frame(config)
             if vxgi is not None:
+                from diviewer.gl.context import stage_timer
                 from diviewer.gl.vxgi import VXGIPass
 
-                vx = VXGIPass(ctx, renderer, vxgi)
-                vx.timing = True
+                vx = VXGIPass(ctx, renderer, vxgi, timer=stage_timer(ctx, sync=True))
                 vx.run(config)
                 frame["vxgi"], frame["vxgi_indirect"] = vx.read("vxgi"), vx.read("vxgi_indirect")
                 vxgi_info = {"settings": settings_dict(vxgi), "fragments": vx.fragment_counts,
@@ -147,7 +92,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 imageio.write_exr(out / f"{name}.exr", frame[name])
             imageio.write_png(out / "depth.png", imageio.depth_preview(frame["depth"]))
             imageio.write_png(out / "normal.png", imageio.normal_preview(frame["normal"]))
-            imageio.write_png(out / "albedo.png", imageio.srgb8(frame["albedo"]))
+            imageio.write_png(out / "albedo.png", srgb8(frame["albedo"]))
             imageio.write_png(out / "direct.png", compositor.to_ldr(frame["direct"], ev, tonemap))
             if "neural" in frame:
                 imageio.write_exr(out / "neural.exr", frame["neural"])
@@ -201,7 +146,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     import time
 
     from diviewer.gl.context import headless_context
-    from diviewer.gl.renderer import Compositor
+    from diviewer.gl.display import DEFAULT_TONEMAP, DisplayPass
     from diviewer.gl.shaders import ShaderCache
     from diviewer.reference import mitsuba as ref
 
@@ -249,9 +194,9 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     for name, im in images.items():
         imageio.write_exr(out / f"{name}.exr", im)
     display = record.get("display") or {}
-    ev, tonemap = float(display.get("exposure", scene.exposure)), display.get("tonemap", "aces")
+    ev, tonemap = float(display.get("exposure", scene.exposure)), display.get("tonemap", DEFAULT_TONEMAP)
     with headless_context() as ctx:
-        compositor = Compositor(ctx, ShaderCache(ctx))
+        compositor = DisplayPass(ctx, ShaderCache(ctx))
         try:
             for name, im in images.items():
                 # Noise can make single indirect pixels slightly negative; the preview clamps, the EXR does not.

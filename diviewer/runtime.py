@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNELS, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
+from diviewer.timing import StageTimer
 
 INPUT_NAME = "buffers"
 OUTPUT_NAME = "radiance"
@@ -102,14 +101,6 @@ def choose_providers(available: list[str], requested: str | None = None) -> list
     return [name] + (["CPUExecutionProvider"] if name != "CPUExecutionProvider" else [])
 
 
-@dataclass
-class StageTimes:
-    """Milliseconds of the last frame's stages."""
-
-    inference: float = 0.0
-    history: list = field(default_factory=list)
-
-
 class NeuralGI:
     """One loaded model: checks, then turns (N, H, W, 10) raw buffers into (N, H, W, 3) radiance."""
 
@@ -141,7 +132,8 @@ class NeuralGI:
         self.provider = self.session.get_providers()[0]
         self.multiple = int(self.meta["multiple"])
         self.resolution = tuple(int(x) for x in self.meta["resolution"])
-        self.times = StageTimes()
+        self.timer = StageTimer()
+        """Times ``inference`` (the session's run alone) unless ``run`` is given the caller's timer."""
 
     @property
     def file_sha256(self) -> str:
@@ -153,23 +145,21 @@ class NeuralGI:
                                 f"got {width}x{height} (it was trained at {self.resolution[0]}x{self.resolution[1]})",
                                 path=self.path)
 
-    def run(self, buffers: np.ndarray) -> np.ndarray:
+    def run(self, buffers: np.ndarray, timer: StageTimer | None = None) -> np.ndarray:
         """(N, H, W, 10) or (H, W, 10) float32 raw buffers to radiance of the same leading shape."""
         single = buffers.ndim == 3
         x = buffers[None] if single else buffers
         if x.dtype != np.float32 or not x.flags.c_contiguous:
             x = np.ascontiguousarray(x, dtype=np.float32)
         self.check_size(x.shape[2], x.shape[1])
-        t0 = time.perf_counter()
-        (y,) = self.session.run([OUTPUT_NAME], {INPUT_NAME: x})
-        self.times.inference = (time.perf_counter() - t0) * 1000.0
+        with (timer or self.timer).stage("inference"):
+            (y,) = self.session.run([OUTPUT_NAME], {INPUT_NAME: x})
         return y[0] if single else y
 
 
 def pack_buffers(frame: dict[str, np.ndarray]) -> np.ndarray:
     """GL frame buffers (depth (H, W), others (H, W, 3)) to the model's (H, W, 10) input, on the CPU."""
-    depth = frame["depth"][..., None] if frame["depth"].ndim == 2 else frame["depth"]
-    parts = [depth] + [frame[name] for name, _ in INPUT_CHANNELS[1:]]
+    parts = [frame[name].reshape(*frame[name].shape[:2], n) for name, n in INPUT_CHANNELS]
     return np.ascontiguousarray(np.concatenate(parts, axis=-1), dtype=np.float32)
 
 

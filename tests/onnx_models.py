@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNELS
+from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNEL_COUNT, INPUT_CHANNELS, input_channel_slices
 
 
 def base_meta(scene_hash: str = "0" * 64, scene: str = "plane") -> dict:
@@ -19,16 +19,17 @@ def base_meta(scene_hash: str = "0" * 64, scene: str = "plane") -> dict:
     }
 
 
-def direct_times(path: Path, factor: float = 2.0, meta: dict | None = None, channels: int = 10,
+def direct_times(path: Path, factor: float = 2.0, meta: dict | None = None, channels: int = INPUT_CHANNEL_COUNT,
                  with_meta: bool = True) -> Path:
-    """radiance = factor * direct (channels 7:10 of the input)."""
+    """radiance = factor * direct (its channels of the input, from the encoding's layout)."""
     import onnx
     from onnx import TensorProto, helper
 
     x = helper.make_tensor_value_info("buffers", TensorProto.FLOAT, ["N", "H", "W", channels])
     y = helper.make_tensor_value_info("radiance", TensorProto.FLOAT, ["N", "H", "W", 3])
-    inits = [helper.make_tensor("starts", TensorProto.INT64, [1], [7]),
-             helper.make_tensor("ends", TensorProto.INT64, [1], [10]),
+    direct = input_channel_slices()["direct"]
+    inits = [helper.make_tensor("starts", TensorProto.INT64, [1], [direct.start]),
+             helper.make_tensor("ends", TensorProto.INT64, [1], [direct.stop]),
              helper.make_tensor("axes", TensorProto.INT64, [1], [3]),
              helper.make_tensor("k", TensorProto.FLOAT, [], [factor])]
     nodes = [helper.make_node("Slice", ["buffers", "starts", "ends", "axes"], ["direct"]),

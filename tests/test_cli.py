@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
@@ -96,14 +97,26 @@ def test_wheel_installs_and_renders_from_another_directory(tmp_path):
 
 
 def test_viewer_runtime_and_render_work_without_torch(gl_context, tmp_path):
-    """The viewer and the runtime install and run without the train extra (torch, mitsuba)."""
+    """Everything outside train/ (viewer, runtime, render, gl, scene, data, metrics) imports and runs
+    without the train extra (torch, mitsuba): every such module is imported with both blocked, and
+    the shipped model renders a frame through the runtime."""
+    from diviewer.paths import models_dir
+
+    model = Path(models_dir()) / "cornell.onnx"
     code = (
-        "import sys\n"
+        "import importlib, pkgutil, sys\n"
         "sys.modules['torch'] = None\n"  # any `import torch` now raises ImportError
         "sys.modules['mitsuba'] = None\n"
-        "import diviewer.viewer.app, diviewer.runtime, diviewer.gl.neural, diviewer.encoding\n"
+        "import diviewer\n"
+        "names = [m.name for m in pkgutil.walk_packages(diviewer.__path__, 'diviewer.')\n"
+        "         if not m.name.startswith('diviewer.train') and not m.name.endswith('__main__')]\n"
+        "assert {'diviewer.viewer.app', 'diviewer.runtime', 'diviewer.render'} <= set(names), names\n"
+        "for name in names:\n"
+        "    importlib.import_module(name)\n"
         "from diviewer.cli import main\n"
         f"rc = main(['render', '--scene', 'cornell', '--res', '32', '--out', {str(tmp_path / 'o')!r}])\n"
+        "assert rc == 0, rc\n"
+        f"rc = main(['render', '--scene', 'cornell', '--model', {str(model)!r}, '--out', {str(tmp_path / 'n')!r}])\n"
         "assert rc == 0, rc\n"
         f"rc = main(['export', {str(tmp_path / 'x.ckpt')!r}, '--out', {str(tmp_path / 'x.onnx')!r}])\n"
         "assert rc == 2, rc\n"
@@ -112,13 +125,14 @@ def test_viewer_runtime_and_render_work_without_torch(gl_context, tmp_path):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "pip install 'diviewer[train]'" in r.stderr, "export names the extra to install"
+    assert (tmp_path / "n" / "neural.exr").is_file()
 
 
 def test_frame_json_with_a_loaded_mesh_file_renders_again(gl_context, tmp_path):
     """A viewer screenshot after loading a mesh file records it; render --config loads it again."""
     import trimesh
 
-    from diviewer.render import scene_for_frame_json
+    from diviewer.frames import scene_for_frame_json
     from diviewer.scene import load_scene
     from diviewer.scene.loader import add_mesh_file
 
@@ -148,3 +162,21 @@ def test_written_files_get_ordinary_permissions(tmp_path):
     finally:
         os.umask(old)
     assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(any(importlib.util.find_spec(m) is None for m in ("torch", "mitsuba", "onnx")),
+                    reason="the pipeline needs the train extra: pip install 'diviewer[train]'")
+def test_capture_train_export_runtime_smoke(gl_context, tmp_path):
+    """The whole pipeline shrunk, through the CLI: capture -> train a few steps -> export -> a runtime frame."""
+    data, run, model, out = tmp_path / "data", tmp_path / "run", tmp_path / "m.onnx", tmp_path / "frame"
+    assert main(["capture", "--scene", "cornell", "--frames", "6", "--res", "32", "--spp", "4", "--max-depth", "3",
+                 "--splits", "0.5,0.25,0.25", "--out", str(data)]) == 0
+    assert main(["train", "--data", str(data), "--out", str(run), "--k", "4", "--ndf", "8", "--batch-size", "2",
+                 "--epochs", "1", "--device", "cpu"]) == 0
+    assert (run / "best.ckpt").is_file() and (run / "metrics.csv").is_file()
+    assert main(["export", str(run / "best.ckpt"), "--out", str(model), "--verify-frames", "1"]) == 0
+    assert main(["render", "--scene", "cornell", "--model", str(model), "--out", str(out)]) == 0
+    neural, direct = read_exr(out / "neural.exr"), read_exr(out / "direct.exr")
+    assert neural.shape == direct.shape == (32, 32, 3), "rendered at the model's resolution"
+    assert np.isfinite(neural).all()

@@ -45,6 +45,41 @@ def test_layout_constants() -> None:
     assert slices["depth"] == slice(0, 1) and slices["direct"] == slice(7, 10)
 
 
+def test_every_copy_of_the_channel_layout_follows_the_encoding() -> None:
+    """The GL renderer's buffers, the pack shader's offsets, the dataset's stored channels and the
+    export's slices all come from INPUT_CHANNELS; this fails if one is written out again and drifts.
+    (The GPU packing itself is compared bit for bit with the table in tests/test_runtime.py.)"""
+    import inspect
+    import re
+
+    from diviewer.data.dataset import CHANNELS
+    from diviewer.gl.neural import PACK_DEFINES
+    from diviewer.gl.renderer import BUFFERS
+    from diviewer.paths import shaders_dir
+    from diviewer.runtime import pack_buffers
+
+    names = [name for name, _ in INPUT_CHANNELS]
+    assert list(BUFFERS) == names
+    assert CHANNELS[:len(INPUT_CHANNELS)] == INPUT_CHANNELS and len({n for n, _ in CHANNELS}) == len(CHANNELS)
+    slices = input_channel_slices()
+    assert PACK_DEFINES == {"IN_CHANNELS": INPUT_CHANNEL_COUNT,
+                            **{f"IN_{n.upper()}": slices[n].start for n in names},
+                            **{f"IN_{n.upper()}_N": c for n, c in INPUT_CHANNELS}}
+    # The shader indexes only through those defines: no channel offset or count written as a number.
+    shader = (shaders_dir() / "pack.glsl").read_text()
+    indices = re.findall(r"data\[([^\]]*)\]", shader.split("void main()")[1])
+    assert indices and all(re.fullmatch(r"base \+ IN_[A-Z]+( \+ [12])?", i) for i in indices), indices
+    assert "* IN_CHANNELS" in shader and not re.search(r"\*\s*\d+;", shader)
+    # The CPU packing and the export read by name from the same table.
+    frame = {n: np.full((2, 3, c), i, np.float32) for i, (n, c) in enumerate(INPUT_CHANNELS)}
+    packed = pack_buffers(frame)
+    for i, n in enumerate(names):
+        assert (packed[..., slices[n]] == i).all()
+    from diviewer.train import export  # imports torch only when it exports
+
+    assert not re.search(r"x\[:, \d+:\d+\]", inspect.getsource(export)), "export slices channels by number again"
+
+
 @pytest.mark.parametrize(("dtype", "rtol"), [(np.float32, RTOL_F32), (np.float64, RTOL_F64)])
 def test_radiance_round_trip_whole_range(dtype: type, rtol: float) -> None:
     x = _magnitudes(ENC, dtype)

@@ -78,7 +78,9 @@ def test_fp16_export_is_finite_and_close(checkpoints, tmp_path):
     card = export(checkpoints["full"], out, ExportSettings(fp16=True), log=quiet)
     v = card["verification"]
     assert card["precision"] == "fp16" and v["onnx_finite"]
-    assert v["psnr_db"] > 30.0, v  # measured ~50 dB on the tiny model; fp16 must not be far off
+    # Measured 81.5 dB (max error 5.6e-4 of peak) on this tiny model: fp16 ONNX against the fp16 torch
+    # module. ~10 dB of margin for other CPUs and onnxruntime builds, no more: a real mismatch is far below.
+    assert v["psnr_db"] > 70.0 and v["max_rel_to_peak"] < 5e-3, v
     fp32 = tmp_path / "f.onnx"
     export(checkpoints["full"], fp32, log=quiet)
     assert out.stat().st_size < 0.75 * fp32.stat().st_size, "fp16 weights take about half the space"
@@ -129,3 +131,114 @@ def test_eval_of_the_exported_model_reproduces_training_validation(checkpoints, 
     assert set(result["methods"]) == {"neural", "direct"}
     assert json.loads((tmp_path / "eval.json").read_text())["frames"] == 2
     assert main(["eval", "--model", str(out), "--data", str(checkpoints["data"]), "--split", "val"]) == 0
+
+
+# ---------------------------------------------------------------------------------------------
+# Ablation options: every decoder upsampling and normalisation exports and matches PyTorch
+
+
+def _buffers(rng, n: int, h: int, w: int) -> np.ndarray:
+    return np.concatenate([rng.uniform(1, 5, (n, h, w, 1)), rng.uniform(-1, 1, (n, h, w, 3)),
+                           rng.uniform(0, 1, (n, h, w, 3)), rng.uniform(0, 3, (n, h, w, 3))], -1).astype(np.float32)
+
+
+@pytest.mark.parametrize("upsample", ["transpose", "resize", "shuffle"])
+@pytest.mark.parametrize("norm", ["batch", "instance", "none"])
+def test_each_option_exports_and_matches_torch(upsample, norm):
+    """Build, train one step, export (legacy exporter, opset 17): onnxruntime equals PyTorch to 1e-4 of
+    peak for the full target and for indirect / albedo, whose composition the graph must carry."""
+    import onnxruntime as ort
+
+    from diviewer.encoding import Encoding, decode_radiance, encode_inputs
+    from diviewer.train.export import OPSET, onnx_bytes
+    from diviewer.train.losses import reconstruction_loss
+    from diviewer.train.networks import NetConfig, init_weights
+    from diviewer.train.trainer import ALBEDO_FLOOR
+
+    torch.manual_seed(0)
+    netG = init_weights(NetConfig(K=4, resolution=32, upsample=upsample, norm=norm).build_generator())
+    enc = Encoding(exposure=2.0, depth_scale=10.0)
+    rng = np.random.default_rng(5)
+    train_x = torch.from_numpy(_buffers(rng, 2, 32, 32)).permute(0, 3, 1, 2)
+    real_A = encode_inputs(train_x[:, 0:1], train_x[:, 1:4], train_x[:, 4:7], train_x[:, 7:10], enc, channel_axis=1)
+    opt = torch.optim.Adam(netG.parameters(), lr=1e-3)
+    loss = reconstruction_loss(netG.train()(real_A), torch.rand(2, 3, 32, 32) - 0.5)
+    opt.zero_grad()
+    loss.backward()
+    opt.step()  # weights and batch-norm statistics off their initial values
+    netG.eval()
+
+    frames = _buffers(rng, 2, 32, 32)
+    wide = _buffers(rng, 1, 64, 96)  # dynamic size: larger and non-square
+    for target, divide_albedo in (("full", False), ("indirect", True)):
+        module = gi_module(netG, enc, {"target": target, "divide_albedo": divide_albedo})
+        session = ort.InferenceSession(onnx_bytes(module, torch.from_numpy(frames[:1])),
+                                       providers=["CPUExecutionProvider"])
+        for x in (frames, wide):
+            with torch.no_grad():
+                ref = module(torch.from_numpy(x)).numpy()
+            got = session.run(None, {"buffers": x})[0]
+            assert got.shape == x.shape[:3] + (3,)
+            assert np.abs(got - ref).max() <= 1e-4 * np.abs(ref).max(), (upsample, norm, target, OPSET)
+        if divide_albedo:
+            # the graph multiplies netG's decoded irradiance by the albedo (floored) and adds direct
+            t = torch.from_numpy(frames).permute(0, 3, 1, 2)
+            with torch.no_grad():
+                irradiance = decode_radiance(netG(encode_inputs(t[:, 0:1], t[:, 1:4], t[:, 4:7], t[:, 7:10], enc,
+                                                                channel_axis=1)), enc)
+            expected = (t[:, 7:10] + irradiance * t[:, 4:7].clamp(min=ALBEDO_FLOOR)).permute(0, 2, 3, 1).numpy()
+            got = session.run(None, {"buffers": frames})[0]
+            np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
+
+
+def _rewrite_checkpoint(src, dst, upsample=None, norm=None, drop_options=False, divide_albedo=None):
+    """A copy of a trained checkpoint whose generator is rebuilt with other options (or whose records
+    lack the option keys, as checkpoints written before they existed do)."""
+    from diviewer.train.networks import UnetGenerator, init_weights
+    from diviewer.train.trainer import load_checkpoint
+
+    ckpt = load_checkpoint(src)
+    args = dict(ckpt["model_args"])
+    if drop_options:
+        for key in ("upsample", "norm"):
+            args.pop(key, None)
+            ckpt["net_config"].pop(key, None)
+        ckpt["net_config"].pop("norm_D", None)
+    else:
+        args.update(upsample=upsample, norm=norm)
+        ckpt["net_config"].update(upsample=upsample, norm=norm)
+        torch.manual_seed(1)
+        netG = init_weights(UnetGenerator(**args))
+        netG.train()(torch.randn(2, netG.in_channels, 32, 32))  # batch-norm statistics off their start
+        ckpt["netG"] = netG.state_dict()
+    if divide_albedo is not None:
+        ckpt["config"]["divide_albedo"] = divide_albedo
+    ckpt["model_args"] = args
+    torch.save(ckpt, dst)
+    return dst
+
+
+@pytest.mark.parametrize(("upsample", "norm"), [("resize", "instance"), ("shuffle", "none")])
+def test_export_of_a_checkpoint_with_options(checkpoints, tmp_path, upsample, norm):
+    ckpt = _rewrite_checkpoint(checkpoints["indirect"], tmp_path / "o.ckpt", upsample, norm, divide_albedo=True)
+    out = tmp_path / "o.onnx"
+    card = export(ckpt, out, log=quiet)
+    assert card["verification"]["max_rel_to_peak"] <= 1e-4
+    assert (card["upsample"], card["norm"], card["divide_albedo"]) == (upsample, norm, True)
+    assert f"upsample={upsample} norm={norm}" in info(out)
+    netG, enc, meta = build_generator_from_checkpoint(ckpt)
+    x = np.random.default_rng(2).uniform(0.1, 2, (1, 64, 32, 10)).astype(np.float32)
+    with torch.no_grad():
+        ref = gi_module(netG, enc, meta)(torch.from_numpy(x)).numpy()
+    np.testing.assert_allclose(NeuralGI(out).run(x), ref, rtol=1e-4, atol=1e-5 * np.abs(ref).max())
+
+
+def test_checkpoint_from_before_the_options_exports_the_same_graph(checkpoints, tmp_path):
+    import onnx
+
+    old = _rewrite_checkpoint(checkpoints["full"], tmp_path / "old.ckpt", drop_options=True)
+    a, b = tmp_path / "new.onnx", tmp_path / "old.onnx"
+    export(checkpoints["full"], a, log=quiet)
+    card = export(old, b, log=quiet)
+    assert (card["upsample"], card["norm"]) == ("transpose", "batch")
+    assert onnx.load(str(a)).graph.SerializeToString() == onnx.load(str(b)).graph.SerializeToString()

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from diviewer.gl.renderer import Compositor, Renderer, RenderSettings
+from diviewer.gl.display import DisplayPass
+from diviewer.gl.renderer import Renderer, RenderSettings
 from diviewer.scene import camera as cam
 from scenes import facing_plane
 
@@ -197,7 +198,7 @@ def test_image_rows_run_top_to_bottom(ctx):
 
 def test_composite_tonemaps_and_flags_non_finite(ctx):
     r = Renderer(ctx, facing_plane(), 8, 8)
-    comp = Compositor(ctx, r.shaders)
+    comp = DisplayPass(ctx, r.shaders)
     try:
         img = np.zeros((8, 8, 3), np.float32)
         img[0, 0] = [np.nan, 0, 0]
@@ -212,6 +213,22 @@ def test_composite_tonemaps_and_flags_non_finite(ctx):
         assert 0 < out[3, 3, 0] < 255
         brighter = comp.to_ldr(img, exposure=1.0)
         assert brighter[3, 3, 0] > out[3, 3, 0]
+    finally:
+        comp.release()
+        r.release()
+
+
+def test_display_srgb_matches_scene_colour(ctx):
+    """The display's sRGB curve (shaders/tonemap.glsl) and diviewer.scene.colour are the same curve."""
+    from diviewer.scene.colour import srgb8
+
+    r = Renderer(ctx, facing_plane(), 16, 16)
+    comp = DisplayPass(ctx, r.shaders)
+    try:
+        ramp = np.linspace(0.0, 1.0, 16 * 16 * 3, dtype=np.float32).reshape(16, 16, 3) ** 2  # dense in the dark end
+        out = comp.to_ldr(ramp, exposure=0.0, tonemap="clamp")
+        # The GPU rounds float to unorm8 itself: allow one step.
+        assert np.abs(out.astype(int) - srgb8(ramp).astype(int)).max() <= 1
     finally:
         comp.release()
         r.release()
@@ -243,3 +260,26 @@ def test_mirrored_object_faces_outwards(ctx):
     assert box.sum() > 20
     np.testing.assert_allclose(f["normal"][box], np.broadcast_to([0, 0, 1], f["normal"][box].shape), atol=1e-5)
     np.testing.assert_allclose(f["direct"][box], 0.5 / np.pi, rtol=1e-4)
+
+
+@pytest.mark.parametrize("how", ["sync", "queries"])
+def test_passes_are_timed_by_the_shared_timer(ctx, how):
+    """Each named pass is one stage of the program's timer: by the wall clock around a GPU sync, or by GL
+    timer queries; the frame is the same either way."""
+    from diviewer.gl.context import stage_timer
+
+    timer = stage_timer(ctx, sync=how == "sync", queries=how == "queries")
+    r = Renderer(ctx, facing_plane(), 16, 16, RenderSettings(shadow_size=64), timer=timer)
+    plain = Renderer(ctx, facing_plane(), 16, 16, RenderSettings(shadow_size=64))
+    try:
+        assert [name for name, _ in r.passes] == ["shadows", "gbuffer", "direct"]
+        f = r.frame()
+        assert set(timer.times) == {"shadows", "gbuffer", "direct", "readback"}
+        assert all(ms >= 0.0 for ms in timer.times.values())
+        assert plain.timer.times == {}  # no sync, no queries: GL stages are not timed
+        for k, v in plain.frame().items():
+            np.testing.assert_array_equal(v, f[k])
+    finally:
+        plain.release()
+        r.release()
+        timer.release()

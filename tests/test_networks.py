@@ -10,11 +10,15 @@ from torch import nn  # noqa: E402
 
 from diviewer.encoding import INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS, Encoding, encode_inputs, encode_radiance  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
+from diviewer.train.losses import reconstruction_loss  # noqa: E402
 from diviewer.train.networks import (  # noqa: E402
     LAMBDA_L1,
+    NORMS,
+    UPSAMPLES,
     GANLoss,
     NetConfig,
     NLayerDiscriminator,
+    PixelShuffleUpsample,
     UnetGenerator,
     init_weights,
     levels_for_resolution,
@@ -209,3 +213,124 @@ def test_net_config() -> None:
         NetConfig(target="direct")
     with pytest.raises(DiviewerError, match="multiple"):
         NetConfig(resolution=96, levels=6)
+
+
+# ---------------------------------------------------------------------------------------------
+# Ablation options: decoder upsampling and normalisation
+
+
+def _norm_modules(net: nn.Module) -> list[nn.Module]:
+    return [m for m in net.modules() if isinstance(m, (nn.BatchNorm2d, nn.InstanceNorm2d))]
+
+
+@pytest.mark.parametrize("upsample", UPSAMPLES)
+@pytest.mark.parametrize("norm", NORMS)
+def test_each_option_builds_and_trains_one_step(upsample: str, norm: str) -> None:
+    config = NetConfig(K=4, resolution=32, ndf=8, upsample=upsample, norm=norm, norm_D=norm, target="indirect")
+    netG, netD = init_weights(config.build_generator()), init_weights(config.build_discriminator())
+    assert netG.model_args()["upsample"] == upsample and netG.model_args()["norm"] == norm
+    levels = netG.levels
+    expected_norms = 0 if norm == "none" else (levels - 2) + (levels - 1)
+    assert len(_norm_modules(netG)) == expected_norms
+    assert all(isinstance(m, nn.InstanceNorm2d) == (norm == "instance") for m in _norm_modules(netG))
+    assert len(_norm_modules(netD)) == (0 if norm == "none" else 3)
+    # a conv followed by a norm needs no bias (the norm's shift replaces it); without a norm it has one
+    for block in netG.down[1:-1]:
+        assert (block[0].bias is None) == (norm != "none")
+    # one pix2pix step: netD on real/fake pairs, then netG on GAN + reconstruction
+    real_A, real_B = _tiny_batch()
+    optG = torch.optim.Adam(netG.parameters(), lr=2e-4, betas=(0.5, 0.999))
+    optD = torch.optim.Adam(netD.parameters(), lr=2e-4, betas=(0.5, 0.999))
+    before = {k: v.clone() for k, v in netG.state_dict().items()}
+    criterion = GANLoss()
+    fake_B = netG(real_A)
+    assert fake_B.shape == real_B.shape
+    loss_D = 0.5 * (criterion(netD(torch.cat([real_A, fake_B.detach()], 1)), False)
+                    + criterion(netD(torch.cat([real_A, real_B], 1)), True))
+    optD.zero_grad()
+    loss_D.backward()
+    optD.step()
+    loss_G = criterion(netD(torch.cat([real_A, fake_B], 1)), True) + LAMBDA_L1 * reconstruction_loss(fake_B, real_B)
+    optG.zero_grad()
+    loss_G.backward()
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in netG.parameters())
+    optG.step()
+    changed = [k for k, v in netG.state_dict().items() if v.is_floating_point() and not torch.equal(v, before[k])]
+    assert any(k.startswith("down.0.") for k in changed) and any(k.startswith(f"up.{levels - 1}.") for k in changed)
+    # non-square sizes work with every option
+    netG.eval()
+    with torch.no_grad():
+        assert netG(torch.randn(1, INPUT_CHANNEL_COUNT, 32, 64)).shape == (1, OUTPUT_CHANNELS, 32, 64)
+
+
+def test_instance_norm_has_no_running_statistics() -> None:
+    """Instance norm normalises each image by itself: train and eval give the same output."""
+    netG = init_weights(UnetGenerator(K=4, resolution=32, norm="instance", dropout=0.0))
+    assert not any(b.numel() for b in netG.buffers())
+    x = torch.randn(2, INPUT_CHANNEL_COUNT, 32, 32)
+    with torch.no_grad():
+        y_train = netG.train()(x)
+        y_eval = netG.eval()(x)
+        assert torch.allclose(y_train, y_eval, atol=1e-6)
+        # and one image's output does not depend on the others in the batch (BatchNorm's does in training)
+        assert torch.allclose(netG(x[:1]), y_eval[:1], atol=1e-6)
+
+
+@pytest.mark.parametrize("initialise", [False, True])
+def test_pixel_shuffle_starts_as_nearest_upsampling(initialise: bool) -> None:
+    """ICNR: the four sub-pixels of each 2x2 output block start equal (no checkerboard at init)."""
+    up = PixelShuffleUpsample(6, 5)
+    if initialise:
+        init_weights(up, gain=0.02)
+        assert up[0].weight.std().item() == pytest.approx(0.02, rel=0.2)
+    else:
+        torch.nn.init.uniform_(up[0].bias)  # a non-zero bias must be grouped too
+        up.reset_icnr()
+    with torch.no_grad():
+        y = up(torch.randn(2, 6, 8, 8))
+    assert y.shape == (2, 5, 16, 16)
+    corner = y[..., 0::2, 0::2]
+    for dy, dx in ((0, 1), (1, 0), (1, 1)):
+        assert torch.equal(y[..., dy::2, dx::2], corner)
+    assert corner.std() > 0
+
+
+def test_resize_decoder_uses_no_transposed_convolution() -> None:
+    netG = UnetGenerator(K=4, resolution=32, upsample="resize")
+    assert not any(isinstance(m, nn.ConvTranspose2d) for m in netG.modules())
+    assert sum(isinstance(m, nn.Upsample) for m in netG.modules()) == netG.levels
+    assert all(m.mode == "nearest" for m in netG.modules() if isinstance(m, nn.Upsample))
+    shuffle = UnetGenerator(K=4, resolution=32, upsample="shuffle")
+    assert sum(isinstance(m, nn.PixelShuffle) for m in shuffle.modules()) == shuffle.levels
+
+
+def test_checkpoints_without_the_options_rebuild_the_paper_network() -> None:
+    """model_args and net_config written before upsample/norm existed rebuild transpose/batch, strictly."""
+    netG = init_weights(UnetGenerator(K=8, levels=5))
+    old_args = {k: v for k, v in netG.model_args().items() if k not in ("upsample", "norm")}
+    rebuilt = UnetGenerator(**old_args)
+    assert rebuilt.model_args() == netG.model_args()
+    assert rebuilt.model_args()["upsample"] == "transpose" and rebuilt.model_args()["norm"] == "batch"
+    rebuilt.load_state_dict(netG.state_dict())  # strict: same keys and shapes as before
+    assert isinstance(rebuilt.up[0][1], nn.ConvTranspose2d) and isinstance(rebuilt.up[0][2], nn.BatchNorm2d)
+    old_config = {k: v for k, v in NetConfig(K=8, resolution=64).to_dict().items()
+                  if k not in ("upsample", "norm", "norm_D")}
+    config = NetConfig.from_dict(old_config)
+    assert (config.upsample, config.norm, config.norm_D) == ("transpose", "batch", "batch")
+    netD = NLayerDiscriminator(ndf=8)
+    old_netD_args = {k: v for k, v in netD.model_args().items() if k != "norm"}
+    NLayerDiscriminator(**old_netD_args).load_state_dict(netD.state_dict())
+
+
+def test_net_config_options_are_validated_by_name() -> None:
+    config = NetConfig(K=8, resolution=32, upsample="shuffle", norm="none", norm_D="instance")
+    assert NetConfig.from_dict(config.to_dict()) == config
+    assert config.build_generator().model_args()["upsample"] == "shuffle"
+    assert config.build_discriminator().norm == "instance"
+    for field, value in (("upsample", "bilinear"), ("norm", "group"), ("norm_D", "spectral")):
+        with pytest.raises(DiviewerError, match=rf"net\.{field}: must be one of"):
+            NetConfig(**{field: value})
+    with pytest.raises(ValueError, match="upsample"):
+        UnetGenerator(K=4, levels=3, upsample="deconv")
+    with pytest.raises(ValueError, match="norm"):
+        NLayerDiscriminator(norm="layer")

@@ -1,21 +1,30 @@
-"""The onnxruntime model wrapper: metadata checks and refusals, and the GL neural pass end to end."""
+"""The onnxruntime model wrapper: metadata checks and refusals, the shipped models, and the GL neural pass."""
 
 from __future__ import annotations
 
-import dataclasses
+import importlib.util
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from diviewer.encoding import input_channel_slices
 from diviewer.errors import DiviewerError
+from diviewer.paths import models_dir
 from diviewer.runtime import NeuralGI, choose_providers, pack_buffers, read_metadata
 
 from onnx_models import base_meta, direct_times
 from scenes import facing_plane
 
-pytest.importorskip("onnx")
+# The hand-built test models need the `onnx` package (train extra); the runtime itself needs only
+# onnxruntime, so the tests of shipped models and of provider choice run without it.
+needs_onnx = pytest.mark.skipif(importlib.util.find_spec("onnx") is None,
+                                reason="builds a test model with onnx (pip install 'diviewer[train]')")
+DIRECT = input_channel_slices()["direct"]
+SHIPPED = sorted(Path(models_dir()).glob("*.onnx"))
 
 
+@needs_onnx
 def test_model_runs_and_reports_metadata(tmp_path):
     path = direct_times(tmp_path / "m.onnx")
     model = NeuralGI(path)
@@ -23,10 +32,11 @@ def test_model_runs_and_reports_metadata(tmp_path):
     x = np.random.default_rng(0).random((32, 48, 10), dtype=np.float32)
     y = model.run(x)
     assert y.shape == (32, 48, 3)
-    np.testing.assert_allclose(y, 2 * x[..., 7:10], rtol=1e-6)
+    np.testing.assert_allclose(y, 2 * x[..., DIRECT], rtol=1e-6)
     assert read_metadata(path)["scene"] == "plane"
 
 
+@needs_onnx
 @pytest.mark.parametrize("case,words", [
     ("no_meta", "no diviewer metadata"),
     ("wrong_channels", "input channels"),
@@ -56,6 +66,7 @@ def test_bad_models_are_refused_with_the_reason(tmp_path, case, words):
     assert words in str(info.value) and str(path) in str(info.value)
 
 
+@needs_onnx
 def test_model_for_another_scene_is_refused(tmp_path):
     scene = facing_plane()
     path = direct_times(tmp_path / "m.onnx", meta=base_meta(scene_hash="f" * 64, scene="cornell"))
@@ -65,10 +76,27 @@ def test_model_for_another_scene_is_refused(tmp_path):
     NeuralGI(ok, scene=scene)
 
 
-def test_size_must_be_a_multiple(tmp_path):
-    model = NeuralGI(direct_times(tmp_path / "m.onnx"))
-    with pytest.raises(DiviewerError, match="multiples of 16"):
-        model.run(np.zeros((1, 20, 32, 10), np.float32))
+def test_size_must_be_a_multiple():
+    model = NeuralGI(SHIPPED[0])  # a shipped model: no onnx package needed
+    m = model.multiple
+    with pytest.raises(DiviewerError, match=f"multiples of {m}"):
+        model.run(np.zeros((1, m + 4, 2 * m, 10), np.float32))
+
+
+def test_pack_shader_refuses_a_layout_it_does_not_write(ctx):
+    """pack.glsl writes 1 depth and 3 normal/albedo/direct components: other counts fail to compile."""
+    import moderngl
+
+    from diviewer.gl.neural import PACK_DEFINES
+    from diviewer.gl.shaders import ShaderCache
+
+    shaders = ShaderCache(ctx)
+    try:
+        shaders.compute("pack.glsl", PACK_DEFINES)  # the encoding's layout compiles
+        with pytest.raises(moderngl.Error, match="channel counts differ"):
+            shaders.compute("pack.glsl", {**PACK_DEFINES, "IN_NORMAL_N": 2})
+    finally:
+        shaders.release()
 
 
 def test_provider_choice():
@@ -80,17 +108,19 @@ def test_provider_choice():
         choose_providers(["CPUExecutionProvider"], "cuda")
 
 
+@needs_onnx
 def test_gl_neural_pass_end_to_end(ctx, tmp_path):
     """scene -> GL buffers -> packed on the GPU -> ONNX -> texture -> composite: finite, right size."""
     from diviewer.gl.neural import NeuralPass
-    from diviewer.gl.renderer import Compositor, Renderer
+    from diviewer.gl.display import DisplayPass
+    from diviewer.gl.renderer import Renderer
 
     scene = facing_plane(lights=[{"name": "sun", "type": "directional", "direction": [0.3, -0.4, -1.0],
                                   "irradiance": 2.0}])
     model = NeuralGI(direct_times(tmp_path / "m.onnx", meta=base_meta(scene_hash=scene.file_hash)), scene=scene)
     renderer = Renderer(ctx, scene, 48, 32)
     neural = NeuralPass(ctx, renderer, model)
-    comp = Compositor(ctx, renderer.shaders)
+    comp = DisplayPass(ctx, renderer.shaders)
     try:
         frame = renderer.frame()
         tex = neural.run()
@@ -115,16 +145,67 @@ def test_gl_neural_pass_end_to_end(ctx, tmp_path):
         renderer.release()
 
 
+@needs_onnx
 def test_nan_and_inf_in_buffers_stay_visible_not_fatal(ctx, tmp_path):
-    """A broken buffer reaches the model as is; the runtime does not crash on it."""
-    model = NeuralGI(direct_times(tmp_path / "m.onnx"))
-    x = np.zeros((16, 16, 10), np.float32)
-    x[0, 0, 7] = np.nan
-    x[1, 1, 8] = np.inf
+    """The runtime does not sanitise: a NaN or Inf the model returns stays in the frame, exactly where
+    it arose, and the display flags it (magenta) instead of hiding a broken buffer. (An exported model's
+    own encoding maps NaN inputs of the network to 0; what its graph returns is passed on as is.)"""
+    from diviewer.gl.display import DisplayPass
+    from diviewer.gl.renderer import Renderer
+
+    model = NeuralGI(direct_times(tmp_path / "m.onnx"))  # radiance = 2 * direct
+    rng = np.random.default_rng(0)
+    x = rng.random((16, 16, 10), dtype=np.float32)
+    x[0, 0, DIRECT.start] = np.nan
+    x[1, 1, DIRECT.start + 1] = np.inf
     y = model.run(x)
-    assert y.shape == (16, 16, 3) and np.isfinite(y[2:, 2:]).all()
+    assert y.shape == (16, 16, 3)
+    assert np.isnan(y[0, 0, 0]) and np.isposinf(y[1, 1, 1])
+    broken = ~np.isfinite(y).all(axis=-1)
+    assert np.argwhere(broken).tolist() == [[0, 0], [1, 1]], "nothing else turned non-finite"
+    np.testing.assert_allclose(y[~broken], 2 * x[..., DIRECT][~broken], rtol=1e-6)
+    r = Renderer(ctx, facing_plane(), 16, 16)
+    comp = DisplayPass(ctx, r.shaders)
+    try:
+        shown = comp.to_ldr(y)
+        assert tuple(shown[0, 0]) == (255, 0, 255) and tuple(shown[1, 1]) == (255, 0, 255)
+        assert not (shown[~broken] == (255, 0, 255)).all(axis=-1).any()
+    finally:
+        comp.release()
+        r.release()
 
 
+def test_models_are_shipped():
+    assert [p.stem for p in SHIPPED if not p.with_suffix(".json").is_file()] == [] and SHIPPED, "each with its card"
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
+def test_shipped_model_runs_a_frame_of_its_scene(ctx, path):
+    """Each shipped model loads for its scene and turns a GL frame into finite radiance of the frame's size;
+    the GPU's packing of that frame is the encoding's channel layout, bit for bit."""
+    from diviewer.gl.neural import NeuralPass
+    from diviewer.gl.renderer import Renderer
+    from diviewer.scene import load_scene, sample_config
+
+    meta = read_metadata(path)
+    scene = load_scene(meta["scene"])
+    model = NeuralGI(path, scene=scene, provider="cpu")
+    w, h = model.multiple, model.multiple  # the smallest frame it takes
+    renderer = Renderer(ctx, scene, w, h)
+    neural = NeuralPass(ctx, renderer, model)
+    try:
+        frame = renderer.frame(sample_config(scene, 0, "test"))
+        neural.run()
+        np.testing.assert_array_equal(neural.packed[0], pack_buffers(frame))
+        out = neural.image()
+        assert out.shape == (h, w, 3) and out.dtype == np.float32
+        assert np.isfinite(out).all() and out.max() > 0
+    finally:
+        neural.release()
+        renderer.release()
+
+
+@needs_onnx
 def test_render_with_model_writes_neural_exr(gl_context, tmp_path):
     """`diviewer render --model` writes neural.exr beside the buffers; another scene's model is refused."""
     from diviewer.cli import main

@@ -89,6 +89,37 @@ def test_camera_view_matrix_conventions():
     p = cam.perspective(90, 2.0, 1.0, 10.0)
     clip = p @ [2.0, 1.0, -1.0, 1.0]
     np.testing.assert_allclose(clip[:3] / clip[3], [1.0, 1.0, -1.0])  # near plane corner
+    np.testing.assert_allclose(v @ [0, 1, 5, 1], [0, 1, 0, 1])    # world +y is up
+    far = p @ [0.0, 0.0, -10.0, 1.0]
+    assert far[2] / far[3] == pytest.approx(1.0)  # far plane at clip z = +w
+
+
+def test_orthographic_maps_its_box_to_the_clip_cube():
+    o = cam.orthographic(2.0, 3.0, 0.5, 9.0)
+    np.testing.assert_allclose(o @ [2.0, 3.0, -0.5, 1.0], [1, 1, -1, 1], atol=1e-12)
+    np.testing.assert_allclose(o @ [-2.0, -3.0, -9.0, 1.0], [-1, -1, 1, 1], atol=1e-12)
+
+
+def test_rotations_are_right_handed_column_matrices():
+    """pyrr builds them; pin them to the right-hand rule and Rodrigues' formula (column vectors)."""
+    x, y, z = np.identity(3)
+    np.testing.assert_allclose(cam.axis_angle(z, 90) @ x, y, atol=1e-12)
+    np.testing.assert_allclose(cam.axis_angle(x, 90) @ y, z, atol=1e-12)
+    np.testing.assert_allclose(cam.axis_angle(y, 90) @ z, x, atol=1e-12)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a, deg, v = rng.normal(size=3), rng.uniform(-360, 360), rng.normal(size=3)
+        k, th = a / np.linalg.norm(a), np.radians(deg)
+        rodrigues = v * np.cos(th) + np.cross(k, v) * np.sin(th) + k * (k @ v) * (1 - np.cos(th))
+        np.testing.assert_allclose(cam.axis_angle(a, deg) @ v, rodrigues, atol=1e-12)
+    # Euler xyz: about x first, then y, then z.
+    np.testing.assert_allclose(cam.euler_xyz((90, 90, 0)) @ y, x, atol=1e-12)
+    e = rng.uniform(-180, 180, 3)
+    np.testing.assert_allclose(cam.euler_xyz(e), cam.axis_angle(z, e[2]) @ cam.axis_angle(y, e[1]) @ cam.axis_angle(x, e[0]),
+                               atol=1e-12)
+    p, s, v = rng.normal(size=3), rng.uniform(-2, 2, 3), rng.normal(size=3)
+    np.testing.assert_allclose(cam.trs(p, e, s) @ np.append(v, 1.0), np.append(p + cam.euler_xyz(e) @ (s * v), 1.0),
+                               atol=1e-12)
 
 
 # --- bad input ------------------------------------------------------------------------------------
@@ -206,3 +237,14 @@ def test_glb_with_base_colour_texture(tmp_path):
     assert scene.meshes["t"].uvs is not None
     obj = next(o for o in scene.default.objects if o.name == "t")
     assert obj.material == "mesh:t"
+
+
+def test_srgb_curve_round_trips_and_hits_known_values():
+    from diviewer.scene.colour import linear_to_srgb, srgb8, srgb_to_linear
+
+    x = np.linspace(0.0, 1.0, 1001)
+    np.testing.assert_allclose(srgb_to_linear(linear_to_srgb(x)), x, atol=1e-12)
+    # IEC 61966-2-1: 8-bit 128 is linear 0.2158605; the linear segment ends at 0.0031308 -> 0.04045.
+    assert srgb_to_linear(128 / 255) == pytest.approx(0.2158605, abs=1e-7)
+    assert linear_to_srgb(0.0031308) == pytest.approx(0.04045, abs=1e-6)
+    assert srgb8(np.array([np.nan, -1.0, 0.2158605, 2.0])).tolist() == [0, 0, 128, 255]

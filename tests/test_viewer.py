@@ -21,11 +21,12 @@ import pytest
 from diviewer.errors import DiviewerError
 from diviewer.scene import load_scene
 from diviewer.scene.model import Camera
-from diviewer.viewer.controls import FlyController, OrbitController, direction, pixel_ray, yaw_pitch
-from diviewer.viewer.state import (
-    VIEW_MODE_NAMES, VIEW_MODES, Stats, ViewerState, angles_to_vector, single_modes, vector_to_angles,
-    view_mode,
-)
+from diviewer.scene.lights import angles_to_vector, vector_to_angles
+from diviewer.scene.picking import pixel_ray
+from diviewer.viewer.controls import FlyController, OrbitController, direction, yaw_pitch
+from diviewer.viewer.state import ViewerState
+from diviewer.viewer.stats import Stats
+from diviewer.viewer.view_modes import VIEW_MODE_NAMES, VIEW_MODES, single_modes, view_mode
 
 REQUIRE_GL = os.environ.get("DIVIEWER_REQUIRE_GL", "") not in ("", "0")
 
@@ -43,7 +44,7 @@ def state(cornell):
 # --- view modes -----------------------------------------------------------------------------------
 
 def test_view_mode_registry_is_complete():
-    from diviewer.viewer.app import DISPLAY_KINDS, LAYOUTS
+    from diviewer.gl.display import KINDS, LAYOUTS
 
     expected = {"final", "direct", "reference", "depth", "normal", "albedo", "net_input", "net_output", "split",
                 "difference"}
@@ -54,7 +55,7 @@ def test_view_mode_registry_is_complete():
     for m in VIEW_MODES:
         assert m.layout in LAYOUTS and m.label
         if m.layout == "single":
-            assert callable(m.produce) and m.display in DISPLAY_KINDS
+            assert callable(m.produce) and m.display in KINDS
         else:
             assert m.produce is None
     assert {m.name for m in single_modes()} == expected - {"split", "difference"}
@@ -285,7 +286,7 @@ def test_stats_keep_the_last_seconds():
 
 
 def test_letterbox_keeps_the_gi_aspect():
-    from diviewer.viewer.app import letterbox
+    from diviewer.viewer.window import letterbox
 
     assert letterbox(200, 100, 1.0) == (50, 0, 100, 100)
     assert letterbox(100, 200, 2.0) == (0, 75, 100, 50)
@@ -294,10 +295,34 @@ def test_letterbox_keeps_the_gi_aspect():
     assert letterbox(0, 0, 1.0) == (0, 0, 0, 0)
 
 
+def test_shortcut_list_comes_from_the_key_table():
+    from diviewer.viewer.input import BINDINGS, SHORTCUTS, shortcuts_markdown
+
+    chords = [c for b in BINDINGS for c in b.chords]
+    assert len(chords) == len(set(chords)), "a key bound twice"
+    assert all(b.run is not None for b in BINDINGS if b.chords)
+    assert {m.key for m in VIEW_MODES if m.key} <= set(chords)
+    assert ("Shift+R", "reset the whole frame (lights, objects, camera)") in SHORTCUTS
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert shortcuts_markdown() in readme, "README's controls differ from viewer/input.py (paste shortcuts_markdown())"
+
+
+def test_one_tone_map_list():
+    from diviewer.cli import build_parser
+    from diviewer.gl.display import DEFAULT_TONEMAP, TONEMAPS
+
+    render = build_parser()._subparsers._group_actions[0].choices["render"]
+    tonemap = next(a for a in render._actions if a.dest == "tonemap")
+    assert tuple(tonemap.choices) == tuple(TONEMAPS) and tonemap.default == DEFAULT_TONEMAP
+    shader = (Path(__file__).resolve().parents[1] / "shaders" / "tonemap.glsl").read_text()
+    for name, code in TONEMAPS.items():  # the codes the shader's comment documents
+        assert f"{code}: " in shader and (name[:4].lower() in shader.lower())
+
+
 def test_view_command_line():
     import argparse
 
-    from diviewer.viewer.app import add_view_parser, run_view
+    from diviewer.viewer.command import add_view_parser, run_view
 
     ap = argparse.ArgumentParser()
     add_view_parser(ap.add_subparsers(dest="command"))
@@ -312,14 +337,14 @@ def test_view_command_line():
 
 
 def test_viewer_imports_no_torch():
-    code = ("import sys, diviewer.viewer.app, diviewer.viewer.imgui_gl, diviewer.viewer.reference, "
-            "diviewer.gl.neural, diviewer.runtime; assert 'torch' not in sys.modules, 'torch was imported'")
+    code = ("import sys, diviewer.viewer.app, diviewer.viewer.imgui_gl, diviewer.reference.progressive, "
+            "diviewer.viewer.panel, diviewer.gl.neural, diviewer.runtime; assert 'torch' not in sys.modules, 'torch was imported'")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
 
 
 def test_model_card_rows():
-    from diviewer.viewer.app import meta_lines
+    from diviewer.viewer.panel import meta_lines
 
     rows = dict(meta_lines({"K": 8, "resolution": [64, 48], "target": "indirect", "dataset_hash": "ab" * 32,
                             "val": {"psnr": 31.5, "ssim": 0.91234}}))
@@ -403,7 +428,7 @@ def _in_window_process(fn, *args, timeout: float = 180.0) -> None:
 def _settings(**changes):
     from diviewer.gl.renderer import RenderSettings
     from diviewer.viewer.app import ViewerSettings
-    from diviewer.viewer.reference import ReferenceSettings
+    from diviewer.reference.progressive import ReferenceSettings
 
     base = dict(size=(128, 128), vsync=False, model="none", render=RenderSettings(shadow_size=256),
                 reference=ReferenceSettings(variant="scalar_rgb", max_spp=2, pass_spp=1, max_depth=4))
@@ -427,10 +452,79 @@ def _check_image(img: np.ndarray, size) -> None:
     assert img.std() > 5.0, "the screenshot is (nearly) uniform"
 
 
+# What a screenshot must show, made without the window: the frame its JSON records, rendered again on the
+# session's headless context and drawn by the display pass. Arguments a and b pick a buffer of that
+# frame and how it is shown: (buffer, display kind, factor).
+DIRECT = ("direct", "radiance", 1.0)
+
+
+def _offscreen_view(ctx, shot: Path, a=DIRECT, b=None, layout: str = "single", window=None,
+                    linear: bool = False) -> np.ndarray:
+    """The view a screenshot (``shot``: its PNG path) recorded, re-rendered offscreen, (H, W, 3) float.
+
+    Args:
+        window: (w, h): draw it letterboxed into a window-sized target cleared with the viewer's background
+            (what the window shows with the panel hidden), else at the frame's own resolution.
+        linear: sample the image bilinearly (the neural pass's texture) rather than nearest (the G-buffer's).
+    """
+    import moderngl
+
+    from diviewer.frames import load_frame_json, scene_for_frame_json
+    from diviewer.gl.context import unbind_framebuffer
+    from diviewer.gl.display import DisplayPass, Image, Look, depth_range, read_rgb8
+    from diviewer.gl.renderer import Renderer, RenderSettings
+    from diviewer.viewer.app import BACKGROUND
+    from diviewer.viewer.window import letterbox
+
+    path = shot.with_suffix(".json")
+    record = json.loads(path.read_text())
+    scene = scene_for_frame_json(load_scene(record["scene"]), path)
+    config = load_frame_json(scene, path)
+    w, h = record["resolution"]
+    renderer = Renderer(ctx, scene, w, h, RenderSettings(shadow_size=256))  # as _settings()
+    display = DisplayPass(ctx, renderer.shaders)
+    frame = renderer.frame(config)
+    made = []
+
+    def image(spec) -> Image:
+        name, kind, factor = spec
+        arr = np.ascontiguousarray(np.flipud(frame[name] * factor), dtype="f4")
+        tex = ctx.texture((w, h), 1 if arr.ndim == 2 else 3, arr.tobytes(), dtype="f4")
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR) if linear else (moderngl.NEAREST, moderngl.NEAREST)
+        tex.repeat_x = tex.repeat_y = False
+        made.append(tex)
+        return Image(tex, False, kind)
+
+    tw, th = window or (w, h)
+    target = ctx.texture((tw, th), 4)
+    fbo = ctx.framebuffer([target])
+    try:
+        fbo.use()
+        fbo.clear(*BACKGROUND, 1.0)
+        rect = letterbox(tw, th, w / h) if window else (0, 0, w, h)
+        look = Look(record["display"]["exposure"], record["display"]["tonemap"], depth_range(scene, config),
+                    split=0.5, diff_gain=2.0 ** 2.0)  # the state's defaults
+        display.show(fbo, rect, image(a), image(b) if b else None, layout, look)
+        return read_rgb8(fbo).astype(np.float32)
+    finally:
+        unbind_framebuffer(ctx)
+        for r in (fbo, target, *made):
+            r.release()
+        display.release()
+        renderer.release()
+
+
+def _same(shown: np.ndarray, expected: np.ndarray, what: str) -> None:
+    """The window's image equals the offscreen one (both llvmpipe: at most one step of rounding apart)."""
+    assert shown.shape == expected.shape, f"{what}: {shown.shape} != {expected.shape}"
+    diff = np.abs(shown - expected)
+    assert diff.max() <= 1.0, f"{what}: differs from the offscreen render by up to {diff.max():.0f} ({diff.mean():.3f} mean)"
+
+
 def _scripted_session(tmp_path: Path) -> None:
-    from diviewer.render import load_frame_json
+    from diviewer.frames import load_frame_json
     from diviewer.viewer.app import run_viewer
-    from diviewer.viewer.reference import mitsuba_missing
+    from diviewer.reference.progressive import mitsuba_missing
 
     cornell = load_scene("cornell")
     script = [
@@ -454,6 +548,8 @@ def _scripted_session(tmp_path: Path) -> None:
     script.append((f, "set_view_mode", {"name": "final"}))
     picked = {}
     script.append((f, lambda v: picked.update(selected=v.state.selected)))
+    script.append((f + 1, lambda v: setattr(v.state, "show_panel", False)))
+    script.append((f + 1, "window_screenshot", {"path": tmp_path / "window_nopanel.png"}))
     frames = f + 2
     summary = run_viewer(cornell, frames=frames, screenshot=tmp_path / "last.png", script=script,
                          settings=_settings())
@@ -463,13 +559,9 @@ def _scripted_session(tmp_path: Path) -> None:
     size = summary["gi_size"]
     assert size == (128, 128)
     before, light, moved = (_png(tmp_path / f"{n}.png") for n in ("before", "light", "moved"))
-    for img in (before, light, moved):
-        _check_image(img, size)
     assert np.abs(before - light).mean() > 2.0, "moving the light did not change the image"
     assert np.abs(light - moved).mean() > 2.0, "moving the camera did not change the image"
     images = {name: _png(tmp_path / f"mode_{name}.png") for name in VIEW_MODE_NAMES}
-    for name in ("final", "direct", "depth", "normal", "albedo", "net_input", "split", "difference"):
-        _check_image(images[name], size)
     assert np.abs(images["depth"] - images["normal"]).mean() > 10.0
     assert np.abs(images["albedo"] - images["direct"]).mean() > 10.0
     # No model: the network's output says why and shows black; the final image is the direct light.
@@ -484,9 +576,9 @@ def _scripted_session(tmp_path: Path) -> None:
     half = size[0] // 2
     assert np.abs(images["split"][:, : half - 2] - images["final"][:, : half - 2]).max() <= 1.0
     assert np.abs(images["split"][:, half + 2:] - images["normal"][:, half + 2:]).max() <= 1.0
-    # The window shot has the panel on top of the image; its size is the framebuffer's.
+    # The window shot has the panel on top of the image (compared with the image in the test itself).
     window = _png(tmp_path / "window.png")
-    assert window.shape == (128, 128, 3) and np.abs(window - images["final"]).mean() > 1.0
+    assert window.shape == (128, 128, 3)
     # The screenshot's JSON is a frame.json that `diviewer render --config` reads back.
     record = json.loads((tmp_path / "moved.json").read_text())
     assert record["scene"] == "cornell" and record["view_mode"] == "final"
@@ -498,9 +590,25 @@ def _scripted_session(tmp_path: Path) -> None:
     np.testing.assert_allclose(last.lights[0].direction, now.lights[0].direction, atol=1e-9)
 
 
-def test_scripted_session(display, tmp_path):
-    """Camera moves, light moves, every view mode, picking, screenshots, a clean exit."""
+def test_scripted_session(display, tmp_path, ctx):
+    """Camera moves, light moves, every view mode, picking, screenshots, a clean exit; each screenshot is the
+    frame its JSON records, rendered again offscreen, and so is the window with the panel hidden."""
     _in_window_process(_scripted_session, tmp_path)
+    for name in ("before", "light", "moved", "last"):
+        _same(_png(tmp_path / f"{name}.png"), _offscreen_view(ctx, tmp_path / f"{name}.png"), name)
+    normal = ("normal", "normal", 1.0)
+    modes = {"final": (DIRECT,), "direct": (DIRECT,), "depth": (("depth", "depth", 1.0),), "normal": (normal,),
+             "albedo": (("albedo", "albedo", 1.0),), "net_input": (("direct", "raw", 1.0),),
+             "split": (DIRECT, normal, "split"), "difference": (DIRECT, normal, "difference")}
+    for name, args in modes.items():
+        shot = tmp_path / f"mode_{name}.png"
+        _same(_png(shot), _offscreen_view(ctx, shot, *args), f"view mode {name}")
+    # What the window showed (no model: the direct light fills the square window) with the panel hidden ...
+    alone = _offscreen_view(ctx, tmp_path / "last.png", window=(128, 128))
+    _same(_png(tmp_path / "window_nopanel.png"), alone, "the window without the panel")
+    # ... and with it: the panel covers its top left corner, the rest is the image.
+    window = _png(tmp_path / "window.png")
+    assert np.abs(window[:24, :24] - alone[:24, :24]).mean() > 10.0, "no panel in the window shot"
 
 
 def _resize_session(tmp_path: Path) -> None:
@@ -514,11 +622,11 @@ def _resize_session(tmp_path: Path) -> None:
     summary = run_viewer("cornell", frames=8, screenshot=tmp_path / "after.png", script=script, settings=_settings())
     assert summary["gl_error"] == "GL_NO_ERROR" and summary["frames"] == 8
     assert sizes == {2: (8, 8), 4: (1, 1), 7: (96, 64)}
-    _check_image(_png(tmp_path / "after.png"), (96, 64))
 
 
-def test_resize_to_tiny_and_back(display, tmp_path):
+def test_resize_to_tiny_and_back(display, tmp_path, ctx):
     _in_window_process(_resize_session, tmp_path)
+    _same(_png(tmp_path / "after.png"), _offscreen_view(ctx, tmp_path / "after.png"), "after resizing")
 
 
 def _cornell_model(path: Path, **meta_changes) -> Path:
@@ -540,32 +648,38 @@ def _neural_session(tmp_path: Path) -> None:
               (6, "set_view_mode", {"name": "difference", "a": "final", "b": "direct"}),
               (7, "screenshot", {"path": tmp_path / "diff.png"}),
               (8, "window_screenshot", {"path": tmp_path / "window.png"}),
-              (8, "set_view_mode", {"name": "final"})]
-    summary = run_viewer("cornell", model=model, frames=9, script=script, settings=_settings(size=(128, 128)))
+              (8, "set_view_mode", {"name": "final"}),
+              (9, lambda v: setattr(v.state, "show_panel", False)),
+              (9, "window_screenshot", {"path": tmp_path / "window_nopanel.png"})]
+    summary = run_viewer("cornell", model=model, frames=10, script=script, settings=_settings(size=(128, 128)))
     assert summary["gl_error"] == "GL_NO_ERROR"
     assert summary["model"] == "cornell_k8.onnx" and summary["provider"] == "CPUExecutionProvider"
     assert summary["gi_size"] == (64, 48)
     assert summary["stages_ms"]["inference"] > 0.0 and summary["stages_ms"]["upload"] > 0.0
     final, direct = _png(tmp_path / "final.png"), _png(tmp_path / "direct.png")
-    _check_image(final, (64, 48))
-    _check_image(direct, (64, 48))
     lit = direct.sum(axis=-1) > 30
     assert (final[lit] >= direct[lit] - 1).all() and final[lit].mean() > direct[lit].mean() + 5  # 2 x direct
-    _check_image(_png(tmp_path / "raw.png"), (64, 48))
-    assert _png(tmp_path / "diff.png").mean() > 1.0
-    # The 4:3 image is letterboxed in the square window: bars above and below.
-    window = _png(tmp_path / "window.png")
-    bar = window[-8:, -40:]  # bottom right corner: below the image, away from the panel
-    assert bar.std(axis=(0, 1)).max() < 1.0 and bar.mean() < 40
     record = json.loads((tmp_path / "final.json").read_text())
     assert record["model"].endswith("cornell_k8.onnx") and record["provider"] == "CPUExecutionProvider"
     assert record["resolution"] == [64, 48]
 
 
-def test_neural_gi_every_frame(display, tmp_path):
+def test_neural_gi_every_frame(display, tmp_path, ctx):
     """A tiny ONNX model (2 x direct) runs each frame at its own resolution, letterboxed in the window."""
     pytest.importorskip("onnx")
     _in_window_process(_neural_session, tmp_path)
+    # The model doubles the direct light: each view is the offscreen render's direct light times two.
+    twice = ("direct", "radiance", 2.0)
+    for name, args in {"final": (twice,), "direct": (DIRECT,), "raw": (("direct", "raw", 2.0),),
+                       "diff": (twice, DIRECT, "difference")}.items():
+        shot = tmp_path / f"{name}.png"
+        _same(_png(shot), _offscreen_view(ctx, shot, *args), name)
+    # The window with the panel hidden: the 4:3 image letterboxed in the square window, bars above and below,
+    # the network's 64x48 output scaled bilinearly.
+    shown = _png(tmp_path / "window_nopanel.png")
+    _same(shown, _offscreen_view(ctx, tmp_path / "final.png", twice, window=(128, 128), linear=True), "the window")
+    bars = np.concatenate([shown[:16], shown[-16:]]).reshape(-1, 3)
+    assert (bars == bars[0]).all() and shown[16:-16].std() > 5.0
 
 
 def _refused_session(tmp_path: Path) -> None:
@@ -598,35 +712,42 @@ def _input_session(tmp_path: Path) -> None:
     def keys(v):
         st = v.state
         for key, mode in ((glfw.KEY_4, "depth"), (glfw.KEY_9, "split"), (glfw.KEY_1, "final")):
-            v.on_key(key, glfw.PRESS, 0)
+            v.input.on_key(key, glfw.PRESS, 0)
             seen[mode] = st.view_mode
         az = st.light_angles()[0]
-        v.on_key(glfw.KEY_RIGHT, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_RIGHT, glfw.PRESS, 0)
         seen["azimuth"] = st.light_angles()[0] - az
-        v.on_key(glfw.KEY_C, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_C, glfw.PRESS, 0)
         seen["controller"] = st.controller.kind
-        v.on_key(glfw.KEY_L, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_L, glfw.PRESS, 0)
         seen["animate"] = st.animate_light
-        v.on_key(glfw.KEY_TAB, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_TAB, glfw.PRESS, 0)
         seen["tab"] = st.selected
-        v.on_key(glfw.KEY_EQUAL, glfw.PRESS, 0)
+        v.input.on_key(glfw.KEY_EQUAL, glfw.PRESS, 0)
         seen["exposure"] = st.exposure
+        st.set_light_direction(40.0, 30.0)
+        v.input.on_key(glfw.KEY_R, glfw.PRESS, 0)  # R: the camera only
+        seen["light_kept"] = st.light_angles()
+        v.input.on_key(glfw.KEY_R, glfw.PRESS, glfw.MOD_SHIFT)  # Shift+R: the whole frame
+        seen["frame_reset"] = st.config.lights == cornell.default.lights
+        v.input.on_key(glfw.KEY_C, glfw.PRESS, glfw.MOD_CONTROL)  # Ctrl+C is bound to nothing
+        seen["ctrl_c"] = st.controller.kind
 
     def mouse(v):
         st = v.state
         cam0 = st.config.camera
-        v.on_cursor(64.0, 64.0)
-        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
-        v.on_cursor(90.0, 70.0)  # a drag: orbit, no picking
-        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+        v.input.on_cursor(64.0, 64.0)
+        v.input.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+        v.input.on_cursor(90.0, 70.0)  # a drag: orbit, no picking
+        v.input.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
         seen["orbited"] = st.config.camera != cam0
         seen["after_drag"] = st.selected
-        v.on_scroll(0.0, 2.0)
+        v.input.on_scroll(0.0, 2.0)
         seen["zoom"] = st.controller.distance
-        v.on_key(glfw.KEY_R, glfw.PRESS, 0)  # reset the camera, then click the centre object
-        v.on_cursor(64.0, 74.0)
-        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
-        v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+        v.input.on_key(glfw.KEY_R, glfw.PRESS, 0)  # reset the camera, then click the centre object
+        v.input.on_cursor(64.0, 74.0)
+        v.input.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+        v.input.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
         seen["clicked"] = st.selected
 
     script = [(1, keys), (2, mouse), (3, "load_mesh", {"path": tmp_path / "ring.ply", "name": "center"}),
@@ -637,6 +758,7 @@ def _input_session(tmp_path: Path) -> None:
     assert (seen["depth"], seen["split"], seen["final"]) == ("depth", "split", "final")
     assert seen["azimuth"] == pytest.approx(5.0) and seen["controller"] == "orbit" and seen["animate"]
     assert seen["tab"] == cornell.default.objects[0].name and seen["exposure"] == pytest.approx(0.5)
+    assert seen["light_kept"] == pytest.approx((40.0, 30.0)) and seen["frame_reset"] and seen["ctrl_c"] == "orbit"
     assert seen["orbited"] and seen["after_drag"] == seen["tab"]
     assert seen["zoom"] == pytest.approx(3.4 * 0.81)
     assert seen["clicked"] == "center" and seen["gpu"]
@@ -653,7 +775,7 @@ def test_keyboard_mouse_and_mesh_loading(display, tmp_path):
 # --- the background reference ---------------------------------------------------------------------
 
 def test_progressive_reference_refines_restarts_and_never_blocks(cornell):
-    from diviewer.viewer.reference import ProgressiveReference, ReferenceSettings, mitsuba_missing
+    from diviewer.reference.progressive import ProgressiveReference, ReferenceSettings, mitsuba_missing
 
     if mitsuba_missing():
         pytest.skip("Mitsuba is not installed")
@@ -685,7 +807,7 @@ def test_progressive_reference_refines_restarts_and_never_blocks(cornell):
 def test_reference_without_mitsuba_says_why(monkeypatch, cornell):
     import importlib.util
 
-    from diviewer.viewer import reference
+    from diviewer.reference import progressive as reference
 
     real = importlib.util.find_spec
     monkeypatch.setattr(reference.importlib.util, "find_spec",

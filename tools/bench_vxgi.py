@@ -8,7 +8,7 @@ Three kinds of frame, each timed over --frames frames after a warm-up (median mi
   moving    the scene's movable objects turn each frame: their voxelization, injection and mips;
   still     nothing changed: trace (+ upsample) + composite only.
 The G-buffer, shadow and direct passes of the renderer are timed too (they run every frame anyway).
-GL work is timed with ctx.finish() around each stage (wall clock). Prints a table; writes JSON with
+GL work is timed with ctx.finish() around each stage (wall clock; llvmpipe runs on the CPU). Prints a table; writes JSON with
 the GL renderer string, the CPU load average when it started, and the versions.
 """
 
@@ -20,17 +20,18 @@ import json
 import os
 import statistics
 
-STAGES = ("gbuffer", "shadows", "direct", "vxgi_voxelize", "vxgi_inject", "vxgi_mip", "vxgi_trace", "vxgi_upsample",
-          "vxgi_composite")
+STAGES = ("gbuffer", "shadows", "direct", "vxgi_voxelize", "vxgi_inject", "vxgi_mip", "vxgi_bounce", "vxgi_trace",
+          "vxgi_upsample", "vxgi_composite")
 
 
 def bench(ctx, scene, res: int, settings, frames: int) -> dict:
+    from diviewer.gl.context import stage_timer
     from diviewer.gl.renderer import Renderer
     from diviewer.gl.vxgi import VXGIPass
 
-    r = Renderer(ctx, scene, res, res)
+    timer = stage_timer(ctx, sync=True)
+    r = Renderer(ctx, scene, res, res, timer=timer)
     v = VXGIPass(ctx, r, settings)
-    r.timing = v.timing = True
     movable = list(scene.ranges.objects)
     out = {}
     try:
@@ -44,11 +45,12 @@ def bench(ctx, scene, res: int, settings, frames: int) -> dict:
                         config = config.replace_object(name, rotation=(7.0 * i, 11.0 * i, 3.0 * i))
                 if kind == "rebuild":
                     v.invalidate()
+                timer.reset()
                 r.render(config)
                 v.run(config)
                 if i < 2:
                     continue
-                times = {**r.timings, **v.timings}
+                times = dict(timer.times)
                 for s in STAGES:
                     per_stage[s].append(times.get(s, 0.0))
                 totals.append(sum(times.get(s, 0.0) for s in STAGES))

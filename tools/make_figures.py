@@ -14,9 +14,11 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.gl.context import headless_context
-from diviewer.gl.renderer import Compositor, Renderer
+from diviewer.gl.display import DisplayPass
+from diviewer.gl.renderer import Renderer
 from diviewer.paths import models_dir
 from diviewer.scene import load_scene, sample_config
+from diviewer.scene.colour import srgb8
 
 OUT = Path(__file__).resolve().parents[1] / "assets" / "figures"
 GAP = 4
@@ -32,10 +34,10 @@ def main() -> None:
     scene = load_scene("cornell")
     with headless_context() as ctx:
         renderer = Renderer(ctx, scene, 256, 256)
-        comp = Compositor(ctx, renderer.shaders)
+        comp = DisplayPass(ctx, renderer.shaders)
         f = renderer.frame()
         tiles = [imageio.depth_preview(f["depth"])[..., None].repeat(3, -1), imageio.normal_preview(f["normal"]),
-                 imageio.srgb8(f["albedo"]), comp.to_ldr(f["direct"], scene.exposure)]
+                 srgb8(f["albedo"]), comp.to_ldr(f["direct"], scene.exposure)]
         imageio.write_png(OUT / "cornell_buffers.png", row(tiles))
         print(f"wrote {OUT / 'cornell_buffers.png'}")
         renderer.release()

@@ -18,7 +18,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
 from diviewer.errors import DiviewerError
-from diviewer.progress import Progress
+from diviewer.console import progress_bar
 from diviewer.provenance import versions
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
 from diviewer.scene.sampler import SPLITS, path_parameter
@@ -147,8 +147,8 @@ class PathTracedGT:
         self.ref, self.scene, self.settings = ref, scene, settings
         self.variant = ref.select_variant()
 
-    def __call__(self, config: FrameConfig, seed: int) -> dict[str, np.ndarray]:
-        s = self.settings
+    def __call__(self, config: FrameConfig, entry: dict) -> dict[str, np.ndarray]:
+        s, seed = self.settings, entry["seed"]
         # One loaded Mitsuba scene for both renders; the same seed correlates their noise, which
         # lowers the variance of indirect = full - direct.
         frame = self.ref.load_frame(self.scene, config, s.width, s.height)
@@ -236,29 +236,36 @@ def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: Captur
         _render_frames_gl(ctx, scene, ds, todo, settings, gt, describe(ctx), log)
 
 
-def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings: CaptureSettings, gt, gl_name: str,
+def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings, gt, gl_name: str,
                       log) -> None:
-    from diviewer.gl.renderer import Compositor, Renderer
+    """Render and write ``todo``: GL buffers plus ``gt(config, frame entry)``, stored in the manifest's channels.
+
+    Shared with the evaluation set (diviewer.evalset), whose ground truth adds channels; ``settings``
+    needs ``width``, ``height``, ``dtype`` and ``thumbs``.
+    """
+    from diviewer.gl.display import DisplayPass
+    from diviewer.gl.renderer import Renderer
     from diviewer.scene.loader import config_from_dict
 
     renderer = Renderer(ctx, scene, settings.width, settings.height)
-    compositor = Compositor(ctx, renderer.shaders)
+    compositor = DisplayPass(ctx, renderer.shaders)
     if hasattr(gt, "attach"):
         gt.attach(ctx, renderer)
-    thumbs = {i for s in SPLITS for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
-    progress = Progress(len(todo), label="capture")
+    splits = dict.fromkeys(f["split"] for f in ds.frames)  # in order of first appearance
+    thumbs = {i for s in splits for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
+    progress = progress_bar(len(todo), "capture", "frame")
     try:
         for f in todo:
             config = config_from_dict(scene, f["config"])
             t0 = time.perf_counter()
             buffers = renderer.frame(config)
             t1 = time.perf_counter()
-            truth = gt(config, f["seed"])
+            truth = gt(config, f)
             t2 = time.perf_counter()
             planes = {**buffers, **truth}
-            arr = np.concatenate([planes[name].reshape(settings.height, settings.width, c) for name, c in CHANNELS],
+            arr = np.concatenate([planes[name].reshape(settings.height, settings.width, c) for name, c in ds.channels],
                                  axis=-1)
-            bad = [name for name, c in CHANNELS if not np.all(np.isfinite(planes[name]))]
+            bad = [name for name, c in ds.channels if not np.all(np.isfinite(planes[name]))]
             if bad:
                 raise DiviewerError(f"frame {f['index']}: non-finite values in {', '.join(bad)} "
                                     f"(configuration in the manifest); nothing was written for it")
@@ -273,8 +280,10 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
                        compositor.to_ldr(planes["pt"] - planes["pt_direct"], scene.exposure)]
                 imageio.write_png(ds.root / "thumbs" / f"{frame_name(f['index'])}_{f['split']}.png",
                                   np.concatenate(row, axis=1))
-            progress.update(extra=f"gt {t2 - t1:.1f}s/frame ({gt.variant})")
+            progress.set_postfix_str(f"gt {t2 - t1:.1f}s/frame ({gt.variant})", refresh=False)
+            progress.update()
     finally:
+        progress.close()
         if hasattr(gt, "release"):
             gt.release()
         compositor.release()

@@ -25,24 +25,18 @@ from pathlib import Path
 import numpy as np
 
 from diviewer import imageio
+from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError
 
 FORMAT = "diviewer-dataset"
 FORMAT_VERSION = 1
-CHANNELS = (("depth", 1), ("normal", 3), ("albedo", 3), ("direct", 3), ("pt", 3), ("pt_direct", 3))
-"""Stored channels: the network inputs (GL) then the path-traced ground truth (full, direct only)."""
+CHANNELS = (*INPUT_CHANNELS, ("pt", 3), ("pt_direct", 3))
+"""Stored channels: the network inputs (GL, diviewer.encoding's layout) then the path-traced ground truth
+(full, direct only)."""
 
 # Manifest fields that define a dataset: a resumed capture or a shard must agree on all of them.
 IDENTITY = ("format", "format_version", "scene", "scene_hash", "resolution", "channels", "dtype", "gt", "spp",
             "max_depth", "seed", "frames", "split_fractions", "render_settings")
-
-
-def channel_slices(channels=CHANNELS) -> dict[str, slice]:
-    out, start = {}, 0
-    for name, n in channels:
-        out[name] = slice(start, start + n)
-        start += n
-    return out
 
 
 def frame_name(index: int) -> str:

@@ -8,6 +8,7 @@ from contextlib import contextmanager
 import moderngl
 
 from diviewer.errors import DiviewerError
+from diviewer.timing import StageTimer
 
 GL_VERSION = 430
 
@@ -62,3 +63,10 @@ def unbind_framebuffer(ctx: moderngl.Context) -> None:
     released while bound, the restore raises GL_INVALID_OPERATION.
     """
     ctx.detect_framebuffer(0).use()
+
+
+def stage_timer(ctx: moderngl.Context, sync: bool = False, queries: bool = False) -> StageTimer:
+    """The program's stage timer for GL work on ``ctx``: waits for the GPU around each GL stage (``sync``), or
+    reads GL timer queries (``queries``; ARB_timer_query, which llvmpipe has), or leaves GL stages untimed."""
+    return StageTimer(sync=ctx.finish if sync else None,
+                      gpu_query=(lambda: ctx.query(time=True)) if queries else None)

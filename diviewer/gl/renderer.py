@@ -1,25 +1,28 @@
-"""The deferred GL renderer: named passes (shadow, G-buffer, direct, composite); a frame is named buffers."""
+"""The deferred GL renderer: a list of named passes (shadows, G-buffer, direct light); a frame is named buffers.
+
+Each pass owns its targets and is timed as one stage by the shared ``StageTimer``. Shadow maps are
+kept per light, so a later frame can reuse the map of a light that did not move.
+"""
 
 from __future__ import annotations
 
 import math
-import time
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 
+from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shaders import ShaderCache
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
+from diviewer.timing import StageTimer
 
-BUFFERS = ("depth", "normal", "albedo", "direct")
-"""The buffers a frame returns, in the network's input order."""
+BUFFERS = INPUT_NAMES
+"""The buffers a frame returns, in the network's input order (diviewer.encoding.INPUT_CHANNELS)."""
 
-TONEMAPS = {"clamp": 0, "reinhard": 1, "aces": 2}
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,16 @@ class RenderSettings:
     """Slope-scaled bias, in texels per unit tan(theta) (theta: angle of incidence)."""
     normal_offset: float = 1.5
     """Offset of the lookup point along the surface normal, in shadow-map texels."""
+
+
+@dataclass(frozen=True)
+class FrameView:
+    """What every pass of one frame reads: the configuration, camera matrices and the scene's bounds."""
+
+    config: FrameConfig
+    view: np.ndarray
+    proj: np.ndarray
+    bounds: np.ndarray
 
 
 def _fit_directional(bounds: np.ndarray, direction) -> tuple[np.ndarray, float, float]:
@@ -70,24 +83,21 @@ class Renderer:
     """Renders a Scene's frames at a fixed resolution; textures stay on the GPU until read."""
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, width: int, height: int,
-                 settings: RenderSettings = RenderSettings(), shaders: ShaderCache | None = None):
+                 settings: RenderSettings = RenderSettings(), shaders: ShaderCache | None = None,
+                 timer: StageTimer | None = None):
         self.ctx, self.scene, self.settings = ctx, scene, settings
         self.shaders = shaders or ShaderCache(ctx)
+        self.timer = timer or StageTimer()
+        """Times each pass as a stage; the frame's owner resets it (GL passes need its sync or queries)."""
         self.gpu = GpuScene(ctx, scene.meshes, scene.materials)
         self._screen_vaos: dict[int, moderngl.VertexArray] = {}
-        self.timings: dict[str, float] = {}
-        self.timing = False
-        self._shadow_dir = ctx.depth_texture((settings.shadow_size, settings.shadow_size))
-        self._shadow_dir.compare_func = "<="
-        self._shadow_dir.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._shadow_dir.repeat_x = self._shadow_dir.repeat_y = False
-        self._shadow_dir_fbo = ctx.framebuffer(depth_attachment=self._shadow_dir)
-        face = max(settings.shadow_size // 2, 16)
-        self._face_size = face
-        self._shadow_pt = ctx.texture((3 * face, 2 * face), 1, dtype="f4")
-        self._shadow_pt.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self._shadow_pt_depth = ctx.depth_renderbuffer((3 * face, 2 * face))
-        self._shadow_pt_fbo = ctx.framebuffer([self._shadow_pt], self._shadow_pt_depth)
+        self._face_size = max(settings.shadow_size // 2, 16)
+        self._shadow_targets: dict[str, tuple] = {}
+        """Per light name: (kind, texture, framebuffer, depth renderbuffer or None)."""
+        self._shadows: dict[str, dict] = {}
+        """This frame's shadow lookup parameters per light (None entries: shadows off)."""
+        self.passes = (("shadows", self._shadow_pass), ("gbuffer", self._gbuffer_pass), ("direct", self._direct_pass))
+        """The frame, in order: (stage name, pass(frame view)); each pass is one timed stage."""
         self.width = self.height = 0
         self.resize(width, height)
 
@@ -125,44 +135,56 @@ class Renderer:
         self._gbuffer_fbo.release()
         self._direct_fbo.release()
 
+    def _shadow_target(self, light) -> tuple:
+        """The light's shadow map and framebuffer, made at its first use: a depth texture compared in
+        hardware (sun), or a 3x2 atlas of cube faces holding distances (point light)."""
+        kind = "dir" if isinstance(light, DirectionalLight) else "point"
+        target = self._shadow_targets.get(light.name)
+        if target is not None and target[0] == kind:
+            return target
+        if target is not None:
+            self._release_shadow_target(light.name)
+        ctx = self.ctx
+        if kind == "dir":
+            size = self.settings.shadow_size
+            tex = ctx.depth_texture((size, size))
+            tex.compare_func = "<="
+            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
+            target = (kind, tex, ctx.framebuffer(depth_attachment=tex), None)
+        else:
+            s = self._face_size
+            tex = ctx.texture((3 * s, 2 * s), 1, dtype="f4")
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            depth = ctx.depth_renderbuffer((3 * s, 2 * s))
+            target = (kind, tex, ctx.framebuffer([tex], depth), depth)
+        self._shadow_targets[light.name] = target
+        return target
+
+    def _release_shadow_target(self, name: str) -> None:
+        unbind_framebuffer(self.ctx)
+        _, tex, fbo, depth = self._shadow_targets.pop(name)
+        for r in (fbo, tex, depth):
+            if r is not None:
+                r.release()
+
     def release(self) -> None:
         self._release_targets()
-        for r in (self._shadow_dir_fbo, self._shadow_dir, self._shadow_pt_fbo, self._shadow_pt, self._shadow_pt_depth,
-                  *self._screen_vaos.values()):
-            r.release()
+        for name in list(self._shadow_targets):
+            self._release_shadow_target(name)
+        for vao in self._screen_vaos.values():
+            vao.release()
         self.gpu.release()
 
     # --- passes ---------------------------------------------------------------------------------
-    @contextmanager
-    def _timed(self, name: str):
-        if not self.timing:
-            yield
-            return
-        self.ctx.finish()
-        t0 = time.perf_counter()
-        yield
-        self.ctx.finish()
-        self.timings[name] = self.timings.get(name, 0.0) + (time.perf_counter() - t0) * 1000.0
-
     def render(self, config: FrameConfig | None = None) -> dict[str, moderngl.Texture]:
         """Render one frame; returns the named textures (depth, normal, albedo, emission, direct)."""
         config = config or self.scene.default
-        self.timings = {}
-        aspect = self.width / self.height
-        view = config.camera.view_matrix()
-        proj = config.camera.projection(aspect)
-        with self._timed("gbuffer"):
-            self._gbuffer_pass(config, view, proj)
-        bounds = self.scene.bounds(config)
-        self._direct_fbo.use()
-        self._direct_fbo.clear(0.0, 0.0, 0.0, 0.0)
-        for light in config.lights:
-            with self._timed("shadows"):
-                shadow = self._shadow_pass(config, light, bounds) if self.settings.shadows else None
-            with self._timed("direct"):
-                self._light_pass(config, light, view, shadow)
-        with self._timed("direct"):
-            self._emission_pass()
+        frame = FrameView(config, config.camera.view_matrix(), config.camera.projection(self.width / self.height),
+                          self.scene.bounds(config))
+        for name, run in self.passes:
+            with self.timer.stage(name, gpu=True):
+                run(frame)
         return self.textures
 
     def _draw_objects(self, prog: moderngl.Program, config: FrameConfig, view: np.ndarray | None) -> None:
@@ -184,8 +206,8 @@ class Renderer:
             self.gpu.meshes[obj.mesh].vao(prog).render(moderngl.TRIANGLES)
         self.ctx.front_face = "ccw"
 
-    def _gbuffer_pass(self, config: FrameConfig, view: np.ndarray, proj: np.ndarray) -> None:
-        ctx = self.ctx
+    def _gbuffer_pass(self, frame: "FrameView") -> None:
+        ctx, config, view, proj = self.ctx, frame.config, frame.view, frame.proj
         self._gbuffer_fbo.use()
         self._gbuffer_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable_only(moderngl.DEPTH_TEST)
@@ -194,29 +216,38 @@ class Renderer:
         set_uniform(prog, "m_view", view)
         self._draw_objects(prog, config, view)
 
-    def _shadow_pass(self, config: FrameConfig, light, bounds: np.ndarray) -> dict:
+    def _shadow_pass(self, frame: "FrameView") -> None:
+        """Each light's shadow map (none with shadows off)."""
+        self._shadows = {}
+        for light in frame.config.lights:
+            self._shadows[light.name] = (self._render_shadow(frame.config, light, frame.bounds)
+                                         if self.settings.shadows else None)
+
+    def _render_shadow(self, config: FrameConfig, light, bounds: np.ndarray) -> dict:
         ctx = self.ctx
         ctx.enable_only(moderngl.DEPTH_TEST)
-        if isinstance(light, DirectionalLight):
+        kind, tex, fbo, _ = self._shadow_target(light)
+        if kind == "dir":
             m_light, extent, depth_range = _fit_directional(bounds, light.direction)
-            self._shadow_dir_fbo.use()
-            self._shadow_dir_fbo.clear(depth=1.0)
+            fbo.use()
+            fbo.clear(depth=1.0)
             prog = self.shaders.program("shadow.glsl")
             set_uniform(prog, "m_light", m_light)
             self._draw_objects(prog, config, None)
-            return {"m_light": m_light, "texel_world": extent / self.settings.shadow_size, "depth_range": depth_range}
+            return {"map": tex, "m_light": m_light, "texel_world": extent / self.settings.shadow_size,
+                    "depth_range": depth_range}
         faces = _point_faces(light.position, bounds)
-        self._shadow_pt_fbo.use()
-        self._shadow_pt_fbo.clear(1e30, 1e30, 1e30, 1e30, depth=1.0)
+        fbo.use()
+        fbo.clear(1e30, 1e30, 1e30, 1e30, depth=1.0)
         prog = self.shaders.program("shadow.glsl", {"POINT_LIGHT": 1})
         set_uniform(prog, "u_light_pos", tuple(light.position))
         s = self._face_size
         for i, m in enumerate(faces):
-            self._shadow_pt_fbo.viewport = ((i % 3) * s, (i // 3) * s, s, s)
+            fbo.viewport = ((i % 3) * s, (i // 3) * s, s, s)
             set_uniform(prog, "m_light", m)
             self._draw_objects(prog, config, None)
-        self._shadow_pt_fbo.viewport = (0, 0, 3 * s, 2 * s)
-        return {"faces": faces}
+        fbo.viewport = (0, 0, 3 * s, 2 * s)
+        return {"map": tex, "faces": faces}
 
     def _screen_program(self, defines: dict) -> moderngl.Program:
         prog = self.shaders.program("direct.glsl", defines)
@@ -230,6 +261,14 @@ class Renderer:
         if prog.glo not in self._screen_vaos:
             self._screen_vaos[prog.glo] = self.ctx.vertex_array(prog, [])
         self._screen_vaos[prog.glo].render(moderngl.TRIANGLES, vertices=3)
+
+    def _direct_pass(self, frame: "FrameView") -> None:
+        """Each light's shadowed Lambert term, then emission, added into the direct-light target."""
+        self._direct_fbo.use()
+        self._direct_fbo.clear(0.0, 0.0, 0.0, 0.0)
+        for light in frame.config.lights:
+            self._light_pass(frame.config, light, frame.view, self._shadows.get(light.name))
+        self._emission_pass()
 
     def _light_pass(self, config: FrameConfig, light, view: np.ndarray, shadow: dict | None) -> None:
         ctx = self.ctx
@@ -251,7 +290,7 @@ class Renderer:
             set_uniform(prog, "u_light_color", tuple(float(c) * light.irradiance for c in light.color))
             set_uniform(prog, "u_light_dir", tuple(light.direction))
             if shadow is not None:
-                self._shadow_dir.use(location=4)
+                shadow["map"].use(location=4)
                 set_uniform(prog, "u_shadow_map", 4)
                 set_uniform(prog, "m_light", shadow["m_light"])
                 set_uniform(prog, "u_texel_world", float(shadow["texel_world"]))
@@ -261,7 +300,7 @@ class Renderer:
             set_uniform(prog, "u_light_color", tuple(float(c) * light.intensity for c in light.color))
             set_uniform(prog, "u_light_pos", tuple(light.position))
             if shadow is not None:
-                self._shadow_pt.use(location=4)
+                shadow["map"].use(location=4)
                 set_uniform(prog, "u_shadow_atlas", 4)
                 set_uniform(prog, "m_faces", shadow["faces"])
                 set_uniform(prog, "u_face_size", float(self._face_size))
@@ -287,48 +326,5 @@ class Renderer:
     def frame(self, config: FrameConfig | None = None) -> dict[str, np.ndarray]:
         """Render and read back the network's input buffers."""
         self.render(config)
-        with self._timed("readback"):
+        with self.timer.stage("readback", gpu=True):
             return {name: self.read(name) for name in BUFFERS}
-
-
-class Compositor:
-    """Exposure, tone map and sRGB: an HDR texture to a display framebuffer (any size)."""
-
-    def __init__(self, ctx: moderngl.Context, shaders: ShaderCache):
-        self.ctx = ctx
-        self.prog = shaders.program("composite.glsl")
-        self.vao = ctx.vertex_array(self.prog, [])
-        self._ldr: dict[tuple[int, int], tuple] = {}
-
-    def run(self, hdr: moderngl.Texture, target: moderngl.Framebuffer, exposure: float = 0.0,
-            tonemap: str = "aces", flip_y: bool = False) -> None:
-        target.use()
-        self.ctx.enable_only(moderngl.NOTHING)
-        hdr.use(location=0)
-        set_uniform(self.prog, "u_hdr", 0)
-        set_uniform(self.prog, "u_exposure", float(exposure))
-        set_uniform(self.prog, "u_tonemap", TONEMAPS[tonemap])
-        set_uniform(self.prog, "u_flip_y", bool(flip_y))
-        self.vao.render(moderngl.TRIANGLES, vertices=3)
-
-    def to_ldr(self, image: np.ndarray, exposure: float = 0.0, tonemap: str = "aces") -> np.ndarray:
-        """Tone-map a linear (H, W, 3) image to uint8 sRGB through the same shader as the display."""
-        h, w = image.shape[:2]
-        if (w, h) not in self._ldr:
-            # Kept per size: no allocation per call.
-            src = self.ctx.texture((w, h), 3, dtype="f4")
-            src.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            dst = self.ctx.texture((w, h), 4)
-            self._ldr[(w, h)] = (src, dst, self.ctx.framebuffer([dst]))
-        src, _, fbo = self._ldr[(w, h)]
-        src.write(np.ascontiguousarray(np.flipud(image), dtype="f4").tobytes())
-        self.run(src, fbo, exposure, tonemap)
-        out = np.frombuffer(fbo.read(components=3), dtype=np.uint8).reshape(h, w, 3)
-        return np.ascontiguousarray(np.flipud(out))
-
-    def release(self) -> None:
-        unbind_framebuffer(self.ctx)
-        for targets in self._ldr.values():
-            for t in reversed(targets):
-                t.release()
-        self.vao.release()

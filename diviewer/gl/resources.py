@@ -66,11 +66,27 @@ class GpuScene:
     def __init__(self, ctx: moderngl.Context, meshes: dict[str, Mesh], materials: dict[str, Material]):
         self.meshes = {k: GpuMesh(ctx, m) for k, m in meshes.items()}
         self.textures = {k: upload_texture(ctx, m.texture) for k, m in materials.items() if m.texture is not None}
+        self._sources: dict[str, object] = {**meshes, **{f"material:{k}": m for k, m in materials.items()}}
+        """What each GPU copy was made from, so ``sync`` uploads only what changed."""
 
     def add_mesh(self, ctx: moderngl.Context, mesh: Mesh) -> None:
         if mesh.name in self.meshes:
             self.meshes[mesh.name].release()
         self.meshes[mesh.name] = GpuMesh(ctx, mesh)
+        self._sources[mesh.name] = mesh
+
+    def sync(self, ctx: moderngl.Context, scene) -> None:
+        """Upload the scene's meshes and material textures that are new or replaced since they were uploaded
+        (a mesh file loaded, or loaded again under the same key: objects are compared, not keys)."""
+        for key, mesh in scene.meshes.items():
+            if self._sources.get(key) is not mesh:
+                self.add_mesh(ctx, mesh)
+        for key, mat in scene.materials.items():
+            if mat.texture is not None and self._sources.get(f"material:{key}") is not mat:
+                if key in self.textures:
+                    self.textures[key].release()
+                self.textures[key] = upload_texture(ctx, mat.texture)
+                self._sources[f"material:{key}"] = mat
 
     def release(self) -> None:
         for m in self.meshes.values():

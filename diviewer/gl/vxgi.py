@@ -64,8 +64,6 @@ Artefacts, and what the settings do about them:
 from __future__ import annotations
 
 import math
-import time
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import moderngl
@@ -73,10 +71,11 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.gl.context import unbind_framebuffer
-from diviewer.gl.renderer import Renderer, _fit_directional, _point_faces
+from diviewer.gl.renderer import Renderer
 from diviewer.gl.resources import set_uniform
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, Object, PointLight
+from diviewer.timing import StageTimer
 
 MAX_CONES = 16
 """Must match MAX_CONES in shaders/vxgi_cone.glsl."""
@@ -200,9 +199,12 @@ class _FragmentList:
 class VXGIPass:
     """VXGI over a Renderer's frame: call ``run(config)`` after ``renderer.render(config)``."""
 
-    def __init__(self, ctx: moderngl.Context, renderer: Renderer, settings: VXGISettings = VXGISettings()):
+    def __init__(self, ctx: moderngl.Context, renderer: Renderer, settings: VXGISettings = VXGISettings(),
+                 timer: StageTimer | None = None):
         settings.validate()
         self.ctx, self.renderer, self.settings = ctx, renderer, settings
+        self.timer = timer or renderer.timer
+        """Each stage is timed here (the renderer's timer unless given one)."""
         self.scene = renderer.scene
         self.shaders = renderer.shaders
         res = settings.resolution
@@ -233,7 +235,7 @@ class VXGIPass:
         self.grid_min = np.zeros(3)
         self.grid_size = 1.0
         self.timings: dict[str, float] = {}
-        self.timing = False
+        """The last run's stage times (ms), also added to ``timer``."""
         self.updated: tuple[str, ...] = ()
         """What the last run redid: a subset of ('static', 'dynamic', 'inject')."""
         self.width = self.height = 0
@@ -283,17 +285,6 @@ class VXGIPass:
         """Forget the cached grid: the next run voxelizes and injects everything (for benchmarks)."""
         self._keys.clear()
 
-    @contextmanager
-    def _timed(self, name: str):
-        if not self.timing:
-            yield
-            return
-        self.ctx.finish()
-        t0 = time.perf_counter()
-        yield
-        self.ctx.finish()
-        self.timings[name] = self.timings.get(name, 0.0) + (time.perf_counter() - t0) * 1000.0
-
     # --- the frame ------------------------------------------------------------------------------
     def run(self, config: FrameConfig | None = None) -> dict[str, moderngl.Texture]:
         """Update the grid where the frame changed, trace and composite; returns the named textures.
@@ -301,7 +292,7 @@ class VXGIPass:
         The renderer must have rendered ``config`` (its G-buffer and direct light are read).
         """
         config = config or self.scene.default
-        self.timings = {}
+        before = {k: self.timer.times.get(k, 0.0) for k in STAGES}
         self._ensure_targets()
         grid = self._fit_grid(config)
         moving = set(self.scene.ranges.objects)
@@ -311,30 +302,31 @@ class VXGIPass:
         for part, objects in parts.items():
             key = (grid, self._objects_key(objects))
             if self._keys.get(part) != key:
-                with self._timed("vxgi_voxelize"):
+                with self.timer.stage("vxgi_voxelize", gpu=True):
                     self._voxelize(self._lists[part], objects)
                 self._keys[part] = key
                 updated.append(part)
         light_key = (config.lights, self.renderer.settings)
         if updated or self._keys.get("light") != light_key:
-            with self._timed("vxgi_inject"):
+            with self.timer.stage("vxgi_inject", gpu=True):
                 self._inject(config)
-            with self._timed("vxgi_mip"):
+            with self.timer.stage("vxgi_mip", gpu=True):
                 self._build_mips()
             if self.settings.bounces > 1:
-                with self._timed("vxgi_bounce"):
+                with self.timer.stage("vxgi_bounce", gpu=True):
                     self._bounce()
             self._per_fragment("ZERO")
             self._keys["light"] = light_key
             updated.append("inject")
         self.updated = tuple(updated)
-        with self._timed("vxgi_trace"):
+        with self.timer.stage("vxgi_trace", gpu=True):
             self._trace(config)
         if self.settings.trace_scale > 1:
-            with self._timed("vxgi_upsample"):
+            with self.timer.stage("vxgi_upsample", gpu=True):
                 self._upsample()
-        with self._timed("vxgi_composite"):
+        with self.timer.stage("vxgi_composite", gpu=True):
             self._composite()
+        self.timings = {k: self.timer.times.get(k, 0.0) - before[k] for k in STAGES if k in self.timer.times}
         return self.textures
 
     def _fit_grid(self, config: FrameConfig) -> tuple:
@@ -390,17 +382,15 @@ class VXGIPass:
     def _inject(self, config: FrameConfig) -> None:
         ctx = self.ctx
         r = self.renderer
-        bounds = self.scene.bounds(config)
         self._sums.bind_to_storage_buffer(2)
         first = True
-        # The last light first: its shadow map is still the renderer's from this frame's direct pass.
-        for k, light in enumerate(reversed(config.lights or (None,))):
+        for light in config.lights or (None,):
             shadow = None
             if light is None:
                 prog = self.shaders.compute("vxgi_inject.glsl")
             else:
-                if r.settings.shadows:
-                    shadow = self._current_shadow(light, bounds) if k == 0 else r._shadow_pass(config, light, bounds)
+                # This frame's shadow map of the light, as the renderer's direct pass used it.
+                shadow = r._shadows.get(light.name)
                 directional = isinstance(light, DirectionalLight)
                 prog = self.shaders.compute("vxgi_inject.glsl", {"DIRECTIONAL": 1} if directional else {"POINT_LIGHT": 1})
                 self._light_uniforms(prog, light, shadow)
@@ -428,14 +418,6 @@ class VXGIPass:
                 prog.run(group_x=-(-lst.count // 64))
         self.ctx.memory_barrier()
 
-    def _current_shadow(self, light, bounds: np.ndarray) -> dict:
-        """The lookup parameters of the shadow map the renderer drew last (for ``light``), without drawing it."""
-        if isinstance(light, DirectionalLight):
-            m_light, extent, depth_range = _fit_directional(bounds, light.direction)
-            return {"m_light": m_light, "texel_world": extent / self.renderer.settings.shadow_size,
-                    "depth_range": depth_range}
-        return {"faces": _point_faces(light.position, bounds)}
-
     def _light_uniforms(self, prog, light, shadow: dict | None) -> None:
         """The uniforms of direct.glsl's visibility() and radiometry, as the renderer's light pass sets them."""
         r = self.renderer
@@ -449,7 +431,7 @@ class VXGIPass:
             set_uniform(prog, "u_light_color", tuple(float(c) * light.irradiance for c in light.color))
             set_uniform(prog, "u_light_dir", tuple(float(x) for x in light.direction))
             if shadow is not None:
-                r._shadow_dir.use(location=4)
+                shadow["map"].use(location=4)
                 set_uniform(prog, "u_shadow_map", 4)
                 set_uniform(prog, "m_light", shadow["m_light"])
                 set_uniform(prog, "u_texel_world", float(shadow["texel_world"]))
@@ -459,7 +441,7 @@ class VXGIPass:
             set_uniform(prog, "u_light_color", tuple(float(c) * light.intensity for c in light.color))
             set_uniform(prog, "u_light_pos", tuple(float(x) for x in light.position))
             if shadow is not None:
-                r._shadow_pt.use(location=4)
+                shadow["map"].use(location=4)
                 set_uniform(prog, "u_shadow_atlas", 4)
                 set_uniform(prog, "m_faces", shadow["faces"])
                 set_uniform(prog, "u_face_size", float(r._face_size))

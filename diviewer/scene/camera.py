@@ -12,10 +12,18 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from pyrr import matrix33, matrix44
+
+# pyrr is the camera and transform library. Its matrices act on row vectors (``p @ M``, translation
+# in the last row), the transpose of the GL column convention used everywhere in this package, so
+# every pyrr matrix is transposed once, here, and nowhere else. pyrr's create_from_{x,y,z}_rotation
+# already follow the column convention (the opposite of its create_from_axis_rotation), so only the
+# axis form is used, for every rotation. tests/test_scene.py pins each function to its definition.
+_F64 = np.float64
 
 
 def normalize(v: np.ndarray) -> np.ndarray:
-    v = np.asarray(v, dtype=np.float64)
+    v = np.asarray(v, dtype=_F64)
     n = np.linalg.norm(v)
     if not np.isfinite(n) or n == 0.0:
         raise ValueError(f"cannot normalise vector {v.tolist()}")
@@ -24,39 +32,20 @@ def normalize(v: np.ndarray) -> np.ndarray:
 
 def look_at(eye, target, up) -> np.ndarray:
     """World-to-view matrix (4x4, float64) for a camera at ``eye`` looking at ``target``."""
-    eye = np.asarray(eye, dtype=np.float64)
-    f = normalize(np.asarray(target, dtype=np.float64) - eye)
-    s = np.cross(f, np.asarray(up, dtype=np.float64))
-    if np.linalg.norm(s) < 1e-9:
+    eye, target, up = (np.asarray(v, dtype=_F64) for v in (eye, target, up))
+    if np.linalg.norm(np.cross(normalize(target - eye), up)) < 1e-9:
         raise ValueError("camera 'up' is parallel to the viewing direction")
-    s = s / np.linalg.norm(s)
-    u = np.cross(s, f)
-    m = np.identity(4)
-    m[0, :3], m[1, :3], m[2, :3] = s, u, -f
-    m[:3, 3] = -m[:3, :3] @ eye
-    return m
+    return matrix44.create_look_at(eye, target, up, dtype=_F64).T
 
 
 def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
     """OpenGL projection (clip z in [-w, w]) for a vertical field of view in degrees."""
-    t = 1.0 / math.tan(math.radians(fov_y_deg) / 2.0)
-    m = np.zeros((4, 4))
-    m[0, 0] = t / aspect
-    m[1, 1] = t
-    m[2, 2] = (far + near) / (near - far)
-    m[2, 3] = 2.0 * far * near / (near - far)
-    m[3, 2] = -1.0
-    return m
+    return matrix44.create_perspective_projection(fov_y_deg, aspect, near, far, dtype=_F64).T
 
 
 def orthographic(half_w: float, half_h: float, near: float, far: float) -> np.ndarray:
     """OpenGL orthographic projection of the box [-half_w, half_w] x [-half_h, half_h] x [-near, -far]."""
-    m = np.identity(4)
-    m[0, 0] = 1.0 / half_w
-    m[1, 1] = 1.0 / half_h
-    m[2, 2] = -2.0 / (far - near)
-    m[2, 3] = -(far + near) / (far - near)
-    return m
+    return matrix44.create_orthogonal_projection(-half_w, half_w, -half_h, half_h, near, far, dtype=_F64).T
 
 
 def pixel_rays_view(width: int, height: int, fov_y_deg: float) -> np.ndarray:
@@ -84,30 +73,26 @@ def view_to_world(view: np.ndarray) -> np.ndarray:
     return m
 
 
-def euler_xyz(degrees) -> np.ndarray:
-    """Rotation matrix (3x3) for rotations about x, then y, then z (degrees), i.e. Rz @ Ry @ Rx."""
-    ax, ay, az = np.radians(np.asarray(degrees, dtype=np.float64))
-    cx, sx, cy, sy, cz, sz = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), math.cos(az), math.sin(az)
-    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return rz @ ry @ rx
-
-
 def axis_angle(axis, degrees: float) -> np.ndarray:
     """Rotation matrix (3x3) of ``degrees`` about ``axis`` (right-handed)."""
-    a = normalize(axis)
-    th = math.radians(degrees)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.identity(3) + math.sin(th) * k + (1 - math.cos(th)) * (k @ k)
+    return matrix33.create_from_axis_rotation(normalize(axis), math.radians(degrees), dtype=_F64).T
+
+
+_AXES = np.identity(3)
+
+
+def euler_xyz(degrees) -> np.ndarray:
+    """Rotation matrix (3x3) for rotations about x, then y, then z (degrees), i.e. Rz @ Ry @ Rx."""
+    ax, ay, az = (float(a) for a in np.asarray(degrees, dtype=_F64))
+    return axis_angle(_AXES[2], az) @ axis_angle(_AXES[1], ay) @ axis_angle(_AXES[0], ax)
 
 
 def trs(position, rotation_deg, scale) -> np.ndarray:
     """Model matrix: translate @ rotate (euler xyz, degrees) @ scale."""
-    m = np.identity(4)
-    m[:3, :3] = euler_xyz(rotation_deg) @ np.diag(np.asarray(scale, dtype=np.float64))
-    m[:3, 3] = np.asarray(position, dtype=np.float64)
-    return m
+    t = matrix44.create_from_translation(np.asarray(position, dtype=_F64), dtype=_F64).T
+    r = matrix44.create_from_matrix33(euler_xyz(rotation_deg), dtype=_F64)  # 3x3 block only: no transpose issue
+    s = matrix44.create_from_scale(np.asarray(scale, dtype=_F64), dtype=_F64)  # diagonal
+    return t @ r @ s
 
 
 def normal_matrix(model: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.paths import scenes_dir
-from diviewer.scene import shapes
+from diviewer.scene import colour, shapes
 from diviewer.scene.model import (
     Camera, CameraRange, DirectionalLight, FrameConfig, LightRange, Material, Object, ObjectRange,
     PointLight, Ranges, Scene,
@@ -307,7 +307,7 @@ def _load_texture(file: Path, path, field: str) -> np.ndarray:
         img = Image.open(file).convert("RGB")
     except Exception as exc:
         raise DiviewerError(f"cannot read texture {file}: {exc}", path=path, field=field) from exc
-    return shapes.srgb_to_linear(np.asarray(img, dtype=np.float32) / 255.0).astype(np.float32)
+    return colour.srgb_to_linear(np.asarray(img, dtype=np.float32) / 255.0).astype(np.float32)
 
 
 def add_mesh_file(scene: Scene, path: str | Path, key: str | None = None) -> tuple[Scene, str, str | None]:

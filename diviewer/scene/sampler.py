@@ -8,11 +8,13 @@ import math
 import numpy as np
 
 from diviewer.scene import camera as cam
-from diviewer.scene.model import CameraRange, DirectionalLight, FrameConfig, PointLight, Scene
+from diviewer.scene.lights import rotate_light, scale_light
+from diviewer.scene.model import CameraRange, FrameConfig, Scene
 
 SPLITS = ("train", "val", "test")
 
 
+# pyrr builds rotations (scene.camera) but has no inverse for this Euler order, hence this one.
 def matrix_to_euler_xyz(r: np.ndarray) -> tuple[float, float, float]:
     """Euler angles (degrees) with ``euler_xyz(angles) == r`` for a rotation matrix r = Rz Ry Rx."""
     sy = -float(np.clip(r[2, 0], -1.0, 1.0))
@@ -94,16 +96,9 @@ def sample_config(scene: Scene, seed: int, split: str = "train") -> FrameConfig:
         if r is None:
             lights.append(light)
             continue
-        rot = cam.axis_angle(r.axis, float(rng.uniform(*r.angle)))
+        angle = float(rng.uniform(*r.angle))
         scale = float(math.exp(rng.uniform(math.log(r.intensity[0]), math.log(r.intensity[1]))))
-        if isinstance(light, DirectionalLight):
-            d = rot @ np.asarray(light.direction)
-            lights.append(dataclasses.replace(light, direction=tuple(map(float, d / np.linalg.norm(d))),
-                                              irradiance=light.irradiance * scale))
-        else:
-            assert isinstance(light, PointLight)
-            p = centre + rot @ (np.asarray(light.position) - centre)
-            lights.append(dataclasses.replace(light, position=tuple(map(float, p)), intensity=light.intensity * scale))
+        lights.append(scale_light(rotate_light(light, r.axis, angle, centre), scale))
 
     objects = []
     for obj in config.objects:

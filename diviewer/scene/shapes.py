@@ -9,6 +9,7 @@ import numpy as np
 import trimesh
 
 from diviewer.errors import DiviewerError
+from diviewer.scene.colour import srgb_to_linear
 from diviewer.scene.model import Mesh
 
 CREASE_ANGLE_DEG = 30.0
@@ -173,12 +174,3 @@ def load_file(name: str, file: Path, *, path=None, field: str = "") -> tuple[Mes
     mesh = from_trimesh(name, loaded, source=str(file), path=path, field=field, strict=True)
     return mesh, base_color, texture
 
-
-def srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    c = np.asarray(c, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(c: np.ndarray) -> np.ndarray:
-    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.0031308, c * 12.92, 1.055 * np.power(c, 1 / 2.4) - 0.055)

@@ -13,13 +13,14 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from diviewer import imageio
-from diviewer.encoding import INPUT_CHANNELS
+from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
 from diviewer.provenance import versions
@@ -61,7 +62,7 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False):
 
         def forward(self, buffers):
             x = buffers.permute(0, 3, 1, 2)
-            depth, normal, albedo, direct = x[:, 0:1], x[:, 1:4], x[:, 4:7], x[:, 7:10]
+            depth, normal, albedo, direct = (x[:, channel_slices()[k]] for k in ("depth", "normal", "albedo", "direct"))
             inp = encode_inputs(depth, normal, albedo, direct, encoding, channel_axis=1)
             y = self.netG(inp.half() if fp16 else inp)
             radiance = decode_radiance(y.float() if fp16 else y, encoding)
@@ -69,6 +70,21 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False):
             return out.permute(0, 2, 3, 1)
 
     return GIModel().eval()
+
+
+def onnx_bytes(module, example) -> bytes:
+    """`module` (NHWC buffers -> NHWC radiance) as ONNX bytes: the legacy TorchScript exporter at
+    `OPSET`, dynamic batch, height and width. `example` is a (1, H, W, 10) float32 tensor."""
+    torch = _torch()
+    buf = io.BytesIO()
+    with torch.no_grad(), warnings.catch_warnings():
+        # InstanceNorm without running statistics normalises with each image's own statistics in
+        # eval mode too, which is what it should export; the exporter warns about exactly that.
+        warnings.filterwarnings("ignore", message=r".*operator 'instance_norm' is set to train=True")
+        torch.onnx.export(module, (example,), buf, input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
+                          opset_version=OPSET, dynamo=False,
+                          dynamic_axes={INPUT_NAME: {0: "N", 1: "H", 2: "W"}, OUTPUT_NAME: {0: "N", 1: "H", 2: "W"}})
+    return buf.getvalue()
 
 
 def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[int, int]) -> tuple[np.ndarray, str]:
@@ -82,7 +98,7 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
             frames = []
             for i in idx:
                 f = ds.load(i)
-                frames.append(np.concatenate([f["depth"][..., None], f["normal"], f["albedo"], f["direct"]], -1))
+                frames.append(np.concatenate([f[name].reshape(*f[name].shape[:2], n) for name, n in INPUT_CHANNELS], -1))
             return np.stack(frames).astype(np.float32), f"{len(idx)} frames of {data_dir}"
     # No dataset: smooth synthetic buffers with plausible ranges (depth 1..far, unit normals).
     rng = np.random.default_rng(0)
@@ -118,12 +134,9 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     with torch.no_grad():
         reference = ref_module(torch.from_numpy(frames)).numpy()
         module = gi_module(build_generator_from_checkpoint(ckpt)[0], encoding, meta, fp16=settings.fp16)
-        buf = io.BytesIO()
-        torch.onnx.export(module, (torch.from_numpy(frames[:1]),), buf, input_names=[INPUT_NAME],
-                          output_names=[OUTPUT_NAME], opset_version=OPSET, dynamo=False,
-                          dynamic_axes={INPUT_NAME: {0: "N", 1: "H", 2: "W"}, OUTPUT_NAME: {0: "N", 1: "H", 2: "W"}})
-    model = onnx.load_from_string(buf.getvalue())
-    session = ort.InferenceSession(buf.getvalue(), providers=["CPUExecutionProvider"])
+    data = onnx_bytes(module, torch.from_numpy(frames[:1]))
+    model = onnx.load_from_string(data)
+    session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
     got = np.concatenate([session.run([OUTPUT_NAME], {INPUT_NAME: f[None]})[0] for f in frames])
     diff = np.abs(got.astype(np.float64) - reference)
     peak = float(np.abs(reference).max()) or 1.0
@@ -155,6 +168,9 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "multiple": 2 ** levels,
         "K": int(meta["K"]),
         "levels": levels,
+        # absent from checkpoints made before these options existed, which were transpose/batch
+        "upsample": meta["model_args"].get("upsample", "transpose"),
+        "norm": meta["model_args"].get("norm", "batch"),
         "target": meta["target"],
         "divide_albedo": meta["divide_albedo"],
         "encoding": encoding.to_dict(),
@@ -185,10 +201,16 @@ def info(path: str | Path) -> str:
     from diviewer.runtime import read_metadata
 
     m = read_metadata(path)
+    if m.get("kind") == "linear_baseline":
+        return "\n".join([f"{path}", f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",
+                          f"  baseline     {m['description']}",
+                          f"  parameters   {m['parameters']}, fitted on {m['fit']['frames']} frames "
+                          f"({m['fit']['split']} split of {m['fit']['data']}), train RMSE {m['fit']['train_rmse']:.4g}"])
     val = m.get("validation") or {}
     lines = [f"{path}",
              f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",
-             f"  network      U-Net K={m['K']} levels={m['levels']} ({m['precision']}), target {m['target']}"
+             f"  network      U-Net K={m['K']} levels={m['levels']} upsample={m.get('upsample', 'transpose')} "
+             f"norm={m.get('norm', 'batch')} ({m['precision']}), target {m['target']}"
              + (" / albedo" if m.get("divide_albedo") else ""),
              f"  trained at   {m['resolution'][0]}x{m['resolution'][1]}; sizes must be multiples of {m['multiple']}",
              f"  training     {m.get('epochs')} epochs, {m.get('steps')} steps, dataset {m['dataset_hash'][:16]}...",

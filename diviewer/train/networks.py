@@ -1,8 +1,11 @@
-"""Deep Illumination's networks: the U-Net generator, the PatchGAN discriminator and the GAN loss.
+"""Deep Illumination's networks: the U-Net generator and the PatchGAN discriminator.
 
 Architectures follow pix2pix (Isola et al.; pytorch-CycleGAN-and-pix2pix), which the paper uses
-with base width K = ngf and a number of levels that follows the resolution. The training step
-lives in another module; this one only builds modules.
+with base width K = ngf and a number of levels that follows the resolution. Two ablation options
+change them: the decoder's upsampling (`UPSAMPLES`) and the normalisation layer (`NORMS`); the
+defaults are the paper's, and a checkpoint that does not name them rebuilds exactly as before.
+The losses live in `diviewer.train.losses` (`GANLoss` is re-exported here for older imports); the
+training step lives in another module; this one only builds modules.
 """
 
 from __future__ import annotations
@@ -18,12 +21,93 @@ from torch import nn
 from diviewer.encoding import INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
 from diviewer.provenance import check_known_keys
+from diviewer.train.losses import GANLoss
+
+__all__ = [
+    "LAMBDA_L1", "NORMS", "TARGETS", "UPSAMPLES", "GANLoss", "NLayerDiscriminator", "NetConfig",
+    "PixelShuffleUpsample", "UnetGenerator", "icnr_", "init_weights", "levels_for_resolution",
+]
 
 LAMBDA_L1: float = 100.0
 """Weight of the L1 term against the adversarial term (pix2pix's default, used by the paper)."""
 
 TARGETS: tuple[str, ...] = ("full", "indirect")
 """What the generator predicts: the full GI image, or indirect light only (added to exact direct)."""
+
+
+UPSAMPLES: tuple[str, ...] = ("transpose", "resize", "shuffle")
+"""Decoder upsampling: "transpose" = ConvTranspose 4x4/2 (pix2pix, the paper); "resize" = nearest
+upsample x2 then Conv 3x3 (Odena et al. 2016, "Deconvolution and checkerboard artifacts": every
+output pixel sees the same number of kernel taps, so no checkerboard by construction); "shuffle" =
+Conv 3x3 to 4x the channels then PixelShuffle(2) (Shi et al. 2016), ICNR-initialised (Aitken et al.
+2017) so it starts as "resize" and has no checkerboard at initialisation."""
+
+NORMS: tuple[str, ...] = ("batch", "instance", "none")
+"""Normalisation after each inner convolution: BatchNorm (pix2pix, the paper), InstanceNorm (affine,
+no running statistics: train and eval behave alike), or none (the convolution gets a bias instead)."""
+
+
+def _norm_layer(norm: str, channels: int) -> nn.Module | None:
+    """The normalisation module for `norm` (None for "none")."""
+    if norm == "batch":
+        return nn.BatchNorm2d(channels)
+    if norm == "instance":
+        # affine=True (pix2pix uses affine=False) so the layer has the same learnable scale and
+        # shift as BatchNorm and the ablation changes only the statistics it normalises with.
+        return nn.InstanceNorm2d(channels, affine=True, track_running_stats=False)
+    return None
+
+
+def _check_choice(name: str, value: str, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {list(choices)}, got {value!r}")
+
+
+def icnr_(weight: torch.Tensor, scale: int = 2, init=nn.init.kaiming_normal_) -> torch.Tensor:
+    """ICNR init of a conv that feeds PixelShuffle(scale): the scale**2 sub-pixel kernels of each
+    output channel start equal, so conv + shuffle equals nearest upsampling of one conv (Aitken et al.).
+
+    Args:
+        weight: (C_out * scale**2, C_in, kh, kw) conv weight, overwritten in place.
+        scale: the PixelShuffle factor.
+        init: initialiser applied to the (C_out, C_in, kh, kw) sub-kernel.
+    """
+    out_channels = weight.shape[0] // scale**2
+    sub = torch.empty(out_channels, *weight.shape[1:], dtype=weight.dtype, device=weight.device)
+    init(sub)
+    # PixelShuffle puts input channel c * scale**2 + k at sub-pixel k of output channel c, so the
+    # copies of one kernel must be consecutive: repeat_interleave, not repeat.
+    with torch.no_grad():
+        weight.copy_(sub.repeat_interleave(scale**2, dim=0))
+    return weight
+
+
+class PixelShuffleUpsample(nn.Sequential):
+    """Sub-pixel convolution: Conv 3x3 to 4 x out_channels, then PixelShuffle(2); ICNR-initialised."""
+
+    def __init__(self, in_channels: int, out_channels: int, bias: bool = True) -> None:
+        super().__init__(nn.Conv2d(in_channels, 4 * out_channels, 3, 1, 1, bias=bias), nn.PixelShuffle(2))
+        self.reset_icnr()
+
+    def reset_icnr(self, init=nn.init.kaiming_normal_) -> None:
+        """Re-initialise the conv ICNR-style with `init` for the sub-kernel; the bias, too, per group."""
+        conv = self[0]
+        icnr_(conv.weight, 2, init)
+        if conv.bias is not None:
+            with torch.no_grad():
+                conv.bias.copy_(conv.bias[::4].repeat_interleave(4))
+
+
+def _upsample(kind: str, in_channels: int, out_channels: int, bias: bool) -> list[nn.Module]:
+    """The decoder's x2 upsampling convolution as a list of modules (one module for "transpose", so
+    a default decoder keeps pix2pix's layer indices and today's checkpoints load)."""
+    if kind == "transpose":
+        return [nn.ConvTranspose2d(in_channels, out_channels, 4, 2, 1, bias=bias)]
+    if kind == "resize":
+        # Nearest, as Odena et al. recommend; the 3x3 conv then smooths the 2x2 blocks. Upsampling
+        # before the conv costs 9 MACs per output pixel and channel pair (transpose: 4).
+        return [nn.Upsample(scale_factor=2, mode="nearest"), nn.Conv2d(in_channels, out_channels, 3, 1, 1, bias=bias)]
+    return [PixelShuffleUpsample(in_channels, out_channels, bias=bias)]
 
 
 def levels_for_resolution(resolution: int) -> int:
@@ -44,10 +128,11 @@ def levels_for_resolution(resolution: int) -> int:
 class UnetGenerator(nn.Module):
     """pix2pix U-Net: `levels` stride-2 encoders down to the bottleneck, as many decoders back up.
 
-    Encoder block: Conv 4x4/2 -> BatchNorm -> LeakyReLU(0.2); no norm on the first encoder, and the
+    Encoder block: Conv 4x4/2 -> norm -> LeakyReLU(0.2); no norm on the first encoder, and the
     innermost (bottleneck) conv has neither norm nor LeakyReLU (pix2pix: a 1x1 map cannot be
-    batch-normalised at batch size 1). Decoder block: ReLU -> ConvTranspose 4x4/2 -> BatchNorm
-    [-> Dropout]; the last decoder ends in tanh without norm. Each decoder after the first sees its
+    batch-normalised at batch size 1). Decoder block: ReLU -> x2 upsampling conv -> norm
+    [-> Dropout]; the last decoder ends in tanh without norm. With the defaults (BatchNorm,
+    ConvTranspose 4x4/2) this is pix2pix's U-Net. Each decoder after the first sees its
     input concatenated with the mirrored encoder's output (skip first, as pix2pix's cat([x, f(x)])).
 
     This is pix2pix's dataflow written as a flat list rather than recursive blocks: pix2pix's
@@ -61,6 +146,8 @@ class UnetGenerator(nn.Module):
         levels: number of encoder (and decoder) levels; inputs must be multiples of 2**levels.
         dropout: dropout probability in the innermost decoders (0 disables it).
         resolution: used only when levels is None, through `levels_for_resolution`.
+        upsample: the decoders' upsampling, one of `UPSAMPLES`.
+        norm: the normalisation layer, one of `NORMS`.
     """
 
     def __init__(
@@ -71,8 +158,12 @@ class UnetGenerator(nn.Module):
         levels: int | None = None,
         dropout: float = 0.5,
         resolution: int = 256,
+        upsample: str = "transpose",
+        norm: str = "batch",
     ) -> None:
         super().__init__()
+        _check_choice("upsample", upsample, UPSAMPLES)
+        _check_choice("norm", norm, NORMS)
         if levels is None:
             levels = levels_for_resolution(resolution)
         if levels < 1:
@@ -84,16 +175,18 @@ class UnetGenerator(nn.Module):
         self.K = K
         self.levels = levels
         self.dropout = dropout
+        self.upsample = upsample
+        self.norm = norm
 
         widths = [K * min(2**i, 8) for i in range(levels)]
         self.down = nn.ModuleList()
         for i in range(levels):
             c_in = in_channels if i == 0 else widths[i - 1]
             innermost = i == levels - 1
-            norm = 0 < i < levels - 1
-            layers: list[nn.Module] = [nn.Conv2d(c_in, widths[i], 4, 2, 1, bias=not norm)]
-            if norm:
-                layers.append(nn.BatchNorm2d(widths[i]))
+            norm_layer = _norm_layer(norm, widths[i]) if 0 < i < levels - 1 else None
+            layers: list[nn.Module] = [nn.Conv2d(c_in, widths[i], 4, 2, 1, bias=norm_layer is None)]
+            if norm_layer is not None:
+                layers.append(norm_layer)
             if not innermost:
                 layers.append(nn.LeakyReLU(0.2))
             self.down.append(nn.Sequential(*layers))
@@ -108,12 +201,12 @@ class UnetGenerator(nn.Module):
             outermost = k == levels - 1
             layers = [nn.ReLU()]
             if outermost:
-                layers += [nn.ConvTranspose2d(c_in, out_channels, 4, 2, 1), nn.Tanh()]
+                layers += [*_upsample(upsample, c_in, out_channels, bias=True), nn.Tanh()]
             else:
-                layers += [
-                    nn.ConvTranspose2d(c_in, widths[levels - 2 - k], 4, 2, 1, bias=False),
-                    nn.BatchNorm2d(widths[levels - 2 - k]),
-                ]
+                norm_layer = _norm_layer(norm, widths[levels - 2 - k])
+                layers += _upsample(upsample, c_in, widths[levels - 2 - k], bias=norm_layer is None)
+                if norm_layer is not None:
+                    layers.append(norm_layer)
                 if k < n_dropout:
                     layers.append(nn.Dropout(dropout))
             self.up.append(nn.Sequential(*layers))
@@ -131,6 +224,8 @@ class UnetGenerator(nn.Module):
             "K": self.K,
             "levels": self.levels,
             "dropout": self.dropout,
+            "upsample": self.upsample,
+            "norm": self.norm,
         }
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -162,57 +257,47 @@ class NLayerDiscriminator(nn.Module):
 
     Conditioned: the caller concatenates the input buffers and the image (real_B or fake_B), so
     in_channels = input channels + 3. Layers: Conv/2 + LeakyReLU; n_layers - 1 times
-    Conv/2 + BatchNorm + LeakyReLU; Conv/1 + BatchNorm + LeakyReLU; Conv/1 to one channel
-    (n_layers + 2 convolutions, 5 for the paper's n_layers = 3).
+    Conv/2 + norm + LeakyReLU; Conv/1 + norm + LeakyReLU; Conv/1 to one channel
+    (n_layers + 2 convolutions, 5 for the paper's n_layers = 3). norm is one of `NORMS` (BatchNorm
+    in pix2pix and the paper).
     """
 
-    def __init__(self, in_channels: int = INPUT_CHANNEL_COUNT + OUTPUT_CHANNELS, ndf: int = 64, n_layers: int = 3) -> None:
+    def __init__(self, in_channels: int = INPUT_CHANNEL_COUNT + OUTPUT_CHANNELS, ndf: int = 64, n_layers: int = 3,
+                 norm: str = "batch") -> None:
         super().__init__()
         if n_layers < 1:
             raise ValueError(f"n_layers must be >= 1, got {n_layers}")
+        _check_choice("norm", norm, NORMS)
         self.in_channels = in_channels
         self.ndf = ndf
         self.n_layers = n_layers
+        self.norm = norm
         layers: list[nn.Module] = [nn.Conv2d(in_channels, ndf, 4, 2, 1), nn.LeakyReLU(0.2)]
         mult = 1
         for n in range(1, n_layers + 1):
             prev, mult = mult, min(2**n, 8)
             stride = 2 if n < n_layers else 1
-            layers += [
-                nn.Conv2d(ndf * prev, ndf * mult, 4, stride, 1, bias=False),
-                nn.BatchNorm2d(ndf * mult),
-                nn.LeakyReLU(0.2),
-            ]
+            norm_layer = _norm_layer(norm, ndf * mult)
+            layers.append(nn.Conv2d(ndf * prev, ndf * mult, 4, stride, 1, bias=norm_layer is None))
+            if norm_layer is not None:
+                layers.append(norm_layer)
+            layers.append(nn.LeakyReLU(0.2))
         layers.append(nn.Conv2d(ndf * mult, 1, 4, 1, 1))
         self.model = nn.Sequential(*layers)
 
     def model_args(self) -> dict[str, Any]:
         """Constructor arguments that rebuild this module."""
-        return {"in_channels": self.in_channels, "ndf": self.ndf, "n_layers": self.n_layers}
+        return {"in_channels": self.in_channels, "ndf": self.ndf, "n_layers": self.n_layers, "norm": self.norm}
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(N, in_channels, H, W) -> patch logits (N, 1, H', W')."""
         return self.model(x)
 
 
-class GANLoss(nn.Module):
-    """Vanilla GAN loss on logits: BCEWithLogits, stable for any logit size (no sigmoid first)."""
-
-    def __init__(self, real_label: float = 1.0, fake_label: float = 0.0) -> None:
-        super().__init__()
-        self.register_buffer("real_label", torch.tensor(real_label))
-        self.register_buffer("fake_label", torch.tensor(fake_label))
-        self.loss = nn.BCEWithLogitsLoss()
-
-    def forward(self, pred: torch.Tensor, target_is_real: bool) -> torch.Tensor:
-        """Mean loss of the discriminator logits `pred` against all-real or all-fake labels."""
-        label = self.real_label if target_is_real else self.fake_label
-        return self.loss(pred, label.to(pred.dtype).expand_as(pred))
-
-
 def init_weights(net: nn.Module, gain: float = 0.02) -> nn.Module:
     """pix2pix 'normal' init: conv weights ~ N(0, gain), norm scales ~ N(1, gain), biases 0.
 
+    Pixel-shuffle convolutions get the same N(0, gain) sub-kernel, ICNR-repeated (see `icnr_`).
     Seed torch first for a reproducible net. Returns net, for chaining.
     """
     for m in net.modules():
@@ -220,9 +305,13 @@ def init_weights(net: nn.Module, gain: float = 0.02) -> nn.Module:
             nn.init.normal_(m.weight, 0.0, gain)
             if m.bias is not None:
                 nn.init.zeros_(m.bias)
-        elif isinstance(m, nn.BatchNorm2d):
+        elif isinstance(m, (nn.BatchNorm2d, nn.InstanceNorm2d)) and m.weight is not None:
             nn.init.normal_(m.weight, 1.0, gain)
             nn.init.zeros_(m.bias)
+    # After the loop: modules() visits a PixelShuffleUpsample before its conv, which the loop redraws.
+    for m in net.modules():
+        if isinstance(m, PixelShuffleUpsample):
+            m.reset_icnr(lambda w: nn.init.normal_(w, 0.0, gain))
     return net
 
 
@@ -254,6 +343,15 @@ class NetConfig:
     target: str = "full"
     """What the generator predicts: "full" GI radiance, or "indirect" (added to the exact direct light)."""
 
+    upsample: str = "transpose"
+    """Generator decoder upsampling, one of `UPSAMPLES`: "transpose" (the paper), "resize", "shuffle"."""
+
+    norm: str = "batch"
+    """Generator normalisation, one of `NORMS`: "batch" (the paper), "instance", "none"."""
+
+    norm_D: str = "batch"
+    """Discriminator normalisation, one of `NORMS`: "batch" (the paper), "instance", "none"."""
+
     def __post_init__(self) -> None:
         def fail(field: str, message: str) -> None:
             raise DiviewerError(message, field=f"net.{field}")
@@ -274,6 +372,11 @@ class NetConfig:
             fail("lambda_L1", f"must be a number >= 0, got {self.lambda_L1!r}")
         if self.target not in TARGETS:
             fail("target", f"must be one of {list(TARGETS)}, got {self.target!r}")
+        if self.upsample not in UPSAMPLES:
+            fail("upsample", f"must be one of {list(UPSAMPLES)}, got {self.upsample!r}")
+        for name in ("norm", "norm_D"):
+            if getattr(self, name) not in NORMS:
+                fail(name, f"must be one of {list(NORMS)}, got {getattr(self, name)!r}")
 
     def resolved_levels(self) -> int:
         """The generator's levels: explicit, or derived from the resolution."""
@@ -281,11 +384,13 @@ class NetConfig:
 
     def build_generator(self) -> UnetGenerator:
         """netG for this config (weights not yet initialised: see `init_weights`)."""
-        return UnetGenerator(INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS, K=self.K, levels=self.resolved_levels(), dropout=self.dropout)
+        return UnetGenerator(INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS, K=self.K, levels=self.resolved_levels(),
+                             dropout=self.dropout, upsample=self.upsample, norm=self.norm)
 
     def build_discriminator(self) -> NLayerDiscriminator:
         """netD for this config, conditioned on the input buffers (input channels + 3)."""
-        return NLayerDiscriminator(INPUT_CHANNEL_COUNT + OUTPUT_CHANNELS, ndf=self.ndf, n_layers=self.n_layers_D)
+        return NLayerDiscriminator(INPUT_CHANNEL_COUNT + OUTPUT_CHANNELS, ndf=self.ndf, n_layers=self.n_layers_D,
+                                   norm=self.norm_D)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict for checkpoints and model cards."""
@@ -293,6 +398,7 @@ class NetConfig:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> NetConfig:
-        """Rebuild from `to_dict()` output; unknown keys are an error, missing ones take defaults."""
+        """Rebuild from `to_dict()` output; unknown keys are an error, missing ones take defaults (a
+        checkpoint from before upsample/norm existed rebuilds as transpose/batch, which it was)."""
         check_known_keys(cls, data, "net")
         return cls(**dict(data))

@@ -647,7 +647,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
 
     from diviewer.data.dataset import Dataset
     from diviewer.encoding import Encoding
-    from diviewer.progress import Progress
+    from diviewer.console import progress_bar
     from diviewer.provenance import versions
     from diviewer.train.networks import GANLoss, NetConfig, init_weights, levels_for_resolution
 
@@ -814,7 +814,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
             f"{dev.world} process(es) on {dev.device}{' with AMP' if amp else ''}, "
             f"exposure {enc.exposure:.4g}, depth_scale {enc.depth_scale:.4g}")
         elapsed0, t_start = elapsed, time.perf_counter()
-        progress = Progress(total - step, label="train", unit="steps") if dev.main else None
+        progress = progress_bar(total - step, "train", "step") if dev.main else None
         stop = {"stop": False}
         restore_handlers = _install_stop_handlers(stop, say)
         netG.train()
@@ -863,7 +863,8 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
                     accum["n"] += 1
                     history.append({"step": step, "loss_D": lD, "loss_G_GAN": lGAN, "loss_G_L1": lL1})
                     if progress:
-                        progress.update(extra=f"epoch {epoch + 1} D {lD:.3f} G {lGAN:.3f} L1 {lL1:.3f}")
+                        progress.set_postfix_str(f"epoch {epoch + 1} D {lD:.3f} G {lGAN:.3f} L1 {lL1:.3f}", refresh=False)
+                        progress.update()
                     if _stop_requested(stop, dev):
                         save(None, False)
                         say(f"stopped at epoch {epoch} + {batch_in_epoch} steps, step {step}; "
@@ -893,6 +894,8 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
                     break
         finally:
             restore_handlers()
+            if progress:
+                progress.close()
         return _result(epoch, step, last_val, best, history, out)
     finally:
         if dev.initialized_here and dist.is_initialized():

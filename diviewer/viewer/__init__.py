@@ -1,5 +1,8 @@
-"""The interactive viewer: GLFW window, camera controls, imgui panel, background path-traced reference.
+"""The interactive viewer. ``app.run_viewer`` opens it; each room is one file:
 
-``diviewer.viewer.app.run_viewer`` opens it; ``diviewer.viewer.state`` and ``controls`` are pure
-state and math (no GL), testable without a display.
+app (the frame loop), window (size, HiDPI scale, letterbox, window-to-image mapping), input (the key
+table), panel (imgui; never imports app), screenshots, sources (the view modes' textures), models
+(which model), view_modes, stats, command (``diviewer view``'s arguments). ``state``, ``controls``,
+``view_modes`` and ``stats`` are pure state and math (no GL), testable without a display. The display
+pass is ``diviewer.gl.display``; the path-traced preview ``diviewer.reference.progressive``.
 """

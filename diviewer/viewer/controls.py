@@ -181,17 +181,3 @@ def make_controller(kind: str, camera: Camera, centre=None) -> Controller:
     if kind == "orbit":
         return OrbitController.from_camera(camera, centre)
     raise ValueError(f"unknown camera controller {kind!r} (fly, orbit)")
-
-
-def pixel_ray(camera: Camera, x: float, y: float, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """World-space ray (origin, unit direction) through the point (x, y) of an image, x right, y down, in pixels.
-
-    Pixel (i, j)'s centre is (j + 0.5, i + 0.5), as in diviewer.scene.camera.
-    """
-    t = math.tan(math.radians(camera.fov) / 2.0)
-    aspect = width / height
-    vx = (x / width * 2.0 - 1.0) * t * aspect
-    vy = (1.0 - y / height * 2.0) * t
-    to_world = cam.view_to_world(camera.view_matrix())
-    d = to_world[:3, :3] @ np.array([vx, vy, -1.0])
-    return np.asarray(camera.position, dtype=np.float64), d / np.linalg.norm(d)

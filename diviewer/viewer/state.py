@@ -9,208 +9,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
-from collections import deque
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Protocol
 
 import numpy as np
 
 from diviewer.errors import DiviewerError
-from diviewer.scene import camera as cam
+from diviewer.gl.display import DEFAULT_TONEMAP, tonemap_code
+from diviewer.scene.lights import angles_to_vector, power_field, rotate_light, vector_to_angles
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
+from diviewer.scene.picking import pick_object, pixel_ray
 from diviewer.scene.sampler import camera_on_path
-from diviewer.viewer.controls import Controller, make_controller, pixel_ray
+from diviewer.viewer.controls import Controller, make_controller
+from diviewer.viewer.stats import Stats
+from diviewer.viewer.view_modes import ViewMode, view_mode
 
-TONEMAPS = ("aces", "reinhard", "clamp")
-"""Display curves (the Compositor's names)."""
-
-STAGES = ("gbuffer", "shadows", "direct", "readback", "inference", "upload", "composite")
-"""Per-frame stages the stats record, in pipeline order (ms each)."""
-
-
-# --- view modes ---------------------------------------------------------------------------------
-
-class Unavailable(Exception):
-    """A view mode's image cannot be produced now; the message says why (shown in the panel)."""
-
-
-class FrameSources(Protocol):
-    """What a view mode draws from; the app implements it (the images are GL textures there)."""
-
-    has_model: bool
-
-    def buffer(self, name: str) -> Any:
-        """A G-buffer channel of this frame: depth, normal, albedo, direct."""
-
-    def network_output(self) -> Any:
-        """The model's output for this frame (raises Unavailable without a model)."""
-
-    def reference(self) -> Any:
-        """The latest path-traced reference of this view (raises Unavailable while none is ready)."""
-
-
-@dataclass(frozen=True)
-class ViewMode:
-    """One entry of the view-mode registry: what the window shows and how to produce it."""
-
-    name: str
-    label: str
-    produce: Callable[[FrameSources], Any] | None
-    """Gets the image from the frame's sources; None for the two-image layouts (split, difference)."""
-    display: str = "radiance"
-    """How values become pixels: radiance (exposure + tone map), raw (linear clamped to [0, 1]),
-    depth (near bright, far dark), normal (n / 2 + 1/2), albedo (sRGB of the linear value)."""
-    layout: str = "single"
-    """single, split (A left, B right) or difference (|A - B|)."""
-    key: str = ""
-    """Keyboard shortcut."""
-    help: str = ""
-
-
-def _final(s: FrameSources):
-    # The model's output is the final image's radiance (an ``indirect`` model adds the exact direct
-    # light inside its graph); without a model the frame has direct light only.
-    return s.network_output() if s.has_model else s.buffer("direct")
-
-
-VIEW_MODES: tuple[ViewMode, ...] = (
-    ViewMode("final", "Final (neural GI)", _final, "radiance", key="1",
-             help="the network's image: direct + indirect light (direct light only when no model is loaded)"),
-    ViewMode("direct", "Direct light only", lambda s: s.buffer("direct"), "radiance", key="2",
-             help="the GL renderer's shadow-mapped direct light and emission"),
-    ViewMode("reference", "Path-traced reference", lambda s: s.reference(), "radiance", key="3",
-             help="Mitsuba 3, rendered progressively in the background; restarts when anything changes"),
-    ViewMode("depth", "G-buffer: depth", lambda s: s.buffer("depth"), "depth", key="4"),
-    ViewMode("normal", "G-buffer: normal", lambda s: s.buffer("normal"), "normal", key="5",
-             help="view-space normals"),
-    ViewMode("albedo", "G-buffer: albedo", lambda s: s.buffer("albedo"), "albedo", key="6"),
-    ViewMode("net_input", "Network input: direct (raw)", lambda s: s.buffer("direct"), "raw", key="7",
-             help="the direct-light channel the network reads, linear values clamped to [0, 1]"),
-    ViewMode("net_output", "Network output: raw GI", lambda s: s.network_output(), "raw", key="8",
-             help="the network's output, linear values clamped to [0, 1]"),
-    ViewMode("split", "Split screen (A | B)", None, layout="split", key="9",
-             help="mode A left of the divider, mode B right of it"),
-    ViewMode("difference", "Difference |A - B|", None, layout="difference", key="0",
-             help="absolute difference of modes A and B, with a gain"),
-)
-"""All view modes, in panel order; adding one (VXGI) is one entry here plus its source in the app."""
-
-VIEW_MODE_NAMES = tuple(m.name for m in VIEW_MODES)
-
-
-def view_mode(name: str) -> ViewMode:
-    for m in VIEW_MODES:
-        if m.name == name:
-            return m
-    raise DiviewerError(f"unknown view mode '{name}'; view modes: {', '.join(VIEW_MODE_NAMES)}", field="view mode")
-
-
-def single_modes() -> tuple[ViewMode, ...]:
-    """The modes that show one image (those split screen and difference combine)."""
-    return tuple(m for m in VIEW_MODES if m.layout == "single")
-
-
-# --- stats --------------------------------------------------------------------------------------
-
-class Stats:
-    """Frame and per-stage times (ms) over the last ``window_s`` seconds."""
-
-    def __init__(self, window_s: float = 5.0):
-        self.window_s = window_s
-        self.history: deque[tuple[float, float, dict[str, float]]] = deque()
-        self.frames = 0
-
-    def record(self, frame_ms: float, stages: dict[str, float], now: float | None = None) -> None:
-        now = time.perf_counter() if now is None else now
-        self.history.append((now, float(frame_ms), dict(stages)))
-        self.frames += 1
-        while self.history and now - self.history[0][0] > self.window_s:
-            self.history.popleft()
-
-    def series(self, name: str = "frame") -> np.ndarray:
-        """The recorded values of ``frame`` or a stage, oldest first (0 where a frame lacked the stage)."""
-        if name == "frame":
-            return np.array([f for _, f, _ in self.history], np.float32)
-        return np.array([s.get(name, 0.0) for _, _, s in self.history], np.float32)
-
-    def mean(self, name: str = "frame") -> float:
-        v = self.series(name)
-        return float(v.mean()) if len(v) else 0.0
-
-    def last(self) -> dict[str, float]:
-        if not self.history:
-            return {}
-        _, f, s = self.history[-1]
-        return {"frame": f, **s}
-
-    @property
-    def fps(self) -> float:
-        m = self.mean("frame")
-        return 1000.0 / m if m > 0 else 0.0
-
-
-# --- picking ------------------------------------------------------------------------------------
-
-def _ray_triangles(origin: np.ndarray, d: np.ndarray, tri: np.ndarray) -> float:
-    """Nearest positive ray parameter hitting any triangle of ``tri`` (M, 3, 3), or inf (Moller-Trumbore)."""
-    v0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    p = np.cross(d, e2)
-    det = np.einsum("ij,ij->i", e1, p)
-    ok = np.abs(det) > 1e-12
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    s = origin - v0
-    u = np.einsum("ij,ij->i", s, p) * inv
-    q = np.cross(s, e1)
-    v = (q @ d) * inv
-    t = np.einsum("ij,ij->i", e2, q) * inv
-    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-6)
-    return float(t[hit].min()) if hit.any() else math.inf
-
-
-def _ray_box(origin: np.ndarray, d: np.ndarray, box: np.ndarray) -> bool:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / d
-        t0, t1 = (box[0] - origin) * inv, (box[1] - origin) * inv
-    lo = np.nanmax(np.minimum(t0, t1))
-    hi = np.nanmin(np.maximum(t0, t1))
-    return bool(hi >= max(lo, 0.0))
-
-
-def pick_object(scene: Scene, config: FrameConfig, origin, direction) -> tuple[str, float] | None:
-    """The object a world-space ray hits first, and the distance along the ray; None for the sky."""
-    best: tuple[str, float] | None = None
-    o_w, d_w = np.asarray(origin, np.float64), np.asarray(direction, np.float64)
-    for obj in config.objects:
-        mesh = scene.meshes[obj.mesh]
-        inv = np.linalg.inv(obj.matrix())
-        # Object-space ray with an unnormalised direction: t stays the world-space parameter.
-        o = inv[:3, :3] @ o_w + inv[:3, 3]
-        d = inv[:3, :3] @ d_w
-        if not _ray_box(o, d, mesh.bounds.astype(np.float64)):
-            continue
-        t = _ray_triangles(o, d, mesh.vertices.astype(np.float64)[mesh.faces])
-        if t < math.inf and (best is None or t < best[1]):
-            best = (obj.name, t)
-    return best
-
-
-# --- light angles -------------------------------------------------------------------------------
-
-def angles_to_vector(azimuth: float, elevation: float) -> np.ndarray:
-    """Unit vector (y up) at ``azimuth`` degrees about +y (from +z towards +x), ``elevation`` degrees above the
-    horizon."""
-    a, e = math.radians(azimuth), math.radians(elevation)
-    return np.array([math.cos(e) * math.sin(a), math.sin(e), math.cos(e) * math.cos(a)])
-
-
-def vector_to_angles(v) -> tuple[float, float]:
-    x, y, z = cam.normalize(v)
-    return math.degrees(math.atan2(x, z)), math.degrees(math.asin(float(np.clip(y, -1.0, 1.0))))
-
-
-# --- the state ----------------------------------------------------------------------------------
 
 class ViewerState:
     """Scene, current frame configuration, camera controller, selection and display settings.
@@ -237,7 +49,7 @@ class ViewerState:
         self.diff_gain_ev = 2.0
         """The difference image is brightened by this many stops."""
         self.exposure = float(scene.exposure)
-        self.tonemap = "aces"
+        self.tonemap = DEFAULT_TONEMAP
         self.animate_light = False
         self.light_time = 0.0
         self.light_period = 10.0
@@ -426,14 +238,10 @@ class ViewerState:
         self.animate_light = False
         return self._set(self.config.replace_light(l.name, position=tuple(float(v) for v in position)))
 
-    @staticmethod
-    def _power_field(light) -> str:
-        return "irradiance" if isinstance(light, DirectionalLight) else "intensity"
-
     def light_intensity_ev(self, name: str | None = None) -> float:
         """The light's irradiance (sun) or intensity (point) in stops relative to the scene file's value."""
         l = self.light(name)
-        f = self._power_field(l)
+        f = power_field(l)
         base, now = getattr(self._default_light(l.name), f), getattr(l, f)
         if base <= 0.0 or now <= 0.0:
             return -math.inf if now <= 0.0 else 0.0
@@ -442,7 +250,7 @@ class ViewerState:
     def set_light_intensity(self, ev: float, name: str | None = None) -> FrameConfig:
         """Log scale: the scene file's irradiance/intensity times 2**ev (ev = -inf turns the light off)."""
         l = self.light(name)
-        f = self._power_field(l)
+        f = power_field(l)
         base = getattr(self._default_light(l.name), f) or 1.0
         value = 0.0 if ev == -math.inf else base * 2.0 ** float(ev)
         return self._set(self.config.replace_light(l.name, **{f: value}))
@@ -465,25 +273,19 @@ class ViewerState:
     def _animated_lights(self) -> tuple:
         """Each light turned about its range axis: swept across the range angle, or all round without one."""
         phase = 2.0 * math.pi * self.light_time / self.light_period
-        centre = self.scene_centre()
         out = []
         for light in self.config.lights:
-            base = self._default_light(light.name)
             r = self.scene.ranges.lights.get(light.name)
             if r is not None and r.angle[1] > r.angle[0]:
                 lo, hi = r.angle
                 angle = 0.5 * (lo + hi) + 0.5 * (hi - lo) * math.sin(phase)
-                axis = r.axis
             else:
                 angle = math.degrees(phase) % 360.0
-                axis = r.axis if r is not None else (0.0, 1.0, 0.0)
-            rot = cam.axis_angle(axis, angle)
-            if isinstance(light, DirectionalLight):
-                d = rot @ np.asarray(base.direction)
-                out.append(dataclasses.replace(light, direction=tuple(map(float, d / np.linalg.norm(d)))))
-            else:
-                p = centre + rot @ (np.asarray(base.position) - centre)
-                out.append(dataclasses.replace(light, position=tuple(map(float, p))))
+            axis = r.axis if r is not None else (0.0, 1.0, 0.0)
+            # Turned from the scene file's pose; power and colour stay as the panel set them.
+            turned = rotate_light(self._default_light(light.name), axis, angle, self.scene_centre())
+            keep = {"direction": turned.direction} if isinstance(light, DirectionalLight) else {"position": turned.position}
+            out.append(dataclasses.replace(light, **keep))
         return tuple(out)
 
     def step(self, dt: float) -> FrameConfig:
@@ -529,8 +331,7 @@ class ViewerState:
         return self.exposure
 
     def set_tonemap(self, name: str) -> str:
-        if name not in TONEMAPS:
-            raise DiviewerError(f"unknown tone map '{name}'; use one of {', '.join(TONEMAPS)}", field="tonemap")
+        tonemap_code(name)  # refuses an unknown name
         self.tonemap = name
         return name
 

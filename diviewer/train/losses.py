@@ -1,0 +1,150 @@
+"""Training losses: the adversarial loss (`GANLoss`) and the reconstruction loss (`reconstruction_loss`).
+
+The reconstruction loss compares netG's output with the path-traced target. Both arrive encoded
+(`diviewer.encoding.encode_radiance`: linear below ~1, logarithmic above), and the loss is taken
+either on those encoded values or on linear radiance scaled by the dataset's exposure. Which
+statistic of a noisy target each choice converges to matters, because the ground truth is a
+Monte-Carlo estimate whose noise is heavy-tailed (rare, very bright "firefly" samples):
+
+- L2 on linear radiance is minimised by the per-pixel **mean** of the targets the network sees,
+  and the Monte-Carlo estimate is unbiased, so this is the one unbiased choice: trained on many
+  noisy frames it learns the converged image (at the price of gradients dominated by fireflies).
+- L1 (on either space: the encoding is monotonic, so medians commute with it) is minimised by the
+  **median**, which for a right-skewed distribution lies below the mean: biased dark exactly where
+  fireflies are (caustics, small bright light paths).
+- L2 on the encoded (log-like) values is minimised by the mean of the encoded values, i.e. the
+  decoded result is a generalised (for bright pixels, geometric-like) mean, below the arithmetic
+  mean by Jensen's inequality: biased dark too, less than L1 for mild noise.
+- L1 on linear radiance: the median again, with linear-radiance weighting across pixels.
+
+The trainer calls `reconstruction_loss(fake_B, real_B, mode, space, encoding)` and nothing else;
+`LossConfig` is the settings dataclass recorded with checkpoints.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from torch import nn
+
+from diviewer.encoding import Encoding
+from diviewer.errors import DiviewerError
+from diviewer.provenance import check_known_keys
+
+RECONSTRUCTION_MODES: tuple[str, ...] = ("l1", "l2")
+"""Reconstruction norms: mean absolute error (pix2pix, the paper) or mean squared error."""
+
+RECONSTRUCTION_SPACES: tuple[str, ...] = ("encoded", "linear")
+"""Where the reconstruction loss is taken: on the network's encoded values (the paper's choice, as
+the network sees them), or on linear radiance times the dataset's exposure (so ~1 is a typical value)."""
+
+GAN_MODES: tuple[str, ...] = ("vanilla", "lsgan")
+"""Adversarial objectives (pix2pix's names): BCE on logits (the paper), or least squares (Mao et al.)."""
+
+
+class GANLoss(nn.Module):
+    """pix2pix's GAN loss on discriminator outputs against all-real or all-fake labels.
+
+    "vanilla": BCEWithLogits, stable for any logit size (no sigmoid first). "lsgan": mean squared
+    error to the labels, whose gradient does not vanish for confidently classified fakes.
+    """
+
+    def __init__(self, real_label: float = 1.0, fake_label: float = 0.0, gan_mode: str = "vanilla") -> None:
+        super().__init__()
+        if gan_mode not in GAN_MODES:
+            raise ValueError(f"gan_mode must be one of {list(GAN_MODES)}, got {gan_mode!r}")
+        self.gan_mode = gan_mode
+        self.register_buffer("real_label", torch.tensor(real_label))
+        self.register_buffer("fake_label", torch.tensor(fake_label))
+        self.loss = nn.BCEWithLogitsLoss() if gan_mode == "vanilla" else nn.MSELoss()
+
+    def forward(self, pred: torch.Tensor, target_is_real: bool) -> torch.Tensor:
+        """Mean loss of the discriminator outputs `pred` against all-real or all-fake labels."""
+        label = self.real_label if target_is_real else self.fake_label
+        return self.loss(pred, label.to(pred.dtype).expand_as(pred))
+
+
+def exposed_radiance(y: torch.Tensor, encoding: Encoding) -> torch.Tensor:
+    """Encoded values -> linear radiance times the exposure, differentiable everywhere.
+
+    Equals `decode_radiance(y, encoding) * encoding.exposure` (clamping y to [-1, 1] likewise), but
+    written for gradients rather than for ONNX: torch's exact expm1, and an odd extension by a
+    `where` whose branches are both finite, so the slope at y = 0 is log1p(R), not sign's 0.
+    """
+    c = math.log1p(encoding.radiance_max)
+    y = y.clamp(-1.0, 1.0)
+    return torch.where(y >= 0, torch.expm1(y * c), -torch.expm1(-y * c))
+
+
+def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = "l1", space: str = "encoded",
+                        encoding: Encoding | None = None) -> torch.Tensor:
+    """The reconstruction term between netG's output and the target, both encoded; see the module
+    docstring for which statistic of a noisy target each (mode, space) converges to.
+
+    Args:
+        fake_B: netG's output (encoded, any float dtype; the loss is computed in float32).
+        real_B: the encoded target, same shape.
+        mode: "l1" or "l2" (`RECONSTRUCTION_MODES`).
+        space: "encoded" or "linear" (`RECONSTRUCTION_SPACES`); "linear" needs `encoding`.
+        encoding: the dataset's encoding, to decode to linear radiance (times its exposure).
+
+    Returns:
+        The mean over all elements (a scalar tensor), unweighted: the caller applies lambda.
+    """
+    if mode not in RECONSTRUCTION_MODES:
+        raise ValueError(f"mode must be one of {list(RECONSTRUCTION_MODES)}, got {mode!r}")
+    if space not in RECONSTRUCTION_SPACES:
+        raise ValueError(f"space must be one of {list(RECONSTRUCTION_SPACES)}, got {space!r}")
+    fake, real = fake_B.float(), real_B.float()
+    if space == "linear":
+        if encoding is None:
+            raise ValueError("space 'linear' needs the encoding to decode radiance")
+        fake, real = exposed_radiance(fake, encoding), exposed_radiance(real, encoding)
+    if mode == "l1":
+        return nn.functional.l1_loss(fake, real)
+    return nn.functional.mse_loss(fake, real)
+
+
+@dataclass(frozen=True)
+class LossConfig:
+    """Loss settings, recorded with checkpoints; the weight of the reconstruction term stays the
+    trainer's lambda_L1 (pix2pix's name, kept whatever the mode)."""
+
+    reconstruction: str = "l1"
+    """Reconstruction norm, one of `RECONSTRUCTION_MODES` ("l1": the paper)."""
+
+    space: str = "encoded"
+    """Where the reconstruction loss is taken, one of `RECONSTRUCTION_SPACES` ("encoded": the paper)."""
+
+    gan_mode: str = "vanilla"
+    """Adversarial objective, one of `GAN_MODES` ("vanilla": the paper)."""
+
+    def __post_init__(self) -> None:
+        for name, choices in (("reconstruction", RECONSTRUCTION_MODES), ("space", RECONSTRUCTION_SPACES),
+                              ("gan_mode", GAN_MODES)):
+            value = getattr(self, name)
+            if value not in choices:
+                raise DiviewerError(f"must be one of {list(choices)}, got {value!r}", field=f"loss.{name}")
+
+    def reconstruction_loss(self, fake_B: torch.Tensor, real_B: torch.Tensor, encoding: Encoding) -> torch.Tensor:
+        """`reconstruction_loss` with this config's mode and space."""
+        return reconstruction_loss(fake_B, real_B, self.reconstruction, self.space, encoding)
+
+    def gan_loss(self) -> GANLoss:
+        """The adversarial criterion for this config."""
+        return GANLoss(gan_mode=self.gan_mode)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict for checkpoints and model cards."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> LossConfig:
+        """Rebuild from `to_dict()` output; unknown keys are an error, missing ones take defaults."""
+        check_known_keys(cls, data, "loss")
+        return cls(**dict(data))

@@ -1,0 +1,46 @@
+"""`diviewer view` on the command line: its arguments, mapped onto ``ViewerSettings``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from diviewer.errors import DiviewerError
+
+
+def add_view_parser(subparsers) -> argparse.ArgumentParser:
+    """Define ``diviewer view`` on the CLI's subparsers."""
+    p = subparsers.add_parser("view", help="fly through a scene with neural GI every frame (window + panel)",
+                              description="Open a window on a scene with its neural GI model; "
+                                          "the panel lists the keyboard shortcuts.")
+    p.add_argument("--scene", default="cornell", help="shipped scene name (cornell, atrium) or a .toml path")
+    p.add_argument("--model", default="auto",
+                   help="model file, 'auto' (assets/models/<scene>*.onnx, the first that fits) or 'none'")
+    p.add_argument("--size", default="768x768", help="window size WxH (or N); default 768x768")
+    p.add_argument("--no-vsync", action="store_true", help="do not wait for the display's refresh")
+    p.add_argument("--frames", type=int, default=None, help="render N frames, then exit (with --screenshot)")
+    p.add_argument("--screenshot", type=Path, default=None, help="on exit, save the view as PNG (+ frame JSON)")
+    p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"),
+                   help="onnxruntime execution provider (default: the fastest available)")
+    p.add_argument("--camera", default="fly", choices=("fly", "orbit"), help="camera controller at start")
+    p.set_defaults(func=run_view)
+    return p
+
+
+def run_view(args: argparse.Namespace) -> int:
+    """Open the viewer as the arguments say; with ``--frames``, print one line of what it did."""
+    from diviewer.frames import parse_resolution
+    from diviewer.viewer.app import ViewerSettings, run_viewer
+
+    if args.frames is not None and args.frames < 1:
+        raise DiviewerError(f"--frames must be at least 1, got {args.frames}", field="--frames")
+    size = parse_resolution(args.size)
+    settings = ViewerSettings(size=size, vsync=not args.no_vsync, model=args.model, provider=args.provider,
+                              controller=args.camera)
+    summary = run_viewer(args.scene, frames=args.frames, screenshot=args.screenshot, settings=settings)
+    if args.frames is not None:
+        gw, gh = summary["gi_size"]
+        print(f"viewer: {summary['frames']} frames at GI {gw}x{gh}, "
+              f"{summary['stages_ms']['frame']:.1f} ms/frame"
+              + (f", saved {args.screenshot}" if args.screenshot else ""))
+    return 0

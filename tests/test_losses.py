@@ -1,0 +1,134 @@
+"""Tests for diviewer.train.losses: values on hand-made tensors, and which statistic of a noisy
+target each reconstruction loss is minimised at (mean, median, or a log-domain mean)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from diviewer.encoding import Encoding, decode_radiance, encode_radiance  # noqa: E402
+from diviewer.errors import DiviewerError  # noqa: E402
+from diviewer.train import networks  # noqa: E402
+from diviewer.train.losses import (  # noqa: E402
+    GANLoss,
+    LossConfig,
+    exposed_radiance,
+    reconstruction_loss,
+)
+
+ENC = Encoding(exposure=2.0, depth_scale=10.0)
+
+# One pixel's Monte-Carlo samples: ten dark ones and one firefly (right-skewed, like path tracing).
+SAMPLES = np.array([0.1] * 10 + [10.0])
+MEAN, MEDIAN = float(SAMPLES.mean()), float(np.median(SAMPLES))  # 1.0 and 0.1
+
+
+def _encoded(x) -> torch.Tensor:
+    return encode_radiance(torch.as_tensor(np.asarray(x, np.float64), dtype=torch.float32), ENC)
+
+
+def test_gan_loss_moved_and_re_exported() -> None:
+    assert networks.GANLoss is GANLoss
+    lsgan = GANLoss(gan_mode="lsgan")
+    pred = torch.tensor([[0.0, 2.0]])
+    assert lsgan(pred, True).item() == pytest.approx((1.0 + 1.0) / 2)  # (0-1)^2, (2-1)^2
+    assert lsgan(pred, False).item() == pytest.approx((0.0 + 4.0) / 2)
+    assert GANLoss()(torch.zeros(1, 1, 2, 2), True).item() == pytest.approx(np.log(2), rel=1e-6)
+    with pytest.raises(ValueError, match="gan_mode"):
+        GANLoss(gan_mode="wgan")
+
+
+def test_exposed_radiance_is_decode_times_exposure_with_a_gradient_at_zero() -> None:
+    y = torch.linspace(-1.2, 1.2, 241)
+    expected = decode_radiance(y, ENC) * ENC.exposure
+    np.testing.assert_allclose(exposed_radiance(y, ENC).numpy(), expected.numpy(), rtol=1e-5, atol=1e-7)
+    zero = torch.zeros(3, requires_grad=True)
+    exposed_radiance(zero, ENC).sum().backward()
+    # slope of the curve at 0 is log1p(R): the loss still pulls an output sitting exactly at 0
+    np.testing.assert_allclose(zero.grad.numpy(), np.log1p(ENC.radiance_max), rtol=1e-6)
+
+
+def test_loss_values_on_hand_made_tensors() -> None:
+    fake_lin = torch.tensor([[0.0, 1.0], [2.0, 0.5]])
+    real_lin = torch.tensor([[1.0, 1.0], [0.0, 0.25]])
+    fake, real = encode_radiance(fake_lin, ENC), encode_radiance(real_lin, ENC)
+    e = ENC.exposure
+    d_lin = (fake_lin - real_lin) * e
+    l1, l2 = (reconstruction_loss(fake, real, mode, "linear", ENC).item() for mode in ("l1", "l2"))
+    assert l1 == pytest.approx(d_lin.abs().mean().item(), rel=1e-5)
+    assert l2 == pytest.approx((d_lin**2).mean().item(), rel=1e-5)
+    d_enc = fake - real
+    assert reconstruction_loss(fake, real).item() == pytest.approx(d_enc.abs().mean().item(), rel=1e-6)
+    assert reconstruction_loss(fake, real, "l2").item() == pytest.approx((d_enc**2).mean().item(), rel=1e-6)
+    # the paper's default is L1 on the encoded values; float16 inputs are promoted (AMP)
+    assert reconstruction_loss(fake.half(), real).dtype == torch.float32
+    assert reconstruction_loss(real, real, "l2", "linear", ENC).item() == 0.0
+
+
+def test_refusals() -> None:
+    x = torch.zeros(2)
+    with pytest.raises(ValueError, match="mode"):
+        reconstruction_loss(x, x, "huber")
+    with pytest.raises(ValueError, match="space"):
+        reconstruction_loss(x, x, "l1", "log")
+    with pytest.raises(ValueError, match="encoding"):
+        reconstruction_loss(x, x, "l2", "linear")
+    with pytest.raises(DiviewerError, match="loss.space"):
+        LossConfig(space="log")
+    with pytest.raises(DiviewerError, match="loss.reconstruction"):
+        LossConfig(reconstruction="l3")
+    with pytest.raises(DiviewerError, match="loss.gan_mode"):
+        LossConfig(gan_mode="hinge")
+    with pytest.raises(DiviewerError, match="unknown key"):
+        LossConfig.from_dict({"reconstruction": "l1", "weight": 1.0})
+
+
+def test_loss_config_round_trip_and_dispatch() -> None:
+    config = LossConfig(reconstruction="l2", space="linear", gan_mode="lsgan")
+    assert LossConfig.from_dict(config.to_dict()) == config
+    assert LossConfig.from_dict({}) == LossConfig()  # older checkpoints: the paper's L1 + vanilla GAN
+    fake, real = _encoded([0.3, 2.0]), _encoded([0.1, 1.0])
+    expected = reconstruction_loss(fake, real, "l2", "linear", ENC).item()
+    assert config.reconstruction_loss(fake, real, ENC).item() == expected
+    assert config.gan_loss().gan_mode == "lsgan"
+
+
+def _minimiser(mode: str, space: str) -> float:
+    """The linear radiance a constant prediction must take to minimise the loss over SAMPLES."""
+    real = _encoded(SAMPLES)
+    # a grid over the encoded range that holds the samples, then a finer one around its best point
+    lo, hi = float(_encoded(0.05)), float(_encoded(12.0))
+    for _ in range(2):
+        grid = torch.linspace(lo, hi, 401)
+        losses = torch.stack([reconstruction_loss(g.expand_as(real), real, mode, space, ENC) for g in grid])
+        best = int(torch.argmin(losses))
+        lo, hi = float(grid[max(best - 1, 0)]), float(grid[min(best + 1, len(grid) - 1)])
+    return float(decode_radiance(grid[best], ENC))
+
+
+def _gradient_at(value: float, mode: str, space: str) -> float:
+    real = _encoded(SAMPLES)
+    p = _encoded(value).clone().requires_grad_(True)
+    reconstruction_loss(p.expand_as(real), real, mode, space, ENC).backward()
+    return float(p.grad)
+
+
+def test_l2_on_linear_radiance_is_minimised_at_the_mean() -> None:
+    assert _minimiser("l2", "linear") == pytest.approx(MEAN, rel=2e-3)
+    assert abs(_gradient_at(MEAN, "l2", "linear")) < 1e-4  # stationary there
+    assert _gradient_at(0.9 * MEAN, "l2", "linear") < 0 < _gradient_at(1.1 * MEAN, "l2", "linear")
+
+
+@pytest.mark.parametrize("space", ["encoded", "linear"])
+def test_l1_is_minimised_at_the_median_darker_than_the_mean(space: str) -> None:
+    assert _minimiser("l1", space) == pytest.approx(MEDIAN, rel=2e-3)
+    assert MEDIAN < 0.2 * MEAN  # the firefly's energy is lost: biased dark
+
+
+def test_l2_on_encoded_values_is_minimised_at_a_log_domain_mean() -> None:
+    log_mean = float(decode_radiance(_encoded(SAMPLES).mean(), ENC))  # the mean taken in the encoded domain
+    got = _minimiser("l2", "encoded")
+    assert got == pytest.approx(log_mean, rel=2e-3)
+    assert MEDIAN < got < 0.5 * MEAN  # biased dark (Jensen), between the median and the mean here

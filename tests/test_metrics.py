@@ -1,0 +1,132 @@
+"""Image metrics against reference implementations (scikit-image, flip-evaluator) and at their extremes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from diviewer import metrics
+
+
+def _image(seed: int, shape=(32, 40, 3), scale: float = 1.0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]] / 16.0
+    smooth = 0.5 + 0.4 * np.sin(xx + 2 * yy)[..., None] * np.array([1.0, 0.7, 0.4])[: shape[2]]
+    return scale * (smooth + 0.05 * rng.standard_normal(shape))
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_ssim_matches_scikit_image(channels):
+    skm = pytest.importorskip("skimage.metrics")
+    a = _image(0, (48, 40, channels))
+    b = a + 0.1 * np.random.default_rng(1).standard_normal(a.shape)
+    ours = metrics.ssim(a, b, data_range=1.0)
+    theirs = skm.structural_similarity(a, b, data_range=1.0, channel_axis=-1, gaussian_weights=True, sigma=1.5,
+                                       use_sample_covariance=False)
+    assert abs(ours - theirs) < 1e-3
+    assert 0.2 < ours < 0.95  # a real difference, not a trivial agreement at 1
+
+
+def test_ssim_extremes_stay_in_range_and_finite():
+    a = _image(2)
+    const = np.full_like(a, 0.3)
+    assert metrics.ssim(const, const) == pytest.approx(1.0)
+    assert metrics.ssim(np.zeros_like(a), np.zeros_like(a)) == pytest.approx(1.0)
+    for ref, test in [(np.zeros_like(a), a), (a, np.zeros_like(a)), (const, a), (a, -a), (a * 1e150, a * 1.01e150),
+                      (a * 1e-200, a), (a * 1e300, np.zeros_like(a))]:
+        s = metrics.ssim(ref, test)
+        assert math.isfinite(s) and -1.0 <= s <= 1.0
+    # scale invariance when the data range scales along: the huge case is the unit case
+    assert metrics.ssim(a * 1e150, a * 1.01e150, data_range=1e150) == pytest.approx(metrics.ssim(a, a * 1.01), abs=1e-9)
+    assert metrics.psnr(a, a) == math.inf
+
+
+def test_flip_matches_flip_evaluator_and_labels_modes():
+    flip_evaluator = pytest.importorskip("flip_evaluator")
+    ref = np.abs(_image(3)).astype(np.float32)
+    test = np.abs(ref * 1.2 + 0.02).astype(np.float32)
+    _, expected_hdr, _ = flip_evaluator.evaluate(ref, test, "HDR", applyMagma=False)
+    assert metrics.flip(ref, test, "HDR") == pytest.approx(expected_hdr, abs=1e-5)
+    ldr_ref, ldr_test = np.clip(ref, 0, 1), np.clip(test, 0, 1)
+    _, expected_ldr, _ = flip_evaluator.evaluate(ldr_ref, ldr_test, "LDR", applyMagma=False)
+    assert metrics.flip(ldr_ref, ldr_test, "LDR") == pytest.approx(expected_ldr, abs=1e-5)
+    assert 0 < expected_ldr < 1 and 0 < expected_hdr < 1
+    with pytest.raises(ValueError):
+        metrics.flip(ref, test, "SDR")
+
+
+def test_flip_extremes():
+    pytest.importorskip("flip_evaluator")
+    a = np.abs(_image(4)).astype(np.float32)
+    black = np.zeros_like(a)
+    assert metrics.flip(a, a, "HDR") == 0.0 and metrics.flip(black, black, "HDR") == 0.0
+    for ref, test in [(black, a), (a, black), (a * 1e-30, a * 1.1e-30), (a * 1e30, a * 1.1e30), (a, -a)]:
+        for mode in metrics.FLIP_MODES:
+            v = metrics.flip(ref, test, mode)
+            assert math.isfinite(v) and 0.0 <= v <= 1.0
+    assert metrics.flip(black, a, "HDR") > 0.1  # light where the reference has none is a visible error
+    # HDR-FLIP picks its exposures from the reference, so a common scale does not change it
+    assert metrics.flip(a * 1e30, a * 1.1e30, "HDR") == pytest.approx(metrics.flip(a, a * 1.1, "HDR"), abs=1e-4)
+
+
+def _flat_gbuffer(h=32, w=32):
+    depth = np.full((h, w), 2.0)
+    normal = np.zeros((h, w, 3))
+    normal[..., 2] = 1.0
+    albedo = np.full((h, w, 3), 0.73)
+    return depth, normal, albedo
+
+
+def test_flat_mask_keeps_planes_and_drops_edges():
+    depth, normal, albedo = _flat_gbuffer()
+    yy, xx = np.mgrid[0:32, 0:32]
+    depth = 1.0 / (0.5 + 0.01 * xx + 0.003 * yy)  # a tilted plane under perspective: 1/z affine
+    albedo[:, 20:] = (0.63, 0.065, 0.05)  # a material edge
+    depth[:8] = 0.0  # background
+    m = metrics.flat_mask(depth, normal, albedo)
+    assert m[10:30, 2:18].all()
+    assert not m[:9].any() and not m[:, 19:21].any() and not m[:, 0].any() and not m[-1].any()
+    curved = 1.0 / (0.5 + 0.01 * xx + 0.003 * yy + 0.05 * ((xx - 16.0) / 16.0) ** 2)  # a bulge is not a plane
+    assert not metrics.flat_mask(curved, normal, albedo)[12:28, 4:12].any()
+
+
+def test_checkerboard_ratio_sees_a_checker_and_gives_one_for_identical_images():
+    depth, normal, albedo = _flat_gbuffer()
+    mask = metrics.flat_mask(depth, normal, albedo)
+    rng = np.random.default_rng(5)
+    yy, xx = np.mgrid[0:32, 0:32]
+    reference = 0.4 + 0.2 * xx[..., None] / 32 + 0.002 * rng.standard_normal((32, 32, 3))  # ramp + MC noise
+    checker = 0.02 * (((xx + yy) % 2) * 2 - 1)[..., None]
+    assert metrics.checkerboard_ratio(reference, reference, mask) == 1.0
+    assert metrics.checkerboard_ratio(reference + checker, reference, mask) > 20.0
+    stripes = 0.02 * ((xx % 2) * 2 - 1)[..., None]
+    assert metrics.checkerboard_ratio(reference + stripes, reference, mask) > 20.0
+    smooth = 0.4 + 0.2 * xx[..., None] / 32 + 0 * reference  # the ramp alone: less power than the noise
+    assert metrics.checkerboard_ratio(smooth, reference, mask) < 0.01
+    assert metrics.checkerboard_ratio(smooth, smooth, mask) == 1.0
+    assert metrics.checkerboard_ratio(reference, np.full_like(reference, 0.5), mask) == math.inf
+
+
+@pytest.mark.parametrize("k", [1.0, 0.5])
+def test_equivalent_spp_on_known_error_curves(k):
+    ladder = [1, 4, 16, 64, 256]
+    err = [0.3 / s ** k for s in ladder]  # Monte-Carlo: MSE ~ 1/spp (k = 1); RMSE-like (k = 0.5)
+    for true in (1.0, 2.5, 37.0, 100.0, 256.0):
+        r = metrics.equivalent_spp(ladder, err, 0.3 / true ** k)
+        assert r["bound"] == "=" and r["spp"] == pytest.approx(true, rel=1e-9)
+    assert metrics.equivalent_spp(ladder, err, 0.3 / 37.0 ** k)["text"] == "37"
+    assert metrics.equivalent_spp(ladder, err, 0.3 / 1000 ** k) == {"spp": 256.0, "bound": ">=", "text": ">= 256"}
+    assert metrics.equivalent_spp(ladder, err, 0.6) == {"spp": 1.0, "bound": "<", "text": "< 1"}
+
+
+def test_equivalent_spp_from_psnr_and_non_monotone_ladders():
+    ladder = [1, 4, 16, 64, 256]
+    psnrs = [20.0, 26.0, 32.0, 38.0, 44.0]  # +6 dB per 4x: PSNR linear in log spp
+    r = metrics.equivalent_spp(ladder, [metrics.psnr_error(p) for p in psnrs], metrics.psnr_error(35.0))
+    assert r["spp"] == pytest.approx(32.0)  # halfway between 16 and 64 in log spp
+    r = metrics.equivalent_spp([1, 4, 16], [1.0, 0.2, 0.3], 0.25)  # noise made 16 spp worse than 4
+    assert r["bound"] == "=" and 1 < r["spp"] < 4
+    with pytest.raises(ValueError):
+        metrics.equivalent_spp([4, 1], [1.0, 0.5], 0.7)
