@@ -205,7 +205,6 @@ class VXGIPass:
         self.ctx, self.renderer, self.settings = ctx, renderer, settings
         self.timer = timer or renderer.timer
         """Each stage is timed here (the renderer's timer unless given one)."""
-        self.scene = renderer.scene
         self.shaders = renderer.shaders
         res = settings.resolution
         self.levels = int(math.log2(res)) + 1
@@ -240,6 +239,11 @@ class VXGIPass:
         """What the last run redid: a subset of ('static', 'dynamic', 'inject')."""
         self.width = self.height = 0
         self.textures: dict[str, moderngl.Texture] = {}
+
+    @property
+    def scene(self):
+        """The renderer's scene (the viewer swaps it when meshes are added)."""
+        return self.renderer.scene
 
     # --- resources ------------------------------------------------------------------------------
     def _ensure_targets(self) -> None:

@@ -114,6 +114,8 @@ class Viewer:
         self._scene_revision = 0
         self.model = None
         self.neural = None
+        self.vxgi = None
+        """The VXGI pass, made the first time the VXGI view mode is shown."""
         self.imgui_ctx = imgui.create_context()
         imgui.get_io().set_ini_filename(None)  # no imgui.ini in the user's working folder
         self.input = Input(self.state, self, self.glfw)
@@ -347,6 +349,8 @@ class Viewer:
             self.imgui.destroy_context(self.imgui_ctx)
             self.black.release()
             self.display.release()
+            if self.vxgi is not None:
+                self.vxgi.release()
             self.timer.release()
             self.renderer.release()
             self.shaders.release()
