@@ -1,7 +1,7 @@
 """Time the VXGI pass per stage across grid and screen resolutions (headless EGL).
 
 Usage: python tools/bench_vxgi.py [--scene cornell] [--res 128 256] [--grid 32 64 128] [--trace-scale 1 2]
-                                  [--frames 10] [--out bench_vxgi.json]
+                                  [--bounces 1] [--frames 10] [--out bench_vxgi.json]
 
 Three kinds of frame, each timed over --frames frames after a warm-up (median milliseconds):
   rebuild   the grid invalidated: static and dynamic geometry voxelized, light injected, mips built;
@@ -70,6 +70,7 @@ def main() -> None:
     ap.add_argument("--res", type=int, nargs="+", default=[128, 256])
     ap.add_argument("--grid", type=int, nargs="+", default=[32, 64, 128])
     ap.add_argument("--trace-scale", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--bounces", type=int, default=1, choices=(1, 2))
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
@@ -86,17 +87,18 @@ def main() -> None:
         gl = describe(ctx)
         print(f"{gl}; load average {load[0]:.2f}; {os.cpu_count()} CPUs")
         print(f"{'res':>4} {'grid':>4} {'ts':>2} | {'rebuild':>8} {'moving':>7} {'still':>6} | "
-              f"{'voxelize':>8} {'inject':>6} {'mip':>5} {'trace':>6} {'upsmpl':>6} {'comp':>5} | {'gbuf+shd+dir':>12}")
+              f"{'voxelize':>8} {'inject':>6} {'mip':>5} {'bounce':>6} {'trace':>6} {'upsmpl':>6} {'comp':>5} | "
+              f"{'gbuf+shd+dir':>12}")
         for res in args.res:
             for grid in args.grid:
                 for ts in args.trace_scale:
-                    settings = dataclasses.replace(VXGISettings(), resolution=grid, trace_scale=ts)
+                    settings = dataclasses.replace(VXGISettings(), resolution=grid, trace_scale=ts, bounces=args.bounces)
                     b = bench(ctx, scene, res, settings, args.frames)
                     s = b["rebuild"]["stages_ms"]
                     gl_ms = s["gbuffer"] + s["shadows"] + s["direct"]
                     print(f"{res:>4} {grid:>4} {ts:>2} | {b['rebuild']['total_ms']:>8.1f} {b['moving']['total_ms']:>7.1f} "
                           f"{b['still']['total_ms']:>6.1f} | {s['vxgi_voxelize']:>8.1f} {s['vxgi_inject']:>6.1f} "
-                          f"{s['vxgi_mip']:>5.1f} {s['vxgi_trace']:>6.1f} {s['vxgi_upsample']:>6.1f} "
+                          f"{s['vxgi_mip']:>5.1f} {s['vxgi_bounce']:>6.1f} {s['vxgi_trace']:>6.1f} {s['vxgi_upsample']:>6.1f} "
                           f"{s['vxgi_composite']:>5.1f} | {gl_ms:>12.1f}", flush=True)
                     rows.append({"res": res, "settings": dataclasses.asdict(settings), **b})
     result = {"scene": args.scene, "gl_renderer": gl, "load_average": load, "cpus": os.cpu_count(),

@@ -96,7 +96,8 @@ class VXGISettings:
     cones: int = 6
     """Diffuse cones per pixel: one along the normal, the others in a ring around it; 1 to 16."""
     aperture: float = 60.0
-    """Full cone angle in degrees; the ring sits at 90 - aperture / 2 degrees from the normal."""
+    """Full cone angle in degrees; the ring sits at 90 - aperture / 2 degrees from the normal (45 for
+    apertures over 90)."""
     step: float = 1.0
     """March step as a multiple of the sample's diameter (larger: faster, skips thin walls)."""
     offset: float = 1.5
@@ -159,7 +160,8 @@ def cone_layout(cones: int, aperture: float) -> tuple[np.ndarray, np.ndarray]:
     if cones == 1:
         dirs = np.array([[0.0, 0.0, 1.0]])
     else:
-        theta = math.radians(max(90.0 - aperture / 2.0, aperture / 2.0 if aperture < 90.0 else 45.0))
+        # The ring's cones reach the horizon; wider than 90 degrees they would reach below it.
+        theta = math.radians(90.0 - aperture / 2.0 if aperture <= 90.0 else 45.0)
         phi = 2.0 * math.pi * np.arange(cones - 1) / (cones - 1)
         ring = np.stack([math.sin(theta) * np.cos(phi), math.sin(theta) * np.sin(phi),
                          np.full(cones - 1, math.cos(theta))], axis=1)
