@@ -14,6 +14,7 @@ from diviewer.gl.vxgi import VXGIPass, VXGISettings, cone_layout
 from diviewer.scene import camera as cam
 from diviewer.scene import load_scene, sample_config
 from diviewer.scene.loader import parse_scene
+from diviewer.scene.model import PointLight
 
 RES = 32
 GRID = VXGISettings(resolution=32, trace_scale=1)
@@ -245,3 +246,16 @@ def test_thin_walls_leak_little_of_the_light_outside(ctx):
     print(f"sealed box: outside radiance {outside:.3f}, indirect inside {leak:.4f} (isotropic {iso['indirect'].mean():.4f})")
     assert leak < 0.1 * outside
     assert iso["indirect"].mean() > 1.5 * leak
+
+
+def test_point_light_inside_the_sealed_box(ctx):
+    """A bulb inside the closed box: its shadow-mapped light is injected (the point-light path) and bounces."""
+    scene = sealed_box(sun=False)
+    cfg = dataclasses.replace(scene.default, lights=(PointLight("bulb", position=(0.3, 0.5, -0.2), intensity=3.0),))
+    frame, out = run_vxgi(ctx, scene, cfg, settings=dataclasses.replace(GRID, resolution=32))
+    assert frame["direct"].max() > 0.0
+    for name in ("indirect", "vxgi"):
+        assert np.all(np.isfinite(out[name])) and out[name].min() >= 0.0
+    # White walls all round: the bounce is grey and a sizeable share of the direct light.
+    ind = out["vxgi_indirect"].mean(axis=(0, 1))
+    assert np.allclose(ind, ind.mean(), rtol=1e-3) and ind.mean() > 0.2 * frame["direct"].mean()
