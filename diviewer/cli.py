@@ -209,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--info", type=Path, metavar="MODEL", help="print a model's metadata and exit")
     p.set_defaults(func=_cmd_export)
 
-    from diviewer.train.trainer import add_train_parser
+    from diviewer.train.cli import add_train_parser
     from diviewer.viewer.command import add_view_parser
 
     add_train_parser(sub)

@@ -14,7 +14,8 @@ from diviewer.cli import main  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 from diviewer.runtime import NeuralGI, read_metadata  # noqa: E402
 from diviewer.train.export import ExportSettings, export, gi_module, info  # noqa: E402
-from diviewer.train.trainer import build_generator_from_checkpoint, train  # noqa: E402
+from diviewer.train.checkpoint import build_generator_from_checkpoint  # noqa: E402
+from diviewer.train.trainer import train  # noqa: E402
 from test_train import make_dataset, quiet, tiny  # noqa: E402
 
 
@@ -40,6 +41,11 @@ def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, t
         assert key in meta, key
     assert meta["target"] == target and meta["precision"] == "fp32"
     assert json.loads(out.with_suffix(".json").read_text()) == meta
+    # the recipe: how to capture and train it again (tools/build_shipped_model.py reads it)
+    recipe = meta["recipe"]
+    assert recipe["capture"]["spp"] == 4 and recipe["capture"]["frames"] == 10
+    assert recipe["train"]["K"] == 4 and recipe["train"]["target"] == target and "device" not in recipe["train"]
+    assert recipe["net"]["K"] == 4
     # the runtime's output equals the torch module's on new buffers, at the trained size and larger
     netG, enc, m = build_generator_from_checkpoint(checkpoints[target])
     module = gi_module(netG, enc, m)
@@ -57,7 +63,7 @@ def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, t
 
 def test_indirect_model_adds_the_exact_direct_light(checkpoints, tmp_path):
     """With the indirect target the graph returns the input's direct light + netG's decoded indirect."""
-    from diviewer.encoding import decode_radiance, encode_inputs
+    from diviewer.train.encoding_torch import decode_radiance, encode_inputs
 
     out = tmp_path / "i.onnx"
     export(checkpoints["indirect"], out, log=quiet)
@@ -120,7 +126,7 @@ def test_bad_checkpoint_is_refused(tmp_path, capsys):
 def test_eval_of_the_exported_model_reproduces_training_validation(checkpoints, tmp_path):
     """`diviewer eval` (onnxruntime, torch-free) scores the val split as training's validation did."""
     from diviewer.evaluate import evaluate
-    from diviewer.train.trainer import load_checkpoint
+    from diviewer.train.checkpoint import load_checkpoint
 
     out = tmp_path / "m.onnx"
     export(checkpoints["indirect"], out, log=quiet)
@@ -149,11 +155,12 @@ def test_each_option_exports_and_matches_torch(upsample, norm):
     peak for the full target and for indirect / albedo, whose composition the graph must carry."""
     import onnxruntime as ort
 
-    from diviewer.encoding import Encoding, decode_radiance, encode_inputs
+    from diviewer.encoding import Encoding
+    from diviewer.train.encoding_torch import decode_radiance, encode_inputs
     from diviewer.train.export import OPSET, onnx_bytes
     from diviewer.train.losses import reconstruction_loss
     from diviewer.train.networks import NetConfig, init_weights
-    from diviewer.train.trainer import ALBEDO_FLOOR
+    from diviewer.train.targets import ALBEDO_FLOOR
 
     torch.manual_seed(0)
     netG = init_weights(NetConfig(K=4, resolution=32, upsample=upsample, norm=norm).build_generator())
@@ -195,7 +202,7 @@ def _rewrite_checkpoint(src, dst, upsample=None, norm=None, drop_options=False, 
     """A copy of a trained checkpoint whose generator is rebuilt with other options (or whose records
     lack the option keys, as checkpoints written before they existed do)."""
     from diviewer.train.networks import UnetGenerator, init_weights
-    from diviewer.train.trainer import load_checkpoint
+    from diviewer.train.checkpoint import load_checkpoint
 
     ckpt = load_checkpoint(src)
     args = dict(ckpt["model_args"])

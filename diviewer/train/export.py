@@ -52,8 +52,8 @@ def _torch():
 def gi_module(netG, encoding, meta: dict, fp16: bool = False):
     """The exported computation as a torch module: raw NHWC buffers -> linear radiance NHWC."""
     torch = _torch()
-    from diviewer.encoding import decode_radiance, encode_inputs
-    from diviewer.train.trainer import compose_radiance
+    from diviewer.train.encoding_torch import decode_radiance, encode_inputs
+    from diviewer.train.targets import compose_radiance
 
     class GIModel(torch.nn.Module):
         def __init__(self):
@@ -122,7 +122,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     import onnx
     import onnxruntime as ort
 
-    from diviewer.train.trainer import build_generator_from_checkpoint, load_checkpoint
+    from diviewer.train.checkpoint import build_generator_from_checkpoint, load_checkpoint
 
     ckpt_path, out = Path(ckpt_path), Path(out)
     ckpt = load_checkpoint(ckpt_path)
@@ -186,6 +186,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "exported_with": versions(),
         "verification": check,
         "opset": OPSET,
+        "recipe": _recipe(meta),
     }
     onnx.helper.set_model_props(model, {META_KEY: json.dumps(card, sort_keys=True)})
     model.producer_name, model.producer_version = "diviewer", card["exported_with"]["diviewer"]
@@ -194,6 +195,18 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     imageio.write_text(out.with_suffix(".json"), json.dumps(card, indent=2, sort_keys=True))
     log(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB) and {out.with_suffix('.json').name}")
     return card
+
+
+_RUN_ONLY = ("data", "out", "max_steps", "device", "num_workers", "precision")
+"""TrainConfig fields that describe one invocation on one machine, not how the model was made."""
+
+
+def _recipe(meta: dict) -> dict:
+    """How the model was made, for the card: capture settings, training settings, network settings
+    (`tools/build_shipped_model.py` rebuilds a shipped model from it)."""
+    return {"capture": meta.get("capture"),
+            "train": {k: v for k, v in meta["config"].items() if k not in _RUN_ONLY},
+            "net": meta["net_config"], "loss": meta.get("loss_config")}
 
 
 def info(path: str | Path) -> str:
