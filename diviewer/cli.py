@@ -132,6 +132,24 @@ def _cmd_evalset(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from diviewer.bench import BenchSettings, quick, run_bench
+
+    settings = quick(BenchSettings()) if args.quick else BenchSettings()
+    given = {"scene": args.scene, "models": tuple(str(m) for m in args.models) if args.models else None,
+             "resolutions": tuple(args.res) if args.res else None, "frames": args.frames, "warmup": args.warmup,
+             "untrained_k": tuple(args.untrained_k) if args.untrained_k is not None else None,
+             "gi_steps": tuple(args.gi_steps) if args.gi_steps is not None else None,
+             "evalset": str(args.evalset) if args.evalset else None, "eval_frames": args.eval_frames,
+             "calib_data": str(args.calib_data) if args.calib_data else None, "provider": args.provider,
+             "timing": args.timing, "pt_frames": args.pt_frames}
+    settings = dataclasses.replace(settings, **{k: v for k, v in given.items() if v is not None})
+    run_bench(settings, json_out=args.json, plot_out=args.plot)
+    return 0
+
+
 def _add_reference_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("path-traced reference (needs the 'train' extra: mitsuba)")
     g.add_argument("--reference", default=None, choices=("pt",),
@@ -246,6 +264,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-depth", type=int, default=16, help="path length limit of the full renders")
     p.add_argument("--seed", type=int, default=0, help="which evaluation set of its own seed stream (default 0)")
     p.set_defaults(func=_cmd_evalset)
+
+    p = sub.add_parser("bench", help="headless frame timing per stage and the speed/accuracy table: direct light, "
+                                     "the baseline, models (fp32/fp16/int8, GI resolutions), untrained K, path tracer")
+    p.add_argument("--scene", default=None, help="shipped scene name or a .toml path (default cornell)")
+    p.add_argument("--models", type=Path, nargs="+", default=None,
+                   help="ONNX models (diviewer export / baseline); default the scene's shipped models")
+    p.add_argument("--res", type=int, nargs="+", default=None, help="square frame resolutions (default 128 256)")
+    p.add_argument("--frames", type=int, default=None, help="timed frames per row (default 30)")
+    p.add_argument("--warmup", type=int, default=None, help="untimed frames first (default 5)")
+    p.add_argument("--untrained-k", type=int, nargs="*", default=None,
+                   help="base widths of untrained generators for the cost curve (default 8 16 32 64 128)")
+    p.add_argument("--gi-steps", type=int, nargs="*", default=None,
+                   help="GI at 1/step of the frame resolution where the model allows (default 2)")
+    p.add_argument("--evalset", type=Path, default=None, help="evaluation set (default runs/<scene>/evalset)")
+    p.add_argument("--eval-frames", type=int, default=None, help="frames per split scored (default all)")
+    p.add_argument("--calib-data", type=Path, default=None,
+                   help="a capture whose train split calibrates int8 (default GL renders of training configurations)")
+    p.add_argument("--pt-frames", type=int, default=None, help="frames the path tracer is timed on (default 2)")
+    p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
+    p.add_argument("--timing", default=None, choices=("auto", "query", "sync"),
+                   help="GL stages: timer queries (auto where supported) or wall clock around glFinish")
+    p.add_argument("--json", type=Path, default=None, help="write the results as strict JSON")
+    p.add_argument("--plot", type=Path, default=None, help="write the speed/accuracy plot (PNG)")
+    p.add_argument("--quick", action="store_true", help="a few frames at 32x32 (seconds): the test suite's run")
+    p.set_defaults(func=_cmd_bench)
 
     p = sub.add_parser("data", help="inspect datasets")
     data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")

@@ -90,7 +90,9 @@ def score_frame(image: np.ndarray, truth: np.ndarray, exposure: float, mask: np.
     return s
 
 
-def _aggregate(rows: list[dict]) -> dict:
+def aggregate(rows: list[dict]) -> dict:
+    """Per-frame scores (``score_frame``) of one method as mean and std per key, plus the pooled checkerboard
+    ratio; what evaluate and the bench report per method."""
     out = {k: {"mean": float(np.mean([r[k] for r in rows])), "std": float(np.std([r[k] for r in rows]))}
            for k in EVAL_KEYS}
     # Pooled over frames (each frame's flat pixels weigh alike), not a mean of per-frame ratios.
@@ -103,7 +105,9 @@ def _error(summary: dict, key: str) -> float:
     return psnr_error(v) if key.startswith("psnr") else v
 
 
-def _equivalent(summary: dict, ladder_spp: list[int], ladder: list[dict]) -> dict:
+def equivalent(summary: dict, ladder_spp: list[int], ladder: list[dict]) -> dict:
+    """The path-traced sample count whose error matches ``summary``'s (an ``aggregate``), per key of
+    ``EQUIVALENT_BY``, read off the ladder (``ladder[i]`` aggregated at ``ladder_spp[i]``); None where none can be."""
     out = {}
     for key in EQUIVALENT_BY:
         try:
@@ -164,10 +168,10 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
             for key, ch in rows_of.items():
                 rows[key].append(score_frame(f[ch], f["pt"], exposure, mask))
             progress.update()
-        methods = {k: _aggregate(r) for k, r in rows.items()}
+        methods = {k: aggregate(r) for k, r in rows.items()}
         ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
         for key, m in methods.items():
-            m["equivalent_spp"] = _equivalent(m, ladder_spp, ladder)
+            m["equivalent_spp"] = equivalent(m, ladder_spp, ladder)
             if key in models:
                 net = models[key]
                 m.update(kind=net.meta.get("kind", "neural"), label=_model_label(net.meta, net.path),

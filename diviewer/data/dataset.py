@@ -142,9 +142,13 @@ class Dataset:
             out["pt_indirect"] = out["pt"] - out["pt_direct"]
         return out
 
-    def array(self, split: str) -> tuple[list[int], np.ndarray]:
-        """All present frames of a split stacked in RAM: (N, H, W, C) in the stored dtype, checked."""
-        idx = self.indices(split)
+    def array(self, split: str, indices: list[int] | None = None) -> tuple[list[int], np.ndarray]:
+        """Frames of a split stacked in RAM: (N, H, W, C) in the stored dtype, each checked.
+
+        Args:
+            indices: these frames, in this order (the trainer's subset); by default every present one.
+        """
+        idx = self.indices(split) if indices is None else list(indices)
         if not idx:
             raise DiviewerError(f"dataset has no '{split}' frames yet", path=self.root)
         out = np.empty((len(idx), self.height, self.width, self.num_channels), self.dtype)

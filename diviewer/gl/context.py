@@ -70,3 +70,18 @@ def stage_timer(ctx: moderngl.Context, sync: bool = False, queries: bool = False
     reads GL timer queries (``queries``; ARB_timer_query, which llvmpipe has), or leaves GL stages untimed."""
     return StageTimer(sync=ctx.finish if sync else None,
                       gpu_query=(lambda: ctx.query(time=True)) if queries else None)
+
+
+def set_stage_timing(timer: StageTimer, ctx: moderngl.Context, on: bool) -> None:
+    """Time ``timer``'s GL stages by timer queries (ARB_timer_query, core since GL 3.3), or by waiting for the
+    GPU around them where the driver lacks queries (``on``); or leave them untimed."""
+    timer.release()
+    timer.sync = timer.gpu_query = None
+    if on:
+        try:
+            with ctx.query(time=True) as probe:
+                pass
+            probe.elapsed  # noqa: B018 (raises where the driver has no timer queries)
+            timer.gpu_query = lambda: ctx.query(time=True)
+        except Exception:  # noqa: BLE001
+            timer.sync = ctx.finish

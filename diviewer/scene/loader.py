@@ -11,7 +11,7 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.paths import scenes_dir
-from diviewer.scene import colour, shapes
+from diviewer.scene import gltf, shapes
 from diviewer.scene.model import (
     Camera, CameraRange, DirectionalLight, FrameConfig, LightRange, Material, Object, ObjectRange,
     PointLight, Ranges, Scene,
@@ -138,23 +138,33 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
     camera = _camera(root.table("camera"))
 
     materials: dict[str, Material] = {}
-    mats = root.table("materials")
-    for key in list(mats.data):
-        t = mats.table(key)
-        texture, tex_src = None, ""
+    meshes = {}
+    objects = []
+    if root.has("gltf"):
+        # A whole glTF scene: its meshes, materials and placed objects, before the file's own.
+        g = root.table("gltf")
+        meshes, materials, objects = gltf.load_gltf(base / g.str("file"), path=path, field="gltf.file")
+        g.finish()
+
+    for key, t in _entries(root.table("materials"), _not_in_gltf(materials, "material")):
+        texture, alpha, tex_src = None, None, ""
         if t.has("texture"):
             tex_path = base / t.str("texture")
-            texture, tex_src = _load_texture(tex_path, path, t._field("texture")), str(tex_path)
+            texture, alpha = gltf.load_texture(tex_path, path=path, field=t._field("texture"))
+            tex_src = str(tex_path)
+        cutoff = 0.5
+        if t.has("alpha_cutoff"):
+            # Alpha-tested: the texture's alpha channel is the cut-out mask (as glTF's alphaMode MASK).
+            cutoff = t.num("alpha_cutoff", lo=0.0, hi=1.0)
+            if alpha is None:
+                raise t.err("alpha_cutoff", "needs a 'texture' with an alpha channel (the cut-out mask)")
+        else:
+            alpha = None
         materials[key] = Material(key, albedo=t.vec("albedo", 3, (0.8, 0.8, 0.8), lo=0.0, hi=1.0),
                                   emission=t.vec("emission", 3, (0.0, 0.0, 0.0), lo=0.0),
-                                  texture=texture, texture_source=tex_src)
-        t.finish()
-    mats.finish()
+                                  texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff)
 
-    meshes = {}
-    mtab = root.table("meshes")
-    for key in list(mtab.data):
-        t = mtab.table(key)
+    for key, t in _entries(root.table("meshes"), _not_in_gltf(meshes, "mesh")):
         if t.has("file") == t.has("shape"):
             raise t.err("shape", "a mesh needs exactly one of 'shape' (procedural) or 'file'")
         if t.has("shape"):
@@ -168,14 +178,11 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                 # The file's own material, used by objects that name no material.
                 materials[f"mesh:{key}"] = Material(f"mesh:{key}", albedo=color or (1.0, 1.0, 1.0), texture=texture,
                                                     texture_source=str(base / t.data["file"]))
-        t.finish()
-    mtab.finish()
 
-    objects = []
     raw_objects = root.raw("objects", [])
     if not isinstance(raw_objects, list):
         raise root.err("objects", "expected an array of tables ([[objects]])")
-    names = set()
+    names = {o.name for o in objects}
     for i, o in enumerate(raw_objects):
         t = _Table(o, path, f"objects[{i}]")
         oname = t.str("name", f"object{i}")
@@ -196,7 +203,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                               rotation=t.vec("rotation", 3, (0.0, 0.0, 0.0)), scale=scale))
         t.finish()
     if not objects:
-        raise DiviewerError("a scene needs at least one object ([[objects]])", path=path, field="objects")
+        raise DiviewerError("a scene needs at least one object ([[objects]] or [gltf])", path=path, field="objects")
 
     lights = []
     raw_lights = root.raw("lights", [])
@@ -212,6 +219,25 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
     root.finish()
     return Scene(name=name, path=path, file_hash=file_hash, meshes=meshes, materials=materials, default=default,
                  ranges=ranges, exposure=exposure, ambient=ambient)
+
+
+def _entries(tab: _Table, problem):
+    """Each entry of a table of tables (``[materials]``, ``[ranges.lights]``, ...) as (key, its table),
+    refusing a key for which ``problem(key)`` gives a reason; each entry, then the table, is checked for
+    unknown keys once the caller has read it."""
+    for key in list(tab.data):
+        why = problem(key)
+        if why:
+            raise tab.err(key, why)
+        t = tab.table(key)
+        yield key, t
+        t.finish()
+    tab.finish()
+
+
+def _not_in_gltf(defined: dict, what: str):
+    """``_entries``' check for a name the glTF file already defined."""
+    return lambda key: f"{what} '{key}' is already defined by the glTF file" if key in defined else None
 
 
 def _camera(t: _Table) -> Camera:
@@ -247,12 +273,8 @@ def _light(t: _Table, i: int):
 
 def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
     lights, objects, camera = {}, {}, None
-    lt = t.table("lights")
     known_lights = {l.name for l in default.lights}
-    for key in list(lt.data):
-        if key not in known_lights:
-            raise lt.err(key, f"no light named '{key}'")
-        r = lt.table(key)
+    for key, r in _entries(t.table("lights"), lambda k: None if k in known_lights else f"no light named '{k}'"):
         angle = r.vec("angle", 2, (0.0, 0.0))
         inten = r.vec("intensity", 2, (1.0, 1.0), lo=0.0)
         if angle[0] > angle[1] or inten[0] > inten[1]:
@@ -260,14 +282,8 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
         if inten[0] <= 0.0:
             raise r.err("intensity", "the intensity multiplier range must be positive (drawn log-uniformly)")
         lights[key] = LightRange(axis=r.vec("axis", 3, (0.0, 1.0, 0.0)), angle=angle, intensity=inten)
-        r.finish()
-    lt.finish()
-    ot = t.table("objects")
     known_objects = {o.name for o in default.objects}
-    for key in list(ot.data):
-        if key not in known_objects:
-            raise ot.err(key, f"no object named '{key}'")
-        r = ot.table(key)
+    for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else f"no object named '{k}'"):
         train, test = r.strs("train_meshes"), r.strs("test_meshes")
         for field_name, lst in (("train_meshes", train), ("test_meshes", test)):
             for m in lst:
@@ -280,8 +296,6 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
             raise r.err("offset", "expected [[min x, y, z], [max x, y, z]]")
         objects[key] = ObjectRange(axes=r.vecs("axes", 3, []), angle=r.vec("angle", 2, (0.0, 360.0)),
                                    offset=offset, train_meshes=train, test_meshes=test)
-        r.finish()
-    ot.finish()
     if t.has("camera"):
         r = t.table("camera")
         positions, targets = r.vecs("positions", 3), r.vecs("targets", 3)
@@ -296,18 +310,6 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
         r.finish()
     t.finish()
     return Ranges(lights=lights, objects=objects, camera=camera)
-
-
-def _load_texture(file: Path, path, field: str) -> np.ndarray:
-    from PIL import Image
-
-    if not file.is_file():
-        raise DiviewerError(f"texture file not found: {file}", path=path, field=field)
-    try:
-        img = Image.open(file).convert("RGB")
-    except Exception as exc:
-        raise DiviewerError(f"cannot read texture {file}: {exc}", path=path, field=field) from exc
-    return colour.srgb_to_linear(np.asarray(img, dtype=np.float32) / 255.0).astype(np.float32)
 
 
 def add_mesh_file(scene: Scene, path: str | Path, key: str | None = None) -> tuple[Scene, str, str | None]:

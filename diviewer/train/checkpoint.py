@@ -181,9 +181,8 @@ def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Datase
 
 
 def save_run(run: Any, nets: Any, st: Any, val: dict[str, float] | None, is_best: bool) -> None:
-    """Write last.ckpt (and best.ckpt); collective under torchrun (gathers every rank's RNG)."""
-    import shutil
-
+    """Write last.ckpt (and best.ckpt); collective under torchrun: gathers every rank's RNG, and no
+    rank returns before the files are written (a rank that goes on to read them sees them whole)."""
     import torch.distributed as dist
 
     from diviewer.train.distributed import rng_state
@@ -194,8 +193,16 @@ def save_run(run: Any, nets: Any, st: Any, val: dict[str, float] | None, is_best
     if run.dev.world > 1:
         rngs = [None] * run.dev.world
         dist.all_gather_object(rngs, rng)
-    if not run.dev.main:
-        return
+    if run.dev.main:
+        _write_run_checkpoints(run, nets, st, val, is_best, rngs)
+    if run.dev.world > 1:
+        dist.barrier()
+
+
+def _write_run_checkpoints(run: Any, nets: Any, st: Any, val: dict[str, float] | None, is_best: bool,
+                           rngs: list[Any]) -> None:
+    import shutil
+
     cfg = run.cfg
     ckpt = {
         **run.meta, **st.to_checkpoint(), "val": val,

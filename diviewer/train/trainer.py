@@ -268,27 +268,14 @@ def _load_splits(cfg: TrainConfig, dev: Dist, say) -> tuple[Dataset, list[int], 
             raise DiviewerError(f"has only {len(train_idx)} train frames yet; --train-frames {cfg.train_frames} "
                                 "needs that many (wait for the capture, or ask for fewer)", path=ds.root)
         train_idx = train_idx[:cfg.train_frames]
-    train_arr = _stack(ds, train_idx, "train")
+    _, train_arr = ds.array("train", train_idx)
     val_arr = None
     if dev.main:
         if ds.indices("val"):
-            val_arr = _stack(ds, sorted(ds.indices("val")), "val")
+            _, val_arr = ds.array("val", sorted(ds.indices("val")))
         else:
             say(f"warning: {ds.root} has no val frames: no validation, no best.ckpt")
     return ds, train_idx, train_arr, val_arr
-
-
-def _stack(ds: Dataset, idx: list[int], split: str) -> np.ndarray:
-    """These frames stacked in RAM (N, H, W, C) in the stored dtype, each checked."""
-    if not idx:
-        raise DiviewerError(f"dataset has no '{split}' frames yet", path=ds.root)
-    out = np.empty((len(idx), ds.height, ds.width, ds.num_channels), ds.dtype)
-    for k, i in enumerate(idx):
-        problem = ds.check_frame(i, verify_checksum=False)
-        if problem:
-            raise DiviewerError(f"frame {i}: {problem}; run `diviewer data check {ds.root}`", path=ds.path(i))
-        out[k] = np.load(ds.path(i))
-    return out
 
 
 def _open_run(cfg: TrainConfig, ds: Dataset, train_idx: list[int], resume: bool, say) -> dict[str, Any] | None:

@@ -57,6 +57,7 @@ class FrameImages:
         self.v = viewer
         self.has_model = viewer.neural is not None
         self._neural: Image | None = None
+        self._final: Image | None = None
         self._vxgi: Image | None = None
 
     def buffer(self, name: str) -> Image:
@@ -70,9 +71,16 @@ class FrameImages:
             self._neural = Image(v.neural.run(), flip=True)  # stages go to the viewer's timer
         return self._neural
 
+    def final(self) -> Image:
+        """The full-resolution frame: direct light + the network's indirect light, upsampled."""
+        if self._final is None:
+            self.network_output()
+            self._final = Image(self.v.neural.composite())
+        return self._final
+
     def reference(self) -> Image:
         st = self.v.state
-        return self.v.reference_texture.image(st.scene, st.config, self.v.gi_size)
+        return self.v.reference_texture.image(st.scene, st.config, self.v.render_size)
 
     def vxgi(self) -> Image:
         """The VXGI image, traced at most once a frame; its grid is rebuilt only where the frame changed."""
