@@ -3,11 +3,26 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
 from diviewer import __version__
 from diviewer.errors import DiviewerError
+from diviewer.outputs import ENVIRONMENT_ERRNOS, check_output_dir, check_output_file
+
+# Numeric options by destination, the same rule in every subcommand: (lowest, highest or None).
+# Seeds seed numpy (0 <= seed < 2**32); counts are at least 1 unless 0 means "none".
+INT_OPTIONS = {
+    "seed": (0, 2**32 - 1), "pt_seed": (0, 2**32 - 2), "frames": (1, 1_000_000), "spp": (1, 1 << 20),
+    "max_depth": (2, 1024), "thumbs": (0, 1000), "verify_frames": (1, 1000), "K": (1, 4096), "epochs": (1, None),
+    "batch_size": (1, None), "ndf": (1, 4096), "max_steps": (1, None), "val_every": (1, None),
+    "save_every": (0, None), "num_workers": (0, 256),
+}
+FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None)}
+# Outputs by (command, destination): a folder or a file, checked before any work.
+OUTPUT_DIRS = {("render", "out"), ("capture", "out"), ("train", "out"), ("data", "out")}
+OUTPUT_FILES = {("eval", "out"), ("view", "screenshot"), ("view", "stats")}
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
@@ -55,14 +70,24 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     from diviewer.frames import parse_resolution
 
     width, height = parse_resolution(args.res)
-    fractions = tuple(float(x) for x in args.splits.split(","))
-    if len(fractions) != 3:
-        raise DiviewerError(f"--splits takes three fractions train,val,test, got '{args.splits}'", field="--splits")
+    fractions = parse_splits(args.splits)
     settings = CaptureSettings(frames=args.frames, width=width, height=height, gt=args.gt, spp=args.spp,
                                max_depth=args.max_depth, seed=args.seed, split_fractions=fractions, dtype=args.dtype,
                                thumbs=args.thumbs, vxgi_resolution=args.vxgi_res)
     capture(args.scene, args.out, settings, parse_shard(args.shard))
     return 0
+
+
+def parse_splits(text: str) -> tuple[float, float, float]:
+    """``0.8,0.1,0.1``: three finite non-negative fractions train,val,test with a positive sum."""
+    try:
+        fractions = tuple(float(x) for x in str(text).split(","))
+    except ValueError:
+        fractions = ()
+    if len(fractions) != 3 or not all(math.isfinite(f) and f >= 0 for f in fractions) or sum(fractions) <= 0:
+        raise DiviewerError(f"takes three non-negative fractions train,val,test (e.g. 0.8,0.1,0.1), got '{text}'",
+                            field="--splits")
+    return fractions
 
 
 def _cmd_data_check(args: argparse.Namespace) -> int:
@@ -85,6 +110,10 @@ def _cmd_data_check(args: argparse.Namespace) -> int:
 
 def _cmd_data_merge(args: argparse.Namespace) -> int:
     from diviewer.data.capture import merge
+
+    for src in args.sources:
+        if src.exists() and args.out.exists() and src.resolve() == args.out.resolve():
+            raise DiviewerError(f"{src} is both a source and the output", field="--out")
 
     merge(args.sources, args.out)
     return 0
@@ -303,12 +332,60 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _chosen_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
+    """The (sub)subparser that parsed ``args``: its actions know the option strings the user typed."""
+    parser = ap
+    for dest in ("command", "data_command"):
+        sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+        if sub is None or getattr(args, dest, None) not in sub.choices:
+            break
+        parser = sub.choices[getattr(args, dest)]
+    return parser
+
+
+def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """One rule per option name across subcommands: numbers in range and finite, outputs writable."""
+    options = {a.dest: a.option_strings[0] if a.option_strings else a.dest
+               for a in _chosen_parser(ap, args)._actions}
+    for dest, (lo, hi) in INT_OPTIONS.items():
+        v = getattr(args, dest, None)
+        if dest in options and v is not None and not (v >= lo and (hi is None or v <= hi)):
+            rng = f"from {lo} to {hi}" if hi is not None else f"at least {lo}"
+            raise DiviewerError(f"must be {rng}, got {v}", field=options[dest])
+    for dest, (lo, hi) in FLOAT_OPTIONS.items():
+        v = getattr(args, dest, None)
+        if dest in options and v is not None and not (math.isfinite(v) and v >= lo and (hi is None or v <= hi)):
+            rng = f"from {lo} to {hi}" if hi is not None else f"at least {lo}"
+            raise DiviewerError(f"must be a finite number {rng}, got {v}", field=options[dest])
+    for dest in ("out", "screenshot", "stats"):
+        v = getattr(args, dest, None)
+        if v is None or dest not in options:
+            continue
+        if (args.command, dest) in OUTPUT_DIRS:
+            check_output_dir(v, options[dest])
+        elif (args.command, dest) in OUTPUT_FILES:
+            check_output_file(v, options[dest])
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    ap = build_parser()
+    args = ap.parse_args(argv)
     try:
+        check_options(ap, args)
         return int(args.func(args) or 0)
     except DiviewerError as exc:
         print(f"diviewer {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        # A full disk, a read-only folder, a file where a folder should be: the machine's state,
+        # not a bug. Whatever was written before is intact (every write goes to a temporary name).
+        if exc.errno not in ENVIRONMENT_ERRNOS:
+            raise
+        where = exc.filename or ""
+        print(f"diviewer {args.command}: error: {where}{': ' if where else ''}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"diviewer {args.command}: error: out of memory; use a smaller size or fewer frames", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"diviewer {args.command}: interrupted", file=sys.stderr)

@@ -165,7 +165,7 @@ def test_direct_is_linear_in_light_intensity(ctx, scale):
     np.testing.assert_allclose(f2["direct"], f1["direct"] * scale, rtol=1e-5)
 
 
-@pytest.mark.parametrize("near,far", [(1e-4, 1e4), (2.9, 3.1)])
+@pytest.mark.parametrize("near,far", [(1e-4, 10.0), (1e-1, 1e4), (2.9, 3.1)])  # far/near up to MAX_FAR_NEAR
 def test_extreme_near_far_planes(ctx, near, far):
     f = render(ctx, facing_plane(distance=3.0, near=near, far=far))
     np.testing.assert_allclose(f["depth"], 3.0, rtol=1e-4)

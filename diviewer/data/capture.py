@@ -127,7 +127,7 @@ def open_or_create(out: Path, manifest: dict) -> Dataset:
     """Create the dataset folder, or check that the one there is the same dataset (to resume)."""
     path = out / "manifest.json"
     if path.is_file():
-        existing = json.loads(path.read_text())
+        existing = Dataset(out).manifest  # read and checked: a corrupt manifest is named, not a traceback
         diff = _same_identity(existing, manifest)
         if diff:
             raise DiviewerError(f"a different dataset is already there (differs in: {', '.join(diff)}); "
@@ -204,10 +204,14 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
         raise DiviewerError(f"unknown ground truth '{settings.gt}'; choose pt or vxgi", field="--gt")
     if settings.dtype not in ("float16", "float32"):
         raise DiviewerError(f"--dtype must be float16 or float32, got {settings.dtype}", field="--dtype")
-    if settings.frames < 1 or settings.spp < 1 or settings.max_depth < 2:
-        raise DiviewerError("frames and spp must be >= 1, max_depth >= 2")
+    for name, value, lo in (("--frames", settings.frames, 1), ("--spp", settings.spp, 1),
+                            ("--max-depth", settings.max_depth, 2), ("--thumbs", settings.thumbs, 0),
+                            ("--seed", settings.seed, 0)):
+        if value < lo:
+            raise DiviewerError(f"must be at least {lo}, got {value}", field=name)
     scene = load_scene(scene_name)
     manifest = build_manifest(scene, settings)
+    _check_size(settings)  # before the folder is created: a size the GL context cannot hold leaves nothing
     ds = open_or_create(out, manifest)
     k, n = shard
     mine = [f for f in ds.frames if f["index"] % n == k - 1]
@@ -226,6 +230,13 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
         f"({', '.join(f'{s} {c}' for s, c in summary['per_split'].items())}), "
         f"{summary['disk_mb']:.1f} MB, {summary['seconds']:.0f} s")
     return summary
+
+
+def _check_size(settings: CaptureSettings) -> None:
+    from diviewer.gl.context import check_render_size, headless_context
+
+    with headless_context() as ctx:
+        check_render_size(ctx, settings.width, settings.height, "--res")
 
 
 def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: CaptureSettings, log) -> None:

@@ -18,6 +18,20 @@ from diviewer.scene.model import (
 )
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+"""Every number ends up in float32 (GL uniforms, Mitsuba's rgb variants): larger ones are refused."""
+
+MAX_FAR_NEAR = 1e5
+"""Largest camera far/near ratio. The G-buffer's 24-bit depth buffer stores 1 - near/distance in
+effect, so at far/near = 2**24 (1.7e7) everything beyond that distance is clipped (measured: near
+1e-6, far 10 renders a wall at 9 black); at 1e5 surfaces 0.6 % of their distance apart still sort
+correctly at the far plane. Refused rather than rendered wrong (a reversed-Z buffer would lift it)."""
+
+
+def _f32(v: float) -> bool:
+    return abs(v) <= FLOAT32_MAX
+
+
 class _Table:
     """One TOML table being read: typed getters that name the file and field in every error."""
 
@@ -56,6 +70,8 @@ class _Table:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise self.err(key, f"expected a finite number, got {v!r}")
         v = float(v)
+        if not _f32(v):
+            raise self.err(key, f"{v:g} is outside float32's range (+-3.4e38), in which it is rendered")
         if lo is not None and (v < lo or (lo_open and v == lo)):
             raise self.err(key, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
         if hi is not None and (v > hi or (hi_open and v == hi)):
@@ -69,6 +85,8 @@ class _Table:
         if (not isinstance(v, (list, tuple)) or len(v) != n
                 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
             raise self.err(key, f"expected {n} finite numbers, got {v!r}")
+        if not all(_f32(float(x)) for x in v):
+            raise self.err(key, f"{v} is outside float32's range (+-3.4e38), in which it is rendered")
         if lo is not None and min(v) < lo:
             raise self.err(key, f"values must be >= {lo}, got {v}")
         if hi is not None and max(v) > hi:
@@ -246,6 +264,9 @@ def _camera(t: _Table) -> Camera:
                near=t.num("near", 0.05, lo=0.0, lo_open=True), far=t.num("far", 100.0, lo=0.0, lo_open=True))
     if c.near >= c.far:
         raise t.err("near", f"near ({c.near}) must be less than far ({c.far})")
+    if c.far / c.near > MAX_FAR_NEAR:
+        raise t.err("near", f"far / near = {c.far / c.near:.3g} is more than the depth buffer resolves "
+                            f"({MAX_FAR_NEAR:.0e}); raise near to at least {c.far / MAX_FAR_NEAR:.3g} or lower far")
     d = np.subtract(c.target, c.position)
     if np.linalg.norm(d) < 1e-9:
         raise t.err("target", "camera target equals its position")
@@ -265,8 +286,14 @@ def _light(t: _Table, i: int):
             raise t.err("direction", "direction must be non-zero")
         light = DirectionalLight(name, direction=tuple(float(x) for x in np.divide(direction, np.linalg.norm(direction))),
                                  color=color, irradiance=t.num("irradiance", 1.0, lo=0.0))
+        strength = ("irradiance", light.irradiance)
     else:
         light = PointLight(name, position=t.vec("position", 3), color=color, intensity=t.num("intensity", 1.0, lo=0.0))
+        strength = ("intensity", light.intensity)
+    # The shader multiplies colour by strength: the product must stay in float32 too.
+    if not _f32(max(color) * strength[1]):
+        raise t.err(strength[0], f"color x {strength[0]} = {max(color) * strength[1]:.3g} is outside float32's range "
+                                 f"(+-3.4e38), in which it is rendered")
     t.finish()
     return light
 
@@ -281,6 +308,10 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
             raise r.err("angle", "ranges are [min, max] with min <= max")
         if inten[0] <= 0.0:
             raise r.err("intensity", "the intensity multiplier range must be positive (drawn log-uniformly)")
+        light = next(l for l in default.lights if l.name == key)
+        peak = max(light.color) * getattr(light, "irradiance", getattr(light, "intensity", 1.0)) * inten[1]
+        if not _f32(peak):
+            raise r.err("intensity", f"the brightest drawn light ({peak:.3g}) is outside float32's range (+-3.4e38)")
         lights[key] = LightRange(axis=r.vec("axis", 3, (0.0, 1.0, 0.0)), angle=angle, intensity=inten)
     known_objects = {o.name for o in default.objects}
     for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else f"no object named '{k}'"):
@@ -337,6 +368,9 @@ def config_from_dict(scene: Scene, data: dict, *, path=None) -> FrameConfig:
     """Rebuild a FrameConfig written by FrameConfig.to_dict, checked against the scene."""
     t = _Table(data, path, "")
     camera = _camera(t.table("camera"))
+    for key in ("lights", "objects"):
+        if not isinstance(t.data.get(key, []), list):
+            raise t.err(key, f"expected a list of tables, got {t.data[key]!r}")
     lights = []
     for i, l in enumerate(t.raw("lights", [])):
         lights.append(_light(_Table(l, path, f"lights[{i}]"), i))

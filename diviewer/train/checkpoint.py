@@ -58,7 +58,7 @@ def load_checkpoint(path: str | Path, *, mmap: bool = False) -> dict[str, Any]:
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=mmap)
     except Exception as exc:  # truncated zip, foreign pickle, not a torch file at all
-        raise DiviewerError(f"not a readable checkpoint ({type(exc).__name__}: {str(exc).splitlines()[0][:200]}); "
+        raise DiviewerError(f"not a readable checkpoint ({type(exc).__name__}: {(str(exc).splitlines() or [''])[0][:200]}); "
                             "it may be truncated or corrupt: use another checkpoint", path=path) from exc
     if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
         raise DiviewerError(f"not a diviewer checkpoint (no format '{CHECKPOINT_FORMAT}')", path=path)

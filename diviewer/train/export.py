@@ -23,6 +23,7 @@ from diviewer import imageio
 from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
+from diviewer.outputs import check_output_file, dumps, staged
 from diviewer.provenance import versions
 from diviewer.runtime import INPUT_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
 
@@ -67,7 +68,7 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False):
             y = self.netG(inp.half() if fp16 else inp)
             radiance = decode_radiance(y.float() if fp16 else y, encoding)
             out = compose_radiance(radiance, direct, albedo, meta["target"], meta["divide_albedo"])
-            return out.permute(0, 2, 3, 1)
+            return out.permute(0, 2, 3, 1)  # clamped at 0 by compose_radiance
 
     return GIModel().eval()
 
@@ -116,6 +117,15 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
     return np.stack(frames).astype(np.float32), f"{n} synthetic frames (dataset {data_dir} not found)"
 
 
+def check_export_paths(ckpt_path: Path, out: Path) -> None:
+    """Refuse, before any work, an --out that would overwrite the checkpoint or be overwritten by the card."""
+    if not ckpt_path.is_file():
+        raise DiviewerError(f"checkpoint not found: {ckpt_path}", field="checkpoint")
+    card = out.with_suffix(".json")
+    check_output_file(out, "--out", protect=(ckpt_path,), suffix=".onnx")
+    check_output_file(card, "--out", protect=(ckpt_path,))
+
+
 def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = ExportSettings(), log=print) -> dict:
     """Export, verify, and write the model and its model card (``out`` with .json); returns the card."""
     torch = _torch()
@@ -125,6 +135,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     from diviewer.train.checkpoint import build_generator_from_checkpoint, load_checkpoint
 
     ckpt_path, out = Path(ckpt_path), Path(out)
+    check_export_paths(ckpt_path, out)
     ckpt = load_checkpoint(ckpt_path)
     netG, encoding, meta = build_generator_from_checkpoint(ckpt)
     levels = int(meta["model_args"]["levels"])
@@ -188,11 +199,11 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "opset": OPSET,
         "recipe": _recipe(meta),
     }
-    onnx.helper.set_model_props(model, {META_KEY: json.dumps(card, sort_keys=True)})
+    onnx.helper.set_model_props(model, {META_KEY: dumps(card, sort_keys=True)})
     model.producer_name, model.producer_version = "diviewer", card["exported_with"]["diviewer"]
-    with imageio.atomic_path(out) as tmp:
-        onnx.save(model, str(tmp))
-    imageio.write_text(out.with_suffix(".json"), json.dumps(card, indent=2, sort_keys=True))
+    with staged() as stage:  # the model and its card land together, or neither does
+        onnx.save(model, str(stage(out)))
+        imageio.write_text(stage(out.with_suffix(".json")), dumps(card, indent=2, sort_keys=True))
     log(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB) and {out.with_suffix('.json').name}")
     return card
 

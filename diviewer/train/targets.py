@@ -33,15 +33,22 @@ def target_radiance(pt: Any, pt_direct: Any, albedo: Any, target: str, divide_al
 
 
 def compose_radiance(pred: Any, direct: Any, albedo: Any, target: str, divide_albedo: bool) -> Any:
-    """The displayed image from netG's decoded output: as is ("full"), or GL direct + indirect.
+    """The displayed image from netG's decoded output: as is ("full"), or GL direct + indirect; clamped at 0.
 
     Works on numpy arrays and torch tensors (ONNX: Max/Mul/Add), so the exporter can use it too.
     """
     if target == "full":
-        return pred
+        return _non_negative(pred)
     if divide_albedo:
         pred = pred * _albedo_floor(albedo)
-    return direct + pred
+    return _non_negative(direct + pred)
+
+
+def _non_negative(x: Any) -> Any:
+    """Radiance is never negative: an undershooting prediction is clamped (validation, export and runtime agree)."""
+    if type(x).__module__.startswith("torch"):
+        return x.clamp(min=0.0)
+    return np.maximum(x, 0.0)
 
 
 def _albedo_floor(albedo: Any) -> Any:

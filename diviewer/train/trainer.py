@@ -330,7 +330,7 @@ def _check_trainable(net_cfg: NetConfig, cfg: TrainConfig, ds: Dataset, n_train:
             real_A = torch.zeros(smallest, netG.in_channels, ds.height, ds.width)
             netD(torch.cat([real_A, netG(real_A)], 1))
     except (RuntimeError, ValueError) as exc:
-        reason = str(exc).splitlines()[0]
+        reason = (str(exc).splitlines() or [type(exc).__name__])[0]
         raise DiviewerError(f"cannot train on {n_train} frame(s) of {ds.width}x{ds.height} at batch size "
                             f"{cfg.batch_size}: {reason}; capture at least {3 * 2 ** net_cfg.n_layers_D} px per side "
                             "and more train frames", path=ds.root) from None

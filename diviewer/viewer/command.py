@@ -40,13 +40,21 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
 def run_view(args: argparse.Namespace) -> int:
     """Open the viewer as the arguments say; with ``--frames``, print one line of what it did."""
     from diviewer.frames import parse_resolution
+    from diviewer.gl.neural import GISettings
     from diviewer.viewer.app import ViewerSettings, run_viewer
 
     if args.frames is not None and args.frames < 1:
         raise DiviewerError(f"--frames must be at least 1, got {args.frames}", field="--frames")
-    from diviewer.gl.neural import GISettings
+    size = parse_resolution(args.size, "--size")
+    if args.frames is not None and str(args.model).lower() not in ("auto", "none"):
+        # Scripted mode: a model the user named and the viewer refuses is a user error (exit 2),
+        # found before a window opens; interactively the panel says why and offers the others.
+        from diviewer.scene import load_scene
+        from diviewer.viewer.models import open_model
 
-    size = parse_resolution(args.size)
+        model, message = open_model(args.model, load_scene(args.scene), args.provider)
+        if model is None:
+            raise DiviewerError(message, field="--model")
     settings = ViewerSettings(size=size, vsync=not args.no_vsync, model=args.model, provider=args.provider,
                               controller=args.camera, gi_res=args.gi_res,
                               gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
