@@ -220,7 +220,7 @@ def sealed_box(sun: bool = True):
         "scene": {"name": "sealed"},
         "camera": {"position": [0, 0, 0.9], "target": [0, 0, -1], "up": [0, 1, 0], "fov": 90.0},
         "materials": {"white": {"albedo": [0.8, 0.8, 0.8]}},
-        "meshes": {n: {"shape": "box", "size": list(np.ptp(scene.meshes[o.mesh].bounds, axis=0).round(6))}
+        "meshes": {n: {"shape": "box", "size": [float(x) for x in np.ptp(scene.meshes[o.mesh].bounds, axis=0).round(6)]}
                    for n, o in data_walls.items()},
         "objects": [{"name": n, "mesh": n, "material": "white", "position": list(o.position)} for n, o in data_walls.items()],
         "lights": [{"name": "sun", "type": "directional", "direction": [0.5, -0.7, -0.5], "irradiance": 5.0}] if sun else [],
