@@ -34,12 +34,23 @@ def _cmd_render(args: argparse.Namespace) -> int:
         check_reference(args.reference)  # a missing extra fails before any GL work
     record = render_to_dir(args.scene, args.out, res=args.res, seed=args.seed, split=args.split,
                            config_file=args.config, exposure=args.exposure, tonemap=args.tonemap, model=args.model,
-                           provider=args.provider)
+                           provider=args.provider, vxgi=_vxgi_settings(args))
     w, h = record["resolution"]
     print(f"rendered {record['scene']} at {w}x{h} into {args.out}")
     if args.reference:
         _render_reference(args)
     return 0
+
+
+def _vxgi_settings(args: argparse.Namespace):
+    """The VXGISettings that `render --vxgi` asked for, or None."""
+    if not args.vxgi:
+        return None
+    from diviewer.gl.vxgi import VXGISettings
+
+    settings = VXGISettings(resolution=args.vxgi_res, trace_scale=args.vxgi_trace_scale, bounces=args.vxgi_bounces)
+    settings.validate()
+    return settings
 
 
 def _render_reference(args: argparse.Namespace) -> None:
@@ -62,7 +73,7 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     fractions = parse_splits(args.splits)
     settings = CaptureSettings(frames=args.frames, width=width, height=height, gt=args.gt, spp=args.spp,
                                max_depth=args.max_depth, seed=args.seed, split_fractions=fractions, dtype=args.dtype,
-                               thumbs=args.thumbs)
+                               thumbs=args.thumbs, vxgi_resolution=args.vxgi_res)
     capture(args.scene, args.out, settings, parse_shard(args.shard))
     return 0
 
@@ -212,13 +223,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", type=Path, default=None, help="an ONNX model (diviewer export): also write neural.exr")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"), help="onnxruntime provider")
     _add_reference_args(p)
+    g = p.add_argument_group("voxel cone tracing")
+    g.add_argument("--vxgi", action="store_true", help="also render VXGI: vxgi.exr and vxgi_indirect.exr")
+    g.add_argument("--vxgi-res", type=int, default=64, help="voxels per side of the VXGI grid (32, 64, 128; default 64)")
+    g.add_argument("--vxgi-trace-scale", type=int, default=1,
+                   help="trace one pixel per NxN block and upsample (default 1: full resolution)")
+    g.add_argument("--vxgi-bounces", type=int, default=1, choices=(1, 2), help="bounces of indirect light (default 1)")
     p.set_defaults(func=_cmd_render)
 
     p = sub.add_parser("capture", help="render a dataset: GL inputs and path-traced ground truth (resumable)")
     p.add_argument("--scene", default="cornell", help="shipped scene name or a .toml path")
     p.add_argument("--frames", type=int, default=100, help="frames over all splits")
     p.add_argument("--res", default="128", help="N or WxH; default 128")
-    p.add_argument("--gt", default="pt", choices=("pt", "vxgi"), help="ground truth: pt (Mitsuba path tracer)")
+    p.add_argument("--gt", default="pt", choices=("pt", "vxgi"),
+                   help="ground truth: pt (Mitsuba path tracer) or vxgi (voxel cone tracing, stored in the same channels)")
+    p.add_argument("--vxgi-res", type=int, default=64, help="VXGI grid resolution with --gt vxgi (default 64)")
     p.add_argument("--spp", type=int, default=256, help="path-tracing samples per pixel (default 256)")
     p.add_argument("--max-depth", type=int, default=16, help="path length limit of the full render")
     p.add_argument("--seed", type=int, default=0, help="base seed of configurations and path-tracer seeds")

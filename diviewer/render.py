@@ -30,12 +30,14 @@ def choose_config(scene: Scene, seed: int | None, split: str, config_file: Path 
 
 def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int | None = None, split: str = "train",
                   config_file: Path | None = None, exposure: float | None = None, tonemap: str | None = None,
-                  model: Path | None = None, provider: str | None = None) -> dict:
+                  model: Path | None = None, provider: str | None = None, vxgi=None) -> dict:
     """Render one frame's GL buffers (and, with a model, its neural GI image) and write them.
 
     Args:
         res: N or WxH; None means the model's training resolution (or 256 without a model).
         model: an ONNX model from `diviewer export`, checked against the scene; writes neural.exr.
+        vxgi: a VXGISettings: also run voxel cone tracing; writes vxgi.exr (direct + albedo x indirect)
+            and vxgi_indirect.exr (albedo x indirect, comparable with the path tracer's pt_indirect.exr).
 
     Returns:
         The frame record written to frame.json.
@@ -68,9 +70,19 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
         check_render_size(ctx, width, height, "--res")
         renderer = Renderer(ctx, scene, width, height, settings)
         compositor = DisplayPass(ctx, renderer.shaders)
-        neural = None
+        neural = vx = None
+        vxgi_info = None
         try:
             frame = renderer.frame(config)
+            if vxgi is not None:
+                from diviewer.gl.context import stage_timer
+                from diviewer.gl.vxgi import VXGIPass
+
+                vx = VXGIPass(ctx, renderer, vxgi, timer=stage_timer(ctx, sync=True))
+                vx.run(config)
+                frame["vxgi"], frame["vxgi_indirect"] = vx.read("vxgi"), vx.read("vxgi_indirect")
+                vxgi_info = {"settings": settings_dict(vxgi), "fragments": vx.fragment_counts,
+                             "ms": {k: round(v, 3) for k, v in vx.timings.items()}}
             if net is not None:
                 from diviewer.gl.neural import NeuralPass
 
@@ -80,12 +92,12 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
                                "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}
             # Known good before anything is written: an earlier render in --out stays as it was otherwise.
-            _check_finite(scene, config, frame, (*BUFFERS, "neural"))
+            _check_finite(scene, config, frame, (*BUFFERS, "neural", "vxgi", "vxgi_indirect"))
             ev = scene.exposure if exposure is None else exposure
             record = frame_record(scene, config, (width, height), seed=seed, split=split if seed is not None else None,
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
                                   display={"exposure": ev, "tonemap": tonemap}, neural=neural_info,
-                                  user_meshes=user_meshes)
+                                  user_meshes=user_meshes, **({"vxgi": vxgi_info} if vxgi_info else {}))
             # All files under temporary names first, then renamed together: a failure part-way
             # (a full disk) leaves the folder as it was.
             with staged() as stage:
@@ -98,8 +110,14 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 if "neural" in frame:
                     imageio.write_exr(stage(out / "neural.exr"), frame["neural"])
                     imageio.write_png(stage(out / "neural.png"), compositor.to_ldr(frame["neural"], ev, tonemap))
+                if "vxgi" in frame:
+                    for name in ("vxgi", "vxgi_indirect"):
+                        imageio.write_exr(stage(out / f"{name}.exr"), frame[name])
+                        imageio.write_png(stage(out / f"{name}.png"), compositor.to_ldr(frame[name], ev, tonemap))
                 imageio.write_text(stage(out / "frame.json"), dumps(record, indent=2))
         finally:
+            if vx is not None:
+                vx.release()
             if neural is not None:
                 neural.release()
             compositor.release()

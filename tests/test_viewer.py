@@ -46,8 +46,8 @@ def state(cornell):
 def test_view_mode_registry_is_complete():
     from diviewer.gl.display import KINDS, LAYOUTS
 
-    expected = {"final", "direct", "reference", "depth", "normal", "albedo", "net_input", "net_output", "split",
-                "difference"}
+    expected = {"final", "direct", "reference", "vxgi", "depth", "normal", "albedo", "net_input", "net_output",
+                "split", "difference"}
     assert expected <= set(VIEW_MODE_NAMES)
     assert len(set(VIEW_MODE_NAMES)) == len(VIEW_MODES)
     keys = [m.key for m in VIEW_MODES if m.key]
@@ -79,6 +79,9 @@ def test_view_mode_produces_from_its_sources():
         def reference(self):
             return ("ref",)
 
+        def vxgi(self):
+            return ("vxgi",)
+
     s = Sources()
     assert view_mode("final").produce(s) == ("buffer", "direct")  # no model: direct light only
     s.has_model = True
@@ -86,6 +89,7 @@ def test_view_mode_produces_from_its_sources():
     assert view_mode("depth").produce(s) == ("buffer", "depth")
     assert view_mode("reference").produce(s) == ("ref",)
     assert view_mode("net_output").produce(s) == ("net",)
+    assert view_mode("vxgi").produce(s) == ("vxgi",)
 
 
 def test_set_view_mode_and_compare(state):
@@ -585,6 +589,8 @@ def _scripted_session(tmp_path: Path) -> None:
     # No model: the network's output says why and shows black; the final image is the direct light.
     assert "net_output" in summary["unavailable"] and images["net_output"].max() == 0
     np.testing.assert_array_equal(images["final"], images["direct"])
+    # VXGI adds indirect light to the direct light: brighter on average, lit where direct light is not.
+    assert "vxgi" in summary["modes_drawn"] and images["vxgi"].mean() > images["direct"].mean() + 2.0
     if mitsuba_missing() is None:
         assert "reference" in summary["modes_drawn"]
         _check_image(images["reference"], size)

@@ -123,6 +123,8 @@ class Viewer:
         self.shot_path = f"diviewer_{scene.name}.png"
         self._scene_revision = 0
         self.gi = GIControl(self.ctx, self.renderer, self.state, settings.gi_res, settings.gi, settings.provider)
+        self.vxgi = None
+        """The VXGI pass, made the first time the VXGI view mode is shown."""
         self.imgui_ctx = imgui.create_context()
         imgui.get_io().set_ini_filename(None)  # no imgui.ini in the user's working folder
         self.input = Input(self.state, self, self.glfw)
@@ -341,6 +343,8 @@ class Viewer:
             self.imgui.destroy_context(self.imgui_ctx)
             self.black.release()
             self.display.release()
+            if self.vxgi is not None:
+                self.vxgi.release()
             self.timer.release()
             self.renderer.release()
             self.shaders.release()

@@ -34,6 +34,9 @@ class FrameSources(Protocol):
     def reference(self) -> Any:
         """The latest path-traced reference of this view (raises Unavailable while none is ready)."""
 
+    def vxgi(self) -> Any:
+        """This frame through voxel cone tracing (diviewer.gl.vxgi): direct + albedo x indirect."""
+
 
 @dataclass(frozen=True)
 class ViewMode:
@@ -67,6 +70,8 @@ VIEW_MODES: tuple[ViewMode, ...] = (
              help="the GL renderer's shadow-mapped direct light and emission"),
     ViewMode("reference", "Path-traced reference", lambda s: s.reference(), "radiance", key="3",
              help="Mitsuba 3, rendered progressively in the background; restarts when anything changes"),
+    ViewMode("vxgi", "VXGI (voxel cone tracing)", lambda s: s.vxgi(), "radiance",
+             help="direct light + one bounce of indirect light traced through a voxel grid; no network"),
     ViewMode("depth", "G-buffer: depth", lambda s: s.buffer("depth"), "depth", key="4"),
     ViewMode("normal", "G-buffer: normal", lambda s: s.buffer("normal"), "normal", key="5",
              help="view-space normals"),
