@@ -3,11 +3,26 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
 from diviewer import __version__
 from diviewer.errors import DiviewerError
+from diviewer.outputs import ENVIRONMENT_ERRNOS, check_output_dir, check_output_file
+
+# Numeric options by destination, the same rule in every subcommand: (lowest, highest or None).
+# Seeds seed numpy (0 <= seed < 2**32); counts are at least 1 unless 0 means "none".
+INT_OPTIONS = {
+    "seed": (0, 2**32 - 1), "pt_seed": (0, 2**32 - 2), "frames": (1, 1_000_000), "spp": (1, 1 << 20),
+    "max_depth": (2, 1024), "thumbs": (0, 1000), "verify_frames": (1, 1000), "K": (1, 4096), "epochs": (1, None),
+    "batch_size": (1, None), "ndf": (1, 4096), "max_steps": (1, None), "val_every": (1, None),
+    "save_every": (0, None), "num_workers": (0, 256),
+}
+FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None)}
+# Outputs by (command, destination): a folder or a file, checked before any work.
+OUTPUT_DIRS = {("render", "out"), ("capture", "out"), ("train", "out"), ("data", "out")}
+OUTPUT_FILES = {("eval", "out"), ("view", "screenshot"), ("view", "stats")}
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
@@ -19,12 +34,23 @@ def _cmd_render(args: argparse.Namespace) -> int:
         check_reference(args.reference)  # a missing extra fails before any GL work
     record = render_to_dir(args.scene, args.out, res=args.res, seed=args.seed, split=args.split,
                            config_file=args.config, exposure=args.exposure, tonemap=args.tonemap, model=args.model,
-                           provider=args.provider)
+                           provider=args.provider, vxgi=_vxgi_settings(args))
     w, h = record["resolution"]
     print(f"rendered {record['scene']} at {w}x{h} into {args.out}")
     if args.reference:
         _render_reference(args)
     return 0
+
+
+def _vxgi_settings(args: argparse.Namespace):
+    """The VXGISettings that `render --vxgi` asked for, or None."""
+    if not args.vxgi:
+        return None
+    from diviewer.gl.vxgi import VXGISettings
+
+    settings = VXGISettings(resolution=args.vxgi_res, trace_scale=args.vxgi_trace_scale, bounces=args.vxgi_bounces)
+    settings.validate()
+    return settings
 
 
 def _render_reference(args: argparse.Namespace) -> None:
@@ -44,14 +70,24 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     from diviewer.frames import parse_resolution
 
     width, height = parse_resolution(args.res)
-    fractions = tuple(float(x) for x in args.splits.split(","))
-    if len(fractions) != 3:
-        raise DiviewerError(f"--splits takes three fractions train,val,test, got '{args.splits}'", field="--splits")
+    fractions = parse_splits(args.splits)
     settings = CaptureSettings(frames=args.frames, width=width, height=height, gt=args.gt, spp=args.spp,
                                max_depth=args.max_depth, seed=args.seed, split_fractions=fractions, dtype=args.dtype,
-                               thumbs=args.thumbs)
+                               thumbs=args.thumbs, vxgi_resolution=args.vxgi_res)
     capture(args.scene, args.out, settings, parse_shard(args.shard))
     return 0
+
+
+def parse_splits(text: str) -> tuple[float, float, float]:
+    """``0.8,0.1,0.1``: three finite non-negative fractions train,val,test with a positive sum."""
+    try:
+        fractions = tuple(float(x) for x in str(text).split(","))
+    except ValueError:
+        fractions = ()
+    if len(fractions) != 3 or not all(math.isfinite(f) and f >= 0 for f in fractions) or sum(fractions) <= 0:
+        raise DiviewerError(f"takes three non-negative fractions train,val,test (e.g. 0.8,0.1,0.1), got '{text}'",
+                            field="--splits")
+    return fractions
 
 
 def _cmd_data_check(args: argparse.Namespace) -> int:
@@ -74,6 +110,10 @@ def _cmd_data_check(args: argparse.Namespace) -> int:
 
 def _cmd_data_merge(args: argparse.Namespace) -> int:
     from diviewer.data.capture import merge
+
+    for src in args.sources:
+        if src.exists() and args.out.exists() and src.resolve() == args.out.resolve():
+            raise DiviewerError(f"{src} is both a source and the output", field="--out")
 
     merge(args.sources, args.out)
     return 0
@@ -122,6 +162,24 @@ def _cmd_evalset(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from diviewer.bench import BenchSettings, quick, run_bench
+
+    settings = quick(BenchSettings()) if args.quick else BenchSettings()
+    given = {"scene": args.scene, "models": tuple(str(m) for m in args.models) if args.models else None,
+             "resolutions": tuple(args.res) if args.res else None, "frames": args.frames, "warmup": args.warmup,
+             "untrained_k": tuple(args.untrained_k) if args.untrained_k is not None else None,
+             "gi_steps": tuple(args.gi_steps) if args.gi_steps is not None else None,
+             "evalset": str(args.evalset) if args.evalset else None, "eval_frames": args.eval_frames,
+             "calib_data": str(args.calib_data) if args.calib_data else None, "provider": args.provider,
+             "timing": args.timing, "pt_frames": args.pt_frames}
+    settings = dataclasses.replace(settings, **{k: v for k, v in given.items() if v is not None})
+    run_bench(settings, json_out=args.json, plot_out=args.plot)
+    return 0
+
+
 def _add_reference_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("path-traced reference (needs the 'train' extra: mitsuba)")
     g.add_argument("--reference", default=None, choices=("pt",),
@@ -166,13 +224,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", type=Path, default=None, help="an ONNX model (diviewer export): also write neural.exr")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"), help="onnxruntime provider")
     _add_reference_args(p)
+    g = p.add_argument_group("voxel cone tracing")
+    g.add_argument("--vxgi", action="store_true", help="also render VXGI: vxgi.exr and vxgi_indirect.exr")
+    g.add_argument("--vxgi-res", type=int, default=64, help="voxels per side of the VXGI grid (32, 64, 128; default 64)")
+    g.add_argument("--vxgi-trace-scale", type=int, default=1,
+                   help="trace one pixel per NxN block and upsample (default 1: full resolution)")
+    g.add_argument("--vxgi-bounces", type=int, default=1, choices=(1, 2), help="bounces of indirect light (default 1)")
     p.set_defaults(func=_cmd_render)
 
     p = sub.add_parser("capture", help="render a dataset: GL inputs and path-traced ground truth (resumable)")
     p.add_argument("--scene", default="cornell", help="shipped scene name or a .toml path")
     p.add_argument("--frames", type=int, default=100, help="frames over all splits")
     p.add_argument("--res", default="128", help="N or WxH; default 128")
-    p.add_argument("--gt", default="pt", choices=("pt", "vxgi"), help="ground truth: pt (Mitsuba path tracer)")
+    p.add_argument("--gt", default="pt", choices=("pt", "vxgi"),
+                   help="ground truth: pt (Mitsuba path tracer) or vxgi (voxel cone tracing, stored in the same channels)")
+    p.add_argument("--vxgi-res", type=int, default=64, help="VXGI grid resolution with --gt vxgi (default 64)")
     p.add_argument("--spp", type=int, default=256, help="path-tracing samples per pixel (default 256)")
     p.add_argument("--max-depth", type=int, default=16, help="path length limit of the full render")
     p.add_argument("--seed", type=int, default=0, help="base seed of configurations and path-tracer seeds")
@@ -191,7 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--info", type=Path, metavar="MODEL", help="print a model's metadata and exit")
     p.set_defaults(func=_cmd_export)
 
-    from diviewer.train.trainer import add_train_parser
+    from diviewer.train.cli import add_train_parser
     from diviewer.viewer.command import add_view_parser
 
     add_train_parser(sub)
@@ -229,6 +295,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="which evaluation set of its own seed stream (default 0)")
     p.set_defaults(func=_cmd_evalset)
 
+    p = sub.add_parser("bench", help="headless frame timing per stage and the speed/accuracy table: direct light, "
+                                     "the baseline, models (fp32/fp16/int8, GI resolutions), untrained K, path tracer")
+    p.add_argument("--scene", default=None, help="shipped scene name or a .toml path (default cornell)")
+    p.add_argument("--models", type=Path, nargs="+", default=None,
+                   help="ONNX models (diviewer export / baseline); default the scene's shipped models")
+    p.add_argument("--res", type=int, nargs="+", default=None, help="square frame resolutions (default 128 256)")
+    p.add_argument("--frames", type=int, default=None, help="timed frames per row (default 30)")
+    p.add_argument("--warmup", type=int, default=None, help="untimed frames first (default 5)")
+    p.add_argument("--untrained-k", type=int, nargs="*", default=None,
+                   help="base widths of untrained generators for the cost curve (default 8 16 32 64 128)")
+    p.add_argument("--gi-steps", type=int, nargs="*", default=None,
+                   help="GI at 1/step of the frame resolution where the model allows (default 2)")
+    p.add_argument("--evalset", type=Path, default=None, help="evaluation set (default runs/<scene>/evalset)")
+    p.add_argument("--eval-frames", type=int, default=None, help="frames per split scored (default all)")
+    p.add_argument("--calib-data", type=Path, default=None,
+                   help="a capture whose train split calibrates int8 (default GL renders of training configurations)")
+    p.add_argument("--pt-frames", type=int, default=None, help="frames the path tracer is timed on (default 2)")
+    p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
+    p.add_argument("--timing", default=None, choices=("auto", "query", "sync"),
+                   help="GL stages: timer queries (auto where supported) or wall clock around glFinish")
+    p.add_argument("--json", type=Path, default=None, help="write the results as strict JSON")
+    p.add_argument("--plot", type=Path, default=None, help="write the speed/accuracy plot (PNG)")
+    p.add_argument("--quick", action="store_true", help="a few frames at 32x32 (seconds): the test suite's run")
+    p.set_defaults(func=_cmd_bench)
+
     p = sub.add_parser("data", help="inspect datasets")
     data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")
     q = data.add_parser("check", help="verify every frame: present, readable, finite, shapes, checksum")
@@ -242,12 +333,60 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _chosen_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
+    """The (sub)subparser that parsed ``args``: its actions know the option strings the user typed."""
+    parser = ap
+    for dest in ("command", "data_command"):
+        sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+        if sub is None or getattr(args, dest, None) not in sub.choices:
+            break
+        parser = sub.choices[getattr(args, dest)]
+    return parser
+
+
+def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """One rule per option name across subcommands: numbers in range and finite, outputs writable."""
+    options = {a.dest: a.option_strings[0] if a.option_strings else a.dest
+               for a in _chosen_parser(ap, args)._actions}
+    for dest, (lo, hi) in INT_OPTIONS.items():
+        v = getattr(args, dest, None)
+        if dest in options and v is not None and not (v >= lo and (hi is None or v <= hi)):
+            rng = f"from {lo} to {hi}" if hi is not None else f"at least {lo}"
+            raise DiviewerError(f"must be {rng}, got {v}", field=options[dest])
+    for dest, (lo, hi) in FLOAT_OPTIONS.items():
+        v = getattr(args, dest, None)
+        if dest in options and v is not None and not (math.isfinite(v) and v >= lo and (hi is None or v <= hi)):
+            rng = f"from {lo} to {hi}" if hi is not None else f"at least {lo}"
+            raise DiviewerError(f"must be a finite number {rng}, got {v}", field=options[dest])
+    for dest in ("out", "screenshot", "stats"):
+        v = getattr(args, dest, None)
+        if v is None or dest not in options:
+            continue
+        if (args.command, dest) in OUTPUT_DIRS:
+            check_output_dir(v, options[dest])
+        elif (args.command, dest) in OUTPUT_FILES:
+            check_output_file(v, options[dest])
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    ap = build_parser()
+    args = ap.parse_args(argv)
     try:
+        check_options(ap, args)
         return int(args.func(args) or 0)
     except DiviewerError as exc:
         print(f"diviewer {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        # A full disk, a read-only folder, a file where a folder should be: the machine's state,
+        # not a bug. Whatever was written before is intact (every write goes to a temporary name).
+        if exc.errno not in ENVIRONMENT_ERRNOS:
+            raise
+        where = exc.filename or ""
+        print(f"diviewer {args.command}: error: {where}{': ' if where else ''}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"diviewer {args.command}: error: out of memory; use a smaller size or fewer frames", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"diviewer {args.command}: interrupted", file=sys.stderr)

@@ -2,9 +2,10 @@
 
 Training, ONNX export and the runtime all use these functions, so the exported graph can carry the
 encoding: the runtime feeds raw linear buffers and receives linear radiance. Every function here is
-elementwise (plus one concatenation), works on numpy arrays and on torch tensors alike, and uses
-only operators the ONNX exporter maps one-to-one (Log, Exp, Abs, Sign, Where, Clip, IsNaN, IsInf,
-Concat). This module never imports torch: the viewer and the benchmark run without it.
+elementwise (plus one concatenation), written against a small set of array operations (`ArrayOps`:
+numpy here, torch's in `diviewer.train.encoding_torch`), and uses only operators the ONNX exporter
+maps one-to-one (Log, Exp, Abs, Sign, Where, Clip, IsNaN, IsInf, Concat). This module never imports
+torch: the viewer and the benchmark run without it.
 
 Radiance curve (used for the direct-light input and for the network's output)::
 
@@ -145,134 +146,135 @@ class Encoding:
 
 
 # ---------------------------------------------------------------------------------------------
-# Namespace dispatch: numpy arrays or torch tensors, without importing torch here.
+# Array operations: numpy here; `diviewer.train.encoding_torch` passes torch's (TORCH_OPS), so this
+# module never imports torch while training and export run the very same functions on tensors.
 
 
-def _is_torch(x: Any) -> bool:
-    return type(x).__module__.startswith("torch")
+class ArrayOps:
+    """The few array operations the encodings use, on numpy arrays (subclassed for torch in train/)."""
+
+    abs = staticmethod(np.abs)
+    sign = staticmethod(np.sign)
+    log = staticmethod(np.log)
+    exp = staticmethod(np.exp)
+    isnan = staticmethod(np.isnan)
+    isinf = staticmethod(np.isinf)
+
+    @staticmethod
+    def where(cond: Any, a: Any, b: Any) -> Any:
+        return np.where(cond, a, b).astype(np.result_type(a, b), copy=False)
+
+    @staticmethod
+    def clip(x: Any, lo: float, hi: float) -> Any:
+        return np.clip(x, lo, hi)
+
+    @staticmethod
+    def cat(parts: list[Any], axis: int) -> Any:
+        return np.concatenate(parts, axis=axis)
+
+    @staticmethod
+    def expand_dims(x: Any, axis: int) -> Any:
+        return np.expand_dims(x, axis)
+
+    @staticmethod
+    def prepare(x: Any, name: str) -> Any:
+        """x as a floating-point array; integer buffers are refused (their scale is unknown)."""
+        if type(x).__module__.startswith("torch"):
+            raise TypeError(f"{name}: torch tensors are encoded by diviewer.train.encoding_torch, not diviewer.encoding")
+        if not isinstance(x, np.ndarray):
+            return np.asarray(x, dtype=np.float64)  # Python numbers and lists
+        if x.dtype.kind != "f":
+            raise TypeError(
+                f"{name}: expected a floating-point array, got {x.dtype} "
+                "(convert to float32 first, e.g. albedo / 255 for 8-bit colour)"
+            )
+        if x.dtype.itemsize < 4:
+            return x.astype(np.float32)  # float16 in, float32 math: see the module docstring
+        return x
 
 
-def _prepare(x: Any, name: str) -> Any:
-    """Return x as a floating-point array/tensor; integer buffers are refused (their scale is unknown)."""
-    if _is_torch(x):
-        if not x.is_floating_point():
-            raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
-        return x.float() if x.element_size() < 4 else x  # float16/bfloat16 in, float32 math
-    if not isinstance(x, np.ndarray):
-        return np.asarray(x, dtype=np.float64)  # Python numbers and lists
-    if x.dtype.kind != "f":
-        raise TypeError(
-            f"{name}: expected a floating-point array, got {x.dtype} "
-            "(convert to float32 first, e.g. albedo / 255 for 8-bit colour)"
-        )
-    if x.dtype.itemsize < 4:
-        return x.astype(np.float32)  # float16 in, float32 math: see the module docstring
-    return x
+NUMPY_OPS = ArrayOps()
+"""The default operations: numpy arrays."""
 
 
-def _where(cond: Any, a: Any, b: Any) -> Any:
-    if _is_torch(cond):
-        import torch  # only reached with torch tensors, so torch is installed
-
-        return torch.where(cond, a, b)
-    return np.where(cond, a, b).astype(np.result_type(a, b), copy=False)
+def _nan_to_zero(x: Any, ops: ArrayOps) -> Any:
+    return ops.where(ops.isnan(x), 0.0, x)
 
 
-def _clip(x: Any, lo: float, hi: float) -> Any:
-    return x.clamp(lo, hi) if _is_torch(x) else np.clip(x, lo, hi)
-
-
-def _xp(x: Any) -> Any:
-    """The module holding abs/sign/log/exp/isnan/isinf for x: numpy or torch."""
-    if _is_torch(x):
-        import torch
-
-        return torch
-    return np
-
-
-def _nan_to_zero(x: Any) -> Any:
-    return _where(_xp(x).isnan(x), 0.0, x)
-
-
-def _log1p(a: Any) -> Any:
+def _log1p(a: Any, ops: ArrayOps) -> Any:
     """log(1 + a) for a >= 0, accurate for tiny a, from Log/Where only (exports to any ONNX opset).
 
     Goldberg/Kahan: with u = fl(1 + a), log(u) * a / (u - 1) cancels the rounding of 1 + a.
     """
-    xp = _xp(a)
     u = a + 1.0
     d = u - 1.0
     tiny = d == 0
-    safe_d = _where(tiny, 1.0, d)  # no 0/0 even in the branch that is not taken (NaN gradients)
-    return _where(tiny, a, xp.log(u) * (a / safe_d))
+    safe_d = ops.where(tiny, 1.0, d)  # no 0/0 even in the branch that is not taken (NaN gradients)
+    return ops.where(tiny, a, ops.log(u) * (a / safe_d))
 
 
-def _expm1(z: Any) -> Any:
+def _expm1(z: Any, ops: ArrayOps) -> Any:
     """exp(z) - 1 for z >= 0, accurate for tiny z, from Exp/Log/Where only (Kahan's trick)."""
-    xp = _xp(z)
-    u = xp.exp(z)
+    u = ops.exp(z)
     d = u - 1.0
     tiny = d == 0
-    safe_log = _where(tiny, 1.0, xp.log(u))
-    return _where(tiny, z, d * (z / safe_log))
+    safe_log = ops.where(tiny, 1.0, ops.log(u))
+    return ops.where(tiny, z, d * (z / safe_log))
 
 
 # ---------------------------------------------------------------------------------------------
 # Encodings
 
 
-def encode_radiance(x: Any, enc: Encoding) -> Any:
+def encode_radiance(x: Any, enc: Encoding, ops: ArrayOps = NUMPY_OPS) -> Any:
     """Linear HDR radiance (any sign) -> network range [-1, 1], elementwise; see the module docstring.
 
     NaN maps to 0 and +-Inf (or anything beyond radiance_max once exposed) to +-1.
     """
-    x = _prepare(x, "radiance")
-    xp = _xp(x)
-    t = _nan_to_zero(x * enc.exposure)
-    a = _clip(xp.abs(t), 0.0, enc.radiance_max)  # also turns +-Inf into radiance_max
-    y = xp.sign(t) * (_log1p(a) / math.log1p(enc.radiance_max))
-    return _clip(y, -1.0, 1.0)  # log1p(R) rounded to float32 may exceed the float64 constant by an ulp
+    x = ops.prepare(x, "radiance")
+    t = _nan_to_zero(x * enc.exposure, ops)
+    a = ops.clip(ops.abs(t), 0.0, enc.radiance_max)  # also turns +-Inf into radiance_max
+    y = ops.sign(t) * (_log1p(a, ops) / math.log1p(enc.radiance_max))
+    return ops.clip(y, -1.0, 1.0)  # log1p(R) rounded to float32 may exceed the float64 constant by an ulp
 
 
-def decode_radiance(y: Any, enc: Encoding) -> Any:
+def decode_radiance(y: Any, enc: Encoding, ops: ArrayOps = NUMPY_OPS) -> Any:
     """Network range [-1, 1] -> linear HDR radiance, the inverse of `encode_radiance`; never NaN/Inf.
 
     Values outside [-1, 1] are clamped and NaN decodes to 0, so a misbehaving network cannot put
     NaN or Inf into the frame.
     """
-    y = _prepare(y, "encoded radiance")
-    xp = _xp(y)
-    y = _clip(_nan_to_zero(y), -1.0, 1.0)
-    a = _expm1(xp.abs(y) * math.log1p(enc.radiance_max))
-    return xp.sign(y) * a * (1.0 / enc.exposure)
+    y = ops.prepare(y, "encoded radiance")
+    y = ops.clip(_nan_to_zero(y, ops), -1.0, 1.0)
+    a = _expm1(ops.abs(y) * math.log1p(enc.radiance_max), ops)
+    return ops.sign(y) * a * (1.0 / enc.exposure)
 
 
-def encode_depth(depth: Any, enc: Encoding) -> Any:
+def encode_depth(depth: Any, enc: Encoding, ops: ArrayOps = NUMPY_OPS) -> Any:
     """View-space depth -> [0, 1] for geometry (depth / depth_scale, clamped), -1 for no geometry.
 
     Depth <= 0, NaN and +-Inf all mean "no geometry": background stays distinct from near geometry.
     """
-    depth = _prepare(depth, "depth")
-    xp = _xp(depth)
+    depth = ops.prepare(depth, "depth")
     d = depth * (1.0 / enc.depth_scale)
-    geometry = (d > 0) & ~xp.isinf(d)  # NaN compares false
-    return _where(geometry, _clip(_nan_to_zero(d), 0.0, 1.0), -1.0)
+    geometry = (d > 0) & ~ops.isinf(d)  # NaN compares false
+    return ops.where(geometry, ops.clip(_nan_to_zero(d, ops), 0.0, 1.0), -1.0)
 
 
-def encode_normal(normal: Any) -> Any:
+def encode_normal(normal: Any, ops: ArrayOps = NUMPY_OPS) -> Any:
     """Unit normals are already in [-1, 1]; NaN -> 0 and clamping keep the network input bounded."""
-    normal = _prepare(normal, "normal")
-    return _clip(_nan_to_zero(normal), -1.0, 1.0)
+    normal = ops.prepare(normal, "normal")
+    return ops.clip(_nan_to_zero(normal, ops), -1.0, 1.0)
 
 
-def encode_albedo(albedo: Any) -> Any:
+def encode_albedo(albedo: Any, ops: ArrayOps = NUMPY_OPS) -> Any:
     """Diffuse albedo [0, 1] -> [-1, 1] (NaN -> black)."""
-    albedo = _prepare(albedo, "albedo")
-    return _clip(_nan_to_zero(albedo), 0.0, 1.0) * 2.0 - 1.0
+    albedo = ops.prepare(albedo, "albedo")
+    return ops.clip(_nan_to_zero(albedo, ops), 0.0, 1.0) * 2.0 - 1.0
 
 
-def encode_inputs(depth: Any, normal: Any, albedo: Any, direct: Any, enc: Encoding, *, channel_axis: int) -> Any:
+def encode_inputs(depth: Any, normal: Any, albedo: Any, direct: Any, enc: Encoding, *, channel_axis: int,
+                  ops: ArrayOps = NUMPY_OPS) -> Any:
     """Raw linear G-buffers + direct light -> the stacked network input in [-1, 1].
 
     Args:
@@ -282,18 +284,19 @@ def encode_inputs(depth: Any, normal: Any, albedo: Any, direct: Any, enc: Encodi
         direct: linear direct radiance (unexposed), 3 channels.
         enc: the dataset's encoding.
         channel_axis: where the channels are: -1 for numpy HWC frames, 1 for torch NCHW batches.
+        ops: the array operations (numpy; torch through `diviewer.train.encoding_torch`).
 
     Returns:
         The encoded buffers concatenated along channel_axis in `INPUT_CHANNELS` order (10 channels).
     """
-    depth = _prepare(depth, "depth")
-    normal = _prepare(normal, "normal")
+    depth = ops.prepare(depth, "depth")
+    normal = ops.prepare(normal, "normal")
     ndim = normal.ndim
     axis = channel_axis % ndim if -ndim <= channel_axis < ndim else None
     if axis is None:
         raise ValueError(f"channel_axis={channel_axis} is out of range for {ndim}-d buffers")
     if depth.ndim == ndim - 1:
-        depth = depth.unsqueeze(axis) if _is_torch(depth) else np.expand_dims(depth, axis)
+        depth = ops.expand_dims(depth, axis)
     buffers = {"depth": depth, "normal": normal, "albedo": albedo, "direct": direct}
     for name, n in INPUT_CHANNELS:
         shape = tuple(buffers[name].shape)
@@ -302,16 +305,12 @@ def encode_inputs(depth: Any, normal: Any, albedo: Any, direct: Any, enc: Encodi
                 f"{name}: expected {ndim}-d with {n} channel(s) on axis {channel_axis}, got shape {shape}"
             )
     parts = [
-        encode_depth(depth, enc),
-        encode_normal(normal),
-        encode_albedo(albedo),
-        encode_radiance(direct, enc),
+        encode_depth(depth, enc, ops),
+        encode_normal(normal, ops),
+        encode_albedo(albedo, ops),
+        encode_radiance(direct, enc, ops),
     ]
-    if _is_torch(depth):
-        import torch
-
-        return torch.cat(parts, dim=axis)
-    return np.concatenate(parts, axis=axis)
+    return ops.cat(parts, axis)
 
 
 def fit_exposure(direct_images: Any, *, percentile: float = 99.0, target: float = 1.0, max_samples: int = 1 << 22) -> float:
@@ -331,7 +330,7 @@ def fit_exposure(direct_images: Any, *, percentile: float = 99.0, target: float 
     Returns:
         The exposure, a finite positive float.
     """
-    if isinstance(direct_images, np.ndarray) or _is_torch(direct_images):
+    if isinstance(direct_images, np.ndarray) or type(direct_images).__module__.startswith("torch"):
         images = [np.asarray(direct_images)]
     else:
         images = [np.asarray(im) for im in direct_images]

@@ -23,8 +23,11 @@ from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
 from diviewer.metrics import (equivalent_spp, flat_mask, flip, highpass_power, mse, power_ratio, psnr, psnr_error,
                               ssim, tonemap)
+from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
 
+SSIM_MIN = 11
+"""SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
 KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 
 
@@ -36,7 +39,12 @@ def score(image: np.ndarray, truth: np.ndarray, exposure: float) -> dict[str, fl
 
 def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: str | None = None,
              out: Path | None = None, log=print) -> dict:
+    if out is not None:
+        check_output_file(out, "--out", protect=(model_path, Path(model_path).with_suffix(".json")))
     ds = Dataset(data_dir)
+    if min(ds.width, ds.height) < SSIM_MIN:
+        raise DiviewerError(f"SSIM needs frames of at least {SSIM_MIN}x{SSIM_MIN} pixels, the dataset's are "
+                            f"{ds.width}x{ds.height}", path=Path(data_dir) / "manifest.json", field="resolution")
     model = NeuralGI(model_path, provider=provider)
     if model.meta["scene_hash"] != ds.manifest["scene_hash"]:
         raise DiviewerError(f"the model was trained for scene '{model.meta['scene']}' (another scene file than "
@@ -45,9 +53,11 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
     if not idx:
         raise DiviewerError(f"the dataset has no '{split}' frames", path=data_dir)
     exposure = float(model.meta["encoding"]["exposure"])
-    rows, times = {"neural": [], "direct": []}, []
+    rows, times, black = {"neural": [], "direct": []}, [], []
     for i in idx:
         f = ds.load(i)
+        if not np.any(f["pt"] > 0):
+            black.append(i)
         t0 = time.perf_counter()
         y = model.run(pack_buffers(f))
         times.append((time.perf_counter() - t0) * 1e3)
@@ -58,6 +68,7 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
         "scene": ds.manifest["scene"], "reference_spp": ds.manifest["spp"], "provider": model.provider,
         "K": model.meta["K"], "target": model.meta["target"], "precision": model.meta["precision"],
         "inference_ms": {"median": float(np.median(times)), "p95": float(np.percentile(times, 95))},
+        "black_reference_frames": black,
         "methods": {m: {k: {"mean": float(np.mean([r[k] for r in rs])), "std": float(np.std([r[k] for r in rs]))}
                         for k in KEYS} for m, rs in rows.items()},
     }
@@ -68,8 +79,12 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
         log(f"{label:<34} {s['psnr']['mean']:7.2f} {s['ssim']['mean']:7.4f} {s['psnr_tm']['mean']:8.2f} "
             f"{s['ssim_tm']['mean']:8.4f}")
     log(f"inference {summary['inference_ms']['median']:.1f} ms median ({model.provider})")
+    if black:
+        # PSNR and SSIM against an all-black image measure only how dark the other image is.
+        log(f"warning: {len(black)} frame(s) have an all-black reference ({', '.join(map(str, black[:8]))}"
+            f"{', ...' if len(black) > 8 else ''}); their scores say little: check the dataset's lights")
     if out is not None:
-        imageio.write_text(out, json.dumps(summary, indent=1))
+        write_json(out, summary, indent=1)  # strict JSON: an infinite PSNR (identical images) is null
     return summary
 
 
@@ -90,7 +105,9 @@ def score_frame(image: np.ndarray, truth: np.ndarray, exposure: float, mask: np.
     return s
 
 
-def _aggregate(rows: list[dict]) -> dict:
+def aggregate(rows: list[dict]) -> dict:
+    """Per-frame scores (``score_frame``) of one method as mean and std per key, plus the pooled checkerboard
+    ratio; what evaluate and the bench report per method."""
     out = {k: {"mean": float(np.mean([r[k] for r in rows])), "std": float(np.std([r[k] for r in rows]))}
            for k in EVAL_KEYS}
     # Pooled over frames (each frame's flat pixels weigh alike), not a mean of per-frame ratios.
@@ -103,7 +120,9 @@ def _error(summary: dict, key: str) -> float:
     return psnr_error(v) if key.startswith("psnr") else v
 
 
-def _equivalent(summary: dict, ladder_spp: list[int], ladder: list[dict]) -> dict:
+def equivalent(summary: dict, ladder_spp: list[int], ladder: list[dict]) -> dict:
+    """The path-traced sample count whose error matches ``summary``'s (an ``aggregate``), per key of
+    ``EQUIVALENT_BY``, read off the ladder (``ladder[i]`` aggregated at ``ladder_spp[i]``); None where none can be."""
     out = {}
     for key in EQUIVALENT_BY:
         try:
@@ -164,10 +183,10 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
             for key, ch in rows_of.items():
                 rows[key].append(score_frame(f[ch], f["pt"], exposure, mask))
             progress.update()
-        methods = {k: _aggregate(r) for k, r in rows.items()}
+        methods = {k: aggregate(r) for k, r in rows.items()}
         ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
         for key, m in methods.items():
-            m["equivalent_spp"] = _equivalent(m, ladder_spp, ladder)
+            m["equivalent_spp"] = equivalent(m, ladder_spp, ladder)
             if key in models:
                 net = models[key]
                 m.update(kind=net.meta.get("kind", "neural"), label=_model_label(net.meta, net.path),

@@ -15,7 +15,7 @@ from diviewer.scene.loader import add_mesh_file, config_from_dict
 from diviewer.scene.model import FrameConfig, Scene
 
 
-def parse_resolution(text: str) -> tuple[int, int]:
+def parse_resolution(text: str, field: str = "--res") -> tuple[int, int]:
     """``256`` (square) or ``320x240`` (width x height)."""
     try:
         parts = [int(p) for p in str(text).lower().split("x")]
@@ -24,7 +24,7 @@ def parse_resolution(text: str) -> tuple[int, int]:
     if len(parts) == 1:
         parts = parts * 2
     if len(parts) != 2 or min(parts) < 1 or max(parts) > 16384:
-        raise DiviewerError(f"resolution must be N or WxH with 1 <= N <= 16384, got '{text}'", field="--res")
+        raise DiviewerError(f"resolution must be N or WxH with 1 <= N <= 16384, got '{text}'", field=field)
     return parts[0], parts[1]
 
 
@@ -65,10 +65,15 @@ def read_frame_json(scene: Scene, path: Path) -> dict:
     """A frame.json's content, checked to hold a configuration made with this version of the scene file."""
     try:
         data = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DiviewerError(f"cannot read frame configuration: {exc}", path=path) from exc
+    if not isinstance(data, dict):
+        raise DiviewerError(f"expected a JSON object, got {type(data).__name__}", path=path)
     if "config" not in data:
         raise DiviewerError("missing the 'config' table written by diviewer render", path=path, field="config")
+    meshes = data.get("user_meshes")
+    if meshes is not None and not (isinstance(meshes, dict) and all(isinstance(v, str) for v in meshes.values())):
+        raise DiviewerError("expected a table of mesh file names", path=path, field="user_meshes")
     if data.get("scene_hash") and data["scene_hash"] != scene.file_hash:
         raise DiviewerError(f"this frame was made with another version of scene '{data.get('scene')}' "
                             f"(scene file hash differs)", path=path, field="scene_hash")

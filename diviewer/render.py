@@ -10,6 +10,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.errors import DiviewerError
 from diviewer.frames import frame_record, load_frame_json, parse_resolution, read_frame_json, with_user_meshes
+from diviewer.outputs import check_output_dir, dumps, staged
 from diviewer.provenance import settings_dict
 from diviewer.scene import FrameConfig, Scene, config_from_dict, load_scene, sample_config
 from diviewer.scene.colour import srgb8
@@ -29,22 +30,27 @@ def choose_config(scene: Scene, seed: int | None, split: str, config_file: Path 
 
 def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int | None = None, split: str = "train",
                   config_file: Path | None = None, exposure: float | None = None, tonemap: str | None = None,
-                  model: Path | None = None, provider: str | None = None) -> dict:
+                  model: Path | None = None, provider: str | None = None, vxgi=None) -> dict:
     """Render one frame's GL buffers (and, with a model, its neural GI image) and write them.
 
     Args:
         res: N or WxH; None means the model's training resolution (or 256 without a model).
         model: an ONNX model from `diviewer export`, checked against the scene; writes neural.exr.
+        vxgi: a VXGISettings: also run voxel cone tracing; writes vxgi.exr (direct + albedo x indirect)
+            and vxgi_indirect.exr (albedo x indirect, comparable with the path tracer's pt_indirect.exr).
 
     Returns:
         The frame record written to frame.json.
     """
-    from diviewer.gl.context import describe, headless_context
+    from diviewer.gl.context import check_render_size, describe, headless_context
     from diviewer.gl.display import DEFAULT_TONEMAP, DisplayPass
     from diviewer.gl.renderer import BUFFERS, Renderer, RenderSettings
 
     tonemap = tonemap or DEFAULT_TONEMAP
 
+    out = check_output_dir(out, "--out")
+    if exposure is not None and not np.isfinite(exposure):
+        raise DiviewerError(f"must be a finite number of stops, got {exposure}", field="--exposure")
     scene = load_scene(scene_name)
     net = None
     if model is not None:
@@ -61,11 +67,22 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     settings = RenderSettings()
     neural_info = None
     with headless_context() as ctx:
+        check_render_size(ctx, width, height, "--res")
         renderer = Renderer(ctx, scene, width, height, settings)
         compositor = DisplayPass(ctx, renderer.shaders)
-        neural = None
+        neural = vx = None
+        vxgi_info = None
         try:
             frame = renderer.frame(config)
+            if vxgi is not None:
+                from diviewer.gl.context import stage_timer
+                from diviewer.gl.vxgi import VXGIPass
+
+                vx = VXGIPass(ctx, renderer, vxgi, timer=stage_timer(ctx, sync=True))
+                vx.run(config)
+                frame["vxgi"], frame["vxgi_indirect"] = vx.read("vxgi"), vx.read("vxgi_indirect")
+                vxgi_info = {"settings": settings_dict(vxgi), "fragments": vx.fragment_counts,
+                             "ms": {k: round(v, 3) for k, v in vx.timings.items()}}
             if net is not None:
                 from diviewer.gl.neural import NeuralPass
 
@@ -74,31 +91,57 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 frame["neural"] = neural.image()
                 neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
                                "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}
+            # Known good before anything is written: an earlier render in --out stays as it was otherwise.
+            _check_finite(scene, config, frame, (*BUFFERS, "neural", "vxgi", "vxgi_indirect"))
             ev = scene.exposure if exposure is None else exposure
-            out.mkdir(parents=True, exist_ok=True)
-            for name in BUFFERS:
-                imageio.write_exr(out / f"{name}.exr", frame[name])
-            imageio.write_png(out / "depth.png", imageio.depth_preview(frame["depth"]))
-            imageio.write_png(out / "normal.png", imageio.normal_preview(frame["normal"]))
-            imageio.write_png(out / "albedo.png", srgb8(frame["albedo"]))
-            imageio.write_png(out / "direct.png", compositor.to_ldr(frame["direct"], ev, tonemap))
-            if "neural" in frame:
-                imageio.write_exr(out / "neural.exr", frame["neural"])
-                imageio.write_png(out / "neural.png", compositor.to_ldr(frame["neural"], ev, tonemap))
             record = frame_record(scene, config, (width, height), seed=seed, split=split if seed is not None else None,
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
                                   display={"exposure": ev, "tonemap": tonemap}, neural=neural_info,
-                                  user_meshes=user_meshes)
+                                  user_meshes=user_meshes, **({"vxgi": vxgi_info} if vxgi_info else {}))
+            # All files under temporary names first, then renamed together: a failure part-way
+            # (a full disk) leaves the folder as it was.
+            with staged() as stage:
+                for name in BUFFERS:
+                    imageio.write_exr(stage(out / f"{name}.exr"), frame[name])
+                imageio.write_png(stage(out / "depth.png"), imageio.depth_preview(frame["depth"]))
+                imageio.write_png(stage(out / "normal.png"), imageio.normal_preview(frame["normal"]))
+                imageio.write_png(stage(out / "albedo.png"), srgb8(frame["albedo"]))
+                imageio.write_png(stage(out / "direct.png"), compositor.to_ldr(frame["direct"], ev, tonemap))
+                if "neural" in frame:
+                    imageio.write_exr(stage(out / "neural.exr"), frame["neural"])
+                    imageio.write_png(stage(out / "neural.png"), compositor.to_ldr(frame["neural"], ev, tonemap))
+                if "vxgi" in frame:
+                    for name in ("vxgi", "vxgi_indirect"):
+                        imageio.write_exr(stage(out / f"{name}.exr"), frame[name])
+                        imageio.write_png(stage(out / f"{name}.png"), compositor.to_ldr(frame[name], ev, tonemap))
+                imageio.write_text(stage(out / "frame.json"), dumps(record, indent=2))
         finally:
+            if vx is not None:
+                vx.release()
             if neural is not None:
                 neural.release()
             compositor.release()
             renderer.release()
-    imageio.write_text(out / "frame.json", json.dumps(record, indent=2))
-    bad = [n for n in (*BUFFERS, "neural") if n in frame and not np.all(np.isfinite(frame[n]))]
-    if bad:
-        raise DiviewerError(f"the GL renderer produced non-finite values in {', '.join(bad)}")
     return record
+
+
+def _check_finite(scene: Scene, config: FrameConfig, frame: dict, names) -> None:
+    """Refuse a frame with NaN/Inf in any buffer, naming the light or material that overflowed float32."""
+    bad = [n for n in names if n in frame and not np.all(np.isfinite(frame[n]))]
+    if not bad:
+        return
+    # The loader keeps every field within float32, but products (intensity / distance^2) can still
+    # overflow: point at the strongest emitter, which is what the user can change.
+    strengths = [(max(l.color) * (l.irradiance if hasattr(l, "irradiance") else l.intensity),
+                  f"lights[{i}].{'irradiance' if hasattr(l, 'irradiance') else 'intensity'}")
+                 for i, l in enumerate(config.lights)]
+    strengths += [(max(m.emission), f"materials.{k}.emission") for k, m in scene.materials.items()]
+    hint = ""
+    if strengths:
+        value, field = max(strengths)
+        hint = f"; the strongest emitter is {field} = {value:.3g}: lower it"
+    raise DiviewerError(f"the GL renderer produced non-finite values in {', '.join(bad)} (float32 overflow){hint}; "
+                        f"nothing was written", path=scene.path)
 
 
 REFERENCES = ("pt",)
@@ -140,9 +183,13 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         raise DiviewerError(f"must be at least 2 (2 = direct light only), got {depth}", field="--max-depth")
     scene = load_scene(scene_name)
     frame_json = out / "frame.json"
-    config = load_frame_json(scene, frame_json)
-    record = json.loads(frame_json.read_text())
-    width, height = record["resolution"]
+    data = read_frame_json(scene, frame_json)
+    config = config_from_dict(scene, data["config"], path=frame_json)
+    record = data
+    res = record.get("resolution")
+    if not (isinstance(res, list) and len(res) == 2 and all(isinstance(x, int) and x >= 1 for x in res)):
+        raise DiviewerError(f"expected [width, height], got {res!r}", path=frame_json, field="resolution")
+    width, height = res
 
     ref.select_variant()
     t0 = time.perf_counter()
@@ -173,18 +220,21 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         table["seconds"]["noise_floor"] = round(time.perf_counter() - t0, 4)
         table["noise_floor"] = ref.compare_renders(full, second, spp=table["spp"], seeds=(pt_seed, pt_seed + 1))
 
-    for name, im in images.items():
-        imageio.write_exr(out / f"{name}.exr", im)
-    display = record.get("display") or {}
-    ev, tonemap = float(display.get("exposure", scene.exposure)), display.get("tonemap", DEFAULT_TONEMAP)
-    with headless_context() as ctx:
+    display = record.get("display") if isinstance(record.get("display"), dict) else {}
+    ev, tonemap = display.get("exposure", scene.exposure), display.get("tonemap", DEFAULT_TONEMAP)
+    if isinstance(ev, bool) or not isinstance(ev, (int, float)) or not np.isfinite(ev):
+        raise DiviewerError(f"expected a finite number, got {ev!r}", path=frame_json, field="display.exposure")
+    if tonemap not in ("clamp", "reinhard", "aces"):
+        raise DiviewerError(f"expected clamp, reinhard or aces, got {tonemap!r}", path=frame_json, field="display.tonemap")
+    record["reference"] = table
+    with headless_context() as ctx, staged() as stage:
         compositor = DisplayPass(ctx, ShaderCache(ctx))
         try:
             for name, im in images.items():
+                imageio.write_exr(stage(out / f"{name}.exr"), im)
                 # Noise can make single indirect pixels slightly negative; the preview clamps, the EXR does not.
-                imageio.write_png(out / f"{name}.png", compositor.to_ldr(np.maximum(im, 0.0), ev, tonemap))
+                imageio.write_png(stage(out / f"{name}.png"), compositor.to_ldr(np.maximum(im, 0.0), float(ev), tonemap))
         finally:
             compositor.release()
-    record["reference"] = table
-    imageio.write_text(frame_json, json.dumps(record, indent=2))
+        imageio.write_text(stage(frame_json), dumps(record, indent=2))
     return table

@@ -55,10 +55,41 @@ def _metadata(session, path: Path) -> dict:
         meta = json.loads(props[META_KEY])
     except json.JSONDecodeError as exc:
         raise DiviewerError(f"the model's metadata is not valid JSON: {exc}", path=path, field=META_KEY) from exc
+    if not isinstance(meta, dict):
+        raise DiviewerError(f"the model's metadata is not a JSON object", path=path, field=META_KEY)
     missing = [k for k in REQUIRED_META if k not in meta]
     if missing:
         raise DiviewerError(f"the model's metadata lacks {', '.join(missing)}", path=path, field=META_KEY)
+    _check_meta_types(meta, path)
     return meta
+
+
+def _is_int(v, lo: int = 0) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= lo
+
+
+def _check_meta_types(meta: dict, path: Path) -> None:
+    """Refuse metadata of the wrong types (a hand-edited or foreign model) before anything divides by it."""
+    checks = {
+        "format": _is_int(meta["format"]),
+        "input": isinstance(meta["input"], str), "output": isinstance(meta["output"], str),
+        "layout": isinstance(meta["layout"], str),
+        "channels": isinstance(meta["channels"], list) and all(isinstance(c, (list, tuple)) for c in meta["channels"]),
+        "resolution": isinstance(meta["resolution"], list) and len(meta["resolution"]) == 2
+        and all(_is_int(x, 1) for x in meta["resolution"]),
+        # sizes are checked modulo this: zero would divide by zero, and the U-Net halves it per level
+        "multiple": _is_int(meta["multiple"], 1) and meta["multiple"] & (meta["multiple"] - 1) == 0,
+        "K": _is_int(meta["K"]), "levels": _is_int(meta["levels"]),  # 0: a baseline without a network
+        "target": meta["target"] in ("full", "indirect"),
+        "encoding": isinstance(meta["encoding"], dict) and _is_int(meta["encoding"].get("version", 0)),
+        "precision": meta["precision"] in ("fp32", "fp16"),
+        "scene": isinstance(meta["scene"], str), "scene_hash": isinstance(meta["scene_hash"], str),
+        "dataset_hash": isinstance(meta["dataset_hash"], str),
+    }
+    bad = [k for k, ok in checks.items() if not ok]
+    if bad:
+        raise DiviewerError(f"the model's metadata has a wrong value for {bad[0]}: {meta[bad[0]]!r}", path=path,
+                            field=f"{META_KEY}.{bad[0]}")
 
 
 def check_compatible(meta: dict, path: Path, scene=None) -> None:
@@ -134,6 +165,10 @@ class NeuralGI:
         self.resolution = tuple(int(x) for x in self.meta["resolution"])
         self.timer = StageTimer()
         """Times ``inference`` (the session's run alone) unless ``run`` is given the caller's timer."""
+        self.nonfinite_inputs = 0
+        """Input values of the last frame that were NaN or infinite (the graph's encoding maps them to 0)."""
+        self.nonfinite_outputs = 0
+        """Output values of the last frame that were NaN or infinite (left in place: the display flags them)."""
 
     @property
     def file_sha256(self) -> str:
@@ -152,9 +187,26 @@ class NeuralGI:
         if x.dtype != np.float32 or not x.flags.c_contiguous:
             x = np.ascontiguousarray(x, dtype=np.float32)
         self.check_size(x.shape[2], x.shape[1])
+        # Counted, not replaced: the exported graph's encoding maps non-finite network inputs to 0, and
+        # what the graph returns non-finite (a NaN in the direct light it adds) stays visible where it
+        # arose (the display flags it) instead of being hidden; the counts say how many.
+        self.nonfinite_inputs = count_nonfinite(x)
         with (timer or self.timer).stage("inference"):
             (y,) = self.session.run([OUTPUT_NAME], {INPUT_NAME: x})
+        self.nonfinite_outputs = count_nonfinite(y)
+        # Radiance is never negative: the runtime clamps (models exported before the graph did so,
+        # e.g. an indirect-target model's undershoot, would otherwise darken the composite below 0).
+        # np.maximum keeps NaN, so a broken pixel stays broken.
+        np.maximum(y, 0.0, out=y)
         return y[0] if single else y
+
+
+def count_nonfinite(x: np.ndarray) -> int:
+    """How many values of ``x`` are NaN or infinite, in one pass without a mask when there are none."""
+    # A float64 sum of float32 values cannot overflow, and it is NaN/Inf exactly when an element is.
+    if np.isfinite(np.add.reduce(x, axis=None, dtype=np.float64)):
+        return 0
+    return int(x.size - np.count_nonzero(np.isfinite(x)))
 
 
 def pack_buffers(frame: dict[str, np.ndarray]) -> np.ndarray:

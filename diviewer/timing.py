@@ -33,6 +33,18 @@ class StageTimer:
         self.times: dict[str, float] = {}
         self._queries: dict[str, Any] = {}
 
+    @property
+    def enabled(self) -> bool:
+        """Whether GL stages are timed at all."""
+        return self.sync is not None or self.gpu_query is not None
+
+    @property
+    def method(self) -> str:
+        """How GL stages are timed, in words (the panel's and the stats JSON's)."""
+        if self.sync is not None:
+            return "wall clock around a GPU sync"
+        return "GPU timer queries" if self.gpu_query is not None else "off"
+
     def reset(self) -> dict[str, float]:
         """Start a new frame; returns the last frame's times."""
         last, self.times = self.times, {}

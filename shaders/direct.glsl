@@ -1,13 +1,17 @@
 // Direct light, deferred: one additive pass per light (Lambert, shadow-mapped with PCF), plus one
 // EMISSION pass. Radiance of a diffuse surface: albedo / pi * E * cos(theta) for a directional light
 // of irradiance E; albedo / pi * I * cos(theta) / r^2 for a point light of intensity I (Mitsuba's).
+// With SHADOW_LOOKUP defined (and no stage macro), only the uniforms and visibility() are compiled:
+// the VXGI injection (vxgi_inject.glsl) includes this file so that both shadow the same way.
 #if defined VERTEX_SHADER
 #include "fullscreen.glsl"
-#elif defined FRAGMENT_SHADER
+#elif defined FRAGMENT_SHADER || defined SHADOW_LOOKUP
 
 const float PI = 3.14159265358979;
 
+#if !defined SHADOW_LOOKUP
 in vec2 v_uv;
+#endif
 
 uniform sampler2D u_depth;
 uniform sampler2D u_normal;
@@ -37,7 +41,9 @@ uniform mat4 m_faces[6];          // world -> clip of each cube face
 uniform float u_face_size;        // tile size in texels
 #endif
 
+#if !defined SHADOW_LOOKUP
 out vec4 out_color;
+#endif
 
 #if defined DIRECTIONAL
 float visibility(vec3 p, vec3 n, float cos_t) {
@@ -86,6 +92,7 @@ float visibility(vec3 p, vec3 n, float cos_t) {
 }
 #endif
 
+#if !defined SHADOW_LOOKUP
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
     float depth = texelFetch(u_depth, px, 0).r;
@@ -114,5 +121,6 @@ void main() {
     out_color = vec4(albedo / PI * e * (cos_t * v), 1.0);
 #endif
 }
+#endif  // !SHADOW_LOOKUP
 
 #endif

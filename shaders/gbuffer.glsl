@@ -31,7 +31,10 @@ in vec2 v_uv;
 uniform vec3 u_albedo;
 uniform vec3 u_emission;
 uniform bool u_has_texture;
-uniform sampler2D u_albedo_map;
+uniform sampler2D u_albedo_map;  // linear RGB, alpha = cut-out mask (1 where the material has none)
+#if defined ALPHA_TEST
+uniform float u_alpha_cutoff;
+#endif
 
 layout(location = 0) out float out_depth;
 layout(location = 1) out vec4 out_normal;
@@ -42,8 +45,11 @@ void main() {
     vec3 n = normalize(v_normal);
     // Surfaces are two-sided: a back face is lit and shaded as the side the camera sees.
     if (!gl_FrontFacing) n = -n;
-    vec3 albedo = u_albedo;
-    if (u_has_texture) albedo *= texture(u_albedo_map, v_uv).rgb;
+    vec4 texel = u_has_texture ? texture(u_albedo_map, v_uv) : vec4(1.0);
+#if defined ALPHA_TEST
+    if (texel.a < u_alpha_cutoff) discard;  // glTF alphaMode MASK: the surface is not there
+#endif
+    vec3 albedo = u_albedo * texel.rgb;
     out_depth = -v_pos.z;
     out_normal = vec4(n, 1.0);
     out_albedo = vec4(albedo, 1.0);

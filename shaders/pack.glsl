@@ -1,5 +1,9 @@
 // Packs the G-buffer into the neural model's input: float32 NHWC, rows top first, in one storage
-// buffer, so the CPU reads it once and reshuffles nothing. The channel layout is not written here:
+// buffer, so the CPU reads it once and reshuffles nothing. The G-buffer is at the window's resolution
+// (u_src_size), the model's input at the GI resolution (u_size): each GI texel takes the full-resolution
+// pixel nearest its centre (what a render at the GI resolution samples, as the training captures did),
+// or with AREA defined the mean of the pixels whose centres fall in its footprint for normal, albedo and
+// direct light (depth stays the nearest pixel's: a mean of two surfaces' depths is no surface's). The channel layout is not written here:
 // gl/neural.py injects it from diviewer.encoding.INPUT_CHANNELS as defines (IN_CHANNELS, the total,
 // IN_<NAME>, where each buffer starts, and IN_<NAME>_N, its component count, checked below).
 #if defined COMPUTE_SHADER
@@ -17,7 +21,8 @@ uniform sampler2D u_depth;
 uniform sampler2D u_normal;
 uniform sampler2D u_albedo;
 uniform sampler2D u_direct;
-uniform ivec2 u_size;
+uniform ivec2 u_size;       // GI resolution (the packed image's)
+uniform ivec2 u_src_size;   // the G-buffer's resolution
 
 layout(std430, binding = 0) writeonly buffer Packed { float data[]; };
 
@@ -25,10 +30,30 @@ void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= u_size.x || p.y >= u_size.y) return;
     int base = ((u_size.y - 1 - p.y) * u_size.x + p.x) * IN_CHANNELS;
-    vec3 n = texelFetch(u_normal, p, 0).xyz;
-    vec3 a = texelFetch(u_albedo, p, 0).rgb;
-    vec3 d = texelFetch(u_direct, p, 0).rgb;
-    data[base + IN_DEPTH] = texelFetch(u_depth, p, 0).r;
+    vec2 scale = vec2(u_src_size) / vec2(u_size);
+    ivec2 q = clamp(ivec2((vec2(p) + 0.5) * scale), ivec2(0), u_src_size - 1);
+    vec3 n = texelFetch(u_normal, q, 0).xyz;
+    vec3 a = texelFetch(u_albedo, q, 0).rgb;
+    vec3 d = texelFetch(u_direct, q, 0).rgb;
+#if defined AREA
+    // Pixels whose centres lie in [p, p + 1) * scale; none when the GI is finer than the G-buffer.
+    ivec2 lo = ivec2(ceil(vec2(p) * scale - 0.5));
+    ivec2 hi = min(ivec2(ceil((vec2(p) + 1.0) * scale - 0.5)), u_src_size);
+    if (all(greaterThan(hi, lo))) {
+        vec3 sn = vec3(0.0), sa = vec3(0.0), sd = vec3(0.0);
+        for (int y = lo.y; y < hi.y; ++y)
+            for (int x = lo.x; x < hi.x; ++x) {
+                sn += texelFetch(u_normal, ivec2(x, y), 0).xyz;
+                sa += texelFetch(u_albedo, ivec2(x, y), 0).rgb;
+                sd += texelFetch(u_direct, ivec2(x, y), 0).rgb;
+            }
+        float count = float((hi.x - lo.x) * (hi.y - lo.y));
+        n = dot(sn, sn) > 0.0 ? normalize(sn) : vec3(0.0);
+        a = sa / count;
+        d = sd / count;
+    }
+#endif
+    data[base + IN_DEPTH] = texelFetch(u_depth, q, 0).r;
     data[base + IN_NORMAL] = n.x; data[base + IN_NORMAL + 1] = n.y; data[base + IN_NORMAL + 2] = n.z;
     data[base + IN_ALBEDO] = a.r; data[base + IN_ALBEDO + 1] = a.g; data[base + IN_ALBEDO + 2] = a.b;
     data[base + IN_DIRECT] = d.r; data[base + IN_DIRECT + 1] = d.g; data[base + IN_DIRECT + 2] = d.b;

@@ -94,8 +94,9 @@ def test_onnx_model_matches_numpy_and_follows_the_runtime_contract(tmp_path):
     y = net.run(pack_buffers(f))
     expected = predict(np.array(card["weights"]["A"]), np.array(card["weights"]["B"]), f["depth"], f["normal"],
                        f["albedo"], f["direct"], 10.0)
-    np.testing.assert_allclose(y, expected, rtol=1e-5, atol=1e-5)
-    np.testing.assert_allclose(y, f["pt"], atol=1e-3)  # and the truth, which this data lets it represent
+    # the runtime clamps radiance at 0 (diviewer.runtime); the synthetic truth may dip below it
+    np.testing.assert_allclose(y, np.maximum(expected, 0.0), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(y, np.maximum(f["pt"], 0.0), atol=1e-3)  # and the truth, which this data lets it represent
     assert json.loads(out.with_suffix(".json").read_text())["fit"]["frames"] == 4
     batch = net.run(np.stack([pack_buffers(f)] * 2))  # any batch and size (multiple 1)
     assert batch.shape == (2, 16, 16, 3)

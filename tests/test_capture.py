@@ -148,6 +148,21 @@ def test_shards_merge_into_the_whole(gl_context, tmp_path):
     assert Dataset(merged).check() == []
 
 
-def test_vxgi_ground_truth_is_refused_until_it_exists(tmp_path):
-    with pytest.raises(DiviewerError, match="VXGI"):
-        capture("cornell", tmp_path / "v", CaptureSettings(frames=1, gt="vxgi", **TINY), log=lambda *_: None)
+def test_vxgi_ground_truth_in_the_same_format(tmp_path):
+    """--gt vxgi: the VXGI image in the pt channels, GL direct in pt_direct, settings in the manifest."""
+    out = tmp_path / "v"
+    settings = CaptureSettings(frames=3, gt="vxgi", vxgi_resolution=32, **TINY)
+    capture("cornell", out, settings, log=lambda *_: None)
+    ds = Dataset(out)
+    assert ds.check() == [] and len(ds.indices()) == 3
+    assert ds.manifest["gt"] == "vxgi" and ds.manifest["vxgi"]["resolution"] == 32
+    for i in ds.indices():
+        f = ds.load(i)
+        assert np.all(np.isfinite(f["pt"]))
+        np.testing.assert_array_equal(f["pt_direct"], f["direct"])
+        indirect = f["pt"] - f["pt_direct"]
+        assert indirect.min() >= -1e-3 and indirect.mean() > 1e-3  # float16 rounding aside, light was added
+    # resumable like any capture: nothing left to render
+    assert capture("cornell", out, settings, log=lambda *_: None)["rendered"] == 0
+    with pytest.raises(DiviewerError, match="--gt"):
+        capture("cornell", tmp_path / "w", CaptureSettings(frames=1, gt="nope", **TINY), log=lambda *_: None)

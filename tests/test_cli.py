@@ -21,7 +21,7 @@ FILES = ["depth.exr", "normal.exr", "albedo.exr", "direct.exr", "depth.png", "no
          "direct.png", "frame.json"]
 
 
-@pytest.mark.parametrize("scene", ["cornell", "atrium"])
+@pytest.mark.parametrize("scene", ["cornell", "sponza", "atrium"])
 def test_render_writes_buffers_and_frame_json(gl_context, tmp_path, scene):
     out = tmp_path / scene
     assert main(["render", "--scene", scene, "--res", "64", "--out", str(out)]) == 0

@@ -14,7 +14,8 @@ from diviewer.cli import main  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 from diviewer.runtime import NeuralGI, read_metadata  # noqa: E402
 from diviewer.train.export import ExportSettings, export, gi_module, info  # noqa: E402
-from diviewer.train.trainer import build_generator_from_checkpoint, train  # noqa: E402
+from diviewer.train.checkpoint import build_generator_from_checkpoint  # noqa: E402
+from diviewer.train.trainer import train  # noqa: E402
 from test_train import make_dataset, quiet, tiny  # noqa: E402
 
 
@@ -40,6 +41,11 @@ def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, t
         assert key in meta, key
     assert meta["target"] == target and meta["precision"] == "fp32"
     assert json.loads(out.with_suffix(".json").read_text()) == meta
+    # the recipe: how to capture and train it again (tools/build_shipped_model.py reads it)
+    recipe = meta["recipe"]
+    assert recipe["capture"]["spp"] == 4 and recipe["capture"]["frames"] == 10
+    assert recipe["train"]["K"] == 4 and recipe["train"]["target"] == target and "device" not in recipe["train"]
+    assert recipe["net"]["K"] == 4
     # the runtime's output equals the torch module's on new buffers, at the trained size and larger
     netG, enc, m = build_generator_from_checkpoint(checkpoints[target])
     module = gi_module(netG, enc, m)
@@ -57,7 +63,7 @@ def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, t
 
 def test_indirect_model_adds_the_exact_direct_light(checkpoints, tmp_path):
     """With the indirect target the graph returns the input's direct light + netG's decoded indirect."""
-    from diviewer.encoding import decode_radiance, encode_inputs
+    from diviewer.train.encoding_torch import decode_radiance, encode_inputs
 
     out = tmp_path / "i.onnx"
     export(checkpoints["indirect"], out, log=quiet)
@@ -70,7 +76,8 @@ def test_indirect_model_adds_the_exact_direct_light(checkpoints, tmp_path):
     with torch.no_grad():
         indirect = decode_radiance(netG(encode_inputs(t[:, 0:1], t[:, 1:4], t[:, 4:7], t[:, 7:10], enc, channel_axis=1)),
                                    enc).permute(0, 2, 3, 1).numpy()
-    np.testing.assert_allclose(y, x[..., 7:10] + indirect, rtol=1e-4, atol=1e-6)
+    # radiance is clamped at 0 (in the graph and the runtime): an undershooting indirect never darkens below black
+    np.testing.assert_allclose(y, np.maximum(x[..., 7:10] + indirect, 0.0), rtol=1e-4, atol=1e-6)
 
 
 def test_fp16_export_is_finite_and_close(checkpoints, tmp_path):
@@ -120,7 +127,7 @@ def test_bad_checkpoint_is_refused(tmp_path, capsys):
 def test_eval_of_the_exported_model_reproduces_training_validation(checkpoints, tmp_path):
     """`diviewer eval` (onnxruntime, torch-free) scores the val split as training's validation did."""
     from diviewer.evaluate import evaluate
-    from diviewer.train.trainer import load_checkpoint
+    from diviewer.train.checkpoint import load_checkpoint
 
     out = tmp_path / "m.onnx"
     export(checkpoints["indirect"], out, log=quiet)
@@ -149,11 +156,12 @@ def test_each_option_exports_and_matches_torch(upsample, norm):
     peak for the full target and for indirect / albedo, whose composition the graph must carry."""
     import onnxruntime as ort
 
-    from diviewer.encoding import Encoding, decode_radiance, encode_inputs
+    from diviewer.encoding import Encoding
+    from diviewer.train.encoding_torch import decode_radiance, encode_inputs
     from diviewer.train.export import OPSET, onnx_bytes
     from diviewer.train.losses import reconstruction_loss
     from diviewer.train.networks import NetConfig, init_weights
-    from diviewer.train.trainer import ALBEDO_FLOOR
+    from diviewer.train.targets import ALBEDO_FLOOR
 
     torch.manual_seed(0)
     netG = init_weights(NetConfig(K=4, resolution=32, upsample=upsample, norm=norm).build_generator())
@@ -186,7 +194,9 @@ def test_each_option_exports_and_matches_torch(upsample, norm):
             with torch.no_grad():
                 irradiance = decode_radiance(netG(encode_inputs(t[:, 0:1], t[:, 1:4], t[:, 4:7], t[:, 7:10], enc,
                                                                 channel_axis=1)), enc)
-            expected = (t[:, 7:10] + irradiance * t[:, 4:7].clamp(min=ALBEDO_FLOOR)).permute(0, 2, 3, 1).numpy()
+            # ... and clamps at 0: radiance is never negative
+            expected = (t[:, 7:10] + irradiance * t[:, 4:7].clamp(min=ALBEDO_FLOOR)).clamp(min=0.0)
+            expected = expected.permute(0, 2, 3, 1).numpy()
             got = session.run(None, {"buffers": frames})[0]
             np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
 
@@ -195,7 +205,7 @@ def _rewrite_checkpoint(src, dst, upsample=None, norm=None, drop_options=False, 
     """A copy of a trained checkpoint whose generator is rebuilt with other options (or whose records
     lack the option keys, as checkpoints written before they existed do)."""
     from diviewer.train.networks import UnetGenerator, init_weights
-    from diviewer.train.trainer import load_checkpoint
+    from diviewer.train.checkpoint import load_checkpoint
 
     ckpt = load_checkpoint(src)
     args = dict(ckpt["model_args"])

@@ -165,7 +165,7 @@ def test_direct_is_linear_in_light_intensity(ctx, scale):
     np.testing.assert_allclose(f2["direct"], f1["direct"] * scale, rtol=1e-5)
 
 
-@pytest.mark.parametrize("near,far", [(1e-4, 1e4), (2.9, 3.1)])
+@pytest.mark.parametrize("near,far", [(1e-4, 10.0), (1e-1, 1e4), (2.9, 3.1)])  # far/near up to MAX_FAR_NEAR
 def test_extreme_near_far_planes(ctx, near, far):
     f = render(ctx, facing_plane(distance=3.0, near=near, far=far))
     np.testing.assert_allclose(f["depth"], 3.0, rtol=1e-4)
@@ -283,3 +283,29 @@ def test_passes_are_timed_by_the_shared_timer(ctx, how):
         plain.release()
         r.release()
         timer.release()
+
+
+def test_shadow_map_is_cached_until_the_light_or_an_object_moves(ctx):
+    """The shadow pass renders a light's map only when the light, an object or the settings changed; the cached
+    map gives the same image."""
+    scene = facing_plane(lights=[{"name": "sun", "type": "directional", "direction": [0.3, -0.4, -1.0]}],
+                         extra_objects=[{"name": "box", "mesh": "wall", "material": "occ", "position": [0, 0, -1.5],
+                                         "scale": [0.1, 0.1, 0.1]}])
+    r = Renderer(ctx, scene, RES, RES, RenderSettings(shadow_size=256))
+    try:
+        config = scene.default
+        first = r.frame(config)["direct"]
+        assert r.shadow_renders == 1
+        np.testing.assert_array_equal(r.frame(config)["direct"], first)  # nothing moved: the cached map
+        assert r.shadow_renders == 1
+        turned = dataclasses.replace(config.camera, fov=config.camera.fov * 0.9)
+        r.frame(dataclasses.replace(config, camera=turned))  # the camera alone: still cached
+        assert r.shadow_renders == 1
+        r.frame(config.replace_light("sun", direction=(0.35, -0.4, -1.0)))
+        assert r.shadow_renders == 2
+        r.frame(config.replace_object("box", position=(0.2, 0.0, -1.5)))
+        assert r.shadow_renders == 3
+        r.frame(config.replace_object("box", position=(0.2, 0.0, -1.5)))
+        assert r.shadow_renders == 3
+    finally:
+        r.release()

@@ -8,7 +8,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from diviewer.encoding import Encoding, decode_radiance, encode_radiance  # noqa: E402
+from diviewer.encoding import Encoding  # noqa: E402
+from diviewer.train.encoding_torch import decode_radiance, encode_radiance  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 from diviewer.train import networks  # noqa: E402
 from diviewer.train.losses import (  # noqa: E402

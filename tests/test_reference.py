@@ -348,8 +348,10 @@ def test_old_libllvm_is_not_tried(monkeypatch, tmp_path):
     old = tmp_path / "libLLVM-15.so"
     old.write_bytes(b"")
     monkeypatch.setenv("DRJIT_LIBLLVM_PATH", str(old))
-    monkeypatch.setattr(ref, "_probe_llvm", lambda path: pytest.fail("probed an LLVM 15"))
-    info = ref._choose_llvm(mitsuba)
+    from diviewer.reference import variant
+
+    monkeypatch.setattr(variant, "_probe_llvm", lambda path: pytest.fail("probed an LLVM 15"))
+    info = variant._choose_llvm(mitsuba)
     assert info.variant == "scalar_rgb" and "LLVM 15" in info.reason
 
 
@@ -357,6 +359,22 @@ def test_variant_is_reported(variant):
     info = ref.variant_info()
     assert info.variant == variant in ref.VARIANTS and info.reason
     assert (info.libllvm is not None) == (variant == "llvm_ad_rgb")
+
+
+def test_retarget_renders_as_a_fresh_load(scenes):
+    """load_frame keeps the loaded scene when only camera and lights move; the images are a fresh load's."""
+    from diviewer.scene import sample_config
+
+    s = scenes["cornell"]
+    moved = dataclasses.replace(sample_config(s, 3), objects=s.default.objects)
+    moved = dataclasses.replace(moved, camera=dataclasses.replace(moved.camera, position=(0.1, 1.1, 3.3)))
+    first = ref.load_frame(s, s.default, 24, 16)
+    again = ref.load_frame(s, moved, 24, 16)
+    assert again is first and again.config == moved
+    fresh = ref.MitsubaFrame(s, moved, 24, 16)
+    np.testing.assert_array_equal(again.full(4, 1), fresh.full(4, 1))
+    np.testing.assert_array_equal(again.direct(4, 1), fresh.direct(4, 1))
+    assert ref.load_frame(s, sample_config(s, 4), 24, 16) is not first  # another object pose: a fresh load
 
 
 # --- the command -----------------------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ from diviewer.scene import load_scene, sample_config
 from diviewer.scene.loader import config_from_dict
 from diviewer.scene.sampler import matrix_to_euler_xyz
 
-SHIPPED = ["cornell", "atrium"]
+SHIPPED = ["cornell", "sponza", "atrium"]
 
 
 @pytest.mark.parametrize("name", SHIPPED)

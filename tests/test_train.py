@@ -7,6 +7,7 @@ import csv
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -21,29 +22,23 @@ from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, Dataset, wri
 from diviewer.encoding import fit_exposure  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 from diviewer.train import trainer  # noqa: E402
-from diviewer.train.trainer import (  # noqa: E402
-    CSV_COLUMNS,
-    TrainConfig,
-    add_train_parser,
-    build_generator_from_checkpoint,
-    compose_radiance,
-    epoch_batches,
-    load_checkpoint,
-    run_train,
-    target_radiance,
-    train,
-    validate,
-)
+from diviewer.train.checkpoint import build_generator_from_checkpoint, load_checkpoint  # noqa: E402
+from diviewer.train.cli import add_train_parser, run_train  # noqa: E402
+from diviewer.train.config import TrainConfig  # noqa: E402
+from diviewer.train.distributed import epoch_batches  # noqa: E402
+from diviewer.train.report import CSV_COLUMNS, validate  # noqa: E402
+from diviewer.train.targets import ALBEDO_FLOOR, compose_radiance, target_radiance  # noqa: E402
+from diviewer.train.trainer import train  # noqa: E402
 
 RES = 32
 FAR = 10.0
 SPLITS = ["train"] * 8 + ["val"] * 2
 
 
-def _frame(seed: int) -> np.ndarray:
+def _frame(seed: int, res: int = RES) -> np.ndarray:
     """Smooth analytic buffers: a curved surface facing the camera, lit by a light that moves with the seed."""
     rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:RES, 0:RES] / (RES - 1.0)
+    yy, xx = np.mgrid[0:res, 0:res] / (res - 1.0)
     geometry = (xx - 0.1) ** 2 + (yy - 0.1) ** 2 > 0.04  # a background corner
     depth = np.where(geometry, 2.0 + xx + 0.5 * yy, 0.0)
     n = np.stack([xx - 0.5, yy - 0.5, np.ones_like(xx)], -1)
@@ -60,22 +55,23 @@ def _frame(seed: int) -> np.ndarray:
     return np.concatenate(planes, -1).astype(np.float16)
 
 
-def make_dataset(root: Path, scene: str = "synthetic", seed0: int = 0) -> Dataset:
+def make_dataset(root: Path, scene: str = "synthetic", seed0: int = 0, res: int = RES,
+                 splits: list[str] = SPLITS) -> Dataset:
     """A dataset folder like `diviewer capture` writes, with analytic frames (no GL, no Mitsuba)."""
     root.mkdir(parents=True)
     frames = [{"index": i, "split": s, "seed": seed0 + i,
                "config": {"camera": {"position": [0, 0, 5], "near": 0.05, "far": FAR}, "lights": [], "objects": []}}
-              for i, s in enumerate(SPLITS)]
+              for i, s in enumerate(splits)]
     manifest = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "scene": scene, "scene_hash": f"hash-of-{scene}",
-        "resolution": [RES, RES], "channels": [list(c) for c in CHANNELS], "dtype": "float16", "gt": "pt",
+        "resolution": [res, res], "channels": [list(c) for c in CHANNELS], "dtype": "float16", "gt": "pt",
         "spp": 4, "max_depth": 4, "seed": seed0, "frames": len(frames), "split_fractions": [0.8, 0.2, 0.0],
         "render_settings": {}, "frame_list": frames,
     }
     (root / "manifest.json").write_text(json.dumps(manifest))
     ds = Dataset(root)
     for f in frames:
-        write_frame(ds, f["index"], _frame(f["seed"]), {"index": f["index"], "split": f["split"]})
+        write_frame(ds, f["index"], _frame(f["seed"], res), {"index": f["index"], "split": f["split"]})
     return ds
 
 
@@ -170,7 +166,7 @@ def test_rebuilt_generator_reproduces_the_recorded_validation(run, data):
     ds = Dataset(data)
     _, val = ds.array("val")
     cfg = TrainConfig.from_dict(ckpt["config"])
-    again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"), amp=False)
+    again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"))
     assert again == pytest.approx(ckpt["val"], rel=1e-6)  # the weights that produced the recorded metrics
     x = torch.randn(2, 10, RES, RES)
     netG2, _, _ = build_generator_from_checkpoint(out / "best.ckpt")
@@ -211,12 +207,13 @@ def test_resume_equals_continuous_training(data, tmp_path):
 
 def test_ctrl_c_saves_at_a_step_boundary_and_resumes_exactly(run, data, tmp_path, monkeypatch):
     straight_out, straight = run  # the same settings, run straight through
+    found = signal.getsignal(signal.SIGINT)  # SIG_IGN when the suite runs in the background (nohup, &)
     calls = []
     real_split = trainer.split_batch
 
     def split_then_interrupt(*args, **kw):
         calls.append(1)
-        if len(calls) == 4:  # steps 1, 2, the validation after epoch 1, then inside step 3
+        if len(calls) == 3:  # the training loop's batches: steps 1, 2, then inside step 3
             os.kill(os.getpid(), signal.SIGINT)
         return real_split(*args, **kw)
 
@@ -224,7 +221,7 @@ def test_ctrl_c_saves_at_a_step_boundary_and_resumes_exactly(run, data, tmp_path
     with pytest.raises(KeyboardInterrupt):
         train(tiny(data, tmp_path / "b", epochs=2), log=quiet)
     monkeypatch.setattr(trainer, "split_batch", real_split)
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handlers restored
+    assert signal.getsignal(signal.SIGINT) is found  # the handler the trainer found is back
     assert load_checkpoint(tmp_path / "b" / "last.ckpt")["step"] == 3  # step 3 finished, then saved
     rest = train(tiny(data, tmp_path / "b", epochs=2), resume=True, log=quiet)
     assert [r["step"] for r in rest["losses"]] == [4]
@@ -293,7 +290,7 @@ def test_target_and_composition_invert_each_other():
         np.testing.assert_allclose(yt.numpy(), y, rtol=1e-12)
     # divided by albedo: where the albedo is tiny the divisor is the floor, so noise is not amplified
     y = target_radiance(pt, pt_direct, albedo, "indirect", True)
-    assert np.abs(y).max() <= np.abs(pt - pt_direct).max() / trainer.ALBEDO_FLOOR + 1e-12
+    assert np.abs(y).max() <= np.abs(pt - pt_direct).max() / ALBEDO_FLOOR + 1e-12
 
 
 def test_epoch_batches_are_a_pure_function_and_ranks_partition_them():
@@ -364,3 +361,133 @@ def test_config_validation_names_the_field(tmp_path):
         TrainConfig(data=tmp_path, out=tmp_path, batch_size=0)
     cfg = TrainConfig(data=tmp_path, out=tmp_path / "r", K=16, max_steps=5)
     assert TrainConfig.from_dict(cfg.to_dict()) == cfg
+
+
+def test_a_folder_left_from_an_earlier_run_is_not_replaced(run, data, tmp_path, capsys):
+    """best.ckpt (or metrics.csv, curves.png) without last.ckpt: refused, with or without --resume."""
+    from diviewer.cli import main
+
+    out = tmp_path / "old"
+    out.mkdir()
+    best = out / "best.ckpt"
+    shutil.copyfile(run[0] / "best.ckpt", best)
+    before = best.read_bytes()
+    for resume in (False, True):
+        with pytest.raises(DiviewerError, match="best.ckpt.*earlier run"):
+            train(tiny(data, out, epochs=1), resume=resume, log=quiet)
+    argv = ["train", "--data", str(data), "--out", str(out), "--k", "4", "--ndf", "8", "--device", "cpu"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "best.ckpt" in err[0] and "Traceback" not in err[0]
+    assert best.read_bytes() == before and sorted(p.name for p in out.iterdir()) == ["best.ckpt"]
+
+
+def test_an_untrainable_dataset_is_refused_before_the_run_folder_exists(tmp_path):
+    small = tmp_path / "small"
+    make_dataset(small, res=16)
+    out = tmp_path / "run16"
+    with pytest.raises(DiviewerError, match=r"16x16.*at least 24 px"):
+        train(tiny(small, out), log=quiet)
+    assert not out.exists()
+
+
+def test_resumed_epoch_rows_average_only_their_own_epoch(run, data, tmp_path):
+    """After a resume from an epoch end, the next row's losses are that epoch's alone (issue 17 #10)."""
+    straight_out, _ = run
+    train(tiny(data, tmp_path / "r", epochs=1), log=quiet)
+    assert load_checkpoint(tmp_path / "r" / "last.ckpt")["accum"]["n"] == 0  # saved after the sums were reset
+    train(tiny(data, tmp_path / "r", epochs=2), resume=True, log=quiet)
+    rows_a, rows_b = read_csv(straight_out / "metrics.csv"), read_csv(tmp_path / "r" / "metrics.csv")
+    assert [r["step"] for r in rows_b] == ["2", "4"]
+    for ra, rb in zip(rows_a, rows_b, strict=True):
+        for k in ("loss_D", "loss_G_GAN", "loss_G_L1"):
+            assert float(rb[k]) == pytest.approx(float(ra[k]), rel=1e-5), k
+
+
+@pytest.mark.parametrize("options", [
+    {"gan_weight": 0.0},
+    {"gan_weight": 0.5, "gan_mode": "lsgan"},
+    {"recon_loss": "l2", "recon_space": "linear"},
+    {"recon_loss": "l1", "recon_space": "linear"},
+    {"n_layers_D": 2, "norm_D": "instance", "d_lr": 8e-4},
+    {"upsample": "resize", "norm": "instance"},
+    {"upsample": "shuffle", "norm": "none"},
+    {"precision": "bf16"},
+], ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()))
+def test_each_training_option_trains_and_is_recorded(data, tmp_path, options):
+    result = train(tiny(data, tmp_path / "o", epochs=1, **options), log=quiet)
+    assert result["step"] == 2 and math.isfinite(result["val"]["ssim_tm"])
+    ckpt = load_checkpoint(tmp_path / "o" / "last.ckpt")
+    for k, v in options.items():
+        assert ckpt["config"][k] == v, k
+    net = ckpt["net_config"]
+    assert (net["upsample"], net["norm"], net["norm_D"], net["n_layers_D"]) == (
+        options.get("upsample", "transpose"), options.get("norm", "batch"), options.get("norm_D", "batch"),
+        options.get("n_layers_D", 3))
+    assert ckpt["loss_config"]["reconstruction"] == options.get("recon_loss", "l1")
+    rows = read_csv(tmp_path / "o" / "metrics.csv")
+    adversarial = options.get("gan_weight", 1.0) > 0
+    for k in ("loss_D", "loss_G_GAN", "D_acc_real", "D_acc_fake"):
+        assert (rows[-1][k] != "") == adversarial, k
+    if adversarial:
+        assert 0 <= float(rows[-1]["D_acc_real"]) <= 1 and 0 <= float(rows[-1]["D_acc_fake"]) <= 1
+    netG, _, _ = build_generator_from_checkpoint(ckpt)  # the generator rebuilds with its options
+    assert (netG.upsample, netG.norm) == (net["upsample"], net["norm"])
+
+
+def test_gan_weight_zero_leaves_netD_untouched(data, tmp_path):
+    train(tiny(data, tmp_path / "g0", epochs=1, gan_weight=0.0), log=quiet)
+    ckpt = load_checkpoint(tmp_path / "g0" / "last.ckpt")
+    assert ckpt["optD"]["state"] == {}  # netD never stepped
+
+
+def test_train_frames_uses_the_first_frames_and_is_checked_on_resume(data, tmp_path):
+    out = tmp_path / "tf"
+    train(tiny(data, out, epochs=1, train_frames=4), log=quiet)
+    ckpt = load_checkpoint(out / "last.ckpt")
+    assert ckpt["dataset"]["train_indices"] == sorted(Dataset(data).indices("train"))[:4]
+    assert ckpt["step"] == 1 and ckpt["config"]["train_frames"] == 4  # 4 frames at batch 4: one step per epoch
+    with pytest.raises(DiviewerError, match="train_frames: 4 -> None"):
+        train(tiny(data, out, epochs=2), resume=True, log=quiet)
+    with pytest.raises(DiviewerError, match="only 8 train frames"):
+        train(tiny(data, tmp_path / "many", train_frames=9), log=quiet)
+    assert not (tmp_path / "many").exists()
+
+
+def test_a_shape_option_cannot_change_on_resume(data, tmp_path):
+    out = tmp_path / "shape"
+    train(tiny(data, out, epochs=1), log=quiet)
+    for change, text in (({"upsample": "resize"}, "upsample: 'transpose' -> 'resize'"),
+                         ({"n_layers_D": 2}, "n_layers_D: 3 -> 2"), ({"norm": "none"}, "norm: 'batch' -> 'none'")):
+        with pytest.raises(DiviewerError, match=text):
+            train(tiny(data, out, epochs=2, **change), resume=True, log=quiet)
+
+
+def test_early_stopping_stops_and_marks_the_curve(data, tmp_path):
+    # Validate every step; with patience 1 the run stops at the first validation that is not better.
+    out = tmp_path / "es"
+    result = train(tiny(data, out, epochs=20, val_every_steps=1, patience=1, lr=0.05), log=quiet)
+    rows = read_csv(out / "metrics.csv")
+    ssim = [float(r["val_ssim_tm"]) for r in rows]
+    assert result["stopped_early"] and result["step"] < 40
+    assert ssim[-1] <= max(ssim[:-1])  # the last validation did not improve ...
+    assert all(b > a for a, b in zip(ssim[:-2], ssim[1:-1]))  # ... and every one before it did
+    assert result["best"] == pytest.approx(max(ssim))
+    again = train(tiny(data, out, epochs=20, val_every_steps=1, patience=1, lr=0.05), resume=True, log=quiet)
+    assert again["step"] == result["step"]  # stopped early stays stopped
+
+
+def test_cli_maps_the_options_onto_the_config(data, tmp_path):
+    ap = argparse.ArgumentParser()
+    add_train_parser(ap.add_subparsers(dest="command"))
+    out = tmp_path / "cli_opts"
+    args = ap.parse_args(["train", "--data", str(data), "--out", str(out), "--device", "cpu", "--k", "4", "--ndf", "8",
+                          "--epochs", "1", "--gan-weight", "0", "--recon-loss", "l2", "--recon-space", "linear",
+                          "--n-layers-d", "2", "--d-lr", "1e-3", "--upsample", "resize", "--norm", "instance",
+                          "--train-frames", "8", "--patience", "3", "--val-every-steps", "1", "--precision", "fp32"])
+    assert run_train(args) == 0
+    cfg = load_checkpoint(out / "last.ckpt")["config"]
+    assert (cfg["gan_weight"], cfg["recon_loss"], cfg["recon_space"], cfg["n_layers_D"], cfg["d_lr"]) == (
+        0.0, "l2", "linear", 2, 1e-3)
+    assert (cfg["upsample"], cfg["norm"], cfg["train_frames"], cfg["patience"], cfg["val_every_steps"]) == (
+        "resize", "instance", 8, 3, 1)

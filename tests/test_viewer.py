@@ -46,8 +46,8 @@ def state(cornell):
 def test_view_mode_registry_is_complete():
     from diviewer.gl.display import KINDS, LAYOUTS
 
-    expected = {"final", "direct", "reference", "depth", "normal", "albedo", "net_input", "net_output", "split",
-                "difference"}
+    expected = {"final", "direct", "reference", "vxgi", "depth", "normal", "albedo", "net_input", "net_output",
+                "split", "difference"}
     assert expected <= set(VIEW_MODE_NAMES)
     assert len(set(VIEW_MODE_NAMES)) == len(VIEW_MODES)
     keys = [m.key for m in VIEW_MODES if m.key]
@@ -73,16 +73,23 @@ def test_view_mode_produces_from_its_sources():
         def network_output(self):
             return ("net",)
 
+        def final(self):
+            return ("final",)
+
         def reference(self):
             return ("ref",)
+
+        def vxgi(self):
+            return ("vxgi",)
 
     s = Sources()
     assert view_mode("final").produce(s) == ("buffer", "direct")  # no model: direct light only
     s.has_model = True
-    assert view_mode("final").produce(s) == ("net",)
+    assert view_mode("final").produce(s) == ("final",)  # full resolution, the network's GI upsampled into it
     assert view_mode("depth").produce(s) == ("buffer", "depth")
     assert view_mode("reference").produce(s) == ("ref",)
     assert view_mode("net_output").produce(s) == ("net",)
+    assert view_mode("vxgi").produce(s) == ("vxgi",)
 
 
 def test_set_view_mode_and_compare(state):
@@ -485,9 +492,22 @@ def _offscreen_view(ctx, shot: Path, a=DIRECT, b=None, layout: str = "single", w
     display = DisplayPass(ctx, renderer.shaders)
     frame = renderer.frame(config)
     made = []
+    neural = None
+    if record.get("gi_size"):
+        # The neural GI as the viewer ran it: the recorded model at the recorded GI resolution and settings.
+        from diviewer.gl.neural import GISettings, NeuralPass
+        from diviewer.runtime import NeuralGI
+
+        gi = GISettings(**{**record["gi_settings"], "pipelined": False})
+        neural = NeuralPass(ctx, renderer, NeuralGI(record["model"], scene=scene), tuple(record["gi_size"]), gi)
+        neural.run()
 
     def image(spec) -> Image:
         name, kind, factor = spec
+        if name == "final":  # the full-resolution composite
+            return Image(neural.composite(), False, kind)
+        if name == "net_output":  # the network's own output at the GI resolution
+            return Image(neural.texture, True, kind)
         arr = np.ascontiguousarray(np.flipud(frame[name] * factor), dtype="f4")
         tex = ctx.texture((w, h), 1 if arr.ndim == 2 else 3, arr.tobytes(), dtype="f4")
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR) if linear else (moderngl.NEAREST, moderngl.NEAREST)
@@ -510,6 +530,8 @@ def _offscreen_view(ctx, shot: Path, a=DIRECT, b=None, layout: str = "single", w
         unbind_framebuffer(ctx)
         for r in (fbo, target, *made):
             r.release()
+        if neural is not None:
+            neural.release()
         display.release()
         renderer.release()
 
@@ -567,6 +589,8 @@ def _scripted_session(tmp_path: Path) -> None:
     # No model: the network's output says why and shows black; the final image is the direct light.
     assert "net_output" in summary["unavailable"] and images["net_output"].max() == 0
     np.testing.assert_array_equal(images["final"], images["direct"])
+    # VXGI adds indirect light to the direct light: brighter on average, lit where direct light is not.
+    assert "vxgi" in summary["modes_drawn"] and images["vxgi"].mean() > images["direct"].mean() + 2.0
     if mitsuba_missing() is None:
         assert "reference" in summary["modes_drawn"]
         _check_image(images["reference"], size)
@@ -651,35 +675,73 @@ def _neural_session(tmp_path: Path) -> None:
               (8, "set_view_mode", {"name": "final"}),
               (9, lambda v: setattr(v.state, "show_panel", False)),
               (9, "window_screenshot", {"path": tmp_path / "window_nopanel.png"})]
-    summary = run_viewer("cornell", model=model, frames=10, script=script, settings=_settings(size=(128, 128)))
+    summary = run_viewer("cornell", model=model, frames=10, script=script, settings=_settings(size=(128, 96)),
+                         stats=tmp_path / "stats.json")
     assert summary["gl_error"] == "GL_NO_ERROR"
     assert summary["model"] == "cornell_k8.onnx" and summary["provider"] == "CPUExecutionProvider"
-    assert summary["gi_size"] == (64, 48)
+    assert summary["gi_size"] == (64, 48) and summary["render_size"] == (128, 96)
     assert summary["stages_ms"]["inference"] > 0.0 and summary["stages_ms"]["upload"] > 0.0
     final, direct = _png(tmp_path / "final.png"), _png(tmp_path / "direct.png")
     lit = direct.sum(axis=-1) > 30
-    assert (final[lit] >= direct[lit] - 1).all() and final[lit].mean() > direct[lit].mean() + 5  # 2 x direct
+    assert (final[lit] >= direct[lit] - 1).all() and final[lit].mean() > direct[lit].mean() + 5  # + indirect
     record = json.loads((tmp_path / "final.json").read_text())
     assert record["model"].endswith("cornell_k8.onnx") and record["provider"] == "CPUExecutionProvider"
-    assert record["resolution"] == [64, 48]
+    assert record["resolution"] == [128, 96] and record["gi_size"] == [64, 48]
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["frames"] == 9 and stats["gi_size"] == [64, 48] and stats["render_size"] == [128, 96]
+    assert stats["fps"] > 0 and {"shadows", "gbuffer", "direct", "readback", "inference", "upsample",
+                                 "composite"} <= set(stats["stages_ms"])
+    assert stats["timing"] == "GPU timer queries"
 
 
 def test_neural_gi_every_frame(display, tmp_path, ctx):
-    """A tiny ONNX model (2 x direct) runs each frame at its own resolution, letterboxed in the window."""
+    """A tiny ONNX model (2 x direct) runs each frame at its GI resolution (64x48) under a 128x96 window; the
+    frame is the full-resolution direct light plus the upsampled indirect light; --stats writes the table."""
     pytest.importorskip("onnx")
     _in_window_process(_neural_session, tmp_path)
-    # The model doubles the direct light: each view is the offscreen render's direct light times two.
-    twice = ("direct", "radiance", 2.0)
-    for name, args in {"final": (twice,), "direct": (DIRECT,), "raw": (("direct", "raw", 2.0),),
-                       "diff": (twice, DIRECT, "difference")}.items():
+    final = ("final", "radiance", 1.0)
+    for name, args in {"final": (final,), "direct": (DIRECT,), "raw": (("net_output", "raw", 1.0),),
+                       "diff": (final, DIRECT, "difference")}.items():
         shot = tmp_path / f"{name}.png"
         _same(_png(shot), _offscreen_view(ctx, shot, *args), name)
-    # The window with the panel hidden: the 4:3 image letterboxed in the square window, bars above and below,
-    # the network's 64x48 output scaled bilinearly.
-    shown = _png(tmp_path / "window_nopanel.png")
-    _same(shown, _offscreen_view(ctx, tmp_path / "final.png", twice, window=(128, 128), linear=True), "the window")
-    bars = np.concatenate([shown[:16], shown[-16:]]).reshape(-1, 3)
-    assert (bars == bars[0]).all() and shown[16:-16].std() > 5.0
+    shown = _png(tmp_path / "window_nopanel.png")  # read back from the window itself
+    _same(shown, _offscreen_view(ctx, tmp_path / "final.png", final, window=(128, 96)), "the window")
+
+
+def _readback_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained size 64x48, stride 16
+    script = [(0, lambda v: setattr(v.state, "show_panel", False))]
+    # window larger than the GI (128x96 over 64x48), equal (64x48, GI 1/1), smaller (32x32 under 64x48),
+    # then back to a larger one after a resize, its GI a fraction of the window (1/2 of 96x64: 48x32)
+    plan = [(None, None), ((64, 48), "1/1"), ((32, 32), "model"), ((96, 64), "1/2")]
+    sizes = {}
+    for i, (size, gi) in enumerate(plan):
+        f = 3 * i
+        if size is not None:
+            script.append((f, "resize", {"width": size[0], "height": size[1]}))
+            script.append((f, "set_gi_res", {"spec": gi}))
+        script.append((f + 2, "screenshot", {"path": tmp_path / f"view{i}.png"}))
+        script.append((f + 2, "window_screenshot", {"path": tmp_path / f"window{i}.png"}))
+        script.append((f + 2, lambda v, i=i: sizes.setdefault(i, (v.render_size, v.gi_size))))
+    summary = run_viewer("cornell", model=model, frames=3 * len(plan), script=script,
+                         settings=_settings(size=(128, 96)))
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    assert sizes == {0: ((128, 96), (64, 48)), 1: ((64, 48), (64, 48)), 2: ((32, 32), (64, 48)),
+                     3: ((96, 64), (48, 32))}, sizes
+
+
+def test_window_shows_the_offscreen_frame_at_every_size(display, tmp_path, ctx):
+    """What the window really shows (its back buffer, read before the swap) is the offscreen render of the same
+    frame at the window's size, for a window larger than, equal to and smaller than the GI, and after resizes."""
+    pytest.importorskip("onnx")
+    _in_window_process(_readback_session, tmp_path)
+    final = ("final", "radiance", 1.0)
+    for i, size in enumerate([(128, 96), (64, 48), (32, 32), (96, 64)]):
+        shown = _png(tmp_path / f"window{i}.png")
+        assert shown.shape == (size[1], size[0], 3)
+        _same(shown, _offscreen_view(ctx, tmp_path / f"view{i}.png", final, window=size), f"window {size}")
 
 
 def _refused_session(tmp_path: Path) -> None:

@@ -21,13 +21,18 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 # name -> (what it changes, extra `diviewer train` arguments). The first row is the paper's recipe
-# (transposed convolutions, batch norm, L1 x 100 + GAN, radiance target with albedo demodulation off).
-BASE = ["--k", "16", "--target", "indirect", "--divide-albedo"]
+# (transposed convolutions, batch norm, L1 x 100 + GAN); every row but the last predicts indirect
+# irradiance (albedo demodulation, multiplied back inside the graph).
+BASE = ["--k", "16", "--target", "indirect"]
 ABLATIONS: dict[str, tuple[str, list[str]]] = {
     "paper": ("transposed conv, batch norm, L1 + GAN (paper)", ["--upsample", "transpose"]),
     "resize": ("resize-conv decoder, L1 + GAN", ["--upsample", "resize"]),
     "shuffle": ("pixel-shuffle decoder, L1 + GAN", ["--upsample", "shuffle"]),
     "l1": ("resize, L1 alone (no GAN)", ["--upsample", "resize", "--gan-weight", "0"]),
+    "transpose_l1": ("transposed conv, L1 alone", ["--upsample", "transpose", "--gan-weight", "0"]),
+    "k8": ("resize, L1 alone, K=8", ["--upsample", "resize", "--gan-weight", "0", "--k", "8"]),
+    "k32": ("resize, L1 alone, K=32", ["--upsample", "resize", "--gan-weight", "0", "--k", "32"]),
+    "k64": ("resize, L1 alone, K=64", ["--upsample", "resize", "--gan-weight", "0", "--k", "64"]),
     "l2lin": ("resize, L2 on linear radiance alone", ["--upsample", "resize", "--gan-weight", "0",
                                                      "--recon-loss", "l2", "--recon-space", "linear"]),
     "l1lin": ("resize, L1 on linear radiance alone", ["--upsample", "resize", "--gan-weight", "0",
@@ -35,7 +40,8 @@ ABLATIONS: dict[str, tuple[str, list[str]]] = {
     "strongD": ("resize, L1 + LSGAN, netD lr x2", ["--upsample", "resize", "--gan-mode", "lsgan", "--d-lr", "4e-4"]),
     "instance": ("resize, instance norm, L1 + GAN", ["--upsample", "resize", "--norm", "instance"]),
     "nonorm": ("resize, no norm, L1 + GAN", ["--upsample", "resize", "--norm", "none"]),
-    "nodemod": ("resize, L1 + GAN, no albedo demodulation", ["--upsample", "resize", "--no-divide-albedo"]),
+    "nodemod": ("resize, L1 alone, indirect radiance (no albedo demodulation)", ["--upsample", "resize",
+                                                                             "--gan-weight", "0"]),
 }
 
 
@@ -47,6 +53,9 @@ def sh(args: list[str], log: Path) -> None:
         subprocess.run(args, check=True, stdout=f, stderr=subprocess.STDOUT, env=env)
 
 
+DEMODULATED = ["--divide-albedo"]
+
+
 def one(name: str, a: argparse.Namespace) -> dict:
     """Train, export and score one ablation; each stage is skipped when its output exists."""
     what, extra = ABLATIONS[name]
@@ -56,18 +65,21 @@ def one(name: str, a: argparse.Namespace) -> dict:
     dv = [sys.executable, "-m", "diviewer"]
     if not (run / "done").is_file():
         args = dv + ["train", "--data", str(a.data), "--out", str(run), "--max-steps", str(a.steps),
-                     "--train-frames", str(a.train_frames), "--val-frames", str(a.val_frames),
+                     "--train-frames", str(a.train_frames),
                      "--val-every-steps", str(a.steps // 3), "--seed", "0"]
         t0 = time.time()
-        sh(args + (["--resume"] if (run / "last.ckpt").is_file() else BASE + extra), log)
+        recipe = BASE + ([] if name == "nodemod" else DEMODULATED) + extra
+        sh(args + (["--resume"] if (run / "last.ckpt").is_file() else recipe), log)
         (run / "done").write_text(json.dumps({"train_s": time.time() - t0}))
     model = run / "model.onnx"
     if not model.is_file():
         sh(dv + ["export", str(run / "best.ckpt"), "--out", str(model)], log)
     res = run / "eval.json"
+    if a.train_only:
+        return {}
     if not res.is_file():
         sh(dv + ["eval", "--model", str(model), "--evalset", str(a.evalset), "--out", str(res)], log)
-    return {"name": name, "what": what, "args": BASE + extra, "train": json.loads((run / "done").read_text()),
+    return {"name": name, "what": what, "args": BASE + ([] if name == "nodemod" else DEMODULATED) + extra, "train": json.loads((run / "done").read_text()),
             "eval": json.loads(res.read_text())}
 
 
@@ -78,14 +90,16 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--steps", type=int, default=600)
     ap.add_argument("--train-frames", type=int, default=1000)
-    ap.add_argument("--val-frames", type=int, default=48)
     ap.add_argument("--only", nargs="*", default=None, choices=sorted(ABLATIONS))
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--train-only", action="store_true", help="train and export only (score later)")
     ap.add_argument("--table", type=Path, default=None, help="write the markdown table here too")
     a = ap.parse_args()
     names = a.only or list(ABLATIONS)
     with ThreadPoolExecutor(a.jobs) as pool:
         results = list(pool.map(lambda n: one(n, a), names))
+    if a.train_only:
+        return
     (a.out / "ablate.json").write_text(json.dumps(results, indent=1))
     lines = table(results)
     print("\n".join(lines))

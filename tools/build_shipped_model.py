@@ -1,8 +1,15 @@
-"""Rebuild a shipped model: capture the scene's dataset, train the cGAN, export to assets/models/.
+"""Rebuild the shipped models exactly: capture, train and export each with the settings its model card records.
 
-Usage: python tools/build_shipped_model.py --scene cornell [--frames 500 --res 128 --spp 256 --k 32
-       --epochs 30 --target indirect --work runs/cornell]
-The defaults are the settings of the shipped assets/models/cornell.onnx (exported in fp16).
+Usage: python tools/build_shipped_model.py [NAME ...] [--work runs/SCENE]
+       (NAME: a model in assets/models, e.g. cornell cornell_k32; default: every shipped model)
+
+The settings come from assets/models/NAME.json: scene, resolution, K, target, divide_albedo and
+precision always; the capture settings (frames, spp, path depth, seed, splits) and the full training
+configuration from its "recipe" block, which `diviewer export` writes into every card. Cards written
+before cards carried a recipe (the two cornell models of 2026-11) get the recipe the README records
+for them, LEGACY_RECIPE below. After the capture the dataset's hash must equal the card's
+dataset_hash, so the network is trained on the very data the shipped one saw.
+
 Every stage resumes: run the same command again after an interruption and it goes on where it
 stopped (capture skips finished frames, training continues from RUN/last.ckpt). Logs go to stdout;
 run it in the background with `nohup ... > build.log 2>&1 &`.
@@ -16,8 +23,27 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
+MODELS = ROOT / "assets" / "models"
+
+LEGACY_RECIPE: dict[str, Any] = {
+    "capture": {"frames": 500, "spp": 256, "max_depth": 16, "seed": 0, "split_fractions": [0.8, 0.1, 0.1]},
+    "train": {"epochs": 30},
+}
+"""The recipe of cards without one: `capture --frames 500 --res 128 --spp 256` (the defaults for
+depth, seed and splits) and `train --epochs 30`, as README's "The shipped models" says."""
+
+# Training settings of a recipe, as `diviewer train` spells them; K, target and divide_albedo come
+# from the card itself, and how a machine runs a job (device, workers, autocast) is not a recipe.
+_TRAIN_FLAGS = {"epochs": "--epochs", "batch_size": "--batch-size", "lr": "--lr", "lambda_L1": "--lambda-l1",
+                "ndf": "--ndf", "seed": "--seed", "val_every": "--val-every", "save_every": "--save-every",
+                "gan_weight": "--gan-weight", "gan_mode": "--gan-mode", "recon_loss": "--recon-loss",
+                "recon_space": "--recon-space", "n_layers_D": "--n-layers-d", "norm_D": "--norm-d", "d_lr": "--d-lr",
+                "upsample": "--upsample", "norm": "--norm", "train_frames": "--train-frames", "patience": "--patience",
+                "val_every_steps": "--val-every-steps"}
+_NOT_RECIPE = {"data", "out", "K", "target", "divide_albedo", "max_steps", "device", "num_workers", "precision"}
 
 
 def run(*args: str) -> None:
@@ -25,37 +51,73 @@ def run(*args: str) -> None:
     subprocess.run([sys.executable, "-m", "diviewer", *args], check=True)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", default="cornell")
-    ap.add_argument("--frames", type=int, default=500)
-    ap.add_argument("--res", default="128")
-    ap.add_argument("--spp", type=int, default=256)
-    ap.add_argument("--k", type=int, default=32)
-    ap.add_argument("--epochs", type=int, default=30)
-    ap.add_argument("--target", default="indirect", choices=("full", "indirect"))
-    ap.add_argument("--fp32", action="store_true", help="export fp32 weights (default fp16: same scores, half the size)")
-    ap.add_argument("--name", default=None, help="model file name in assets/models (default SCENE)")
-    ap.add_argument("--work", type=Path, default=None, help="dataset and run folder (default runs/SCENE)")
-    a = ap.parse_args()
-    work = a.work or ROOT / "runs" / a.scene
-    data, run_dir = work / "data", work / f"train_k{a.k}_{a.target}"
-    run("capture", "--scene", a.scene, "--frames", str(a.frames), "--res", a.res, "--spp", str(a.spp),
-        "--out", str(data))
+def recipe(name: str) -> dict[str, Any]:
+    """The model card's settings: what to capture, how to train, how to export."""
+    card = json.loads((MODELS / f"{name}.json").read_text())
+    rec = card.get("recipe") or LEGACY_RECIPE
+    w, h = card["resolution"]
+    train = {k: v for k, v in rec["train"].items() if k in _TRAIN_FLAGS and v is not None}
+    defaults = _train_defaults()
+    odd = {k: v for k, v in rec["train"].items()
+           if k not in _TRAIN_FLAGS and k not in _NOT_RECIPE and v != defaults.get(k, v)}
+    if odd:  # a setting `diviewer train` cannot be given: rebuilding would not be exact
+        sys.exit(f"{MODELS / f'{name}.json'}: recipe settings {odd} have no train option; cannot rebuild exactly")
+    return {"name": name, "scene": card["scene"], "res": f"{w}x{h}", "K": card["K"], "target": card["target"],
+            "divide_albedo": bool(card.get("divide_albedo")), "fp16": card["precision"] == "fp16",
+            "dataset_hash": card["dataset_hash"], "capture": rec["capture"], "train": train}
+
+
+def _train_defaults() -> dict[str, Any]:
+    import dataclasses
+
+    from diviewer.train.config import TrainConfig
+
+    return {f.name: f.default for f in dataclasses.fields(TrainConfig)}
+
+
+def build(r: dict[str, Any], work: Path) -> None:
+    from diviewer.data.dataset import Dataset
+
+    c = r["capture"]
+    data = work / "data"
+    run("capture", "--scene", r["scene"], "--frames", str(c["frames"]), "--res", r["res"], "--spp", str(c["spp"]),
+        "--max-depth", str(c["max_depth"]), "--seed", str(c["seed"]),
+        "--splits", ",".join(str(f) for f in c["split_fractions"]), "--gt", c.get("gt", "pt"),
+        "--dtype", c.get("dtype", "float16"), "--out", str(data))
     run("data", "check", str(data), "--fast")
-    train = ["train", "--data", str(data), "--k", str(a.k), "--epochs", str(a.epochs), "--target", a.target,
-             "--out", str(run_dir)]
+    if Dataset(data).hash != r["dataset_hash"]:
+        sys.exit(f"{data}: dataset hash {Dataset(data).hash[:16]} is not the card's {r['dataset_hash'][:16]} "
+                 f"({r['name']}.json): this capture differs from the shipped model's; not training")
+    run_dir = work / f"train_{r['name']}"
+    train = ["train", "--data", str(data), "--out", str(run_dir), "--k", str(r["K"]), "--target", r["target"]]
+    if r["divide_albedo"]:
+        train.append("--divide-albedo")
+    for k, v in r["train"].items():
+        train += [_TRAIN_FLAGS[k], str(v)]
     if (run_dir / "last.ckpt").is_file():
         train.append("--resume")
     run(*train)
-    name = a.name or a.scene
-    out = ROOT / "assets" / "models" / f"{name}.onnx"
-    run("export", str(run_dir / "best.ckpt"), "--out", str(out), *([] if a.fp32 else ["--fp16"]))
-    shutil.copyfile(run_dir / "curves.png", out.with_name(f"{name}_curves.png"))
-    shutil.copyfile(run_dir / "metrics.csv", out.with_name(f"{name}_metrics.csv"))
+    out = MODELS / f"{r['name']}.onnx"
+    run("export", str(run_dir / "best.ckpt"), "--out", str(out), *(["--fp16"] if r["fp16"] else []))
+    shutil.copyfile(run_dir / "curves.png", out.with_name(f"{r['name']}_curves.png"))
+    shutil.copyfile(run_dir / "metrics.csv", out.with_name(f"{r['name']}_metrics.csv"))
     run("eval", "--model", str(out), "--data", str(data), "--split", "test")
-    card = json.loads(out.with_suffix(".json").read_text())
-    print(json.dumps(card.get("validation"), indent=1))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("names", nargs="*", help="models in assets/models (default: all shipped models)")
+    ap.add_argument("--work", type=Path, default=None, help="dataset and run folders (default runs/SCENE)")
+    a = ap.parse_args()
+    names = a.names or sorted(p.stem for p in MODELS.glob("*.json"))
+    missing = [n for n in names if not (MODELS / f"{n}.json").is_file()]
+    if missing:
+        sys.exit(f"no model card {', '.join(str(MODELS / f'{n}.json') for n in missing)}")
+    for name in names:
+        r = recipe(name)
+        print(f"== {name}: {r['scene']} {r['res']} K={r['K']} {r['target']} "
+              f"{'fp16' if r['fp16'] else 'fp32'}, capture {r['capture']}, train {r['train']}", flush=True)
+        build(r, a.work or ROOT / "runs" / r["scene"])
 
 
 if __name__ == "__main__":

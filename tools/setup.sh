@@ -30,7 +30,7 @@ fi
 python -m pip install -q --upgrade pip
 # The CPU build of torch first: an unpinned torch would pull a multi-GB CUDA build.
 python -c "import torch" >/dev/null 2>&1 || python -m pip install -q "torch==2.13.0"
-python -m pip install -q -e "$ROOT[train,dev]"
+python -m pip install -q -e "$ROOT[train,dev,bench]"
 if [ -z "${DRJIT_LIBLLVM_PATH:-}" ]; then
   for f in /usr/lib/x86_64-linux-gnu/libLLVM-19.so /usr/lib/x86_64-linux-gnu/libLLVM-19.so.1 /usr/lib/llvm-19/lib/libLLVM-19.so; do
     if [ -e "$f" ]; then export DRJIT_LIBLLVM_PATH="$f"; break; fi

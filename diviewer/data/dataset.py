@@ -57,15 +57,62 @@ def read_manifest(root: Path) -> dict:
         raise DiviewerError(f"not a dataset (no manifest.json): {root}")
     try:
         manifest = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DiviewerError(f"manifest is not valid JSON: {exc}", path=path) from exc
+    if not isinstance(manifest, dict):
+        raise DiviewerError(f"expected a JSON object, got {type(manifest).__name__}", path=path)
     if manifest.get("format") != FORMAT:
         raise DiviewerError(f"not a diviewer dataset manifest (format is {manifest.get('format')!r})", path=path,
                             field="format")
-    if int(manifest.get("format_version", 0)) > FORMAT_VERSION:
+    version = manifest.get("format_version", 0)
+    if not _is_int(version):
+        raise DiviewerError(f"expected a whole number, got {version!r}", path=path, field="format_version")
+    if version > FORMAT_VERSION:
         raise DiviewerError(f"dataset format {manifest['format_version']} is newer than this diviewer reads "
                             f"({FORMAT_VERSION}); upgrade diviewer", path=path, field="format_version")
+    _check_manifest(manifest, path)
     return manifest
+
+
+def _is_int(v, lo: int = 0) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= lo
+
+
+def _check_manifest(m: dict, path: Path) -> None:
+    """Refuse a manifest with missing keys or values of the wrong type, naming the field (not a traceback later)."""
+    def bad(field: str, what: str):
+        value = m.get(field, "<missing>")
+        return DiviewerError(f"expected {what}, got {value if value == '<missing>' else repr(value)[:80]}",
+                             path=path, field=field)
+
+    for key in ("scene", "scene_hash"):
+        if not isinstance(m.get(key), str):
+            raise bad(key, "a string")
+    res = m.get("resolution")
+    if not (isinstance(res, list) and len(res) == 2 and all(_is_int(x, 1) for x in res)):
+        raise bad("resolution", "[width, height] of whole numbers >= 1")
+    ch = m.get("channels")
+    if not (isinstance(ch, list) and ch and all(isinstance(c, list) and len(c) == 2 and isinstance(c[0], str)
+                                                 and _is_int(c[1], 1) for c in ch)):
+        raise bad("channels", "a list of [name, count] pairs")
+    names = [c[0] for c in ch]
+    if not {"depth", "normal", "albedo", "direct"} <= set(names) or len(set(names)) != len(names):
+        raise bad("channels", "unique channels including depth, normal, albedo and direct")
+    if m.get("dtype") not in ("float16", "float32"):
+        raise bad("dtype", "float16 or float32")
+    frames = m.get("frame_list")
+    if not isinstance(frames, list):
+        raise bad("frame_list", "a list of frames")
+    seen = set()
+    for k, f in enumerate(frames):
+        where = f"frame_list[{k}]"
+        # split: train/val/test in a capture, other names in an evaluation set (diviewer.evalset)
+        if not (isinstance(f, dict) and _is_int(f.get("index")) and isinstance(f.get("split"), str) and f["split"]):
+            raise DiviewerError(f"expected {{index: whole number, split: name}}, got {repr(f)[:80]}",
+                                path=path, field=where)
+        if f["index"] in seen:
+            raise DiviewerError(f"frame {f['index']} is listed twice", path=path, field=where)
+        seen.add(f["index"])
 
 
 @dataclass(frozen=True)
@@ -86,6 +133,7 @@ class Dataset:
         self.num_channels = sum(c for _, c in self.channels)
         self.dtype = np.dtype(self.manifest["dtype"])
         self.frames = self.manifest["frame_list"]
+        self._split_of = {f["index"]: f["split"] for f in self.frames}
 
     @property
     def hash(self) -> str:
@@ -111,8 +159,17 @@ class Dataset:
             return "incomplete (no .json sidecar: its writing was interrupted)"
         try:
             info = json.loads(meta.read_text())
-        except (OSError, json.JSONDecodeError) as exc:
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             return f"unreadable sidecar: {exc}"
+        if not isinstance(info, dict):
+            return "unreadable sidecar: not a JSON object"
+        # A sidecar records its own frame's index and split: files moved or swapped between frames
+        # (which would leak a validation frame into training) no longer match their names.
+        if "index" in info and info["index"] != index:
+            return f"sidecar is frame {info['index']}'s, not {index}'s (files swapped or renamed)"
+        if "split" in info and index in self._split_of and info["split"] != self._split_of[index]:
+            return (f"sidecar says split '{info['split']}', the manifest '{self._split_of[index]}' "
+                    f"(files from another frame or dataset)")
         if verify_checksum and sha256_file(npy) != info.get("sha256"):
             return "checksum mismatch (corrupted or truncated)"
         try:
@@ -142,9 +199,13 @@ class Dataset:
             out["pt_indirect"] = out["pt"] - out["pt_direct"]
         return out
 
-    def array(self, split: str) -> tuple[list[int], np.ndarray]:
-        """All present frames of a split stacked in RAM: (N, H, W, C) in the stored dtype, checked."""
-        idx = self.indices(split)
+    def array(self, split: str, indices: list[int] | None = None) -> tuple[list[int], np.ndarray]:
+        """Frames of a split stacked in RAM: (N, H, W, C) in the stored dtype, each checked.
+
+        Args:
+            indices: these frames, in this order (the trainer's subset); by default every present one.
+        """
+        idx = self.indices(split) if indices is None else list(indices)
         if not idx:
             raise DiviewerError(f"dataset has no '{split}' frames yet", path=self.root)
         out = np.empty((len(idx), self.height, self.width, self.num_channels), self.dtype)

@@ -65,8 +65,60 @@ def unbind_framebuffer(ctx: moderngl.Context) -> None:
     ctx.detect_framebuffer(0).use()
 
 
+def max_render_size(ctx: moderngl.Context) -> tuple[int, int]:
+    """The largest width and height this context can render to: texture, renderbuffer and viewport limits."""
+    info = ctx.info
+    tex = int(info.get("GL_MAX_TEXTURE_SIZE", 0)) or 1 << 30
+    rbo = int(info.get("GL_MAX_RENDERBUFFER_SIZE", 0)) or 1 << 30
+    vp = info.get("GL_MAX_VIEWPORT_DIMS") or (1 << 30, 1 << 30)
+    return min(tex, rbo, int(vp[0])), min(tex, rbo, int(vp[1]))
+
+
+def check_render_size(ctx: moderngl.Context, width: int, height: int, option: str = "--res") -> None:
+    """Refuse a render size this context cannot hold, before any pass allocates: its limits, then a probe.
+
+    The probe allocates the largest target the renderer uses (an RGBA float32 texture with a depth
+    renderbuffer) and checks that the framebuffer is complete: drivers refuse large targets below
+    GL_MAX_TEXTURE_SIZE (Mesa llvmpipe: no texture of 2 GiB or more, i.e. above 11584x11584 RGBA32F).
+    """
+    mw, mh = max_render_size(ctx)
+    if width > mw or height > mh:
+        raise DiviewerError(f"{width}x{height} is larger than this GL context allows ({mw}x{mh}: "
+                            f"GL_MAX_TEXTURE_SIZE, GL_MAX_RENDERBUFFER_SIZE, GL_MAX_VIEWPORT_DIMS of {describe(ctx)})",
+                            field=option)
+    tex = rbo = fbo = None
+    try:
+        tex = ctx.texture((width, height), 4, dtype="f4")
+        rbo = ctx.depth_renderbuffer((width, height))
+        fbo = ctx.framebuffer([tex], rbo)
+    except moderngl.Error as exc:
+        raise DiviewerError(f"{width}x{height} is too large for {describe(ctx)}: a float RGBA target of that "
+                            f"size cannot be allocated ({exc}); use a smaller size", field=option) from None
+    finally:
+        unbind_framebuffer(ctx)
+        for r in (fbo, rbo, tex):
+            if r is not None:
+                r.release()
+        ctx.error  # a failed allocation leaves GL_OUT_OF_MEMORY behind: read (and clear) it
+
+
 def stage_timer(ctx: moderngl.Context, sync: bool = False, queries: bool = False) -> StageTimer:
     """The program's stage timer for GL work on ``ctx``: waits for the GPU around each GL stage (``sync``), or
     reads GL timer queries (``queries``; ARB_timer_query, which llvmpipe has), or leaves GL stages untimed."""
     return StageTimer(sync=ctx.finish if sync else None,
                       gpu_query=(lambda: ctx.query(time=True)) if queries else None)
+
+
+def set_stage_timing(timer: StageTimer, ctx: moderngl.Context, on: bool) -> None:
+    """Time ``timer``'s GL stages by timer queries (ARB_timer_query, core since GL 3.3), or by waiting for the
+    GPU around them where the driver lacks queries (``on``); or leave them untimed."""
+    timer.release()
+    timer.sync = timer.gpu_query = None
+    if on:
+        try:
+            with ctx.query(time=True) as probe:
+                pass
+            probe.elapsed  # noqa: B018 (raises where the driver has no timer queries)
+            timer.gpu_query = lambda: ctx.query(time=True)
+        except Exception:  # noqa: BLE001
+            timer.sync = ctx.finish

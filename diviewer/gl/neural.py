@@ -1,11 +1,26 @@
-"""The per-frame neural GI pass: pack the G-buffer on the GPU, one read-back, onnxruntime, one upload."""
+"""The per-frame neural GI pass: downsample and pack the G-buffer on the GPU, one read-back, onnxruntime,
+one upload, then the joint bilateral upsample of the indirect light over the full-resolution frame.
+
+The renderer draws at the window's resolution; the network runs at the GI resolution (its own, or a
+fraction of the window's). ``pack.glsl`` reduces each full-resolution buffer to the GI grid while
+packing it into the model's NHWC input; ``upsample.glsl`` turns the network's output back into a
+full-resolution image (direct light at full resolution + upsampled indirect light). With
+``pipelined`` the network runs on a worker thread one frame behind: frame N's inputs are packed and
+handed over while frame N-1's output is composited, so GL and onnxruntime overlap.
+"""
 
 from __future__ import annotations
+
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 
 from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, INPUT_NAMES, input_channel_slices
+from diviewer.errors import DiviewerError
+from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.renderer import Renderer
 from diviewer.gl.resources import set_uniform
 from diviewer.timing import StageTimer
@@ -15,58 +30,151 @@ PACK_DEFINES = {
     **{f"IN_{name.upper()}": s.start for name, s in input_channel_slices().items()},
     **{f"IN_{name.upper()}_N": n for name, n in INPUT_CHANNELS},
 }
-"""The channel layout as pack.glsl reads it, from the encoding's table: the total, where each buffer
-starts, and its component count (which the shader checks against what it writes, at compile time)."""
+"""The channel layout as pack.glsl and upsample.glsl read it, from the encoding's table: the total, where
+each buffer starts, and its component count (which pack.glsl checks against what it writes)."""
 
-STAGES = ("readback", "inference", "upload")
-"""The pass's stages, timed by the wall clock: the read-back waits for the GPU, so it is honest without a sync."""
+STAGES = ("readback", "inference", "inference_wait", "upload", "upsample")
+"""The pass's stages. readback/inference/upload by the wall clock (the read-back waits for the GPU, so it
+is honest without a sync; pipelined, ``inference`` is the worker's time for the prediction shown and
+``inference_wait`` what the frame waited for it); upsample is GL work, timed as the timer times GL stages."""
+
+DOWNSAMPLES = ("nearest", "area")
+
+
+@dataclass(frozen=True)
+class GISettings:
+    """How the neural GI pass reduces its inputs, upsamples its output and schedules the network."""
+
+    downsample: str = "nearest"
+    """``nearest``: each GI texel takes the full-resolution pixel nearest its centre, as a render at the GI
+    resolution would (the training captures were rendered at the model's resolution: measured closest,
+    see README); ``area``: the mean of its footprint for normal, albedo and direct (depth stays nearest)."""
+    depth_sigma: float = 0.1
+    """Joint bilateral upsample: relative depth difference at which a GI texel's weight falls to 1/e."""
+    normal_power: float = 16.0
+    """Joint bilateral upsample: exponent of the cosine between the pixel's and the texel's normals."""
+    pipelined: bool = False
+    """Run the network on a worker thread, one frame behind (the frame shows the previous frame's GI)."""
 
 
 class NeuralPass:
-    """Runs a model (diviewer.runtime.NeuralGI) on a Renderer's buffers; the result is a GL texture.
+    """Runs a model (diviewer.runtime.NeuralGI) on a Renderer's buffers at a GI resolution; composites the result.
 
-    Per frame it makes exactly one GPU->CPU copy (the packed buffer, read into a preallocated
-    array) and one CPU->GPU copy (the model's output into ``self.texture``); the model's input and
-    output layouts are the arrays' own, so nothing is transposed on the CPU. The texture holds
-    rows top first: display it with ``flip_y`` (the display pass does). Its stages go to the
-    renderer's timer unless given one.
+    Per frame it makes exactly one GPU->CPU copy (the packed GI-resolution buffer, read into a preallocated
+    array that onnxruntime reads as is) and one CPU->GPU copy (the model's output into ``self.texture``).
+    ``run()`` gives the network's output (GI resolution, rows top first: display it flipped);
+    ``composite()`` the full-resolution frame (``self.final``). Stages go to the renderer's timer unless
+    given one.
     """
 
-    def __init__(self, ctx: moderngl.Context, renderer: Renderer, model, timer: StageTimer | None = None):
-        self.ctx, self.renderer, self.model = ctx, renderer, model
+    def __init__(self, ctx: moderngl.Context, renderer: Renderer, model, gi_size: tuple[int, int] | None = None,
+                 settings: GISettings = GISettings(), timer: StageTimer | None = None):
+        self.ctx, self.renderer, self.model, self.settings = ctx, renderer, model, settings
         self.timer = timer or renderer.timer
-        model.check_size(renderer.width, renderer.height)
-        self.program = renderer.shaders.compute("pack.glsl", PACK_DEFINES)
-        w, h = renderer.width, renderer.height
-        self.packed = np.empty((1, h, w, INPUT_CHANNEL_COUNT), np.float32)
-        self.ssbo = ctx.buffer(reserve=self.packed.nbytes)
+        if settings.downsample not in DOWNSAMPLES:
+            raise DiviewerError(f"unknown GI downsample '{settings.downsample}'; use one of {', '.join(DOWNSAMPLES)}",
+                                field="downsample")
+        w, h = gi_size or (renderer.width, renderer.height)
+        model.check_size(w, h)
+        self.gi_size = (w, h)
+        defines = dict(PACK_DEFINES, **({"AREA": 1} if settings.downsample == "area" else {}))
+        self.program = renderer.shaders.compute("pack.glsl", defines)
+        self.guide = renderer.shaders.compute("gi_guide.glsl", PACK_DEFINES)
+        self.upsample = renderer.shaders.program("upsample.glsl")
+        self._vao = ctx.vertex_array(self.upsample, [])
+        # Two input slots: with pipelining, frame N packs into one while frame N-1's (read by the upsample,
+        # which must see the inputs its output was predicted from) stays in the other.
+        self._packed = [np.empty((1, h, w, INPUT_CHANNEL_COUNT), np.float32) for _ in range(2)]
+        self.ssbos = [ctx.buffer(reserve=self._packed[0].nbytes) for _ in range(2)]
+        self._slot = 0
+        self.shown_slot = 0
+        """The slot whose inputs the current ``texture`` was predicted from."""
         self.texture = ctx.texture((w, h), 3, dtype="f4")
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
+        self.guides = [ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
+        """Per GI texel: (indirect light / albedo, depth) and (normal, 0), made by gi_guide.glsl."""
+        for t in self.guides:
+            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.final: moderngl.Texture | None = None
+        self._final_fbo: moderngl.Framebuffer | None = None
         self.output: np.ndarray | None = None
         self.timings: dict[str, float] = {}
-        """The last run's stage times (ms), also added to ``timer``."""
-        self.copies = {"download_bytes": self.packed.nbytes, "upload_bytes": 0}
+        """The last frame's stage times (ms), also added to ``timer``."""
+        self.copies = {"download_bytes": self._packed[0].nbytes, "upload_bytes": 0}
+        self.latency_ms = 0.0
+        """How old the shown GI is when composited: from its inputs' read-back to its upload (ms)."""
+        self._worker: ThreadPoolExecutor | None = None
+        self._inflight: tuple[Future, int, float] | None = None
+
+    @property
+    def packed(self) -> np.ndarray:
+        """The inputs (1, H, W, 10) the shown prediction was made from, as the network read them."""
+        return self._packed[self.shown_slot]
+
+    @property
+    def pipelined(self) -> bool:
+        return self.settings.pipelined
+
+    # --- the network ----------------------------------------------------------------------------
+    def _pack(self, slot: int) -> None:
+        r = self.renderer
+        for i, name in enumerate(INPUT_NAMES):
+            r.textures[name].use(location=i)
+            set_uniform(self.program, f"u_{name}", i)
+        w, h = self.gi_size
+        set_uniform(self.program, "u_size", (w, h))
+        set_uniform(self.program, "u_src_size", (r.width, r.height))
+        self.ssbos[slot].bind_to_storage_buffer(0)
+        self.program.run((w + 7) // 8, (h + 7) // 8, 1)
+        self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
+        self.ssbos[slot].read_into(self._packed[slot])
+
+    def _infer(self, slot: int) -> tuple[np.ndarray, float]:
+        """Run the model on a slot's inputs (on the worker thread when pipelined); its own timer, its wall ms."""
+        t0 = time.perf_counter()
+        y = self.model.run(self._packed[slot], timer=StageTimer())
+        return y, (time.perf_counter() - t0) * 1e3
 
     def run(self) -> moderngl.Texture:
-        """Infer the GI image from the renderer's current textures (call after renderer.render)."""
-        r = self.renderer
+        """Infer the GI image from the renderer's current textures (call after renderer.render).
+
+        Pipelined, the returned texture holds the previous frame's prediction (this frame's, on the first).
+        """
         before = {k: self.timer.times.get(k, 0.0) for k in STAGES}
+        slot = self._slot
         with self.timer.stage("readback"):
-            for i, name in enumerate(INPUT_NAMES):
-                r.textures[name].use(location=i)
-                set_uniform(self.program, f"u_{name}", i)
-            set_uniform(self.program, "u_size", (r.width, r.height))
-            self.ssbo.bind_to_storage_buffer(0)
-            self.program.run((r.width + 7) // 8, (r.height + 7) // 8, 1)
-            self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
-            self.ssbo.read_into(self.packed)
-        self.output = self.model.run(self.packed, timer=self.timer)  # the runtime times "inference"
-        with self.timer.stage("upload"):
-            self.texture.write(self.output)  # (1, H, W, 3) float32, contiguous: uploaded as is
-        self.copies["upload_bytes"] = self.output.nbytes
-        self.timings = {k: self.timer.times.get(k, 0.0) - before[k] for k in STAGES}
+            self._pack(slot)
+        t_inputs = time.perf_counter()
+        if not self.pipelined:
+            y, ms = self._infer(slot)
+            self.timer.add("inference", ms)
+            self._show(y, slot, t_inputs)
+        else:
+            if self._worker is None:
+                self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="diviewer-gi")
+            previous = self._inflight
+            self._inflight = (self._worker.submit(self._infer, slot), slot, t_inputs)
+            self._slot = 1 - slot
+            if previous is None and self.output is None:
+                # The very first frame waits for its own prediction (there is nothing older to show) ...
+                previous, self._inflight = self._inflight, None
+            if previous is not None:
+                future, prev_slot, prev_t = previous
+                with self.timer.stage("inference_wait"):
+                    y, ms = future.result()
+                self.timer.add("inference", ms)
+                self._show(y, prev_slot, prev_t)
+            # ... and the second shows the first's again while its own runs: from then on one is in flight.
+        self.timings = {k: self.timer.times[k] - before[k] for k in STAGES if k in self.timer.times}
         return self.texture
+
+    def _show(self, y: np.ndarray, slot: int, t_inputs: float) -> None:
+        with self.timer.stage("upload"):
+            self.texture.write(y)  # (1, H, W, 3) float32, contiguous: uploaded as is
+        self.output, self.shown_slot = y, slot
+        self.copies["upload_bytes"] = y.nbytes
+        self.latency_ms = (time.perf_counter() - t_inputs) * 1e3
 
     def image(self) -> np.ndarray:
         """The last output as (H, W, 3) float32 linear radiance, top row first."""
@@ -74,6 +182,63 @@ class NeuralPass:
             raise RuntimeError("NeuralPass.run has not been called")
         return self.output[0]
 
+    # --- the full-resolution frame ----------------------------------------------------------------
+    def _final_target(self) -> moderngl.Framebuffer:
+        size = (self.renderer.width, self.renderer.height)
+        if self.final is None or self.final.size != size:
+            self._release_final()
+            self.final = self.ctx.texture(size, 4, dtype="f2")  # half floats: radiance needs no more
+            self.final.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._final_fbo = self.ctx.framebuffer([self.final])
+        return self._final_fbo
+
+    def composite(self, indirect_only: bool = False) -> moderngl.Texture:
+        """The full-resolution frame: the renderer's direct light plus the last output's indirect light,
+        upsampled by the joint bilateral filter (``indirect_only``: the upsampled indirect light alone)."""
+        if self.output is None:
+            raise RuntimeError("NeuralPass.run has not been called")
+        r, prog, s = self.renderer, self.upsample, self.settings
+        fbo = self._final_target()
+        w, h = self.gi_size
+        with self.timer.stage("upsample", gpu=True):
+            self.ssbos[self.shown_slot].bind_to_storage_buffer(0)
+            self.texture.use(location=0)
+            set_uniform(self.guide, "u_output", 0)
+            set_uniform(self.guide, "u_gi_size", self.gi_size)
+            for i, t in enumerate(self.guides):
+                t.bind_to_image(i, read=False, write=True)
+            self.guide.run((w + 7) // 8, (h + 7) // 8, 1)
+            self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
+            fbo.use()
+            self.ctx.enable_only(moderngl.NOTHING)
+            for i, name in enumerate(("depth", "normal", "albedo", "direct")):
+                r.textures[name].use(location=i)
+                set_uniform(prog, f"u_{name}", i)
+            for i, (name, t) in enumerate(zip(("u_irradiance_depth", "u_guide_normal"), self.guides)):
+                t.use(location=4 + i)
+                set_uniform(prog, name, 4 + i)
+            set_uniform(prog, "u_gi_size", self.gi_size)
+            set_uniform(prog, "u_depth_sigma", float(s.depth_sigma))
+            set_uniform(prog, "u_normal_power", float(s.normal_power))
+            set_uniform(prog, "u_indirect_only", bool(indirect_only))
+            self._vao.render(moderngl.TRIANGLES, vertices=3)
+        self.timings["upsample"] = self.timer.times.get("upsample", 0.0)
+        return self.final
+
+    def _release_final(self) -> None:
+        if self.final is not None:
+            unbind_framebuffer(self.ctx)
+            self._final_fbo.release()
+            self.final.release()
+            self.final = self._final_fbo = None
+
     def release(self) -> None:
-        self.ssbo.release()
+        if self._worker is not None:
+            self._worker.shutdown(wait=True)  # never release what a running inference reads
+            self._worker = None
+        self._inflight = None
+        self._release_final()
+        self._vao.release()
+        for b in (*self.ssbos, *self.guides):
+            b.release()
         self.texture.release()

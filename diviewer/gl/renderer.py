@@ -1,7 +1,8 @@
 """The deferred GL renderer: a list of named passes (shadows, G-buffer, direct light); a frame is named buffers.
 
 Each pass owns its targets and is timed as one stage by the shared ``StageTimer``. Shadow maps are
-kept per light, so a later frame can reuse the map of a light that did not move.
+kept per light and re-rendered only when what they depend on changed (the light, an object's pose or
+mesh, the shadow settings): a still scene seen from a moving camera renders no shadow map.
 """
 
 from __future__ import annotations
@@ -65,6 +66,8 @@ def _fit_directional(bounds: np.ndarray, direction) -> tuple[np.ndarray, float, 
     return cam.orthographic(radius, radius, near, far) @ view, 2.0 * radius, far - near
 
 
+_IDENTITY = np.identity(4)
+
 # Cube-face (forward, up) pairs for point-light shadows; the lookup uses the same matrices.
 _FACES = (((1, 0, 0), (0, -1, 0)), ((-1, 0, 0), (0, -1, 0)), ((0, 1, 0), (0, 0, 1)),
           ((0, -1, 0), (0, 0, -1)), ((0, 0, 1), (0, -1, 0)), ((0, 0, -1), (0, -1, 0)))
@@ -91,11 +94,17 @@ class Renderer:
         """Times each pass as a stage; the frame's owner resets it (GL passes need its sync or queries)."""
         self.gpu = GpuScene(ctx, scene.meshes, scene.materials)
         self._screen_vaos: dict[int, moderngl.VertexArray] = {}
+        self._draw_cache: tuple = (None, None, [])
+        self._bounds: tuple = (None, None, None)
         self._face_size = max(settings.shadow_size // 2, 16)
         self._shadow_targets: dict[str, tuple] = {}
         """Per light name: (kind, texture, framebuffer, depth renderbuffer or None)."""
         self._shadows: dict[str, dict] = {}
         """This frame's shadow lookup parameters per light (None entries: shadows off)."""
+        self._shadow_keys: dict[str, tuple] = {}
+        """Per light name: what its cached map was rendered from (``_shadow_key``)."""
+        self.shadow_renders = 0
+        """Shadow maps rendered so far (a cached map is not counted): the shadow cache's witness."""
         self.passes = (("shadows", self._shadow_pass), ("gbuffer", self._gbuffer_pass), ("direct", self._direct_pass))
         """The frame, in order: (stage name, pass(frame view)); each pass is one timed stage."""
         self.width = self.height = 0
@@ -163,6 +172,8 @@ class Renderer:
 
     def _release_shadow_target(self, name: str) -> None:
         unbind_framebuffer(self.ctx)
+        self._shadow_keys.pop(name, None)
+        self._shadows.pop(name, None)
         _, tex, fbo, depth = self._shadow_targets.pop(name)
         for r in (fbo, tex, depth):
             if r is not None:
@@ -180,30 +191,69 @@ class Renderer:
     def render(self, config: FrameConfig | None = None) -> dict[str, moderngl.Texture]:
         """Render one frame; returns the named textures (depth, normal, albedo, emission, direct)."""
         config = config or self.scene.default
+        if self._bounds[0] is not self.scene or self._bounds[1] is not config.objects:
+            # The shadow maps' fit; a loop over the objects, so once per (scene, objects tuple).
+            self._bounds = (self.scene, config.objects, self.scene.bounds(config))
         frame = FrameView(config, config.camera.view_matrix(), config.camera.projection(self.width / self.height),
-                          self.scene.bounds(config))
+                          self._bounds[2])
         for name, run in self.passes:
             with self.timer.stage(name, gpu=True):
                 run(frame)
         return self.textures
 
-    def _draw_objects(self, prog: moderngl.Program, config: FrameConfig, view: np.ndarray | None) -> None:
-        for obj in config.objects:
-            model = obj.matrix()
+    def _draw_list(self, config: FrameConfig) -> list:
+        """(GPU mesh, material, model matrix or None for world space) per draw call, opaque first.
+
+        Objects that the scene's ranges never move are merged per material into static buffers once
+        (Sponza: 24 draws instead of 170); they are used while the frame holds all of them unchanged,
+        and the moving objects are drawn one by one. Cached per (scene, objects tuple).
+        """
+        if self._draw_cache[0] is self.scene and self._draw_cache[1] is config.objects:
+            return self._draw_cache[2]
+        scene = self.scene
+        static = [o for o in scene.default.objects if o.name not in scene.ranges.objects]
+        static_set = set(static)
+        items = []
+        if len(static) > 1 and static_set <= set(config.objects):
+            self.gpu.set_static(self.ctx, scene.meshes, static, key=scene)
+            items = [(m, name, None) for name, m in self.gpu.static.items()]
+            moving = [o for o in config.objects if o not in static_set]
+        else:
+            moving = config.objects
+        items += [(self.gpu.meshes[o.mesh], o.material, o.matrix()) for o in moving]
+        items.sort(key=lambda it: scene.materials[it[1]].is_masked)  # opaque first: early depth test
+        self._draw_cache = (scene, config.objects, items)
+        return items
+
+    def _draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None) -> None:
+        """Draw the frame's objects with shaders/<file>; alpha-masked materials use its ALPHA_TEST variant.
+
+        ``setup(prog)`` sets the pass's uniforms on each program variant before its first draw.
+        """
+        progs: dict[bool, moderngl.Program] = {}
+        for gmesh, mat_name, model in self._draw_list(config):
+            mat = self.scene.materials[mat_name]
+            masked = mat.is_masked
+            if masked not in progs:
+                progs[masked] = self.shaders.program(file, {**defines, "ALPHA_TEST": 1} if masked else defines)
+                setup(progs[masked])
+            prog = progs[masked]
+            m = _IDENTITY if model is None else model
             # A mirroring pose (negative scale) flips the winding: keep its outside front-facing.
-            self.ctx.front_face = "cw" if np.linalg.det(model[:3, :3]) < 0 else "ccw"
-            set_uniform(prog, "m_model", model)
+            self.ctx.front_face = "cw" if model is not None and np.linalg.det(model[:3, :3]) < 0 else "ccw"
+            set_uniform(prog, "m_model", m)
+            tex = self.gpu.textures.get(mat_name)
             if view is not None:
-                set_uniform(prog, "m_normal", cam.normal_matrix(view @ model))
-                mat = self.scene.materials[obj.material]
+                set_uniform(prog, "m_normal", cam.normal_matrix(view @ m))
                 set_uniform(prog, "u_albedo", tuple(mat.albedo))
                 set_uniform(prog, "u_emission", tuple(mat.emission))
-                tex = self.gpu.textures.get(obj.material)
                 set_uniform(prog, "u_has_texture", tex is not None)
-                if tex is not None:
-                    tex.use(location=0)
-                    set_uniform(prog, "u_albedo_map", 0)
-            self.gpu.meshes[obj.mesh].vao(prog).render(moderngl.TRIANGLES)
+            if tex is not None and (view is not None or masked):
+                tex.use(location=0)
+                set_uniform(prog, "u_albedo_map", 0)
+            if masked:
+                set_uniform(prog, "u_alpha_cutoff", float(mat.alpha_cutoff))
+            gmesh.vao(prog).render(moderngl.TRIANGLES)
         self.ctx.front_face = "ccw"
 
     def _gbuffer_pass(self, frame: "FrameView") -> None:
@@ -211,17 +261,38 @@ class Renderer:
         self._gbuffer_fbo.use()
         self._gbuffer_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable_only(moderngl.DEPTH_TEST)
-        prog = self.shaders.program("gbuffer.glsl")
-        set_uniform(prog, "m_proj", proj)
-        set_uniform(prog, "m_view", view)
-        self._draw_objects(prog, config, view)
+        def setup(prog):
+            set_uniform(prog, "m_proj", proj)
+            set_uniform(prog, "m_view", view)
+        self._draw_objects(config, "gbuffer.glsl", {}, setup, view)
+
+    def _shadow_key(self, config: FrameConfig, light, bounds: np.ndarray) -> tuple:
+        """Everything a light's shadow map depends on: the light, each object's pose and the GPU mesh it draws
+        (a mesh loaded again under the same name is a new one), the settings. Not the camera."""
+        objects = tuple((o, id(self.gpu.meshes.get(o.mesh))) for o in config.objects)
+        return (light, objects, tuple(np.asarray(bounds, float).ravel()), self.settings)
+
+    def invalidate_shadows(self) -> None:
+        """Forget the cached shadow maps: the next frame renders them all."""
+        self._shadow_keys.clear()
 
     def _shadow_pass(self, frame: "FrameView") -> None:
-        """Each light's shadow map (none with shadows off)."""
-        self._shadows = {}
+        """Each light's shadow map (none with shadows off), reused from an earlier frame when nothing it
+        depends on moved."""
+        shadows = {}
         for light in frame.config.lights:
-            self._shadows[light.name] = (self._render_shadow(frame.config, light, frame.bounds)
-                                         if self.settings.shadows else None)
+            if not self.settings.shadows:
+                shadows[light.name] = None
+                continue
+            key = self._shadow_key(frame.config, light, frame.bounds)
+            cached = self._shadows.get(light.name)
+            if cached is not None and self._shadow_keys.get(light.name) == key:
+                shadows[light.name] = cached
+                continue
+            shadows[light.name] = self._render_shadow(frame.config, light, frame.bounds)
+            self._shadow_keys[light.name] = key
+            self.shadow_renders += 1
+        self._shadows = shadows
 
     def _render_shadow(self, config: FrameConfig, light, bounds: np.ndarray) -> dict:
         ctx = self.ctx
@@ -231,21 +302,20 @@ class Renderer:
             m_light, extent, depth_range = _fit_directional(bounds, light.direction)
             fbo.use()
             fbo.clear(depth=1.0)
-            prog = self.shaders.program("shadow.glsl")
-            set_uniform(prog, "m_light", m_light)
-            self._draw_objects(prog, config, None)
+            self._draw_objects(config, "shadow.glsl", {}, lambda prog: set_uniform(prog, "m_light", m_light), None)
             return {"map": tex, "m_light": m_light, "texel_world": extent / self.settings.shadow_size,
                     "depth_range": depth_range}
         faces = _point_faces(light.position, bounds)
         fbo.use()
         fbo.clear(1e30, 1e30, 1e30, 1e30, depth=1.0)
-        prog = self.shaders.program("shadow.glsl", {"POINT_LIGHT": 1})
-        set_uniform(prog, "u_light_pos", tuple(light.position))
         s = self._face_size
         for i, m in enumerate(faces):
             fbo.viewport = ((i % 3) * s, (i // 3) * s, s, s)
-            set_uniform(prog, "m_light", m)
-            self._draw_objects(prog, config, None)
+
+            def setup(prog, m=m):
+                set_uniform(prog, "u_light_pos", tuple(light.position))
+                set_uniform(prog, "m_light", m)
+            self._draw_objects(config, "shadow.glsl", {"POINT_LIGHT": 1}, setup, None)
         fbo.viewport = (0, 0, 3 * s, 2 * s)
         return {"map": tex, "faces": faces}
 

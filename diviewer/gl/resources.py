@@ -5,6 +5,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from diviewer.scene import camera as cam
 from diviewer.scene.model import Material, Mesh
 
 
@@ -50,14 +51,50 @@ class GpuMesh:
         self.ibo.release()
 
 
-def upload_texture(ctx: moderngl.Context, image: np.ndarray) -> moderngl.Texture:
-    """An RGB float texture from a top-row-first image; GL's t = 0 is the image's bottom row."""
-    img = np.ascontiguousarray(np.flipud(image), dtype="f4")
-    tex = ctx.texture((img.shape[1], img.shape[0]), img.shape[2], img.tobytes(), dtype="f4")
+def upload_texture(ctx: moderngl.Context, image: np.ndarray, alpha: np.ndarray | None = None) -> moderngl.Texture:
+    """A mipmapped RGBA float texture from a top-row-first linear image (alpha 1 where none is given).
+
+    GL's t = 0 is the image's bottom row. Linear floats: mipmaps and bilinear filtering average
+    radiometric values, as Mitsuba's bitmap does with the same data.
+    """
+    rgba = np.empty((*image.shape[:2], 4), dtype="f4")
+    rgba[..., :3] = image[..., :3]
+    rgba[..., 3] = 1.0 if alpha is None else alpha
+    img = np.ascontiguousarray(np.flipud(rgba))
+    tex = ctx.texture((img.shape[1], img.shape[0]), 4, img.tobytes(), dtype="f4")
     tex.build_mipmaps()
     tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
     tex.repeat_x = tex.repeat_y = True
     return tex
+
+
+def merge_static(meshes: dict[str, Mesh], objects) -> dict[str, Mesh]:
+    """Objects that never move, merged per material into one world-space mesh each (one draw call each).
+
+    A mirroring pose has its triangles' winding reversed, so every merged triangle is counter-clockwise
+    seen from outside and the identity pose needs no front-face switch.
+    """
+    groups: dict[str, list] = {}
+    for o in objects:
+        groups.setdefault(o.material, []).append(o)
+    out = {}
+    for material, objs in groups.items():
+        verts, normals, uvs, faces, base = [], [], [], [], 0
+        textured = any(meshes[o.mesh].uvs is not None for o in objs)
+        for o in objs:
+            mesh, m = meshes[o.mesh], o.matrix()
+            verts.append(mesh.vertices @ m[:3, :3].T + m[:3, 3])
+            n = mesh.normals @ cam.normal_matrix(m).T
+            normals.append(n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30))
+            if textured:
+                uvs.append(mesh.uvs if mesh.uvs is not None else np.zeros((len(mesh.vertices), 2), np.float32))
+            f = mesh.faces if np.linalg.det(m[:3, :3]) >= 0 else mesh.faces[:, ::-1]
+            faces.append(f.astype(np.uint32) + base)
+            base += len(mesh.vertices)
+        out[material] = Mesh(f"static:{material}", np.concatenate(verts).astype(np.float32),
+                             np.concatenate(normals).astype(np.float32), np.concatenate(faces),
+                             np.concatenate(uvs).astype(np.float32) if textured else None, source="merged")
+    return out
 
 
 class GpuScene:
@@ -65,9 +102,22 @@ class GpuScene:
 
     def __init__(self, ctx: moderngl.Context, meshes: dict[str, Mesh], materials: dict[str, Material]):
         self.meshes = {k: GpuMesh(ctx, m) for k, m in meshes.items()}
-        self.textures = {k: upload_texture(ctx, m.texture) for k, m in materials.items() if m.texture is not None}
+        self.textures = {k: upload_texture(ctx, m.texture, m.alpha) for k, m in materials.items()
+                         if m.texture is not None}
         self._sources: dict[str, object] = {**meshes, **{f"material:{k}": m for k, m in materials.items()}}
         """What each GPU copy was made from, so ``sync`` uploads only what changed."""
+        self.static: dict[str, GpuMesh] = {}
+        """Per material, the merged geometry of the objects that never move (see Renderer)."""
+        self.static_key: object = None
+
+    def set_static(self, ctx: moderngl.Context, meshes: dict[str, Mesh], objects, key: object) -> None:
+        """Upload the merged static geometry of ``objects`` (once per ``key``, compared by identity)."""
+        if key is self.static_key:
+            return
+        for m in self.static.values():
+            m.release()
+        self.static = {k: GpuMesh(ctx, m) for k, m in merge_static(meshes, objects).items()}
+        self.static_key = key
 
     def add_mesh(self, ctx: moderngl.Context, mesh: Mesh) -> None:
         if mesh.name in self.meshes:
@@ -85,11 +135,11 @@ class GpuScene:
             if mat.texture is not None and self._sources.get(f"material:{key}") is not mat:
                 if key in self.textures:
                     self.textures[key].release()
-                self.textures[key] = upload_texture(ctx, mat.texture)
+                self.textures[key] = upload_texture(ctx, mat.texture, mat.alpha)
                 self._sources[f"material:{key}"] = mat
 
     def release(self) -> None:
-        for m in self.meshes.values():
+        for m in (*self.meshes.values(), *self.static.values()):
             m.release()
         for t in self.textures.values():
             t.release()

@@ -19,6 +19,10 @@ Camera matching (the one source of truth is diviewer.scene.camera):
 - Texture coordinates: GL samples ``t = 0`` at the image's bottom row, Mitsuba's ``bitmap`` samples
   ``v = 0`` at its first (top) row; meshes get ``v' = 1 - v``.
 
+- Alpha-masked materials (glTF MASK): a ``mask`` BSDF with the thresholded alpha as opacity, rendered
+  with ``volpath`` (``path_integrator``); AOVs then come from ``reference/aovs.py``, which sees through
+  cut-out texels as the G-buffer does. The variant machinery is in ``reference/variant.py``.
+
 What the reference contains that the GL direct pass does not (by design, it is the ground truth):
 light bounced between surfaces, exact hard shadows, light from emissive surfaces and from the ambient
 sky (``constant`` emitter) falling on other surfaces, and the sky's radiance in background pixels.
@@ -26,22 +30,16 @@ sky (``constant`` emitter) falling on other surfaces, and the sky's radiance in 
 
 from __future__ import annotations
 
-import glob
-import os
-import re
-import subprocess
-import sys
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
-from diviewer.errors import DiviewerError, missing_extra
+from diviewer.errors import DiviewerError
+from diviewer.reference.variant import (  # noqa: F401 (re-exported: the variant is part of this API)
+    VARIANTS, VariantInfo, _current_variant, _import_mitsuba, find_libllvm, select_variant, variant_info,
+)
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
-
-VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
-"""Variants this module uses, fastest first."""
 
 DEFAULT_MAX_DEPTH = 16
 """Path length limit of the full reference (2 = direct light only). In the Cornell box each bounce
@@ -54,161 +52,6 @@ DEFAULT_RR_DEPTH = 5
 the Cornell box (128 px), cheaper per unit of noise than none: at equal time +1.4 to +1.8 dB PSNR with
 llvm_ad_rgb (a vectorised path only stops when all its lanes stop) and +0.3 dB with scalar_rgb, for
 ~1.1 dB more noise per sample. ``path_integrator(max_depth, rr_depth=max_depth)`` turns it off."""
-
-_LIBLLVM_DIRS = ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib",
-                 "/usr/local/lib", "/usr/lib/llvm-{v}/lib")
-_LIBLLVM_NAMES = ("libLLVM-{v}.so", "libLLVM-{v}.so.1", "libLLVM.so.{v}", "libLLVM.so.{v}.*")
-_LIBLLVM_VERSIONS = (19, 18, 17, 16)
-_MIN_LLVM = 16
-"""drjit's LLVM backend aborts the process (uncatchable) in code generation with the system's LLVM 15."""
-
-_PROBE = """
-import numpy as np, mitsuba as mi
-mi.set_variant('llvm_ad_rgb')
-s = mi.load_dict({'type': 'scene', 'integrator': {'type': 'path', 'max_depth': 3},
-    'shape': {'type': 'sphere', 'bsdf': {'type': 'diffuse'}}, 'light': {'type': 'constant'},
-    'sensor': {'type': 'perspective', 'to_world': mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
-               'film': {'type': 'hdrfilm', 'width': 8, 'height': 8}}})
-img = np.array(mi.render(s, spp=4, seed=0))
-assert img.shape == (8, 8, 3) and np.all(np.isfinite(img)) and img.mean() > 0.1, img.mean()
-print('ok')
-"""
-
-
-@dataclass(frozen=True)
-class VariantInfo:
-    """Which Mitsuba variant this process renders with, and why."""
-
-    variant: str
-    libllvm: str | None
-    """The libLLVM the llvm variant uses (DRJIT_LIBLLVM_PATH), or None."""
-    reason: str
-
-
-_variant_info: VariantInfo | None = None
-
-
-def _import_mitsuba():
-    """The mitsuba module, or the project error naming the extra that installs it."""
-    try:
-        import mitsuba  # noqa: PLC0415 (heavy optional dependency, imported where needed)
-    except ImportError as exc:
-        raise missing_extra("mitsuba") from exc
-    return mitsuba
-
-
-def _llvm_version(path: str) -> int | None:
-    m = re.search(r"libLLVM[-.](?:so\.)?(\d+)", os.path.basename(os.path.realpath(path))) or \
-        re.search(r"libLLVM[-.](?:so\.)?(\d+)", os.path.basename(path)) or re.search(r"llvm-(\d+)", path)
-    return int(m.group(1)) if m else None
-
-
-def find_libllvm() -> str | None:
-    """A libLLVM newer than 15: DRJIT_LIBLLVM_PATH if set, else the newest in the usual Debian places."""
-    env = os.environ.get("DRJIT_LIBLLVM_PATH")
-    if env:
-        return env if os.path.isfile(env) else None
-    for v in _LIBLLVM_VERSIONS:
-        for d in _LIBLLVM_DIRS:
-            for n in _LIBLLVM_NAMES:
-                hits = sorted(glob.glob(os.path.join(d.format(v=v), n.format(v=v))))
-                if hits:
-                    return hits[0]
-    return None
-
-
-def _probe_llvm(path: str, timeout: float = 180.0) -> str | None:
-    """Render a tiny scene with llvm_ad_rgb in a child process; None if it works, else why not.
-
-    A child process, because drjit aborts (not raises) when a libLLVM cannot compile its kernels.
-    """
-    env = dict(os.environ, DRJIT_LIBLLVM_PATH=path)
-    try:
-        r = subprocess.run([sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, timeout=timeout)
-    except subprocess.TimeoutExpired:
-        return f"the llvm_ad_rgb test render with {path} took more than {timeout:.0f} s"
-    if r.returncode == 0 and r.stdout.strip().endswith("ok"):
-        return None
-    tail = (r.stderr or r.stdout).strip().splitlines()[-1:] or [f"exit status {r.returncode}"]
-    return f"the llvm_ad_rgb test render with {path} failed ({tail[0][:200]})"
-
-
-def select_variant(prefer: str | None = None) -> str:
-    """Choose and set the Mitsuba variant for this process: llvm_ad_rgb where it works, else scalar_rgb.
-
-    Args:
-        prefer: ``"scalar_rgb"`` to skip the llvm variant; ``"llvm_ad_rgb"`` to use it where a
-            working libLLVM newer than 15 is found (DRJIT_LIBLLVM_PATH, else libLLVM-19/18/17/16 in the
-            usual Debian places, which then goes into DRJIT_LIBLLVM_PATH). The libLLVM is verified once
-            per process with a tiny render in a child process; scalar_rgb is the fallback. None: the
-            environment variable DIVIEWER_MITSUBA_VARIANT if set, else ``"llvm_ad_rgb"``.
-
-    Returns:
-        The variant now set; ``variant_info()`` says which libLLVM and why.
-    """
-    global _variant_info, _llvm_result
-    mi = _import_mitsuba()
-    source = "prefer" if prefer else "DIVIEWER_MITSUBA_VARIANT"
-    prefer = prefer or os.environ.get("DIVIEWER_MITSUBA_VARIANT") or None
-    if prefer is not None and prefer not in VARIANTS:
-        raise DiviewerError(f"unknown Mitsuba variant '{prefer}'; use one of {', '.join(VARIANTS)}", field=source)
-    if prefer == "scalar_rgb":
-        info = VariantInfo("scalar_rgb", None, "scalar_rgb requested")
-    else:
-        if _llvm_result is None:
-            _llvm_result = _choose_llvm(mi)
-        info = _llvm_result
-    mi.set_variant(info.variant)
-    _variant_info = info
-    return info.variant
-
-
-_llvm_result: VariantInfo | None = None
-
-
-def _choose_llvm(mi) -> VariantInfo:
-    if "llvm_ad_rgb" not in mi.variants():
-        return VariantInfo("scalar_rgb", None, "this mitsuba build has no llvm_ad_rgb variant")
-    path = find_libllvm()
-    if path is None:
-        where = os.environ.get("DRJIT_LIBLLVM_PATH")
-        why = (f"DRJIT_LIBLLVM_PATH={where} is not a file" if where else
-               f"no libLLVM {_MIN_LLVM} or newer found (Debian: apt-get install libllvm19)")
-        return VariantInfo("scalar_rgb", None, why)
-    version = _llvm_version(path)
-    if version is not None and version < _MIN_LLVM:
-        return VariantInfo("scalar_rgb", None, f"{path} is LLVM {version}; llvm_ad_rgb needs {_MIN_LLVM} or newer")
-    failure = _probe_llvm(path)
-    if failure is not None:
-        return VariantInfo("scalar_rgb", None, failure)
-    os.environ["DRJIT_LIBLLVM_PATH"] = path  # drjit reads it when its LLVM backend first starts
-    try:
-        mi.set_variant("llvm_ad_rgb")
-    except Exception as exc:  # drjit raises ImportError/RuntimeError when its LLVM backend cannot start
-        return VariantInfo("scalar_rgb", None, f"llvm_ad_rgb failed to start in this process: {exc}")
-    return VariantInfo("llvm_ad_rgb", path, f"verified with {path}")
-
-
-def variant_info() -> VariantInfo:
-    """The variant in use and why (chooses one with select_variant if none of ours is set)."""
-    mi = _import_mitsuba()
-    v = mi.variant()
-    if v not in VARIANTS:
-        select_variant()
-        v = mi.variant()
-    if _variant_info is not None and _variant_info.variant == v:
-        return _variant_info
-    lib = os.environ.get("DRJIT_LIBLLVM_PATH") if v.startswith("llvm") else None
-    return VariantInfo(v, lib, "set by the caller (mitsuba.set_variant)")
-
-
-def _current_variant(mi) -> str:
-    """The variant set now; chooses one (select_variant) if none of ours is set."""
-    v = mi.variant()
-    if v not in VARIANTS:
-        return select_variant()
-    return v
-
 
 # --- translation ------------------------------------------------------------------------------------------------
 
@@ -301,7 +144,7 @@ def to_mitsuba_dict(scene: Scene, config: FrameConfig, width: int, height: int, 
     c = config.camera
     out: dict = {
         "type": "scene",
-        "integrator": integrator or path_integrator(DEFAULT_MAX_DEPTH),
+        "integrator": integrator or path_integrator(DEFAULT_MAX_DEPTH, masked=has_masks(scene, config)),
         "sensor": {
             "type": "perspective",
             "fov": float(c.fov),
@@ -326,7 +169,17 @@ def to_mitsuba_dict(scene: Scene, config: FrameConfig, width: int, height: int, 
                         "filter_type": "bilinear"}
             else:
                 refl = _rgb(mat.albedo)
-            bsdfs[obj.material] = mi.load_dict({"type": "twosided", "material": {"type": "diffuse", "reflectance": refl}})
+            bsdf = {"type": "twosided", "material": {"type": "diffuse", "reflectance": refl}}
+            if mat.is_masked:
+                # Alpha-tested (glTF MASK): opaque where the alpha passes the cutoff, absent elsewhere.
+                # Nearest texels of the binary mask: Mitsuba reads a fractional opacity as partial
+                # coverage, GL's test is binary; for a binary mask the edge of GL's test on the bilinear
+                # alpha is the texel boundary, where nearest lookup puts it too.
+                opacity = np.ascontiguousarray((mat.alpha >= mat.alpha_cutoff)[..., None], dtype=np.float32)
+                bsdf = {"type": "mask", "material": bsdf,
+                        "opacity": {"type": "bitmap", "data": mi.TensorXf(opacity), "raw": True,
+                                    "wrap_mode": "repeat", "filter_type": "nearest"}}
+            bsdfs[obj.material] = mi.load_dict(bsdf)
         m = obj.matrix()
         v = mesh.vertices.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
         n = mesh.normals.astype(np.float64) @ cam.normal_matrix(m).T
@@ -343,27 +196,42 @@ def to_mitsuba_dict(scene: Scene, config: FrameConfig, width: int, height: int, 
         emitter = mi.load_dict({"type": "area", "radiance": _rgb(mat.emission)}) if mat.is_emissive else None
         out[f"object_{i}"] = _mesh(mi, obj.name, v, n, faces, uvs, bsdfs[obj.material], emitter)
     for i, light in enumerate(config.lights):
-        if isinstance(light, DirectionalLight):
-            out[f"light_{i}"] = {
-                "type": "directional", "direction": [float(x) for x in cam.normalize(light.direction)],
-                "irradiance": _rgb(np.asarray(light.color) * light.irradiance)}
-        else:
-            out[f"light_{i}"] = {
-                "type": "point", "position": [float(x) for x in light.position],
-                "intensity": _rgb(np.asarray(light.color) * light.intensity)}
+        out[f"light_{i}"] = _emitter(light)
     if max(scene.ambient) > 0.0:
         out["ambient"] = {"type": "constant", "radiance": _rgb(scene.ambient)}
     return out
 
 
-def path_integrator(max_depth: int, rr_depth: int | None = None) -> dict:
-    """Mitsuba's ``path`` integrator; ``max_depth = 2`` is direct light only."""
+def _emitter(light) -> dict:
+    """A light as a Mitsuba emitter dict (directional: irradiance; point: intensity)."""
+    if isinstance(light, DirectionalLight):
+        return {"type": "directional", "direction": [float(x) for x in cam.normalize(light.direction)],
+                "irradiance": _rgb(np.asarray(light.color) * light.irradiance)}
+    return {"type": "point", "position": [float(x) for x in light.position],
+            "intensity": _rgb(np.asarray(light.color) * light.intensity)}
+
+
+def path_integrator(max_depth: int, rr_depth: int | None = None, masked: bool = False) -> dict:
+    """Mitsuba's ``path`` integrator; ``max_depth = 2`` is direct light only.
+
+    Args:
+        masked: the frame has alpha-masked surfaces. ``path`` lets their shadow rays be blocked by fully
+            transparent texels and counts a crossing as a bounce (measured: a quad of opacity 0 above a
+            lit floor leaves it black at max_depth 2 and 3); ``volpath``, without media the same
+            estimator, passes shadow rays through ``mask`` surfaces and does not count the crossing.
+    """
     if max_depth < 1:
         raise ValueError(f"max_depth must be >= 1, got {max_depth}")
     rr = DEFAULT_RR_DEPTH if rr_depth is None else rr_depth
     if rr < 1:
         raise ValueError(f"rr_depth must be >= 1, got {rr}")
-    return {"type": "path", "max_depth": int(max_depth), "rr_depth": int(rr), "hide_emitters": False}
+    return {"type": "volpath" if masked else "path", "max_depth": int(max_depth), "rr_depth": int(rr),
+            "hide_emitters": False}
+
+
+def has_masks(scene: Scene, config: FrameConfig) -> bool:
+    """Whether any object of the frame wears an alpha-masked material."""
+    return any(scene.materials[o.material].is_masked for o in config.objects)
 
 
 SAMPLER = "multijitter"
@@ -398,9 +266,36 @@ class MitsubaFrame:
         mi = _import_mitsuba()
         self.variant = _current_variant(mi)
         self.scene, self.config, self.width, self.height = scene, config, width, height
+        self.masked = has_masks(scene, config)
         t0 = time.perf_counter()
         self._mi_scene = mi.load_dict(to_mitsuba_dict(scene, config, width, height, spp=1, seed=0))
         self.load_seconds = time.perf_counter() - t0
+
+    def retarget(self, config: FrameConfig) -> bool:
+        """Move the loaded scene's camera and lights to ``config`` in place; False (nothing changed) when
+        more than that differs (objects, light types, fov or clip planes), which needs a fresh load.
+
+        Geometry, BSDFs and the BVH stay: on Sponza that saves the ~2 s of a load per captured frame.
+        Each light's parameters are copied from a Mitsuba emitter built from the same dict a load uses.
+        """
+        old = self.config
+        c0, c1 = old.camera, config.camera
+        if (config.objects != old.objects or (c0.fov, c0.near, c0.far) != (c1.fov, c1.near, c1.far)
+                or [(type(a), a.name) for a in old.lights] != [(type(b), b.name) for b in config.lights]):
+            return False
+        mi = _import_mitsuba()
+        mi.set_variant(self.variant)
+        _check_supported(self.scene, config)
+        params = mi.traverse(self._mi_scene)
+        params["sensor.to_world"] = mi.ScalarTransform4f(camera_to_world(config).tolist())
+        for i, light in enumerate(config.lights):
+            emitter = mi.traverse(mi.load_dict(_emitter(light)))
+            for k in emitter.keys():
+                if f"light_{i}.{k}" in params and k != "sampling_weight":
+                    params[f"light_{i}.{k}"] = emitter[k]
+        params.update()
+        self.config = config
+        return True
 
     def _render(self, integrator: dict, spp: int, seed: int) -> np.ndarray:
         mi = _import_mitsuba()
@@ -410,7 +305,7 @@ class MitsubaFrame:
 
     def full(self, spp: int, seed: int, max_depth: int = DEFAULT_MAX_DEPTH) -> np.ndarray:
         """Global illumination: (H, W, 3) linear radiance, top row first."""
-        return np.ascontiguousarray(self._render(path_integrator(max_depth), spp, seed)[..., :3])
+        return np.ascontiguousarray(self._render(path_integrator(max_depth, masked=self.masked), spp, seed)[..., :3])
 
     def direct(self, spp: int, seed: int) -> np.ndarray:
         """Direct light and visible emission only (path length 2)."""
@@ -421,7 +316,13 @@ class MitsubaFrame:
 
         Pixel values are box-filtered over the pixel (spp samples); background is 0 like the G-buffer.
         """
-        raw = self._render({"type": "aov", "aovs": AOV_CHANNELS}, spp, seed)
+        if self.masked:  # the aov integrator would stop at cut-out texels
+            from diviewer.reference.aovs import trace_aovs
+
+            _import_mitsuba().set_variant(self.variant)
+            raw = trace_aovs(self._mi_scene, self.width, self.height, effective_spp(spp), seed)
+        else:
+            raw = self._render({"type": "aov", "aovs": AOV_CHANNELS}, spp, seed)
         dd, nn, ng, al = raw[..., 0], raw[..., 1:4], raw[..., 4:7], raw[..., 7:10]
         c = self.config.camera
         rays = cam.pixel_rays_view(self.width, self.height, c.fov)  # unit -z through pixel centres
@@ -443,12 +344,22 @@ _cache: tuple | None = None
 
 
 def load_frame(scene: Scene, config: FrameConfig, width: int, height: int) -> MitsubaFrame:
-    """The loaded Mitsuba scene of a frame; the last one is kept, so full/direct/AOV renders share it."""
+    """The loaded Mitsuba scene of a frame; the last one is kept, so full/direct/AOV renders share it.
+
+    A frame of the same scene and size that differs only in camera pose and lights reuses the loaded
+    scene (``MitsubaFrame.retarget``): the frame returned before then renders the new configuration.
+    """
     global _cache
     mi = _import_mitsuba()
     key = (id(scene), config, width, height, _current_variant(mi))
     if _cache is not None and _cache[0] == key and _cache[1].scene is scene:
         return _cache[1]
+    if _cache is not None:
+        prev = _cache[1]
+        if (prev.scene is scene and (prev.width, prev.height, prev.variant) == (width, height, key[4])
+                and prev.retarget(config)):
+            _cache = (key, prev)
+            return prev
     frame = MitsubaFrame(scene, config, width, height)
     _cache = (key, frame)
     return frame

@@ -11,11 +11,25 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.paths import scenes_dir
-from diviewer.scene import colour, shapes
+from diviewer.scene import gltf, shapes
 from diviewer.scene.model import (
     Camera, CameraRange, DirectionalLight, FrameConfig, LightRange, Material, Object, ObjectRange,
     PointLight, Ranges, Scene,
 )
+
+
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+"""Every number ends up in float32 (GL uniforms, Mitsuba's rgb variants): larger ones are refused."""
+
+MAX_FAR_NEAR = 1e5
+"""Largest camera far/near ratio. The G-buffer's 24-bit depth buffer stores 1 - near/distance in
+effect, so at far/near = 2**24 (1.7e7) everything beyond that distance is clipped (measured: near
+1e-6, far 10 renders a wall at 9 black); at 1e5 surfaces 0.6 % of their distance apart still sort
+correctly at the far plane. Refused rather than rendered wrong (a reversed-Z buffer would lift it)."""
+
+
+def _f32(v: float) -> bool:
+    return abs(v) <= FLOAT32_MAX
 
 
 class _Table:
@@ -56,6 +70,8 @@ class _Table:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise self.err(key, f"expected a finite number, got {v!r}")
         v = float(v)
+        if not _f32(v):
+            raise self.err(key, f"{v:g} is outside float32's range (+-3.4e38), in which it is rendered")
         if lo is not None and (v < lo or (lo_open and v == lo)):
             raise self.err(key, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
         if hi is not None and (v > hi or (hi_open and v == hi)):
@@ -69,6 +85,8 @@ class _Table:
         if (not isinstance(v, (list, tuple)) or len(v) != n
                 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
             raise self.err(key, f"expected {n} finite numbers, got {v!r}")
+        if not all(_f32(float(x)) for x in v):
+            raise self.err(key, f"{v} is outside float32's range (+-3.4e38), in which it is rendered")
         if lo is not None and min(v) < lo:
             raise self.err(key, f"values must be >= {lo}, got {v}")
         if hi is not None and max(v) > hi:
@@ -138,23 +156,33 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
     camera = _camera(root.table("camera"))
 
     materials: dict[str, Material] = {}
-    mats = root.table("materials")
-    for key in list(mats.data):
-        t = mats.table(key)
-        texture, tex_src = None, ""
+    meshes = {}
+    objects = []
+    if root.has("gltf"):
+        # A whole glTF scene: its meshes, materials and placed objects, before the file's own.
+        g = root.table("gltf")
+        meshes, materials, objects = gltf.load_gltf(base / g.str("file"), path=path, field="gltf.file")
+        g.finish()
+
+    for key, t in _entries(root.table("materials"), _not_in_gltf(materials, "material")):
+        texture, alpha, tex_src = None, None, ""
         if t.has("texture"):
             tex_path = base / t.str("texture")
-            texture, tex_src = _load_texture(tex_path, path, t._field("texture")), str(tex_path)
+            texture, alpha = gltf.load_texture(tex_path, path=path, field=t._field("texture"))
+            tex_src = str(tex_path)
+        cutoff = 0.5
+        if t.has("alpha_cutoff"):
+            # Alpha-tested: the texture's alpha channel is the cut-out mask (as glTF's alphaMode MASK).
+            cutoff = t.num("alpha_cutoff", lo=0.0, hi=1.0)
+            if alpha is None:
+                raise t.err("alpha_cutoff", "needs a 'texture' with an alpha channel (the cut-out mask)")
+        else:
+            alpha = None
         materials[key] = Material(key, albedo=t.vec("albedo", 3, (0.8, 0.8, 0.8), lo=0.0, hi=1.0),
                                   emission=t.vec("emission", 3, (0.0, 0.0, 0.0), lo=0.0),
-                                  texture=texture, texture_source=tex_src)
-        t.finish()
-    mats.finish()
+                                  texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff)
 
-    meshes = {}
-    mtab = root.table("meshes")
-    for key in list(mtab.data):
-        t = mtab.table(key)
+    for key, t in _entries(root.table("meshes"), _not_in_gltf(meshes, "mesh")):
         if t.has("file") == t.has("shape"):
             raise t.err("shape", "a mesh needs exactly one of 'shape' (procedural) or 'file'")
         if t.has("shape"):
@@ -168,14 +196,11 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                 # The file's own material, used by objects that name no material.
                 materials[f"mesh:{key}"] = Material(f"mesh:{key}", albedo=color or (1.0, 1.0, 1.0), texture=texture,
                                                     texture_source=str(base / t.data["file"]))
-        t.finish()
-    mtab.finish()
 
-    objects = []
     raw_objects = root.raw("objects", [])
     if not isinstance(raw_objects, list):
         raise root.err("objects", "expected an array of tables ([[objects]])")
-    names = set()
+    names = {o.name for o in objects}
     for i, o in enumerate(raw_objects):
         t = _Table(o, path, f"objects[{i}]")
         oname = t.str("name", f"object{i}")
@@ -196,7 +221,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                               rotation=t.vec("rotation", 3, (0.0, 0.0, 0.0)), scale=scale))
         t.finish()
     if not objects:
-        raise DiviewerError("a scene needs at least one object ([[objects]])", path=path, field="objects")
+        raise DiviewerError("a scene needs at least one object ([[objects]] or [gltf])", path=path, field="objects")
 
     lights = []
     raw_lights = root.raw("lights", [])
@@ -214,12 +239,34 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                  ranges=ranges, exposure=exposure, ambient=ambient)
 
 
+def _entries(tab: _Table, problem):
+    """Each entry of a table of tables (``[materials]``, ``[ranges.lights]``, ...) as (key, its table),
+    refusing a key for which ``problem(key)`` gives a reason; each entry, then the table, is checked for
+    unknown keys once the caller has read it."""
+    for key in list(tab.data):
+        why = problem(key)
+        if why:
+            raise tab.err(key, why)
+        t = tab.table(key)
+        yield key, t
+        t.finish()
+    tab.finish()
+
+
+def _not_in_gltf(defined: dict, what: str):
+    """``_entries``' check for a name the glTF file already defined."""
+    return lambda key: f"{what} '{key}' is already defined by the glTF file" if key in defined else None
+
+
 def _camera(t: _Table) -> Camera:
     c = Camera(position=t.vec("position", 3, (0.0, 0.0, 5.0)), target=t.vec("target", 3, (0.0, 0.0, 0.0)),
                up=t.vec("up", 3, (0.0, 1.0, 0.0)), fov=t.num("fov", 45.0, lo=0.0, hi=180.0, lo_open=True, hi_open=True),
                near=t.num("near", 0.05, lo=0.0, lo_open=True), far=t.num("far", 100.0, lo=0.0, lo_open=True))
     if c.near >= c.far:
         raise t.err("near", f"near ({c.near}) must be less than far ({c.far})")
+    if c.far / c.near > MAX_FAR_NEAR:
+        raise t.err("near", f"far / near = {c.far / c.near:.3g} is more than the depth buffer resolves "
+                            f"({MAX_FAR_NEAR:.0e}); raise near to at least {c.far / MAX_FAR_NEAR:.3g} or lower far")
     d = np.subtract(c.target, c.position)
     if np.linalg.norm(d) < 1e-9:
         raise t.err("target", "camera target equals its position")
@@ -239,35 +286,35 @@ def _light(t: _Table, i: int):
             raise t.err("direction", "direction must be non-zero")
         light = DirectionalLight(name, direction=tuple(float(x) for x in np.divide(direction, np.linalg.norm(direction))),
                                  color=color, irradiance=t.num("irradiance", 1.0, lo=0.0))
+        strength = ("irradiance", light.irradiance)
     else:
         light = PointLight(name, position=t.vec("position", 3), color=color, intensity=t.num("intensity", 1.0, lo=0.0))
+        strength = ("intensity", light.intensity)
+    # The shader multiplies colour by strength: the product must stay in float32 too.
+    if not _f32(max(color) * strength[1]):
+        raise t.err(strength[0], f"color x {strength[0]} = {max(color) * strength[1]:.3g} is outside float32's range "
+                                 f"(+-3.4e38), in which it is rendered")
     t.finish()
     return light
 
 
 def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
     lights, objects, camera = {}, {}, None
-    lt = t.table("lights")
     known_lights = {l.name for l in default.lights}
-    for key in list(lt.data):
-        if key not in known_lights:
-            raise lt.err(key, f"no light named '{key}'")
-        r = lt.table(key)
+    for key, r in _entries(t.table("lights"), lambda k: None if k in known_lights else f"no light named '{k}'"):
         angle = r.vec("angle", 2, (0.0, 0.0))
         inten = r.vec("intensity", 2, (1.0, 1.0), lo=0.0)
         if angle[0] > angle[1] or inten[0] > inten[1]:
             raise r.err("angle", "ranges are [min, max] with min <= max")
         if inten[0] <= 0.0:
             raise r.err("intensity", "the intensity multiplier range must be positive (drawn log-uniformly)")
+        light = next(l for l in default.lights if l.name == key)
+        peak = max(light.color) * getattr(light, "irradiance", getattr(light, "intensity", 1.0)) * inten[1]
+        if not _f32(peak):
+            raise r.err("intensity", f"the brightest drawn light ({peak:.3g}) is outside float32's range (+-3.4e38)")
         lights[key] = LightRange(axis=r.vec("axis", 3, (0.0, 1.0, 0.0)), angle=angle, intensity=inten)
-        r.finish()
-    lt.finish()
-    ot = t.table("objects")
     known_objects = {o.name for o in default.objects}
-    for key in list(ot.data):
-        if key not in known_objects:
-            raise ot.err(key, f"no object named '{key}'")
-        r = ot.table(key)
+    for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else f"no object named '{k}'"):
         train, test = r.strs("train_meshes"), r.strs("test_meshes")
         for field_name, lst in (("train_meshes", train), ("test_meshes", test)):
             for m in lst:
@@ -280,8 +327,6 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
             raise r.err("offset", "expected [[min x, y, z], [max x, y, z]]")
         objects[key] = ObjectRange(axes=r.vecs("axes", 3, []), angle=r.vec("angle", 2, (0.0, 360.0)),
                                    offset=offset, train_meshes=train, test_meshes=test)
-        r.finish()
-    ot.finish()
     if t.has("camera"):
         r = t.table("camera")
         positions, targets = r.vecs("positions", 3), r.vecs("targets", 3)
@@ -296,18 +341,6 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
         r.finish()
     t.finish()
     return Ranges(lights=lights, objects=objects, camera=camera)
-
-
-def _load_texture(file: Path, path, field: str) -> np.ndarray:
-    from PIL import Image
-
-    if not file.is_file():
-        raise DiviewerError(f"texture file not found: {file}", path=path, field=field)
-    try:
-        img = Image.open(file).convert("RGB")
-    except Exception as exc:
-        raise DiviewerError(f"cannot read texture {file}: {exc}", path=path, field=field) from exc
-    return colour.srgb_to_linear(np.asarray(img, dtype=np.float32) / 255.0).astype(np.float32)
 
 
 def add_mesh_file(scene: Scene, path: str | Path, key: str | None = None) -> tuple[Scene, str, str | None]:
@@ -335,6 +368,9 @@ def config_from_dict(scene: Scene, data: dict, *, path=None) -> FrameConfig:
     """Rebuild a FrameConfig written by FrameConfig.to_dict, checked against the scene."""
     t = _Table(data, path, "")
     camera = _camera(t.table("camera"))
+    for key in ("lights", "objects"):
+        if not isinstance(t.data.get(key, []), list):
+            raise t.err(key, f"expected a list of tables, got {t.data[key]!r}")
     lights = []
     for i, l in enumerate(t.raw("lights", [])):
         lights.append(_light(_Table(l, path, f"lights[{i}]"), i))

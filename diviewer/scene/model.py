@@ -54,10 +54,19 @@ class Material:
     """(H, W, 3) float32 linear base-colour texture, top row first, or None."""
     texture_source: str = ""
     """The file the texture came from."""
+    alpha: np.ndarray | None = None
+    """(H, W) float32 cut-out mask in [0, 1] (the base colour's alpha, same size as ``texture``), or None:
+    opaque. Where the filtered alpha is below ``alpha_cutoff`` the surface is not there (glTF MASK)."""
+    alpha_cutoff: float = 0.5
 
     @property
     def is_emissive(self) -> bool:
         return max(self.emission) > 0.0
+
+    @property
+    def is_masked(self) -> bool:
+        """Alpha-tested: cut out where the texture's alpha is below the cutoff (leaves, chains)."""
+        return self.alpha is not None
 
 
 @dataclass(frozen=True)

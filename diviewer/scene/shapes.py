@@ -60,7 +60,7 @@ def _capsule_cluster(count: int = 3, radius: float = 0.12, height: float = 0.5) 
 
 # shape name -> (builder, {parameter: default}); parameters come from the scene file's mesh table.
 SHAPES = {
-    "box": (lambda size: trimesh.creation.box(extents=size), {"size": (1.0, 1.0, 1.0)}),
+    "box": (lambda size: trimesh.creation.box(extents=np.broadcast_to(np.asarray(size, dtype=np.float64), 3)), {"size": (1.0, 1.0, 1.0)}),
     "sphere": (lambda radius, subdivisions: trimesh.creation.icosphere(subdivisions=int(subdivisions), radius=radius),
                {"radius": 0.5, "subdivisions": 3}),
     "cylinder": (lambda radius, height, sections: trimesh.creation.cylinder(radius=radius, height=height, sections=int(sections)),
@@ -80,6 +80,40 @@ SHAPES = {
 }
 
 
+# Integer parameters and their allowed ranges. The upper bounds keep a mesh within what a frame can
+# afford: an icosphere has 20 * 4**subdivisions faces (7: 328k; 10: 21M, minutes and out of memory).
+INTEGER_PARAMS = {
+    ("sphere", "subdivisions"): (0, 7),
+    ("cylinder", "sections"): (3, 4096),
+    ("cone", "sections"): (3, 4096),
+    ("torus_knot", "p"): (1, 64),
+    ("torus_knot", "q"): (1, 64),
+    ("capsule_cluster", "count"): (1, 64),
+}
+MAX_EXTENT = 1e6
+"""Largest size or radius of a procedural shape (scene units); float32 vertices keep 0.06 units of
+precision there, and the shadow maps are fitted to the scene's bounds."""
+
+
+def _check_param(shape: str, key: str, v, path, field: str) -> None:
+    where = f"{field}.{key}"
+    if (shape, key) in INTEGER_PARAMS:
+        lo, hi = INTEGER_PARAMS[(shape, key)]
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            raise DiviewerError(f"expected a whole number from {lo} to {hi}, got {v!r}", path=path, field=where)
+        if not lo <= v <= hi:
+            raise DiviewerError(f"must be from {lo} to {hi}, got {v}", path=path, field=where)
+        return
+    flat = v if isinstance(v, (list, tuple)) else [v]
+    if not flat or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in flat):
+        raise DiviewerError(f"expected a number or a list of numbers, got {v!r}", path=path, field=where)
+    vals = np.asarray(flat, dtype=np.float64)
+    if not np.all(np.isfinite(vals)) or np.any(vals <= 0):
+        raise DiviewerError(f"must be positive and finite, got {v}", path=path, field=where)
+    if np.any(vals > MAX_EXTENT):
+        raise DiviewerError(f"must be at most {MAX_EXTENT:g}, got {v}", path=path, field=where)
+
+
 def procedural(name: str, shape: str, params: dict, *, path=None, field: str = "") -> Mesh:
     """Build a procedural shape; ``params`` must be a subset of the shape's parameters."""
     if shape not in SHAPES:
@@ -91,9 +125,14 @@ def procedural(name: str, shape: str, params: dict, *, path=None, field: str = "
                             path=path, field=field)
     args = {**defaults, **params}
     for k, v in args.items():
-        vals = np.atleast_1d(np.asarray(v, dtype=np.float64))
-        if not np.all(np.isfinite(vals)) or np.any(vals <= 0):
-            raise DiviewerError(f"must be positive and finite, got {v}", path=path, field=f"{field}.{k}")
+        _check_param(shape, k, v, path, field)
+    if shape in ("box",) and np.ndim(args["size"]) and len(args["size"]) != 3:
+        raise DiviewerError(f"expected 3 numbers, got {args['size']}", path=path, field=f"{field}.size")
+    if shape == "plane" and np.ndim(args["size"]) and len(args["size"]) != 2:
+        raise DiviewerError(f"expected 2 numbers, got {args['size']}", path=path, field=f"{field}.size")
+    if shape == "torus" and args["minor_radius"] >= args["major_radius"]:
+        raise DiviewerError(f"minor_radius ({args['minor_radius']}) must be less than major_radius "
+                            f"({args['major_radius']})", path=path, field=f"{field}.minor_radius")
     return from_trimesh(name, builder(**args), source=shape, path=path, field=field, strict=False)
 
 

@@ -23,6 +23,7 @@ from diviewer import imageio
 from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
+from diviewer.outputs import check_output_file, dumps, staged
 from diviewer.provenance import versions
 from diviewer.runtime import INPUT_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
 
@@ -52,8 +53,8 @@ def _torch():
 def gi_module(netG, encoding, meta: dict, fp16: bool = False):
     """The exported computation as a torch module: raw NHWC buffers -> linear radiance NHWC."""
     torch = _torch()
-    from diviewer.encoding import decode_radiance, encode_inputs
-    from diviewer.train.trainer import compose_radiance
+    from diviewer.train.encoding_torch import decode_radiance, encode_inputs
+    from diviewer.train.targets import compose_radiance
 
     class GIModel(torch.nn.Module):
         def __init__(self):
@@ -67,7 +68,7 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False):
             y = self.netG(inp.half() if fp16 else inp)
             radiance = decode_radiance(y.float() if fp16 else y, encoding)
             out = compose_radiance(radiance, direct, albedo, meta["target"], meta["divide_albedo"])
-            return out.permute(0, 2, 3, 1)
+            return out.permute(0, 2, 3, 1)  # clamped at 0 by compose_radiance
 
     return GIModel().eval()
 
@@ -116,15 +117,25 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
     return np.stack(frames).astype(np.float32), f"{n} synthetic frames (dataset {data_dir} not found)"
 
 
+def check_export_paths(ckpt_path: Path, out: Path) -> None:
+    """Refuse, before any work, an --out that would overwrite the checkpoint or be overwritten by the card."""
+    if not ckpt_path.is_file():
+        raise DiviewerError(f"checkpoint not found: {ckpt_path}", field="checkpoint")
+    card = out.with_suffix(".json")
+    check_output_file(out, "--out", protect=(ckpt_path,), suffix=".onnx")
+    check_output_file(card, "--out", protect=(ckpt_path,))
+
+
 def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = ExportSettings(), log=print) -> dict:
     """Export, verify, and write the model and its model card (``out`` with .json); returns the card."""
     torch = _torch()
     import onnx
     import onnxruntime as ort
 
-    from diviewer.train.trainer import build_generator_from_checkpoint, load_checkpoint
+    from diviewer.train.checkpoint import build_generator_from_checkpoint, load_checkpoint
 
     ckpt_path, out = Path(ckpt_path), Path(out)
+    check_export_paths(ckpt_path, out)
     ckpt = load_checkpoint(ckpt_path)
     netG, encoding, meta = build_generator_from_checkpoint(ckpt)
     levels = int(meta["model_args"]["levels"])
@@ -186,14 +197,27 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "exported_with": versions(),
         "verification": check,
         "opset": OPSET,
+        "recipe": _recipe(meta),
     }
-    onnx.helper.set_model_props(model, {META_KEY: json.dumps(card, sort_keys=True)})
+    onnx.helper.set_model_props(model, {META_KEY: dumps(card, sort_keys=True)})
     model.producer_name, model.producer_version = "diviewer", card["exported_with"]["diviewer"]
-    with imageio.atomic_path(out) as tmp:
-        onnx.save(model, str(tmp))
-    imageio.write_text(out.with_suffix(".json"), json.dumps(card, indent=2, sort_keys=True))
+    with staged() as stage:  # the model and its card land together, or neither does
+        onnx.save(model, str(stage(out)))
+        imageio.write_text(stage(out.with_suffix(".json")), dumps(card, indent=2, sort_keys=True))
     log(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB) and {out.with_suffix('.json').name}")
     return card
+
+
+_RUN_ONLY = ("data", "out", "max_steps", "device", "num_workers", "precision")
+"""TrainConfig fields that describe one invocation on one machine, not how the model was made."""
+
+
+def _recipe(meta: dict) -> dict:
+    """How the model was made, for the card: capture settings, training settings, network settings
+    (`tools/build_shipped_model.py` rebuilds a shipped model from it)."""
+    return {"capture": meta.get("capture"),
+            "train": {k: v for k, v in meta["config"].items() if k not in _RUN_ONLY},
+            "net": meta["net_config"], "loss": meta.get("loss_config")}
 
 
 def info(path: str | Path) -> str:

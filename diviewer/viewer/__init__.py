@@ -2,7 +2,8 @@
 
 app (the frame loop), window (size, HiDPI scale, letterbox, window-to-image mapping), input (the key
 table), panel (imgui; never imports app), screenshots, sources (the view modes' textures), models
-(which model), view_modes, stats, command (``diviewer view``'s arguments). ``state``, ``controls``,
+(which model), gi (the model's neural pass and the GI resolution policy), script (scripted runs), report
+(a run's summary and stats JSON), view_modes, stats, command (``diviewer view``'s arguments). ``state``, ``controls``,
 ``view_modes`` and ``stats`` are pure state and math (no GL), testable without a display. The display
 pass is ``diviewer.gl.display``; the path-traced preview ``diviewer.reference.progressive``.
 """

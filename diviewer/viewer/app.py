@@ -5,29 +5,30 @@ Usage::
     diviewer view --scene cornell                      # interactive, the scene's model if one is shipped
     diviewer view --frames 60 --screenshot shot.png    # scripted: 60 frames, save the last, exit
 
-Each frame: the GL renderer draws the G-buffer and direct light at the GI resolution (the model's
-training resolution when a model is loaded, else the window's framebuffer), the neural pass turns
-them into the final image, the display pass draws the view mode's image into the window (letterboxed
-to the GI aspect ratio), and the panel goes on top. Nothing here imports torch. The rooms: window.py
-(size, scale, letterbox), input.py (key table), panel.py, screenshots.py, sources.py (the view modes'
-textures), models.py (which model), state.py (what is shown, no GL).
+Each frame: the GL renderer draws shadows (cached while nothing moves), the G-buffer and direct light
+at the window's framebuffer resolution; the neural pass reduces them to the GI resolution (``gi_res``:
+the model's training size or a fraction of the window), runs the network (optionally one frame
+behind, on a worker thread), and upsamples its indirect light over the full-resolution direct light;
+the display pass draws the view mode's image into the window, and the panel goes on top. Nothing here
+imports torch. The rooms: window.py (size, scale, letterbox), input.py (key table), panel.py,
+screenshots.py, sources.py (the view modes' textures), models.py (which model), gi.py (the model's neural
+pass and the GI resolution policy), script.py (scripted runs), report.py (the run's summary and stats
+JSON), state.py (what is shown, no GL).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from diviewer.errors import DiviewerError
 from diviewer.gl.display import Image, Look, depth_range
+from diviewer.gl.neural import GISettings
 from diviewer.gl.renderer import RenderSettings
 from diviewer.reference.progressive import ReferenceSettings
 from diviewer.scene.model import Scene
-from diviewer.viewer.models import model_candidates, open_model
-from diviewer.viewer.stats import STAGES
+from diviewer.viewer.models import model_candidates
 from diviewer.viewer.view_modes import Unavailable, view_mode
 
 BACKGROUND = (0.08, 0.08, 0.09)
@@ -36,7 +37,8 @@ BACKGROUND = (0.08, 0.08, 0.09)
 
 @dataclass(frozen=True)
 class ViewerSettings:
-    """Settings of one viewer session."""
+    """Settings a viewer session opens with (the GI resolution, pipelining and timing then change live:
+    ``Viewer.gi`` and ``Viewer.timer`` hold the current ones)."""
 
     size: tuple[int, int] = (768, 768)
     """Window size in screen units (the framebuffer may be larger on HiDPI screens)."""
@@ -48,7 +50,13 @@ class ViewerSettings:
     controller: str = "fly"
     """Camera controller at start: fly or orbit."""
     timing: bool = True
-    """Time each stage (waits for the GPU between stages: the frame is a little slower, the numbers are honest)."""
+    """Time each stage: GL stages by GPU timer queries (by waiting for the GPU around them where the driver
+    has none), the rest by the wall clock."""
+    gi_res: str = "model"
+    """The neural GI's resolution: ``model`` (its training size), a fraction of the window (``1/4``: snapped
+    to the model's stride) or ``WxH`` (a multiple of the stride, else refused)."""
+    gi: GISettings = field(default_factory=GISettings)
+    """How the GI inputs are reduced, the output upsampled, and whether inference runs one frame behind."""
     panel: bool = True
     render: RenderSettings = field(default_factory=RenderSettings)
     reference: ReferenceSettings = field(default_factory=ReferenceSettings)
@@ -89,6 +97,7 @@ class Viewer:
         from diviewer.gl.display import DisplayPass
         from diviewer.gl.renderer import Renderer
         from diviewer.gl.shaders import ShaderCache
+        from diviewer.viewer.gi import GIControl
         from diviewer.viewer.imgui_gl import GlfwImgui, ImguiRenderer
         from diviewer.viewer.input import Input
         from diviewer.viewer.panel import Panel
@@ -102,8 +111,9 @@ class Viewer:
         self.state = ViewerState(scene, controller=settings.controller)
         self.state.show_panel = settings.panel
         self.shaders = ShaderCache(self.ctx)
-        self.timer = stage_timer(self.ctx, sync=settings.timing)
+        self.timer = stage_timer(self.ctx)
         """One timer for every stage of a frame: renderer passes, neural pass, inference, display, panel."""
+        self.set_timing(settings.timing)
         fb_w, fb_h = (max(1, s) for s in self.window.fb_size)
         self.renderer = Renderer(self.ctx, scene, fb_w, fb_h, settings.render, self.shaders, timer=self.timer)
         self.display = DisplayPass(self.ctx, self.shaders)
@@ -112,8 +122,9 @@ class Viewer:
         self.shots = Screenshots(self.ctx)
         self.shot_path = f"diviewer_{scene.name}.png"
         self._scene_revision = 0
-        self.model = None
-        self.neural = None
+        self.gi = GIControl(self.ctx, self.renderer, self.state, settings.gi_res, settings.gi, settings.provider)
+        self.vxgi = None
+        """The VXGI pass, made the first time the VXGI view mode is shown."""
         self.imgui_ctx = imgui.create_context()
         imgui.get_io().set_ini_filename(None)  # no imgui.ini in the user's working folder
         self.input = Input(self.state, self, self.glfw)
@@ -134,47 +145,24 @@ class Viewer:
         self.set_model(settings.model)
 
     @property
-    def gi_size(self) -> tuple[int, int]:
+    def render_size(self) -> tuple[int, int]:
+        """The G-buffer's resolution: the window's framebuffer."""
         return self.renderer.width, self.renderer.height
 
-    def set_model(self, spec: str | Path | None) -> None:
-        """Load a model (path, ``auto`` or ``none``); without one the viewer shows direct light and says why."""
-        from diviewer.gl.neural import NeuralPass
+    @property
+    def gi_size(self) -> tuple[int, int]:
+        """The neural GI's resolution (the render size without a model)."""
+        return self.gi.size
 
-        self._drop_model()
-        model, message = open_model(spec, self.state.scene, self.settings.provider)
-        st = self.state
-        st.model_message, st.model_meta, st.provider = message, None, ""
-        st.model_name = None
-        if model is not None:
-            w, h = model.resolution
-            try:
-                model.check_size(w, h)
-                self.renderer.resize(w, h)
-                self.neural = NeuralPass(self.ctx, self.renderer, model)
-            except DiviewerError as exc:
-                st.model_message = f"model refused: {exc}"
-                self._fit_renderer_to_window()
-                return
-            self.model = model
-            st.model_name = model.path.name
-            st.model_meta = dict(model.meta)
-            st.provider = model.provider
-        else:
-            self._fit_renderer_to_window()
-        if message and spec not in (None, "auto", "none"):
-            print(f"diviewer view: {message}", file=sys.stderr)
+    @property
+    def model(self):
+        """The loaded ``runtime.NeuralGI``, or None."""
+        return self.gi.model
 
-    def _drop_model(self) -> None:
-        if self.neural is not None:
-            self.neural.release()
-        self.neural = None
-        self.model = None  # drops the onnxruntime session
-
-    def _fit_renderer_to_window(self) -> None:
-        fb_w, fb_h = self.window.fb_size
-        if fb_w > 0 and fb_h > 0:
-            self.renderer.resize(fb_w, fb_h)
+    @property
+    def neural(self):
+        """The ``gl.neural.NeuralPass`` of the model, or None."""
+        return self.gi.neural
 
     def _sync_scene(self) -> None:
         """Upload meshes and textures added to the scene (a mesh file loaded from the panel)."""
@@ -183,19 +171,41 @@ class Viewer:
             self.renderer.scene = self.state.scene
             self._scene_revision = self.state.scene_revision
 
-    # --- actions (the panel's, the keys', scripts') --------------------------------------------------
+    # --- actions (the panel's, the keys', scripts': script.SCRIPT_ACTIONS) ----------------------------
+    def set_model(self, spec: str | Path | None) -> None:
+        """Load a model (path, ``auto`` or ``none``); without one the viewer shows direct light and says why."""
+        self.gi.release()
+        fb_w, fb_h = self.window.fb_size
+        if fb_w > 0 and fb_h > 0:
+            self.renderer.resize(fb_w, fb_h)
+        self.gi.load(spec)
+
     def request_model(self, spec: str) -> None:
         """Switch models at the next frame's start (this frame's images are in use)."""
         self._pending_model = spec
 
+    def set_gi_res(self, spec: str) -> tuple[int, int]:
+        """Run the network at another GI resolution (``model``, ``1/4``, ``WxH``); refused sizes change nothing."""
+        return self.gi.set_gi_res(spec)
+
+    def set_pipelined(self, on: bool) -> None:
+        """Run inference one frame behind on a worker thread, or in the frame."""
+        self.gi.set_pipelined(on)
+
     @property
     def timer_sync(self) -> bool:
-        return self.timer.sync is not None
+        """Whether stages are timed (the panel's checkbox)."""
+        return self.timer.enabled
+
+    @property
+    def timing_method(self) -> str:
+        return self.timer.method
 
     def set_timing(self, on: bool) -> None:
-        """Wait for the GPU around each GL stage (honest stage times, a slower frame) or not."""
-        self.timer.sync = self.ctx.finish if on else None
-        self.settings = dataclasses.replace(self.settings, timing=bool(on))
+        """Time GL stages (by timer queries, or a GPU sync where the driver has none), or not at all."""
+        from diviewer.gl.context import set_stage_timing
+
+        set_stage_timing(self.timer, self.ctx, on)
 
     def set_vsync(self, on: bool) -> None:
         self.window.set_vsync(on)
@@ -205,23 +215,24 @@ class Viewer:
         self.window.resize(width, height)
 
     def view_rect(self) -> tuple[int, int, int, int]:
-        """Where the GI image is drawn in the framebuffer: (x, y, w, h), y from the bottom."""
-        return self.window.view_rect(self.gi_size)
+        """Where the image is drawn in the framebuffer: (x, y, w, h), y from the bottom (all of it, but for
+        the frame after a resize, still drawn at the old size and letterboxed)."""
+        return self.window.view_rect(self.render_size)
 
     def pick_window_point(self, x: float, y: float) -> str | None:
         """Select the object under window point (x, y) (screen units, y down)."""
-        point = self.window.to_image(x, y, self.gi_size)
+        point = self.window.to_image(x, y, self.render_size)
         if point is None:
             return self.state.select_object(None)
-        return self.state.pick(*point, *self.gi_size)
+        return self.state.pick(*point, *self.render_size)
 
     def screenshot(self, path: str | Path) -> Path:
-        """Save the view (without the panel) at the GI resolution as PNG, and the frame as JSON, at the
+        """Save the view (without the panel) at the render resolution as PNG, and the frame as JSON, at the
         end of the next frame (so image and configuration agree)."""
         return self.shots.request(path)
 
     def window_screenshot(self, path: str | Path) -> Path:
-        """Save the whole window (with the panel) as PNG at the end of the next frame."""
+        """Save what the window shows (with the panel), read back from its framebuffer before the swap."""
         return self.shots.request_window(path)
 
     # --- drawing -----------------------------------------------------------------------------------
@@ -250,8 +261,10 @@ class Viewer:
     def _save_view(self, path: Path, images: list[Image]) -> Path:
         from diviewer.viewer.screenshots import view_record
 
-        st, size = self.state, self.gi_size
-        record = view_record(st, size, self.model.path if self.model is not None else None, self.gl_renderer)
+        st, size = self.state, self.render_size
+        record = view_record(st, size, self.model.path if self.model is not None else None, self.gl_renderer,
+                             gi_size=self.gi_size if self.neural is not None else None,
+                             gi_settings=dataclasses.asdict(self.gi.settings) if self.neural is not None else None)
         self.shots.save_view(path, size, lambda fbo, rect: self._draw_view(fbo, rect, images), record)
         st.message = f"saved {path} and {path.with_suffix('.json').name}"
         return path
@@ -278,8 +291,9 @@ class Viewer:
         self.input.held_keys(dt)
         st.step(dt)
         self._sync_scene()
-        if self.neural is None and self.gi_size != (fb_w, fb_h):
+        if self.render_size != (fb_w, fb_h):
             self.renderer.resize(fb_w, fb_h)
+            self.gi.follow_window()
         self.timer.reset()
         self.renderer.render(st.config)
         if not any(m.name == "reference" for m in st.modes_shown()):
@@ -301,10 +315,11 @@ class Viewer:
             self.panel.overlay(rect, notes)
             imgui.render()
             self.imgui_renderer.render(imgui.get_draw_data())
-        while self.shots.pending_window:
-            self.shots.save_window(self.shots.pending_window.pop(0), (fb_w, fb_h), BACKGROUND, rect,
-                                   lambda fbo, r: self._draw_view(fbo, r, images),
-                                   lambda: self.imgui_renderer.render(imgui.get_draw_data()))
+        if self.shots.pending_window:
+            shown = self.window.read_pixels()  # the back buffer, as the swap will show it
+            screen.use()
+            while self.shots.pending_window:
+                self.shots.save_window(self.shots.pending_window.pop(0), shown)
         while self.shots.pending:
             self._save_view(self.shots.pending.pop(0), images)
         self.window.swap()
@@ -312,26 +327,7 @@ class Viewer:
         self.frame_index += 1
         return True
 
-    # --- scripts and shutdown ----------------------------------------------------------------------
-    SCRIPT_ACTIONS = ("resize", "screenshot", "window_screenshot", "set_model", "set_vsync", "pick_window_point")
-
-    def apply(self, action) -> None:
-        """Apply one script action: a callable(viewer), or (name, kwargs) naming a Viewer action
-        (resize, screenshot, window_screenshot, set_model, set_vsync, pick_window_point) or a ViewerState method."""
-        if callable(action):
-            action(self)
-            return
-        if isinstance(action, dict):
-            action = dict(action)
-            name, kwargs = action.pop("action"), action
-        else:
-            name, kwargs = action[0], (action[1] if len(action) > 1 else {})
-        target = self if name in self.SCRIPT_ACTIONS else self.state
-        fn = getattr(target, name, None)
-        if fn is None or name.startswith("_"):
-            raise DiviewerError(f"unknown viewer action '{name}'", field="script")
-        fn(**kwargs)
-
+    # --- shutdown ---------------------------------------------------------------------------------
     def close(self) -> None:
         """Release everything: the reference thread, the model, GL objects, imgui, the window, GLFW."""
         if self._closed:
@@ -339,7 +335,7 @@ class Viewer:
         self._closed = True
         self.reference.close()
         try:
-            self._drop_model()
+            self.gi.release()
             self.shots.release()
             self.reference_texture.release()
             self.gui.release()
@@ -347,6 +343,8 @@ class Viewer:
             self.imgui.destroy_context(self.imgui_ctx)
             self.black.release()
             self.display.release()
+            if self.vxgi is not None:
+                self.vxgi.release()
             self.timer.release()
             self.renderer.release()
             self.shaders.release()
@@ -355,24 +353,10 @@ class Viewer:
             self.window.close()
 
 
-def _normalise_script(script) -> dict[int, list]:
-    """Script items (frame, action) / (frame, name, kwargs) / {"frame": i, "action": name, ...} by frame."""
-    out: dict[int, list] = {}
-    for item in script or ():
-        if isinstance(item, dict):
-            item = dict(item)
-            frame = int(item.pop("frame"))
-            out.setdefault(frame, []).append(item)
-        elif len(item) == 2:
-            out.setdefault(int(item[0]), []).append(item[1])
-        else:
-            out.setdefault(int(item[0]), []).append((item[1], item[2] if len(item) > 2 else {}))
-    return out
-
-
 def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None = None, frames: int | None = None,
                screenshot: str | Path | None = None, script=None, size: tuple[int, int] = (768, 768),
-               vsync: bool = True, provider: str | None = None, settings: ViewerSettings | None = None) -> dict:
+               vsync: bool = True, provider: str | None = None, settings: ViewerSettings | None = None,
+               stats: str | Path | None = None) -> dict:
     """Open the viewer on a scene and run it until the window closes, or for ``frames`` frames.
 
     Args:
@@ -386,12 +370,16 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
             ``(frame, name, kwargs)`` or ``{"frame": i, "action": name, **kwargs}``; names are Viewer
             actions (resize, screenshot, window_screenshot, set_model, set_vsync, pick_window_point) or
             ViewerState methods (set_view_mode, set_light_direction, fly, drag, ...).
+        stats: write the per-stage times of every frame drawn (median, p95, mean ms), the frame rate, the
+            window and GI resolutions and how the stages were timed, as JSON, here.
 
     Returns:
         A summary: frames drawn, GI size, model, screenshots, view modes drawn, the reasons of those
         that could not be, mean stage times, and the GL error state before shutdown.
     """
     from diviewer.scene import load_scene
+    from diviewer.viewer.report import run_summary, write_stats
+    from diviewer.viewer.script import apply_action, normalise_script
     from diviewer.viewer.sources import FrameImages
 
     if not isinstance(scene, Scene):
@@ -407,36 +395,28 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
         from diviewer.runtime import choose_providers
 
         choose_providers(ort.get_available_providers(), settings.provider)  # before a window opens
-    steps = _normalise_script(script)
+    steps = normalise_script(script)
     viewer = Viewer(scene, settings)
     summary: dict = {}
+    per_frame: list[dict[str, float]] = []
     try:
         while frames is None or viewer.frame_index < frames:
             for action in steps.get(viewer.frame_index, ()):
-                viewer.apply(action)
+                apply_action(viewer, action)
+            drawn = viewer.frame_index
             if not viewer.frame():
                 break
+            if stats is not None and viewer.frame_index > drawn:
+                per_frame.append(viewer.state.stats.last())
         if screenshot is not None:
             if viewer.frame_index == 0:
                 viewer.frame()
             # The state is the last frame's: save its view now.
             viewer._save_view(Path(screenshot).with_suffix(".png"), viewer._images(FrameImages(viewer))[0])
-        st = viewer.state
-        summary = {
-            "frames": viewer.frame_index,
-            "gi_size": viewer.gi_size,
-            "window_size": viewer.window.size,
-            "model": st.model_name,
-            "model_message": st.model_message,
-            "provider": st.provider,
-            "screenshots": [str(p) for p in viewer.shots.saved],
-            "modes_drawn": sorted(viewer.modes_drawn),
-            "unavailable": dict(viewer.unavailable),
-            "stages_ms": {k: st.stats.mean(k) for k in ("frame",) + STAGES + ("panel",)},
-            "config": st.config,
-            "gl_error": viewer.ctx.error,
-            "gl_renderer": viewer.gl_renderer,
-        }
+        summary = run_summary(viewer)
+        if stats is not None:
+            summary["stats"] = write_stats(Path(stats), viewer, per_frame)
     finally:
         viewer.close()
     return summary
+

@@ -23,6 +23,16 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"),
                    help="onnxruntime execution provider (default: the fastest available)")
     p.add_argument("--camera", default="fly", choices=("fly", "orbit"), help="camera controller at start")
+    p.add_argument("--gi-res", default="model",
+                   help="neural GI resolution: 'model' (its training size, default), a fraction of the window "
+                        "(1/2, 1/4, 1/6: snapped to the model's stride) or WxH (a multiple of the stride, else refused)")
+    p.add_argument("--gi-downsample", default="nearest", choices=("nearest", "area"),
+                   help="how the full-resolution buffers are reduced to the GI resolution (default nearest)")
+    p.add_argument("--pipelined", action="store_true",
+                   help="run inference one frame behind on a worker thread (GL and onnxruntime overlap)")
+    p.add_argument("--light-moving", action="store_true", help="start with the light animated")
+    p.add_argument("--stats", type=Path, default=None,
+                   help="with --frames: write per-stage times, fps and the resolutions as JSON here")
     p.set_defaults(func=run_view)
     return p
 
@@ -30,17 +40,31 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
 def run_view(args: argparse.Namespace) -> int:
     """Open the viewer as the arguments say; with ``--frames``, print one line of what it did."""
     from diviewer.frames import parse_resolution
+    from diviewer.gl.neural import GISettings
     from diviewer.viewer.app import ViewerSettings, run_viewer
 
     if args.frames is not None and args.frames < 1:
         raise DiviewerError(f"--frames must be at least 1, got {args.frames}", field="--frames")
-    size = parse_resolution(args.size)
+    size = parse_resolution(args.size, "--size")
+    if args.frames is not None and str(args.model).lower() not in ("auto", "none"):
+        # Scripted mode: a model the user named and the viewer refuses is a user error (exit 2),
+        # found before a window opens; interactively the panel says why and offers the others.
+        from diviewer.scene import load_scene
+        from diviewer.viewer.models import open_model
+
+        model, message = open_model(args.model, load_scene(args.scene), args.provider)
+        if model is None:
+            raise DiviewerError(message, field="--model")
     settings = ViewerSettings(size=size, vsync=not args.no_vsync, model=args.model, provider=args.provider,
-                              controller=args.camera)
-    summary = run_viewer(args.scene, frames=args.frames, screenshot=args.screenshot, settings=settings)
+                              controller=args.camera, gi_res=args.gi_res,
+                              gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
+    script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else None
+    summary = run_viewer(args.scene, frames=args.frames, screenshot=args.screenshot, settings=settings,
+                         stats=args.stats, script=script)
     if args.frames is not None:
         gw, gh = summary["gi_size"]
-        print(f"viewer: {summary['frames']} frames at GI {gw}x{gh}, "
+        rw, rh = summary["render_size"]
+        print(f"viewer: {summary['frames']} frames at {rw}x{rh}, GI {gw}x{gh}, "
               f"{summary['stages_ms']['frame']:.1f} ms/frame"
               + (f", saved {args.screenshot}" if args.screenshot else ""))
     return 0

@@ -57,3 +57,40 @@ def open_model(spec: str | Path | None, scene: Scene, provider: str | None = Non
         except DiviewerError as exc:
             refusals.append(str(exc))
     return None, "no compatible model for this scene: " + "; ".join(refusals)
+
+
+GI_FRACTIONS = ("1/1", "1/2", "1/3", "1/4", "1/6", "1/8")
+"""GI resolutions offered as fractions of the window's framebuffer (the panel's list, ``--gi-res``)."""
+
+
+def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], multiple: int) -> tuple[int, int]:
+    """The GI resolution ``spec`` asks for, for a model of stride ``multiple`` trained at ``trained``.
+
+    ``model`` is the training resolution. A fraction (``1/4``) of the window is snapped to the nearest
+    multiple of the stride on each side (at least one stride): it names a ratio, not a size. An explicit
+    ``WxH`` must already be a multiple of the stride, or it is refused with the nearest sizes that are.
+    """
+    spec = str(spec).strip().lower()
+    m = max(1, int(multiple))
+    if spec == "model":
+        return int(trained[0]), int(trained[1])
+    if "/" in spec:
+        try:
+            num, den = (float(x) for x in spec.split("/"))
+        except ValueError:
+            num = den = 0.0
+        if not (num > 0 and den > 0):
+            raise DiviewerError(f"GI resolution '{spec}' is not a fraction like 1/4", field="--gi-res")
+        return tuple(max(m, round(s * num / den / m) * m) for s in window)
+    from diviewer.frames import parse_resolution
+
+    try:
+        w, h = parse_resolution(spec)
+    except (DiviewerError, ValueError) as exc:
+        raise DiviewerError(f"GI resolution '{spec}': use 'model', a fraction of the window (1/2, 1/4, 1/6) "
+                            f"or WxH", field="--gi-res") from exc
+    if w % m or h % m:
+        near = lambda s: f"{m}" if s < m else f"{s // m * m} or {(s // m + 1) * m}"
+        raise DiviewerError(f"GI resolution {w}x{h} is not a multiple of the model's stride {m} "
+                            f"(width {near(w)}, height {near(h)})", field="--gi-res")
+    return w, h

@@ -16,6 +16,7 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.display import TONEMAPS
 from diviewer.scene.model import DirectionalLight
 from diviewer.viewer.input import SHORTCUTS
+from diviewer.viewer.models import GI_FRACTIONS, gi_resolution
 from diviewer.viewer.state import ViewerState
 from diviewer.viewer.stats import STAGES
 from diviewer.viewer.view_modes import VIEW_MODES, single_modes, view_mode
@@ -31,6 +32,9 @@ class PanelActions(Protocol):
     window: Any
     """``viewer.window.Window``: size, framebuffer size, vsync."""
     gi_size: tuple[int, int]
+    render_size: tuple[int, int]
+    neural: Any
+    """The NeuralPass (GI size, pipelining, latency), or None."""
     model: Any
     """The loaded NeuralGI, or None."""
     candidates: list[Path]
@@ -42,8 +46,11 @@ class PanelActions(Protocol):
     gl_renderer: str
     shot_path: str
     timer_sync: bool
+    timing_method: str
 
     def request_model(self, spec: str) -> None: ...
+    def set_gi_res(self, spec: str) -> tuple[int, int]: ...
+    def set_pipelined(self, on: bool) -> None: ...
     def set_timing(self, on: bool) -> None: ...
     def set_vsync(self, on: bool) -> None: ...
     def screenshot(self, path: str | Path) -> Path: ...
@@ -115,7 +122,11 @@ class Panel:
         if expanded:
             imgui.push_item_width(-150)
             gw, gh = self.actions.gi_size
-            imgui.text(f"{st.scene.name}   GI {gw}x{gh}   {st.stats.fps:5.1f} fps")
+            rw, rh = self.actions.render_size
+            imgui.text(f"{st.scene.name}   {rw}x{rh}   GI {gw}x{gh}   {st.stats.fps:5.1f} fps")
+            neural = self.actions.neural
+            if neural is not None and neural.pipelined:
+                imgui.text_colored(imgui.ImVec4(*DIM), f"GI one frame behind: {neural.latency_ms:.1f} ms old")
             if self.actions.model is not None:
                 imgui.text(f"neural GI: {st.model_name} ({st.provider.replace('ExecutionProvider', '')})")
             else:
@@ -314,6 +325,24 @@ class Panel:
             self.actions.request_model(chosen)
         if not self.actions.candidates:
             imgui.text_disabled(f"no assets/models/{st.scene.name}*.onnx")
+        model = self.actions.model
+        if model is not None:
+            items = []
+            for spec in ("model",) + GI_FRACTIONS:
+                try:
+                    w, h = gi_resolution(spec, self.actions.render_size, model.resolution, model.multiple)
+                except DiviewerError:
+                    continue
+                items.append((spec, f"{'training size' if spec == 'model' else spec + ' of the window'}: {w}x{h}"))
+            chosen = self._combo("GI resolution", st.gi_res, items)
+            if chosen:
+                self.actions.set_gi_res(chosen)
+            self._wrapped(f"fractions snap to multiples of the model's stride ({model.multiple})", DIM)
+            neural = self.actions.neural
+            changed, on = imgui.checkbox("inference one frame behind (worker thread)",
+                                         neural is not None and neural.pipelined)
+            if changed:
+                self.actions.set_pipelined(on)
         if self.actions.model is not None and st.model_meta:
             imgui.text(f"provider: {st.provider}")
             if imgui.begin_table("meta", 2, imgui.TableFlags_.borders_inner_v):
@@ -354,7 +383,11 @@ class Panel:
                              graph_size=imgui.ImVec2(-1, 40))
         imgui.text_disabled(f"provider: {st.provider or '-'}")
         self._wrapped(f"GL: {self.actions.gl_renderer}", DIM)
-        changed, on = imgui.checkbox("per-stage timing (syncs the GPU)", self.actions.timer_sync)
+        imgui.text_disabled(f"GL stages: {self.actions.timing_method}")
+        neural = self.actions.neural
+        if neural is not None and neural.pipelined:
+            imgui.text(f"GI latency {neural.latency_ms:.1f} ms (one frame behind)")
+        changed, on = imgui.checkbox("per-stage timing", self.actions.timer_sync)
         if changed:
             self.actions.set_timing(on)
         changed, on = imgui.checkbox("vsync (V)", self.actions.window.vsync)

@@ -24,15 +24,17 @@ Draw = Callable[[moderngl.Framebuffer, tuple[int, int, int, int]], None]
 """Draws into a framebuffer's rectangle (x, y, w, h from the bottom)."""
 
 
-def view_record(state: ViewerState, size: tuple[int, int], model_path: Path | None, gl_renderer: str) -> dict:
-    """The frame.json of the state's current frame, with how it was shown (view mode, model, display)."""
+def view_record(state: ViewerState, size: tuple[int, int], model_path: Path | None, gl_renderer: str,
+                **extra) -> dict:
+    """The frame.json of the state's current frame, with how it was shown (view mode, model, display, and
+    ``extra``: the GI resolution and settings)."""
     st = state
     return frame_record(st.scene, st.config, size, view_mode=st.view_mode,
                         compare=list(st.compare) if view_mode(st.view_mode).layout != "single" else None,
                         model=str(model_path) if model_path is not None else None,
                         model_message=st.model_message or None, provider=st.provider or None,
                         display={"exposure": st.exposure, "tonemap": st.tonemap},
-                        gl_renderer=gl_renderer, user_meshes=dict(st.user_meshes) or None)
+                        gl_renderer=gl_renderer, user_meshes=dict(st.user_meshes) or None, **extra)
 
 
 class Screenshots:
@@ -73,27 +75,8 @@ class Screenshots:
         self.saved.append(path)
         return path
 
-    def save_window(self, path: Path, fb_size: tuple[int, int], background, rect: tuple[int, int, int, int],
-                    draw_view: Draw, draw_panel: Callable[[], None]) -> Path:
-        """The window as just drawn (view + panel), redrawn into an offscreen target and saved as PNG.
-
-        Redrawn rather than read back: reading the default framebuffer through moderngl reads
-        GL_COLOR_ATTACHMENT0 (invalid there), and ``ctx.screen``'s size is the window's first size.
-        """
-        tex = self.ctx.texture(fb_size, 4)
-        fbo = self.ctx.framebuffer([tex])
-        try:
-            fbo.use()
-            fbo.clear(*background, 1.0)
-            draw_view(fbo, rect)
-            fbo.viewport = (0, 0, *fb_size)
-            fbo.use()
-            draw_panel()
-            rgb = read_rgb8(fbo)
-        finally:
-            unbind_framebuffer(self.ctx)
-            fbo.release()
-            tex.release()
+    def save_window(self, path: Path, rgb) -> Path:
+        """Save the window's own pixels (``Window.read_pixels``, read before the swap) as PNG."""
         path.parent.mkdir(parents=True, exist_ok=True)
         imageio.write_png(path, rgb)
         return path

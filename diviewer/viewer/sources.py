@@ -1,4 +1,4 @@
-"""One frame's images for the view modes, as GL textures: G-buffers, the network's output, the reference.
+"""One frame's images for the view modes, as GL textures: G-buffers, the network's output, VXGI, the reference.
 
 ``FrameImages`` implements ``view_modes.FrameSources``: the neural pass runs at most once a frame, and
 only when a shown mode needs it; the path-traced reference is uploaded when a newer image is ready.
@@ -57,6 +57,8 @@ class FrameImages:
         self.v = viewer
         self.has_model = viewer.neural is not None
         self._neural: Image | None = None
+        self._final: Image | None = None
+        self._vxgi: Image | None = None
 
     def buffer(self, name: str) -> Image:
         return Image(self.v.renderer.textures[name])
@@ -69,9 +71,28 @@ class FrameImages:
             self._neural = Image(v.neural.run(), flip=True)  # stages go to the viewer's timer
         return self._neural
 
+    def final(self) -> Image:
+        """The full-resolution frame: direct light + the network's indirect light, upsampled."""
+        if self._final is None:
+            self.network_output()
+            self._final = Image(self.v.neural.composite())
+        return self._final
+
     def reference(self) -> Image:
         st = self.v.state
-        return self.v.reference_texture.image(st.scene, st.config, self.v.gi_size)
+        return self.v.reference_texture.image(st.scene, st.config, self.v.render_size)
+
+    def vxgi(self) -> Image:
+        """The VXGI image, traced at most once a frame; its grid is rebuilt only where the frame changed."""
+        v = self.v
+        if self._vxgi is None:
+            if v.vxgi is None:
+                from diviewer.gl.vxgi import VXGIPass
+
+                v.vxgi = VXGIPass(v.ctx, v.renderer, timer=v.timer)  # stages go to the viewer's timer
+            v.vxgi.run(v.state.config)
+            self._vxgi = Image(v.vxgi.textures["vxgi"])
+        return self._vxgi
 
     def produce(self, mode: ViewMode) -> Image:
         """The mode's image, shown as its display kind; Unavailable propagates with the reason."""

@@ -64,6 +64,8 @@ class ViewerState:
         self.model_message = ""
         """Why there is no neural GI (no model for this scene, or the model's refusal)."""
         self.provider = ""
+        self.gi_res = "model"
+        """The GI resolution asked for (``model``, a fraction of the window, WxH)."""
         self.stats = Stats()
         self.show_panel = True
         self.message = ""

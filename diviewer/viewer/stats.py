@@ -9,7 +9,8 @@ import numpy as np
 
 from diviewer.timing import percentiles
 
-STAGES = ("gbuffer", "shadows", "direct", "readback", "inference", "upload", "composite")
+STAGES = ("shadows", "gbuffer", "direct", "readback", "inference", "inference_wait", "upload", "upsample",
+          "composite")
 """Per-frame stages the stats record, in pipeline order (ms each)."""
 
 

@@ -26,10 +26,16 @@ class FrameSources(Protocol):
         """A G-buffer channel of this frame: depth, normal, albedo, direct."""
 
     def network_output(self) -> Any:
-        """The model's output for this frame (raises Unavailable without a model)."""
+        """The model's output for this frame at the GI resolution (raises Unavailable without a model)."""
+
+    def final(self) -> Any:
+        """The full-resolution frame with the model's indirect light upsampled into it (needs a model)."""
 
     def reference(self) -> Any:
         """The latest path-traced reference of this view (raises Unavailable while none is ready)."""
+
+    def vxgi(self) -> Any:
+        """This frame through voxel cone tracing (diviewer.gl.vxgi): direct + albedo x indirect."""
 
 
 @dataclass(frozen=True)
@@ -51,18 +57,21 @@ class ViewMode:
 
 
 def _final(s: FrameSources):
-    # The model's output is the final image's radiance (an ``indirect`` model adds the exact direct
-    # light inside its graph); without a model the frame has direct light only.
-    return s.network_output() if s.has_model else s.buffer("direct")
+    # The full-resolution direct light plus the model's indirect light (its output less its input direct
+    # light) upsampled from the GI resolution; without a model the frame has direct light only.
+    return s.final() if s.has_model else s.buffer("direct")
 
 
 VIEW_MODES: tuple[ViewMode, ...] = (
     ViewMode("final", "Final (neural GI)", _final, "radiance", key="1",
-             help="the network's image: direct + indirect light (direct light only when no model is loaded)"),
+             help="full-resolution direct light + the network's indirect light, upsampled edge-aware from the "
+                  "GI resolution (direct light only when no model is loaded)"),
     ViewMode("direct", "Direct light only", lambda s: s.buffer("direct"), "radiance", key="2",
              help="the GL renderer's shadow-mapped direct light and emission"),
     ViewMode("reference", "Path-traced reference", lambda s: s.reference(), "radiance", key="3",
              help="Mitsuba 3, rendered progressively in the background; restarts when anything changes"),
+    ViewMode("vxgi", "VXGI (voxel cone tracing)", lambda s: s.vxgi(), "radiance",
+             help="direct light + one bounce of indirect light traced through a voxel grid; no network"),
     ViewMode("depth", "G-buffer: depth", lambda s: s.buffer("depth"), "depth", key="4"),
     ViewMode("normal", "G-buffer: normal", lambda s: s.buffer("normal"), "normal", key="5",
              help="view-space normals"),
@@ -70,7 +79,7 @@ VIEW_MODES: tuple[ViewMode, ...] = (
     ViewMode("net_input", "Network input: direct (raw)", lambda s: s.buffer("direct"), "raw", key="7",
              help="the direct-light channel the network reads, linear values clamped to [0, 1]"),
     ViewMode("net_output", "Network output: raw GI", lambda s: s.network_output(), "raw", key="8",
-             help="the network's output, linear values clamped to [0, 1]"),
+             help="the network's output at the GI resolution, linear values clamped to [0, 1]"),
     ViewMode("split", "Split screen (A | B)", None, layout="split", key="9",
              help="mode A left of the divider, mode B right of it"),
     ViewMode("difference", "Difference |A - B|", None, layout="difference", key="0",

@@ -80,6 +80,7 @@ class Window:
         glfw.make_context_current(handle)
         self.vsync = vsync
         self.set_vsync(vsync)
+        self._gl = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -120,6 +121,32 @@ class Window:
 
     def key_down(self, key: int) -> bool:
         return self.glfw.get_key(self.handle, key) == self.glfw.PRESS
+
+    def read_pixels(self) -> "np.ndarray":
+        """What the window shows: its back buffer as drawn so far, (H, W, 3) uint8, top row first.
+
+        Read with glReadPixels on the default framebuffer's GL_BACK: moderngl's ``ctx.screen.read()`` asks
+        for GL_COLOR_ATTACHMENT0 (GL_INVALID_OPERATION on the default framebuffer) and keeps the window's
+        first size after a resize, so the call goes through GLFW's own GL entry points.
+        """
+        import ctypes
+
+        import numpy as np
+
+        if self._gl is None:
+            c = ctypes
+            fn = lambda name, *args: c.CFUNCTYPE(None, *args)(self.glfw.get_proc_address(name))
+            self._gl = (fn("glBindFramebuffer", c.c_uint, c.c_uint), fn("glReadBuffer", c.c_uint),
+                        fn("glPixelStorei", c.c_uint, c.c_int),
+                        fn("glReadPixels", c.c_int, c.c_int, c.c_int, c.c_int, c.c_uint, c.c_uint, c.c_void_p))
+        bind, read_buffer, store, read_pixels = self._gl
+        w, h = self.fb_size
+        out = np.empty((h, w, 3), np.uint8)
+        bind(0x8CA8, 0)  # GL_READ_FRAMEBUFFER
+        read_buffer(0x0405)  # GL_BACK
+        store(0x0D05, 1)  # GL_PACK_ALIGNMENT: rows of 3-byte pixels are not 4-aligned
+        read_pixels(0, 0, w, h, 0x1907, 0x1401, out.ctypes.data)  # GL_RGB, GL_UNSIGNED_BYTE
+        return np.ascontiguousarray(out[::-1])
 
     def swap(self) -> None:
         self.glfw.swap_buffers(self.handle)

@@ -1,0 +1,376 @@
+"""`diviewer bench`: settings, and the run that turns measurements (diviewer.bench.runner) into rows."""
+
+from __future__ import annotations
+
+import dataclasses
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from diviewer.errors import DiviewerError
+
+
+@dataclass(frozen=True)
+class BenchSettings:
+    """What the benchmark measures; recorded in its JSON."""
+
+    scene: str = "cornell"
+    """Shipped scene name or a .toml path."""
+    models: tuple[str, ...] = ()
+    """ONNX models (diviewer export or baseline); empty: the scene's shipped assets/models/<scene>*.onnx."""
+    resolutions: tuple[int, ...] = (128, 256)
+    """Square frame resolutions."""
+    frames: int = 30
+    """Timed frames per row (test configurations along the scene's camera path)."""
+    warmup: int = 5
+    """Untimed frames before them."""
+    untrained_k: tuple[int, ...] = (8, 16, 32, 64, 128)
+    """Base widths of the untrained generators (cost curve only: no accuracy)."""
+    pt_spp: tuple[int, ...] = (1, 4, 16, 64, 256)
+    """Path tracer sample counts when there is no evaluation set (else the set's ladder)."""
+    pt_frames: int = 2
+    """Frames the path tracer is timed on, per sample count."""
+    gi_steps: tuple[int, ...] = (2,)
+    """GI below frame resolution: frame / step, for each step the model's size multiple allows."""
+    evalset: str | None = None
+    """The scene's evaluation set (diviewer evalset); default runs/<scene>/evalset."""
+    eval_frames: int | None = None
+    """Frames per split of the evaluation set scored (None: all)."""
+    calib_data: str | None = None
+    """A capture whose train split calibrates int8 quantisation (default: GL renders of training configurations)."""
+    calib_frames: int = 16
+    int8_max_drop_db: float = 0.5
+    """int8 is kept when its tone-mapped PSNR is within this of the fp32 model's."""
+    temporal_frames: int = 8
+    temporal_spp: int = 64
+    """Samples per pixel of the temporal sequence's reference."""
+    provider: str | None = None
+    """onnxruntime provider (cpu, cuda, tensorrt); default the best available."""
+    timing: str = "auto"
+    """GL stage timing: auto (timer queries where supported), query, or sync (wall clock around glFinish)."""
+
+    def check(self) -> None:
+        if self.frames < 1 or self.warmup < 0 or self.pt_frames < 1 or self.temporal_frames < 2:
+            raise DiviewerError("--frames and pt frames must be >= 1, warm-up >= 0, temporal frames >= 2",
+                                field="--frames")
+        if any(r < 16 or r % 2 for r in self.resolutions):
+            raise DiviewerError(f"resolutions must be even and >= 16, got {self.resolutions}", field="--res")
+        if self.timing not in ("auto", "query", "sync"):
+            raise DiviewerError(f"--timing must be auto, query or sync, got {self.timing}", field="--timing")
+
+
+QUICK = {"resolutions": (32,), "frames": 3, "warmup": 1, "untrained_k": (8, 16), "pt_frames": 1, "eval_frames": 1,
+         "calib_frames": 2, "temporal_frames": 3, "temporal_spp": 4}
+"""--quick: a few frames at a small size, seconds; every kind of row, stage and metric is still there."""
+
+
+def quick(settings: BenchSettings) -> BenchSettings:
+    return dataclasses.replace(settings, **QUICK)
+
+
+def _model_paths(settings: BenchSettings, scene) -> list[Path]:
+    if settings.models:
+        return [Path(m) for m in settings.models]
+    from diviewer.paths import models_dir
+
+    try:
+        return sorted(models_dir().glob(f"{scene.name}*.onnx"))
+    except FileNotFoundError:
+        return []
+
+
+def _variants(paths: list[Path], tmp: Path, notes: list[str], log) -> list[dict]:
+    """Each given model as fp32 and fp16 files (converted without torch where needed); baselines as given."""
+    import onnx
+
+    from diviewer.bench.onnx_tools import to_fp16, to_fp32
+    from diviewer.runtime import read_metadata
+
+    out = []
+    for path in paths:
+        meta = read_metadata(path)
+        base = {"source": str(path), "name": path.stem, "meta": meta}
+        if meta.get("kind") == "linear_baseline":
+            out.append({**base, "kind": "baseline", "precision": meta["precision"], "path": path})
+            continue
+        given = meta["precision"]
+        out.append({**base, "kind": "neural", "precision": given, "path": path})
+        other = "fp32" if given == "fp16" else "fp16"
+        try:
+            model = onnx.load(str(path))
+            converted = to_fp32(model) if other == "fp32" else to_fp16(model)
+            dst = tmp / f"{path.stem}_{other}.onnx"
+            onnx.save(converted, str(dst))
+            out.append({**base, "kind": "neural", "precision": other, "path": dst, "converted_from": given})
+        except Exception as exc:  # a graph the converter does not handle: the row is left out, and said so
+            notes.append(f"{path.name}: no {other} variant ({type(exc).__name__}: {exc})")
+    names = ", ".join(f"{v['name']} {v['precision']}" for v in out)
+    log(f"models: {names or 'none'}")
+    return out
+
+
+def _calibration(settings, scene, gb, width: int, height: int) -> tuple[list[np.ndarray], str]:
+    """Model inputs of training frames: a capture's train split when given, else GL renders of training configs."""
+    if settings.calib_data:
+        from diviewer.data.dataset import Dataset
+        from diviewer.runtime import pack_buffers
+
+        ds = Dataset(settings.calib_data)
+        idx = ds.indices("train")[: settings.calib_frames]
+        if not idx:
+            raise DiviewerError("no train frames to calibrate int8 on", path=settings.calib_data)
+        frames = [pack_buffers(ds.load(i)) for i in idx]
+        if frames[0].shape[:2] == (height, width):
+            return [f[None] for f in frames], f"{len(idx)} train frames of {settings.calib_data}"
+    from diviewer.scene import sample_config
+
+    return ([gb.buffers(sample_config(scene, 9000 + i, "train")) for i in range(settings.calib_frames)],
+            f"GL inputs of {settings.calib_frames} training configurations")
+
+
+def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: Path | None = None,
+              log=print) -> dict:
+    """Measure every row; print the table; write the JSON and the plot when asked. Returns the result."""
+    import onnx
+
+    from diviewer.bench import report
+    from diviewer.bench.onnx_tools import generator_flops, quantize_int8, untrained_generator
+    from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_configs, time_path_tracer
+    from diviewer.gl.context import headless_context
+    from diviewer.runtime import NeuralGI
+    from diviewer.scene import load_scene, sample_config
+
+    settings.check()
+    t_start = time.perf_counter()
+    scene = load_scene(settings.scene)
+    notes: list[str] = []
+    ds = _open_evalset(settings, scene, notes)
+    tmp_dir = tempfile.TemporaryDirectory(prefix="diviewer-bench-")
+    tmp = Path(tmp_dir.name)
+    variants = _variants(_model_paths(settings, scene), tmp, notes, log)
+    nets = {}
+
+    def net_of(v):
+        key = str(v["path"])
+        if key not in nets:
+            nets[key] = NeuralGI(v["path"], scene=scene, provider=settings.provider)
+        return nets[key]
+
+    configs = [sample_config(scene, 7000 + i, "test") for i in range(settings.frames)]
+    rows: list[dict] = []
+    with headless_context() as ctx:
+        mode = gl_timing_mode(ctx, settings.timing)
+        env = report.environment(ctx, mode)
+        # int8: each trained model's fp32 variant, quantised with inputs of training frames.
+        for v in [v for v in variants if v["kind"] == "neural" and v["precision"] == "fp32"]:
+            w, h = (int(x) for x in v["meta"]["resolution"])
+            gb = GlBench(ctx, scene, w, h, mode)
+            try:
+                calib, calib_note = _calibration(settings, scene, gb, w, h)
+            finally:
+                gb.release()
+            dst = tmp / f"{v['name']}_int8.onnx"
+            try:
+                quantize_int8(Path(v["path"]), dst, calib)
+                variants.append({**v, "precision": "int8", "path": dst, "calibration": calib_note,
+                                 "converted_from": "fp32"})
+            except Exception as exc:
+                notes.append(f"{v['name']}: int8 quantisation failed ({type(exc).__name__}: {exc})")
+        for res in settings.resolutions:
+            log(f"timing at {res}x{res} ({settings.warmup} warm-up + {settings.frames} frames per row, GL: {mode})")
+            gb = GlBench(ctx, scene, res, res, mode)
+            try:
+                rows.append(_row("direct", "direct light only", res, res, gb.time_direct(configs, settings.warmup)))
+                for v in variants:
+                    net = net_of(v)
+                    m = net.multiple
+                    steps = [1] + ([s for s in settings.gi_steps if v["precision"] == v["meta"]["precision"]]
+                                   if v["kind"] == "neural" else [])
+                    for step in steps:
+                        if res % step or (res // step) % m:
+                            if step == 1:
+                                notes.append(f"{v['name']} {v['precision']}: not timed at {res}x{res} "
+                                             f"(needs multiples of {m})")
+                            continue
+                        row = _row(v["kind"], _label(v, step), res, res // step,
+                                   gb.time_model(net, configs, settings.warmup, step))
+                        row.update(model=v["source"], precision=v["precision"], provider=net.provider,
+                                   K=v["meta"].get("K"), levels=v["meta"].get("levels"), step=step,
+                                   accuracy_key=f"{v['path']}|{step}", converted_from=v.get("converted_from"),
+                                   calibration=v.get("calibration"))
+                        if v["kind"] == "neural":
+                            row["flops"] = generator_flops(int(v["meta"]["K"]), int(v["meta"]["levels"]), res // step,
+                                                           res // step, upsample=v["meta"].get("upsample", "transpose"))["flops"]
+                        rows.append(row)
+                levels = _levels(res)
+                for K in settings.untrained_k:
+                    path = tmp / f"untrained_K{K}_{res}.onnx"
+                    onnx.save(untrained_generator(K, levels, scene, res), str(path))
+                    net = NeuralGI(path, scene=scene, provider=settings.provider)
+                    row = _row("untrained", f"untrained K={K} fp32", res, res, gb.time_model(net, configs, settings.warmup))
+                    row.update(K=K, levels=levels, precision="fp32", provider=net.provider, untrained=True, step=1,
+                               flops=generator_flops(K, levels, res, res)["flops"])
+                    rows.append(row)
+                    del net
+                    path.unlink()
+            finally:
+                gb.release()
+        accuracy = _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log)
+        temporal = _temporal(ctx, settings, scene, ds, variants, net_of, mode, notes, log)
+    pt = _path_tracer_timing(settings, scene, ds, configs, notes, log, time_path_tracer)
+    rows.extend(pt["rows"])
+    result = report.assemble(settings, scene, rows, accuracy, temporal, pt, env, notes,
+                             seconds=time.perf_counter() - t_start)
+    for line in report.table(result):
+        log(line)
+    if json_out is not None:
+        from diviewer import imageio
+        from diviewer.evaluate import strict_json
+
+        imageio.write_text(json_out, strict_json(result))
+    if plot_out is not None:
+        report.plot(result, plot_out)
+    tmp_dir.cleanup()
+    return result
+
+
+def _levels(res: int) -> int:
+    """U-Net levels for a square side: the times it halves exactly (train.networks.levels_for_resolution, which
+    imports torch)."""
+    levels, r = 0, res
+    while r % 2 == 0 and r > 1:
+        r //= 2
+        levels += 1
+    return levels
+
+
+def _label(v: dict, step: int) -> str:
+    if v["kind"] == "baseline":
+        return f"linear baseline ({v['name']})"
+    gi = f" GI 1/{step}" if step > 1 else ""
+    return f"{v['name']} K={v['meta']['K']} {v['precision']}{gi}"
+
+
+def _row(kind: str, label: str, res: int, gi_res: int, timing: dict) -> dict:
+    return {"kind": kind, "label": label, "resolution": [res, res], "gi_resolution": [gi_res, gi_res],
+            "timing": timing}
+
+
+def _open_evalset(settings, scene, notes):
+    from diviewer.evalset import load_evalset
+
+    path = Path(settings.evalset or f"runs/{scene.name}/evalset")
+    if not (path / "manifest.json").is_file():
+        notes.append(f"no evaluation set at {path}: accuracy columns are empty (make one with "
+                     f"`diviewer evalset --scene {scene.name} --out {path}`)")
+        return None
+    ds = load_evalset(path)
+    if ds.manifest["scene_hash"] != scene.file_hash:
+        notes.append(f"the evaluation set {path} was made from another version of the scene file: accuracy left out")
+        return None
+    if not ds.indices():
+        notes.append(f"the evaluation set {path} has no frames yet: accuracy left out")
+        return None
+    return ds
+
+
+def _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log) -> dict | None:
+    """Scores at the evaluation set's resolution, keyed like rows' ``accuracy_key``."""
+    if ds is None:
+        return None
+    from diviewer.bench.runner import GlBench, score_evalset
+
+    E = ds.width
+    models = {}
+    for v in variants:
+        net = net_of(v)
+        steps = [1] + (list(settings.gi_steps) if v["kind"] == "neural" and v["precision"] == v["meta"]["precision"]
+                       else [])
+        for step in steps:
+            if ds.width % step or ds.height % step or (ds.width // step) % net.multiple or (ds.height // step) % net.multiple:
+                notes.append(f"{v['name']} {v['precision']}" + (f" GI 1/{step}" if step > 1 else "") +
+                             f": no accuracy (the evaluation set's {E} px / {step} is not a multiple of {net.multiple})")
+                continue
+            models[f"{v['path']}|{step}"] = (net, step)
+    log(f"scoring {len(models)} model variants on {ds.root} ({ds.width}x{ds.height})")
+    gl = GlBench(ctx, scene, ds.width, ds.height, mode) if any(step > 1 for _, step in models.values()) else None
+    try:
+        scored = score_evalset(ds, models, settings.eval_frames, gl, log)
+    finally:
+        if gl is not None:
+            gl.release()
+    scored["path"] = str(ds.root)
+    scored["resolution"] = [ds.width, ds.height]
+    scored["reference_spp"] = ds.manifest["spp"]
+    return scored
+
+
+def _temporal(ctx, settings, scene, ds, variants, net_of, mode, notes, log) -> dict | None:
+    """Frame-to-frame change of each method along a smooth sequence against the path tracer's (Mitsuba needed)."""
+    from diviewer.bench.frontier import temporal_stability
+    from diviewer.bench.runner import GlBench, temporal_configs
+    from diviewer.encoding import fit_exposure
+    from diviewer.metrics import tonemap
+    from diviewer.runtime import pack_buffers
+
+    try:
+        from diviewer.reference.mitsuba import MitsubaFrame, _import_mitsuba
+
+        _import_mitsuba()
+    except DiviewerError as exc:
+        notes.append(f"no temporal stability: {exc}")
+        return None
+    res = ds.width if ds is not None else settings.resolutions[0]
+    seq = temporal_configs(scene, settings.temporal_frames)
+    log(f"temporal stability: {len(seq)} frames at {res}x{res}, reference {settings.temporal_spp} spp")
+    gb = GlBench(ctx, scene, res, res, mode)
+    try:
+        buffers = [gb.renderer.frame(c) for c in seq]
+    finally:
+        gb.release()
+    exposure = float(ds.manifest["evalset"]["tonemap"]["exposure"]) if ds is not None else \
+        fit_exposure([b["direct"] for b in buffers])
+    frames = [MitsubaFrame(scene, c, res, res) for c in seq]
+    ref = [f.full(settings.temporal_spp, 0) for f in frames]  # one seed: the reference's noise holds still
+    seqs = {"direct": [b["direct"] for b in buffers]}
+    for v in variants:
+        net = net_of(v)
+        if res % net.multiple == 0:
+            seqs[f"{v['path']}|1"] = [net.run(pack_buffers(b)) for b in buffers]
+    ladder = [int(n) for n in ds.manifest["evalset"]["ladder_spp"]] if ds is not None else list(settings.pt_spp)
+    for n in ladder:  # a real-time path tracer draws new samples every frame
+        seqs[f"pt_spp{n}"] = [f.full(n, 1 + k) for k, f in enumerate(frames)]
+    ref_tm = [tonemap(x, exposure) for x in ref]
+    out = {k: temporal_stability([tonemap(x, exposure) for x in s], ref_tm) for k, s in seqs.items()}
+    return {"resolution": [res, res], "frames": len(seq), "reference_spp": settings.temporal_spp,
+            "tonemap_exposure": exposure, "methods": out,
+            "measure": "mean |frame t+1 - frame t| of tone-mapped images; ratio = method / reference; excess = "
+                       "mean |delta method - delta reference|"}
+
+
+def _path_tracer_timing(settings, scene, ds, configs, notes, log, time_path_tracer) -> dict:
+    try:
+        from diviewer.reference.mitsuba import _import_mitsuba, effective_spp
+
+        _import_mitsuba()
+    except DiviewerError as exc:
+        notes.append(f"no path tracer rows: {exc}")
+        return {"rows": [], "ladder": {}}
+    ladder = [int(n) for n in ds.manifest["evalset"]["ladder_spp"]] if ds is not None else \
+        sorted({effective_spp(n) for n in settings.pt_spp})
+    rows, by_res = [], {}
+    for res in settings.resolutions:
+        log(f"path tracer at {res}x{res}: {'/'.join(map(str, ladder))} spp on {settings.pt_frames} frame(s)")
+        timings = time_path_tracer(scene, configs[: settings.pt_frames], res, res, ladder)
+        by_res[res] = {n: t["frame"]["median"] for n, t in timings.items()}
+        for n, t in timings.items():
+            row = _row("path_tracer", f"path traced {n} spp", res, res, t)
+            row.update(spp=n, accuracy_key=f"pt_spp{n}")
+            rows.append(row)
+    return {"rows": rows, "ladder": ladder, "ms_by_resolution": by_res}
+
+
+__all__ = ["BenchSettings", "QUICK", "quick", "run_bench"]

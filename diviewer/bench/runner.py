@@ -1,0 +1,234 @@
+"""The benchmark's measurements: frame timing per stage on a headless GL context, and each method's accuracy
+against the scene's evaluation set (torch-free).
+
+A method is timed as the viewer runs it: the renderer's passes, then its own stages, then the composite
+into an 8-bit frame; a warm-up, then one frame per configuration. The path tracer is timed by the wall
+clock around Mitsuba's render (scene loading excluded). Accuracy is scored by diviewer.evaluate on the
+evaluation set's stored buffers, pooled over both of its splits.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from diviewer.timing import StageTimer
+
+STAGES = ("shadows", "gbuffer", "direct", "readback", "inference", "upload", "upsample", "composite")
+"""Every stage a GL frame may have, in frame order; the path tracer's one stage is ``path_trace``."""
+
+
+def stats(values) -> dict[str, float]:
+    """median, p95 and max of milliseconds."""
+    v = np.asarray(list(values), np.float64)
+    return {"median": float(np.median(v)), "p95": float(np.percentile(v, 95)), "max": float(v.max())}
+
+
+def timing_summary(frames: list[dict[str, float]], totals: list[float]) -> dict:
+    """Per stage and per frame: median, p95, max; fps from the median frame; overhead outside inference."""
+    stages = {k: stats(f[k] for f in frames if k in f) for k in dict.fromkeys(k for f in frames for k in f)}
+    frame = stats(totals)
+    inference = stages.get("inference", {}).get("median", 0.0)
+    return {"frames": len(totals), "frame": frame, "stages": stages, "fps": 1e3 / frame["median"],
+            "overhead_fraction": max(frame["median"] - inference, 0.0) / frame["median"]}
+
+
+# --- GL timing -----------------------------------------------------------------------------------------------------
+
+def gl_timing_mode(ctx, requested: str = "auto") -> str:
+    """``query`` (GL timer queries: GL_ARB_timer_query or GL >= 3.3) or ``sync`` (wall clock around glFinish)."""
+    if requested in ("query", "sync"):
+        return requested
+    return "query" if ("GL_ARB_timer_query" in ctx.extensions or ctx.version_code >= 330) else "sync"
+
+
+@dataclass
+class GlBench:
+    """One resolution's renderer, display pass and target, and the stage timer every pass reports to."""
+
+    ctx: object
+    scene: object
+    width: int
+    height: int
+    mode: str
+    renderer: object = field(init=False)
+    timer: StageTimer = field(init=False)
+
+    def __post_init__(self):
+        from diviewer.gl.context import stage_timer
+        from diviewer.gl.display import DisplayPass
+        from diviewer.gl.renderer import Renderer
+
+        self.timer = stage_timer(self.ctx, sync=self.mode == "sync", queries=self.mode == "query")
+        self.renderer = Renderer(self.ctx, self.scene, self.width, self.height, timer=self.timer)
+        self.display = DisplayPass(self.ctx, self.renderer.shaders)
+        self.target_tex = self.ctx.texture((self.width, self.height), 4)
+        self.target = self.ctx.framebuffer([self.target_tex])
+
+    def run(self, configs, warmup: int, method) -> dict:
+        """Time ``method(config) -> (texture, flip_y)`` (called after the renderer's passes) over ``configs``."""
+        frames, totals = [], []
+        for i, config in enumerate([configs[k % len(configs)] for k in range(warmup)] + list(configs)):
+            self.timer.reset()
+            t0 = time.perf_counter()
+            self.renderer.render(config)
+            tex, flip = method(config)
+            with self.timer.stage("composite", gpu=True):
+                self.display.run(tex, self.target, flip_y=flip)
+            self.ctx.finish()
+            ms = (time.perf_counter() - t0) * 1e3
+            if i >= warmup:
+                frames.append(dict(self.timer.times))
+                totals.append(ms)
+        return timing_summary(frames, totals)
+
+    def time_direct(self, configs, warmup: int) -> dict:
+        return self.run(configs, warmup, lambda c: (self.renderer.textures["direct"], False))
+
+    def time_model(self, net, configs, warmup: int, step: int = 1) -> dict:
+        """The viewer's neural frame: pack at the GI resolution (frame / step), infer, upload, the joint
+        bilateral upsample over the frame's direct light (diviewer.gl.neural), composite."""
+        neural = self.neural_pass(net, step)
+        try:
+            def frame(config):
+                neural.run()
+                return neural.composite(), False
+
+            return self.run(configs, warmup, frame)
+        finally:
+            neural.release()
+
+    def neural_pass(self, net, step: int = 1):
+        from diviewer.gl.neural import NeuralPass
+
+        return NeuralPass(self.ctx, self.renderer, net, gi_size=(self.width // step, self.height // step))
+
+    def buffers(self, config) -> np.ndarray:
+        """The model input of one configuration at this resolution, (1, H, W, 10) (for calibration)."""
+        from diviewer.runtime import pack_buffers
+
+        return pack_buffers(self.renderer.frame(config))[None]
+
+    def release(self) -> None:
+        from diviewer.gl.context import unbind_framebuffer
+
+        self.timer.reset()
+        unbind_framebuffer(self.ctx)
+        self.target.release()
+        self.target_tex.release()
+        self.display.release()
+        self.renderer.release()
+        self.timer.release()
+
+
+# --- the path tracer -----------------------------------------------------------------------------------------------
+
+def time_path_tracer(scene, configs, width: int, height: int, ladder: list[int], max_depth: int = 16) -> dict:
+    """Wall-clock milliseconds per frame of Mitsuba at each sample count (one untimed warm-up render per count:
+    the first render of a kernel compiles it)."""
+    from diviewer.reference.mitsuba import MitsubaFrame
+
+    loaded = [MitsubaFrame(scene, c, width, height) for c in configs]
+    out = {}
+    for spp in ladder:
+        loaded[0].full(spp, 0, max_depth)
+        totals = []
+        for k, frame in enumerate(loaded):
+            t0 = time.perf_counter()
+            frame.full(spp, k + 1, max_depth)
+            totals.append((time.perf_counter() - t0) * 1e3)
+        out[spp] = timing_summary([{"path_trace": t} for t in totals], totals)
+    return out
+
+
+# --- accuracy ------------------------------------------------------------------------------------------------------
+
+def read_final(tex) -> np.ndarray:
+    """A NeuralPass's composited frame (half floats, rows bottom first) as (H, W, 3) float32, top row first."""
+    w, h = tex.size
+    raw = np.frombuffer(tex.read(), np.float16).reshape(h, w, 4)[..., :3]
+    return np.ascontiguousarray(np.flipud(raw), dtype=np.float32)
+
+
+def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | None = None, log=print) -> dict:
+    """Every method's pooled metrics over the evaluation set's frames (both splits).
+
+    A model at its full resolution (step 1) is scored on its output for the stored buffers, as `diviewer eval`
+    does; below it (step > 1) on the frame the viewer shows: the configuration rendered again by ``gl`` (at
+    the set's resolution: the same buffers), packed at the GI resolution, upsampled and composited.
+
+    Args:
+        models: key -> (NeuralGI, step).
+    Returns:
+        ``{"frames", "ladder_spp", "methods": {key: aggregate}}`` with ``direct``, ``noise_floor`` and
+        ``pt_spp<n>`` beside the models; each aggregate carries its ``equivalent_spp``.
+    """
+    from diviewer.evalset import EVAL_SPLITS
+    from diviewer.evaluate import aggregate, equivalent, score_frame
+    from diviewer.metrics import flat_mask
+    from diviewer.runtime import pack_buffers
+
+    info = ds.manifest["evalset"]
+    exposure = float(info["tonemap"]["exposure"])
+    ladder_spp = [int(n) for n in info["ladder_spp"]]
+    channels = {"direct": "direct", "noise_floor": info["second_seed_channel"],
+                **{f"pt_spp{n}": ch for n, ch in zip(ladder_spp, info["ladder_channels"])}}
+    idx = [i for s in EVAL_SPLITS for i in ds.indices(s)[:frames_per_split]]
+    from diviewer.scene.loader import config_from_dict
+
+    rows = {k: [] for k in (*models, *channels)}
+    passes = {key: gl.neural_pass(net, step) for key, (net, step) in models.items() if step > 1}
+    try:
+        for i in idx:
+            f = ds.load(i)
+            mask = flat_mask(f["depth"], f["normal"], f["albedo"])
+            if passes:
+                gl.renderer.render(config_from_dict(gl.scene, _entry(ds, i)["config"]))
+            for key, (net, step) in models.items():
+                if step == 1:
+                    image = net.run(pack_buffers(f))
+                else:
+                    passes[key].run()
+                    image = read_final(passes[key].composite())
+                rows[key].append(score_frame(image, f["pt"], exposure, mask))
+            for key, ch in channels.items():
+                rows[key].append(score_frame(f[ch], f["pt"], exposure, mask))
+    finally:
+        for p in passes.values():
+            p.release()
+    methods = {k: aggregate(r) for k, r in rows.items() if r}
+    ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
+    for m in methods.values():
+        m["equivalent_spp"] = equivalent(m, ladder_spp, ladder)
+    return {"frames": len(idx), "ladder_spp": ladder_spp, "exposure": exposure, "methods": methods}
+
+
+def _entry(ds, index: int) -> dict:
+    return next(f for f in ds.frames if f["index"] == index)
+
+
+# --- temporal stability --------------------------------------------------------------------------------------------
+
+def temporal_configs(scene, n: int, span: float = 0.25) -> list:
+    """A smooth sequence from the default configuration: each ranged light turned through ``span`` of its
+    range and, when the scene has a camera path, the camera moved along ``span`` of it."""
+    import dataclasses
+
+    from diviewer.scene.lights import rotate_light
+    from diviewer.scene.sampler import camera_on_path
+
+    base = scene.default
+    centre = scene.bounds().mean(axis=0)
+    out = []
+    for i in range(n):
+        t = span * i / max(n - 1, 1)
+        lights = []
+        for light in base.lights:
+            r = scene.ranges.lights.get(light.name)
+            lights.append(light if r is None else rotate_light(light, r.axis, r.angle[0] + t * (r.angle[1] - r.angle[0]),
+                                                               centre))
+        camera = base.camera if scene.ranges.camera is None else camera_on_path(scene, t)
+        out.append(dataclasses.replace(base, lights=tuple(lights), camera=camera))
+    return out

@@ -1,0 +1,238 @@
+"""Checkpoints: written atomically, read with weights_only, self-describing enough to rebuild netG,
+and the checks a resumed run must pass against the checkpoint it continues."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from diviewer import imageio
+from diviewer.errors import DiviewerError, missing_extra
+from diviewer.train.config import RESUME_FIXED, TrainConfig
+from diviewer.train.targets import ALBEDO_FLOOR
+
+if TYPE_CHECKING:
+    from diviewer.data.dataset import Dataset
+
+CHECKPOINT_FORMAT = "diviewer-checkpoint"
+CHECKPOINT_VERSION = 1
+
+
+def require_torch():
+    """torch, or the user error that names the extra to install."""
+    try:
+        import torch
+    except ImportError:
+        raise missing_extra("torch") from None
+    return torch
+
+
+def atomic_save(obj: Any, path: Path) -> None:
+    """torch.save to a temporary file beside `path`, fsync, then rename: a reader never sees half a file."""
+    import torch
+
+    with imageio.atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            torch.save(obj, f)
+            f.flush()
+            os.fsync(f.fileno())
+
+
+def load_checkpoint(path: str | Path, *, mmap: bool = False) -> dict[str, Any]:
+    """Read a checkpoint written by `train` (weights_only: tensors and plain data only, on the CPU).
+
+    Args:
+        mmap: map the tensors instead of reading them (cheap when only the settings are needed).
+
+    Raises:
+        DiviewerError: naming the file when it is missing, truncated, not a checkpoint, or newer
+            than this diviewer.
+    """
+    torch = require_torch()
+    path = Path(path)
+    if not path.is_file():
+        raise DiviewerError("checkpoint not found", path=path)
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=mmap)
+    except Exception as exc:  # truncated zip, foreign pickle, not a torch file at all
+        raise DiviewerError(f"not a readable checkpoint ({type(exc).__name__}: {(str(exc).splitlines() or [''])[0][:200]}); "
+                            "it may be truncated or corrupt: use another checkpoint", path=path) from exc
+    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
+        raise DiviewerError(f"not a diviewer checkpoint (no format '{CHECKPOINT_FORMAT}')", path=path)
+    if int(ckpt.get("format_version", 0)) > CHECKPOINT_VERSION:
+        raise DiviewerError(f"checkpoint format {ckpt['format_version']} is newer than this diviewer reads "
+                            f"({CHECKPOINT_VERSION}); upgrade diviewer", path=path, field="format_version")
+    missing = [k for k in ("model_args", "net_config", "encoding", "config", "netG") if k not in ckpt]
+    if missing:
+        raise DiviewerError(f"checkpoint lacks {missing}", path=path)
+    return ckpt
+
+
+def build_generator_from_checkpoint(ckpt: Mapping[str, Any] | str | Path):
+    """netG (eval mode, CPU) + its Encoding + what an exporter needs to know, from a checkpoint.
+
+    Args:
+        ckpt: a dict from `load_checkpoint`, or a checkpoint path.
+
+    Returns:
+        (netG, encoding, meta). meta holds target, divide_albedo, albedo_floor (how to compose the
+        output: `compose_radiance`), resolution, K, scene, scene_hash, dataset_hash, epoch, step,
+        val metrics, model_args, net_config, train config, versions and the dataset's capture settings.
+    """
+    require_torch()
+    from diviewer.encoding import Encoding
+    from diviewer.train.networks import UnetGenerator
+
+    if not isinstance(ckpt, Mapping):
+        ckpt = load_checkpoint(ckpt)
+    netG = UnetGenerator(**ckpt["model_args"])
+    netG.load_state_dict(ckpt["netG"])
+    netG.eval()
+    encoding = Encoding.from_dict(ckpt["encoding"])
+    config = ckpt["config"]
+    meta = {
+        "target": config["target"],
+        "divide_albedo": bool(config["divide_albedo"]),
+        "albedo_floor": ckpt.get("albedo_floor", ALBEDO_FLOOR),
+        "resolution": ckpt["dataset"]["resolution"],
+        "K": ckpt["model_args"]["K"],
+        "scene": ckpt["dataset"]["scene"],
+        "scene_hash": ckpt["dataset"]["scene_hash"],
+        "dataset_hash": ckpt["dataset"]["hash"],
+        "epoch": ckpt["epoch"],
+        "step": ckpt["step"],
+        "val": ckpt.get("val"),
+        "model_args": dict(ckpt["model_args"]),
+        "net_config": dict(ckpt["net_config"]),
+        "config": dict(config),
+        "versions": dict(ckpt.get("versions", {})),
+        "capture": ckpt["dataset"].get("capture"),
+        "loss_config": ckpt.get("loss_config"),
+    }
+    return netG, encoding, meta
+
+
+# ---------------------------------------------------------------------------------------------
+# Validation, metrics.csv and curves.png
+
+
+def to_cpu(obj: Any) -> Any:
+    """Nested dicts/lists/tuples with every tensor moved to the CPU (state dicts keep their metadata)."""
+    if callable(getattr(obj, "cpu", None)):
+        return obj.cpu()
+    if isinstance(obj, dict):
+        out = type(obj)((k, to_cpu(v)) for k, v in obj.items())
+        if hasattr(obj, "_metadata"):
+            out._metadata = obj._metadata
+        return out
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(to_cpu(v) for v in obj)
+    return obj
+
+
+def check_resume(cfg: TrainConfig, ckpt: Mapping[str, Any], ds: Dataset, train_idx: list[int], path: Path) -> None:
+    """The resumed run must train the same networks on the same data as the checkpoint's."""
+    if ckpt["dataset"]["hash"] != ds.hash:
+        raise DiviewerError(f"was trained on another dataset (hash {ckpt['dataset']['hash'][:12]}, "
+                            f"{cfg.data} has {ds.hash[:12]}); resume with the same --data or choose another --out",
+                            path=path)
+    old = ckpt["config"]
+    # Settings a checkpoint from before they existed does not record had their default then.
+    default = {f.name: f.default for f in dataclasses.fields(TrainConfig)}
+    diff = [f"{k}: {old.get(k, default[k])!r} -> {getattr(cfg, k)!r}" for k in RESUME_FIXED
+            if old.get(k, default[k]) != getattr(cfg, k)]
+    if diff:
+        raise DiviewerError(f"cannot resume with different settings ({'; '.join(diff)}); "
+                            "drop those options or choose another --out", path=path)
+    then = ckpt["dataset"].get("train_indices")
+    if then is not None and list(then) != list(train_idx):
+        raise DiviewerError(f"the train split changed since this run began ({len(then)} frames then, "
+                            f"{len(train_idx)} now; a capture still running?): resume with --train-frames {len(then)}",
+                            path=path)
+
+
+# ---------------------------------------------------------------------------------------------
+# A run's checkpoints: what they record, writing them, and continuing from one
+
+
+CAPTURE_KEYS: tuple[str, ...] = ("frames", "spp", "max_depth", "seed", "split_fractions", "gt", "dtype")
+"""Dataset manifest fields a checkpoint (and so a model card's recipe) records: how to capture it again."""
+
+
+def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Dataset, train_idx: list[int],
+                 n_val: int) -> dict[str, Any]:
+    """What every checkpoint of a run records besides the weights and the progress."""
+    from diviewer.provenance import versions
+
+    return {
+        "format": CHECKPOINT_FORMAT, "format_version": CHECKPOINT_VERSION,
+        "model_args": nets.netG_m.model_args(), "netD_args": nets.netD_m.model_args(),
+        "net_config": net_cfg.to_dict(), "loss_config": nets.loss.to_dict(), "encoding": enc.to_dict(),
+        "albedo_floor": ALBEDO_FLOOR, "config": cfg.to_dict(),
+        "dataset": {"path": str(ds.root), "hash": ds.hash, "scene": ds.manifest.get("scene"),
+                    "scene_hash": ds.manifest.get("scene_hash"), "resolution": [ds.width, ds.height],
+                    "train_frames": len(train_idx), "train_indices": list(train_idx), "val_frames": n_val,
+                    "capture": {k: ds.manifest.get(k) for k in CAPTURE_KEYS}},
+        "versions": versions(),
+    }
+
+
+def save_run(run: Any, nets: Any, st: Any, val: dict[str, float] | None, is_best: bool) -> None:
+    """Write last.ckpt (and best.ckpt); collective under torchrun: gathers every rank's RNG, and no
+    rank returns before the files are written (a rank that goes on to read them sees them whole)."""
+    import torch.distributed as dist
+
+    from diviewer.train.distributed import rng_state
+
+    st.elapsed = run.elapsed()
+    rng = rng_state(run.dev.device)
+    rngs = [rng]
+    if run.dev.world > 1:
+        rngs = [None] * run.dev.world
+        dist.all_gather_object(rngs, rng)
+    if run.dev.main:
+        _write_run_checkpoints(run, nets, st, val, is_best, rngs)
+    if run.dev.world > 1:
+        dist.barrier()
+
+
+def _write_run_checkpoints(run: Any, nets: Any, st: Any, val: dict[str, float] | None, is_best: bool,
+                           rngs: list[Any]) -> None:
+    import shutil
+
+    cfg = run.cfg
+    ckpt = {
+        **run.meta, **st.to_checkpoint(), "val": val,
+        "data_order": {"seed": cfg.seed, "epoch": st.epoch, "batch": st.batch_in_epoch, "world": run.dev.world,
+                       "batch_size": cfg.batch_size},
+        # On the CPU: a GPU-trained checkpoint then loads anywhere, even without map_location.
+        **to_cpu({"netG": nets.netG_m.state_dict(), "netD": nets.netD_m.state_dict(),
+                  "optG": nets.optG.state_dict(), "optD": nets.optD.state_dict(), "rng": rngs}),
+        "scaler": nets.scaler.state_dict() if nets.scaler.is_enabled() else None,
+    }
+    atomic_save(ckpt, cfg.out / "last.ckpt")
+    if is_best:
+        with imageio.atomic_path(cfg.out / "best.ckpt") as tmp:
+            shutil.copyfile(cfg.out / "last.ckpt", tmp)
+
+
+def restore_run(nets: Any, ckpt: Mapping[str, Any], cfg: TrainConfig, dev: Any, say) -> None:
+    """Weights, optimizers and random state of the interrupted run (its progress: `TrainState`)."""
+    from diviewer.train.distributed import seed_all, set_rng_state
+
+    nets.netG_m.load_state_dict(ckpt["netG"])
+    nets.netD_m.load_state_dict(ckpt["netD"])
+    nets.optG.load_state_dict(ckpt["optG"])
+    nets.optD.load_state_dict(ckpt["optD"])
+    if nets.scaler.is_enabled() and ckpt.get("scaler"):
+        nets.scaler.load_state_dict(ckpt["scaler"])
+    order, rngs = ckpt["data_order"], ckpt["rng"]
+    if order["world"] == dev.world and len(rngs) == dev.world:
+        set_rng_state(rngs[dev.rank], dev.device)
+    else:
+        say(f"warning: resuming with {dev.world} process(es) where the checkpoint had {order['world']}: "
+            "training continues, but not in exactly the order the interrupted run would have")
+        seed_all(cfg.seed + 1_000_003 * (dev.rank + 1) + ckpt["step"])

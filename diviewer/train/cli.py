@@ -1,0 +1,112 @@
+"""The `diviewer train` command line: options onto `TrainConfig` (on --resume, the checkpoint's
+settings fill what is not given), then `train`. `python -m diviewer.train.cli` (e.g. under
+torchrun) runs the subcommand on its own::
+
+    torchrun --standalone --nproc_per_node 4 -m diviewer.train.cli --data data/cornell --out runs/c4
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+from typing import Any
+
+from diviewer.errors import DiviewerError
+from diviewer.train.config import CHOICES, RESUME_INHERITED, TrainConfig
+
+
+def add_train_parser(subparsers) -> argparse.ArgumentParser:
+    """The `train` subcommand; it calls `run_train`. On --resume, options left out come from the
+    checkpoint (see `RESUME_INHERITED`), and those that define the networks may not change."""
+    d = {f.name: f.default for f in dataclasses.fields(TrainConfig)}
+    p = subparsers.add_parser("train", help="train the neural GI network (cGAN) for one scene's dataset",
+                              description="Train Deep Illumination's cGAN on a captured dataset; resumable.")
+    p.add_argument("--data", type=Path, required=True, help="dataset folder (diviewer capture --out)")
+    p.add_argument("--out", type=Path, required=True, help="run folder: checkpoints, metrics.csv, curves.png")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out exactly where it stopped")
+    p.add_argument("--k", dest="K", type=int, default=None, help=f"generator base width (default {d['K']})")
+    p.add_argument("--epochs", type=int, default=None, help=f"default {d['epochs']}")
+    p.add_argument("--target", choices=("full", "indirect"), default=None,
+                   help="predict the full GI image or indirect light only (default full)")
+    p.add_argument("--divide-albedo", action="store_true", default=None,
+                   help="with --target indirect: predict indirect / albedo")
+    p.add_argument("--batch-size", type=int, default=None, help=f"default {d['batch_size']}")
+    p.add_argument("--lr", type=float, default=None, help=f"Adam learning rate (default {d['lr']})")
+    p.add_argument("--lambda-l1", dest="lambda_L1", type=float, default=None, help=f"default {d['lambda_L1']}")
+    p.add_argument("--ndf", type=int, default=None, help=f"discriminator base width (default {d['ndf']})")
+    p.add_argument("--seed", type=int, default=None, help=f"default {d['seed']}")
+    p.add_argument("--max-steps", type=int, default=None, help="stop after this many steps in total")
+    p.add_argument("--val-every", type=int, default=None, help="validate every N epochs (default 1)")
+    p.add_argument("--save-every", type=int, default=None,
+                   help="also save last.ckpt every N steps (default 0: epoch ends only)")
+    p.add_argument("--precision", choices=CHOICES["precision"], default=None,
+                   help="autocast: auto (bf16 on CUDA, fp32 on the CPU; default), fp32, bf16, fp16 (CUDA only)")
+    p.add_argument("--amp", action="store_true", help="the same as --precision fp16")
+    g = p.add_argument_group("losses and discriminator (ablations; the defaults are the paper's)")
+    g.add_argument("--gan-weight", type=float, default=None,
+                   help=f"weight of the adversarial term (default {d['gan_weight']}; 0: reconstruction only)")
+    g.add_argument("--gan-mode", choices=CHOICES["gan_mode"], default=None, help="adversarial objective (default vanilla)")
+    g.add_argument("--recon-loss", choices=CHOICES["recon_loss"], default=None, help="reconstruction norm (default l1)")
+    g.add_argument("--recon-space", choices=CHOICES["recon_space"], default=None,
+                   help="reconstruction on encoded values (default) or linear radiance x exposure (l2 there: unbiased)")
+    g.add_argument("--n-layers-d", dest="n_layers_D", type=int, default=None,
+                   help=f"discriminator stride layers (default {d['n_layers_D']}: 70x70 patches)")
+    g.add_argument("--norm-d", dest="norm_D", choices=CHOICES["norm_D"], default=None,
+                   help="discriminator normalisation (default batch)")
+    g.add_argument("--d-lr", type=float, default=None, help="discriminator learning rate (default: --lr)")
+    g = p.add_argument_group("generator (ablations; the defaults are the paper's)")
+    g.add_argument("--upsample", choices=CHOICES["upsample"], default=None, help="decoder upsampling (default transpose)")
+    g.add_argument("--norm", choices=CHOICES["norm"], default=None, help="normalisation (default batch)")
+    g = p.add_argument_group("data and stopping")
+    g.add_argument("--train-frames", type=int, default=None,
+                   help="use only the first N train frames by index (default: all present)")
+    g.add_argument("--patience", type=int, default=None,
+                   help="stop after N validations without a better tone-mapped SSIM (default 0: never)")
+    g.add_argument("--val-every-steps", type=int, default=None,
+                   help="also validate (and save) every N steps (default 0: epoch ends only)")
+    p.add_argument("--num-workers", type=int, default=d["num_workers"], help="DataLoader workers (default 0)")
+    p.add_argument("--device", default=d["device"], help="auto, cpu, cuda or cuda:N (default auto)")
+    p.set_defaults(func=run_train)
+    return p
+
+
+def run_train(args: argparse.Namespace) -> int:
+    """`diviewer train`: TrainConfig from the options (and, on --resume, the checkpoint's), then `train`."""
+    from diviewer.train.checkpoint import load_checkpoint, require_torch
+    from diviewer.train.trainer import train
+
+    require_torch()
+    given = {k: getattr(args, k, None) for k in RESUME_INHERITED}
+    base: dict[str, Any] = {}
+    last = Path(args.out) / "last.ckpt"
+    if getattr(args, "resume", False) and last.is_file():
+        old = load_checkpoint(last, mmap=True)["config"]
+        base = {k: old[k] for k in RESUME_INHERITED if k in old}
+    fields = {**base, **{k: v for k, v in given.items() if v is not None}}
+    precision = args.precision or ("fp16" if args.amp else "auto")
+    cfg = TrainConfig(data=args.data, out=args.out, max_steps=args.max_steps, precision=precision,
+                      num_workers=args.num_workers, device=args.device, **fields)
+    result = train(cfg, resume=bool(getattr(args, "resume", False)))
+    if result["best"] is not None:
+        print(f"best tone-mapped SSIM {result['best']:.4f}; checkpoints in {cfg.out}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m diviewer.train.cli` (e.g. under torchrun): the `train` subcommand on its own."""
+    ap = argparse.ArgumentParser(prog="diviewer.train.cli")
+    add_train_parser(ap.add_subparsers(dest="command", required=True))
+    args = ap.parse_args(["train", *(sys.argv[1:] if argv is None else argv)])
+    try:
+        return args.func(args)
+    except DiviewerError as exc:
+        print(f"diviewer train: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

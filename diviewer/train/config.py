@@ -1,0 +1,203 @@
+"""Settings of one training run (`TrainConfig`), and which of them a resumed run may change."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from diviewer.errors import DiviewerError
+from diviewer.provenance import check_known_keys
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Settings of one training run; recorded in every checkpoint (`to_dict`)."""
+
+    data: Path
+    """Dataset folder (`diviewer capture` output) with train and val frames."""
+
+    out: Path
+    """Run folder: checkpoints, metrics.csv, curves.png."""
+
+    K: int = 32
+    """Generator base width (pix2pix's ngf); the paper trains K = 32, 64, 128."""
+
+    epochs: int = 50
+    """Passes over the train split (the paper: 50)."""
+
+    batch_size: int = 4
+    """Frames per step (per process under torchrun); the paper: 4."""
+
+    lr: float = 2e-4
+    """Adam learning rate of both networks (pix2pix)."""
+
+    beta1: float = 0.5
+    """Adam beta1 (pix2pix: 0.5, which keeps GAN training stable)."""
+
+    beta2: float = 0.999
+    """Adam beta2."""
+
+    lambda_L1: float = 100.0
+    """Weight of the L1 term against the adversarial term (pix2pix)."""
+
+    target: str = "full"
+    """What netG predicts: "full" (the path-traced image) or "indirect" (pt - pt_direct, added to
+    the GL direct light when composed)."""
+
+    divide_albedo: bool = False
+    """With target "indirect": predict indirect / max(albedo, ALBEDO_FLOOR) (texture-free, closer
+    to irradiance) and multiply back when composing."""
+
+    seed: int = 0
+    """Seeds the weights, the data order and dropout; the same seed gives the same run."""
+
+    dropout: float = 0.5
+    """Dropout in the innermost generator decoders (pix2pix: 0.5)."""
+
+    ndf: int = 64
+    """Discriminator base width (the paper: 64)."""
+
+    precision: str = "auto"
+    """Autocast: "auto" (bfloat16 on CUDA, float32 on the CPU), "fp32", "bf16" (no loss scaling
+    needed: float32's range), or "fp16" (float16 with gradient scaling; CUDA only)."""
+
+    num_workers: int = 0
+    """DataLoader workers. The train split lives in RAM, so workers only overlap the host-to-GPU
+    copy with compute; 0 loads in the training process."""
+
+    val_every: int = 1
+    """Validate every this many epochs (and always after the last one and when a run stops)."""
+
+    save_every: int = 0
+    """Also write last.ckpt every this many steps inside an epoch (0: at epoch ends and stops only)."""
+
+    max_steps: int | None = None
+    """Stop after this many steps in total (smoke runs, tests); None trains all epochs."""
+
+    device: str = "auto"
+    """"auto" (CUDA if available, else CPU), "cpu", "cuda" or "cuda:N"."""
+
+    gan_weight: float = 1.0
+    """Weight of netG's adversarial term (1: pix2pix and the paper; 0: reconstruction only, netD
+    is then neither trained nor run)."""
+
+    gan_mode: str = "vanilla"
+    """Adversarial objective: "vanilla" (BCE on logits, the paper) or "lsgan" (least squares)."""
+
+    recon_loss: str = "l1"
+    """Reconstruction norm, weighted by lambda_L1: "l1" (the paper) or "l2"."""
+
+    recon_space: str = "encoded"
+    """Where the reconstruction loss is taken: "encoded" (the network's values, the paper) or
+    "linear" (radiance times the dataset exposure; with l2 the one unbiased choice under
+    Monte-Carlo noise, see `diviewer.train.losses`)."""
+
+    n_layers_D: int = 3
+    """Discriminator stride layers (3: the paper's 70x70 PatchGAN; 4 sees 142x142 patches)."""
+
+    norm_D: str = "batch"
+    """Discriminator normalisation: "batch" (the paper), "instance" or "none"."""
+
+    d_lr: float | None = None
+    """netD's Adam learning rate (None: the same as lr); a higher one rebalances a netD at chance."""
+
+    upsample: str = "transpose"
+    """Generator decoder upsampling: "transpose" (the paper), "resize" or "shuffle"."""
+
+    norm: str = "batch"
+    """Generator normalisation: "batch" (the paper), "instance" or "none"."""
+
+    train_frames: int | None = None
+    """Train on only the first N train frames by index (None: all present), so runs can share a
+    dataset whose capture is still adding frames."""
+
+    patience: int = 0
+    """Early stopping: stop when validation tone-mapped SSIM has not improved for this many
+    validations in a row (0: never; train all epochs)."""
+
+    val_every_steps: int = 0
+    """Also validate (and write a row, and save) every this many steps (0: at epoch ends only)."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "data", Path(self.data))
+        object.__setattr__(self, "out", Path(self.out))
+
+        def fail(name: str, message: str) -> None:
+            raise DiviewerError(message, field=f"train.{name}")
+
+        for name in ("K", "epochs", "batch_size", "ndf", "val_every", "n_layers_D"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                fail(name, f"must be a positive integer, got {v!r}")
+        for name in ("num_workers", "save_every", "seed", "patience", "val_every_steps"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                fail(name, f"must be an integer >= 0, got {v!r}")
+        if self.max_steps is not None and (isinstance(self.max_steps, bool) or not isinstance(self.max_steps, int)
+                                           or self.max_steps < 1):
+            fail("max_steps", f"must be a positive integer or None, got {self.max_steps!r}")
+        if self.train_frames is not None and (isinstance(self.train_frames, bool)
+                                              or not isinstance(self.train_frames, int) or self.train_frames < 1):
+            fail("train_frames", f"must be a positive integer or None, got {self.train_frames!r}")
+        for name in ("lr", *(("d_lr",) if self.d_lr is not None else ())):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                fail(name, f"must be a positive number, got {v!r}")
+        if isinstance(self.gan_weight, bool) or not (isinstance(self.gan_weight, (int, float))
+                                                     and math.isfinite(self.gan_weight) and self.gan_weight >= 0):
+            fail("gan_weight", f"must be a number >= 0, got {self.gan_weight!r}")
+        for name, choices in CHOICES.items():
+            if getattr(self, name) not in choices:
+                fail(name, f"must be one of {', '.join(choices)}, got {getattr(self, name)!r}")
+        for name in ("beta1", "beta2"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and 0.0 <= v < 1.0):
+                fail(name, f"must be in [0, 1), got {v!r}")
+        if not (isinstance(self.lambda_L1, (int, float)) and math.isfinite(self.lambda_L1) and self.lambda_L1 >= 0):
+            fail("lambda_L1", f"must be a number >= 0, got {self.lambda_L1!r}")
+        if not (isinstance(self.dropout, (int, float)) and 0.0 <= self.dropout < 1.0):
+            fail("dropout", f"must be in [0, 1), got {self.dropout!r}")
+        if self.target not in ("full", "indirect"):
+            fail("target", f"must be 'full' or 'indirect', got {self.target!r}")
+        if self.divide_albedo and self.target != "indirect":
+            fail("divide_albedo", "only applies to target 'indirect' (use --target indirect)")
+        cuda_n = self.device.startswith("cuda:") and self.device[5:].isdigit()
+        if not (self.device in ("auto", "cpu", "cuda") or cuda_n):
+            fail("device", f"must be auto, cpu, cuda or cuda:N, got {self.device!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict (paths as strings) for checkpoints."""
+        d = dataclasses.asdict(self)
+        d["data"], d["out"] = str(self.data), str(self.out)
+        return d
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> TrainConfig:
+        """Rebuild from `to_dict()` output; unknown keys are an error (checkpoints written before
+        `precision` recorded `amp`: True meant float16 autocast)."""
+        data = dict(data)
+        if "amp" in data and "precision" not in data:
+            data["precision"] = "fp16" if data.pop("amp") else "auto"
+        check_known_keys(cls, data, "train")
+        return cls(**data)
+
+
+CHOICES: dict[str, tuple[str, ...]] = {
+    "precision": ("auto", "fp32", "bf16", "fp16"), "gan_mode": ("vanilla", "lsgan"), "recon_loss": ("l1", "l2"),
+    "recon_space": ("encoded", "linear"), "norm_D": ("batch", "instance", "none"),
+    "upsample": ("transpose", "resize", "shuffle"), "norm": ("batch", "instance", "none"),
+}
+"""The settings that take one of a few names (the network ones are `networks.UPSAMPLES`/`NORMS`)."""
+
+RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "beta1", "beta2", "lambda_L1", "target", "divide_albedo",
+                                 "seed", "dropout", "ndf", "gan_weight", "gan_mode", "recon_loss", "recon_space",
+                                 "n_layers_D", "norm_D", "d_lr", "upsample", "norm", "train_frames")
+"""Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change)."""
+
+RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save_every", "patience", "val_every_steps")
+"""Settings `diviewer train --resume` takes from the checkpoint unless given again (max_steps, precision,
+device and num_workers describe this invocation and this machine, so they are not inherited)."""

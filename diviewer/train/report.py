@@ -1,0 +1,160 @@
+"""Validation and what a person reads of a run: per-frame metrics of the composed image against the
+path tracer, metrics.csv (one row per validation or stop) and curves.png."""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from diviewer import imageio
+from diviewer.metrics import tonemap
+from diviewer.train.config import TrainConfig
+from diviewer.train.targets import compose_radiance, split_batch
+
+if TYPE_CHECKING:
+    from diviewer.encoding import Encoding
+
+METRIC_KEYS: tuple[str, ...] = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
+"""Validation metrics: on linear radiance, then on tone-mapped images (suffix _tm)."""
+
+CSV_COLUMNS: tuple[str, ...] = ("epoch", "step", "loss_D", "loss_G_GAN", "loss_G_L1", "D_acc_real", "D_acc_fake",
+                                *(f"val_{k}" for k in METRIC_KEYS), "seconds")
+"""metrics.csv columns: fractional epoch, global step, mean train losses over the epoch so far
+(loss_G_L1: the reconstruction term, L1 or L2, already times lambda_L1, as pix2pix reports it;
+loss_G_GAN unweighted), netD's accuracy on real and on generated pairs over the same steps (0.5:
+at chance; the adversarial columns are empty when gan_weight is 0), validation metrics (empty when
+not validated) and wall-clock seconds since the run began (summed over resumed parts)."""
+
+
+def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, cfg: TrainConfig, device,
+             dtype=None) -> dict[str, float]:
+    """Mean per-frame metrics of the composed image against the path-traced `pt`, netG in eval mode.
+
+    Linear: MSE, PSNR (peak 1) and SSIM (data_range 1) on radiance as stored, as `diviewer.metrics`
+    defines them. Tone-mapped (_tm): the same on `tonemap(x, enc.exposure)`. With target
+    "indirect" the image is GL direct + predicted indirect, as the viewer composes it. dtype: the
+    autocast dtype netG runs in (None: float32).
+    """
+    import torch
+
+    from diviewer import metrics
+    from diviewer.train.encoding_torch import decode_radiance
+
+    was_training = netG.training
+    netG.eval()
+    sums = dict.fromkeys(METRIC_KEYS, 0.0)
+    with torch.no_grad():
+        for start in range(0, len(val), cfg.batch_size):
+            x16 = torch.from_numpy(val[start:start + cfg.batch_size]).to(device)
+            b = split_batch(x16, slices, enc, cfg)
+            with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
+                fake_B = netG(b["real_A"])
+            pred = compose_radiance(decode_radiance(fake_B.float(), enc), b["direct"], b["albedo"], cfg.target,
+                                    cfg.divide_albedo)
+            pred = pred.permute(0, 2, 3, 1).cpu().numpy()
+            truth = b["pt"].permute(0, 2, 3, 1).cpu().numpy()
+            for p, t in zip(pred, truth):
+                p_tm, t_tm = tonemap(p, enc.exposure), tonemap(t, enc.exposure)
+                sums["mse"] += metrics.mse(p, t)
+                sums["psnr"] += metrics.psnr(p, t)
+                sums["ssim"] += metrics.ssim(p, t)
+                sums["mse_tm"] += metrics.mse(p_tm, t_tm)
+                sums["psnr_tm"] += metrics.psnr(p_tm, t_tm)
+                sums["ssim_tm"] += metrics.ssim(p_tm, t_tm)
+    netG.train(was_training)
+    return {k: float(v / len(val)) for k, v in sums.items()}
+
+
+def read_metrics(path: Path) -> list[dict[str, float | None]]:
+    """metrics.csv rows as dicts of floats (None where a row has no value)."""
+    if not path.is_file():
+        return []
+    with open(path, newline="") as f:
+        return [{k: (float(v) if v not in ("", None) else None) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def write_metrics(path: Path, rows: list[dict[str, Any]]) -> None:
+    def cell(v: Any) -> str:
+        return "" if v is None else (f"{v:.8g}" if isinstance(v, float) else str(v))
+
+    lines = [",".join(CSV_COLUMNS)] + [",".join(cell(r.get(c)) for c in CSV_COLUMNS) for r in rows]
+    imageio.write_text(path, "\n".join(lines) + "\n")
+
+
+def draw_curves(rows: list[Mapping[str, Any]], path: Path, best_epoch: float | None = None,
+                stop_epoch: float | None = None) -> None:
+    """curves.png: validation MSE and SSIM per epoch (linear and tone-mapped), the train losses and
+    netD's accuracy; a grey line marks the best validation, a red one where early stopping stopped."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    panels = [
+        ("validation MSE (log)", [("linear", "val_mse"), ("tone-mapped", "val_mse_tm")], True),
+        ("validation SSIM", [("linear", "val_ssim"), ("tone-mapped", "val_ssim_tm")], False),
+        ("train losses (log)", [("D", "loss_D"), ("G GAN", "loss_G_GAN"), ("G rec", "loss_G_L1")], True),
+        ("netD accuracy (0.5: chance)", [("real", "D_acc_real"), ("fake", "D_acc_fake")], False),
+    ]
+    colors = [(31, 119, 180), (255, 127, 14), (44, 160, 44)]
+    pw, ph, ml, mr, mt, mb = 420, 330, 64, 14, 42, 38
+    img = Image.new("RGB", (pw * len(panels), ph), "white")
+    draw = ImageDraw.Draw(img)
+    font = ImageFont.load_default()
+    for k, (title, series, log_y) in enumerate(panels):
+        x0, x1, y0, y1 = k * pw + ml, (k + 1) * pw - mr, mt, ph - mb
+        draw.text((k * pw + ml, 6), title, fill="black", font=font)
+        draw.rectangle([x0, y0, x1, y1], outline="black")
+        pts = {}
+        for label, key in series:
+            p = [(float(r["epoch"]), float(r[key])) for r in rows
+                 if r.get(key) is not None and math.isfinite(float(r[key])) and (not log_y or float(r[key]) > 0)]
+            pts[label] = [(x, math.log10(y) if log_y else y) for x, y in p]
+        allp = [q for p in pts.values() for q in p]
+        if not allp:
+            draw.text((x0 + 10, (y0 + y1) // 2), "no data yet", fill="gray", font=font)
+            continue
+        xlo, xhi = min(q[0] for q in allp), max(q[0] for q in allp)
+        ylo, yhi = min(q[1] for q in allp), max(q[1] for q in allp)
+        if xhi - xlo < 1e-9:
+            xlo, xhi = xlo - 0.5, xhi + 0.5
+        pad = (yhi - ylo) * 0.05 or (0.5 if log_y else max(abs(ylo) * 0.05, 1e-3))
+        ylo, yhi = ylo - pad, yhi + pad
+
+        def to_px(x: float, y: float) -> tuple[float, float]:
+            return (x0 + (x - xlo) / (xhi - xlo) * (x1 - x0), y1 - (y - ylo) / (yhi - ylo) * (y1 - y0))
+
+        for i in range(5):
+            fx = xlo + (xhi - xlo) * i / 4
+            fy = ylo + (yhi - ylo) * i / 4
+            px, _ = to_px(fx, ylo)
+            _, py = to_px(xlo, fy)
+            draw.line([px, y1, px, y1 + 4], fill="black")
+            draw.text((px - 10, y1 + 6), f"{fx:.3g}", fill="black", font=font)
+            draw.line([x0 - 4, py, x0, py], fill="black")
+            draw.text((k * pw + 4, py - 6), f"{10 ** fy if log_y else fy:.3g}", fill="black", font=font)
+        draw.text(((x0 + x1) // 2 - 14, ph - 14), "epoch", fill="black", font=font)
+        for mark, color, label in ((best_epoch, (150, 150, 150), "best"), (stop_epoch, (214, 39, 40), "stop")):
+            if mark is not None and xlo <= mark <= xhi:
+                px, _ = to_px(mark, ylo)
+                draw.line([px, y0, px, y1], fill=color, width=1)
+                draw.text((px + 3, y0 + 3), label, fill=color, font=font)
+        lx = x0  # the legend: one row between the title and the plot
+        for j, (label, p) in enumerate(pts.items()):
+            color = colors[j % len(colors)]
+            xy = [to_px(x, y) for x, y in p]
+            if len(xy) > 1:
+                draw.line(xy, fill=color, width=2)
+            for px, py in xy:
+                draw.ellipse([px - 2, py - 2, px + 2, py + 2], fill=color)
+            draw.line([lx, 28, lx + 16, 28], fill=color, width=2)
+            draw.text((lx + 20, 22), label, fill="black", font=font)
+            lx += 20 + int(draw.textlength(label, font=font)) + 18
+    with imageio.atomic_path(path) as tmp:
+        img.save(tmp, format="PNG")
+
+
+# ---------------------------------------------------------------------------------------------
+# The training loop

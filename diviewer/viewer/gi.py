@@ -1,0 +1,105 @@
+"""The viewer's neural GI: which model runs, and its neural pass at the GI resolution asked for.
+
+The GI resolution policy lives here: ``gi_res`` is ``model`` (the training size), a fraction of the window
+(it follows the window when it is resized) or ``WxH``; a size the model cannot run at is refused and
+changes nothing. The pass is rebuilt when the resolution, the pipelining or (for a fraction) the window's
+size changes. The sizes themselves are computed by ``models.gi_resolution``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+from diviewer.errors import DiviewerError
+from diviewer.gl.neural import GISettings
+from diviewer.viewer.models import gi_resolution, open_model
+from diviewer.viewer.state import ViewerState
+
+
+class GIControl:
+    """The loaded model (``model``, a ``runtime.NeuralGI``) and its ``NeuralPass`` (``neural``), or neither."""
+
+    def __init__(self, ctx, renderer, state: ViewerState, gi_res: str, settings: GISettings,
+                 provider: str | None = None):
+        self.ctx, self.renderer, self.state, self.provider = ctx, renderer, state, provider
+        self.gi_res = str(gi_res)
+        """What the user asked for: ``model``, a fraction (``1/4``) or ``WxH``."""
+        self.settings = settings
+        """How the inputs are reduced and the output upsampled, and whether inference runs a frame behind."""
+        self.model = None
+        self.neural = None
+
+    @property
+    def render_size(self) -> tuple[int, int]:
+        return self.renderer.width, self.renderer.height
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """The GI resolution the network runs at (the render size without a model)."""
+        return self.neural.gi_size if self.neural is not None else self.render_size
+
+    def _size_for(self, model, gi_res: str, render_size: tuple[int, int]) -> tuple[int, int]:
+        return gi_resolution(gi_res, render_size, model.resolution, model.multiple)
+
+    def _build(self, model) -> None:
+        from diviewer.gl.neural import NeuralPass
+
+        size = self._size_for(model, self.gi_res, self.render_size)
+        self.neural = NeuralPass(self.ctx, self.renderer, model, size, self.settings)
+        self.state.gi_res = self.gi_res
+
+    def _rebuild(self) -> None:
+        self.neural.release()
+        self._build(self.model)
+
+    def load(self, spec: str | Path | None) -> None:
+        """Load a model (path, ``auto`` or ``none``); without one the state's message says why."""
+        self.release()
+        model, message = open_model(spec, self.state.scene, self.provider)
+        st = self.state
+        st.model_message, st.model_meta, st.provider = message, None, ""
+        st.model_name = None
+        if model is not None:
+            # A GI resolution the model cannot run at is the user's request, not the model's fault: raised.
+            self._size_for(model, self.gi_res, self.render_size)
+            try:
+                self._build(model)
+            except DiviewerError as exc:
+                st.model_message = f"model refused: {exc}"
+                return
+            self.model = model
+            st.model_name = model.path.name
+            st.model_meta = dict(model.meta)
+            st.provider = model.provider
+        if message and spec not in (None, "auto", "none"):
+            print(f"diviewer view: {message}", file=sys.stderr)
+
+    def set_gi_res(self, spec: str) -> tuple[int, int]:
+        """Run the network at another GI resolution (``model``, ``1/4``, ``WxH``); refused sizes change nothing."""
+        if self.model is not None:
+            self._size_for(self.model, str(spec), self.render_size)  # raises before anything changes
+        self.gi_res = str(spec)
+        if self.model is not None:
+            self._rebuild()
+        return self.size
+
+    def set_pipelined(self, on: bool) -> None:
+        """Run inference one frame behind on a worker thread (GL and onnxruntime overlap) or in the frame."""
+        self.settings = dataclasses.replace(self.settings, pipelined=bool(on))
+        if self.model is not None:
+            self._rebuild()
+
+    def follow_window(self) -> None:
+        """After the renderer was resized: a fraction of the window follows it; other sizes stay."""
+        if self.neural is not None and "/" in self.gi_res:
+            if self._size_for(self.model, self.gi_res, self.render_size) != self.neural.gi_size:
+                self._rebuild()
+
+    def release(self) -> None:
+        """Drop the neural pass and the model (and with it the onnxruntime session)."""
+        if self.neural is not None:
+            self.neural.release()
+        self.neural = None
+        self.model = None

@@ -1,0 +1,188 @@
+"""`diviewer bench`: the FLOP count, the equal-time / equal-error logic on synthetic tables, and a --quick run (torch blocked) whose JSON has every row, stage and metric."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from diviewer.bench.frontier import (equal_error, equal_time, smallest_sufficient_k, spp_in_time,
+                                     temporal_stability)
+from diviewer.bench.onnx_tools import generator_flops
+
+# --- cost model ----------------------------------------------------------------------------------------------------
+
+
+def test_flops_of_a_two_level_generator_match_a_hand_count():
+    """K=2, 2 levels, 4x4 input, 10 -> 3 channels; widths 2, 4. Multiply-adds by hand:
+    down0 Conv 10->2, 4x4/2 -> 2x2 output: 4 px * 2 * 10 * 16 = 1280
+    down1 Conv 2->4 -> 1x1:                1 px * 4 * 2 * 16  = 128
+    up0 ConvT 4->2 -> 2x2 (4 of 16 taps per output pixel): 4 px * 4 * 2 * 4 = 128
+    up1 ConvT (2+2)->3 -> 4x4:             16 px * 4 * 3 * 4  = 768
+    total 2304 MACs = 4608 FLOPs."""
+    f = generator_flops(K=2, levels=2, width=4, height=4)
+    assert dict(f["layers"]) == {"down0": 1280, "down1": 128, "up0": 128, "up1": 768}
+    assert f["macs"] == 2304 and f["flops"] == 4608
+    # resize decoders: nearest x2 then Conv 3x3 at the output: 9 taps instead of 4.
+    r = generator_flops(K=2, levels=2, width=4, height=4, upsample="resize")
+    assert r["macs"] == 1280 + 128 + 4 * 4 * 2 * 9 + 16 * 4 * 3 * 9
+    with pytest.raises(ValueError):
+        generator_flops(K=2, levels=3, width=4, height=4)
+
+
+def test_untrained_generator_runs_and_matches_the_torch_unet_in_size():
+    """The torch-free U-Net has pix2pix's layer shapes (as many convolution weights as UnetGenerator), and
+    onnxruntime runs it under the runtime's contract."""
+    import onnx
+    import onnxruntime as ort
+    from onnx import numpy_helper
+
+    from diviewer.bench.onnx_tools import untrained_generator
+    from diviewer.scene import load_scene
+
+    model = untrained_generator(4, 3, load_scene("cornell"), 16)
+    sess = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"])
+    x = np.random.default_rng(0).random((1, 16, 16, 10), dtype=np.float32)
+    (y,) = sess.run(None, {"buffers": x})
+    assert y.shape == (1, 16, 16, 3) and np.all(np.isfinite(y))
+    weights = {i.name: numpy_helper.to_array(i) for i in model.graph.initializer if i.name.endswith(".w")}
+    assert [w.shape for k, w in weights.items() if k.startswith("down")] == [(4, 10, 4, 4), (8, 4, 4, 4), (16, 8, 4, 4)]
+    assert [w.shape for k, w in weights.items() if k.startswith("up")] == [(16, 8, 4, 4), (16, 4, 4, 4), (8, 3, 4, 4)]
+    torch = pytest.importorskip("torch")
+    from diviewer.train.networks import UnetGenerator
+
+    net = UnetGenerator(K=4, levels=3)
+    conv_weights = sum(m.weight.numel() for m in net.modules() if isinstance(m, (torch.nn.Conv2d, torch.nn.ConvTranspose2d)))
+    assert conv_weights == sum(w.size for w in weights.values())
+    assert onnx.checker.check_model(model) is None
+
+
+# --- equal time, equal error, smallest K, temporal stability ---------------------------------------------------------
+
+LADDER = [1, 4, 16, 64, 256]
+MS = [10.0 * n for n in LADDER]          # the path tracer: 10 ms per sample per pixel
+ERR = [1.0 / n for n in LADDER]          # its error falls as 1 / spp
+
+
+def test_equal_time_on_a_synthetic_ladder():
+    r = equal_time(LADDER, MS, ERR, 80.0)  # 80 ms buys 8 spp, whose error is 1/8
+    assert r["bound"] == "=" and r["spp"] == pytest.approx(8.0) and r["error"] == pytest.approx(1 / 8)
+    assert equal_time(LADDER, MS, ERR, 10.0)["spp"] == pytest.approx(1.0)
+    below = equal_time(LADDER, MS, ERR, 5.0)  # not even one sample in time
+    assert below["bound"] == "<" and below["error"] is None
+    above = equal_time(LADDER, MS, ERR, 10000.0)
+    assert above["bound"] == ">=" and above["spp"] == 256 and above["error"] == pytest.approx(1 / 256)
+    # A ladder whose time grows as spp^0.5 interpolates in log-log exactly.
+    assert spp_in_time([1, 16], [4.0, 16.0], 8.0)["spp"] == pytest.approx(4.0)
+
+
+def test_equal_error_gives_the_path_tracers_time_and_the_speed_up():
+    r = equal_error(LADDER, MS, ERR, error=1 / 32, ms=4.0)  # a method as good as 32 spp, in 4 ms
+    assert r["bound"] == "=" and r["spp"] == pytest.approx(32.0)
+    assert r["pt_ms"] == pytest.approx(320.0) and r["speedup"] == pytest.approx(80.0)
+    better = equal_error(LADDER, MS, ERR, error=1e-4, ms=4.0)
+    assert better["bound"] == ">=" and better["pt_ms"] == pytest.approx(2560.0)  # a lower bound on the speed-up
+    worse = equal_error(LADDER, MS, ERR, error=2.0, ms=4.0)
+    assert worse["bound"] == "<"
+
+
+def test_smallest_sufficient_k():
+    s = smallest_sufficient_k({8: 25.0, 16: 26.7, 32: 27.0, 64: 26.9})
+    assert s["K"] == 16 and s["best_K"] == 32
+    assert smallest_sufficient_k({8: 25.0, 16: 26.0})["K"] == 16
+    assert smallest_sufficient_k({}) is None
+
+
+def test_temporal_stability_sees_flicker_the_reference_does_not_have():
+    ramp = [np.full((4, 4), 0.1 * t) for t in range(5)]
+    same = temporal_stability(ramp, ramp)
+    assert same["ratio"] == pytest.approx(1.0) and same["excess"] == 0.0
+    flicker = [r + (0.05 if t % 2 else 0.0) for t, r in enumerate(ramp)]
+    f = temporal_stability(flicker, ramp)
+    # changes alternate 0.15, 0.05: mean 0.1 like the reference, but each differs from it by 0.05
+    assert f["excess"] == pytest.approx(0.05) and f["change"] == pytest.approx(0.1)
+    still = [np.zeros((4, 4))] * 5
+    assert temporal_stability(flicker, still)["ratio"] == math.inf
+
+
+# --- the --quick run -------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def tiny_bench_inputs(tmp_path_factory):
+    """A 32x32 evaluation set of one frame per split (16 spp, ladder 1/4) and a small model that runs at 32 and 16."""
+    pytest.importorskip("mitsuba", reason="the evaluation set and the path-tracer rows need the train extra")
+    import onnx
+
+    from diviewer.bench.onnx_tools import get_meta, set_meta, untrained_generator
+    from diviewer.evalset import EvalSetSettings, build_evalset
+    from diviewer.scene import load_scene
+
+    root = tmp_path_factory.mktemp("bench")
+    build_evalset("cornell", root / "es", EvalSetSettings(frames_per_split=1, width=32, height=32, spp=16,
+                                                           ladder=(1, 4), thumbs=0), log=lambda *_: None)
+    model = untrained_generator(4, 3, load_scene("cornell"), 32)
+    meta = get_meta(model)
+    meta.update(kind="neural", dataset_hash="test")  # stands for a trained model: scored like one
+    set_meta(model, meta)
+    onnx.save(model, str(root / "small.onnx"))
+    return root
+
+
+def test_quick_bench_without_torch_writes_every_row_stage_and_metric(gl_context, tiny_bench_inputs):
+    root = tiny_bench_inputs
+    code = (
+        "import sys\n"
+        "sys.modules['torch'] = None\n"
+        "from diviewer.cli import main\n"
+        f"rc = main(['bench', '--quick', '--models', {str(root / 'small.onnx')!r}, '--evalset', {str(root / 'es')!r},"
+        f" '--json', {str(root / 'b.json')!r}, '--plot', {str(root / 'b.png')!r}])\n"
+        "assert rc == 0, rc\n"
+        "assert 'torch' not in [m for m in sys.modules if sys.modules[m] is not None]\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "method" in r.stdout and "path traced 4 spp" in r.stdout and "stages (median ms)" in r.stdout
+    result = json.loads((root / "b.json").read_text())  # strict JSON: no NaN/Infinity tokens
+    assert (root / "b.png").stat().st_size > 10_000
+    rows = result["rows"]
+    labels = [row["label"] for row in rows]
+    kinds = {(row["kind"], row.get("precision"), row["gi_resolution"][0]) for row in rows}
+    assert {("direct", None, 32), ("neural", "fp32", 32), ("neural", "fp16", 32), ("neural", "int8", 32),
+            ("neural", "fp32", 16), ("untrained", "fp32", 32), ("path_tracer", None, 32)} <= kinds, labels
+    assert [row["K"] for row in rows if row["kind"] == "untrained"] == [8, 16]
+    assert [row["spp"] for row in rows if row["kind"] == "path_tracer"] == [1, 4]
+    gl_stages = {"shadows", "gbuffer", "direct", "composite"}
+    for row in rows:
+        t = row["timing"]
+        stages = set(t["stages"])
+        if row["kind"] == "path_tracer":
+            assert stages == {"path_trace"}
+        elif row["kind"] == "direct":
+            assert stages == gl_stages
+        else:
+            assert stages == gl_stages | {"readback", "inference", "upload", "upsample"}
+        for s in [t["frame"], *t["stages"].values()]:
+            assert all(math.isfinite(s[k]) and s[k] > 0 for k in ("median", "p95", "max")), (row["label"], s)
+            assert s["median"] <= s["p95"] <= s["max"]
+        assert t["fps"] > 0 and 0 <= t["overhead_fraction"] <= 1
+        if row.get("untrained"):
+            assert row["accuracy"] is None and row["flops"] > 0 and row["achieved_flops_per_s"] > 0
+            continue
+        a = row["accuracy"]
+        assert a is not None and all(a[k] is not None and math.isfinite(a[k]) for k in
+                                     ("psnr", "ssim", "psnr_tm", "ssim_tm", "flip_hdr", "flip_ldr")), row["label"]
+        assert row["equivalent_spp"]["psnr_tm"]["spp"] > 0
+        if row["kind"] != "path_tracer":
+            assert row["equal_time"]["spp"] > 0 and row["equal_error"]["pt_ms"] > 0
+        if row.get("step", 1) == 1:
+            assert row["temporal"]["change"] >= 0 and row["temporal"]["reference_change"] > 0
+    int8 = next(row for row in rows if row.get("precision") == "int8")
+    assert math.isfinite(int8["int8"]["drop_db"]) and isinstance(int8["int8"]["kept"], bool)
+    assert result["cost_model"]["smallest_sufficient_K"]["K"] == 4
+    env = result["environment"]
+    assert env["gl_renderer"] and "CPUExecutionProvider" in env["onnxruntime_available_providers"]
+    assert "timer queries" in env["gl_timing"] or "glFinish" in env["gl_timing"]

@@ -1,0 +1,150 @@
+"""The neural GI pass at a GI resolution below the render's: downsampled inputs, joint bilateral upsample."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from diviewer.errors import DiviewerError
+from diviewer.runtime import NeuralGI
+from scenes import facing_plane
+
+pytest.importorskip("onnx")
+
+W, H, F = 64, 48, 4  # render size and its ratio to the GI resolution
+ALBEDO = 0.5
+
+
+def _pass(ctx, tmp_path, gi=(W // F, H // F), **settings):
+    """A renderer at W x H with a NeuralPass at ``gi`` of a model that returns twice its direct input, so that
+    its indirect light (output - direct) is the direct light it was given."""
+    from onnx_models import base_meta, direct_times
+
+    from diviewer.gl.neural import GISettings, NeuralPass
+    from diviewer.gl.renderer import Renderer
+
+    scene = facing_plane()
+    meta = dict(base_meta(scene_hash=scene.file_hash), multiple=4, resolution=[W, H])
+    model = NeuralGI(direct_times(tmp_path / "m.onnx", factor=2.0, meta=meta), scene=scene)
+    renderer = Renderer(ctx, scene, W, H)
+    return renderer, NeuralPass(ctx, renderer, model, gi, GISettings(**settings))
+
+
+def _write(renderer, depth, normal, irradiance) -> None:
+    """Synthetic full-resolution buffers (rows bottom first, as GL's): the direct light is albedo x irradiance,
+    so the GI texels' demodulated indirect light is ``irradiance`` sampled at the GI resolution."""
+    albedo = np.full((H, W, 4), ALBEDO, np.float32)
+    direct = albedo * np.asarray(irradiance, np.float32)[..., None]
+    n4 = np.concatenate([normal, np.zeros((H, W, 1))], axis=-1)
+    for name, a in (("depth", depth[..., None]), ("normal", n4), ("albedo", albedo), ("direct", direct),
+                    ("emission", np.zeros((H, W, 4)))):
+        renderer.textures[name].write(np.ascontiguousarray(a, dtype="f4").tobytes())
+
+
+def _indirect(ctx, neural) -> np.ndarray:
+    """The upsampled indirect light (albedo x irradiance), (H, W, 3), rows bottom first."""
+    neural.run()
+    tex = neural.composite(indirect_only=True)
+    return np.frombuffer(tex.read(), np.float16).reshape(H, W, 4)[..., :3].astype(np.float32)
+
+
+def _edge_case(ctx, tmp_path, which: str) -> None:
+    renderer, neural = _pass(ctx, tmp_path)
+    try:
+        x = np.arange(W)[None, :].repeat(H, 0)
+        right = x >= 30  # not on a GI texel boundary (every 4 pixels)
+        depth = np.where(right, 2.0, 1.0) if which == "depth" else np.full((H, W), 1.5)
+        normal = np.zeros((H, W, 3))
+        normal[..., 2] = 1.0
+        if which == "normal":
+            normal[right] = (1.0, 0.0, 0.0)
+        irradiance = np.where(right, 3.0, 1.0)
+        _write(renderer, depth, normal, irradiance)
+        got = _indirect(ctx, neural)[..., 0]
+        expected = ALBEDO * irradiance
+        # No bleeding across the edge: every pixel gets its own side's light, right up to the edge.
+        np.testing.assert_allclose(got, expected, rtol=2e-3)
+        # The GI grid itself straddles the edge: GI column 7 (pixels 28-31) sampled pixel 30, the right side,
+        # so a bilinear upsample would have lit pixels 26-29 with the right side's light.
+        assert neural.packed[0, 0, 7, 7] == pytest.approx(ALBEDO * 3.0)
+    finally:
+        neural.release()
+        renderer.release()
+
+
+@pytest.mark.parametrize("which", ["depth", "normal"])
+def test_joint_bilateral_upsample_keeps_an_edge(ctx, tmp_path, which):
+    """An edge in depth or in normals between two differently lit surfaces stays sharp at full resolution."""
+    _edge_case(ctx, tmp_path, which)
+
+
+def test_joint_bilateral_upsample_keeps_a_constant_constant(ctx, tmp_path):
+    """Constant indirect light on a bumpy surface (random depths and normals) stays exactly constant."""
+    renderer, neural = _pass(ctx, tmp_path)
+    try:
+        rng = np.random.default_rng(0)
+        normal = rng.normal(size=(H, W, 3)) + (0.0, 0.0, 2.0)
+        normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+        _write(renderer, rng.uniform(1.0, 3.0, (H, W)), normal, np.full((H, W), 0.7))
+        got = _indirect(ctx, neural)
+        np.testing.assert_allclose(got, ALBEDO * 0.7, rtol=2e-3)
+    finally:
+        neural.release()
+        renderer.release()
+
+
+def test_final_frame_is_full_resolution_direct_plus_upsampled_indirect(ctx, tmp_path):
+    """On a lit plane the composite is direct + indirect at the render's resolution, and the network
+    saw its inputs at the GI resolution (nearest pixel of each texel's centre)."""
+    renderer, neural = _pass(ctx, tmp_path)
+    try:
+        frame = renderer.frame()
+        neural.run()
+        assert neural.packed.shape == (1, H // F, W // F, 10)
+        # Nearest: GI texel (i, j) holds the pixel at floor((i + 0.5) * F) (rows top first in both).
+        idx = (np.arange(H // F) + 0.5) * F
+        jdx = (np.arange(W // F) + 0.5) * F
+        np.testing.assert_array_equal(neural.packed[0, ..., 7:], frame["direct"][idx.astype(int)][:, jdx.astype(int)])
+        final = np.frombuffer(neural.composite().read(), np.float16).reshape(H, W, 4)[::-1, :, :3]
+        # The model doubles the direct light, so the indirect light equals the direct light here (a plane
+        # with smoothly varying light: the upsample interpolates it).
+        lit = frame["direct"].sum(-1) > 0
+        np.testing.assert_allclose(final[lit], 2 * frame["direct"][lit], rtol=0.05, atol=1e-3)
+    finally:
+        neural.release()
+        renderer.release()
+
+
+def test_area_downsample_averages_the_footprint(ctx, tmp_path):
+    renderer, neural = _pass(ctx, tmp_path, downsample="area")
+    try:
+        frame = renderer.frame()
+        neural.run()
+        mean = frame["direct"].reshape(H // F, F, W // F, F, 3).mean(axis=(1, 3))
+        np.testing.assert_allclose(neural.packed[0, ..., 7:], mean, rtol=1e-5)
+    finally:
+        neural.release()
+        renderer.release()
+
+
+def test_pipelined_inference_shows_the_previous_frame(ctx, tmp_path):
+    """One frame behind: after the first frame, each run shows the prediction of the frame before it."""
+    renderer, neural = _pass(ctx, tmp_path, pipelined=True)
+    try:
+        outs = []
+        for light in (1.0, 2.0, 4.0):
+            _write(renderer, np.full((H, W), 1.5), np.broadcast_to([0.0, 0.0, 1.0], (H, W, 3)),
+                   np.full((H, W), light))
+            neural.run()
+            outs.append(float(neural.image().mean()))
+        # frame 1 waits for its own (2 x 0.5 x 1); frame 2 shows frame 1's again; frame 3 shows frame 2's
+        assert outs == pytest.approx([1.0, 1.0, 2.0])
+        assert neural.latency_ms > 0.0
+    finally:
+        neural.release()
+        renderer.release()
+
+
+def test_gi_size_must_fit_the_model(ctx, tmp_path):
+    with pytest.raises(DiviewerError, match="multiples of 4"):
+        _pass(ctx, tmp_path, gi=(10, 12))
