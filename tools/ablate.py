@@ -3,8 +3,8 @@
 Usage: python tools/ablate.py --data runs/cornell/data64 --evalset runs/cornell/evalset --out runs/cornell/ablate
        [--steps 600] [--train-frames 1000] [--only NAME ...] [--jobs 2] [--table OUT.md]
 Every run trains `diviewer train` for the same number of steps on the same first N train frames (so
-runs started while a capture still grows see the same data), exports fp32 ONNX and runs `diviewer eval`
-on the evaluation set. Each stage resumes: run the same command again after an interruption. The
+runs started while a capture still grows see the same data) and exports fp32 ONNX; one `diviewer eval`
+then scores them all on the evaluation set. Each stage resumes: run the same command again after an interruption. The
 table (markdown, plus ablate.json) lists per split PSNR/SSIM tone-mapped, FLIP, the checkerboard ratio
 and the equivalent sample count, with each run's training speed on this machine.
 """
@@ -54,33 +54,45 @@ def sh(args: list[str], log: Path) -> None:
 
 
 DEMODULATED = ["--divide-albedo"]
+DV = [sys.executable, "-m", "diviewer"]
 
 
 def one(name: str, a: argparse.Namespace) -> dict:
-    """Train, export and score one ablation; each stage is skipped when its output exists."""
+    """Train and export one ablation (RUN/NAME.onnx, fp32); each stage is skipped when its output exists."""
     what, extra = ABLATIONS[name]
+    recipe = BASE + ([] if name == "nodemod" else DEMODULATED) + extra
     run = a.out / name
     run.mkdir(parents=True, exist_ok=True)
     log = run / "ablate.log"
-    dv = [sys.executable, "-m", "diviewer"]
     if not (run / "done").is_file():
-        args = dv + ["train", "--data", str(a.data), "--out", str(run), "--max-steps", str(a.steps),
-                     "--train-frames", str(a.train_frames),
-                     "--val-every-steps", str(a.steps // 3), "--seed", "0"]
+        args = DV + ["train", "--data", str(a.data), "--out", str(run), "--max-steps", str(a.steps),
+                     "--train-frames", str(a.train_frames), "--val-every-steps", str(a.steps // 3), "--seed", "0"]
         t0 = time.time()
-        recipe = BASE + ([] if name == "nodemod" else DEMODULATED) + extra
         sh(args + (["--resume"] if (run / "last.ckpt").is_file() else recipe), log)
         (run / "done").write_text(json.dumps({"train_s": time.time() - t0}))
-    model = run / "model.onnx"
+    model = run / f"{name}.onnx"
     if not model.is_file():
-        sh(dv + ["export", str(run / "best.ckpt"), "--out", str(model)], log)
-    res = run / "eval.json"
-    if a.train_only:
-        return {}
-    if not res.is_file():
-        sh(dv + ["eval", "--model", str(model), "--evalset", str(a.evalset), "--out", str(res)], log)
-    return {"name": name, "what": what, "args": BASE + ([] if name == "nodemod" else DEMODULATED) + extra, "train": json.loads((run / "done").read_text()),
-            "eval": json.loads(res.read_text())}
+        sh(DV + ["export", str(run / "best.ckpt"), "--out", str(model)], log)
+    return {"name": name, "what": what, "args": recipe, "model": str(model),
+            "train": json.loads((run / "done").read_text())}
+
+
+def score(results: list[dict], a: argparse.Namespace) -> dict:
+    """One `diviewer eval` over every model, so the reference rows (ladder, noise floor) are scored once."""
+    out = a.out / "eval.json"
+    models = [r["model"] for r in results]
+    if out.is_file():
+        cached = json.loads(out.read_text())
+        if cached.get("ablate_models") == models:
+            return cached
+    args = DV + ["eval", "--evalset", str(a.evalset), "--out", str(out)]
+    for m in models:
+        args += ["--model", m]
+    sh(args, a.out / "eval.log")
+    result = json.loads(out.read_text())
+    result["ablate_models"] = models
+    out.write_text(json.dumps(result, indent=1))
+    return result
 
 
 def main() -> None:
@@ -100,30 +112,34 @@ def main() -> None:
         results = list(pool.map(lambda n: one(n, a), names))
     if a.train_only:
         return
-    (a.out / "ablate.json").write_text(json.dumps(results, indent=1))
-    lines = table(results)
+    evaluation = score(results, a)
+    (a.out / "ablate.json").write_text(json.dumps({"runs": results, "eval": evaluation}, indent=1))
+    lines = table(results, evaluation)
     print("\n".join(lines))
     if a.table:
         a.table.write_text("\n".join(lines) + "\n")
 
 
-def table(results: list[dict]) -> list[str]:
-    """Markdown rows: one per ablation, columns per split from `diviewer eval --evalset`'s JSON."""
-    splits = list(results[0]["eval"]["splits"]) if results else []
-    head = "| ablation | train s | " + " | ".join(f"{s}: PSNR tm / SSIM tm / FLIP-LDR / eq. spp / checker" for s in splits)
+def table(results: list[dict], evaluation: dict) -> list[str]:
+    """Markdown rows: one per ablation, then the reference rows; columns per split of the eval JSON."""
+    splits = list(evaluation["splits"])
+    head = "| row | train s | " + " | ".join(f"{s}: PSNR tm / SSIM tm / FLIP-LDR / eq. spp / checker" for s in splits)
     lines = [head + " |", "|---" * (2 + len(splits)) + "|"]
     for r in results:
-        cells = [_cell(r["eval"]["splits"][s]) for s in splits]
+        cells = [_cell(evaluation["splits"][s]["methods"][r["name"]]) for s in splits]
         lines.append(f"| {r['what']} | {r['train']['train_s']:.0f} | " + " | ".join(cells) + " |")
+    for key in ("direct", "noise_floor"):
+        cells = [_cell(evaluation["splits"][s]["methods"][key]) for s in splits]
+        lines.append(f"| {evaluation['splits'][splits[0]]['methods'][key]['label']} | - | " + " | ".join(cells) + " |")
     return lines
 
 
-def _cell(split: dict) -> str:
-    """The (only) model's means in one split of an eval result (evaluate.evaluate_evalset's layout)."""
-    m = next(v for v in split["methods"].values() if v.get("kind") == "neural")
+def _cell(m: dict) -> str:
+    """One method's means in one split (evaluate.evaluate_evalset's layout)."""
     eq = m["equivalent_spp"]["psnr_tm"]
+    checker = "-" if m["checkerboard"] is None else f"{m['checkerboard']:.2f}"
     return (f"{m['psnr_tm']['mean']:.2f} / {m['ssim_tm']['mean']:.3f} / {m['flip_ldr']['mean']:.3f} / "
-            f"{eq['text'] if eq else '-'} / {m['checkerboard']:.2f}")
+            f"{eq['text'] if eq else '-'} / {checker}")
 
 
 if __name__ == "__main__":
