@@ -100,8 +100,8 @@ def capture_rate(root: Path, n: int | None = None) -> dict:
 def wait_for_evalset(evalset: Path) -> None:
     m = json.loads((evalset / "manifest.json").read_text())
     planned = len(m["frame_list"])
-    while (done := present(evalset, m["frame_list"])) and sum(done.values()) < planned:
-        print(f"waiting for the evaluation set: {sum(done.values())}/{planned} frames", flush=True)
+    while (done := sum(present(evalset, m["frame_list"]).values())) < planned:
+        print(f"waiting for the evaluation set: {done}/{planned} frames", flush=True)
         time.sleep(60)
 
 
