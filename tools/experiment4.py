@@ -7,7 +7,8 @@ The path-tracing side is an existing run of tools/ablate.py (`--only l1`). The V
 --gt vxgi` with the path-traced dataset's frames, resolution, splits and seed (the same configurations, frame for
 frame), stopped once it holds --train-frames train and --min-val val frames; `diviewer train` with ablate.py's
 l1 recipe, steps and frame count; export fp32. Both models are then scored by `diviewer eval` against the path
-tracer on the evaluation set (waiting until it is complete). Each stage resumes: run the same command again after
+tracer on the evaluation set (waiting until it is complete), beside VXGI itself (what the VXGI model was taught,
+rendered again for the set's configurations) and direct light. Each stage resumes: run the same command again after
 an interruption. Run it as `OMP_NUM_THREADS=1 nice -n 5 python tools/experiment4.py ...` beside other work: its
 jobs run one at a time, each on one thread.
 """
@@ -15,6 +16,7 @@ jobs run one at a time, each on one thread.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import subprocess
@@ -105,6 +107,51 @@ def wait_for_evalset(evalset: Path) -> None:
         time.sleep(60)
 
 
+def score_vxgi_itself(a: argparse.Namespace, eval_result: dict) -> dict:
+    """The VXGI ground truth itself against the path tracer, per split of the evaluation set: what the VXGI-trained
+    model was taught, re-rendered (GL, the VXGI dataset's settings) for the set's configurations."""
+    from diviewer.evalset import load_evalset
+    from diviewer.evaluate import aggregate, equivalent, score_frame
+    from diviewer.gl.context import headless_context
+    from diviewer.gl.renderer import Renderer
+    from diviewer.gl.vxgi import VXGIPass, VXGISettings
+    from diviewer.metrics import flat_mask
+    from diviewer.scene import load_scene
+    from diviewer.scene.loader import config_from_dict
+
+    ds = load_evalset(a.evalset)
+    scene = load_scene(ds.manifest["scene_file"])
+    if scene.file_hash != ds.manifest["scene_hash"]:
+        raise SystemExit(f"{ds.manifest['scene_file']} changed since the evaluation set was made")
+    settings = VXGISettings(**json.loads((a.vxgi_data / "manifest.json").read_text())["vxgi"])
+    exposure = float(eval_result["tonemap_exposure"])
+    entries = {f["index"]: f for f in ds.frames}
+    out = {}
+    with headless_context() as ctx:
+        renderer = Renderer(ctx, scene, ds.width, ds.height)
+        vx = VXGIPass(ctx, renderer, settings)
+        try:
+            for split, r in eval_result["splits"].items():
+                rows = []
+                for i in ds.indices(split):
+                    f = ds.load(i)
+                    config = config_from_dict(scene, entries[i]["config"])
+                    renderer.render(config)
+                    vx.run(config)
+                    rows.append(score_frame(vx.read("vxgi"), f["pt"], exposure,
+                                            flat_mask(f["depth"], f["normal"], f["albedo"])))
+                m = aggregate(rows)
+                n = eval_result["ladder_spp"]
+                m["equivalent_spp"] = equivalent(m, n, [r["methods"][f"pt_spp{k}"] for k in n])
+                m.update(kind="vxgi", label=f"VXGI {settings.resolution}^3, {settings.bounces} bounces", frames=len(rows),
+                         settings=dataclasses.asdict(settings))
+                out[split] = m
+        finally:
+            vx.release()
+            renderer.release()
+    return out
+
+
 def check_pt_run(a: argparse.Namespace) -> None:
     """The path-tracing run was trained as this script trains the VXGI one (its first `train` line in ablate.log)."""
     line = next(ln for ln in (a.pt_run / "ablate.log").read_text().splitlines() if ln.startswith("+") and " train " in ln)
@@ -152,13 +199,19 @@ def main() -> None:
         wait_for_evalset(a.evalset)
         sh(DV + ["eval", "--model", str(a.pt_run / "model.onnx"), "--model", str(model), "--evalset", str(a.evalset),
                  "--out", str(res)], log)
+    gt_scores = a.out / "vxgi_gt_eval.json"
+    if not gt_scores.is_file():
+        gt_scores.write_text(json.dumps(score_vxgi_itself(a, json.loads(res.read_text())), indent=1))
+    evaluated = json.loads(res.read_text())
+    for split, m in json.loads(gt_scores.read_text()).items():
+        evaluated["splits"][split]["methods"]["vxgi_gt"] = m
     result = {"pt_run": str(a.pt_run), "vxgi_run": str(a.out), "recipe": recipe(), "steps": a.steps,
               "train_frames": a.train_frames, "vxgi_dataset": {"path": str(a.vxgi_data), "frames": counts,
                                                                "capture": capture_rate(a.vxgi_data)},
               "pt_dataset_capture": capture_rate(a.pt_data, n=sum(counts.values())),
               "train_s": {"pt": json.loads((a.pt_run / "done").read_text())["train_s"],
                           "vxgi": json.loads((a.out / "done").read_text())["train_s"]},
-              "eval": json.loads(res.read_text())}
+              "eval": evaluated}
     (a.out / "experiment4.json").write_text(json.dumps(result, indent=1))
     lines = table(result, pt_key=(a.pt_run / "model.onnx").stem, vxgi_key=model.stem)
     print("\n".join(lines))
@@ -168,7 +221,8 @@ def main() -> None:
 
 def table(result: dict, pt_key: str, vxgi_key: str) -> list[str]:
     """Markdown: per split, the two models and direct light against the path-traced evaluation set."""
-    rows = [("trained on path tracing (ablate l1)", pt_key), ("trained on VXGI", vxgi_key), ("direct light only", "direct")]
+    rows = [("trained on path tracing (ablate l1)", pt_key), ("trained on VXGI", vxgi_key),
+            ("VXGI itself (the VXGI model's ground truth)", "vxgi_gt"), ("direct light only", "direct")]
     splits = result["eval"]["splits"]
     lines = ["| ground truth of training | " + " | ".join(f"{s}: PSNR tm / SSIM tm / FLIP-LDR / eq. spp" for s in splits)
              + " |", "|---" * (1 + len(splits)) + "|"]
