@@ -47,7 +47,8 @@ def features(depth: np.ndarray, normal: np.ndarray, direct: np.ndarray, depth_sc
     return np.concatenate([ones, d / depth_scale, np.asarray(normal, np.float64), np.asarray(direct, np.float64)], -1)
 
 
-def predict(weights_a: np.ndarray, weights_b: np.ndarray, depth, normal, albedo, direct, depth_scale: float) -> np.ndarray:
+def predict(weights_a: np.ndarray, weights_b: np.ndarray, depth, normal, albedo, direct,
+            depth_scale: float) -> np.ndarray:
     """The baseline in numpy (what the ONNX graph computes): direct + f @ A + albedo * (f @ B)."""
     f = features(depth, normal, direct, depth_scale)
     return np.asarray(direct, np.float64) + f @ weights_a + np.asarray(albedo, np.float64) * (f @ weights_b)

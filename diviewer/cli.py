@@ -148,13 +148,14 @@ def _cmd_baseline(args: argparse.Namespace) -> int:
 
 def _cmd_evalset(args: argparse.Namespace) -> int:
     from diviewer.evalset import EvalSetSettings, build_evalset
-    from diviewer.render import parse_resolution
+    from diviewer.frames import parse_resolution
 
     width, height = parse_resolution(args.res)
     try:
         ladder = tuple(int(x) for x in args.ladder.split(","))
     except ValueError:
-        raise DiviewerError(f"--ladder takes sample counts like 1,4,16, got '{args.ladder}'", field="--ladder") from None
+        raise DiviewerError(f"--ladder takes sample counts like 1,4,16, got '{args.ladder}'",
+                            field="--ladder") from None
     settings = EvalSetSettings(frames_per_split=args.frames_per_split, width=width, height=height, spp=args.spp,
                                ladder=ladder, max_depth=args.max_depth, seed=args.seed)
     build_evalset(args.scene, args.out, settings)

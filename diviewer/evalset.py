@@ -88,7 +88,8 @@ def channels(settings: EvalSetSettings) -> tuple[tuple[str, int], ...]:
 
 
 def _seeds(settings: EvalSetSettings, split_index: int, i: int) -> dict:
-    state = np.random.SeedSequence([EVAL_STREAM, settings.seed, split_index, i]).generate_state(3 + len(settings.ladder))
+    seq = np.random.SeedSequence([EVAL_STREAM, settings.seed, split_index, i])
+    state = seq.generate_state(3 + len(settings.ladder))
     s = [int(x & 0x7FFFFFFF) for x in state]
     return {"config": s[0], "reference": s[1], "second": s[2], "ladder": s[3:]}
 
@@ -205,7 +206,7 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
             f"{settings.width}x{settings.height} ({settings.spp} spp twice + direct + ladder "
             f"{'/'.join(map(str, settings.ladder))}: {per_frame} full samples per pixel per frame, {truth.variant})")
         if todo:
-            _render_frames_gl(ctx, scene, ds, todo, settings, truth, describe(ctx), log)
+            _render_frames_gl(ctx, scene, ds, todo, settings, truth, describe(ctx), log, label="evalset")
     summary = {"planned": len(plan), "present": len(ds.indices()), "seconds": round(time.perf_counter() - t0, 1)}
     if summary["present"] == len(plan):
         from diviewer.evaluate import evaluate_evalset

@@ -173,7 +173,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
         flat = 0
         for i in idx:
             f = ds.load(i)
-            mask = flat_mask(f["depth"], f["normal"], f["albedo"])
+            mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # flat and no shadow edge
             flat += int(mask.sum())
             for key, net in models.items():
                 t0 = time.perf_counter()
@@ -211,7 +211,8 @@ def format_tables(result: dict) -> list[str]:
     """The per-split tables for people."""
     lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; tm = tone-mapped at "
              f"exposure {result['tonemap_exposure']:.3g}; FLIP-HDR on linear radiance, FLIP-LDR on tone-mapped; "
-             f"eq. spp from PSNR tm; checker = high-frequency power over flat regions / the reference's"]
+             f"eq. spp from PSNR tm; checker = high-frequency power over flat, shadow-edge-free regions / "
+             f"the reference's"]
     for split, r in result["splits"].items():
         lines.append("")
         lines.append(f"{split} ({r['frames']} frames)")
@@ -219,10 +220,14 @@ def format_tables(result: dict) -> list[str]:
                      f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7}")
         for m in r["methods"].values():
             eq = m["equivalent_spp"][EQUIVALENT_BY[0]]
-            lines.append(f"{m['label']:<34} {m['psnr']['mean']:6.2f} {m['ssim']['mean']:6.4f} {m['psnr_tm']['mean']:7.2f} "
-                         f"{m['ssim_tm']['mean']:7.4f} {m['flip_hdr']['mean']:8.4f} {m['flip_ldr']['mean']:8.4f} "
-                         f"{eq['text'] if eq else '-':>8} {m['checkerboard']:7.3g}")
+            lines.append(f"{m['label']:<34} {m['psnr']['mean']:6.2f} {m['ssim']['mean']:6.4f} "
+                         f"{m['psnr_tm']['mean']:7.2f} {m['ssim_tm']['mean']:7.4f} {m['flip_hdr']['mean']:8.4f} "
+                         f"{m['flip_ldr']['mean']:8.4f} {eq['text'] if eq else '-':>8} {_num(m['checkerboard']):>7}")
     return lines
+
+
+def _num(v: float) -> str:
+    return f"{v:.3g}" if math.isfinite(v) else "inf"
 
 
 def _finite(obj):

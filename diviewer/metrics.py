@@ -161,13 +161,16 @@ def flip(reference, test, mode: str = "HDR") -> float:
 
 # --- checkerboard -------------------------------------------------------------------------------------------------
 
-def flat_mask(depth, normal, albedo, *, depth_tol: float = 1e-4, normal_tol: float = 1e-4,
-              albedo_tol: float = 1e-3) -> np.ndarray:
+def flat_mask(depth, normal, albedo, direct=None, *, depth_tol: float = 1e-4, normal_tol: float = 1e-4,
+              albedo_tol: float = 1e-3, direct_tol: float = 0.05) -> np.ndarray:
     """(H, W) bool: pixels whose 3x3 neighbourhood lies on one plane of one albedo (walls, floor).
 
     A plane's inverse view depth is affine in screen space, so its second differences vanish: they
     must stay below ``depth_tol`` times 1/z. Normals must agree with the centre's within ``normal_tol``
     (1 - cos), albedo within ``albedo_tol``; background (depth 0) and the image border are excluded.
+    With ``direct`` (the GL direct light) the neighbourhood must also be free of shadow edges: its
+    direct light may vary by at most ``direct_tol`` of its largest value. Shadow edges are aliased in
+    the GL pass and box-filtered in the path tracer, so without this the measure would count them.
     """
     z = np.asarray(depth, dtype=np.float64)
     z = z[..., 0] if z.ndim == 3 else z
@@ -189,6 +192,11 @@ def flat_mask(depth, normal, albedo, *, depth_tol: float = 1e-4, normal_tol: flo
             core &= valid[nb]
             core &= np.sum(n[nb] * n[c], axis=-1) >= 1.0 - normal_tol
             core &= np.max(np.abs(al[nb] - al[c]), axis=-1) <= albedo_tol
+    if direct is not None:
+        lum = np.asarray(direct, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+        nbs = [lum[1 + dy:h - 1 + dy, 1 + dx:w - 1 + dx] for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+        hi, lo = np.maximum.reduce(nbs), np.minimum.reduce(nbs)
+        core &= hi - lo <= direct_tol * hi
     ok[c] = core
     return ok
 

@@ -88,6 +88,10 @@ def test_flat_mask_keeps_planes_and_drops_edges():
     m = metrics.flat_mask(depth, normal, albedo)
     assert m[10:30, 2:18].all()
     assert not m[:9].any() and not m[:, 19:21].any() and not m[:, 0].any() and not m[-1].any()
+    direct = np.full((32, 32, 3), 0.8)
+    direct[:, :10] = 0.0  # a shadow edge between columns 9 and 10
+    with_light = metrics.flat_mask(depth, normal, albedo, direct)
+    assert not with_light[:, 9:11].any() and with_light[10:30, 2:8].all() and with_light[10:30, 12:18].all()
     curved = 1.0 / (0.5 + 0.01 * xx + 0.003 * yy + 0.05 * ((xx - 16.0) / 16.0) ** 2)  # a bulge is not a plane
     assert not metrics.flat_mask(curved, normal, albedo)[12:28, 4:12].any()
 

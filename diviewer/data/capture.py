@@ -248,7 +248,7 @@ def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: Captur
 
 
 def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings, gt, gl_name: str,
-                      log) -> None:
+                      log, label: str = "capture") -> None:
     """Render and write ``todo``: GL buffers plus ``gt(config, frame entry)``, stored in the manifest's channels.
 
     Shared with the evaluation set (diviewer.evalset), whose ground truth adds channels; ``settings``
@@ -264,7 +264,7 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
         gt.attach(ctx, renderer)
     splits = dict.fromkeys(f["split"] for f in ds.frames)  # in order of first appearance
     thumbs = {i for s in splits for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
-    progress = progress_bar(len(todo), "capture", "frame")
+    progress = progress_bar(len(todo), label, "frame")
     try:
         for f in todo:
             config = config_from_dict(scene, f["config"])
@@ -303,7 +303,9 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
 
 def summarize(ds: Dataset) -> dict:
     present = ds.indices()
-    per_split = {s: len(ds.indices(s)) for s in SPLITS}
+    own = [s for s in dict.fromkeys(f["split"] for f in ds.frames) if s not in SPLITS]
+    splits = own or SPLITS  # an evaluation set has splits of its own (unseen_configs, unseen_objects)
+    per_split = {s: len(ds.indices(s)) for s in splits}
     disk = sum(p.stat().st_size for p in ds.root.rglob("*") if p.is_file())
     return {"planned": len(ds.frames), "present": len(present), "per_split": per_split, "disk_mb": disk / 2**20}
 
