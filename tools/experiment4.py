@@ -120,9 +120,9 @@ def score_vxgi_itself(a: argparse.Namespace, eval_result: dict) -> dict:
     from diviewer.scene.loader import config_from_dict
 
     ds = load_evalset(a.evalset)
-    scene = load_scene(ds.manifest["scene_file"])
+    scene = load_scene(ds.manifest["scene"])  # the shipped scene: the file the set names may be another checkout's
     if scene.file_hash != ds.manifest["scene_hash"]:
-        raise SystemExit(f"{ds.manifest['scene_file']} changed since the evaluation set was made")
+        raise SystemExit(f"scene '{ds.manifest['scene']}' changed since the evaluation set was made")
     settings = VXGISettings(**json.loads((a.vxgi_data / "manifest.json").read_text())["vxgi"])
     exposure = float(eval_result["tonemap_exposure"])
     entries = {f["index"]: f for f in ds.frames}
@@ -139,7 +139,7 @@ def score_vxgi_itself(a: argparse.Namespace, eval_result: dict) -> dict:
                     renderer.render(config)
                     vx.run(config)
                     rows.append(score_frame(vx.read("vxgi"), f["pt"], exposure,
-                                            flat_mask(f["depth"], f["normal"], f["albedo"])))
+                                            flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])))
                 m = aggregate(rows)
                 n = eval_result["ladder_spp"]
                 m["equivalent_spp"] = equivalent(m, n, [r["methods"][f"pt_spp{k}"] for k in n])

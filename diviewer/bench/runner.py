@@ -221,7 +221,7 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
     try:
         for n, i in enumerate(idx):
             f = ds.load(i)
-            mask = flat_mask(f["depth"], f["normal"], f["albedo"])
+            mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # as diviewer eval
             if passes:
                 gl.renderer.render(config_from_dict(gl.scene, _entry(ds, i)["config"]))
             for key, (net, step) in models.items():
