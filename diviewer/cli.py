@@ -174,7 +174,9 @@ def _cmd_bench(args: argparse.Namespace) -> int:
              "gi_steps": tuple(args.gi_steps) if args.gi_steps is not None else None,
              "evalset": str(args.evalset) if args.evalset else None, "eval_frames": args.eval_frames,
              "calib_data": str(args.calib_data) if args.calib_data else None, "provider": args.provider,
-             "timing": args.timing, "pt_frames": args.pt_frames}
+             "timing": args.timing, "pt_frames": args.pt_frames,
+             "vxgi_grids": tuple(args.vxgi_grids) if args.vxgi_grids is not None else None,
+             "vxgi_trace_scale": args.vxgi_trace_scale}
     settings = dataclasses.replace(settings, **{k: v for k, v in given.items() if v is not None})
     run_bench(settings, json_out=args.json, plot_out=args.plot)
     return 0
@@ -296,7 +298,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_evalset)
 
     p = sub.add_parser("bench", help="headless frame timing per stage and the speed/accuracy table: direct light, "
-                                     "the baseline, models (fp32/fp16/int8, GI resolutions), untrained K, path tracer")
+                                     "the baseline, models (fp32/fp16/int8, GI resolutions), untrained K, VXGI, path tracer")
     p.add_argument("--scene", default=None, help="shipped scene name or a .toml path (default cornell)")
     p.add_argument("--models", type=Path, nargs="+", default=None,
                    help="ONNX models (diviewer export / baseline); default the scene's shipped models")
@@ -312,6 +314,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--calib-data", type=Path, default=None,
                    help="a capture whose train split calibrates int8 (default GL renders of training configurations)")
     p.add_argument("--pt-frames", type=int, default=None, help="frames the path tracer is timed on (default 2)")
+    p.add_argument("--vxgi-grids", type=int, nargs="*", default=None,
+                   help="VXGI grid resolutions, one row each (default 32 64 128; none: no VXGI rows)")
+    p.add_argument("--vxgi-trace-scale", type=int, default=None,
+                   help="VXGI traces at 1/N of the frame resolution, then upsamples (default 2)")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
     p.add_argument("--timing", default=None, choices=("auto", "query", "sync"),
                    help="GL stages: timer queries (auto where supported) or wall clock around glFinish")

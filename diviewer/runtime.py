@@ -82,7 +82,9 @@ def _check_meta_types(meta: dict, path: Path) -> None:
         "K": _is_int(meta["K"]), "levels": _is_int(meta["levels"]),  # 0: a baseline without a network
         "target": meta["target"] in ("full", "indirect"),
         "encoding": isinstance(meta["encoding"], dict) and _is_int(meta["encoding"].get("version", 0)),
-        "precision": meta["precision"] in ("fp32", "fp16"),
+        # int8 only as bench's static quantisation writes it: with the record of how it was quantised
+        "precision": meta["precision"] in ("fp32", "fp16")
+        or (meta["precision"] == "int8" and isinstance(meta.get("quantization"), dict)),
         "scene": isinstance(meta["scene"], str), "scene_hash": isinstance(meta["scene_hash"], str),
         "dataset_hash": isinstance(meta["dataset_hash"], str),
     }

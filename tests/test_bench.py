@@ -152,7 +152,8 @@ def test_quick_bench_without_torch_writes_every_row_stage_and_metric(gl_context,
     labels = [row["label"] for row in rows]
     kinds = {(row["kind"], row.get("precision"), row["gi_resolution"][0]) for row in rows}
     assert {("direct", None, 32), ("neural", "fp32", 32), ("neural", "fp16", 32), ("neural", "int8", 32),
-            ("neural", "fp32", 16), ("untrained", "fp32", 32), ("path_tracer", None, 32)} <= kinds, labels
+            ("neural", "fp32", 16), ("untrained", "fp32", 32), ("path_tracer", None, 32), ("vxgi", None, 16)} <= kinds, labels
+    assert [row["grid"] for row in rows if row["kind"] == "vxgi"] == [16]  # --quick: one small grid
     assert [row["K"] for row in rows if row["kind"] == "untrained"] == [8, 16]
     assert [row["spp"] for row in rows if row["kind"] == "path_tracer"] == [1, 4]
     gl_stages = {"shadows", "gbuffer", "direct", "composite"}
@@ -163,6 +164,11 @@ def test_quick_bench_without_torch_writes_every_row_stage_and_metric(gl_context,
             assert stages == {"path_trace"}
         elif row["kind"] == "direct":
             assert stages == gl_stages
+        elif row["kind"] == "vxgi":  # voxelize, inject and mip run in the frames whose configuration changed
+            from diviewer.gl.vxgi import STAGES as VXGI_STAGES
+
+            every_frame = {"vxgi_inject", "vxgi_mip", "vxgi_trace", "vxgi_upsample", "vxgi_composite"}
+            assert gl_stages | every_frame <= stages <= gl_stages | set(VXGI_STAGES), stages
         else:
             assert stages == gl_stages | {"readback", "inference", "upload", "upsample"}
         for s in [t["frame"], *t["stages"].values()]:

@@ -33,6 +33,10 @@ class BenchSettings:
     """Path tracer sample counts when there is no evaluation set (else the set's ladder)."""
     pt_frames: int = 2
     """Frames the path tracer is timed on, per sample count."""
+    vxgi_grids: tuple[int, ...] = (32, 64, 128)
+    """VXGI grid resolutions (voxels per side), one row each; empty: no VXGI rows."""
+    vxgi_trace_scale: int = 2
+    """VXGI traces one pixel per block of this side, then upsamples (the pass's default; 1: full resolution)."""
     gi_steps: tuple[int, ...] = (2,)
     """GI below frame resolution: frame / step, for each step the model's size multiple allows."""
     evalset: str | None = None
@@ -58,12 +62,22 @@ class BenchSettings:
                                 field="--frames")
         if any(r < 16 or r % 2 for r in self.resolutions):
             raise DiviewerError(f"resolutions must be even and >= 16, got {self.resolutions}", field="--res")
+        if self.vxgi_trace_scale < 1:
+            raise DiviewerError(f"must be >= 1, got {self.vxgi_trace_scale}", field="--vxgi-trace-scale")
+        for g in self.vxgi_grids:
+            self.vxgi(g).validate()
         if self.timing not in ("auto", "query", "sync"):
             raise DiviewerError(f"--timing must be auto, query or sync, got {self.timing}", field="--timing")
 
+    def vxgi(self, grid: int):
+        """The VXGISettings of the row for ``grid`` voxels per side."""
+        from diviewer.gl.vxgi import VXGISettings
+
+        return VXGISettings(resolution=grid, trace_scale=self.vxgi_trace_scale)
+
 
 QUICK = {"resolutions": (32,), "frames": 3, "warmup": 1, "untrained_k": (8, 16), "pt_frames": 1, "eval_frames": 1,
-         "calib_frames": 2, "temporal_frames": 3, "temporal_spp": 4}
+         "calib_frames": 2, "temporal_frames": 3, "temporal_spp": 4, "vxgi_grids": (16,)}
 """--quick: a few frames at a small size, seconds; every kind of row, stage and metric is still there."""
 
 
@@ -184,6 +198,12 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
             gb = GlBench(ctx, scene, res, res, mode)
             try:
                 rows.append(_row("direct", "direct light only", res, res, gb.time_direct(configs, settings.warmup)))
+                for g in settings.vxgi_grids:
+                    vs = settings.vxgi(g)
+                    row = _row("vxgi", _vxgi_label(vs), res, -(-res // vs.trace_scale),
+                               gb.time_vxgi(vs, configs, settings.warmup))
+                    row.update(grid=g, vxgi=dataclasses.asdict(vs), accuracy_key=f"vxgi{g}")
+                    rows.append(row)
                 for v in variants:
                     net = net_of(v)
                     m = net.multiple
@@ -254,6 +274,10 @@ def _label(v: dict, step: int) -> str:
     return f"{v['name']} K={v['meta']['K']} {v['precision']}{gi}"
 
 
+def _vxgi_label(vs) -> str:
+    return f"VXGI {vs.resolution}^3" + (f" trace 1/{vs.trace_scale}" if vs.trace_scale > 1 else "")
+
+
 def _row(kind: str, label: str, res: int, gi_res: int, timing: dict) -> dict:
     return {"kind": kind, "label": label, "resolution": [res, res], "gi_resolution": [gi_res, gi_res],
             "timing": timing}
@@ -295,10 +319,11 @@ def _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log) -> d
                              f": no accuracy (the evaluation set's {E} px / {step} is not a multiple of {net.multiple})")
                 continue
             models[f"{v['path']}|{step}"] = (net, step)
-    log(f"scoring {len(models)} model variants on {ds.root} ({ds.width}x{ds.height})")
-    gl = GlBench(ctx, scene, ds.width, ds.height, mode) if any(step > 1 for _, step in models.values()) else None
+    vxgi = {f"vxgi{g}": settings.vxgi(g) for g in settings.vxgi_grids}
+    log(f"scoring {len(models)} model variants and {len(vxgi)} VXGI grids on {ds.root} ({ds.width}x{ds.height})")
+    gl = GlBench(ctx, scene, ds.width, ds.height, mode) if vxgi or any(step > 1 for _, step in models.values()) else None
     try:
-        scored = score_evalset(ds, models, settings.eval_frames, gl, log)
+        scored = score_evalset(ds, models, settings.eval_frames, gl, log, vxgi=vxgi)
     finally:
         if gl is not None:
             gl.release()
@@ -329,13 +354,14 @@ def _temporal(ctx, settings, scene, ds, variants, net_of, mode, notes, log) -> d
     gb = GlBench(ctx, scene, res, res, mode)
     try:
         buffers = [gb.renderer.frame(c) for c in seq]
+        vx = {f"vxgi{g}": gb.vxgi_frames(settings.vxgi(g), seq) for g in settings.vxgi_grids}
     finally:
         gb.release()
     exposure = float(ds.manifest["evalset"]["tonemap"]["exposure"]) if ds is not None else \
         fit_exposure([b["direct"] for b in buffers])
     frames = [MitsubaFrame(scene, c, res, res) for c in seq]
     ref = [f.full(settings.temporal_spp, 0) for f in frames]  # one seed: the reference's noise holds still
-    seqs = {"direct": [b["direct"] for b in buffers]}
+    seqs = {"direct": [b["direct"] for b in buffers], **vx}
     for v in variants:
         net = net_of(v)
         if res % net.multiple == 0:

@@ -188,7 +188,7 @@ def plot(result: dict, out: Path) -> Path:
 
     by = EQUIVALENT_BY[0]
     fig, ax = plt.subplots(figsize=(8, 5.5), dpi=120)
-    markers = {"direct": "s", "baseline": "D", "neural": "o", "path_tracer": "^"}
+    markers = {"direct": "s", "baseline": "D", "neural": "o", "path_tracer": "^", "vxgi": "v"}
     for res in sorted({r["resolution"][0] for r in result["rows"]}):
         rows = [r for r in result["rows"] if r["resolution"][0] == res and r["accuracy"]]
         pt = sorted((r for r in rows if r["kind"] == "path_tracer"), key=lambda r: r["spp"])

@@ -17,7 +17,8 @@ import numpy as np
 from diviewer.timing import StageTimer
 
 STAGES = ("shadows", "gbuffer", "direct", "readback", "inference", "upload", "upsample", "composite")
-"""Every stage a GL frame may have, in frame order; the path tracer's one stage is ``path_trace``."""
+"""Every stage a GL frame may have, in frame order; the path tracer's one stage is ``path_trace``; VXGI rows
+have diviewer.gl.vxgi.STAGES after ``direct``."""
 
 
 def stats(values) -> dict[str, float]:
@@ -100,6 +101,37 @@ class GlBench:
         finally:
             neural.release()
 
+    def time_vxgi(self, vxgi_settings, configs, warmup: int) -> dict:
+        """The viewer's VXGI frame: the pass's stages (diviewer.gl.vxgi) on the shared timer, then the composite.
+
+        Each configuration differs from the last in light and object, so a frame re-voxelizes the moving
+        objects and re-injects the light; the static geometry is voxelized once, in the warm-up. Per-stage
+        figures are over the frames where the stage ran.
+        """
+        from diviewer.gl.vxgi import VXGIPass
+
+        vx = VXGIPass(self.ctx, self.renderer, vxgi_settings, timer=self.timer)
+        try:
+            return self.run(configs, warmup, lambda c: (vx.run(c)["vxgi"], False))
+        finally:
+            vx.release()
+
+    def vxgi_frames(self, vxgi_settings, configs) -> list[np.ndarray]:
+        """VXGI's composited image (direct + albedo x indirect) of each configuration, (H, W, 3) float32."""
+        from diviewer.gl.vxgi import VXGIPass
+
+        vx = VXGIPass(self.ctx, self.renderer, vxgi_settings, timer=self.timer)
+        try:
+            out = []
+            for config in configs:
+                self.renderer.render(config)
+                vx.run(config)
+                out.append(vx.read("vxgi"))
+            return out
+        finally:
+            vx.release()
+            self.timer.reset()
+
     def neural_pass(self, net, step: int = 1):
         from diviewer.gl.neural import NeuralPass
 
@@ -152,15 +184,18 @@ def read_final(tex) -> np.ndarray:
     return np.ascontiguousarray(np.flipud(raw), dtype=np.float32)
 
 
-def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | None = None, log=print) -> dict:
+def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | None = None, log=print,
+                  vxgi: dict | None = None) -> dict:
     """Every method's pooled metrics over the evaluation set's frames (both splits).
 
     A model at its full resolution (step 1) is scored on its output for the stored buffers, as `diviewer eval`
     does; below it (step > 1) on the frame the viewer shows: the configuration rendered again by ``gl`` (at
-    the set's resolution: the same buffers), packed at the GI resolution, upsampled and composited.
+    the set's resolution: the same buffers), packed at the GI resolution, upsampled and composited. VXGI is
+    scored on its composited frame of the configuration rendered again by ``gl``.
 
     Args:
         models: key -> (NeuralGI, step).
+        vxgi: key -> VXGISettings (needs ``gl``).
     Returns:
         ``{"frames", "ladder_spp", "methods": {key: aggregate}}`` with ``direct``, ``noise_floor`` and
         ``pt_spp<n>`` beside the models; each aggregate carries its ``equivalent_spp``.
@@ -178,12 +213,15 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
     idx = [i for s in EVAL_SPLITS for i in ds.indices(s)[:frames_per_split]]
     from diviewer.scene.loader import config_from_dict
 
-    rows = {k: [] for k in (*models, *channels)}
+    vxgi = vxgi or {}
+    rows = {k: [] for k in (*models, *vxgi, *channels)}
+    configs = [config_from_dict(gl.scene, _entry(ds, i)["config"]) for i in idx] if vxgi else []
+    vx_images = {key: gl.vxgi_frames(s, configs) for key, s in vxgi.items()}
     passes = {key: gl.neural_pass(net, step) for key, (net, step) in models.items() if step > 1}
     try:
-        for i in idx:
+        for n, i in enumerate(idx):
             f = ds.load(i)
-            mask = flat_mask(f["depth"], f["normal"], f["albedo"])
+            mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # as diviewer eval
             if passes:
                 gl.renderer.render(config_from_dict(gl.scene, _entry(ds, i)["config"]))
             for key, (net, step) in models.items():
@@ -193,6 +231,8 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
                     passes[key].run()
                     image = read_final(passes[key].composite())
                 rows[key].append(score_frame(image, f["pt"], exposure, mask))
+            for key, images in vx_images.items():
+                rows[key].append(score_frame(images[n], f["pt"], exposure, mask))
             for key, ch in channels.items():
                 rows[key].append(score_frame(f[ch], f["pt"], exposure, mask))
     finally:

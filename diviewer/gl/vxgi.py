@@ -74,8 +74,9 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.renderer import Renderer
 from diviewer.gl.resources import set_uniform
+from diviewer.gl.vxgi_grid import VoxelGridPasses, _FragmentList
 from diviewer.scene import camera as cam
-from diviewer.scene.model import DirectionalLight, FrameConfig, Object, PointLight
+from diviewer.scene.model import FrameConfig, Object
 from diviewer.timing import StageTimer
 
 MAX_CONES = 16
@@ -84,7 +85,6 @@ MAX_CONES = 16
 STAGES = ("vxgi_voxelize", "vxgi_inject", "vxgi_mip", "vxgi_bounce", "vxgi_trace", "vxgi_upsample", "vxgi_composite")
 """Timed stages (``VXGIPass.timings``); the first four run only when something changed."""
 
-_FRAG_BYTES = 48  # three vec4 per voxel fragment
 _SUM_UINTS = 8    # per voxel: r, g, b as (lo, hi) words, count, unused
 
 
@@ -177,29 +177,7 @@ def cone_layout(cones: int, aperture: float) -> tuple[np.ndarray, np.ndarray]:
     return dirs.astype("f4"), weights.astype("f4")
 
 
-class _FragmentList:
-    """A voxel fragment list on the GPU: a (count, capacity) header and the fragments."""
-
-    def __init__(self, ctx: moderngl.Context, capacity: int):
-        self.ctx = ctx
-        self.header = ctx.buffer(reserve=8)
-        self.capacity = 0
-        self.frags = None
-        self.count = 0
-        self.grow(capacity)
-
-    def grow(self, capacity: int) -> None:
-        if self.frags is not None:
-            self.frags.release()
-        self.capacity = int(capacity)
-        self.frags = self.ctx.buffer(reserve=max(self.capacity, 1) * _FRAG_BYTES)
-
-    def release(self) -> None:
-        self.header.release()
-        self.frags.release()
-
-
-class VXGIPass:
+class VXGIPass(VoxelGridPasses):
     """VXGI over a Renderer's frame: call ``run(config)`` after ``renderer.render(config)``."""
 
     def __init__(self, ctx: moderngl.Context, renderer: Renderer, settings: VXGISettings = VXGISettings(),
@@ -355,136 +333,6 @@ class VXGIPass:
         set_uniform(prog, "u_grid_size", float(self.grid_size))
         set_uniform(prog, "u_res", int(self.settings.resolution))
 
-    def _voxelize(self, lst: _FragmentList, objects: list[Object]) -> None:
-        ctx = self.ctx
-        self._per_fragment("CLEAR", [lst])  # empty the voxels the list's old fragments filled
-        prog = self.shaders.program("vxgi_voxelize.glsl")
-        self._grid_uniforms(prog)
-        self._raster_fbo.use()
-        ctx.enable_only(moderngl.NOTHING)  # no depth test, no culling: every triangle, both sides
-        while True:
-            lst.header.write(np.array([0, lst.capacity], dtype="u4").tobytes())
-            lst.header.bind_to_storage_buffer(0)
-            lst.frags.bind_to_storage_buffer(1)
-            for obj in objects:
-                model = obj.matrix()
-                set_uniform(prog, "m_model", model)
-                set_uniform(prog, "m_normal", cam.normal_matrix(model))
-                mat = self.scene.materials[obj.material]
-                set_uniform(prog, "u_albedo", tuple(float(x) for x in mat.albedo))
-                set_uniform(prog, "u_emission", tuple(float(x) for x in mat.emission))
-                tex = self.renderer.gpu.textures.get(obj.material)
-                set_uniform(prog, "u_has_texture", tex is not None)
-                if tex is not None:
-                    tex.use(location=0)
-                    set_uniform(prog, "u_albedo_map", 0)
-                self.renderer.gpu.meshes[obj.mesh].vao(prog).render(moderngl.TRIANGLES)
-            ctx.memory_barrier()
-            count = int(np.frombuffer(lst.header.read(4), dtype="u4")[0])
-            if count <= lst.capacity:
-                break
-            lst.grow(int(count * 1.25) + 1024)  # the list overflowed: draw again into a longer one
-        lst.count = count
-
-    def _inject(self, config: FrameConfig) -> None:
-        ctx = self.ctx
-        r = self.renderer
-        self._sums.bind_to_storage_buffer(2)
-        first = True
-        for light in config.lights or (None,):
-            shadow = None
-            if light is None:
-                prog = self.shaders.compute("vxgi_inject.glsl")
-            else:
-                # This frame's shadow map of the light, as the renderer's direct pass used it.
-                shadow = r._shadows.get(light.name)
-                directional = isinstance(light, DirectionalLight)
-                prog = self.shaders.compute("vxgi_inject.glsl", {"DIRECTIONAL": 1} if directional else {"POINT_LIGHT": 1})
-                self._light_uniforms(prog, light, shadow)
-            set_uniform(prog, "u_first", first)
-            for lst in self._lists.values():
-                if lst.count == 0:
-                    continue
-                lst.header.bind_to_storage_buffer(0)
-                lst.frags.bind_to_storage_buffer(1)
-                prog.run(group_x=-(-lst.count // 64))
-                ctx.memory_barrier()
-            first = False
-        self._per_fragment("RESOLVE")
-
-    def _per_fragment(self, mode: str, lists=None) -> None:
-        """Run vxgi_resolve.glsl in ``mode`` (RESOLVE, ZERO or CLEAR) over the voxels of fragment lists."""
-        prog = self.shaders.compute("vxgi_resolve.glsl", {mode: 1})
-        set_uniform(prog, "u_res", int(self.settings.resolution))
-        self._sums.bind_to_storage_buffer(2)
-        self.voxels.bind_to_image(0, read=False, write=True, level=0)
-        for lst in lists or self._lists.values():
-            if lst.count:
-                lst.header.bind_to_storage_buffer(0)
-                lst.frags.bind_to_storage_buffer(1)
-                prog.run(group_x=-(-lst.count // 64))
-        self.ctx.memory_barrier()
-
-    def _light_uniforms(self, prog, light, shadow: dict | None) -> None:
-        """The uniforms of direct.glsl's visibility() and radiometry, as the renderer's light pass sets them."""
-        r = self.renderer
-        s = r.settings
-        set_uniform(prog, "u_shadows", shadow is not None)
-        set_uniform(prog, "u_pcf_radius", int(s.pcf_radius))
-        set_uniform(prog, "u_bias", float(s.bias))
-        set_uniform(prog, "u_slope_bias", float(s.slope_bias))
-        set_uniform(prog, "u_normal_offset", float(s.normal_offset))
-        if isinstance(light, DirectionalLight):
-            set_uniform(prog, "u_light_color", tuple(float(c) * light.irradiance for c in light.color))
-            set_uniform(prog, "u_light_dir", tuple(float(x) for x in light.direction))
-            if shadow is not None:
-                shadow["map"].use(location=4)
-                set_uniform(prog, "u_shadow_map", 4)
-                set_uniform(prog, "m_light", shadow["m_light"])
-                set_uniform(prog, "u_texel_world", float(shadow["texel_world"]))
-                set_uniform(prog, "u_depth_range", float(shadow["depth_range"]))
-        else:
-            assert isinstance(light, PointLight)
-            set_uniform(prog, "u_light_color", tuple(float(c) * light.intensity for c in light.color))
-            set_uniform(prog, "u_light_pos", tuple(float(x) for x in light.position))
-            if shadow is not None:
-                shadow["map"].use(location=4)
-                set_uniform(prog, "u_shadow_atlas", 4)
-                set_uniform(prog, "m_faces", shadow["faces"])
-                set_uniform(prog, "u_face_size", float(r._face_size))
-
-    def _build_mips(self) -> None:
-        if self.aniso:
-            self._build_aniso_mips()
-            return
-        prog = self.shaders.compute("vxgi_mip.glsl")
-        self.voxels.use(location=0)
-        set_uniform(prog, "u_fine", 0)
-        for level in range(self.levels - 1):
-            side = self.settings.resolution >> (level + 1)
-            set_uniform(prog, "u_level", level)
-            set_uniform(prog, "u_res", side)
-            self.voxels.bind_to_image(0, read=False, write=True, level=level + 1)
-            prog.run(group_x=-(-side // 4), group_y=-(-side // 4), group_z=-(-side // 4))
-            self.ctx.memory_barrier()
-
-    def _build_aniso_mips(self) -> None:
-        prog = self.shaders.compute("vxgi_mip.glsl", {"ANISO": 1})
-        self.voxels.use(location=0)
-        set_uniform(prog, "u_iso", 0)
-        for i, t in enumerate(self.aniso):
-            t.use(location=1 + i)
-        prog["u_src"].value = tuple(range(1, 7))
-        for level in range(self.levels - 1):  # directional level k is grid level k + 1
-            side = self.settings.resolution >> (level + 1)
-            set_uniform(prog, "u_from_iso", level == 0)
-            set_uniform(prog, "u_level", max(level - 1, 0))
-            set_uniform(prog, "u_res", side)
-            for i, t in enumerate(self.aniso):
-                t.bind_to_image(i, read=False, write=True, level=level)
-            prog.run(group_x=-(-side // 4), group_y=-(-side // 4), group_z=-(-side // 4))
-            self.ctx.memory_barrier()
-
     def _fullscreen(self, prog: moderngl.Program) -> None:
         if prog.glo not in self._vaos:
             self._vaos[prog.glo] = self.ctx.vertex_array(prog, [])
@@ -517,20 +365,6 @@ class VXGIPass:
         set_uniform(prog, "u_max_dist", float(s.max_distance * self.grid_size))
         set_uniform(prog, "u_ao_dist", float(s.ao_distance * self.grid_size))
         set_uniform(prog, "u_ambient", tuple(float(x) for x in self.scene.ambient))
-
-    def _bounce(self) -> None:
-        """A second bounce: fragments gather the first-bounce grid, then resolve and filter again."""
-        prog = self.shaders.compute("vxgi_bounce.glsl", self._defines)
-        self._cone_uniforms(prog, 0)
-        self._sums.bind_to_storage_buffer(2)
-        for lst in self._lists.values():
-            if lst.count:
-                lst.header.bind_to_storage_buffer(0)
-                lst.frags.bind_to_storage_buffer(1)
-                prog.run(group_x=-(-lst.count // 64))
-        self.ctx.memory_barrier()
-        self._per_fragment("RESOLVE")
-        self._build_mips()
 
     def _trace(self, config: FrameConfig) -> None:
         s, r = self.settings, self.renderer
