@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -182,8 +183,19 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+MITSUBA_VARIANTS = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
+"""--variant choices (diviewer.reference.variant.VARIANTS; not imported here to keep the parser light)."""
+
+
+def _add_variant_arg(p) -> None:
+    p.add_argument("--variant", default=None, choices=MITSUBA_VARIANTS,
+                   help="Mitsuba variant (default: cuda_ad_rgb on a CUDA GPU, else llvm_ad_rgb where a libLLVM >= 16 "
+                        "works, else scalar_rgb; a variant that cannot run here falls back the same way)")
+
+
 def _add_reference_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("path-traced reference (needs the 'train' extra: mitsuba)")
+    _add_variant_arg(g)
     g.add_argument("--reference", default=None, choices=("pt",),
                    help="also write the ground truth: pt = Mitsuba path tracer (pt.exr, pt_direct.exr, pt_indirect.exr)")
     g.add_argument("--spp", type=int, default=256, help="samples per pixel of the reference (default 256)")
@@ -248,6 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dtype", default="float16", choices=("float16", "float32"), help="frame storage type")
     p.add_argument("--thumbs", type=int, default=2, help="PNG thumbnails per split")
     p.add_argument("--shard", default=None, help="k/n: render every n-th frame starting at the k-th")
+    _add_variant_arg(p)
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.set_defaults(func=_cmd_capture)
 
@@ -295,6 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lower sample counts for the equivalent spp (default 1,4,16,64,256)")
     p.add_argument("--max-depth", type=int, default=16, help="path length limit of the full renders")
     p.add_argument("--seed", type=int, default=0, help="which evaluation set of its own seed stream (default 0)")
+    _add_variant_arg(p)
     p.set_defaults(func=_cmd_evalset)
 
     p = sub.add_parser("bench", help="headless frame timing per stage and the speed/accuracy table: direct light, "
@@ -379,6 +393,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         check_options(ap, args)
+        if getattr(args, "variant", None):
+            os.environ["DIVIEWER_MITSUBA_VARIANT"] = args.variant  # read by reference.variant.select_variant
         return int(args.func(args) or 0)
     except DiviewerError as exc:
         print(f"diviewer {args.command}: error: {exc}", file=sys.stderr)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import sys
 
 import numpy as np
@@ -353,6 +354,43 @@ def test_old_libllvm_is_not_tried(monkeypatch, tmp_path):
     monkeypatch.setattr(variant, "_probe_llvm", lambda path: pytest.fail("probed an LLVM 15"))
     info = variant._choose_llvm(mitsuba)
     assert info.variant == "scalar_rgb" and "LLVM 15" in info.reason
+
+
+def test_cuda_variant_is_chosen_only_where_it_renders(monkeypatch):
+    """cuda_ad_rgb first where the build has it and a GPU renders with it; else the llvm/scalar choice."""
+    import mitsuba
+
+    from diviewer.reference import variant as v
+
+    fake = type("FakeMitsuba", (), {"variants": staticmethod(lambda: ["scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb"])})
+    monkeypatch.setattr(v, "_cuda_result", None)
+    monkeypatch.setattr(v, "_has_cuda_driver", lambda: False)
+    assert v._choose_cuda(fake) is None, "no CUDA driver: not even probed"
+    probed = []
+    monkeypatch.setattr(v, "_cuda_result", None)
+    monkeypatch.setattr(v, "_has_cuda_driver", lambda: True)
+    monkeypatch.setattr(v, "_probe", lambda variant, env, what: probed.append(variant) or "no device")
+    assert v._choose_cuda(fake) is None and probed == ["cuda_ad_rgb"], "a failed probe falls back"
+    monkeypatch.setattr(v, "_cuda_result", None)
+    monkeypatch.setattr(v, "_probe", lambda variant, env, what: None)
+    info = v._choose_cuda(fake)
+    assert info.variant == "cuda_ad_rgb" and "GPU" in info.reason
+    monkeypatch.setattr(v, "_cuda_result", None)
+    monkeypatch.setattr(v, "_has_cuda_driver", lambda: False)
+    assert v.select_variant() in ("llvm_ad_rgb", "scalar_rgb"), "this machine has no GPU"
+    assert mitsuba.variant() in ("llvm_ad_rgb", "scalar_rgb")
+
+
+def test_variant_option_picks_the_variant(tmp_path, monkeypatch):
+    """`--variant scalar_rgb` renders the reference with scalar_rgb and records it in frame.json."""
+    monkeypatch.delenv("DIVIEWER_MITSUBA_VARIANT", raising=False)
+    try:
+        assert main(["render", "--scene", "cornell", "--res", "16", "--out", str(tmp_path), "--reference", "pt",
+                     "--spp", "1", "--variant", "scalar_rgb"]) == 0
+        assert json.loads((tmp_path / "frame.json").read_text())["reference"]["variant"] == "scalar_rgb"
+    finally:
+        os.environ.pop("DIVIEWER_MITSUBA_VARIANT", None)
+        ref.select_variant()  # back to this module's variant for the tests after this one
 
 
 def test_variant_is_reported(variant):

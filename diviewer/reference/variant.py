@@ -1,7 +1,9 @@
-"""Which Mitsuba 3 variant renders: llvm_ad_rgb where a working libLLVM >= 16 is found, else scalar_rgb.
+"""Which Mitsuba 3 variant renders: cuda_ad_rgb on a CUDA GPU, else llvm_ad_rgb where a working
+libLLVM >= 16 is found, else scalar_rgb.
 
-drjit aborts the process (it does not raise) when a libLLVM cannot compile its kernels, so a candidate
-libLLVM is first tried in a child process. The choice and its reason are kept for the records.
+drjit aborts the process (it does not raise) when a backend cannot compile its kernels, so the CUDA
+variant and a candidate libLLVM are first tried in a child process. The choice and its reason are kept
+for the records.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from dataclasses import dataclass
 
 from diviewer.errors import DiviewerError, missing_extra
 
-VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
+VARIANTS = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 """Variants this module uses, fastest first."""
 
 _LIBLLVM_DIRS = ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib",
@@ -26,8 +28,8 @@ _MIN_LLVM = 16
 """drjit's LLVM backend aborts the process (uncatchable) in code generation with the system's LLVM 15."""
 
 _PROBE = """
-import numpy as np, mitsuba as mi
-mi.set_variant('llvm_ad_rgb')
+import sys, numpy as np, mitsuba as mi
+mi.set_variant(sys.argv[1])
 s = mi.load_dict({'type': 'scene', 'integrator': {'type': 'path', 'max_depth': 3},
     'shape': {'type': 'sphere', 'bsdf': {'type': 'diffuse'}}, 'light': {'type': 'constant'},
     'sensor': {'type': 'perspective', 'to_world': mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
@@ -80,31 +82,39 @@ def find_libllvm() -> str | None:
     return None
 
 
-def _probe_llvm(path: str, timeout: float = 180.0) -> str | None:
-    """Render a tiny scene with llvm_ad_rgb in a child process; None if it works, else why not.
+def _probe(variant: str, env: dict[str, str], what: str, timeout: float = 180.0) -> str | None:
+    """Render a tiny scene with ``variant`` in a child process; None if it works, else why not.
 
-    A child process, because drjit aborts (not raises) when a libLLVM cannot compile its kernels.
+    A child process, because drjit aborts (not raises) when a backend cannot compile its kernels.
     """
-    env = dict(os.environ, DRJIT_LIBLLVM_PATH=path)
     try:
-        r = subprocess.run([sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, timeout=timeout)
+        r = subprocess.run([sys.executable, "-c", _PROBE, variant], env=env, capture_output=True, text=True,
+                           timeout=timeout)
     except subprocess.TimeoutExpired:
-        return f"the llvm_ad_rgb test render with {path} took more than {timeout:.0f} s"
+        return f"the {variant} test render {what} took more than {timeout:.0f} s"
     if r.returncode == 0 and r.stdout.strip().endswith("ok"):
         return None
     tail = (r.stderr or r.stdout).strip().splitlines()[-1:] or [f"exit status {r.returncode}"]
-    return f"the llvm_ad_rgb test render with {path} failed ({tail[0][:200]})"
+    return f"the {variant} test render {what} failed ({tail[0][:200]})"
+
+
+def _probe_llvm(path: str) -> str | None:
+    """None if llvm_ad_rgb renders with the libLLVM at ``path``, else why not."""
+    return _probe("llvm_ad_rgb", dict(os.environ, DRJIT_LIBLLVM_PATH=path), f"with {path}")
 
 
 def select_variant(prefer: str | None = None) -> str:
-    """Choose and set the Mitsuba variant for this process: llvm_ad_rgb where it works, else scalar_rgb.
+    """Choose and set the Mitsuba variant for this process: the fastest that works here.
 
     Args:
-        prefer: ``"scalar_rgb"`` to skip the llvm variant; ``"llvm_ad_rgb"`` to use it where a
+        prefer: ``"cuda_ad_rgb"`` to use the GPU where this mitsuba build has the variant and a CUDA
+            device renders (verified once per process in a child process), else what ``"llvm_ad_rgb"``
+            gives; ``"scalar_rgb"`` to skip the JIT variants; ``"llvm_ad_rgb"`` to use it where a
             working libLLVM newer than 15 is found (DRJIT_LIBLLVM_PATH, else libLLVM-19/18/17/16 in the
             usual Debian places, which then goes into DRJIT_LIBLLVM_PATH). The libLLVM is verified once
             per process with a tiny render in a child process; scalar_rgb is the fallback. None: the
-            environment variable DIVIEWER_MITSUBA_VARIANT if set, else ``"llvm_ad_rgb"``.
+            environment variable DIVIEWER_MITSUBA_VARIANT if set (`--variant` on the command line sets
+            it), else ``"cuda_ad_rgb"`` (which falls back as above on a machine without CUDA).
 
     Returns:
         The variant now set; ``variant_info()`` says which libLLVM and why.
@@ -118,15 +128,39 @@ def select_variant(prefer: str | None = None) -> str:
     if prefer == "scalar_rgb":
         info = VariantInfo("scalar_rgb", None, "scalar_rgb requested")
     else:
-        if _llvm_result is None:
-            _llvm_result = _choose_llvm(mi)
-        info = _llvm_result
+        info = _choose_cuda(mi) if prefer in (None, "cuda_ad_rgb") else None
+        if info is None:
+            if _llvm_result is None:
+                _llvm_result = _choose_llvm(mi)
+            info = _llvm_result
     mi.set_variant(info.variant)
     _variant_info = info
     return info.variant
 
 
 _llvm_result: VariantInfo | None = None
+_cuda_result: tuple[VariantInfo | None] | None = None
+
+
+def _choose_cuda(mi) -> VariantInfo | None:
+    """cuda_ad_rgb if this build has it and a CUDA device renders with it (probed once), else None."""
+    global _cuda_result
+    if _cuda_result is None:
+        if "cuda_ad_rgb" not in mi.variants():
+            _cuda_result = (None,)
+        elif not _has_cuda_driver():
+            _cuda_result = (None,)
+        else:
+            failure = _probe("cuda_ad_rgb", dict(os.environ), "on this machine's GPU")
+            _cuda_result = (None,) if failure else (VariantInfo("cuda_ad_rgb", None, "verified on this machine's GPU"),)
+    return _cuda_result[0]
+
+
+def _has_cuda_driver() -> bool:
+    """Whether a CUDA driver library is present at all (skips the child-process probe where it is not)."""
+    return any(glob.glob(os.path.join(d, "libcuda.so*")) for d in
+               ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib",
+                "/usr/local/cuda/lib64", "/usr/local/nvidia/lib64"))
 
 
 def _choose_llvm(mi) -> VariantInfo:
