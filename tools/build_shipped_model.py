@@ -1,7 +1,7 @@
 """Rebuild the shipped models exactly: capture, train and export each with the settings its model card records.
 
 Usage: python tools/build_shipped_model.py [NAME ...] [--work runs/SCENE]
-       (NAME: a model in assets/models, e.g. cornell cornell_k32; default: every shipped model)
+       (NAME: a model in assets/models, e.g. cornell; default: every shipped model)
 
 The settings come from assets/models/NAME.json: scene, resolution, K, target, divide_albedo and
 precision always; the capture settings (frames, spp, path depth, seed, splits) and the full training

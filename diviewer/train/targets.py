@@ -52,9 +52,14 @@ def _non_negative(x: Any) -> Any:
 
 
 def _albedo_floor(albedo: Any) -> Any:
+    """Albedo within [ALBEDO_FLOOR, 1], a NaN taken as black: the exported graph multiplies its prediction
+    by the raw albedo input, and a broken G-buffer texel must not turn into a broken pixel (albedo above 1
+    is refused by the scene loader, so clamping there changes no valid frame)."""
     if type(albedo).__module__.startswith("torch"):
-        return albedo.clamp(min=ALBEDO_FLOOR)
-    return np.maximum(albedo, ALBEDO_FLOOR)
+        import torch
+
+        return torch.where(torch.isnan(albedo), torch.zeros_like(albedo), albedo).clamp(ALBEDO_FLOOR, 1.0)
+    return np.clip(np.where(np.isnan(albedo), 0.0, albedo), ALBEDO_FLOOR, 1.0)
 
 
 def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray) -> Encoding:
