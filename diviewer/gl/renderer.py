@@ -350,15 +350,22 @@ class Renderer:
         t = math.tan(math.radians(config.camera.fov) / 2.0)
         set_uniform(prog, "m_inv_view", cam.view_to_world(view))
         set_uniform(prog, "u_tan_half_fov", (t * self.width / self.height, t))
+        self.set_light_uniforms(prog, light, shadow)
+        self._fullscreen(prog)
+        ctx.disable(moderngl.BLEND)
+
+    def set_light_uniforms(self, prog, light, shadow: dict | None) -> None:
+        """One light's radiometry and shadow-lookup uniforms for direct.glsl's code (the direct pass, and
+        VXGI's injection, which shares the shadow lookup); ``shadow`` is this frame's map of the light."""
         s = self.settings
         set_uniform(prog, "u_shadows", shadow is not None)
         set_uniform(prog, "u_pcf_radius", int(s.pcf_radius))
         set_uniform(prog, "u_bias", float(s.bias))
         set_uniform(prog, "u_slope_bias", float(s.slope_bias))
         set_uniform(prog, "u_normal_offset", float(s.normal_offset))
-        if directional:
+        if isinstance(light, DirectionalLight):
             set_uniform(prog, "u_light_color", tuple(float(c) * light.irradiance for c in light.color))
-            set_uniform(prog, "u_light_dir", tuple(light.direction))
+            set_uniform(prog, "u_light_dir", tuple(float(x) for x in light.direction))
             if shadow is not None:
                 shadow["map"].use(location=4)
                 set_uniform(prog, "u_shadow_map", 4)
@@ -368,14 +375,12 @@ class Renderer:
         else:
             assert isinstance(light, PointLight)
             set_uniform(prog, "u_light_color", tuple(float(c) * light.intensity for c in light.color))
-            set_uniform(prog, "u_light_pos", tuple(light.position))
+            set_uniform(prog, "u_light_pos", tuple(float(x) for x in light.position))
             if shadow is not None:
                 shadow["map"].use(location=4)
                 set_uniform(prog, "u_shadow_atlas", 4)
                 set_uniform(prog, "m_faces", shadow["faces"])
                 set_uniform(prog, "u_face_size", float(self._face_size))
-        self._fullscreen(prog)
-        ctx.disable(moderngl.BLEND)
 
     def _emission_pass(self) -> None:
         ctx = self.ctx

@@ -12,7 +12,7 @@ import numpy as np
 
 from diviewer.gl.resources import set_uniform
 from diviewer.scene import camera as cam
-from diviewer.scene.model import DirectionalLight, FrameConfig, Object, PointLight
+from diviewer.scene.model import DirectionalLight, FrameConfig, Object
 
 _FRAG_BYTES = 48  # three vec4 per voxel fragment
 
@@ -86,7 +86,7 @@ class VoxelGridPasses:
                 shadow = r._shadows.get(light.name)
                 directional = isinstance(light, DirectionalLight)
                 prog = self.shaders.compute("vxgi_inject.glsl", {"DIRECTIONAL": 1} if directional else {"POINT_LIGHT": 1})
-                self._light_uniforms(prog, light, shadow)
+                self.renderer.set_light_uniforms(prog, light, shadow)
             set_uniform(prog, "u_first", first)
             for lst in self._lists.values():
                 if lst.count == 0:
@@ -110,34 +110,6 @@ class VoxelGridPasses:
                 lst.frags.bind_to_storage_buffer(1)
                 prog.run(group_x=-(-lst.count // 64))
         self.ctx.memory_barrier()
-
-    def _light_uniforms(self, prog, light, shadow: dict | None) -> None:
-        """The uniforms of direct.glsl's visibility() and radiometry, as the renderer's light pass sets them."""
-        r = self.renderer
-        s = r.settings
-        set_uniform(prog, "u_shadows", shadow is not None)
-        set_uniform(prog, "u_pcf_radius", int(s.pcf_radius))
-        set_uniform(prog, "u_bias", float(s.bias))
-        set_uniform(prog, "u_slope_bias", float(s.slope_bias))
-        set_uniform(prog, "u_normal_offset", float(s.normal_offset))
-        if isinstance(light, DirectionalLight):
-            set_uniform(prog, "u_light_color", tuple(float(c) * light.irradiance for c in light.color))
-            set_uniform(prog, "u_light_dir", tuple(float(x) for x in light.direction))
-            if shadow is not None:
-                shadow["map"].use(location=4)
-                set_uniform(prog, "u_shadow_map", 4)
-                set_uniform(prog, "m_light", shadow["m_light"])
-                set_uniform(prog, "u_texel_world", float(shadow["texel_world"]))
-                set_uniform(prog, "u_depth_range", float(shadow["depth_range"]))
-        else:
-            assert isinstance(light, PointLight)
-            set_uniform(prog, "u_light_color", tuple(float(c) * light.intensity for c in light.color))
-            set_uniform(prog, "u_light_pos", tuple(float(x) for x in light.position))
-            if shadow is not None:
-                shadow["map"].use(location=4)
-                set_uniform(prog, "u_shadow_atlas", 4)
-                set_uniform(prog, "m_faces", shadow["faces"])
-                set_uniform(prog, "u_face_size", float(r._face_size))
 
     def _build_mips(self) -> None:
         if self.aniso:
