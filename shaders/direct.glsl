@@ -92,6 +92,22 @@ float visibility(vec3 p, vec3 n, float cos_t) {
 }
 #endif
 
+// Direction to the light and irradiance at p, facing the light (Mitsuba's radiometry: E for a
+// directional light, I / r^2 for a point light); shared with the VXGI injection.
+#if defined DIRECTIONAL || defined POINT_LIGHT
+void light_at(vec3 p, out vec3 l, out vec3 e) {
+#if defined DIRECTIONAL
+    l = -normalize(u_light_dir);
+    e = u_light_color;
+#else
+    vec3 to_light = u_light_pos - p;
+    float r2 = max(dot(to_light, to_light), 1e-12);
+    l = to_light * inversesqrt(r2);
+    e = u_light_color / r2;
+#endif
+}
+#endif
+
 #if !defined SHADOW_LOOKUP
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
@@ -106,15 +122,8 @@ void main() {
     vec3 p_view = depth * vec3(ndc * u_tan_half_fov, -1.0);
     vec3 p = (m_inv_view * vec4(p_view, 1.0)).xyz;
     vec3 n = normalize(mat3(m_inv_view) * n_view);
-#if defined DIRECTIONAL
-    vec3 l = -normalize(u_light_dir);
-    vec3 e = u_light_color;
-#else
-    vec3 to_light = u_light_pos - p;
-    float r2 = max(dot(to_light, to_light), 1e-12);
-    vec3 l = to_light * inversesqrt(r2);
-    vec3 e = u_light_color / r2;
-#endif
+    vec3 l, e;
+    light_at(p, l, e);
     float cos_t = dot(n, l);
     if (cos_t <= 0.0) discard;
     float v = u_shadows ? visibility(p, n, cos_t) : 1.0;

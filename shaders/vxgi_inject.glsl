@@ -26,15 +26,8 @@ void main() {
     vec3 radiance = u_first ? c.rgb : vec3(0.0);
 #if defined DIRECTIONAL || defined POINT_LIGHT
     vec3 n = b.xyz;
-#if defined DIRECTIONAL
-    vec3 l = -normalize(u_light_dir);
-    vec3 e = u_light_color;
-#else
-    vec3 to_light = u_light_pos - p;
-    float r2 = max(dot(to_light, to_light), 1e-12);
-    vec3 l = to_light * inversesqrt(r2);
-    vec3 e = u_light_color / r2;
-#endif
+    vec3 l, e;
+    light_at(p, l, e);
     float cos_t = dot(n, l);
     if (cos_t < 0.0) { n = -n; cos_t = -cos_t; }   // the side that faces the light
     if (cos_t > 0.0) {
