@@ -23,7 +23,7 @@ from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
 from diviewer.metrics import (equivalent_spp, flat_mask, flip, highpass_power, mse, power_ratio, psnr, psnr_error,
                               ssim, tonemap)
-from diviewer.outputs import check_output_file, write_json
+from diviewer.outputs import check_output_file, strict, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
 
 SSIM_MIN = 11
@@ -230,16 +230,6 @@ def _num(v: float) -> str:
     return f"{v:.3g}" if math.isfinite(v) else "inf"
 
 
-def _finite(obj):
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
-
-
 def strict_json(obj) -> str:
     """JSON without NaN or Infinity (a perfect PSNR, a ratio over a perfectly smooth reference): they become null."""
-    return json.dumps(_finite(obj), indent=1, allow_nan=False)
+    return json.dumps(strict(obj), indent=1, allow_nan=False)

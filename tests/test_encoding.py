@@ -134,7 +134,8 @@ def test_intensity_is_absolute() -> None:
     np.testing.assert_array_equal(encode_radiance(image[3:4, 5:6], ENC), encode_radiance(image, ENC)[3:4, 5:6])
 
 
-def _frame(rng: np.random.Generator, h: int = 6, w: int = 5) -> tuple[np.ndarray, ...]:
+def random_frame(rng: np.random.Generator, h: int = 6, w: int = 5) -> tuple[np.ndarray, ...]:
+    """Random depth (a background row), unit normals, albedo and direct light: the four input buffers."""
     depth = rng.uniform(0.1, 60.0, (h, w)).astype(np.float32)
     depth[0, :] = 0.0  # background row
     normal = rng.normal(size=(h, w, 3)).astype(np.float32)
@@ -146,7 +147,7 @@ def _frame(rng: np.random.Generator, h: int = 6, w: int = 5) -> tuple[np.ndarray
 
 
 def test_encode_inputs_layout_and_range() -> None:
-    depth, normal, albedo, direct = _frame(np.random.default_rng(2))
+    depth, normal, albedo, direct = random_frame(np.random.default_rng(2))
     depth[1, 0] = 1e-4  # geometry right at the camera
     depth[1, 1] = np.nan
     albedo[1, 2] = np.nan
@@ -168,7 +169,7 @@ def test_encode_inputs_layout_and_range() -> None:
 
 
 def test_encode_inputs_refuses_bad_buffers() -> None:
-    depth, normal, albedo, direct = _frame(np.random.default_rng(5))
+    depth, normal, albedo, direct = random_frame(np.random.default_rng(5))
     with pytest.raises(ValueError, match="albedo"):
         encode_inputs(depth, normal, albedo[..., :2], direct, ENC, channel_axis=-1)
     with pytest.raises(TypeError, match="albedo"):

@@ -13,6 +13,7 @@ torch = pytest.importorskip("torch")
 from diviewer import encoding as np_encoding  # noqa: E402
 from diviewer.encoding import INPUT_CHANNEL_COUNT, Encoding  # noqa: E402
 from diviewer.train.encoding_torch import decode_radiance, encode_inputs, encode_radiance  # noqa: E402
+from test_encoding import random_frame  # noqa: E402  (the same random buffers as the numpy tests)
 
 ENC = Encoding(exposure=0.25, depth_scale=50.0)
 
@@ -22,17 +23,6 @@ def _magnitudes(enc: Encoding, dtype: type) -> np.ndarray:
     t = np.concatenate([np.logspace(-30, np.log10(enc.radiance_max), 20001), [enc.radiance_max]])
     x = t / enc.exposure
     return np.concatenate([[0.0], x, -x]).astype(dtype)
-
-
-def _frame(rng: np.random.Generator, h: int = 6, w: int = 5) -> tuple[np.ndarray, ...]:
-    depth = rng.uniform(0.1, 60.0, (h, w)).astype(np.float32)
-    depth[0, :] = 0.0  # background row
-    normal = rng.normal(size=(h, w, 3)).astype(np.float32)
-    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
-    normal[0, :] = 0.0
-    albedo = rng.uniform(0, 1, (h, w, 3)).astype(np.float32)
-    direct = rng.uniform(0, 5, (h, w, 3)).astype(np.float32)
-    return depth, normal, albedo, direct
 
 
 def test_numpy_and_torch_agree() -> None:
@@ -47,7 +37,7 @@ def test_numpy_and_torch_agree() -> None:
 
 
 def test_encode_inputs_torch_nchw_matches_numpy_hwc() -> None:
-    frames = [_frame(np.random.default_rng(seed)) for seed in (3, 4)]
+    frames = [random_frame(np.random.default_rng(seed)) for seed in (3, 4)]
     hwc = np.stack([np_encoding.encode_inputs(*f, ENC, channel_axis=-1) for f in frames])
     depth, normal, albedo, direct = (
         torch.from_numpy(np.stack([f[i] for f in frames])) for i in range(4)
@@ -68,7 +58,7 @@ def test_onnx_export_matches_numpy() -> None:
         def forward(self, depth, normal, albedo, direct, y):  # type: ignore[no-untyped-def]
             return encode_inputs(depth, normal, albedo, direct, enc, channel_axis=1), decode_radiance(y, enc)
 
-    depth, normal, albedo, direct = (np.ascontiguousarray(np.moveaxis(a.reshape(6, 5, -1), -1, 0)[None]) for a in _frame(np.random.default_rng(6)))
+    depth, normal, albedo, direct = (np.ascontiguousarray(np.moveaxis(a.reshape(6, 5, -1), -1, 0)[None]) for a in random_frame(np.random.default_rng(6)))
     direct[0, 0, 1, :3] = [np.nan, np.inf, 1e-12]
     y = np.linspace(-1.2, 1.2, 3 * 6 * 5, dtype=np.float32).reshape(1, 3, 6, 5)
     y[0, 0, 0, :2] = [np.nan, 1e-9]
