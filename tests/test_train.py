@@ -491,3 +491,34 @@ def test_cli_maps_the_options_onto_the_config(data, tmp_path):
         0.0, "l2", "linear", 2, 1e-3)
     assert (cfg["upsample"], cfg["norm"], cfg["train_frames"], cfg["patience"], cfg["val_every_steps"]) == (
         "resize", "instance", 8, 3, 1)
+
+
+def test_cosine_schedule_runs_from_lr_to_the_floor_and_none_is_constant(data, tmp_path):
+    from diviewer.train.step import LR_FLOOR, lr_factor
+
+    cos = TrainConfig(data=data, out=tmp_path / "c", lr_decay="cosine")
+    assert lr_factor(cos, 0, 100) == 1.0
+    assert lr_factor(cos, 50, 100) == pytest.approx(0.5 * (1 + LR_FLOOR))
+    assert lr_factor(cos, 100, 100) == pytest.approx(LR_FLOOR) and lr_factor(cos, 500, 100) == pytest.approx(LR_FLOOR)
+    factors = [lr_factor(cos, s, 100) for s in range(101)]
+    assert all(a >= b for a, b in zip(factors, factors[1:]))  # never rises
+    flat = TrainConfig(data=data, out=tmp_path / "n")
+    assert {lr_factor(flat, s, 100) for s in range(0, 101, 10)} == {1.0}
+
+
+def test_cosine_decay_is_applied_and_resumes_on_the_same_curve(data, tmp_path):
+    # 3 epochs of 2 steps: the last step runs at the factor of step 5 of 6; a run stopped after 3 steps
+    # and resumed ends with the same weights as the straight one (the rate is a function of the step).
+    from diviewer.train.step import lr_factor
+
+    straight = train(tiny(data, tmp_path / "a", epochs=3, lr_decay="cosine"), log=quiet)
+    train(tiny(data, tmp_path / "b", epochs=3, max_steps=3, lr_decay="cosine"), log=quiet)
+    resumed = train(tiny(data, tmp_path / "b", epochs=3, lr_decay="cosine"), resume=True, log=quiet)
+    assert straight["step"] == resumed["step"] == 6
+    a, b = load_checkpoint(tmp_path / "a" / "last.ckpt"), load_checkpoint(tmp_path / "b" / "last.ckpt")
+    cfg = TrainConfig(data=data, out=tmp_path / "a", lr_decay="cosine")
+    assert a["optG"]["param_groups"][0]["lr"] == pytest.approx(cfg.lr * lr_factor(cfg, 5, 6))
+    for k, v in a["netG"].items():
+        torch.testing.assert_close(b["netG"][k], v, rtol=1e-5, atol=1e-6, msg=k)
+    with pytest.raises(DiviewerError, match="lr_decay"):  # the schedule is part of the run
+        train(tiny(data, tmp_path / "b", epochs=4), resume=True, log=quiet)

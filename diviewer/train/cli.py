@@ -34,6 +34,8 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
                    help="with --target indirect: predict indirect / albedo")
     p.add_argument("--batch-size", type=int, default=None, help=f"default {d['batch_size']}")
     p.add_argument("--lr", type=float, default=None, help=f"Adam learning rate (default {d['lr']})")
+    p.add_argument("--lr-decay", choices=CHOICES["lr_decay"], default=None,
+                   help="learning-rate schedule: none (default) or cosine (to lr/100 over all epochs)")
     p.add_argument("--lambda-l1", dest="lambda_L1", type=float, default=None, help=f"default {d['lambda_L1']}")
     p.add_argument("--ndf", type=int, default=None, help=f"discriminator base width (default {d['ndf']})")
     p.add_argument("--seed", type=int, default=None, help=f"default {d['seed']}")

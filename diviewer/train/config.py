@@ -35,6 +35,10 @@ class TrainConfig:
     lr: float = 2e-4
     """Adam learning rate of both networks (pix2pix)."""
 
+    lr_decay: str = "none"
+    """Learning-rate schedule: "none" (constant, pix2pix) or "cosine" (from lr down to lr / 100 over
+    epochs x steps per epoch, a pure function of the step, so a resumed run follows the same curve)."""
+
     beta1: float = 0.5
     """Adam beta1 (pix2pix: 0.5, which keeps GAN training stable)."""
 
@@ -190,11 +194,12 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "precision": ("auto", "fp32", "bf16", "fp16"), "gan_mode": ("vanilla", "lsgan"), "recon_loss": ("l1", "l2"),
     "recon_space": ("encoded", "linear"), "norm_D": ("batch", "instance", "none"),
     "upsample": ("transpose", "resize", "shuffle"), "norm": ("batch", "instance", "none"),
+    "lr_decay": ("none", "cosine"),
 }
 """The settings that take one of a few names (the network ones are `networks.UPSAMPLES`/`NORMS`)."""
 
-RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "beta1", "beta2", "lambda_L1", "target", "divide_albedo",
-                                 "seed", "dropout", "ndf", "gan_weight", "gan_mode", "recon_loss", "recon_space",
+RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "beta1", "beta2", "lambda_L1", "target",
+                                 "divide_albedo", "seed", "dropout", "ndf", "gan_weight", "gan_mode", "recon_loss", "recon_space",
                                  "n_layers_D", "norm_D", "d_lr", "upsample", "norm", "train_frames")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change)."""
 

@@ -3,6 +3,7 @@ of netD then netG (`train_step`), with the numbers a reader needs to see whether
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -71,6 +72,30 @@ def build_nets(cfg: TrainConfig, net_cfg: NetConfig, enc: Encoding, dev: Dist, s
     # Dropout draws differ per rank (after identical weights); ranks' states are all saved.
     seed_all(cfg.seed + 1_000_003 * (dev.rank + 1))
     return nets
+
+
+LR_FLOOR = 0.01
+"""The cosine schedule ends at this fraction of the learning rate."""
+
+
+def lr_factor(cfg: TrainConfig, step: int, horizon: int) -> float:
+    """The learning rate at ``step`` (0-based, the step about to run) as a fraction of ``cfg.lr``.
+
+    "none": 1. "cosine": 1 at step 0, LR_FLOOR at ``horizon`` (epochs x steps per epoch) and after.
+    """
+    if cfg.lr_decay == "none" or horizon <= 0:
+        return 1.0
+    t = min(max(step / horizon, 0.0), 1.0)
+    return LR_FLOOR + (1.0 - LR_FLOOR) * 0.5 * (1.0 + math.cos(math.pi * t))
+
+
+def set_learning_rate(nets: Nets, cfg: TrainConfig, step: int, horizon: int) -> float:
+    """Apply the schedule to both optimizers (netD keeps its own base rate); returns netG's rate."""
+    f = lr_factor(cfg, step, horizon)
+    for opt, base in ((nets.optG, cfg.lr), (nets.optD, cfg.d_lr or cfg.lr)):
+        for group in opt.param_groups:
+            group["lr"] = base * f
+    return cfg.lr * f
 
 
 def _accuracy(pred: torch.Tensor, real: bool, gan_mode: str) -> torch.Tensor:

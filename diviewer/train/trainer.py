@@ -151,7 +151,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
 
     from diviewer.encoding import Encoding
     from diviewer.console import progress_bar
-    from diviewer.train.step import build_nets, train_step
+    from diviewer.train.step import build_nets, set_learning_rate, train_step
 
     dev = distributed.setup(cfg)
     say = log if dev.main else (lambda *_: None)
@@ -182,7 +182,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
                   meta=run_metadata(cfg, nets, net_cfg, enc, ds, train_idx, 0 if val_arr is None else len(val_arr)),
                   steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed)
 
-        total = cfg.epochs * steps_per_epoch
+        total = horizon = cfg.epochs * steps_per_epoch  # the lr schedule's horizon ignores max_steps
         if cfg.max_steps is not None:
             total = min(total, cfg.max_steps)
         if st.step >= total or st.epoch >= cfg.epochs or _patience_spent(cfg, st):
@@ -203,6 +203,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
                 t_epoch = time.perf_counter()
                 batches = epoch_batches(len(train_arr), st.epoch, cfg.seed, cfg.batch_size, dev.rank, dev.world)
                 for x16 in distributed.loader(train_arr, batches[st.batch_in_epoch:], cfg, dev):
+                    set_learning_rate(nets, cfg, st.step, horizon)
                     numbers = train_step(nets, split_batch(x16.to(dev.device, non_blocking=True), ds.slices, enc, cfg))
                     if not nets.scaler.is_enabled() and not all(map(math.isfinite, numbers.values())):
                         raise DiviewerError(f"training diverged at step {st.step + 1} ({_fmt(numbers)}); "
