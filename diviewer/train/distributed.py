@@ -47,8 +47,8 @@ def setup(cfg: TrainConfig) -> Dist:
         raise DiviewerError("CUDA is not available on this machine; use --device cpu (or auto)", field="--device")
     if world > 1:
         device = torch.device("cuda", local_rank) if want.startswith("cuda") else torch.device("cpu")
-    else:
-        device = torch.device(want)
+    else:  # an index always: torch.cuda.set_device and the CUDA RNG state refuse a bare "cuda"
+        device = torch.device("cuda", 0) if want == "cuda" else torch.device(want)
     if device.type == "cuda":
         torch.cuda.set_device(device)
         torch.backends.cudnn.benchmark = True  # fixed input size: let cuDNN pick the fastest convolutions
