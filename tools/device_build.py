@@ -274,22 +274,32 @@ def main() -> None:
     ap.add_argument("--work", type=Path, required=True)
     ap.add_argument("--smoke", action="store_true")
     ap.add_argument("--stretch", type=float, default=1.0, help="multiply every deadline (a faster or slower lease)")
+    ap.add_argument("--post-only", action="store_true",
+                    help="only export and evaluate the runs there (after trainings run by hand or interrupted)")
     a = ap.parse_args()
     scenes, deadlines, res = plan(a.smoke)
     deadlines = {k: v * a.stretch for k, v in deadlines.items()}
     a.work.mkdir(parents=True, exist_ok=True)
     b = Build(a.work, scenes, deadlines, res, a.smoke)
     cornell, sponza = scenes
-    b.say(f"plan: {json.dumps(b.record['scenes'])}; deadlines {deadlines}")
-    cap_c, cap_s = b.capture(cornell), b.capture(sponza)
-    b.wait(cap_c, "capture_cornell")
-    train_c = b.train(cornell)
-    ev = b.evalset(sponza)  # on the GPU beside cornell's trainings; its 2048 spp truth scores the Sponza ladder
-    b.wait(cap_s, "capture_sponza")
-    train_s = b.train(sponza)
-    b.wait([ev], "train")
-    b.wait(train_c + train_s, "train")
-    b.say("trainings ended; export and evaluation")
+    if not a.post_only:
+        b.say(f"plan: {json.dumps(b.record['scenes'])}; deadlines {deadlines}")
+        cap_c, cap_s = b.capture(cornell), b.capture(sponza)
+        b.wait(cap_c, "capture_cornell")
+        train_c = b.train(cornell)
+        ev = b.evalset(sponza)  # on the GPU beside cornell's trainings; its 2048 spp truth scores the Sponza ladder
+        b.wait(cap_s, "capture_sponza")
+        train_s = b.train(sponza)
+        b.wait([ev], "train")
+        b.wait(train_c + train_s, "train")
+        b.say("trainings ended; export and evaluation")
+    else:
+        old = a.work / "record.json"
+        if old.is_file():  # keep what the interrupted build recorded (its jobs, the plan)
+            prev = json.loads(old.read_text())
+            b.record["earlier"] = {k: prev.get(k) for k in ("started", "jobs", "scenes", "deadlines_min")}
+        for s in scenes:
+            b.record["scenes"][s.name]["present"] = {sp: b.present(s, sp) for sp in ("train", "val", "test")}
     b.wait(b.export_and_eval(cornell) + b.export_and_eval(sponza), None)
     last = b.eval_on_evalset(sponza)
     if last:
