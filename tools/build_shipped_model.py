@@ -110,7 +110,7 @@ def main() -> None:
     ap.add_argument("names", nargs="*", help="models in assets/models (default: all shipped models)")
     ap.add_argument("--work", type=Path, default=None, help="dataset and run folders (default runs/SCENE)")
     a = ap.parse_args()
-    names = a.names or sorted(p.stem for p in MODELS.glob("*.json"))
+    names = a.names or sorted(p.stem for p in MODELS.glob("*.onnx"))  # cards beside models; not *_ladder.json
     missing = [n for n in names if not (MODELS / f"{n}.json").is_file()]
     if missing:
         sys.exit(f"no model card {', '.join(str(MODELS / f'{n}.json') for n in missing)}")
