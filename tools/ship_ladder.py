@@ -52,17 +52,18 @@ def evalset_rows(results: Path, scene: str) -> dict[str, dict]:
     return rows
 
 
-def ladder(results: Path, scene: str) -> list[dict]:
+def ladder(results: Path, scene: str, ablations: bool = False) -> list[dict]:
+    """The runs kN (the ladder, resize decoder) or, with ``ablations``, the others (kN_transpose, ...)."""
     record = json.loads((results / "record.json").read_text())
     ev = evalset_rows(results, scene)
     out = []
     for name, run in sorted(record["runs"].items()):
         s, _, tag = name.partition("/")
-        m = re.fullmatch(r"k(\d+)", tag)
-        if s != scene or not m or not run.get("test"):
-            continue  # the ladder is the resize-decoder runs; k16_transpose etc. are ablations
+        m = re.fullmatch(r"k(\d+)(_\w+)?", tag)
+        if s != scene or not m or not run.get("test") or bool(m.group(2)) != ablations:
+            continue
         k, test = int(m.group(1)), run["test"]
-        row = {"K": k, "parameters": generator_parameters(k), "steps": int(run["last_row"]["step"]),
+        row = {"run": tag, "K": k, "parameters": generator_parameters(k), "steps": int(run["last_row"]["step"]),
                "test_split": {"frames": test["frames"], "reference_spp": test["reference_spp"],
                               **{meth: {q: test["methods"][meth][q]["mean"] for q in QUALITY}
                                  for meth in ("neural", "direct")}},
@@ -93,7 +94,7 @@ def main() -> None:
            "chosen_K": chosen["K"], "machine": record["machine"], "capture": record["scenes"][a.scene],
            "evalset": ev.get("_meta"), "reference_rows": {k: v for k, v in ev.items() if not k.startswith(f"{a.scene}_")
                                                           and k != "_meta"},
-           "rows": rows, **({"note": a.note} if a.note else {})}
+           "rows": rows, "ablations": ladder(a.results, a.scene, ablations=True), **({"note": a.note} if a.note else {})}
     dst = MODELS / f"{a.scene}_ladder.json"
     dst.write_text(json.dumps(out, indent=1) + "\n")
     print(f"{dst}: K={chosen['K']} ({out['rule']})")
