@@ -52,13 +52,15 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=384, help="window size (square), a multiple of the model's")
     ap.add_argument("--frames", type=int, default=6, help="frames per split (train, test)")
     ap.add_argument("--spp", type=int, default=256)
+    ap.add_argument("--gi-downsample", default="nearest", choices=("nearest", "area"),
+                    help="how the full-resolution buffers are reduced to the network's inputs")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "cornell" / "fullres_accuracy.json")
     a = ap.parse_args()
 
     from diviewer import metrics
     from diviewer.evaluate import score
     from diviewer.gl.context import describe, headless_context
-    from diviewer.gl.neural import NeuralPass
+    from diviewer.gl.neural import GISettings, NeuralPass
     from diviewer.gl.renderer import Renderer
     from diviewer.reference import mitsuba as ref
     from diviewer.runtime import NeuralGI, pack_buffers
@@ -74,7 +76,7 @@ def main() -> None:
     with headless_context() as ctx:
         full_r = Renderer(ctx, scene, a.size, a.size)
         low_r = Renderer(ctx, scene, gw, gh)
-        npass = NeuralPass(ctx, full_r, model, gi_size=(gw, gh))
+        npass = NeuralPass(ctx, full_r, model, gi_size=(gw, gh), settings=GISettings(downsample=a.gi_downsample))
         for split in rows:
             for i in range(a.frames):
                 seed = int(np.random.SeedSequence([STREAM, 0 if split == "train" else 1, i]).generate_state(1)[0]
@@ -109,6 +111,7 @@ def main() -> None:
     summary = {split: {name: {q: mean(rs, name, q) for q in qs} for name in ("full", "stretched")}
                for split, rs in [*rows.items(), ("all", rows["train"] + rows["test"])]}
     out = {"scene": a.scene, "model": str(a.model), "window": [a.size, a.size], "gi": [gw, gh], "spp": a.spp,
+           "gi_downsample": a.gi_downsample,
            "variant": variant, "gl_renderer": gl, "tonemap_exposure": exposure, "summary": summary, "frames": rows,
            "seconds": round(time.time() - t0, 1)}
     a.out.parent.mkdir(parents=True, exist_ok=True)
