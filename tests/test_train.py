@@ -522,3 +522,18 @@ def test_cosine_decay_is_applied_and_resumes_on_the_same_curve(data, tmp_path):
         torch.testing.assert_close(b["netG"][k], v, rtol=1e-5, atol=1e-6, msg=k)
     with pytest.raises(DiviewerError, match="lr_decay"):  # the schedule is part of the run
         train(tiny(data, tmp_path / "b", epochs=4), resume=True, log=quiet)
+
+
+@pytest.mark.parametrize("asked,index", [("cuda", 0), ("cuda:1", 1), ("auto", 0)])
+def test_a_cuda_device_always_has_an_index(data, tmp_path, monkeypatch, asked, index):
+    # torch.cuda.set_device and get_rng_state refuse a bare "cuda" (seen on an H100, where every run
+    # failed at the first step); faked here: this machine has no GPU.
+    from diviewer.train import distributed
+
+    chosen = []
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "set_device", lambda d: chosen.append(d))
+    monkeypatch.setattr(torch.backends.cudnn, "benchmark", False)  # setup turns it on: restored after
+    monkeypatch.delenv("WORLD_SIZE", raising=False)
+    dev = distributed.setup(TrainConfig(data=data, out=tmp_path / "c", device=asked))
+    assert dev.device == torch.device("cuda", index) and chosen == [dev.device]
