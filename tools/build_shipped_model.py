@@ -76,7 +76,7 @@ def _train_defaults() -> dict[str, Any]:
     return {f.name: f.default for f in dataclasses.fields(TrainConfig)}
 
 
-def build(r: dict[str, Any], work: Path) -> None:
+def build(r: dict[str, Any], work: Path, max_steps: int | None = None) -> None:
     from diviewer.data.dataset import Dataset
 
     c = r["capture"]
@@ -95,6 +95,8 @@ def build(r: dict[str, Any], work: Path) -> None:
         train.append("--divide-albedo")
     for k, v in r["train"].items():
         train += [_TRAIN_FLAGS[k], str(v)]
+    if max_steps is not None:  # where the shipped run was stopped (its card's "steps" is the best step)
+        train += ["--max-steps", str(max_steps)]
     if (run_dir / "last.ckpt").is_file():
         train.append("--resume")
     run(*train)
@@ -109,6 +111,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("names", nargs="*", help="models in assets/models (default: all shipped models)")
     ap.add_argument("--work", type=Path, default=None, help="dataset and run folders (default runs/SCENE)")
+    ap.add_argument("--max-steps", type=int, default=None,
+                    help="stop training there (the README says where each shipped model's run stopped)")
     a = ap.parse_args()
     names = a.names or sorted(p.stem for p in MODELS.glob("*.onnx"))  # cards beside models; not *_ladder.json
     missing = [n for n in names if not (MODELS / f"{n}.json").is_file()]
@@ -118,7 +122,7 @@ def main() -> None:
         r = recipe(name)
         print(f"== {name}: {r['scene']} {r['res']} K={r['K']} {r['target']} "
               f"{'fp16' if r['fp16'] else 'fp32'}, capture {r['capture']}, train {r['train']}", flush=True)
-        build(r, a.work or ROOT / "runs" / r["scene"])
+        build(r, a.work or ROOT / "runs" / r["scene"], a.max_steps)
 
 
 if __name__ == "__main__":
