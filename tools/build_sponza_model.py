@@ -102,8 +102,10 @@ def main() -> None:
                        "bytes": model.stat().st_size, "inference_ms": test["inference_ms"],
                        "splits": {s: {m: {q: r["methods"][m][q]["mean"] for q in ("psnr", "ssim", "psnr_tm", "ssim_tm")}
                                       for m in ("neural", "direct")} for s, r in scores.items()}})
-    best = max(r["splits"]["test"]["neural"]["psnr_tm"] for r in ladder)
-    chosen = min((r for r in ladder if r["splits"]["test"]["neural"]["psnr_tm"] >= best - a.tolerance), key=lambda r: r["K"])
+    from diviewer.bench.frontier import smallest_sufficient_k
+
+    pick = smallest_sufficient_k({r["K"]: r["splits"]["test"]["neural"]["psnr_tm"] for r in ladder}, a.tolerance)
+    best, chosen = pick["best_psnr"], next(r for r in ladder if r["K"] == pick["K"])
     record = {"scene": "sponza", "frames": a.frames, "res": a.res, "spp": a.spp, "epochs": a.epochs, "seed": a.seed,
               "target": a.target, "noise_floor": {k: v for k, v in floor.items() if k != "frames_detail"},
               "ladder": ladder, "chosen_K": chosen["K"],

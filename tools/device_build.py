@@ -159,12 +159,9 @@ class Build:
             if frames.is_dir():
                 parts.append(f"{s.name} {sum(1 for _ in frames.glob('*.json'))}/{s.frames} frames")
             for r in s.runs:
-                m = self.work / s.name / f"train_{r}" / "metrics.csv"
-                if m.is_file():
-                    rows = m.read_text().splitlines()
-                    if len(rows) > 1:
-                        cells = dict(zip(rows[0].split(","), rows[-1].split(",")))
-                        parts.append(f"{s.name}/{r} step {cells.get('step')} val_psnr_tm {cells.get('val_psnr_tm', '')[:6]}")
+                last = _last_row(self.work / s.name / f"train_{r}" / "metrics.csv")
+                if last:
+                    parts.append(f"{s.name}/{r} step {last['step']:.0f} val_psnr_tm {last.get('val_psnr_tm') or 0:.2f}")
         self.say("; ".join(parts) or "starting")
         self.save()
 
@@ -324,10 +321,10 @@ def main() -> None:
 
 
 def _last_row(path: Path) -> dict | None:
-    if not path.is_file():
-        return None
-    rows = path.read_text().splitlines()
-    return dict(zip(rows[0].split(","), rows[-1].split(","))) if len(rows) > 1 else None
+    from diviewer.train.report import read_metrics
+
+    rows = read_metrics(path)
+    return rows[-1] if rows else None
 
 
 if __name__ == "__main__":

@@ -23,13 +23,16 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from diviewer.bench.frontier import smallest_sufficient_k  # noqa: E402  (the bench's rule, the same K)
+
 MODELS = ROOT / "assets" / "models"
 QUALITY = ("psnr", "ssim", "psnr_tm", "ssim_tm")
 
 
 def generator_parameters(k: int) -> int:
     """netG's parameter count at width K (the 128x128 U-Net every shipped model uses)."""
-    sys.path.insert(0, str(ROOT))
     from diviewer.train.networks import NetConfig
 
     return sum(p.numel() for p in NetConfig(K=k, resolution=128, upsample="resize").build_generator().parameters())
@@ -85,8 +88,8 @@ def main() -> None:
     rows = ladder(a.results, a.scene)
     if not rows:
         sys.exit(f"{a.results}: no ladder runs of {a.scene} with test results")
-    best = max(r["test_split"]["neural"]["psnr_tm"] for r in rows)
-    chosen = min((r for r in rows if r["test_split"]["neural"]["psnr_tm"] >= best - a.tolerance), key=lambda r: r["K"])
+    pick = smallest_sufficient_k({r["K"]: r["test_split"]["neural"]["psnr_tm"] for r in rows}, a.tolerance)
+    best, chosen = pick["best_psnr"], next(r for r in rows if r["K"] == pick["K"])
     record = json.loads((a.results / "record.json").read_text())
     ev = evalset_rows(a.results, a.scene)
     out = {"scene": a.scene, "rule": f"smallest K whose tone-mapped test-split PSNR is within {a.tolerance} dB of the "

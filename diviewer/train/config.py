@@ -199,8 +199,8 @@ CHOICES: dict[str, tuple[str, ...]] = {
 """The settings that take one of a few names (the network ones are `networks.UPSAMPLES`/`NORMS`)."""
 
 RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "beta1", "beta2", "lambda_L1", "target",
-                                 "divide_albedo", "seed", "dropout", "ndf", "gan_weight", "gan_mode", "recon_loss", "recon_space",
-                                 "n_layers_D", "norm_D", "d_lr", "upsample", "norm", "train_frames")
+                                 "divide_albedo", "seed", "dropout", "ndf", "gan_weight", "gan_mode", "recon_loss",
+                                 "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample", "norm", "train_frames")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change)."""
 
 RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save_every", "patience", "val_every_steps")

@@ -89,13 +89,12 @@ def lr_factor(cfg: TrainConfig, step: int, horizon: int) -> float:
     return LR_FLOOR + (1.0 - LR_FLOOR) * 0.5 * (1.0 + math.cos(math.pi * t))
 
 
-def set_learning_rate(nets: Nets, cfg: TrainConfig, step: int, horizon: int) -> float:
-    """Apply the schedule to both optimizers (netD keeps its own base rate); returns netG's rate."""
+def set_learning_rate(nets: Nets, cfg: TrainConfig, step: int, horizon: int) -> None:
+    """Apply the schedule to both optimizers (netD keeps its own base rate)."""
     f = lr_factor(cfg, step, horizon)
     for opt, base in ((nets.optG, cfg.lr), (nets.optD, cfg.d_lr or cfg.lr)):
         for group in opt.param_groups:
             group["lr"] = base * f
-    return cfg.lr * f
 
 
 def _accuracy(pred: torch.Tensor, real: bool, gan_mode: str) -> torch.Tensor:
