@@ -46,6 +46,28 @@ out vec4 out_color;
 #endif
 
 #if defined DIRECTIONAL
+// Percentage-closer filtering: the mean of (2r+1)^2 bilinear depth comparisons at whole-texel offsets
+// around uv. Those taps cover (2r+2)^2 texels, each weighted by wx(i) * wy(j), with wx = 1 - f.x at
+// the block's left column, f.x at its right one and 1 between: the same sum as the taps', from
+// (r+1)^2 textureGather calls of four comparisons each instead of (2r+1)^2 filtered lookups.
+float pcf(vec2 uv, float ref) {
+    int r = u_pcf_radius;
+    vec2 size = vec2(textureSize(u_shadow_map, 0));
+    vec2 st = uv * size - 0.5;
+    vec2 base = floor(st);
+    vec2 f = st - base;
+    float sum = 0.0;
+    for (int j = -r; j <= r + 1; j += 2)
+        for (int i = -r; i <= r + 1; i += 2) {
+            // texels (i, j), (i+1, j), (i, j+1), (i+1, j+1) come back as w, z, x, y
+            vec4 g = textureGather(u_shadow_map, (base + vec2(i, j) + 1.0) / size, ref);
+            vec2 wx = vec2(i == -r ? 1.0 - f.x : 1.0, i + 1 == r + 1 ? f.x : 1.0);
+            vec2 wy = vec2(j == -r ? 1.0 - f.y : 1.0, j + 1 == r + 1 ? f.y : 1.0);
+            sum += dot(g, vec4(wx.x * wy.y, wx.y * wy.y, wx.y * wy.x, wx.x * wy.x));
+        }
+    return sum / float((2 * r + 1) * (2 * r + 1));
+}
+
 float visibility(vec3 p, vec3 n, float cos_t) {
     float tan_t = sqrt(max(1.0 - cos_t * cos_t, 0.0)) / max(cos_t, 1e-3);
     vec3 q = p + n * (u_normal_offset * u_texel_world);
@@ -53,15 +75,7 @@ float visibility(vec3 p, vec3 n, float cos_t) {
     vec3 s = c.xyz * 0.5 + 0.5;
     if (any(lessThan(s.xy, vec2(0.0))) || any(greaterThan(s.xy, vec2(1.0))) || s.z > 1.0) return 1.0;
     float bias = (u_bias + u_slope_bias * min(tan_t, 10.0)) * u_texel_world / u_depth_range;
-    vec2 texel = 1.0 / vec2(textureSize(u_shadow_map, 0));
-    float sum = 0.0;
-    int taps = 0;
-    for (int y = -u_pcf_radius; y <= u_pcf_radius; ++y)
-        for (int x = -u_pcf_radius; x <= u_pcf_radius; ++x) {
-            sum += texture(u_shadow_map, vec3(s.xy + vec2(x, y) * texel, s.z - bias));
-            ++taps;
-        }
-    return sum / float(taps);
+    return pcf(s.xy, s.z - bias);
 }
 #elif defined POINT_LIGHT
 float visibility(vec3 p, vec3 n, float cos_t) {

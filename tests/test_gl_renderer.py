@@ -156,6 +156,29 @@ def test_emission_is_added_to_direct(ctx):
     np.testing.assert_allclose(f["direct"], np.broadcast_to([1.5, 0.0, 3.0], f["direct"].shape), rtol=1e-6)
 
 
+def test_lights_and_emission_add_up(ctx):
+    # The first light writes over the cleared target, later ones and emission add to it: the sum of
+    # the parts, frame after frame (no term left over from the previous frame); a scene that emits
+    # nothing skips the emission pass.
+    sun = {"name": "sun", "type": "directional", "direction": [0.3, -0.2, -1.0], "irradiance": 1.0}
+    bulb = {"name": "bulb", "type": "point", "position": [0.2, 0.1, -1.0], "intensity": 0.5}
+    parts = [render(ctx, facing_plane(lights=[light]))["direct"] for light in (sun, bulb)]
+    scene = facing_plane(lights=[sun, bulb])
+    mat = dataclasses.replace(scene.materials["m"], emission=(0.25, 0.5, 0.0))
+    glowing = dataclasses.replace(scene, materials={**scene.materials, "m": mat})
+    dark = Renderer(ctx, scene, 4, 4)
+    assert not dark.emissive
+    dark.release()
+    r = Renderer(ctx, glowing, RES, RES)
+    try:
+        assert r.emissive
+        for _ in range(2):
+            f = r.frame()
+            np.testing.assert_allclose(f["direct"], parts[0] + parts[1] + [0.25, 0.5, 0.0], rtol=1e-5, atol=1e-6)
+    finally:
+        r.release()
+
+
 @pytest.mark.parametrize("scale", [1e-6, 1.0, 1e6])
 def test_direct_is_linear_in_light_intensity(ctx, scale):
     """Over twelve orders of magnitude the direct buffer scales exactly with the light."""
@@ -309,3 +332,64 @@ def test_shadow_map_is_cached_until_the_light_or_an_object_moves(ctx):
         assert r.shadow_renders == 3
     finally:
         r.release()
+
+
+PCF_PROBE = """
+layout(local_size_x = 64) in;
+#define SHADOW_LOOKUP 1
+#define DIRECTIONAL 1
+#include "direct.glsl"
+layout(std430, binding = 0) readonly buffer Queries { vec4 queries[]; };   // uv, reference depth, -
+layout(std430, binding = 1) writeonly buffer Results { vec2 results[]; };  // pcf(), the taps' mean
+void main() {
+    uint k = gl_GlobalInvocationID.x;
+    vec2 uv = queries[k].xy;
+    float ref = queries[k].z;
+    vec2 texel = 1.0 / vec2(textureSize(u_shadow_map, 0));
+    float sum = 0.0;
+    for (int y = -u_pcf_radius; y <= u_pcf_radius; ++y)
+        for (int x = -u_pcf_radius; x <= u_pcf_radius; ++x)
+            sum += texture(u_shadow_map, vec3(uv + vec2(x, y) * texel, ref));
+    results[k] = vec2(pcf(uv, ref), sum / float((2 * u_pcf_radius + 1) * (2 * u_pcf_radius + 1)));
+}
+"""
+
+
+@pytest.mark.parametrize("radius", [0, 1, 2])
+def test_gathered_pcf_equals_the_mean_of_bilinear_comparison_taps(ctx, radius):
+    # direct.glsl's pcf() sums textureGather comparisons with bilinear weights; it must equal the
+    # (2r+1)^2 filtered shadow lookups it replaces, anywhere on the map (edges clamp), for random
+    # depths, including references equal to a stored depth (the comparison is <=).
+    import moderngl
+
+    from diviewer.gl.shaders import ShaderCache
+
+    rng = np.random.default_rng(radius)
+    size = 16
+    depths = rng.uniform(0.2, 0.8, (size, size)).astype("f4")
+    tex = ctx.depth_texture((size, size), data=depths.tobytes())
+    tex.compare_func = "<="
+    tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    tex.repeat_x = tex.repeat_y = False
+    n = 1024
+    q = np.zeros((n, 4), "f4")
+    q[:, :2] = rng.uniform(-0.05, 1.05, (n, 2))
+    q[:, 2] = rng.uniform(0.15, 0.85, n)
+    q[:64, 2] = depths.ravel()[rng.integers(0, size * size, 64)]  # ties
+    cache = ShaderCache(ctx)
+    prog = cache.compute_source(PCF_PROBE)
+    queries, results = ctx.buffer(q.tobytes()), ctx.buffer(reserve=n * 8)
+    try:
+        tex.use(location=0)
+        prog["u_shadow_map"] = 0
+        prog["u_pcf_radius"] = radius
+        queries.bind_to_storage_buffer(0)
+        results.bind_to_storage_buffer(1)
+        prog.run(n // 64)
+        ctx.memory_barrier()
+        got = np.frombuffer(results.read(), "f4").reshape(n, 2)
+    finally:
+        for obj in (queries, results, prog, tex):
+            obj.release()
+    assert got[:, 1].min() < 0.1 and got[:, 1].max() > 0.9  # both lit and shadowed queries
+    np.testing.assert_allclose(got[:, 0], got[:, 1], atol=2e-5)

@@ -524,6 +524,40 @@ def test_cosine_decay_is_applied_and_resumes_on_the_same_curve(data, tmp_path):
         train(tiny(data, tmp_path / "b", epochs=4), resume=True, log=quiet)
 
 
+def test_a_delayed_cosine_is_constant_then_anneals_to_the_floor(data, tmp_path):
+    from diviewer.train.step import LR_FLOOR, constant_until, lr_factor
+
+    cfg = TrainConfig(data=data, out=tmp_path / "c", lr_decay="cosine", lr_decay_start=40)
+    assert {lr_factor(cfg, s, 100) for s in range(41)} == {1.0}
+    assert lr_factor(cfg, 70, 100) == pytest.approx(0.5 * (1 + LR_FLOOR))  # half way through the anneal
+    assert lr_factor(cfg, 100, 100) == pytest.approx(LR_FLOOR) and lr_factor(cfg, 90, 30) == LR_FLOOR
+    factors = [lr_factor(cfg, s, 100) for s in range(101)]
+    assert all(a >= b for a, b in zip(factors, factors[1:]))
+    assert constant_until(cfg, 40) and not constant_until(cfg, 41)
+    assert constant_until({"lr_decay": "none"}, 10**6) and constant_until({}, 5)
+    with pytest.raises(DiviewerError, match="lr_decay_start"):
+        TrainConfig(data=data, out=tmp_path / "c", lr_decay="cosine", lr_decay_start=-1)
+
+
+def test_a_constant_run_resumes_into_an_anneal_like_a_straight_run(data, tmp_path):
+    # 3 epochs of 2 steps: a constant run stopped after 3 steps and resumed into a cosine that starts
+    # at step 3 ends with the weights of a straight run on that schedule; an anneal that would
+    # rewrite steps already taken is refused, naming the field.
+    straight = train(tiny(data, tmp_path / "a", epochs=3, lr_decay="cosine", lr_decay_start=3), log=quiet)
+    train(tiny(data, tmp_path / "b", epochs=3, max_steps=3), log=quiet)
+    resumed = train(tiny(data, tmp_path / "b", epochs=3, lr_decay="cosine", lr_decay_start=3), resume=True,
+                    log=quiet)
+    assert straight["step"] == resumed["step"] == 6
+    a, b = load_checkpoint(tmp_path / "a" / "last.ckpt"), load_checkpoint(tmp_path / "b" / "last.ckpt")
+    assert b["config"]["lr_decay"] == "cosine" and b["config"]["lr_decay_start"] == 3
+    assert a["optG"]["param_groups"][0]["lr"] < 2e-4 * 0.5
+    for k, v in a["netG"].items():
+        torch.testing.assert_close(b["netG"][k], v, rtol=1e-5, atol=1e-6, msg=k)
+    train(tiny(data, tmp_path / "c", epochs=3, max_steps=3), log=quiet)
+    with pytest.raises(DiviewerError, match="lr_decay"):  # step 3 would have run at a lower rate
+        train(tiny(data, tmp_path / "c", epochs=3, lr_decay="cosine", lr_decay_start=1), resume=True, log=quiet)
+
+
 @pytest.mark.parametrize("asked,index", [("cuda", 0), ("cuda:1", 1), ("auto", 0)])
 def test_a_cuda_device_always_has_an_index(data, tmp_path, monkeypatch, asked, index):
     # torch.cuda.set_device and get_rng_state refuse a bare "cuda" (seen on an H100, where every run

@@ -38,7 +38,7 @@ depth, seed and splits) and `train --epochs 30`, as README's "The shipped models
 # Training settings of a recipe, as `diviewer train` spells them; K, target and divide_albedo come
 # from the card itself, and how a machine runs a job (device, workers, autocast) is not a recipe.
 _TRAIN_FLAGS = {"epochs": "--epochs", "batch_size": "--batch-size", "lr": "--lr", "lambda_L1": "--lambda-l1",
-                "ndf": "--ndf", "seed": "--seed", "lr_decay": "--lr-decay", "val_every": "--val-every",
+                "ndf": "--ndf", "seed": "--seed", "lr_decay": "--lr-decay", "lr_decay_start": "--lr-decay-start", "val_every": "--val-every",
                 "save_every": "--save-every",
                 "gan_weight": "--gan-weight", "gan_mode": "--gan-mode", "recon_loss": "--recon-loss",
                 "recon_space": "--recon-space", "n_layers_D": "--n-layers-d", "norm_D": "--norm-d", "d_lr": "--d-lr",

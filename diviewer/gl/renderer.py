@@ -333,17 +333,30 @@ class Renderer:
         self._screen_vaos[prog.glo].render(moderngl.TRIANGLES, vertices=3)
 
     def _direct_pass(self, frame: "FrameView") -> None:
-        """Each light's shadowed Lambert term, then emission, added into the direct-light target."""
+        """Each light's shadowed Lambert term, then emission, added into the direct-light target.
+
+        The first light writes over the cleared target (adding to zero is writing; a full-resolution
+        float blend is a read per pixel on a software rasterizer); emission is drawn only when a material
+        of the scene emits (otherwise it is a full-resolution pass that adds zeros).
+        """
         self._direct_fbo.use()
         self._direct_fbo.clear(0.0, 0.0, 0.0, 0.0)
-        for light in frame.config.lights:
-            self._light_pass(frame.config, light, frame.view, self._shadows.get(light.name))
-        self._emission_pass()
+        for i, light in enumerate(frame.config.lights):
+            self._light_pass(frame.config, light, frame.view, self._shadows.get(light.name), blend=i > 0)
+        if self.emissive:
+            self._emission_pass()
 
-    def _light_pass(self, config: FrameConfig, light, view: np.ndarray, shadow: dict | None) -> None:
+    @property
+    def emissive(self) -> bool:
+        """Whether any material of the scene emits light."""
+        return any(any(c > 0.0 for c in m.emission) for m in self.scene.materials.values())
+
+    def _light_pass(self, config: FrameConfig, light, view: np.ndarray, shadow: dict | None,
+                    blend: bool = True) -> None:
+        """One light's term, added to the target (``blend``) or written over it."""
         ctx = self.ctx
         self._direct_fbo.use()
-        ctx.enable_only(moderngl.BLEND)
+        ctx.enable_only(moderngl.BLEND if blend else moderngl.NOTHING)
         ctx.blend_func = moderngl.ONE, moderngl.ONE
         directional = isinstance(light, DirectionalLight)
         prog = self._screen_program({"DIRECTIONAL": 1} if directional else {"POINT_LIGHT": 1})

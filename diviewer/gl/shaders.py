@@ -22,8 +22,12 @@ def _source(name: str, seen: tuple[str, ...] = ()) -> str:
     if name in seen:
         raise RuntimeError(f"shader include cycle: {' -> '.join(seen + (name,))}")
     path = Path(shaders_dir()) / name
-    text = path.read_text()
-    return _INCLUDE.sub(lambda m: _source(m.group(1), seen + (name,)), text)
+    return _resolve(path.read_text(), seen + (name,))
+
+
+def _resolve(text: str, seen: tuple[str, ...] = ()) -> str:
+    """``text`` with each ``#include "file"`` replaced by that file of shaders/ (recursively)."""
+    return _INCLUDE.sub(lambda m: _source(m.group(1), seen), text)
 
 
 class ShaderCache:
@@ -52,6 +56,11 @@ class ShaderCache:
             src = _source(name)
             self._programs[key] = self.ctx.compute_shader(self._with_defines(src, {"COMPUTE_SHADER": 1, **(defines or {})}))
         return self._programs[key]
+
+    def compute_source(self, text: str, defines: dict[str, object] | None = None) -> moderngl.ComputeShader:
+        """A compute shader from source text that may ``#include`` files of shaders/ (e.g. a test's probe of
+        a shader function); not cached."""
+        return self.ctx.compute_shader(self._with_defines(_resolve(text), {"COMPUTE_SHADER": 1, **(defines or {})}))
 
     @staticmethod
     def _with_defines(src: str, defines: dict[str, object]) -> str:

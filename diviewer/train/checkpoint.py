@@ -142,8 +142,18 @@ def check_resume(cfg: TrainConfig, ckpt: Mapping[str, Any], ds: Dataset, train_i
     old = ckpt["config"]
     # Settings a checkpoint from before they existed does not record had their default then.
     default = {f.name: f.default for f in dataclasses.fields(TrainConfig)}
-    diff = [f"{k}: {old.get(k, default[k])!r} -> {getattr(cfg, k)!r}" for k in RESUME_FIXED
+    # The schedule may change only where it leaves the steps already taken as they were: a run at a
+    # constant rate resumed into an anneal that starts at or after its step (see lr_decay_start).
+    from diviewer.train.step import constant_until
+
+    same_past = constant_until(old, ckpt["step"]) and constant_until(cfg, ckpt["step"])
+    fixed = [k for k in RESUME_FIXED if not (k == "lr_decay" and same_past)]
+    diff = [f"{k}: {old.get(k, default[k])!r} -> {getattr(cfg, k)!r}" for k in fixed
             if old.get(k, default[k]) != getattr(cfg, k)]
+    start_then = old.get("lr_decay_start", default["lr_decay_start"])
+    if cfg.lr_decay != "none" and start_then != cfg.lr_decay_start and not same_past:
+        diff.append(f"lr_decay_start: {start_then!r} -> {cfg.lr_decay_start!r} (the run is at step "
+                    f"{ckpt['step']}: only an anneal that has not begun may move)")
     if diff:
         raise DiviewerError(f"cannot resume with different settings ({'; '.join(diff)}); "
                             "drop those options or choose another --out", path=path)

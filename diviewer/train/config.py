@@ -39,6 +39,11 @@ class TrainConfig:
     """Learning-rate schedule: "none" (constant, pix2pix) or "cosine" (from lr down to lr / 100 over
     epochs x steps per epoch, a pure function of the step, so a resumed run follows the same curve)."""
 
+    lr_decay_start: int = 0
+    """With "cosine": the step the decay begins at; the rate is constant before it (a constant phase,
+    then an anneal). A run trained at a constant rate can be resumed into an anneal that starts at or
+    after its step: every step it took ran at the rate the new schedule gives it."""
+
     beta1: float = 0.5
     """Adam beta1 (pix2pix: 0.5, which keeps GAN training stable)."""
 
@@ -137,7 +142,7 @@ class TrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 fail(name, f"must be a positive integer, got {v!r}")
-        for name in ("num_workers", "save_every", "seed", "patience", "val_every_steps"):
+        for name in ("num_workers", "save_every", "seed", "patience", "val_every_steps", "lr_decay_start"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 fail(name, f"must be an integer >= 0, got {v!r}")
@@ -203,6 +208,6 @@ RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "beta1", "
                                  "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample", "norm", "train_frames")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change)."""
 
-RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save_every", "patience", "val_every_steps")
+RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "lr_decay_start", "epochs", "val_every", "save_every", "patience", "val_every_steps")
 """Settings `diviewer train --resume` takes from the checkpoint unless given again (max_steps, precision,
 device and num_workers describe this invocation and this machine, so they are not inherited)."""

@@ -81,12 +81,23 @@ LR_FLOOR = 0.01
 def lr_factor(cfg: TrainConfig, step: int, horizon: int) -> float:
     """The learning rate at ``step`` (0-based, the step about to run) as a fraction of ``cfg.lr``.
 
-    "none": 1. "cosine": 1 at step 0, LR_FLOOR at ``horizon`` (epochs x steps per epoch) and after.
+    "none": 1. "cosine": 1 up to ``cfg.lr_decay_start`` (0: from the first step), then a half cosine
+    down to LR_FLOOR at ``horizon`` (epochs x steps per epoch), LR_FLOOR after it.
     """
-    if cfg.lr_decay == "none" or horizon <= 0:
+    start = cfg.lr_decay_start
+    if cfg.lr_decay == "none" or step <= start:
         return 1.0
-    t = min(max(step / horizon, 0.0), 1.0)
+    if horizon <= start:
+        return LR_FLOOR if horizon > 0 else 1.0
+    t = min((step - start) / (horizon - start), 1.0)
     return LR_FLOOR + (1.0 - LR_FLOOR) * 0.5 * (1.0 + math.cos(math.pi * t))
+
+
+def constant_until(cfg: Any, step: int) -> bool:
+    """Whether the schedule of ``cfg`` (a TrainConfig or a checkpoint's config dict) runs every step
+    before ``step`` at the full rate, whatever the horizon."""
+    get = cfg.get if isinstance(cfg, dict) else (lambda k, d=None: getattr(cfg, k, d))
+    return get("lr_decay", "none") == "none" or (get("lr_decay_start", 0) or 0) >= step
 
 
 def set_learning_rate(nets: Nets, cfg: TrainConfig, step: int, horizon: int) -> None:
