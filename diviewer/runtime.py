@@ -137,7 +137,8 @@ def choose_providers(available: list[str], requested: str | None = None) -> list
 class NeuralGI:
     """One loaded model: checks, then turns (N, H, W, 10) raw buffers into (N, H, W, 3) radiance."""
 
-    def __init__(self, path: str | Path, scene=None, provider: str | None = None, threads: int = 0):
+    def __init__(self, path: str | Path, scene=None, provider: str | None = None, threads: int = 0,
+                 spin: bool = False):
         import onnxruntime as ort
 
         self.path = Path(path)
@@ -147,6 +148,11 @@ class NeuralGI:
         opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
         if threads:
             opts.intra_op_num_threads = threads
+        # Unless ``spin``, onnxruntime's worker threads sleep after a run instead of spinning for the next:
+        # in the viewer and the benchmark the next work is the frame's GL passes, which a software
+        # rasterizer runs on the very cores they would spin on (tools/frame_probe.py --compare spin).
+        if not spin:
+            opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
         providers = choose_providers(ort.get_available_providers(), provider)
         try:
             self.session = ort.InferenceSession(str(self.path), sess_options=opts, providers=providers)

@@ -1,22 +1,14 @@
 // Direct light, deferred: one additive pass per light (Lambert, shadow-mapped with PCF), plus one
 // EMISSION pass. Radiance of a diffuse surface: albedo / pi * E * cos(theta) for a directional light
 // of irradiance E; albedo / pi * I * cos(theta) / r^2 for a point light of intensity I (Mitsuba's).
-// With SHADOW_LOOKUP defined (and no stage macro), only the uniforms and visibility() are compiled:
-// the VXGI injection (vxgi_inject.glsl) includes this file so that both shadow the same way.
+// With SHADOW_LOOKUP defined (and no stage macro), only the uniforms and the functions are compiled:
+// the VXGI injection (vxgi_inject.glsl) includes this file so that both shadow the same way, and
+// direct_inline.glsl so that the neural pass computes a pixel's direct light exactly as this pass does.
 #if defined VERTEX_SHADER
 #include "fullscreen.glsl"
 #elif defined FRAGMENT_SHADER || defined SHADOW_LOOKUP
 
 const float PI = 3.14159265358979;
-
-#if !defined SHADOW_LOOKUP
-in vec2 v_uv;
-#endif
-
-uniform sampler2D u_depth;
-uniform sampler2D u_normal;
-uniform sampler2D u_albedo;
-uniform sampler2D u_emission;
 
 uniform mat4 m_inv_view;          // camera to world
 uniform vec2 u_tan_half_fov;      // (tan(fov_y / 2) * aspect, tan(fov_y / 2))
@@ -122,7 +114,30 @@ void light_at(vec3 p, out vec3 l, out vec3 e) {
 }
 #endif
 
+// One light's term at a pixel (centre ``pixel`` of an image of ``size``) from its G-buffer values:
+// linear depth (> 0: a surface), view-space normal, albedo. Zero where the surface faces away.
+#if defined DIRECTIONAL || defined POINT_LIGHT
+vec3 light_term(vec2 pixel, vec2 size, float depth, vec3 n_view, vec3 albedo) {
+    vec2 ndc = (pixel / size) * 2.0 - 1.0;
+    vec3 p_view = depth * vec3(ndc * u_tan_half_fov, -1.0);
+    vec3 p = (m_inv_view * vec4(p_view, 1.0)).xyz;
+    vec3 n = normalize(mat3(m_inv_view) * n_view);
+    vec3 l, e;
+    light_at(p, l, e);
+    float cos_t = dot(n, l);
+    if (cos_t <= 0.0) return vec3(0.0);
+    float v = u_shadows ? visibility(p, n, cos_t) : 1.0;
+    return albedo / PI * e * (cos_t * v);
+}
+#endif
+
 #if !defined SHADOW_LOOKUP
+in vec2 v_uv;
+uniform sampler2D u_depth;
+uniform sampler2D u_normal;
+uniform sampler2D u_albedo;
+uniform sampler2D u_emission;
+
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
     float depth = texelFetch(u_depth, px, 0).r;
@@ -130,18 +145,8 @@ void main() {
 #if defined EMISSION
     out_color = vec4(texelFetch(u_emission, px, 0).rgb, 1.0);
 #else
-    vec3 n_view = texelFetch(u_normal, px, 0).xyz;
-    vec3 albedo = texelFetch(u_albedo, px, 0).rgb;
-    vec2 ndc = (gl_FragCoord.xy / vec2(textureSize(u_depth, 0))) * 2.0 - 1.0;
-    vec3 p_view = depth * vec3(ndc * u_tan_half_fov, -1.0);
-    vec3 p = (m_inv_view * vec4(p_view, 1.0)).xyz;
-    vec3 n = normalize(mat3(m_inv_view) * n_view);
-    vec3 l, e;
-    light_at(p, l, e);
-    float cos_t = dot(n, l);
-    if (cos_t <= 0.0) discard;
-    float v = u_shadows ? visibility(p, n, cos_t) : 1.0;
-    out_color = vec4(albedo / PI * e * (cos_t * v), 1.0);
+    out_color = vec4(light_term(gl_FragCoord.xy, vec2(textureSize(u_depth, 0)), depth,
+                                texelFetch(u_normal, px, 0).xyz, texelFetch(u_albedo, px, 0).rgb), 1.0);
 #endif
 }
 #endif  // !SHADOW_LOOKUP

@@ -5,7 +5,8 @@
 // or with AREA defined the mean of the pixels whose centres fall in its footprint for normal, albedo and
 // direct light (depth stays the nearest pixel's: a mean of two surfaces' depths is no surface's). The channel layout is not written here:
 // gl/neural.py injects it from diviewer.encoding.INPUT_CHANNELS as defines (IN_CHANNELS, the total,
-// IN_<NAME>, where each buffer starts, and IN_<NAME>_N, its component count, checked below).
+// IN_<NAME>, where each buffer starts, and IN_<NAME>_N, its component count, checked below). The direct
+// light is read from the direct pass's target or, with INLINE_DIRECT, computed (direct_inline.glsl).
 #if defined COMPUTE_SHADER
 
 #if !defined IN_CHANNELS || !defined IN_DEPTH || !defined IN_NORMAL || !defined IN_ALBEDO || !defined IN_DIRECT
@@ -20,11 +21,12 @@ layout(local_size_x = 8, local_size_y = 8) in;
 uniform sampler2D u_depth;
 uniform sampler2D u_normal;
 uniform sampler2D u_albedo;
-uniform sampler2D u_direct;
 uniform ivec2 u_size;       // GI resolution (the packed image's)
 uniform ivec2 u_src_size;   // the G-buffer's resolution
 
 layout(std430, binding = 0) writeonly buffer Packed { float data[]; };
+
+#include "direct_inline.glsl"
 
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
@@ -32,9 +34,11 @@ void main() {
     int base = ((u_size.y - 1 - p.y) * u_size.x + p.x) * IN_CHANNELS;
     vec2 scale = vec2(u_src_size) / vec2(u_size);
     ivec2 q = clamp(ivec2((vec2(p) + 0.5) * scale), ivec2(0), u_src_size - 1);
+    vec2 src = vec2(u_src_size);
+    float z = texelFetch(u_depth, q, 0).r;
     vec3 n = texelFetch(u_normal, q, 0).xyz;
     vec3 a = texelFetch(u_albedo, q, 0).rgb;
-    vec3 d = texelFetch(u_direct, q, 0).rgb;
+    vec3 d = direct_at(q, src, z, n, a);
 #if defined AREA
     // Pixels whose centres lie in [p, p + 1) * scale; none when the GI is finer than the G-buffer.
     ivec2 lo = ivec2(ceil(vec2(p) * scale - 0.5));
@@ -43,9 +47,11 @@ void main() {
         vec3 sn = vec3(0.0), sa = vec3(0.0), sd = vec3(0.0);
         for (int y = lo.y; y < hi.y; ++y)
             for (int x = lo.x; x < hi.x; ++x) {
-                sn += texelFetch(u_normal, ivec2(x, y), 0).xyz;
-                sa += texelFetch(u_albedo, ivec2(x, y), 0).rgb;
-                sd += texelFetch(u_direct, ivec2(x, y), 0).rgb;
+                ivec2 o = ivec2(x, y);
+                vec3 no = texelFetch(u_normal, o, 0).xyz, ao = texelFetch(u_albedo, o, 0).rgb;
+                sn += no;
+                sa += ao;
+                sd += direct_at(o, src, texelFetch(u_depth, o, 0).r, no, ao);
             }
         float count = float((hi.x - lo.x) * (hi.y - lo.y));
         n = dot(sn, sn) > 0.0 ? normalize(sn) : vec3(0.0);
@@ -53,7 +59,7 @@ void main() {
         d = sd / count;
     }
 #endif
-    data[base + IN_DEPTH] = texelFetch(u_depth, q, 0).r;
+    data[base + IN_DEPTH] = z;
     data[base + IN_NORMAL] = n.x; data[base + IN_NORMAL + 1] = n.y; data[base + IN_NORMAL + 2] = n.z;
     data[base + IN_ALBEDO] = a.r; data[base + IN_ALBEDO + 1] = a.g; data[base + IN_ALBEDO + 2] = a.b;
     data[base + IN_DIRECT] = d.r; data[base + IN_DIRECT + 1] = d.g; data[base + IN_DIRECT + 2] = d.b;

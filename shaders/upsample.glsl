@@ -1,7 +1,8 @@
 // Neural GI composite at the window's resolution: the network's indirect light, predicted at the GI
 // resolution and demodulated by gi_guide.glsl, upsampled with a joint bilateral filter guided by the
 // full-resolution depth and normals, multiplied by each pixel's albedo and added to the full-resolution
-// direct light.
+// direct light (read from the direct pass's target, or with INLINE_DIRECT computed here:
+// direct_inline.glsl).
 #if defined VERTEX_SHADER
 #include "fullscreen.glsl"
 #elif defined FRAGMENT_SHADER
@@ -11,7 +12,6 @@ in vec2 v_uv;
 uniform sampler2D u_depth;      // full resolution
 uniform sampler2D u_normal;
 uniform sampler2D u_albedo;
-uniform sampler2D u_direct;
 uniform sampler2D u_irradiance_depth;  // GI resolution (gi_guide.glsl): indirect / albedo, depth
 uniform sampler2D u_guide_normal;      // GI resolution: normal
 uniform ivec2 u_gi_size;
@@ -20,6 +20,8 @@ uniform float u_normal_power;   // exponent of the normals' cosine
 uniform bool u_indirect_only;   // write the upsampled indirect light (albedo x irradiance) alone
 
 out vec4 out_color;
+
+#include "direct_inline.glsl"
 
 struct Texel { float depth; vec3 normal; vec3 indirect; };
 
@@ -42,7 +44,7 @@ void main() {
     float z = texelFetch(u_depth, p, 0).r;
     vec3 n = texelFetch(u_normal, p, 0).xyz;
     vec3 albedo = texelFetch(u_albedo, p, 0).rgb;
-    vec3 direct = texelFetch(u_direct, p, 0).rgb;
+    vec3 direct = direct_at(p, vec2(textureSize(u_depth, 0)), z, n, albedo);
     // This pixel's centre in GI texel coordinates; its 2x2 bilinear neighbours, weighted by similarity.
     vec2 g = v_uv * vec2(u_gi_size) - 0.5;
     ivec2 g0 = ivec2(floor(g));

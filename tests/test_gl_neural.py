@@ -13,9 +13,11 @@ pytest.importorskip("onnx")
 
 W, H, F = 64, 48, 4  # render size and its ratio to the GI resolution
 ALBEDO = 0.5
+SUN = {"name": "sun", "type": "directional", "direction": [0.6, -0.3, -0.75], "irradiance": 3.0}
+BULB = {"name": "bulb", "type": "point", "position": [0.8, 0.3, -0.5], "intensity": 5.0}
 
 
-def _pass(ctx, tmp_path, gi=(W // F, H // F), **settings):
+def _pass(ctx, tmp_path, gi=(W // F, H // F), scene=None, **settings):
     """A renderer at W x H with a NeuralPass at ``gi`` of a model that returns twice its direct input, so that
     its indirect light (output - direct) is the direct light it was given."""
     from onnx_models import base_meta, direct_times
@@ -23,11 +25,18 @@ def _pass(ctx, tmp_path, gi=(W // F, H // F), **settings):
     from diviewer.gl.neural import GISettings, NeuralPass
     from diviewer.gl.renderer import Renderer
 
-    scene = facing_plane()
+    scene = scene or facing_plane()
     meta = dict(base_meta(scene_hash=scene.file_hash), multiple=4, resolution=[W, H])
     model = NeuralGI(direct_times(tmp_path / "m.onnx", factor=2.0, meta=meta), scene=scene)
     renderer = Renderer(ctx, scene, W, H)
     return renderer, NeuralPass(ctx, renderer, model, gi, GISettings(**settings))
+
+
+def _nearest(gi_h: int, gi_w: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns (rows top first) of the full-resolution pixels the nearest downsample gives the GI
+    texels (rows top first): GL's texel (i, j), rows bottom first, takes pixel floor((i + 0.5) * F)."""
+    bottom_first = ((np.arange(gi_h) + 0.5) * (H / gi_h)).astype(int)
+    return (H - 1 - bottom_first)[::-1], ((np.arange(gi_w) + 0.5) * (W / gi_w)).astype(int)
 
 
 def _write(renderer, depth, normal, irradiance) -> None:
@@ -96,19 +105,18 @@ def test_joint_bilateral_upsample_keeps_a_constant_constant(ctx, tmp_path):
 def test_final_frame_is_full_resolution_direct_plus_upsampled_indirect(ctx, tmp_path):
     """On a lit plane the composite is direct + indirect at the render's resolution, and the network
     saw its inputs at the GI resolution (nearest pixel of each texel's centre)."""
-    renderer, neural = _pass(ctx, tmp_path)
+    renderer, neural = _pass(ctx, tmp_path, scene=facing_plane(lights=[BULB]))
     try:
         frame = renderer.frame()
         neural.run()
         assert neural.packed.shape == (1, H // F, W // F, 10)
-        # Nearest: GI texel (i, j) holds the pixel at floor((i + 0.5) * F) (rows top first in both).
-        idx = (np.arange(H // F) + 0.5) * F
-        jdx = (np.arange(W // F) + 0.5) * F
-        np.testing.assert_array_equal(neural.packed[0, ..., 7:], frame["direct"][idx.astype(int)][:, jdx.astype(int)])
+        rows, cols = _nearest(H // F, W // F)
+        np.testing.assert_array_equal(neural.packed[0, ..., 7:], frame["direct"][rows][:, cols])
         final = np.frombuffer(neural.composite().read(), np.float16).reshape(H, W, 4)[::-1, :, :3]
         # The model doubles the direct light, so the indirect light equals the direct light here (a plane
-        # with smoothly varying light: the upsample interpolates it).
+        # lit by a near point light, smoothly varying: the upsample interpolates it).
         lit = frame["direct"].sum(-1) > 0
+        assert lit.all() and np.ptp(frame["direct"][..., 0]) > 0.2 * frame["direct"][..., 0].max()
         np.testing.assert_allclose(final[lit], 2 * frame["direct"][lit], rtol=0.05, atol=1e-3)
     finally:
         neural.release()
@@ -122,6 +130,61 @@ def test_area_downsample_averages_the_footprint(ctx, tmp_path):
         neural.run()
         mean = frame["direct"].reshape(H // F, F, W // F, F, 3).mean(axis=(1, 3))
         np.testing.assert_allclose(neural.packed[0, ..., 7:], mean, rtol=1e-5)
+    finally:
+        neural.release()
+        renderer.release()
+
+
+def _lit_scene(lights, emission=(0.0, 0.0, 0.0)):
+    """The facing plane with a box in front of it that casts a shadow on it; the box may glow."""
+    import dataclasses
+
+    scene = facing_plane(distance=3.0, fov=70.0, lights=lights,
+                         extra_meshes={"blocker": {"shape": "box", "size": [0.6, 0.6, 0.6]}},
+                         extra_objects=[{"name": "blocker", "mesh": "blocker", "material": "occ",
+                                         "position": [0.1, 0.0, -1.5]}])
+    occ = dataclasses.replace(scene.materials["occ"], emission=tuple(emission))
+    return dataclasses.replace(scene, materials={**scene.materials, "occ": occ})
+
+
+@pytest.mark.parametrize("lights,emission,downsample", [
+    ([SUN], (0, 0, 0), "nearest"), ([BULB], (0, 0, 0), "nearest"), ([SUN], (0.5, 0.25, 0.0), "nearest"),
+    ([], (0.5, 0.25, 0.0), "nearest"), ([], (0, 0, 0), "nearest"), ([SUN], (0, 0, 0), "area"),
+])
+def test_inline_direct_light_equals_the_direct_pass(ctx, tmp_path, lights, emission, downsample):
+    """With the direct pass deferred, pack and upsample compute each pixel's direct light themselves
+    (direct_inline.glsl): the network's inputs and the final frame are those of the direct pass's
+    target, shadows (PCF), point lights and emission included, and the direct pass never runs."""
+    scene = _lit_scene(lights, emission)
+    results = []
+    for direct in (True, False):
+        renderer, neural = _pass(ctx, tmp_path, scene=scene, downsample=downsample)
+        try:
+            renderer.render(direct=direct)
+            neural.run()
+            final = np.frombuffer(neural.composite().read(), np.float16).reshape(H, W, 4)[..., :3]
+            assert neural.inline_direct is not direct and renderer.direct_pending is not direct
+            results.append((neural.packed.copy(), final.astype(np.float32)))
+        finally:
+            neural.release()
+            renderer.release()
+    (packed_a, final_a), (packed_b, final_b) = results
+    if lights or any(emission):
+        assert packed_a[..., 7:].max() > 0 and (packed_a[..., 7:].sum(-1) == 0).any()  # lit and dark texels
+    np.testing.assert_allclose(packed_b, packed_a, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(final_b, final_a, rtol=2e-3, atol=1e-4)
+
+
+def test_two_lights_fall_back_to_the_direct_pass(ctx, tmp_path):
+    """Inline direct light handles one light; with two the deferred direct pass runs before the pack."""
+    renderer, neural = _pass(ctx, tmp_path, scene=_lit_scene([SUN, BULB]))
+    try:
+        renderer.render(direct=False)
+        assert renderer.direct_pending
+        neural.run()
+        assert not neural.inline_direct and not renderer.direct_pending
+        rows, cols = _nearest(H // F, W // F)
+        np.testing.assert_array_equal(neural.packed[0, ..., 7:], renderer.read("direct")[rows][:, cols])
     finally:
         neural.release()
         renderer.release()

@@ -37,6 +37,20 @@ def test_model_runs_and_reports_metadata(tmp_path):
 
 
 @needs_onnx
+def test_worker_threads_sleep_between_runs_unless_asked_to_spin(tmp_path):
+    # Spinning onnxruntime threads take the cores the next frame's GL passes need on a software
+    # rasterizer (tools/frame_probe.py --compare spin); the same answers either way.
+    path = direct_times(tmp_path / "m.onnx")
+    sleeping, spinning = NeuralGI(path), NeuralGI(path, spin=True)
+    key = "session.intra_op.allow_spinning"
+    assert sleeping.session.get_session_options().get_session_config_entry(key) == "0"
+    with pytest.raises(Exception, match=key):  # onnxruntime's default (spin) is left alone
+        spinning.session.get_session_options().get_session_config_entry(key)
+    x = np.random.default_rng(1).random((16, 16, 10), dtype=np.float32)
+    np.testing.assert_array_equal(sleeping.run(x), spinning.run(x))
+
+
+@needs_onnx
 @pytest.mark.parametrize("case,words", [
     ("no_meta", "no diviewer metadata"),
     ("wrong_channels", "input channels"),

@@ -692,6 +692,7 @@ def _neural_session(tmp_path: Path) -> None:
     assert stats["fps"] > 0 and {"shadows", "gbuffer", "direct", "readback", "inference", "upsample",
                                  "composite"} <= set(stats["stages_ms"])
     assert stats["timing"] == "GPU timer queries"
+    assert stats["direct_light"] == "inline"  # cornell has one light: the direct pass ran only for the direct view
 
 
 def test_neural_gi_every_frame(display, tmp_path, ctx):

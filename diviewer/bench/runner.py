@@ -68,13 +68,14 @@ class GlBench:
         self.target_tex = self.ctx.texture((self.width, self.height), 4)
         self.target = self.ctx.framebuffer([self.target_tex])
 
-    def run(self, configs, warmup: int, method) -> dict:
-        """Time ``method(config) -> (texture, flip_y)`` (called after the renderer's passes) over ``configs``."""
+    def run(self, configs, warmup: int, method, direct: bool = True) -> dict:
+        """Time ``method(config) -> (texture, flip_y)`` (called after the renderer's passes) over ``configs``;
+        ``direct=False`` defers the direct pass as the viewer does (Renderer.render)."""
         frames, totals = [], []
         for i, config in enumerate([configs[k % len(configs)] for k in range(warmup)] + list(configs)):
             self.timer.reset()
             t0 = time.perf_counter()
-            self.renderer.render(config)
+            self.renderer.render(config, direct=direct)
             tex, flip = method(config)
             with self.timer.stage("composite", gpu=True):
                 self.display.run(tex, self.target, flip_y=flip)
@@ -90,14 +91,15 @@ class GlBench:
 
     def time_model(self, net, configs, warmup: int, step: int = 1) -> dict:
         """The viewer's neural frame: pack at the GI resolution (frame / step), infer, upload, the joint
-        bilateral upsample over the frame's direct light (diviewer.gl.neural), composite."""
+        bilateral upsample over the frame's direct light (diviewer.gl.neural), composite; the direct light
+        computed inline as the viewer does where the frame allows (NeuralPass.inline_direct)."""
         neural = self.neural_pass(net, step)
         try:
             def frame(config):
                 neural.run()
                 return neural.composite(), False
 
-            return self.run(configs, warmup, frame)
+            return self.run(configs, warmup, frame, direct=False)
         finally:
             neural.release()
 
@@ -223,7 +225,7 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
             f = ds.load(i)
             mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # as diviewer eval
             if passes:
-                gl.renderer.render(config_from_dict(gl.scene, _entry(ds, i)["config"]))
+                gl.renderer.render(config_from_dict(gl.scene, _entry(ds, i)["config"]), direct=False)  # as timed
             for key, (net, step) in models.items():
                 if step == 1:
                     image = net.run(pack_buffers(f))

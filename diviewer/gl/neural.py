@@ -78,11 +78,13 @@ class NeuralPass:
         w, h = gi_size or (renderer.width, renderer.height)
         model.check_size(w, h)
         self.gi_size = (w, h)
-        defines = dict(PACK_DEFINES, **({"AREA": 1} if settings.downsample == "area" else {}))
-        self.program = renderer.shaders.compute("pack.glsl", defines)
+        self._pack_defines = dict(PACK_DEFINES, **({"AREA": 1} if settings.downsample == "area" else {}))
         self.guide = renderer.shaders.compute("gi_guide.glsl", PACK_DEFINES)
-        self.upsample = renderer.shaders.program("upsample.glsl")
-        self._vao = ctx.vertex_array(self.upsample, [])
+        self._vaos: dict[int, moderngl.VertexArray] = {}
+        self._defines: dict[str, int] = {}
+        self.inline_direct = False
+        """This frame's direct light was computed inside the pack and the upsample (direct_inline.glsl),
+        not read from the renderer's direct pass (which then did not run)."""
         # Two input slots: with pipelining, frame N packs into one while frame N-1's (read by the upsample,
         # which must see the inputs its output was predicted from) stays in the other.
         self._packed = [np.empty((1, h, w, INPUT_CHANNEL_COUNT), np.float32) for _ in range(2)]
@@ -117,17 +119,53 @@ class NeuralPass:
     def pipelined(self) -> bool:
         return self.settings.pipelined
 
+    # --- the direct light: the renderer's target, or computed where it is read ---------------------
+    def _direct_defines(self) -> dict[str, int]:
+        """Decide this frame's direct light (``inline_direct``) and return the shaders' defines for it.
+
+        When the renderer deferred its direct pass and the frame has at most one light, pack and upsample
+        compute each pixel's direct light as the direct pass would have (one full-resolution pass, its
+        target and its reads fewer); otherwise the direct pass runs now, if it has not, and they read it.
+        """
+        r = self.renderer
+        ok, light = r.inline_light()
+        self.inline_direct = bool(r.direct_pending and ok)
+        if not self.inline_direct:
+            r.ensure_direct()
+            return {}
+        return {"INLINE_DIRECT": 1, **r.light_defines(light), **({"EMISSIVE": 1} if r.emissive else {})}
+
+    def _bind_gbuffer(self, prog) -> None:
+        """Units 0-3: depth, normal, albedo and the direct target (or the emission buffer); unit 4: the
+        light's shadow map (Renderer.set_direct_uniforms)."""
+        r = self.renderer
+        fourth = "emission" if self.inline_direct else "direct"
+        for i, name in enumerate(("depth", "normal", "albedo", fourth)):
+            r.textures[name].use(location=i)
+            set_uniform(prog, f"u_{name}", i)
+        _, light = r.inline_light()
+        if self.inline_direct and light is not None:
+            r.set_direct_uniforms(prog, light)
+
+    @property
+    def program(self) -> moderngl.ComputeShader:
+        """The pack program of the current direct-light variant."""
+        return self.renderer.shaders.compute("pack.glsl", {**self._pack_defines, **self._defines})
+
+    @property
+    def upsample(self) -> moderngl.Program:
+        """The upsample program of the current direct-light variant."""
+        return self.renderer.shaders.program("upsample.glsl", self._defines)
+
     # --- the network ----------------------------------------------------------------------------
     def _pack(self, slot: int) -> None:
-        r = self.renderer
-        for i, name in enumerate(INPUT_NAMES):
-            r.textures[name].use(location=i)
-            set_uniform(self.program, f"u_{name}", i)
+        r, prog = self.renderer, self.program
+        self._bind_gbuffer(prog)
         w, h = self.gi_size
-        set_uniform(self.program, "u_size", (w, h))
-        set_uniform(self.program, "u_src_size", (r.width, r.height))
+        set_uniform(prog, "u_size", (w, h))
+        set_uniform(prog, "u_src_size", (r.width, r.height))
         self.ssbos[slot].bind_to_storage_buffer(0)
-        self.program.run((w + 7) // 8, (h + 7) // 8, 1)
+        prog.run((w + 7) // 8, (h + 7) // 8, 1)
         self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
         self.ssbos[slot].read_into(self._packed[slot])
 
@@ -142,6 +180,7 @@ class NeuralPass:
 
         Pipelined, the returned texture holds the previous frame's prediction (this frame's, on the first).
         """
+        self._defines = self._direct_defines()  # may run the direct pass: before this pass's stages
         before = {k: self.timer.times.get(k, 0.0) for k in STAGES}
         slot = self._slot
         with self.timer.stage("readback"):
@@ -198,7 +237,9 @@ class NeuralPass:
         upsampled by the joint bilateral filter (``indirect_only``: the upsampled indirect light alone)."""
         if self.output is None:
             raise RuntimeError("NeuralPass.run has not been called")
-        r, prog, s = self.renderer, self.upsample, self.settings
+        if self.renderer.direct_pending and not self.inline_direct:
+            self._defines = self._direct_defines()  # a frame rendered since run(): its direct light
+        prog, s = self.upsample, self.settings
         fbo = self._final_target()
         w, h = self.gi_size
         with self.timer.stage("upsample", gpu=True):
@@ -212,17 +253,17 @@ class NeuralPass:
             self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
             fbo.use()
             self.ctx.enable_only(moderngl.NOTHING)
-            for i, name in enumerate(("depth", "normal", "albedo", "direct")):
-                r.textures[name].use(location=i)
-                set_uniform(prog, f"u_{name}", i)
+            self._bind_gbuffer(prog)
             for i, (name, t) in enumerate(zip(("u_irradiance_depth", "u_guide_normal"), self.guides)):
-                t.use(location=4 + i)
-                set_uniform(prog, name, 4 + i)
+                t.use(location=5 + i)
+                set_uniform(prog, name, 5 + i)
             set_uniform(prog, "u_gi_size", self.gi_size)
             set_uniform(prog, "u_depth_sigma", float(s.depth_sigma))
             set_uniform(prog, "u_normal_power", float(s.normal_power))
             set_uniform(prog, "u_indirect_only", bool(indirect_only))
-            self._vao.render(moderngl.TRIANGLES, vertices=3)
+            if prog.glo not in self._vaos:
+                self._vaos[prog.glo] = self.ctx.vertex_array(prog, [])
+            self._vaos[prog.glo].render(moderngl.TRIANGLES, vertices=3)
         self.timings["upsample"] = self.timer.times.get("upsample", 0.0)
         return self.final
 
@@ -239,7 +280,9 @@ class NeuralPass:
             self._worker = None
         self._inflight = None
         self._release_final()
-        self._vao.release()
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
         for b in (*self.ssbos, *self.guides):
             b.release()
         self.texture.release()

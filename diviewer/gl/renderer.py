@@ -107,6 +107,10 @@ class Renderer:
         """Shadow maps rendered so far (a cached map is not counted): the shadow cache's witness."""
         self.passes = (("shadows", self._shadow_pass), ("gbuffer", self._gbuffer_pass), ("direct", self._direct_pass))
         """The frame, in order: (stage name, pass(frame view)); each pass is one timed stage."""
+        self.frame_view: FrameView | None = None
+        """The last frame rendered: its configuration, camera matrices and bounds."""
+        self.direct_pending = False
+        """The last frame's direct pass was deferred (``render(direct=False)``) and has not run yet."""
         self.width = self.height = 0
         self.resize(width, height)
 
@@ -188,18 +192,57 @@ class Renderer:
         self.gpu.release()
 
     # --- passes ---------------------------------------------------------------------------------
-    def render(self, config: FrameConfig | None = None) -> dict[str, moderngl.Texture]:
-        """Render one frame; returns the named textures (depth, normal, albedo, emission, direct)."""
+    def render(self, config: FrameConfig | None = None, direct: bool = True) -> dict[str, moderngl.Texture]:
+        """Render one frame; returns the named textures (depth, normal, albedo, emission, direct).
+
+        ``direct=False`` defers the direct pass: ``textures["direct"]`` is then stale until
+        ``ensure_direct()`` runs it. The viewer renders so, because its neural pass computes the direct
+        light inline where it can (``inline_light``) and everything else that reads the buffer asks first.
+        """
         config = config or self.scene.default
         if self._bounds[0] is not self.scene or self._bounds[1] is not config.objects:
             # The shadow maps' fit; a loop over the objects, so once per (scene, objects tuple).
             self._bounds = (self.scene, config.objects, self.scene.bounds(config))
         frame = FrameView(config, config.camera.view_matrix(), config.camera.projection(self.width / self.height),
                           self._bounds[2])
+        self.frame_view = frame
+        self.direct_pending = not direct
         for name, run in self.passes:
+            if name == "direct" and not direct:
+                continue
             with self.timer.stage(name, gpu=True):
                 run(frame)
         return self.textures
+
+    def ensure_direct(self) -> moderngl.Texture:
+        """The direct-light target of the last frame, running the direct pass if ``render`` deferred it."""
+        if self.direct_pending:
+            with self.timer.stage("direct", gpu=True):
+                self._direct_pass(self.frame_view)
+            self.direct_pending = False
+        return self.textures["direct"]
+
+    def inline_light(self) -> tuple[bool, object]:
+        """Whether the last frame's direct light can be computed where it is read (direct_inline.glsl: at
+        most one light), and that light (None: none)."""
+        lights = self.frame_view.config.lights if self.frame_view is not None else ()
+        return len(lights) <= 1, (lights[0] if lights else None)
+
+    @staticmethod
+    def light_defines(light) -> dict[str, int]:
+        """direct.glsl's defines for one light's term (none: no light)."""
+        if light is None:
+            return {}
+        return {"DIRECTIONAL": 1} if isinstance(light, DirectionalLight) else {"POINT_LIGHT": 1}
+
+    def set_direct_uniforms(self, prog, light) -> None:
+        """The uniforms of direct.glsl's light_term() for ``light`` in the last frame: the camera's inverse
+        view and field of view, the light, its shadow map (texture unit 4)."""
+        config, view = self.frame_view.config, self.frame_view.view
+        t = math.tan(math.radians(config.camera.fov) / 2.0)
+        set_uniform(prog, "m_inv_view", cam.view_to_world(view))
+        set_uniform(prog, "u_tan_half_fov", (t * self.width / self.height, t))
+        self.set_light_uniforms(prog, light, self._shadows.get(light.name))
 
     def _draw_list(self, config: FrameConfig) -> list:
         """(GPU mesh, material, model matrix or None for world space) per draw call, opaque first.
@@ -342,7 +385,7 @@ class Renderer:
         self._direct_fbo.use()
         self._direct_fbo.clear(0.0, 0.0, 0.0, 0.0)
         for i, light in enumerate(frame.config.lights):
-            self._light_pass(frame.config, light, frame.view, self._shadows.get(light.name), blend=i > 0)
+            self._light_pass(light, blend=i > 0)
         if self.emissive:
             self._emission_pass()
 
@@ -351,19 +394,14 @@ class Renderer:
         """Whether any material of the scene emits light."""
         return any(any(c > 0.0 for c in m.emission) for m in self.scene.materials.values())
 
-    def _light_pass(self, config: FrameConfig, light, view: np.ndarray, shadow: dict | None,
-                    blend: bool = True) -> None:
-        """One light's term, added to the target (``blend``) or written over it."""
+    def _light_pass(self, light, blend: bool = True) -> None:
+        """One light's term in the last frame, added to the target (``blend``) or written over it."""
         ctx = self.ctx
         self._direct_fbo.use()
         ctx.enable_only(moderngl.BLEND if blend else moderngl.NOTHING)
         ctx.blend_func = moderngl.ONE, moderngl.ONE
-        directional = isinstance(light, DirectionalLight)
-        prog = self._screen_program({"DIRECTIONAL": 1} if directional else {"POINT_LIGHT": 1})
-        t = math.tan(math.radians(config.camera.fov) / 2.0)
-        set_uniform(prog, "m_inv_view", cam.view_to_world(view))
-        set_uniform(prog, "u_tan_half_fov", (t * self.width / self.height, t))
-        self.set_light_uniforms(prog, light, shadow)
+        prog = self._screen_program(self.light_defines(light))
+        self.set_direct_uniforms(prog, light)
         self._fullscreen(prog)
         ctx.disable(moderngl.BLEND)
 
@@ -406,7 +444,7 @@ class Renderer:
     # --- read-back ------------------------------------------------------------------------------
     def read(self, name: str) -> np.ndarray:
         """A buffer as float32, top row first: depth (H, W), the others (H, W, 3)."""
-        tex = self.textures[name]
+        tex = self.ensure_direct() if name == "direct" else self.textures[name]
         comps = 1 if name == "depth" else 3
         raw = np.frombuffer(tex.read(), dtype="f4").reshape(self.height, self.width, tex.components)
         return np.ascontiguousarray(np.flipud(raw[..., 0] if comps == 1 else raw[..., :3]))

@@ -277,6 +277,7 @@ class VXGIPass(VoxelGridPasses):
         The renderer must have rendered ``config`` (its G-buffer and direct light are read).
         """
         config = config or self.scene.default
+        self.renderer.ensure_direct()  # read by the composite; a stage of its own, so not inside one of these
         before = {k: self.timer.times.get(k, 0.0) for k in STAGES}
         self._ensure_targets()
         grid = self._fit_grid(config)

@@ -295,7 +295,9 @@ class Viewer:
             self.renderer.resize(fb_w, fb_h)
             self.gi.follow_window()
         self.timer.reset()
-        self.renderer.render(st.config)
+        # The direct pass is deferred: the neural pass computes the direct light inline where it can,
+        # and whatever else reads the buffer (a view mode, VXGI) runs the pass first.
+        self.renderer.render(st.config, direct=False)
         if not any(m.name == "reference" for m in st.modes_shown()):
             self.reference.pause()
         screen = self.ctx.screen

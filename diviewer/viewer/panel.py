@@ -385,6 +385,9 @@ class Panel:
         self._wrapped(f"GL: {self.actions.gl_renderer}", DIM)
         imgui.text_disabled(f"GL stages: {self.actions.timing_method}")
         neural = self.actions.neural
+        if neural is not None:
+            imgui.text_disabled("direct light: " + ("computed in pack and upsample" if neural.inline_direct
+                                                    else "direct pass"))
         if neural is not None and neural.pipelined:
             imgui.text(f"GI latency {neural.latency_ms:.1f} ms (one frame behind)")
         changed, on = imgui.checkbox("per-stage timing", self.actions.timer_sync)

@@ -53,6 +53,7 @@ def write_stats(path: Path, viewer, per_frame: list[dict[str, float]]) -> dict:
         "K": viewer.model.meta.get("K") if viewer.model is not None else None,
         "provider": viewer.state.provider or None,
         "gi_latency_ms": neural.latency_ms if neural is not None and neural.pipelined else None,
+        "direct_light": (("inline" if neural.inline_direct else "pass") if neural is not None else "pass"),
         "timing": viewer.timer.method,
         "shadow_renders": viewer.renderer.shadow_renders,
         "vsync": viewer.window.vsync,

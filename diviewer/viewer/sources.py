@@ -61,7 +61,8 @@ class FrameImages:
         self._vxgi: Image | None = None
 
     def buffer(self, name: str) -> Image:
-        return Image(self.v.renderer.textures[name])
+        r = self.v.renderer
+        return Image(r.ensure_direct() if name == "direct" else r.textures[name])
 
     def network_output(self) -> Image:
         v = self.v
