@@ -179,6 +179,26 @@ def test_lights_and_emission_add_up(ctx):
         r.release()
 
 
+def test_emission_target_holds_zeros_when_nothing_emits(ctx):
+    # The G-buffer pass leaves the emission target out when no material emits; the target then
+    # reads zero, also right after a scene that did emit (the viewer swaps scenes in place).
+    glowing_scene = facing_plane()
+    mat = dataclasses.replace(glowing_scene.materials["m"], emission=(1.0, 2.0, 3.0))
+    glowing_scene = dataclasses.replace(glowing_scene, materials={**glowing_scene.materials, "m": mat})
+    r = Renderer(ctx, glowing_scene, RES, RES)
+    try:
+        r.frame()
+        assert r.read("emission").max() == 3.0
+        r.scene = facing_plane()
+        r.frame()
+        assert r.read("emission").max() == 0.0 and r.read("albedo").max() > 0.0
+        r.scene = glowing_scene
+        r.frame()
+        assert r.read("emission").max() == 3.0
+    finally:
+        r.release()
+
+
 @pytest.mark.parametrize("scale", [1e-6, 1.0, 1e6])
 def test_direct_is_linear_in_light_intensity(ctx, scale):
     """Over twelve orders of magnitude the direct buffer scales exactly with the light."""

@@ -138,6 +138,12 @@ class Renderer:
         self._zbuffer = ctx.depth_renderbuffer(size)
         self._gbuffer_fbo = ctx.framebuffer(
             [self.textures[k] for k in ("depth", "normal", "albedo", "emission")], self._zbuffer)
+        # Without an emissive material the emission target is left out of the G-buffer pass (a
+        # full-resolution float target fewer to write) and holds zeros, cleared once.
+        self._gbuffer_fbo_dark = ctx.framebuffer([self.textures[k] for k in ("depth", "normal", "albedo")],
+                                                 self._zbuffer)
+        self._emission_fbo = ctx.framebuffer([self.textures["emission"]])
+        self._emission_zero = False
         self._direct_fbo = ctx.framebuffer([self.textures["direct"]])
 
     def _release_targets(self) -> None:
@@ -146,6 +152,8 @@ class Renderer:
             t.release()
         self._zbuffer.release()
         self._gbuffer_fbo.release()
+        self._gbuffer_fbo_dark.release()
+        self._emission_fbo.release()
         self._direct_fbo.release()
 
     def _shadow_target(self, light) -> tuple:
@@ -301,8 +309,13 @@ class Renderer:
 
     def _gbuffer_pass(self, frame: "FrameView") -> None:
         ctx, config, view, proj = self.ctx, frame.config, frame.view, frame.proj
-        self._gbuffer_fbo.use()
-        self._gbuffer_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        emissive = self.emissive
+        if not emissive and not self._emission_zero:
+            self._emission_fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self._emission_zero = not emissive
+        fbo = self._gbuffer_fbo if emissive else self._gbuffer_fbo_dark
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable_only(moderngl.DEPTH_TEST)
         def setup(prog):
             set_uniform(prog, "m_proj", proj)
