@@ -95,14 +95,31 @@ EQUIVALENT_BY = ("psnr_tm", "psnr", "flip_ldr")
 """Metrics the equivalent sample count is read from; the first is the headline (tables, targets)."""
 
 
-def score_frame(image: np.ndarray, truth: np.ndarray, exposure: float, mask: np.ndarray) -> dict[str, float]:
-    """Every evaluation-set metric of one frame, plus the high-frequency powers of the checkerboard ratio."""
+def score_frame(image: np.ndarray, truth: np.ndarray, exposure: float, mask: np.ndarray,
+                direct: np.ndarray | None = None) -> dict[str, float]:
+    """Every evaluation-set metric of one frame, plus the sums behind the pooled checkerboard ratio and
+    the pooled bias (given the frame's GL ``direct`` light, also the bias of the indirect light alone)."""
     a, b = tonemap(image, exposure), tonemap(truth, exposure)
     s = score(image, truth, exposure)
     s["flip_hdr"] = flip(truth, image, "HDR")
     s["flip_ldr"] = flip(b, a, "LDR")
     s["hf_power"], s["hf_power_ref"] = highpass_power(a, mask), highpass_power(b, mask)
+    s["sum"], s["sum_ref"] = float(np.sum(image, dtype=np.float64)), float(np.sum(truth, dtype=np.float64))
+    if direct is not None:
+        d = float(np.sum(direct, dtype=np.float64))
+        s["sum_indirect"], s["sum_indirect_ref"] = s["sum"] - d, s["sum_ref"] - d
     return s
+
+
+def pooled_bias(rows: list[dict], key: str = "sum") -> float | None:
+    """Signed relative error of the summed radiance over all frames, (sum image / sum truth) - 1: negative
+    where a method is darker than the truth on the whole. An unbiased estimator (the path tracer at any
+    sample count) scores ~0; L1 training on noisy targets converges to the per-pixel median, which is
+    darker than the mean where fireflies are. None without the sums or with a black truth."""
+    if not rows or any(key not in r for r in rows):
+        return None
+    ref = sum(r[f"{key}_ref"] for r in rows)
+    return sum(r[key] for r in rows) / ref - 1.0 if ref > 0 else None
 
 
 def aggregate(rows: list[dict]) -> dict:
@@ -112,6 +129,8 @@ def aggregate(rows: list[dict]) -> dict:
            for k in EVAL_KEYS}
     # Pooled over frames (each frame's flat pixels weigh alike), not a mean of per-frame ratios.
     out["checkerboard"] = power_ratio(sum(r["hf_power"] for r in rows), sum(r["hf_power_ref"] for r in rows))
+    out["bias"] = pooled_bias(rows)
+    out["bias_indirect"] = pooled_bias(rows, "sum_indirect")
     return out
 
 
@@ -179,9 +198,9 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
                 t0 = time.perf_counter()
                 y = net.run(pack_buffers(f))
                 times[key].append((time.perf_counter() - t0) * 1e3)
-                rows[key].append(score_frame(y, f["pt"], exposure, mask))
+                rows[key].append(score_frame(y, f["pt"], exposure, mask, f["direct"]))
             for key, ch in rows_of.items():
-                rows[key].append(score_frame(f[ch], f["pt"], exposure, mask))
+                rows[key].append(score_frame(f[ch], f["pt"], exposure, mask, f["direct"]))
             progress.update()
         methods = {k: aggregate(r) for k, r in rows.items()}
         ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
@@ -212,18 +231,23 @@ def format_tables(result: dict) -> list[str]:
     lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; tm = tone-mapped at "
              f"exposure {result['tonemap_exposure']:.3g}; FLIP-HDR on linear radiance, FLIP-LDR on tone-mapped; "
              f"eq. spp from PSNR tm; checker = high-frequency power over flat, shadow-edge-free regions / "
-             f"the reference's"]
+             f"the reference's; bias = summed radiance / the reference's - 1 (indirect: minus GL direct light)"]
     for split, r in result["splits"].items():
         lines.append("")
         lines.append(f"{split} ({r['frames']} frames)")
         lines.append(f"{'method':<34} {'PSNR':>6} {'SSIM':>6} {'PSNR tm':>7} {'SSIM tm':>7} {'FLIP-HDR':>8} "
-                     f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7}")
+                     f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7} {'bias':>7} {'indirect':>8}")
         for m in r["methods"].values():
             eq = m["equivalent_spp"][EQUIVALENT_BY[0]]
             lines.append(f"{m['label']:<34} {m['psnr']['mean']:6.2f} {m['ssim']['mean']:6.4f} "
                          f"{m['psnr_tm']['mean']:7.2f} {m['ssim_tm']['mean']:7.4f} {m['flip_hdr']['mean']:8.4f} "
-                         f"{m['flip_ldr']['mean']:8.4f} {eq['text'] if eq else '-':>8} {_num(m['checkerboard']):>7}")
+                         f"{m['flip_ldr']['mean']:8.4f} {eq['text'] if eq else '-':>8} {_num(m['checkerboard']):>7} "
+                         f"{_pct(m.get('bias')):>7} {_pct(m.get('bias_indirect')):>8}")
     return lines
+
+
+def _pct(v: float | None) -> str:
+    return f"{100 * v:+.1f}%" if v is not None and math.isfinite(v) else "-"
 
 
 def _num(v: float) -> str:

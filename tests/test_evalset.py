@@ -116,6 +116,14 @@ def test_eval_scores_every_row_per_split_as_strict_json(evalset, tmp_path):
         assert methods["pt_spp1"]["equivalent_spp"]["psnr_tm"]["text"] == "1"
         assert methods["noise_floor"]["equivalent_spp"]["psnr_tm"]["bound"] == ">="
         assert methods["twice"]["psnr"] == methods["twice_1"]["psnr"]
+        # Pooled bias: the model returns 1.5 x direct light, so its summed radiance is 1.5 x the direct
+        # light's, and its indirect light (minus the GL direct light) is half the direct light's sum.
+        frames = [Dataset(out).load(i) for i in Dataset(out).indices(split)]
+        d, pt = (sum(float(np.sum(f[c], dtype=np.float64)) for f in frames) for c in ("direct", "pt"))
+        assert methods["twice"]["bias"] == pytest.approx(1.5 * d / pt - 1, rel=1e-4)
+        assert methods["twice"]["bias_indirect"] == pytest.approx(0.5 * d / (pt - d) - 1, rel=1e-4)
+        assert methods["direct"]["bias_indirect"] == pytest.approx(-1.0)
+        assert abs(methods["noise_floor"]["bias"]) < 0.2  # a second unbiased render
 
 
 def test_eval_refuses_a_capture_as_evalset_and_models_of_other_scenes(evalset, tmp_path):

@@ -134,3 +134,20 @@ def test_equivalent_spp_from_psnr_and_non_monotone_ladders():
     assert r["bound"] == "=" and 1 < r["spp"] < 4
     with pytest.raises(ValueError):
         metrics.equivalent_spp([4, 1], [1.0, 0.5], 0.7)
+
+
+def test_pooled_bias_is_the_signed_relative_error_of_the_summed_radiance():
+    from diviewer.evaluate import aggregate, pooled_bias, score_frame
+
+    rng = np.random.default_rng(3)
+    truths = [rng.uniform(0.1, 2.0, (16, 16, 3)) for _ in range(3)]
+    directs = [0.5 * t for t in truths]
+    mask = np.ones((16, 16), bool)
+    rows = [score_frame(d + 0.8 * (t - d), t, 0.0, mask, d) for t, d in zip(truths, directs)]
+    m = aggregate(rows)
+    assert m["bias"] == pytest.approx((0.5 + 0.8 * 0.5) - 1.0)  # 0.9 x the truth everywhere
+    assert m["bias_indirect"] == pytest.approx(-0.2)
+    assert aggregate([score_frame(t, t, 0.0, mask) for t in truths])["bias"] == 0.0
+    assert aggregate([score_frame(t, t, 0.0, mask) for t in truths])["bias_indirect"] is None  # no direct given
+    black = np.zeros((16, 16, 3))
+    assert pooled_bias([score_frame(truths[0], black, 0.0, mask)]) is None  # nothing to be relative to
