@@ -143,11 +143,11 @@ def test_pooled_bias_is_the_signed_relative_error_of_the_summed_radiance():
     truths = [rng.uniform(0.01, 0.3, (16, 16, 3)) for _ in range(3)]
     directs = [0.5 * t for t in truths]
     mask = np.ones((16, 16), bool)
-    rows = [score_frame(d + 0.8 * (t - d), t, 0.0, mask, d) for t, d in zip(truths, directs)]
+    rows = [score_frame(d + 0.8 * (t - d), t, 1.0, mask, d) for t, d in zip(truths, directs)]
     m = aggregate(rows)
     assert m["bias"] == pytest.approx((0.5 + 0.8 * 0.5) - 1.0)  # 0.9 x the truth everywhere
     assert m["bias_indirect"] == pytest.approx(-0.2)
-    same = [score_frame(t, t, 0.0, mask) for t in truths]
+    same = [score_frame(t, t, 1.0, mask) for t in truths]
     assert pooled_bias(same) == 0.0 and pooled_bias(same, "sum_indirect") is None  # no direct light given
     black = np.zeros((16, 16, 3))
     assert pooled_bias([score_frame(truths[0], black, 0.0, mask)]) is None  # nothing to be relative to
