@@ -23,7 +23,7 @@ INT_OPTIONS = {
 FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None)}
 # Outputs by (command, destination): a folder or a file, checked before any work.
 OUTPUT_DIRS = {("render", "out"), ("capture", "out"), ("train", "out"), ("data", "out")}
-OUTPUT_FILES = {("eval", "out"), ("view", "screenshot"), ("view", "stats")}
+OUTPUT_FILES = {("eval", "out"), ("view", "screenshot"), ("view", "window_screenshot"), ("view", "stats")}
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
@@ -378,7 +378,7 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None
         if dest in options and v is not None and not (math.isfinite(v) and v >= lo and (hi is None or v <= hi)):
             rng = f"from {lo} to {hi}" if hi is not None else f"at least {lo}"
             raise DiviewerError(f"must be a finite number {rng}, got {v}", field=options[dest])
-    for dest in ("out", "screenshot", "stats"):
+    for dest in ("out", "screenshot", "window_screenshot", "stats"):
         v = getattr(args, dest, None)
         if v is None or dest not in options:
             continue

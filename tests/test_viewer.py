@@ -879,3 +879,25 @@ def test_reference_without_mitsuba_says_why(monkeypatch, cornell):
     ref.request(cornell, cornell.default, 8, 8)
     assert not ref.available and "Mitsuba" in ref.status() and ref.latest() is None and ref._thread is None
     ref.close()
+
+
+def test_view_command_saves_the_window_itself(display, tmp_path):
+    """`diviewer view --frames N --window-screenshot` writes the last frame's window (panel included) at
+    the window's size; right of the panel it is the view that `--screenshot` saves; without --frames
+    the option is refused before a window opens."""
+    window, view = tmp_path / "window.png", tmp_path / "view.png"
+    cmd = [sys.executable, "-m", "diviewer", "view", "--model", "none", "--size", "480x200", "--no-vsync",
+           "--frames", "2", "--window-screenshot", str(window), "--screenshot", str(view)]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=180, env=os.environ.copy())
+    assert r.returncode == 0, r.stderr
+    assert f"saved {window}" in r.stdout
+    shown, alone = _png(window), _png(view)
+    _check_image(shown, (480, 200))
+    from diviewer.viewer.panel import PANEL_WIDTH
+
+    right = slice(PANEL_WIDTH + 16, None)  # the panel sits 8 px in from the left
+    _same(shown[:, right], alone[:, right], "the window right of the panel")
+    assert np.abs(shown[:, :PANEL_WIDTH] - alone[:, :PANEL_WIDTH]).max() > 30  # the panel is in it
+    r = subprocess.run(cmd[:-6] + ["--window-screenshot", str(tmp_path / "w2.png")], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2 and "--window-screenshot" in r.stderr and not (tmp_path / "w2.png").exists()

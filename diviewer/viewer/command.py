@@ -20,6 +20,9 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--no-vsync", action="store_true", help="do not wait for the display's refresh")
     p.add_argument("--frames", type=int, default=None, help="render N frames, then exit (with --screenshot)")
     p.add_argument("--screenshot", type=Path, default=None, help="on exit, save the view as PNG (+ frame JSON)")
+    p.add_argument("--window-screenshot", type=Path, default=None,
+                   help="with --frames: save what the window shows in the last frame (its back buffer, panel "
+                        "included) as PNG")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"),
                    help="onnxruntime execution provider (default: the fastest available)")
     p.add_argument("--camera", default="fly", choices=("fly", "orbit"), help="camera controller at start")
@@ -45,6 +48,9 @@ def run_view(args: argparse.Namespace) -> int:
 
     if args.frames is not None and args.frames < 1:
         raise DiviewerError(f"--frames must be at least 1, got {args.frames}", field="--frames")
+    if args.window_screenshot is not None and args.frames is None:
+        raise DiviewerError("--window-screenshot needs --frames (it saves the last frame's window)",
+                            field="--window-screenshot")
     size = parse_resolution(args.size, "--size")
     if args.frames is not None and str(args.model).lower() not in ("auto", "none"):
         # Scripted mode: a model the user named and the viewer refuses is a user error (exit 2),
@@ -58,7 +64,9 @@ def run_view(args: argparse.Namespace) -> int:
     settings = ViewerSettings(size=size, vsync=not args.no_vsync, model=args.model, provider=args.provider,
                               controller=args.camera, gi_res=args.gi_res,
                               gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
-    script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else None
+    script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else []
+    if args.window_screenshot is not None:
+        script.append((args.frames - 1, "window_screenshot", {"path": args.window_screenshot}))
     summary = run_viewer(args.scene, frames=args.frames, screenshot=args.screenshot, settings=settings,
                          stats=args.stats, script=script)
     if args.frames is not None:
@@ -66,5 +74,5 @@ def run_view(args: argparse.Namespace) -> int:
         rw, rh = summary["render_size"]
         print(f"viewer: {summary['frames']} frames at {rw}x{rh}, GI {gw}x{gh}, "
               f"{summary['stages_ms']['frame']:.1f} ms/frame"
-              + (f", saved {args.screenshot}" if args.screenshot else ""))
+              + "".join(f", saved {p}" for p in (args.screenshot, args.window_screenshot) if p))
     return 0
