@@ -27,9 +27,10 @@ def _nearest_existing(path: Path) -> Path:
     return p
 
 
-def _writable_from(path: Path, option: str) -> None:
-    """The folders that would be created for ``path`` can be: the nearest existing one is a writable folder."""
-    anchor = _nearest_existing(path.parent if not path.exists() else path)
+def _writable_from(path: Path, option: str, folder: Path | None = None) -> None:
+    """The folders that would be created for ``path`` (inside ``folder``, default ``path`` itself: a folder
+    to make) can be: the nearest existing one is a writable folder."""
+    anchor = _nearest_existing(folder if folder is not None else path)
     if not anchor.is_dir():
         raise DiviewerError(f"{anchor} is a file, so {path} cannot be created under it", field=option)
     if not os.access(anchor, os.W_OK | os.X_OK):
@@ -61,7 +62,7 @@ def check_output_file(path: str | Path, option: str = "--out", protect: tuple = 
         if other is not None and _same_file(path, Path(other)):
             raise DiviewerError(f"{path} is also {other}, which this command reads or writes itself; "
                                 f"give another file name", field=option)
-    _writable_from(path, option)
+    _writable_from(path, option, folder=path.parent)  # an existing file is overwritten, not made a folder
     if path.exists() and not os.access(path, os.W_OK):
         raise DiviewerError(f"{path} is not writable", field=option)
     return path

@@ -180,3 +180,21 @@ def test_capture_train_export_runtime_smoke(gl_context, tmp_path):
     neural, direct = read_exr(out / "neural.exr"), read_exr(out / "direct.exr")
     assert neural.shape == direct.shape == (32, 32, 3), "rendered at the model's resolution"
     assert np.isfinite(neural).all()
+
+
+def test_an_existing_output_file_is_overwritten_and_one_under_a_file_is_refused(tmp_path):
+    from diviewer.errors import DiviewerError
+    from diviewer.outputs import check_output_dir, check_output_file
+
+    existing = tmp_path / "shot.png"
+    existing.write_bytes(b"old")
+    assert check_output_file(existing, "--screenshot") == existing  # rewritten, as a rerun does
+    assert check_output_file(tmp_path / "new" / "deeper" / "a.json") == tmp_path / "new" / "deeper" / "a.json"
+    with pytest.raises(DiviewerError, match=r"shot.png is a file, so .*x.json cannot be created under it") as e:
+        check_output_file(existing / "x.json", "--out")
+    assert e.value.field == "--out"
+    with pytest.raises(DiviewerError, match="is a folder"):
+        check_output_file(tmp_path, "--out")
+    assert check_output_dir(tmp_path / "run") == tmp_path / "run"
+    with pytest.raises(DiviewerError, match="is a file; give a folder"):
+        check_output_dir(existing)
