@@ -16,6 +16,7 @@ import numpy as np
 from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.resources import GpuScene, set_uniform
+from diviewer.gl.shadow_fit import fit_directional, point_faces
 from diviewer.gl.shaders import ShaderCache
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
@@ -54,32 +55,7 @@ class FrameView:
     bounds: np.ndarray
 
 
-def _fit_directional(bounds: np.ndarray, direction) -> tuple[np.ndarray, float, float]:
-    """Light view-projection covering the scene's bounding sphere; also the texel-free extents."""
-    centre = bounds.mean(axis=0)
-    radius = max(float(np.linalg.norm(bounds[1] - bounds[0])) / 2.0, 1e-6)
-    d = cam.normalize(direction)
-    up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
-    eye = centre - d * 2.0 * radius
-    view = cam.look_at(eye, centre, up)
-    near, far = 0.5 * radius, 3.5 * radius
-    return cam.orthographic(radius, radius, near, far) @ view, 2.0 * radius, far - near
-
-
 _IDENTITY = np.identity(4)
-
-# Cube-face (forward, up) pairs for point-light shadows; the lookup uses the same matrices.
-_FACES = (((1, 0, 0), (0, -1, 0)), ((-1, 0, 0), (0, -1, 0)), ((0, 1, 0), (0, 0, 1)),
-          ((0, -1, 0), (0, 0, -1)), ((0, 0, 1), (0, -1, 0)), ((0, 0, -1), (0, -1, 0)))
-
-
-def _point_faces(position, bounds: np.ndarray) -> np.ndarray:
-    p = np.asarray(position, dtype=np.float64)
-    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-    far = float(np.linalg.norm(corners - p, axis=1).max()) * 1.01 + 1e-3
-    near = max(far * 1e-4, 1e-4)
-    proj = cam.perspective(90.0, 1.0, near, far)
-    return np.stack([proj @ cam.look_at(p, p + np.array(f), u) for f, u in _FACES])
 
 
 class Renderer:
@@ -355,13 +331,13 @@ class Renderer:
         ctx.enable_only(moderngl.DEPTH_TEST)
         kind, tex, fbo, _ = self._shadow_target(light)
         if kind == "dir":
-            m_light, extent, depth_range = _fit_directional(bounds, light.direction)
+            m_light, extent, depth_range = fit_directional(bounds, light.direction)
             fbo.use()
             fbo.clear(depth=1.0)
             self._draw_objects(config, "shadow.glsl", {}, lambda prog: set_uniform(prog, "m_light", m_light), None)
             return {"map": tex, "m_light": m_light, "texel_world": extent / self.settings.shadow_size,
                     "depth_range": depth_range}
-        faces = _point_faces(light.position, bounds)
+        faces = point_faces(light.position, bounds)
         fbo.use()
         fbo.clear(1e30, 1e30, 1e30, 1e30, depth=1.0)
         s = self._face_size
