@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, INPUT_NAMES, input_channel_slices
+from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, input_channel_slices
 from diviewer.errors import DiviewerError
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.renderer import Renderer
