@@ -558,6 +558,53 @@ def test_a_constant_run_resumes_into_an_anneal_like_a_straight_run(data, tmp_pat
         train(tiny(data, tmp_path / "c", epochs=3, lr_decay="cosine", lr_decay_start=1), resume=True, log=quiet)
 
 
+def test_a_warm_start_begins_from_the_parents_networks_and_records_it(data, tmp_path):
+    # A run onto other frames of the same scene, from a finished run's networks: at a vanishing rate
+    # its weights stay the parent's, its encoding is the parent's, and the checkpoint and the model
+    # card's recipe record the parent (hash, step, how it was made) instead of a path.
+    from diviewer.train.export import ExportSettings, export
+
+    train(tiny(data, tmp_path / "parent", epochs=1), log=quiet)
+    more = make_dataset(tmp_path / "more", seed0=100).root  # same scene, other frames
+    parent_ckpt = tmp_path / "parent" / "last.ckpt"
+    child = train(tiny(more, tmp_path / "child", epochs=1, lr=1e-12, init_from=str(parent_ckpt)), log=quiet)
+    assert child["step"] == 2
+    a, b = load_checkpoint(parent_ckpt), load_checkpoint(tmp_path / "child" / "last.ckpt")
+    assert b["encoding"] == a["encoding"]
+    convs = [k for k, v in a["netG"].items() if k.endswith("weight") and v.ndim == 4]
+    assert convs
+    for k in convs:
+        torch.testing.assert_close(b["netG"][k], a["netG"][k], rtol=1e-6, atol=1e-7, msg=k)
+    fresh = train(tiny(more, tmp_path / "fresh", epochs=1, lr=1e-12), log=quiet)
+    c = load_checkpoint(tmp_path / "fresh" / "last.ckpt")
+    assert fresh["step"] == 2 and not torch.allclose(c["netG"][convs[0]], a["netG"][convs[0]])
+    init = b["init"]
+    assert init["step"] == a["step"] and init["dataset_hash"] == a["dataset"]["hash"] and len(init["checkpoint_sha256"]) == 64
+    meta = export(tmp_path / "child" / "best.ckpt", tmp_path / "m.onnx", ExportSettings(), log=quiet)
+    rec = meta["recipe"]
+    assert "init_from" not in rec["train"] and rec["init"]["step"] == a["step"]
+    assert rec["init"]["recipe"]["train"]["K"] == 4 and rec["init"]["recipe"]["capture"] == a["dataset"]["capture"]
+    # resumed, the run keeps its record; the parent cannot be swapped under it
+    train(tiny(more, tmp_path / "child", epochs=2, lr=1e-12, init_from=str(parent_ckpt)), resume=True, log=quiet)
+    assert load_checkpoint(tmp_path / "child" / "last.ckpt")["init"] == init
+    with pytest.raises(DiviewerError, match="init_from"):
+        train(tiny(more, tmp_path / "child", epochs=3, lr=1e-12), resume=True, log=quiet)
+
+
+def test_a_warm_start_refuses_another_network_target_scene_or_file(data, tmp_path):
+    train(tiny(data, tmp_path / "parent", epochs=1), log=quiet)
+    parent = str(tmp_path / "parent" / "last.ckpt")
+    cases = [({"K": 8}, "another generator"), ({"target": "indirect"}, "predicts something else"),
+             ({"init_from": str(tmp_path / "none.ckpt")}, "no checkpoint")]
+    for i, (kw, words) in enumerate(cases):
+        with pytest.raises(DiviewerError, match=words) as e:
+            train(tiny(data, tmp_path / f"c{i}", epochs=1, **{"init_from": parent, **kw}), log=quiet)
+        assert e.value.field == "train.init_from"
+    other = make_dataset(tmp_path / "other", scene="other").root
+    with pytest.raises(DiviewerError, match="another scene file"):
+        train(tiny(other, tmp_path / "c9", epochs=1, init_from=parent), log=quiet)
+
+
 @pytest.mark.parametrize("asked,index", [("cuda", 0), ("cuda:1", 1), ("auto", 0)])
 def test_a_cuda_device_always_has_an_index(data, tmp_path, monkeypatch, asked, index):
     # torch.cuda.set_device and get_rng_state refuse a bare "cuda" (seen on an H100, where every run

@@ -44,7 +44,8 @@ _TRAIN_FLAGS = {"epochs": "--epochs", "batch_size": "--batch-size", "lr": "--lr"
                 "recon_space": "--recon-space", "n_layers_D": "--n-layers-d", "norm_D": "--norm-d", "d_lr": "--d-lr",
                 "upsample": "--upsample", "norm": "--norm", "train_frames": "--train-frames", "patience": "--patience",
                 "val_every_steps": "--val-every-steps"}
-_NOT_RECIPE = {"data", "out", "K", "target", "divide_albedo", "max_steps", "device", "num_workers", "precision"}
+_NOT_RECIPE = {"data", "out", "K", "target", "divide_albedo", "max_steps", "device", "num_workers", "precision",
+               "init_from"}
 
 
 def run(*args: str) -> None:
@@ -53,19 +54,33 @@ def run(*args: str) -> None:
 
 
 def recipe(name: str) -> dict[str, Any]:
-    """The model card's settings: what to capture, how to train, how to export."""
+    """The model card's settings: what to capture, how to train, how to export; a warm-started model's
+    parent recipe under "init" (recursively), built first."""
     card = json.loads((MODELS / f"{name}.json").read_text())
     rec = card.get("recipe") or LEGACY_RECIPE
     w, h = card["resolution"]
+    top = {"K": card["K"], "target": card["target"], "divide_albedo": bool(card.get("divide_albedo"))}
+    return _from_recipe(rec, name, card["scene"], f"{w}x{h}", card["precision"] == "fp16", card["dataset_hash"],
+                        MODELS / f"{name}.json", top)
+
+
+def _from_recipe(rec: dict, name: str, scene: str, res: str, fp16: bool, dataset_hash: str, where: Path,
+                 top: dict | None = None) -> dict[str, Any]:
     train = {k: v for k, v in rec["train"].items() if k in _TRAIN_FLAGS and v is not None}
     defaults = _train_defaults()
     odd = {k: v for k, v in rec["train"].items()
            if k not in _TRAIN_FLAGS and k not in _NOT_RECIPE and v != defaults.get(k, v)}
     if odd:  # a setting `diviewer train` cannot be given: rebuilding would not be exact
-        sys.exit(f"{MODELS / f'{name}.json'}: recipe settings {odd} have no train option; cannot rebuild exactly")
-    return {"name": name, "scene": card["scene"], "res": f"{w}x{h}", "K": card["K"], "target": card["target"],
-            "divide_albedo": bool(card.get("divide_albedo")), "fp16": card["precision"] == "fp16",
-            "dataset_hash": card["dataset_hash"], "capture": rec["capture"], "train": train}
+        sys.exit(f"{where}: recipe settings {odd} have no train option; cannot rebuild exactly")
+    nets = top or {k: rec["train"][k] for k in ("K", "target", "divide_albedo")}
+    r = {"name": name, "scene": scene, "res": res, "K": nets["K"], "target": nets["target"],
+         "divide_albedo": bool(nets["divide_albedo"]), "fp16": fp16, "dataset_hash": dataset_hash,
+         "capture": rec["capture"], "train": train, "init": None}
+    if rec.get("init"):
+        init = rec["init"]
+        r["init"] = _from_recipe(init["recipe"], f"{name}_init", scene, res, fp16, init["dataset_hash"], where)
+        r["init"]["checkpoint_sha256"] = init["checkpoint_sha256"]
+    return r
 
 
 def _train_defaults() -> dict[str, Any]:
@@ -77,10 +92,26 @@ def _train_defaults() -> dict[str, Any]:
 
 
 def build(r: dict[str, Any], work: Path, max_steps: int | None = None) -> None:
+    """Capture, train (its parent first, if it was warm-started), export and evaluate one model."""
+    run_dir, data = train_run(r, work, max_steps)
+    out = MODELS / f"{r['name']}.onnx"
+    run("export", str(run_dir / "best.ckpt"), "--out", str(out), *(["--fp16"] if r["fp16"] else []))
+    shutil.copyfile(run_dir / "curves.png", out.with_name(f"{r['name']}_curves.png"))
+    shutil.copyfile(run_dir / "metrics.csv", out.with_name(f"{r['name']}_metrics.csv"))
+    run("eval", "--model", str(out), "--data", str(data), "--split", "test")
+
+
+def train_run(r: dict[str, Any], work: Path, max_steps: int | None = None) -> tuple[Path, Path]:
+    """The trained run folder of a recipe (resumed if it exists) and its dataset folder."""
     from diviewer.data.dataset import Dataset
 
     c = r["capture"]
-    data = work / "data"
+    data = work / "data"  # one folder per capture: a parent on another capture gets its own
+    for n in range(100):
+        manifest = data / "manifest.json"
+        if not manifest.is_file() or Dataset(data).hash == r["dataset_hash"]:
+            break
+        data = work / f"data{n + 2}"
     run("capture", "--scene", r["scene"], "--frames", str(c["frames"]), "--res", r["res"], "--spp", str(c["spp"]),
         "--max-depth", str(c["max_depth"]), "--seed", str(c["seed"]),
         "--splits", ",".join(str(f) for f in c["split_fractions"]), "--gt", c.get("gt", "pt"),
@@ -88,23 +119,36 @@ def build(r: dict[str, Any], work: Path, max_steps: int | None = None) -> None:
     run("data", "check", str(data), "--fast")
     if Dataset(data).hash != r["dataset_hash"]:
         sys.exit(f"{data}: dataset hash {Dataset(data).hash[:16]} is not the card's {r['dataset_hash'][:16]} "
-                 f"({r['name']}.json): this capture differs from the shipped model's; not training")
+                 f"({r['name']}): this capture differs from the shipped model's; not training")
     run_dir = work / f"train_{r['name']}"
     train = ["train", "--data", str(data), "--out", str(run_dir), "--k", str(r["K"]), "--target", r["target"]]
     if r["divide_albedo"]:
         train.append("--divide-albedo")
     for k, v in r["train"].items():
         train += [_TRAIN_FLAGS[k], str(v)]
+    if r["init"] is not None:  # warm-started: the parent's best checkpoint, rebuilt from its own recipe
+        parent_dir, _ = train_run(r["init"], work)
+        parent = parent_dir / "best.ckpt"
+        if _sha256(parent) != r["init"]["checkpoint_sha256"]:
+            print(f"note: {parent} is not bit for bit the checkpoint the shipped model started from "
+                  "(training is not bitwise reproducible across machines); going on from it", flush=True)
+        train += ["--init-from", str(parent)]
     if max_steps is not None:  # where the shipped run was stopped (its card's "steps" is the best step)
         train += ["--max-steps", str(max_steps)]
     if (run_dir / "last.ckpt").is_file():
         train.append("--resume")
     run(*train)
-    out = MODELS / f"{r['name']}.onnx"
-    run("export", str(run_dir / "best.ckpt"), "--out", str(out), *(["--fp16"] if r["fp16"] else []))
-    shutil.copyfile(run_dir / "curves.png", out.with_name(f"{r['name']}_curves.png"))
-    shutil.copyfile(run_dir / "metrics.csv", out.with_name(f"{r['name']}_metrics.csv"))
-    run("eval", "--model", str(out), "--data", str(data), "--split", "test")
+    return run_dir, data
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 def main() -> None:

@@ -4,6 +4,7 @@ and the checks a resumed run must pass against the checkpoint it continues."""
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -111,6 +112,7 @@ def build_generator_from_checkpoint(ckpt: Mapping[str, Any] | str | Path):
         "versions": dict(ckpt.get("versions", {})),
         "capture": ckpt["dataset"].get("capture"),
         "loss_config": ckpt.get("loss_config"),
+        "init": ckpt.get("init"),
     }
     return netG, encoding, meta
 
@@ -227,6 +229,62 @@ def _write_run_checkpoints(run: Any, nets: Any, st: Any, val: dict[str, float] |
     if is_best:
         with imageio.atomic_path(cfg.out / "best.ckpt") as tmp:
             shutil.copyfile(cfg.out / "last.ckpt", tmp)
+
+
+# ---------------------------------------------------------------------------------------------
+# A warm start: a new run that begins from another run's networks (TrainConfig.init_from)
+
+
+def open_parent(cfg: TrainConfig, ds: Dataset) -> dict[str, Any]:
+    """The checkpoint ``cfg.init_from`` names, checked to be of this dataset's scene and of this run's
+    target; its networks are compared with this run's in ``warm_start``."""
+    path = Path(cfg.init_from)
+    if not path.is_file():
+        raise DiviewerError(f"no checkpoint at {path}", field="train.init_from")
+    parent = load_checkpoint(path)
+    then = parent["dataset"]
+    if then.get("scene_hash") != ds.manifest.get("scene_hash"):
+        raise DiviewerError(f"{path} was trained on scene '{then.get('scene')}' (another scene file than "
+                            f"{cfg.data}'s '{ds.manifest.get('scene')}')", field="train.init_from")
+    old = parent["config"]
+    diff = [f"{k}: {old.get(k)!r} there, {getattr(cfg, k)!r} here" for k in ("target", "divide_albedo")
+            if old.get(k) != getattr(cfg, k)]
+    if diff:
+        raise DiviewerError(f"{path} predicts something else ({'; '.join(diff)})", field="train.init_from")
+    parent["path"] = str(path)
+    return parent
+
+
+def warm_start(nets: Any, parent: Mapping[str, Any], cfg: TrainConfig, say) -> None:
+    """Load the parent's generator (and its discriminator where it is the same network) into ``nets``."""
+    args, then = nets.netG_m.model_args(), parent["model_args"]
+    diff = [f"{k}: {then.get(k)!r} there, {args.get(k)!r} here" for k in sorted(set(args) | set(then))
+            if args.get(k) != then.get(k)]
+    if diff:
+        raise DiviewerError(f"{parent['path']} holds another generator ({'; '.join(diff)}): give this run the "
+                            "same networks", field="train.init_from")
+    nets.netG_m.load_state_dict(parent["netG"])
+    if parent.get("netD_args") == nets.netD_m.model_args():
+        nets.netD_m.load_state_dict(parent["netD"])
+    else:
+        say("the discriminator starts from random weights (the parent's is another network)")
+    say(f"starting from {parent['path']} (step {parent['step']}, trained on "
+        f"{parent['dataset']['train_frames']} frames of {parent['dataset']['path']})")
+
+
+def init_record(parent: Mapping[str, Any], cfg: TrainConfig) -> dict[str, Any]:
+    """What a warm-started run records of its parent: the file's hash and step, and how the parent was
+    made (its settings, capture and networks, and its own parent's record), so that a model card's
+    recipe can rebuild the chain."""
+    digest = hashlib.sha256()
+    with open(parent["path"], "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return {"path": parent["path"], "checkpoint_sha256": digest.hexdigest(), "step": parent["step"],
+            "dataset_hash": parent["dataset"]["hash"], "train_frames": parent["dataset"]["train_frames"],
+            "meta": {"config": parent["config"], "capture": parent["dataset"].get("capture"),
+                     "net_config": parent["net_config"], "loss_config": parent.get("loss_config"),
+                     **({"init": parent["init"]} if parent.get("init") else {})}}
 
 
 def restore_run(nets: Any, ckpt: Mapping[str, Any], cfg: TrainConfig, dev: Any, say) -> None:

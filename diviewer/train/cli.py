@@ -36,6 +36,9 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--lr", type=float, default=None, help=f"Adam learning rate (default {d['lr']})")
     p.add_argument("--lr-decay", choices=CHOICES["lr_decay"], default=None,
                    help="learning-rate schedule: none (default) or cosine (to lr/100 over all epochs)")
+    p.add_argument("--init-from", default=None, metavar="CKPT",
+                   help="start from this checkpoint's networks and encoding (RUN/best.ckpt of the same networks) "
+                        "instead of random weights; optimizers, step and schedule start afresh")
     p.add_argument("--lr-decay-start", type=int, default=None, metavar="STEP",
                    help="with --lr-decay cosine: constant rate up to STEP, then the decay (default 0); a run "
                         "at a constant rate resumes into an anneal that starts at or after its step")

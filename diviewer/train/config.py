@@ -131,6 +131,12 @@ class TrainConfig:
     val_every_steps: int = 0
     """Also validate (and write a row, and save) every this many steps (0: at epoch ends only)."""
 
+    init_from: str | None = None
+    """A checkpoint (RUN/best.ckpt) whose networks and encoding this run starts from instead of random
+    weights: a warm start, e.g. onto more frames of the same scene. The networks must be the same
+    (K, levels, decoder, normalisation, target); optimizers, step and schedule start afresh. The
+    checkpoint's own recipe is recorded (model card: ``recipe.init``) so the model can be rebuilt."""
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", Path(self.data))
         object.__setattr__(self, "out", Path(self.out))
@@ -205,7 +211,8 @@ CHOICES: dict[str, tuple[str, ...]] = {
 
 RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "beta1", "beta2", "lambda_L1", "target",
                                  "divide_albedo", "seed", "dropout", "ndf", "gan_weight", "gan_mode", "recon_loss",
-                                 "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample", "norm", "train_frames")
+                                 "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample", "norm", "train_frames",
+                                 "init_from")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change)."""
 
 RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "lr_decay_start", "epochs", "val_every", "save_every", "patience", "val_every_steps")

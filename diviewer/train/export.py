@@ -214,10 +214,18 @@ _RUN_ONLY = ("data", "out", "max_steps", "device", "num_workers", "precision")
 
 def _recipe(meta: dict) -> dict:
     """How the model was made, for the card: capture settings, training settings, network settings
-    (`tools/build_shipped_model.py` rebuilds a shipped model from it)."""
-    return {"capture": meta.get("capture"),
-            "train": {k: v for k, v in meta["config"].items() if k not in _RUN_ONLY},
-            "net": meta["net_config"], "loss": meta.get("loss_config")}
+    (`tools/build_shipped_model.py` rebuilds a shipped model from it). A warm-started run's recipe
+    holds its parent's under ``init`` (with the parent checkpoint's hash and step), recursively; the
+    parent's path on the machine that trained it is not a recipe."""
+    rec = {"capture": meta.get("capture"),
+           "train": {k: v for k, v in meta["config"].items() if k not in _RUN_ONLY and k != "init_from"},
+           "net": meta["net_config"], "loss": meta.get("loss_config")}
+    init = meta.get("init")
+    if init:
+        rec["init"] = {"checkpoint_sha256": init["checkpoint_sha256"], "step": init["step"],
+                       "dataset_hash": init["dataset_hash"], "train_frames": init["train_frames"],
+                       "recipe": _recipe(init["meta"])}
+    return rec
 
 
 def info(path: str | Path) -> str:

@@ -39,8 +39,8 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.train import distributed
-from diviewer.train.checkpoint import (check_resume, load_checkpoint, require_torch, restore_run, run_metadata,
-                                       save_run)
+from diviewer.train.checkpoint import (check_resume, init_record, load_checkpoint, open_parent, require_torch,
+                                       restore_run, run_metadata, save_run, warm_start)
 from diviewer.train.config import TrainConfig
 from diviewer.train.distributed import Dist, epoch_batches
 from diviewer.train.report import METRIC_KEYS, draw_curves, read_metrics, validate, write_metrics
@@ -158,11 +158,19 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
     try:
         ds, train_idx, train_arr, val_arr = _load_splits(cfg, dev, say)
         ckpt = _open_run(cfg, ds, train_idx, resume, say)
-        enc = Encoding.from_dict(ckpt["encoding"]) if ckpt else fit_encoding(ds, train_idx, train_arr)
+        parent = open_parent(cfg, ds) if ckpt is None and cfg.init_from else None
+        if ckpt:
+            enc = Encoding.from_dict(ckpt["encoding"])
+        elif parent:  # the parent's weights were trained on its encoding: keep it
+            enc = Encoding.from_dict(parent["encoding"])
+        else:
+            enc = fit_encoding(ds, train_idx, train_arr)
         net_cfg = _net_config(cfg, ds)
         _check_trainable(net_cfg, cfg, ds, len(train_idx))
         nets = build_nets(cfg, net_cfg, enc, dev, say)
         st = TrainState()
+        if parent:
+            warm_start(nets, parent, cfg, say)
         if ckpt:
             restore_run(nets, ckpt, cfg, dev, say)
             st = TrainState.from_checkpoint(ckpt, dev.world)
@@ -178,9 +186,11 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
             nets.netG = torch.nn.parallel.DistributedDataParallel(nets.netG_m, device_ids=ids)
             nets.netD = torch.nn.parallel.DistributedDataParallel(nets.netD_m, device_ids=ids)
         steps_per_epoch = len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world))
+        meta = run_metadata(cfg, nets, net_cfg, enc, ds, train_idx, 0 if val_arr is None else len(val_arr))
+        if parent or (ckpt and ckpt.get("init")):
+            meta["init"] = init_record(parent, cfg) if parent else ckpt["init"]
         run = Run(cfg=cfg, dev=dev, ds=ds, train_arr=train_arr, val_arr=val_arr, enc=enc, say=say,
-                  meta=run_metadata(cfg, nets, net_cfg, enc, ds, train_idx, 0 if val_arr is None else len(val_arr)),
-                  steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed)
+                  meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed)
 
         total = horizon = cfg.epochs * steps_per_epoch  # the lr schedule's horizon ignores max_steps
         if cfg.max_steps is not None:
