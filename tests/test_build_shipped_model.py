@@ -2,20 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
+from tool_modules import load_tool
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("build_shipped_model", ROOT / "tools" / "build_shipped_model.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("build_shipped_model")
 
 
 @pytest.mark.parametrize("card", sorted(p.stem for p in (ROOT / "assets" / "models").glob("*.onnx")

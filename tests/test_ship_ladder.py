@@ -2,23 +2,19 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
 from pathlib import Path
 
 import pytest
 
-pytest.importorskip("torch")  # parameter counts build the generators
+from tool_modules import load_tool
 
-ROOT = Path(__file__).resolve().parents[1]
+pytest.importorskip("torch")  # parameter counts build the generators
 
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("ship_ladder", ROOT / "tools" / "ship_ladder.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("ship_ladder")
 
 
 def _results(root: Path, psnr: dict[str, float]) -> Path:

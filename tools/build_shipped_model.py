@@ -103,7 +103,7 @@ def build(r: dict[str, Any], work: Path, max_steps: int | None = None) -> None:
 
 def train_run(r: dict[str, Any], work: Path, max_steps: int | None = None) -> tuple[Path, Path]:
     """The trained run folder of a recipe (resumed if it exists) and its dataset folder."""
-    from diviewer.data.dataset import Dataset
+    from diviewer.data.dataset import Dataset, sha256_file
 
     c = r["capture"]
     data = work / "data"  # one folder per capture: a parent on another capture gets its own
@@ -129,7 +129,7 @@ def train_run(r: dict[str, Any], work: Path, max_steps: int | None = None) -> tu
     if r["init"] is not None:  # warm-started: the parent's best checkpoint, rebuilt from its own recipe
         parent_dir, _ = train_run(r["init"], work)
         parent = parent_dir / "best.ckpt"
-        if _sha256(parent) != r["init"]["checkpoint_sha256"]:
+        if sha256_file(parent) != r["init"]["checkpoint_sha256"]:
             print(f"note: {parent} is not bit for bit the checkpoint the shipped model started from "
                   "(training is not bitwise reproducible across machines); going on from it", flush=True)
         train += ["--init-from", str(parent)]
@@ -139,16 +139,6 @@ def train_run(r: dict[str, Any], work: Path, max_steps: int | None = None) -> tu
         train.append("--resume")
     run(*train)
     return run_dir, data
-
-
-def _sha256(path: Path) -> str:
-    import hashlib
-
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def main() -> None:

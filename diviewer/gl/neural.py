@@ -82,6 +82,7 @@ class NeuralPass:
         self.guide = renderer.shaders.compute("gi_guide.glsl", PACK_DEFINES)
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._defines: dict[str, int] = {}
+        self._light = None
         self.inline_direct = False
         """This frame's direct light was computed inside the pack and the upsample (direct_inline.glsl),
         not read from the renderer's direct pass (which then did not run)."""
@@ -128,12 +129,12 @@ class NeuralPass:
         target and its reads fewer); otherwise the direct pass runs now, if it has not, and they read it.
         """
         r = self.renderer
-        ok, light = r.inline_light()
+        ok, self._light = r.inline_light()
         self.inline_direct = bool(r.direct_pending and ok)
         if not self.inline_direct:
             r.ensure_direct()
             return {}
-        return {"INLINE_DIRECT": 1, **r.light_defines(light), **({"EMISSIVE": 1} if r.emissive else {})}
+        return {"INLINE_DIRECT": 1, **r.light_defines(self._light), **({"EMISSIVE": 1} if r.emissive else {})}
 
     def _bind_gbuffer(self, prog) -> None:
         """Units 0-3: depth, normal, albedo and the direct target (or the emission buffer); unit 4: the
@@ -143,9 +144,8 @@ class NeuralPass:
         for i, name in enumerate(("depth", "normal", "albedo", fourth)):
             r.textures[name].use(location=i)
             set_uniform(prog, f"u_{name}", i)
-        _, light = r.inline_light()
-        if self.inline_direct and light is not None:
-            r.set_direct_uniforms(prog, light)
+        if self.inline_direct and self._light is not None:
+            r.set_direct_uniforms(prog, self._light)
 
     @property
     def program(self) -> moderngl.ComputeShader:
@@ -237,8 +237,7 @@ class NeuralPass:
         upsampled by the joint bilateral filter (``indirect_only``: the upsampled indirect light alone)."""
         if self.output is None:
             raise RuntimeError("NeuralPass.run has not been called")
-        if self.renderer.direct_pending and not self.inline_direct:
-            self._defines = self._direct_defines()  # a frame rendered since run(): its direct light
+        self._defines = self._direct_defines()  # run()'s decision again, or the frame's if one was rendered since
         prog, s = self.upsample, self.settings
         fbo = self._final_target()
         w, h = self.gi_size

@@ -72,6 +72,7 @@ class Renderer:
         self._screen_vaos: dict[int, moderngl.VertexArray] = {}
         self._draw_cache: tuple = (None, None, [])
         self._bounds: tuple = (None, None, None)
+        self._emissive: tuple = (None, False)
         self._face_size = max(settings.shadow_size // 2, 16)
         self._shadow_targets: dict[str, tuple] = {}
         """Per light name: (kind, texture, framebuffer, depth renderbuffer or None)."""
@@ -380,8 +381,10 @@ class Renderer:
 
     @property
     def emissive(self) -> bool:
-        """Whether any material of the scene emits light."""
-        return any(any(c > 0.0 for c in m.emission) for m in self.scene.materials.values())
+        """Whether any material of the scene emits light (looked up once per scene object)."""
+        if self._emissive[0] is not self.scene:
+            self._emissive = (self.scene, any(any(c > 0.0 for c in m.emission) for m in self.scene.materials.values()))
+        return self._emissive[1]
 
     def _light_pass(self, light, blend: bool = True) -> None:
         """One light's term in the last frame, added to the target (``blend``) or written over it."""

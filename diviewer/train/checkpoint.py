@@ -4,7 +4,6 @@ and the checks a resumed run must pass against the checkpoint it continues."""
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -149,13 +148,9 @@ def check_resume(cfg: TrainConfig, ckpt: Mapping[str, Any], ds: Dataset, train_i
     from diviewer.train.step import constant_until
 
     same_past = constant_until(old, ckpt["step"]) and constant_until(cfg, ckpt["step"])
-    fixed = [k for k in RESUME_FIXED if not (k == "lr_decay" and same_past)]
+    fixed = [k for k in RESUME_FIXED if not (same_past and k in ("lr_decay", "lr_decay_start"))]
     diff = [f"{k}: {old.get(k, default[k])!r} -> {getattr(cfg, k)!r}" for k in fixed
             if old.get(k, default[k]) != getattr(cfg, k)]
-    start_then = old.get("lr_decay_start", default["lr_decay_start"])
-    if cfg.lr_decay != "none" and start_then != cfg.lr_decay_start and not same_past:
-        diff.append(f"lr_decay_start: {start_then!r} -> {cfg.lr_decay_start!r} (the run is at step "
-                    f"{ckpt['step']}: only an anneal that has not begun may move)")
     if diff:
         raise DiviewerError(f"cannot resume with different settings ({'; '.join(diff)}); "
                             "drop those options or choose another --out", path=path)
@@ -272,15 +267,13 @@ def warm_start(nets: Any, parent: Mapping[str, Any], cfg: TrainConfig, say) -> N
         f"{parent['dataset']['train_frames']} frames of {parent['dataset']['path']})")
 
 
-def init_record(parent: Mapping[str, Any], cfg: TrainConfig) -> dict[str, Any]:
+def init_record(parent: Mapping[str, Any]) -> dict[str, Any]:
     """What a warm-started run records of its parent: the file's hash and step, and how the parent was
     made (its settings, capture and networks, and its own parent's record), so that a model card's
     recipe can rebuild the chain."""
-    digest = hashlib.sha256()
-    with open(parent["path"], "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return {"path": parent["path"], "checkpoint_sha256": digest.hexdigest(), "step": parent["step"],
+    from diviewer.data.dataset import sha256_file
+
+    return {"path": parent["path"], "checkpoint_sha256": sha256_file(Path(parent["path"])), "step": parent["step"],
             "dataset_hash": parent["dataset"]["hash"], "train_frames": parent["dataset"]["train_frames"],
             "meta": {"config": parent["config"], "capture": parent["dataset"].get("capture"),
                      "net_config": parent["net_config"], "loss_config": parent.get("loss_config"),

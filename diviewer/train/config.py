@@ -209,12 +209,14 @@ CHOICES: dict[str, tuple[str, ...]] = {
 }
 """The settings that take one of a few names (the network ones are `networks.UPSAMPLES`/`NORMS`)."""
 
-RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "beta1", "beta2", "lambda_L1", "target",
-                                 "divide_albedo", "seed", "dropout", "ndf", "gan_weight", "gan_mode", "recon_loss",
-                                 "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample", "norm", "train_frames",
-                                 "init_from")
-"""Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change)."""
+RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "lr_decay_start", "beta1", "beta2",
+                                 "lambda_L1", "target", "divide_albedo", "seed", "dropout", "ndf", "gan_weight",
+                                 "gan_mode", "recon_loss", "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample",
+                                 "norm", "train_frames", "init_from")
+"""Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change); the schedule
+(lr_decay, lr_decay_start) may change while both the old and the new one are constant up to the
+checkpoint's step (train.checkpoint.check_resume)."""
 
-RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "lr_decay_start", "epochs", "val_every", "save_every", "patience", "val_every_steps")
+RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save_every", "patience", "val_every_steps")
 """Settings `diviewer train --resume` takes from the checkpoint unless given again (max_steps, precision,
 device and num_workers describe this invocation and this machine, so they are not inherited)."""

@@ -188,7 +188,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
         steps_per_epoch = len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world))
         meta = run_metadata(cfg, nets, net_cfg, enc, ds, train_idx, 0 if val_arr is None else len(val_arr))
         if parent or (ckpt and ckpt.get("init")):
-            meta["init"] = init_record(parent, cfg) if parent else ckpt["init"]
+            meta["init"] = init_record(parent) if parent else ckpt["init"]
         run = Run(cfg=cfg, dev=dev, ds=ds, train_arr=train_arr, val_arr=val_arr, enc=enc, say=say,
                   meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed)
 
