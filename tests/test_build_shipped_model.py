@@ -30,6 +30,20 @@ def test_every_shipped_card_has_a_rebuildable_recipe(card):
         parent = parent["init"]
 
 
+def test_a_linear_baseline_is_refitted_on_its_networks_capture():
+    tool = _tool()
+    models = ROOT / "assets" / "models"
+    baselines = [p.stem for p in models.glob("*.json") if json.loads(p.read_text()).get("kind") == "linear_baseline"]
+    assert baselines, "cornell_linear is shipped"
+    for name in baselines:
+        card = json.loads((models / f"{name}.json").read_text())
+        r = tool.recipe(name)
+        net = json.loads((models / f"{card['scene']}.json").read_text())
+        assert r["kind"] == "linear_baseline" and r["train"] == {} and r["init"] is None
+        assert r["capture"] == net["recipe"]["capture"] and r["dataset_hash"] == net["dataset_hash"]
+        assert r["fit"] == {"split": card["fit"]["split"], "frames": card["fit"]["frames"]}
+
+
 def test_a_warm_started_recipe_builds_its_parent_first():
     tool = _tool()
     base = {"capture": {"frames": 10, "spp": 4, "max_depth": 4, "seed": 0, "split_fractions": [0.8, 0.2, 0.0]},

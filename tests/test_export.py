@@ -46,6 +46,9 @@ def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, t
     assert recipe["capture"]["spp"] == 4 and recipe["capture"]["frames"] == 10
     assert recipe["train"]["K"] == 4 and recipe["train"]["target"] == target and "device" not in recipe["train"]
     assert recipe["net"]["K"] == 4
+    # the hardware it trained on: the tiny runs train on the CPU in float32
+    assert meta["trained_on"]["device"] == "cpu" and meta["trained_on"]["autocast"] == "fp32"
+    assert meta["trained_on"]["torch_threads"] >= 1 and "before" not in meta["trained_on"]
     # the runtime's output equals the torch module's on new buffers, at the trained size and larger
     netG, enc, m = build_generator_from_checkpoint(checkpoints[target])
     module = gi_module(netG, enc, m)
@@ -112,6 +115,7 @@ def test_cli_export_and_info(checkpoints, tmp_path, capsys):
     assert main(["export", "--info", str(out)]) == 0
     text = capsys.readouterr().out
     assert "K=4" in text and "synthetic" in text and "multiples of" in text
+    assert "trained on   cpu" in text and "fp32" in text
     assert info(out).splitlines()[0] == str(out)
 
 
@@ -210,6 +214,7 @@ def _rewrite_checkpoint(src, dst, upsample=None, norm=None, drop_options=False, 
     ckpt = load_checkpoint(src)
     args = dict(ckpt["model_args"])
     if drop_options:
+        ckpt.pop("trained_on", None)
         for key in ("upsample", "norm"):
             args.pop(key, None)
             ckpt["net_config"].pop(key, None)
@@ -251,4 +256,5 @@ def test_checkpoint_from_before_the_options_exports_the_same_graph(checkpoints, 
     export(checkpoints["full"], a, log=quiet)
     card = export(old, b, log=quiet)
     assert (card["upsample"], card["norm"]) == ("transpose", "batch")
+    assert card["trained_on"] == {"device": "cpu", "autocast": "fp32", "recorded": False}  # from --device cpu
     assert onnx.load(str(a)).graph.SerializeToString() == onnx.load(str(b)).graph.SerializeToString()

@@ -205,6 +205,19 @@ def test_resume_equals_continuous_training(data, tmp_path):
             assert float(rb[k]) == pytest.approx(float(ra[k]), rel=1e-5), k
 
 
+def test_a_run_resumed_on_other_hardware_records_both(data, tmp_path):
+    from diviewer.train.checkpoint import atomic_save
+
+    train(tiny(data, tmp_path / "r", epochs=2, max_steps=2), log=quiet)
+    ckpt = load_checkpoint(tmp_path / "r" / "last.ckpt")
+    assert ckpt["trained_on"]["device"] == "cpu" and ckpt["trained_on"]["autocast"] == "fp32"
+    gpu = {"device": "cuda", "name": "NVIDIA H100", "autocast": "bf16", "world": 1, "torch_threads": None}
+    atomic_save({**ckpt, "trained_on": gpu}, tmp_path / "r" / "last.ckpt")  # as if the first part ran there
+    train(tiny(data, tmp_path / "r", epochs=2), resume=True, log=quiet)
+    after = load_checkpoint(tmp_path / "r" / "last.ckpt")["trained_on"]
+    assert after["device"] == "cpu" and after["before"] == gpu
+
+
 def test_ctrl_c_saves_at_a_step_boundary_and_resumes_exactly(run, data, tmp_path, monkeypatch):
     straight_out, straight = run  # the same settings, run straight through
     found = signal.getsignal(signal.SIGINT)  # SIG_IGN when the suite runs in the background (nohup, &)

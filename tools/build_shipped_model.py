@@ -5,10 +5,10 @@ Usage: python tools/build_shipped_model.py [NAME ...] [--work runs/SCENE]
 
 The settings come from assets/models/NAME.json: scene, resolution, K, target, divide_albedo and
 precision always; the capture settings (frames, spp, path depth, seed, splits) and the full training
-configuration from its "recipe" block, which `diviewer export` writes into every card. Cards written
-before cards carried a recipe (the two cornell models of 2026-11) get the recipe the README records
-for them, LEGACY_RECIPE below. After the capture the dataset's hash must equal the card's
-dataset_hash, so the network is trained on the very data the shipped one saw.
+configuration from its "recipe" block, which `diviewer export` writes into every card. After the capture the dataset's hash must equal the card's
+dataset_hash, so the network is trained on the very data the shipped one saw. A linear baseline
+(`diviewer baseline`, e.g. cornell_linear) is fitted again on the capture of the shipped network with
+the same dataset hash, over the split and frame count its card's "fit" records.
 
 Every stage resumes: run the same command again after an interruption and it goes on where it
 stopped (capture skips finished frames, training continues from RUN/last.ckpt). Logs go to stdout;
@@ -27,13 +27,6 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "assets" / "models"
-
-LEGACY_RECIPE: dict[str, Any] = {
-    "capture": {"frames": 500, "spp": 256, "max_depth": 16, "seed": 0, "split_fractions": [0.8, 0.1, 0.1]},
-    "train": {"epochs": 30},
-}
-"""The recipe of cards without one: `capture --frames 500 --res 128 --spp 256` (the defaults for
-depth, seed and splits) and `train --epochs 30`, as README's "The shipped models" says."""
 
 # Training settings of a recipe, as `diviewer train` spells them; K, target and divide_albedo come
 # from the card itself, and how a machine runs a job (device, workers, autocast) is not a recipe.
@@ -57,11 +50,32 @@ def recipe(name: str) -> dict[str, Any]:
     """The model card's settings: what to capture, how to train, how to export; a warm-started model's
     parent recipe under "init" (recursively), built first."""
     card = json.loads((MODELS / f"{name}.json").read_text())
-    rec = card.get("recipe") or LEGACY_RECIPE
+    if card.get("kind") == "linear_baseline":
+        return _baseline_recipe(name, card)
+    rec = card.get("recipe")
+    if not rec:  # cards exported before cards carried a recipe
+        sys.exit(f"{MODELS / f'{name}.json'}: no recipe (exported before cards recorded one); cannot rebuild")
     w, h = card["resolution"]
     top = {"K": card["K"], "target": card["target"], "divide_albedo": bool(card.get("divide_albedo"))}
     return _from_recipe(rec, name, card["scene"], f"{w}x{h}", card["precision"] == "fp16", card["dataset_hash"],
                         MODELS / f"{name}.json", top)
+
+
+def _baseline_recipe(name: str, card: dict) -> dict[str, Any]:
+    """A linear baseline (`diviewer baseline`): fitted, not trained, on the capture of the shipped
+    network whose card has the same scene and dataset hash (a baseline's card records its fit, not
+    how its data was captured)."""
+    for other in sorted(MODELS.glob("*.json")):
+        net = json.loads(other.read_text())
+        if (net.get("recipe") and net.get("scene") == card["scene"]
+                and net.get("dataset_hash") == card["dataset_hash"]):
+            w, h = card["resolution"]
+            return {"name": name, "kind": "linear_baseline", "scene": card["scene"], "res": f"{w}x{h}",
+                    "K": card["K"], "target": card["target"], "divide_albedo": False, "fp16": False,
+                    "dataset_hash": card["dataset_hash"], "capture": net["recipe"]["capture"], "train": {},
+                    "init": None, "fit": {"split": card["fit"]["split"], "frames": card["fit"]["frames"]}}
+    sys.exit(f"{MODELS / f'{name}.json'}: dataset_hash {card['dataset_hash'][:16]} is no shipped network's "
+             f"(whose recipe says how to capture that data); cannot rebuild the baseline")
 
 
 def _from_recipe(rec: dict, name: str, scene: str, res: str, fp16: bool, dataset_hash: str, where: Path,
@@ -92,18 +106,26 @@ def _train_defaults() -> dict[str, Any]:
 
 
 def build(r: dict[str, Any], work: Path, max_steps: int | None = None) -> None:
-    """Capture, train (its parent first, if it was warm-started), export and evaluate one model."""
-    run_dir, data = train_run(r, work, max_steps)
+    """Capture, train (its parent first, if it was warm-started), export and evaluate one model; a
+    linear baseline is fitted on its capture instead."""
     out = MODELS / f"{r['name']}.onnx"
+    if r.get("kind") == "linear_baseline":
+        data = capture(r, work)
+        run("baseline", "--data", str(data), "--out", str(out), "--split", r["fit"]["split"],
+            "--max-frames", str(r["fit"]["frames"]))
+        run("eval", "--model", str(out), "--data", str(data), "--split", "test")
+        return
+    run_dir, data = train_run(r, work, max_steps)
     run("export", str(run_dir / "best.ckpt"), "--out", str(out), *(["--fp16"] if r["fp16"] else []))
     shutil.copyfile(run_dir / "curves.png", out.with_name(f"{r['name']}_curves.png"))
     shutil.copyfile(run_dir / "metrics.csv", out.with_name(f"{r['name']}_metrics.csv"))
     run("eval", "--model", str(out), "--data", str(data), "--split", "test")
 
 
-def train_run(r: dict[str, Any], work: Path, max_steps: int | None = None) -> tuple[Path, Path]:
-    """The trained run folder of a recipe (resumed if it exists) and its dataset folder."""
-    from diviewer.data.dataset import Dataset, sha256_file
+def capture(r: dict[str, Any], work: Path) -> Path:
+    """The recipe's dataset, captured (or resumed) into work/data (data2, ... where another capture is
+    there) and checked against the card's dataset hash."""
+    from diviewer.data.dataset import Dataset
 
     c = r["capture"]
     data = work / "data"  # one folder per capture: a parent on another capture gets its own
@@ -119,7 +141,15 @@ def train_run(r: dict[str, Any], work: Path, max_steps: int | None = None) -> tu
     run("data", "check", str(data), "--fast")
     if Dataset(data).hash != r["dataset_hash"]:
         sys.exit(f"{data}: dataset hash {Dataset(data).hash[:16]} is not the card's {r['dataset_hash'][:16]} "
-                 f"({r['name']}): this capture differs from the shipped model's; not training")
+                 f"({r['name']}): this capture differs from the shipped model's; not building")
+    return data
+
+
+def train_run(r: dict[str, Any], work: Path, max_steps: int | None = None) -> tuple[Path, Path]:
+    """The trained run folder of a recipe (resumed if it exists) and its dataset folder."""
+    from diviewer.data.dataset import sha256_file
+
+    data = capture(r, work)
     run_dir = work / f"train_{r['name']}"
     train = ["train", "--data", str(data), "--out", str(run_dir), "--k", str(r["K"]), "--target", r["target"]]
     if r["divide_albedo"]:

@@ -189,22 +189,31 @@ def plot(result: dict, out: Path) -> Path:
     by = EQUIVALENT_BY[0]
     fig, ax = plt.subplots(figsize=(8, 5.5), dpi=120)
     markers = {"direct": "s", "baseline": "D", "neural": "o", "path_tracer": "^", "vxgi": "v"}
-    for res in sorted({r["resolution"][0] for r in result["rows"]}):
+    # one colour per method at every resolution; the first resolution filled, the others open
+    colours, cycle = {}, plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    resolutions = sorted({r["resolution"][0] for r in result["rows"]})
+    for i, res in enumerate(resolutions):
         rows = [r for r in result["rows"] if r["resolution"][0] == res and r["accuracy"]]
+        face = {} if i == 0 else {"markerfacecolor": "none"}
         pt = sorted((r for r in rows if r["kind"] == "path_tracer"), key=lambda r: r["spp"])
         if pt:
-            ax.plot([r["timing"]["frame"]["median"] for r in pt], [r["accuracy"][by] for r in pt], "-^",
-                    label=f"path tracer {res}px (1..{pt[-1]['spp']} spp)")
+            c = colours.setdefault("path tracer", cycle[len(colours) % len(cycle)])
+            ax.plot([r["timing"]["frame"]["median"] for r in pt], [r["accuracy"][by] for r in pt], marker="^",
+                    color=c, ls="-" if i == 0 else "--", label=f"path tracer {res}px (1..{pt[-1]['spp']} spp)", **face)
+        claimed = False
         for r in rows:
             if r["kind"] == "path_tracer":
                 continue
             x, y = r["timing"]["frame"]["median"], r["accuracy"][by]
-            ax.plot([x], [y], markers.get(r["kind"], "o"), label=f"{r['label']} {res}px")
-            if r["kind"] == "neural" and r.get("step") == 1 and r.get("precision") in ("fp16", "fp32"):
-                for name, ratio in PAPER_CLAIMS.items():
+            c = colours.setdefault(r["label"], cycle[len(colours) % len(cycle)])
+            ax.plot([x], [y], markers.get(r["kind"], "o"), color=c, label=f"{r['label']} {res}px", **face)
+            if (r["kind"] == "neural" and r.get("step") == 1 and r.get("precision") in ("fp16", "fp32")
+                    and not claimed):  # the paper's ratios once per resolution, from the first network row
+                claimed = True
+                for j, (name, ratio) in enumerate(PAPER_CLAIMS.items()):
                     ax.plot([x * ratio], [y], "x", color="grey")
-                    ax.annotate(f"paper: {name} ~{ratio:.0f}x", (x * ratio, y), fontsize=6,
-                                color="grey", xytext=(3, 3), textcoords="offset points")
+                    ax.annotate(f"paper: {name} ~{ratio:.0f}x ({res}px)", (x * ratio, y), fontsize=6, color="grey",
+                                xytext=(3, 4 + 9 * (2 * i + j)), textcoords="offset points")
                 if r["equal_error"]:
                     ax.plot([r["equal_error"]["pt_ms"]], [y], "*", color="black", ms=8)
     ax.set_xscale("log")

@@ -112,6 +112,7 @@ def build_generator_from_checkpoint(ckpt: Mapping[str, Any] | str | Path):
         "capture": ckpt["dataset"].get("capture"),
         "loss_config": ckpt.get("loss_config"),
         "init": ckpt.get("init"),
+        "trained_on": trained_on_from_config(ckpt),
     }
     return netG, encoding, meta
 
@@ -184,7 +185,35 @@ def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Datase
                     "train_frames": len(train_idx), "train_indices": list(train_idx), "val_frames": n_val,
                     "capture": {k: ds.manifest.get(k) for k in CAPTURE_KEYS}},
         "versions": versions(),
+        "trained_on": trained_on(nets, cfg),
     }
+
+
+def trained_on(nets: Any, cfg: TrainConfig) -> dict[str, Any]:
+    """Where the run trains (the session that wrote the checkpoint): device kind and name, autocast
+    precision, processes; a model card says on what hardware its model was made."""
+    import platform
+
+    import torch
+
+    dev = next(nets.netG_m.parameters()).device
+    name = torch.cuda.get_device_name(dev) if dev.type == "cuda" else (platform.processor() or platform.machine())
+    names = {None: "fp32", torch.bfloat16: "bf16", torch.float16: "fp16"}
+    return {"device": dev.type, "name": name, "autocast": names.get(nets.dtype, str(nets.dtype)),
+            "world": int(os.environ.get("WORLD_SIZE", 1)),
+            "torch_threads": torch.get_num_threads() if dev.type == "cpu" else None}
+
+
+def trained_on_from_config(ckpt: Mapping[str, Any]) -> dict[str, Any] | None:
+    """`trained_on` of a checkpoint written before checkpoints recorded it: known only where the run
+    named the CPU (``--device cpu``), which trains float32 unless bf16 was asked for; None otherwise."""
+    if ckpt.get("trained_on"):
+        return dict(ckpt["trained_on"])
+    cfg = ckpt["config"]
+    if cfg.get("device") != "cpu":
+        return None
+    return {"device": "cpu", "autocast": "bf16" if cfg.get("precision") == "bf16" else "fp32",
+            "recorded": False}
 
 
 def save_run(run: Any, nets: Any, st: Any, val: dict[str, float] | None, is_best: bool) -> None:

@@ -194,6 +194,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "validation": meta["val"],
         "checkpoint_sha256": hashlib.sha256(ckpt_path.read_bytes()).hexdigest(),
         "trained_with": meta["versions"],
+        "trained_on": meta.get("trained_on"),
         "exported_with": versions(),
         "verification": check,
         "opset": OPSET,
@@ -228,6 +229,16 @@ def _recipe(meta: dict) -> dict:
     return rec
 
 
+def _hardware(t: dict | None) -> str:
+    """A card's `trained_on` in words."""
+    if not t:
+        return "not recorded"
+    words = f"{t['device']}" + (f" ({t['name']})" if t.get("name") else "") + f", {t['autocast']}"
+    if t.get("torch_threads"):
+        words += f", {t['torch_threads']} torch thread{'s' if t['torch_threads'] > 1 else ''}"
+    return words + (f"; before a resume: {_hardware(t['before'])}" if t.get("before") else "")
+
+
 def info(path: str | Path) -> str:
     """A readable summary of a model's metadata (`diviewer export --info`)."""
     from diviewer.runtime import read_metadata
@@ -245,6 +256,7 @@ def info(path: str | Path) -> str:
              f"norm={m.get('norm', 'batch')} ({m['precision']}), target {m['target']}"
              + (" / albedo" if m.get("divide_albedo") else ""),
              f"  trained at   {m['resolution'][0]}x{m['resolution'][1]}; sizes must be multiples of {m['multiple']}",
+             f"  trained on   {_hardware(m.get('trained_on'))}",
              f"  training     {m.get('epochs')} epochs, {m.get('steps')} steps, dataset {m['dataset_hash'][:16]}...",
              f"  input        {m['input']} {m['layout']} channels "
              + ", ".join(f"{n}({c})" for n, c in m["channels"]),
