@@ -5,8 +5,9 @@ Usage: python tools/build_shipped_model.py [NAME ...] [--work runs/SCENE]
 
 The settings come from assets/models/NAME.json: scene, resolution, K, target, divide_albedo and
 precision always; the capture settings (frames, spp, path depth, seed, splits) and the full training
-configuration from its "recipe" block, which `diviewer export` writes into every card. After the capture the dataset's hash must equal the card's
-dataset_hash, so the network is trained on the very data the shipped one saw. A linear baseline
+configuration from its "recipe" block, which `diviewer export` writes into every card. After the
+capture the dataset's hash must equal the card's dataset_hash, so the network is trained on the very
+data the shipped one saw. A linear baseline
 (`diviewer baseline`, e.g. cornell_linear) is fitted again on the capture of the shipped network with
 the same dataset hash, over the split and frame count its card's "fit" records.
 
