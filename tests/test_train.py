@@ -211,7 +211,7 @@ def test_a_run_resumed_on_other_hardware_records_both(data, tmp_path):
     train(tiny(data, tmp_path / "r", epochs=2, max_steps=2), log=quiet)
     ckpt = load_checkpoint(tmp_path / "r" / "last.ckpt")
     assert ckpt["trained_on"]["device"] == "cpu" and ckpt["trained_on"]["autocast"] == "fp32"
-    gpu = {"device": "cuda", "name": "NVIDIA H100", "autocast": "bf16", "world": 1, "torch_threads": None}
+    gpu = {"device": "cuda", "name": "NVIDIA H100", "autocast": "bf16", "torch_threads": None}
     atomic_save({**ckpt, "trained_on": gpu}, tmp_path / "r" / "last.ckpt")  # as if the first part ran there
     train(tiny(data, tmp_path / "r", epochs=2), resume=True, log=quiet)
     after = load_checkpoint(tmp_path / "r" / "last.ckpt")["trained_on"]

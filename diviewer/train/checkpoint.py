@@ -171,8 +171,9 @@ CAPTURE_KEYS: tuple[str, ...] = ("frames", "spp", "max_depth", "seed", "split_fr
 
 
 def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Dataset, train_idx: list[int],
-                 n_val: int) -> dict[str, Any]:
-    """What every checkpoint of a run records besides the weights and the progress."""
+                 n_val: int, resumed: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """What every checkpoint of a run records besides the weights and the progress (`resumed`: the
+    checkpoint the run goes on from, whose hardware record is kept where this session's differs)."""
     from diviewer.provenance import versions
 
     return {
@@ -185,13 +186,14 @@ def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Datase
                     "train_frames": len(train_idx), "train_indices": list(train_idx), "val_frames": n_val,
                     "capture": {k: ds.manifest.get(k) for k in CAPTURE_KEYS}},
         "versions": versions(),
-        "trained_on": trained_on(nets, cfg),
+        "trained_on": trained_on(nets, (resumed or {}).get("trained_on")),
     }
 
 
-def trained_on(nets: Any, cfg: TrainConfig) -> dict[str, Any]:
-    """Where the run trains (the session that wrote the checkpoint): device kind and name, autocast
-    precision, processes; a model card says on what hardware its model was made."""
+def trained_on(nets: Any, before: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Where the run trains: device kind and name, autocast precision, CPU threads; a model card says on
+    what hardware its model was made. A run resumed on other hardware keeps the earlier record as
+    ``before``."""
     import platform
 
     import torch
@@ -199,9 +201,11 @@ def trained_on(nets: Any, cfg: TrainConfig) -> dict[str, Any]:
     dev = next(nets.netG_m.parameters()).device
     name = torch.cuda.get_device_name(dev) if dev.type == "cuda" else (platform.processor() or platform.machine())
     names = {None: "fp32", torch.bfloat16: "bf16", torch.float16: "fp16"}
-    return {"device": dev.type, "name": name, "autocast": names.get(nets.dtype, str(nets.dtype)),
-            "world": int(os.environ.get("WORLD_SIZE", 1)),
-            "torch_threads": torch.get_num_threads() if dev.type == "cpu" else None}
+    now = {"device": dev.type, "name": name, "autocast": names.get(nets.dtype, str(nets.dtype)),
+           "torch_threads": torch.get_num_threads() if dev.type == "cpu" else None}
+    if before and {k: v for k, v in before.items() if k != "before"} != now:
+        now["before"] = dict(before)
+    return now
 
 
 def trained_on_from_config(ckpt: Mapping[str, Any]) -> dict[str, Any] | None:

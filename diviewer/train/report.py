@@ -114,9 +114,9 @@ def draw_curves(rows: list[Mapping[str, Any]], path: Path, best_epoch: float | N
             pts[label] = [(x, math.log10(y) if log_y else y) for x, y in p]
         allp = [q for p in pts.values() for q in p]
         if not allp:
-            trained = any(r.get("loss_G_L1") is not None for r in rows)  # steps ran, netD did not
-            draw.text((x0 + 10, (y0 + y1) // 2), "no discriminator (--gan-weight 0)" if trained and k == 3
-                      else "no data yet", fill="gray", font=font)
+            no_netD = title.startswith("netD") and any(r.get("loss_G_L1") is not None for r in rows)
+            draw.text((x0 + 10, (y0 + y1) // 2), "no discriminator (--gan-weight 0)" if no_netD else "no data yet",
+                      fill="gray", font=font)
             continue
         xlo, xhi = min(q[0] for q in allp), max(q[0] for q in allp)
         ylo, yhi = min(q[1] for q in allp), max(q[1] for q in allp)

@@ -186,12 +186,9 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
             nets.netG = torch.nn.parallel.DistributedDataParallel(nets.netG_m, device_ids=ids)
             nets.netD = torch.nn.parallel.DistributedDataParallel(nets.netD_m, device_ids=ids)
         steps_per_epoch = len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world))
-        meta = run_metadata(cfg, nets, net_cfg, enc, ds, train_idx, 0 if val_arr is None else len(val_arr))
+        meta = run_metadata(cfg, nets, net_cfg, enc, ds, train_idx, 0 if val_arr is None else len(val_arr), ckpt)
         if parent or (ckpt and ckpt.get("init")):
             meta["init"] = init_record(parent) if parent else ckpt["init"]
-        before = ckpt.get("trained_on") if ckpt else None
-        if before and {k: v for k, v in before.items() if k != "before"} != meta["trained_on"]:
-            meta["trained_on"]["before"] = before  # resumed on other hardware: both sessions on the card
         run = Run(cfg=cfg, dev=dev, ds=ds, train_arr=train_arr, val_arr=val_arr, enc=enc, say=say,
                   meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed)
 

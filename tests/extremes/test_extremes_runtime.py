@@ -187,9 +187,9 @@ def test_shipped_model_is_darker_without_light(cornell_frames, shipped):
 
 
 @pytest.mark.xfail(strict=True, reason="the shipped cornell model hallucinates indirect light at zero light "
-                                       "(mean 6 % of the lit frame's for the K=8 of 2026-11-23, 7 % for the K=16 before it, 15 % "
-                                       "before the first retrains): its "
-                                       "training set never has a dark frame")
+                                       "(mean 6 % of the lit frame's for the K=8 of 2026-11-23, 7 % for the K=16 "
+                                       "before it, 15 % before the first retrains): its training set never has a "
+                                       "dark frame")
 def test_shipped_model_is_near_black_at_zero_light(cornell_frames, shipped):
     dark, lit = (float(shipped.run(cornell_frames[1][k]).mean()) for k in (0.0, 1.0))
     assert dark < 0.01 * lit
