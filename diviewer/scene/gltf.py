@@ -18,11 +18,12 @@ from diviewer.errors import DiviewerError
 from diviewer.scene import camera as cam
 from diviewer.scene.model import Material, Mesh, Object
 from diviewer.scene.colour import srgb_to_linear
+from diviewer.scene.reads import note_read, recording_reads
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 _texture_cache: dict[tuple, tuple[np.ndarray, np.ndarray | None]] = {}
-_gltf_cache: dict[tuple, tuple[dict, dict, list]] = {}
+_gltf_cache: dict[tuple, tuple[tuple[dict, dict, list], tuple[Path, ...]]] = {}
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -35,6 +36,7 @@ def _file_key(file: Path, what: str, path, field: str) -> tuple:
     """The cache key of an existing file (its path, mtime and size: an edited file is read again)."""
     if not file.is_file():
         raise DiviewerError(f"{what} file not found: {file}", path=path, field=field)
+    note_read(file)
     st = file.stat()
     return (str(file.resolve()), st.st_mtime_ns, st.st_size)
 
@@ -79,6 +81,7 @@ class _Reader:
             bin_path = base / uri
             if not bin_path.is_file():
                 raise DiviewerError(f"buffer file not found: {bin_path}", path=file, field=f"buffers[{i}].uri")
+            note_read(bin_path)
             data = bin_path.read_bytes()
             if len(data) < b.get("byteLength", 0):
                 raise DiviewerError(f"{bin_path} has {len(data)} bytes, the file declares {b['byteLength']}",
@@ -187,8 +190,11 @@ def load_gltf(file: Path, *, path=None, field: str = "gltf.file") -> tuple[dict[
             doc = json.loads(file.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise DiviewerError(f"not a glTF JSON file: {exc}", path=path, field=field) from exc
-        _gltf_cache[key] = _parse(doc, file.parent, file)
-    meshes, materials, objects = _gltf_cache[key]
+        with recording_reads() as deps:
+            parsed = _parse(doc, file.parent, file)
+        _gltf_cache[key] = (parsed, tuple(deps))
+    (meshes, materials, objects), deps = _gltf_cache[key]
+    note_read(*deps)  # buffers and textures, also when the parse came from the cache
     return dict(meshes), dict(materials), list(objects)
 
 

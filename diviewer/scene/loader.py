@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
+import json
 import math
+import os
 import tomllib
 from pathlib import Path
 
@@ -12,9 +15,10 @@ import numpy as np
 from diviewer.errors import DiviewerError
 from diviewer.paths import scenes_dir
 from diviewer.scene import gltf, shapes
+from diviewer.scene.reads import recording_reads
 from diviewer.scene.model import (
-    Camera, CameraRange, DirectionalLight, FrameConfig, LightRange, Material, Object, ObjectRange,
-    PointLight, Ranges, Scene,
+    Camera, CameraRange, CameraRegion, DirectionalLight, FrameConfig, LightRange, Material, Object, ObjectRange,
+    PointLight, Ranges, Scene, box_intersection, box_volume,
 )
 
 
@@ -132,15 +136,59 @@ def resolve_scene_path(scene: str | Path) -> Path:
     return shipped
 
 
+IDENTITY_VERSION = 2
+"""Version of `scene_identity`'s definition (1 was the scene file's bytes alone)."""
+
+NOT_IDENTITY = ("camera", "ranges")
+"""Top-level tables of a scene file that do not change what the scene looks like: where the camera
+starts and what the sampler varies (a model records the ranges it was trained on separately)."""
+
+
+def scene_identity(data: dict, files: list[Path], base: Path) -> str:
+    """sha256 of what a scene looks like: its parsed TOML (less `NOT_IDENTITY` and the display exposure)
+    and the bytes of every file it loads (glTF, buffers, textures, mesh files), by path from the TOML."""
+    content = {k: v for k, v in data.items() if k not in NOT_IDENTITY}
+    if isinstance(content.get("scene"), dict):
+        content["scene"] = {k: v for k, v in content["scene"].items() if k != "exposure"}
+    deps = {}
+    for f in files:
+        try:
+            rel = os.path.relpath(f.resolve(), base.resolve())
+        except ValueError:  # another drive (Windows)
+            rel = str(f.resolve())
+        deps[rel.replace(os.sep, "/")] = _sha256_file(f)
+    blob = json.dumps({"identity_version": IDENTITY_VERSION, "scene": content, "files": dict(sorted(deps.items()))},
+                      sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()
+
+
+_hash_cache: dict[tuple, str] = {}
+
+
+def _sha256_file(f: Path) -> str:
+    """A file's sha256, cached on (path, mtime, size) as the texture and glTF caches are."""
+    st = f.stat()
+    key = (str(f.resolve()), st.st_mtime_ns, st.st_size)
+    if key not in _hash_cache:
+        h = hashlib.sha256()
+        with open(f, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+        _hash_cache[key] = h.hexdigest()
+    return _hash_cache[key]
+
+
 def load_scene(scene: str | Path) -> Scene:
-    """Load and validate a scene by shipped name or path."""
+    """Load and validate a scene by shipped name or path; its identity hash covers every file it loads."""
     path = resolve_scene_path(scene)
     blob = path.read_bytes()
     try:
         data = tomllib.loads(blob.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DiviewerError(f"not valid TOML: {exc}", path=path) from exc
-    return parse_scene(data, path=path, file_hash=hashlib.sha256(blob).hexdigest())
+    with recording_reads() as files:
+        parsed = parse_scene(data, path=path)
+    return dataclasses.replace(parsed, file_hash=scene_identity(data, files, path.parent))
 
 
 def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") -> Scene:
@@ -327,7 +375,10 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
             raise r.err("offset", "expected [[min x, y, z], [max x, y, z]]")
         objects[key] = ObjectRange(axes=r.vecs("axes", 3, []), angle=r.vec("angle", 2, (0.0, 360.0)),
                                    offset=offset, train_meshes=train, test_meshes=test)
-    if t.has("camera"):
+    camera_region = None
+    if t.has("camera") and t.table("camera").has("region"):
+        camera_region = _camera_region(t.table("camera"), default.camera)
+    elif t.has("camera"):
         r = t.table("camera")
         positions, targets = r.vecs("positions", 3), r.vecs("targets", 3)
         if len(positions) < 2 or len(positions) != len(targets):
@@ -340,7 +391,47 @@ def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
                              test_stretches=stretches)
         r.finish()
     t.finish()
-    return Ranges(lights=lights, objects=objects, camera=camera)
+    return Ranges(lights=lights, objects=objects, camera=camera, camera_region=camera_region)
+
+
+def _box(r: _Table, key: str, value=None) -> tuple:
+    """[[min x, y, z], [max x, y, z]] with min < max on every axis."""
+    sub = r if value is None else _Table({key: value}, r.path, r.where)
+    box = sub.vecs(key, 3)
+    if len(box) != 2:
+        raise r.err(key, "expected [[min x, y, z], [max x, y, z]]")
+    if not all(a < b for a, b in zip(*box)):
+        raise r.err(key, f"each min must be below its max, got {[list(box[0]), list(box[1])]}")
+    return box
+
+
+def _camera_region(r: _Table, camera: Camera) -> CameraRegion:
+    """A free camera's ranges: a box of positions, a jittered look-at target, a field-of-view range."""
+    region = _box(r, "region")
+    target = r.vec("target", 3, camera.target)
+    jitter = r.vec("target_jitter", 3, (0.0, 0.0, 0.0), lo=0.0)
+    fov = r.vec("fov", 2, (camera.fov, camera.fov), lo=1.0, hi=170.0)
+    if fov[0] > fov[1]:
+        raise r.err("fov", f"[min, max] with min <= max, got {list(fov)}")
+    raw = r.raw("test_regions", [])
+    if not isinstance(raw, list):
+        raise r.err("test_regions", "expected a list of [[min x, y, z], [max x, y, z]] boxes")
+    tests = tuple(_box(r, f"test_regions[{i}]", b) for i, b in enumerate(raw))
+    share = r.num("default_share", 0.0, lo=0.0, hi=1.0)
+    result = CameraRegion(region=region, target=target, target_jitter=jitter, fov=fov, test_regions=tests,
+                          default_share=share)
+    inside = [box_volume(box_intersection(region, b)) for b in tests]
+    for i, v in enumerate(inside):
+        if v <= 0.0:
+            raise r.err("test_regions", f"test region {i} does not overlap 'region': no test camera could be drawn there")
+    # Overlapping test boxes count twice here, so this only refuses a region that is (nearly) all held out.
+    if tests and sum(inside) >= 0.9 * box_volume(region):
+        raise r.err("test_regions", "the test regions cover (almost) all of 'region': training needs the rest")
+    for p in (np.asarray(region[0]), np.asarray(region[1])):
+        if np.linalg.norm(np.asarray(target) - p) <= 1e-6:
+            raise r.err("target", "the look-at target is a corner of the camera region")
+    r.finish()
+    return result
 
 
 def add_mesh_file(scene: Scene, path: str | Path, key: str | None = None) -> tuple[Scene, str, str | None]:

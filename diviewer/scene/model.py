@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Union
@@ -173,6 +174,61 @@ class CameraRange:
     """Intervals of the path parameter in [0, 1] used only for test frames."""
 
 
+Box = tuple[Vec3, Vec3]
+
+
+def box_contains(box: Box, p, margin: float = 0.0) -> bool:
+    """Whether point p lies in the axis-aligned box (min, max), grown by ``margin`` on every side."""
+    lo, hi = np.asarray(box[0]) - margin, np.asarray(box[1]) + margin
+    p = np.asarray(p, dtype=np.float64)
+    return bool(np.all(p >= lo) and np.all(p <= hi))
+
+
+def box_volume(box: Box) -> float:
+    return float(np.prod(np.maximum(np.asarray(box[1]) - np.asarray(box[0]), 0.0)))
+
+
+def box_intersection(a: Box, b: Box) -> Box:
+    lo, hi = np.maximum(a[0], b[0]), np.minimum(a[1], b[1])
+    return (_vec3(lo), _vec3(np.maximum(lo, hi)))
+
+
+@dataclass(frozen=True)
+class CameraRegion:
+    """Where a free camera may be: positions in a box, aimed at a jittered target, a field-of-view range.
+
+    Boxes in ``test_regions`` are held out: test frames put the camera there, training frames never do,
+    validation frames anywhere in ``region``.
+    """
+
+    region: Box = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    """(min, max) corners of the box the camera position is drawn from (uniformly)."""
+    target: Vec3 = (0.0, 0.0, 0.0)
+    """Centre of the look-at point."""
+    target_jitter: Vec3 = (0.0, 0.0, 0.0)
+    """Half-extents of the box around ``target`` the look-at point is drawn from."""
+    fov: tuple[float, float] = (45.0, 45.0)
+    """Vertical field of view range in degrees."""
+    test_regions: tuple[Box, ...] = ()
+    """Boxes of camera positions used only by test frames."""
+    default_share: float = 0.0
+    """Share of training and validation frames that keep the scene file's own camera (the fixed view
+    most users start from), so the model stays as sharp there as a fixed-camera model."""
+
+    def in_test_region(self, p) -> bool:
+        return any(box_contains(b, p) for b in self.test_regions)
+
+    def max_look_offset(self, position) -> float:
+        """Largest angle (radians) between the view direction and the direction to ``target`` that the
+        sampler can draw from ``position``: the jitter box seen from there (its corner-most point)."""
+        d = np.asarray(self.target, dtype=np.float64) - np.asarray(position, dtype=np.float64)
+        dist = float(np.linalg.norm(d))
+        reach = float(np.linalg.norm(self.target_jitter))
+        if dist <= reach:
+            return math.pi
+        return math.asin(reach / dist)
+
+
 @dataclass(frozen=True)
 class Ranges:
     """Everything the sampler may vary, declared by the scene file."""
@@ -180,6 +236,9 @@ class Ranges:
     lights: dict[str, LightRange] = field(default_factory=dict)
     objects: dict[str, ObjectRange] = field(default_factory=dict)
     camera: CameraRange | None = None
+    """A camera path (keyframes), or None."""
+    camera_region: CameraRegion | None = None
+    """A free camera's region, or None (at most one of ``camera`` and ``camera_region`` is set)."""
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ import numpy as np
 
 from diviewer.scene import camera as cam
 from diviewer.scene.lights import rotate_light, scale_light
-from diviewer.scene.model import CameraRange, FrameConfig, Scene
+from diviewer.scene.model import CameraRange, FrameConfig, Scene, box_intersection, box_volume
 
 SPLITS = ("train", "val", "test")
 
@@ -82,10 +82,19 @@ def _draw_path_parameter(rng: np.random.Generator, path: CameraRange, split: str
     return float(a + (b - a) * rng.uniform(1e-6, 1.0 - 1e-6))
 
 
-def sample_config(scene: Scene, seed: int, split: str = "train") -> FrameConfig:
-    """One configuration drawn from the scene's ranges; the same (scene, seed, split) gives the same one."""
+CAMERA_MODES = ("sampled", "default")
+
+
+def sample_config(scene: Scene, seed: int, split: str = "train", camera: str = "sampled") -> FrameConfig:
+    """One configuration drawn from the scene's ranges; the same (scene, seed, split) gives the same one.
+
+    ``camera="default"`` keeps the scene file's camera (the paper's fixed-camera protocol); lights and
+    objects are the same either way, since the camera is drawn from a stream of its own.
+    """
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    if camera not in CAMERA_MODES:
+        raise ValueError(f"camera must be one of {CAMERA_MODES}, got {camera!r}")
     rng = np.random.default_rng([int(seed), SPLITS.index(split)])
     config = scene.default
     centre = scene.bounds().mean(axis=0)
@@ -117,9 +126,44 @@ def sample_config(scene: Scene, seed: int, split: str = "train") -> FrameConfig:
         objects.append(dataclasses.replace(obj, mesh=mesh, rotation=matrix_to_euler_xyz(rot),
                                            position=tuple(map(float, pos))))
 
-    s = path_parameter(scene, seed, split)
-    camera = config.camera if s is None else camera_on_path(scene, s)
-    return FrameConfig(camera=camera, lights=tuple(lights), objects=tuple(objects))
+    if camera == "default":
+        cam_out = config.camera
+    elif scene.ranges.camera_region is not None:
+        cam_out = _region_camera(scene, seed, split)
+    else:
+        s = path_parameter(scene, seed, split)
+        cam_out = config.camera if s is None else camera_on_path(scene, s)
+    return FrameConfig(camera=cam_out, lights=tuple(lights), objects=tuple(objects))
+
+
+def _uniform_in(rng: np.random.Generator, box) -> np.ndarray:
+    return rng.uniform(np.asarray(box[0], dtype=np.float64), np.asarray(box[1], dtype=np.float64))
+
+
+def _region_camera(scene: Scene, seed: int, split: str):
+    """A free camera in the scene's region: train avoids the test boxes, test lies in them, val anywhere."""
+    region = scene.ranges.camera_region
+    # A stream of its own (as the path parameter's), so lights and objects do not depend on the camera.
+    rng = np.random.default_rng([int(seed), SPLITS.index(split), 2])
+    if split != "test" and rng.uniform() < region.default_share:
+        return scene.default.camera
+    if split == "test" and region.test_regions:
+        boxes = [box_intersection(region.region, b) for b in region.test_regions]
+        vol = np.array([box_volume(b) for b in boxes])
+        position = _uniform_in(rng, boxes[int(rng.choice(len(boxes), p=vol / vol.sum()))])
+    else:
+        for _ in range(10_000):  # the loader refuses test boxes covering >= 90 % of the region
+            position = _uniform_in(rng, region.region)
+            if split == "val" or not region.in_test_region(position):
+                break
+        else:
+            raise RuntimeError("no training camera position found outside the test regions")
+    target = np.asarray(region.target) + rng.uniform(-1.0, 1.0, 3) * np.asarray(region.target_jitter)
+    if np.linalg.norm(target - position) < 1e-3:  # measure zero; keep look_at well defined
+        target = target + np.array([0.0, 0.0, -1e-2])
+    fov = float(rng.uniform(*region.fov))
+    return dataclasses.replace(scene.default.camera, position=tuple(map(float, position)),
+                               target=tuple(map(float, target)), fov=fov)
 
 
 def path_parameter(scene: Scene, seed: int, split: str = "train") -> float | None:

@@ -11,6 +11,7 @@ import trimesh
 from diviewer.errors import DiviewerError
 from diviewer.scene.colour import srgb_to_linear
 from diviewer.scene.model import Mesh
+from diviewer.scene.reads import note_read
 
 CREASE_ANGLE_DEG = 30.0
 """Edges sharper than this get split normals (a box stays faceted, a sphere stays smooth)."""
@@ -194,6 +195,7 @@ def load_file(name: str, file: Path, *, path=None, field: str = "") -> tuple[Mes
     """
     if not file.is_file():
         raise DiviewerError(f"mesh file not found: {file}", path=path, field=field + ".file")
+    note_read(file)
     try:
         loaded = trimesh.load(file, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
