@@ -34,6 +34,13 @@ uniform bool u_has_texture;
 uniform sampler2D u_albedo_map;  // linear RGB, alpha = cut-out mask (1 where the material has none)
 #if defined ALPHA_TEST
 uniform float u_alpha_cutoff;
+// The cut-out test reads the nearest texel of the full-resolution mask, as the path tracer does
+// (diviewer/reference/mitsuba.py): the same texel decides in both, at every distance.
+float mask_alpha(sampler2D tex, vec2 uv) {
+    ivec2 size = textureSize(tex, 0);
+    ivec2 texel = clamp(ivec2(floor(fract(uv) * vec2(size))), ivec2(0), size - ivec2(1));
+    return texelFetch(tex, texel, 0).a;
+}
 #endif
 
 layout(location = 0) out float out_depth;
@@ -47,7 +54,7 @@ void main() {
     if (!gl_FrontFacing) n = -n;
     vec4 texel = u_has_texture ? texture(u_albedo_map, v_uv) : vec4(1.0);
 #if defined ALPHA_TEST
-    if (texel.a < u_alpha_cutoff) discard;  // glTF alphaMode MASK: the surface is not there
+    if (mask_alpha(u_albedo_map, v_uv) < u_alpha_cutoff) discard;  // glTF alphaMode MASK: the surface is not there
 #endif
     vec3 albedo = u_albedo * texel.rgb;
     out_depth = -v_pos.z;

@@ -30,6 +30,13 @@ in vec3 v_world;
 in vec2 v_uv;
 uniform sampler2D u_albedo_map;
 uniform float u_alpha_cutoff;
+// The cut-out test reads the nearest texel of the full-resolution mask, as the path tracer does
+// (diviewer/reference/mitsuba.py): the same texel decides in both, at every distance.
+float mask_alpha(sampler2D tex, vec2 uv) {
+    ivec2 size = textureSize(tex, 0);
+    ivec2 texel = clamp(ivec2(floor(fract(uv) * vec2(size))), ivec2(0), size - ivec2(1));
+    return texelFetch(tex, texel, 0).a;
+}
 #endif
 
 #if defined POINT_LIGHT
@@ -39,7 +46,7 @@ layout(location = 0) out float out_distance;
 
 void main() {
 #if defined ALPHA_TEST
-    if (texture(u_albedo_map, v_uv).a < u_alpha_cutoff) discard;
+    if (mask_alpha(u_albedo_map, v_uv) < u_alpha_cutoff) discard;
 #endif
 #if defined POINT_LIGHT
     out_distance = length(v_world - u_light_pos);
