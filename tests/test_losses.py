@@ -73,11 +73,11 @@ def test_refusals() -> None:
     with pytest.raises(ValueError, match="mode"):
         reconstruction_loss(x, x, "huber")
     with pytest.raises(ValueError, match="space"):
-        reconstruction_loss(x, x, "l1", "log")
+        reconstruction_loss(x, x, "l1", "cubic")
     with pytest.raises(ValueError, match="encoding"):
         reconstruction_loss(x, x, "l2", "linear")
     with pytest.raises(DiviewerError, match="loss.space"):
-        LossConfig(space="log")
+        LossConfig(space="cubic")
     with pytest.raises(DiviewerError, match="loss.reconstruction"):
         LossConfig(reconstruction="l3")
     with pytest.raises(DiviewerError, match="loss.gan_mode"):
@@ -133,3 +133,23 @@ def test_l2_on_encoded_values_is_minimised_at_a_log_domain_mean() -> None:
     got = _minimiser("l2", "encoded")
     assert got == pytest.approx(log_mean, rel=2e-3)
     assert MEDIAN < got < 0.5 * MEAN  # biased dark (Jensen), between the median and the mean here
+
+
+def test_log_space_counts_errors_relative_to_the_pixel() -> None:
+    """A 10 % error costs the same in a dark pixel as in a bright one (well above LOG_EPSILON), and the
+    value is L1 between log(epsilon + exposed radiance)."""
+    from diviewer.train.losses import LOG_EPSILON
+
+    e = ENC.exposure
+    dark, bright = 0.5 / e, 50.0 / e  # exposed radiance 0.5 and 50
+    costs = [reconstruction_loss(_encoded([x * 1.1]), _encoded([x]), "l1", "log", ENC).item() for x in (dark, bright)]
+    expected = [abs(np.log(1.1 * x * e + LOG_EPSILON) - np.log(x * e + LOG_EPSILON)) for x in (dark, bright)]
+    np.testing.assert_allclose(costs, expected, rtol=1e-4)
+    assert costs[0] == pytest.approx(costs[1], rel=0.03)
+    # on the encoded values (linear below ~1) the dark pixel's 10 % costs ~3x less than the bright one's
+    enc = [reconstruction_loss(_encoded([x * 1.1]), _encoded([x]), "l1", "encoded", ENC).item() for x in (dark, bright)]
+    assert enc[0] < enc[1] / 2
+    # negative (noise) targets clamp to zero rather than producing NaN
+    assert np.isfinite(reconstruction_loss(_encoded([-0.3]), _encoded([0.2]), "l1", "log", ENC).item())
+    with pytest.raises(ValueError, match="needs the encoding"):
+        reconstruction_loss(_encoded([1.0]), _encoded([1.0]), "l1", "log")

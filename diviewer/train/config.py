@@ -101,9 +101,9 @@ class TrainConfig:
     """Reconstruction norm, weighted by lambda_L1: "l1" (the paper) or "l2"."""
 
     recon_space: str = "encoded"
-    """Where the reconstruction loss is taken: "encoded" (the network's values, the paper) or
+    """Where the reconstruction loss is taken: "encoded" (the network's values, the paper),
     "linear" (radiance times the dataset exposure; with l2 the one unbiased choice under
-    Monte-Carlo noise, see `diviewer.train.losses`)."""
+    Monte-Carlo noise) or "log" (relative errors: dark regions count); see `diviewer.train.losses`."""
 
     n_layers_D: int = 3
     """Discriminator stride layers (3: the paper's 70x70 PatchGAN; 4 sees 142x142 patches)."""
@@ -203,7 +203,7 @@ class TrainConfig:
 
 CHOICES: dict[str, tuple[str, ...]] = {
     "precision": ("auto", "fp32", "bf16", "fp16"), "gan_mode": ("vanilla", "lsgan"), "recon_loss": ("l1", "l2"),
-    "recon_space": ("encoded", "linear"), "norm_D": ("batch", "instance", "none"),
+    "recon_space": ("encoded", "linear", "log"), "norm_D": ("batch", "instance", "none"),
     "upsample": ("transpose", "resize", "shuffle"), "norm": ("batch", "instance", "none"),
     "lr_decay": ("none", "cosine"),
 }

@@ -39,9 +39,15 @@ from diviewer.provenance import check_known_keys
 RECONSTRUCTION_MODES: tuple[str, ...] = ("l1", "l2")
 """Reconstruction norms: mean absolute error (pix2pix, the paper) or mean squared error."""
 
-RECONSTRUCTION_SPACES: tuple[str, ...] = ("encoded", "linear")
+RECONSTRUCTION_SPACES: tuple[str, ...] = ("encoded", "linear", "log")
 """Where the reconstruction loss is taken: on the network's encoded values (the paper's choice, as
-the network sees them), or on linear radiance times the dataset's exposure (so ~1 is a typical value)."""
+the network sees them), on linear radiance times the dataset's exposure (so ~1 is a typical value), or
+on log(LOG_EPSILON + exposed radiance), where an error counts relative to the pixel's own brightness:
+dark regions (an object lit only by bounced light) weigh as much as bright ones."""
+
+LOG_EPSILON: float = 0.01
+"""Offset of the "log" space, in exposed radiance (~1 typical): below it errors count absolutely, so
+the black background and Monte-Carlo noise around zero do not dominate."""
 
 GAN_MODES: tuple[str, ...] = ("vanilla", "lsgan")
 """Adversarial objectives (pix2pix's names): BCE on logits (the paper), or least squares (Mao et al.)."""
@@ -90,7 +96,7 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
         fake_B: netG's output (encoded, any float dtype; the loss is computed in float32).
         real_B: the encoded target, same shape.
         mode: "l1" or "l2" (`RECONSTRUCTION_MODES`).
-        space: "encoded" or "linear" (`RECONSTRUCTION_SPACES`); "linear" needs `encoding`.
+        space: "encoded", "linear" or "log" (`RECONSTRUCTION_SPACES`); the last two need `encoding`.
         encoding: the dataset's encoding, to decode to linear radiance (times its exposure).
 
     Returns:
@@ -101,10 +107,12 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
     if space not in RECONSTRUCTION_SPACES:
         raise ValueError(f"space must be one of {list(RECONSTRUCTION_SPACES)}, got {space!r}")
     fake, real = fake_B.float(), real_B.float()
-    if space == "linear":
+    if space in ("linear", "log"):
         if encoding is None:
-            raise ValueError("space 'linear' needs the encoding to decode radiance")
+            raise ValueError(f"space '{space}' needs the encoding to decode radiance")
         fake, real = exposed_radiance(fake, encoding), exposed_radiance(real, encoding)
+    if space == "log":
+        fake, real = torch.log(fake.clamp_min(0.0) + LOG_EPSILON), torch.log(real.clamp_min(0.0) + LOG_EPSILON)
     if mode == "l1":
         return nn.functional.l1_loss(fake, real)
     return nn.functional.mse_loss(fake, real)
