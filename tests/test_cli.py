@@ -198,3 +198,14 @@ def test_an_existing_output_file_is_overwritten_and_one_under_a_file_is_refused(
     assert check_output_dir(tmp_path / "run") == tmp_path / "run"
     with pytest.raises(DiviewerError, match="is a file; give a folder"):
         check_output_dir(existing)
+
+
+@pytest.mark.parametrize("command", ["render", "capture", "evalset", "bench", "view"])
+def test_scene_help_lists_every_shipped_scene_from_the_assets_folder(command, capsys):
+    from diviewer.paths import shipped_scenes
+
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps the help text
+    assert {"cornell", "sponza", "atrium"} <= set(shipped_scenes())
+    assert f"shipped scene name ({', '.join(shipped_scenes())})" in text
