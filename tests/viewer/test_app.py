@@ -310,7 +310,7 @@ def test_shortcut_list_comes_from_the_key_table():
     assert all(b.run is not None for b in BINDINGS if b.chords)
     assert {m.key for m in VIEW_MODES if m.key} <= set(chords)
     assert ("Shift+R", "reset the whole frame (lights, objects, camera)") in SHORTCUTS
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     assert shortcuts_markdown() in readme, "README's controls differ from viewer/input.py (paste shortcuts_markdown())"
 
 
@@ -321,7 +321,7 @@ def test_one_tone_map_list():
     render = build_parser()._subparsers._group_actions[0].choices["render"]
     tonemap = next(a for a in render._actions if a.dest == "tonemap")
     assert tuple(tonemap.choices) == tuple(TONEMAPS) and tonemap.default == DEFAULT_TONEMAP
-    shader = (Path(__file__).resolve().parents[1] / "shaders" / "tonemap.glsl").read_text()
+    shader = (Path(__file__).resolve().parents[2] / "shaders" / "tonemap.glsl").read_text()
     for name, code in TONEMAPS.items():  # the codes the shader's comment documents
         assert f"{code}: " in shader and (name[:4].lower() in shader.lower())
 

@@ -16,7 +16,7 @@ from diviewer.runtime import NeuralGI, read_metadata  # noqa: E402
 from diviewer.train.export import ExportSettings, export, gi_module, info  # noqa: E402
 from diviewer.train.checkpoint import build_generator_from_checkpoint  # noqa: E402
 from diviewer.train.trainer import train  # noqa: E402
-from test_train import make_dataset, quiet, tiny  # noqa: E402
+from train.test_trainer import make_dataset, quiet, tiny  # noqa: E402
 
 
 @pytest.fixture(scope="module")
