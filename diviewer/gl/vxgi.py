@@ -41,7 +41,7 @@ Artefacts, and what the settings do about them:
   sample's footprint (its trilinear neighbourhood of voxels a cone diameter wide) reaches behind the
   cone's apex: a surface sees the lit far side of the wall it stands on, or of the opposite wall
   (cornell's walls are sunlit outside: its red wall glows red inside where the path tracer has it
-  dark). Measured on a closed box lit from outside (tests/test_vxgi.py): 7 % of the outside radiance
+  dark). Measured on a closed box lit from outside (tests/gl/test_vxgi.py): 7 % of the outside radiance
   inside with the defaults, 14 % isotropic or without the lod bias, the same at 64^3 and 128^3.
   ``anisotropic`` stops a wall from showing its far side; ``lod_bias`` samples finer levels than the
   cone's diameter (smaller footprints, a little noisier, and a thin wall between samples is missed

@@ -200,7 +200,7 @@ def test_alpha_cutout_mitsuba_scalar(tmp_path):
     check_cutout(a["albedo"], a["depth"], 16)
 
 
-# --- Sponza: the Mitsuba cross-checks of tests/test_reference.py, at tiny size -----------------------------------
+# --- Sponza: the Mitsuba cross-checks of tests/reference/test_mitsuba.py, at tiny size ------------------------
 
 def test_sponza_mitsuba_matches_gl(ctx, sponza):
     """On a Sponza frame (48x32, 16 spp): Mitsuba's depth and normals match the G-buffer, its albedo the
