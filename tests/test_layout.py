@@ -213,3 +213,24 @@ def test_the_circle_detector_finds_a_planted_circle(tmp_path):
     assert _circles(graph) == [["planted.a", "planted.sub.b", "planted.c", "planted.a"]]
     (pkg / "c.py").write_text("import json\n")
     assert _circles(_graph_of(pkg)) == []
+
+
+TESTS = Path(__file__).resolve().parent
+SUITES = {"extremes"}
+"""Folders of tests/ that are suites across the package (run alone with their mark), not mirrors of a package."""
+
+
+def test_tests_mirror_the_package():
+    """tests/<package>/test_<module>.py tests diviewer/<package>/<module>.py; tests/test_<name>.py a top-level module
+    (or a script of tools/); shared fixtures live in tests/conftest.py, helpers in tests/*.py without test_."""
+    root = PACKAGE.parent
+    strays = []
+    for path in sorted(TESTS.rglob("test_*.py")):
+        rel = path.relative_to(TESTS)
+        if rel.parts[0] in SUITES or path == Path(__file__).resolve():
+            continue
+        module = path.stem[len("test_"):]
+        folder = PACKAGE.joinpath(*rel.parts[:-1])
+        if not ((folder / f"{module}.py").is_file() or (len(rel.parts) == 1 and (root / "tools" / f"{module}.py").is_file())):
+            strays.append(f"tests/{rel.as_posix()}: no {folder.relative_to(root).as_posix()}/{module}.py")
+    assert not strays, "move each test file beside the module it tests:\n" + "\n".join(strays)

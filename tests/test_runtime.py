@@ -193,6 +193,7 @@ def test_models_are_shipped():
     assert [p.stem for p in SHIPPED if not p.with_suffix(".json").is_file()] == [] and SHIPPED, "each with its card"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
 def test_shipped_model_runs_a_frame_of_its_scene(ctx, path):
     """Each shipped model loads for its scene and turns a GL frame into finite radiance of the frame's size;
