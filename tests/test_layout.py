@@ -1,6 +1,7 @@
 """The package's layout stays as docs/architecture.md says: import arrows point down, no module imports itself
-round a circle, torch stays in train/, and no module outgrows what a reader holds in mind. Imports are read with ast (nothing is imported),
-including those inside functions, since the heavy ones are deliberately lazy."""
+round a circle, torch stays in train/, no module outgrows what a reader holds in mind, and the tests mirror the
+package. Imports are read with ast (nothing is imported), including those inside functions, since the heavy ones
+are deliberately lazy."""
 
 from __future__ import annotations
 
@@ -134,7 +135,8 @@ def test_viewer_bench_and_runtime_never_import_train():
 @pytest.mark.parametrize("path", sorted(PACKAGE.rglob("*.py")), ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_modules_stay_small(path):
     lines = len(path.read_text().splitlines())
-    assert lines < MAX_LINES, f"{path.relative_to(PACKAGE)} has {lines} lines; split it into rooms (see docs/architecture.md)"
+    assert lines < MAX_LINES, (f"{path.relative_to(PACKAGE)} has {lines} lines; split it into rooms "
+                               "(see docs/architecture.md)")
 
 
 def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -231,6 +233,7 @@ def test_tests_mirror_the_package():
             continue
         module = path.stem[len("test_"):]
         folder = PACKAGE.joinpath(*rel.parts[:-1])
-        if not ((folder / f"{module}.py").is_file() or (len(rel.parts) == 1 and (root / "tools" / f"{module}.py").is_file())):
+        tool = len(rel.parts) == 1 and (root / "tools" / f"{module}.py").is_file()
+        if not ((folder / f"{module}.py").is_file() or tool):
             strays.append(f"tests/{rel.as_posix()}: no {folder.relative_to(root).as_posix()}/{module}.py")
     assert not strays, "move each test file beside the module it tests:\n" + "\n".join(strays)
