@@ -132,6 +132,7 @@ def test_eval_scores_every_row_per_split_as_strict_json(evalset, tmp_path):
         assert abs(methods["noise_floor"]["bias"]) < 0.2  # a second unbiased render
 
 
+@pytest.mark.slow  # alone, it pays for the module's evaluation set (14 s of setup in the inner loop)
 @pytest.mark.mitsuba
 def test_eval_refuses_a_capture_as_evalset_and_models_of_other_scenes(evalset, tmp_path):
     out, _ = evalset
