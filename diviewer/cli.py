@@ -218,6 +218,14 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scene_help(default: str | None = None) -> str:
+    """--scene's help: the shipped scenes as the assets folder has them (not a list kept by hand)."""
+    from diviewer.paths import shipped_scenes
+
+    tail = f" (default {default})" if default else ""
+    return f"shipped scene name ({', '.join(shipped_scenes())}) or a .toml path{tail}"
+
+
 def build_parser() -> argparse.ArgumentParser:
     from diviewer.gl.display import DEFAULT_TONEMAP, TONEMAPS
 
@@ -226,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("render", help="render one configuration of a scene to image files")
-    p.add_argument("--scene", default="cornell", help="shipped scene name (cornell, atrium) or a .toml path")
+    p.add_argument("--scene", default="cornell", help=_scene_help())
     p.add_argument("--res", default=None, help="N (square) or WxH; default the model's resolution, else 256")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--seed", type=int, default=None, help="draw the configuration from the scene's ranges")
@@ -247,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_render)
 
     p = sub.add_parser("capture", help="render a dataset: GL inputs and path-traced ground truth (resumable)")
-    p.add_argument("--scene", default="cornell", help="shipped scene name or a .toml path")
+    p.add_argument("--scene", default="cornell", help=_scene_help())
     p.add_argument("--frames", type=int, default=100, help="frames over all splits")
     p.add_argument("--res", default="128", help="N or WxH; default 128")
     p.add_argument("--gt", default="pt", choices=("pt", "vxgi"),
@@ -299,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("evalset", help="render a scene's fixed evaluation set: >= 1024-spp truth, its noise floor "
                                        "and a ladder of lower sample counts (resumable)")
-    p.add_argument("--scene", default="cornell", help="shipped scene name or a .toml path")
+    p.add_argument("--scene", default="cornell", help=_scene_help())
     p.add_argument("--out", type=Path, required=True, help="evaluation set folder (created, or resumed)")
     p.add_argument("--frames-per-split", type=int, default=24, help="frames in each split (default 24)")
     p.add_argument("--res", default="128", help="N or WxH; default 128")
@@ -313,7 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("bench", help="headless frame timing per stage and the speed/accuracy table: direct light, "
                                      "the baseline, models (fp32/fp16/int8, GI resolutions), untrained K, VXGI, path tracer")
-    p.add_argument("--scene", default=None, help="shipped scene name or a .toml path (default cornell)")
+    p.add_argument("--scene", default=None, help=_scene_help("cornell"))
     p.add_argument("--models", type=Path, nargs="+", default=None,
                    help="ONNX models (diviewer export / baseline); default the scene's shipped models")
     p.add_argument("--res", type=int, nargs="+", default=None, help="square frame resolutions (default 128 256)")

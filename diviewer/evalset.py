@@ -27,13 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, Dataset, read_manifest
+from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, read_manifest
+from diviewer.data.evalset_format import EVAL_SPLITS, KIND, is_evalset, load_evalset  # noqa: F401 (re-exported)
 from diviewer.errors import DiviewerError
 from diviewer.provenance import versions
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
 
-KIND = "evalset"
-EVAL_SPLITS = ("unseen_configs", "unseen_objects")
 SAMPLER_SPLIT = {"unseen_configs": "train", "unseen_objects": "test"}
 """Which split of the scene's sampler each evaluation split draws from (with seeds no capture uses)."""
 LADDER = (1, 4, 16, 64, 256)
@@ -132,10 +131,6 @@ def build_manifest(scene: Scene, settings: EvalSetSettings, plan: list[dict], ex
     }
 
 
-def is_evalset(ds: Dataset) -> bool:
-    return ds.manifest.get("kind") == KIND
-
-
 class EvalTruth:
     """Mitsuba renders of one evaluation frame: reference, direct, second seed, and the ladder."""
 
@@ -215,15 +210,6 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
         summary["noise_floor"] = {s: r["methods"]["noise_floor"] for s, r in result["splits"].items()}
     log(f"done: {summary['present']}/{summary['planned']} frames in {out}, {summary['seconds']:.0f} s")
     return summary
-
-
-def load_evalset(path: str | Path) -> Dataset:
-    """An evaluation set, refused (with the command that makes one) if the folder is an ordinary capture."""
-    ds = Dataset(path)
-    if not is_evalset(ds):
-        raise DiviewerError("not an evaluation set (a training capture?); make one with "
-                            "`diviewer evalset --scene S --out DIR`, or pass a capture with --data", path=path)
-    return ds
 
 
 def configs_apart(frames: list[dict], others: list[dict]) -> bool:

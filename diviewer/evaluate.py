@@ -160,7 +160,7 @@ def _model_label(meta: dict, path: Path) -> str:
 def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str | None = None,
                      out: Path | None = None, log=print) -> dict:
     """Score models, direct light, the noise floor and the path-tracer ladder on an evaluation set, per split."""
-    from diviewer.evalset import EVAL_SPLITS, load_evalset
+    from diviewer.data.evalset_format import EVAL_SPLITS, load_evalset
     from diviewer.console import progress_bar
 
     ds = load_evalset(evalset_dir)

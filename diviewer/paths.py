@@ -30,5 +30,10 @@ def scenes_dir() -> Path:
     return assets_dir() / "scenes"
 
 
+def shipped_scenes() -> list[str]:
+    """The names `--scene` accepts besides a path: the shipped scene files' stems, read from the assets folder."""
+    return sorted(p.stem for p in scenes_dir().glob("*.toml"))
+
+
 def models_dir() -> Path:
     return assets_dir() / "models"

@@ -150,7 +150,7 @@ class NeuralGI:
             opts.intra_op_num_threads = threads
         # Unless ``spin``, onnxruntime's worker threads sleep after a run instead of spinning for the next:
         # in the viewer and the benchmark the next work is the frame's GL passes, which a software
-        # rasterizer runs on the very cores they would spin on (tools/frame_probe.py --compare spin).
+        # rasterizer runs on the very cores they would spin on (tools/experiments/frame_probe.py --compare spin).
         if not spin:
             opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
         providers = choose_providers(ort.get_available_providers(), provider)

@@ -1,12 +1,25 @@
-"""Shared fixtures: one headless EGL context per session, checked for GL errors around each test."""
+"""Shared fixtures: one headless EGL context per session, checked for GL errors around each test; the marks
+that follow from what a test uses (``gl``: a GL context, ``window``: a display) and the ``mitsuba`` skip."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 
 import pytest
 
 REQUIRE_GL = os.environ.get("DIVIEWER_REQUIRE_GL", "") not in ("", "0")
+MARK_BY_FIXTURE = {"ctx": "gl", "gl_context": "gl", "display": "window"}
+"""A test that asks for one of these fixtures gets the mark: ``pytest -m "not gl"`` runs without any context."""
+NO_MITSUBA = importlib.util.find_spec("mitsuba") is None
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        for mark in sorted({MARK_BY_FIXTURE[f] for f in item.fixturenames if f in MARK_BY_FIXTURE}):
+            item.add_marker(mark)
+        if NO_MITSUBA and item.get_closest_marker("mitsuba"):
+            item.add_marker(pytest.mark.skip(reason="needs mitsuba (pip install 'diviewer[train]')"))
 
 
 @pytest.fixture(scope="session")

@@ -21,6 +21,7 @@ FILES = ["depth.exr", "normal.exr", "albedo.exr", "direct.exr", "depth.png", "no
          "direct.png", "frame.json"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", ["cornell", "sponza", "atrium"])
 def test_render_writes_buffers_and_frame_json(gl_context, tmp_path, scene):
     out = tmp_path / scene
@@ -52,6 +53,7 @@ def test_render_again_from_frame_json_gives_same_buffers(gl_context, tmp_path):
     assert not np.array_equal(read_exr(a / "direct.exr"), read_exr(c / "direct.exr"))
 
 
+@pytest.mark.slow
 def test_bad_scene_exits_2_with_one_line(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[camera]\nfov = 200\n")
@@ -96,6 +98,7 @@ def test_wheel_installs_and_renders_from_another_directory(tmp_path):
     assert (work / "o" / "direct.exr").is_file() and (work / "o" / "frame.json").is_file()
 
 
+@pytest.mark.slow
 def test_viewer_runtime_and_render_work_without_torch(gl_context, tmp_path):
     """Everything outside train/ (viewer, runtime, render, gl, scene, data, metrics) imports and runs
     without the train extra (torch, mitsuba): every such module is imported with both blocked, and
@@ -164,6 +167,7 @@ def test_written_files_get_ordinary_permissions(tmp_path):
     assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
 
 
+@pytest.mark.mitsuba
 @pytest.mark.slow
 @pytest.mark.skipif(any(importlib.util.find_spec(m) is None for m in ("torch", "mitsuba", "onnx")),
                     reason="the pipeline needs the train extra: pip install 'diviewer[train]'")
@@ -198,3 +202,14 @@ def test_an_existing_output_file_is_overwritten_and_one_under_a_file_is_refused(
     assert check_output_dir(tmp_path / "run") == tmp_path / "run"
     with pytest.raises(DiviewerError, match="is a file; give a folder"):
         check_output_dir(existing)
+
+
+@pytest.mark.parametrize("command", ["render", "capture", "evalset", "bench", "view"])
+def test_scene_help_lists_every_shipped_scene_from_the_assets_folder(command, capsys):
+    from diviewer.paths import shipped_scenes
+
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps the help text
+    assert {"cornell", "sponza", "atrium"} <= set(shipped_scenes())
+    assert f"shipped scene name ({', '.join(shipped_scenes())})" in text

@@ -28,6 +28,7 @@ def _center_mesh(f: dict) -> str:
     return next(o["mesh"] for o in f["config"]["objects"] if o["name"] == "center")
 
 
+@pytest.mark.slow
 def test_plan_is_reproducible_split_by_objects_and_apart_from_captures():
     scene = load_scene("cornell")
     plan = plan_evalset(scene, EvalSetSettings(frames_per_split=24))
@@ -61,6 +62,8 @@ def evalset(tmp_path_factory, gl_context):
     return out, summary
 
 
+@pytest.mark.mitsuba
+@pytest.mark.slow
 def test_build_writes_a_sound_set_with_its_noise_floor(evalset):
     out, summary = evalset
     ds = Dataset(out)
@@ -80,6 +83,8 @@ def test_build_writes_a_sound_set_with_its_noise_floor(evalset):
         assert one["psnr"]["mean"] < four["psnr"]["mean"] < floor["psnr"]["mean"], "more samples, less error"
 
 
+@pytest.mark.mitsuba
+@pytest.mark.slow
 def test_build_resumes_a_lost_frame_to_the_same_bytes(evalset, tmp_path):
     out, _ = evalset
     import shutil
@@ -94,6 +99,8 @@ def test_build_resumes_a_lost_frame_to_the_same_bytes(evalset, tmp_path):
         build_evalset("cornell", copy, EvalSetSettings(**{**TINY.__dict__, "spp": 64}), log=quiet)
 
 
+@pytest.mark.mitsuba
+@pytest.mark.slow
 def test_eval_scores_every_row_per_split_as_strict_json(evalset, tmp_path):
     out, _ = evalset
     scene = load_scene("cornell")
@@ -125,6 +132,8 @@ def test_eval_scores_every_row_per_split_as_strict_json(evalset, tmp_path):
         assert abs(methods["noise_floor"]["bias"]) < 0.2  # a second unbiased render
 
 
+@pytest.mark.slow  # alone, it pays for the module's evaluation set (14 s of setup in the inner loop)
+@pytest.mark.mitsuba
 def test_eval_refuses_a_capture_as_evalset_and_models_of_other_scenes(evalset, tmp_path):
     out, _ = evalset
     other = direct_times(tmp_path / "other.onnx", meta=base_meta("f" * 64, "elsewhere"))

@@ -1,6 +1,7 @@
-"""The package's layout stays as the README's Layout section says: import arrows point down, torch stays in
-train/, and no module outgrows what a reader holds in mind. Imports are read with ast (nothing is imported),
-including those inside functions, since the heavy ones are deliberately lazy."""
+"""The package's layout stays as docs/architecture.md says: import arrows point down, no module imports itself
+round a circle, torch stays in train/, no module outgrows what a reader holds in mind, and the tests mirror the
+package. Imports are read with ast (nothing is imported), including those inside functions, since the heavy ones
+are deliberately lazy."""
 
 from __future__ import annotations
 
@@ -39,31 +40,39 @@ def _unit(module: str) -> str:
     return f"{parts[1]}/" if (PACKAGE / parts[1]).is_dir() else parts[1]
 
 
-def _modules() -> list[tuple[Path, str]]:
+def _modules(package: Path = PACKAGE) -> list[tuple[Path, str]]:
     out = []
-    for path in sorted(PACKAGE.rglob("*.py")):
-        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    for path in sorted(package.rglob("*.py")):
+        parts = path.relative_to(package.parent).with_suffix("").parts
         if parts[-1] == "__init__":
             parts = parts[:-1]
         out.append((path, ".".join(parts)))
     return out
 
 
-def _imports(path: Path, module: str) -> set[str]:
+def _is_module(name: str, package: Path) -> bool:
+    """Whether ``name`` (``diviewer.gl.neural``) is a module or subpackage of ``package``."""
+    rel = Path(*name.split(".")[1:]) if "." in name else Path()
+    return (package / rel).with_suffix(".py").is_file() or (package / rel / "__init__.py").is_file()
+
+
+def _imports(path: Path, module: str, package: Path = PACKAGE) -> set[str]:
     """Every module ``path`` imports, anywhere in it (lazy imports too), relative imports resolved; ``from
-    diviewer import gl`` counts as importing ``diviewer.gl``."""
+    diviewer import gl`` and ``from . import sources`` import the submodule (not the package's own code)."""
     names = set()
-    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    pkg = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.Import):
             names.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
-                base = ".".join(package[: len(package) - node.level + 1] + ([base] if base else []))
-            names.add(base)
-            if base == "diviewer":
-                names.update(f"diviewer.{a.name}" for a in node.names)
+                base = ".".join(pkg[: len(pkg) - node.level + 1] + ([base] if base else []))
+            subs = {f"{base}.{a.name}" for a in node.names if base.split(".")[0] == package.name
+                    and _is_module(f"{base}.{a.name}", package)}
+            names.update(subs)
+            if len(subs) < len(node.names):  # a name defined in base itself: base's code runs for it
+                names.add(base)
     return names
 
 
@@ -93,7 +102,8 @@ def test_the_graph_was_read(tmp_path):
     probe = tmp_path / "probe.py"
     probe.write_text("import os\nfrom . import sources\ndef f():\n    from ..gl.neural import NeuralPass\n"
                      "    import torch.nn\n")
-    assert _imports(probe, "diviewer.viewer.probe") == {"os", "diviewer.viewer", "diviewer.gl.neural", "torch.nn"}
+    assert _imports(probe, "diviewer.viewer.probe") == {"os", "diviewer.viewer.sources", "diviewer.gl.neural",
+                                                        "torch.nn"}
 
 
 def test_no_import_points_upward():
@@ -125,4 +135,105 @@ def test_viewer_bench_and_runtime_never_import_train():
 @pytest.mark.parametrize("path", sorted(PACKAGE.rglob("*.py")), ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_modules_stay_small(path):
     lines = len(path.read_text().splitlines())
-    assert lines < MAX_LINES, f"{path.relative_to(PACKAGE)} has {lines} lines; split it into rooms (see README Layout)"
+    assert lines < MAX_LINES, (f"{path.relative_to(PACKAGE)} has {lines} lines; split it into rooms "
+                               "(see docs/architecture.md)")
+
+
+def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """One import cycle (``[a, b, a]``) per strongly connected group of modules (Tarjan), self-imports aside."""
+    index, low, stack, on_stack, groups = {}, {}, [], set(), []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in graph or w == v:
+                continue
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                group.add(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                groups.append(group)
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return [_cycle_through(min(g), g, graph) for g in groups]
+
+
+def _cycle_through(start: str, group: set[str], graph: dict[str, set[str]]) -> list[str]:
+    """The shortest path from ``start`` back to itself inside ``group`` (breadth first)."""
+    came_from, frontier = {start: None}, [start]
+    while frontier:
+        nxt = []
+        for v in frontier:
+            for w in sorted(graph[v] & group):
+                if w == start:
+                    path = [v]
+                    while came_from[path[-1]] is not None:
+                        path.append(came_from[path[-1]])
+                    return path[::-1] + [start]
+                if w not in came_from:
+                    came_from[w] = v
+                    nxt.append(w)
+        frontier = nxt
+    raise AssertionError(f"{start} is in a cycle group but no cycle was found")
+
+
+def _graph_of(package: Path) -> dict[str, set[str]]:
+    return {module: _imports(path, module, package) for path, module in _modules(package)}
+
+
+def test_no_import_circles_lazy_imports_included():
+    circles = _circles(_graph_of(PACKAGE))
+    assert not circles, "import circles (move the shared piece down into a module both import):\n" + "\n".join(
+        " -> ".join(c) for c in circles)
+
+
+def test_the_circle_detector_finds_a_planted_circle(tmp_path):
+    """A top-level import one way and a lazy one back, three modules round, and a clean tree beside them."""
+    pkg = tmp_path / "planted"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from planted.sub import b\n")
+    (pkg / "sub" / "b.py").write_text("def f():\n    from ..c import g\n")
+    (pkg / "c.py").write_text("from . import a\n")
+    (pkg / "leaf.py").write_text("import os\nfrom planted import a\n")
+    graph = _graph_of(pkg)
+    assert _circles(graph) == [["planted.a", "planted.sub.b", "planted.c", "planted.a"]]
+    (pkg / "c.py").write_text("import json\n")
+    assert _circles(_graph_of(pkg)) == []
+
+
+TESTS = Path(__file__).resolve().parent
+SUITES = {"extremes"}
+"""Folders of tests/ that are suites across the package (run alone with their mark), not mirrors of a package."""
+
+
+def test_tests_mirror_the_package():
+    """tests/<package>/test_<module>.py tests diviewer/<package>/<module>.py; tests/test_<name>.py a top-level module
+    (or a script of tools/); shared fixtures live in tests/conftest.py, helpers in tests/*.py without test_."""
+    root = PACKAGE.parent
+    strays = []
+    for path in sorted(TESTS.rglob("test_*.py")):
+        rel = path.relative_to(TESTS)
+        if rel.parts[0] in SUITES or path == Path(__file__).resolve():
+            continue
+        module = path.stem[len("test_"):]
+        folder = PACKAGE.joinpath(*rel.parts[:-1])
+        tool = len(rel.parts) == 1 and (root / "tools" / f"{module}.py").is_file()
+        if not ((folder / f"{module}.py").is_file() or tool):
+            strays.append(f"tests/{rel.as_posix()}: no {folder.relative_to(root).as_posix()}/{module}.py")
+    assert not strays, "move each test file beside the module it tests:\n" + "\n".join(strays)

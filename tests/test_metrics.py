@@ -57,6 +57,7 @@ def test_flip_matches_flip_evaluator_and_labels_modes():
         metrics.flip(ref, test, "SDR")
 
 
+@pytest.mark.slow
 def test_flip_extremes():
     pytest.importorskip("flip_evaluator")
     a = np.abs(_image(4)).astype(np.float32)

@@ -39,7 +39,7 @@ def test_model_runs_and_reports_metadata(tmp_path):
 @needs_onnx
 def test_worker_threads_sleep_between_runs_unless_asked_to_spin(tmp_path):
     # Spinning onnxruntime threads take the cores the next frame's GL passes need on a software
-    # rasterizer (tools/frame_probe.py --compare spin); the same answers either way.
+    # rasterizer (tools/experiments/frame_probe.py --compare spin); the same answers either way.
     path = direct_times(tmp_path / "m.onnx")
     sleeping, spinning = NeuralGI(path), NeuralGI(path, spin=True)
     key = "session.intra_op.allow_spinning"
@@ -193,6 +193,7 @@ def test_models_are_shipped():
     assert [p.stem for p in SHIPPED if not p.with_suffix(".json").is_file()] == [] and SHIPPED, "each with its card"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
 def test_shipped_model_runs_a_frame_of_its_scene(ctx, path):
     """Each shipped model loads for its scene and turns a GL frame into finite radiance of the frame's size;

@@ -1,4 +1,4 @@
-"""Rebuild the README's figures from the shipped scenes and models.
+"""Rebuild the figures of the README and docs/ from the shipped scenes and models.
 
 Usage: python tools/make_figures.py [--scene NAME ...] [--spp 1024]
 Writes assets/figures/cornell_buffers.png (depth, normals, albedo, direct light) and, for each scene

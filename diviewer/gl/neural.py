@@ -49,7 +49,7 @@ class GISettings:
     """``nearest``: each GI texel takes the full-resolution pixel nearest its centre, as a render at the GI
     resolution would (the training captures were rendered at the model's resolution); ``area``: the mean of
     its footprint for normal, albedo and direct (depth stays nearest). Against the path tracer at window
-    resolution the two score the same to 0.02 dB (README, tools/fullres_accuracy.py)."""
+    resolution the two score the same to 0.02 dB (docs/viewer.md, tools/experiments/fullres_accuracy.py)."""
     depth_sigma: float = 0.1
     """Joint bilateral upsample: relative depth difference at which a GI texel's weight falls to 1/e."""
     normal_power: float = 16.0

@@ -29,7 +29,7 @@ maps and its direct light; it adds diffuse indirect light (one bounce, or two):
 7. **composite** (vxgi_composite.glsl): ``vxgi = direct + albedo * indirect``; ``vxgi_indirect`` is
    ``albedo * indirect``, comparable with the path tracer's ``pt - pt_direct``.
 
-Accuracy on cornell (64x64, 4 frames, MSE against a 1024-spp path tracer, tools/vxgi_accuracy.py):
+Accuracy on cornell (64x64, 4 frames, MSE against a 1024-spp path tracer, tools/experiments/vxgi_accuracy.py):
 direct light alone 0.0167; defaults (trace_scale 2) at grids 32/64/128: one bounce 0.0049/0.0057/0.0057,
 two bounces 0.0033/0.0039/0.0038 (the coarse grid's extra leaking stands in for missing bounces). At
 64^3 and full trace resolution: isotropic without lod bias 0.0059, the defaults 0.0055.
@@ -41,7 +41,7 @@ Artefacts, and what the settings do about them:
   sample's footprint (its trilinear neighbourhood of voxels a cone diameter wide) reaches behind the
   cone's apex: a surface sees the lit far side of the wall it stands on, or of the opposite wall
   (cornell's walls are sunlit outside: its red wall glows red inside where the path tracer has it
-  dark). Measured on a closed box lit from outside (tests/test_vxgi.py): 7 % of the outside radiance
+  dark). Measured on a closed box lit from outside (tests/gl/test_vxgi.py): 7 % of the outside radiance
   inside with the defaults, 14 % isotropic or without the lod bias, the same at 64^3 and 128^3.
   ``anisotropic`` stops a wall from showing its far side; ``lod_bias`` samples finer levels than the
   cone's diameter (smaller footprints, a little noisier, and a thin wall between samples is missed

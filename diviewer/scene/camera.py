@@ -18,7 +18,7 @@ from pyrr import matrix33, matrix44
 # in the last row), the transpose of the GL column convention used everywhere in this package, so
 # every pyrr matrix is transposed once, here, and nowhere else. pyrr's create_from_{x,y,z}_rotation
 # already follow the column convention (the opposite of its create_from_axis_rotation), so only the
-# axis form is used, for every rotation. tests/test_scene.py pins each function to its definition.
+# axis form is used, for every rotation. tests/scene/test_loader.py pins each function to its definition.
 _F64 = np.float64
 
 

@@ -400,10 +400,3 @@ def _result(cfg: TrainConfig, st: TrainState) -> dict[str, Any]:
             "best": None if st.best["ssim_tm"] == -math.inf else st.best["ssim_tm"], "losses": st.history,
             "out": cfg.out, "stopped_early": _patience_spent(cfg, st)}
 
-
-if __name__ == "__main__":  # the documented torchrun entry point before the command line moved to cli.py
-    import sys
-
-    from diviewer.train.cli import main
-
-    sys.exit(main())

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from diviewer.errors import DiviewerError
+from diviewer.paths import shipped_scenes
 
 
 def add_view_parser(subparsers) -> argparse.ArgumentParser:
@@ -13,7 +14,8 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("view", help="fly through a scene with neural GI every frame (window + panel)",
                               description="Open a window on a scene with its neural GI model; "
                                           "the panel lists the keyboard shortcuts.")
-    p.add_argument("--scene", default="cornell", help="shipped scene name (cornell, atrium) or a .toml path")
+    p.add_argument("--scene", default="cornell",
+                   help=f"shipped scene name ({', '.join(shipped_scenes())}) or a .toml path")
     p.add_argument("--model", default="auto",
                    help="model file, 'auto' (assets/models/<scene>*.onnx, the first that fits) or 'none'")
     p.add_argument("--size", default="768x768", help="window size WxH (or N); default 768x768")

@@ -96,6 +96,7 @@ def _snapshot(root):
     return sorted((str(p.relative_to(root)), p.stat().st_size) for p in root.rglob("*"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv,needle", BAD, ids=[a for a, _ in BAD])
 def test_bad_arguments_are_one_line_and_exit_2(files, capsys, argv, needle):
     before = _snapshot(files)
@@ -113,6 +114,7 @@ def test_bad_arguments_are_one_line_and_exit_2(files, capsys, argv, needle):
     assert _snapshot(files) == before  # nothing written
 
 
+@pytest.mark.slow
 def test_no_traceback_reaches_stderr_from_the_installed_command(files):
     """The same rule through a real process (the console entry point), for a sample of the cases."""
     for argv, needle in BAD[::9]:

@@ -187,6 +187,7 @@ def test_render_size_limits_come_from_the_context(ctx):
     check_render_size(ctx, 64, 48)
 
 
+@pytest.mark.slow
 def test_a_size_within_limits_the_driver_cannot_allocate_is_refused_up_front(ctx):
     mw, mh = max_render_size(ctx)
     try:

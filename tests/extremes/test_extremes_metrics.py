@@ -61,6 +61,7 @@ def test_psnr_of_unit_images_is_positive_or_inf(a, b):
     assert p > 0 and (math.isfinite(p) or np.array_equal(a, b))
 
 
+@pytest.mark.slow
 @given(st.recursive(st.one_of(st.floats(), st.integers(), st.text(max_size=3), st.none()),
                     lambda c: st.one_of(st.lists(c, max_size=3), st.dictionaries(st.text(max_size=3), c, max_size=3)),
                     max_leaves=8))

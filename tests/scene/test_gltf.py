@@ -175,6 +175,8 @@ def test_alpha_cutout_gbuffer_and_shadow_map(ctx, tmp_path):
         r.release()
 
 
+@pytest.mark.mitsuba
+@pytest.mark.slow
 def test_alpha_cutout_mitsuba(tmp_path):
     pytest.importorskip("mitsuba")
     from diviewer.reference import mitsuba as ref
@@ -186,6 +188,7 @@ def test_alpha_cutout_mitsuba(tmp_path):
     check_shadow(ref.MitsubaFrame(scene, slanted(scene), 64, 64).direct(16, 0), 64)
 
 
+@pytest.mark.mitsuba
 def test_alpha_cutout_mitsuba_scalar(tmp_path):
     """The see-through AOVs also run one ray at a time under scalar_rgb (the variant without a libLLVM)."""
     pytest.importorskip("mitsuba")
@@ -200,8 +203,10 @@ def test_alpha_cutout_mitsuba_scalar(tmp_path):
     check_cutout(a["albedo"], a["depth"], 16)
 
 
-# --- Sponza: the Mitsuba cross-checks of tests/test_reference.py, at tiny size -----------------------------------
+# --- Sponza: the Mitsuba cross-checks of tests/reference/test_mitsuba.py, at tiny size ------------------------
 
+@pytest.mark.mitsuba
+@pytest.mark.slow
 def test_sponza_mitsuba_matches_gl(ctx, sponza):
     """On a Sponza frame (48x32, 16 spp): Mitsuba's depth and normals match the G-buffer, its albedo the
     textured G-buffer albedo, and its direct light the GL direct pass, lit and shadowed.

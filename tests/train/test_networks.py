@@ -38,6 +38,7 @@ def test_levels_for_resolution() -> None:
         levels_for_resolution(33)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("K", "resolution"),
     [(K, r) for K in (8, 16, 32) for r in (32, 64, 128)] + [(8, 256)],
@@ -83,6 +84,7 @@ def test_generator_norms_and_dropout_follow_pix2pix(levels: int) -> None:
     assert dropout_decoders == list(range(min(3, levels - 4)))  # the innermost decoders: 3 at 256
 
 
+@pytest.mark.slow
 def test_generator_batch_size_one_trains() -> None:
     # The 1x1 bottleneck has no norm, so batch-norm statistics exist even for a single image.
     netG = init_weights(UnetGenerator(K=8, resolution=32)).train()
@@ -93,6 +95,7 @@ def test_generator_batch_size_one_trains() -> None:
     assert netG.down[0][0].weight.grad.abs().sum() > 0  # gradients reach the first layer
 
 
+@pytest.mark.slow
 def test_generator_eval_is_deterministic() -> None:
     netG = init_weights(UnetGenerator(K=8, resolution=32))
     x = torch.randn(2, INPUT_CHANNEL_COUNT, 32, 32)
@@ -146,6 +149,7 @@ def one_thread():
     torch.set_num_threads(before)
 
 
+@pytest.mark.slow
 def test_tiny_generator_overfits(one_thread) -> None:
     """K=8 at 32x32 fits a fixed batch: L1 falls >= 5x from the start and >= 4x below the best constant.
 
@@ -224,6 +228,7 @@ def _norm_modules(net: nn.Module) -> list[nn.Module]:
     return [m for m in net.modules() if isinstance(m, (nn.BatchNorm2d, nn.InstanceNorm2d))]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("upsample", UPSAMPLES)
 @pytest.mark.parametrize("norm", NORMS)
 def test_each_option_builds_and_trains_one_step(upsample: str, norm: str) -> None:
@@ -264,6 +269,7 @@ def test_each_option_builds_and_trains_one_step(upsample: str, norm: str) -> Non
         assert netG(torch.randn(1, INPUT_CHANNEL_COUNT, 32, 64)).shape == (1, OUTPUT_CHANNELS, 32, 64)
 
 
+@pytest.mark.slow
 def test_instance_norm_has_no_running_statistics() -> None:
     """Instance norm normalises each image by itself: train and eval give the same output."""
     netG = init_weights(UnetGenerator(K=4, resolution=32, norm="instance", dropout=0.0))

@@ -1,6 +1,6 @@
 """VXGI's error against the path tracer on a scene's frames, per setting (and direct light's, for scale).
 
-Usage: python tools/vxgi_accuracy.py [--scene cornell] [--res 64] [--frames 4] [--spp 1024]
+Usage: python tools/experiments/vxgi_accuracy.py [--scene cornell] [--res 64] [--frames 4] [--spp 1024]
                                      [--set resolution=32,64,128 bounces=1,2 ...] [--out acc.json]
 Frames: the scene's default configuration, then test-split configurations drawn with seeds 1, 2, ...
 The reference is rendered once per run (Mitsuba, `train` extra). --set takes VXGISettings fields with

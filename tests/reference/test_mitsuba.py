@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mitsuba")
+pytestmark = pytest.mark.mitsuba
 
 from diviewer.cli import main  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
@@ -417,6 +418,7 @@ def test_retarget_renders_as_a_fresh_load(scenes):
 
 # --- the command -----------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_cli_reference_writes_pt_buffers(gl_context, tmp_path):
     out = tmp_path / "frame"
     assert main(["render", "--scene", "cornell", "--res", "32", "--out", str(out), "--reference", "pt",

@@ -1,6 +1,6 @@
 """Ablations of the neural GI recipe on one dataset and one training budget, scored on the evaluation set.
 
-Usage: python tools/ablate.py --data runs/cornell/data64 --evalset runs/cornell/evalset --out runs/cornell/ablate
+Usage: python tools/experiments/ablate.py --data runs/cornell/data64 --evalset runs/cornell/evalset --out runs/cornell/ablate
        [--steps 600] [--train-frames 1000] [--only NAME ...] [--jobs 2] [--table OUT.md]
 Every run trains `diviewer train` for the same number of steps on the same first N train frames (so
 runs started while a capture still grows see the same data) and exports fp32 ONNX; one `diviewer eval`
@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
-import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+
+import dvrun  # this folder's helper for running diviewer (a script's own folder is on sys.path)
 
 # name -> (what it changes, extra `diviewer train` arguments). The first row is the paper's recipe
 # (transposed convolutions, batch norm, L1 x 100 + GAN); every row but the last predicts indirect
@@ -45,16 +44,7 @@ ABLATIONS: dict[str, tuple[str, list[str]]] = {
 }
 
 
-def sh(args: list[str], log: Path) -> None:
-    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", DIVIEWER_TORCH_THREADS="1")
-    with log.open("a") as f:
-        f.write("+ " + " ".join(args) + "\n")
-        f.flush()
-        subprocess.run(args, check=True, stdout=f, stderr=subprocess.STDOUT, env=env)
-
-
 DEMODULATED = ["--divide-albedo"]
-DV = [sys.executable, "-m", "diviewer"]
 
 
 def one(name: str, a: argparse.Namespace) -> dict:
@@ -65,14 +55,14 @@ def one(name: str, a: argparse.Namespace) -> dict:
     run.mkdir(parents=True, exist_ok=True)
     log = run / "ablate.log"
     if not (run / "done").is_file():
-        args = DV + ["train", "--data", str(a.data), "--out", str(run), "--max-steps", str(a.steps),
+        args = ["train", "--data", str(a.data), "--out", str(run), "--max-steps", str(a.steps),
                      "--train-frames", str(a.train_frames), "--val-every-steps", str(a.steps // 3), "--seed", "0"]
         t0 = time.time()
-        sh(args + (["--resume"] if (run / "last.ckpt").is_file() else recipe), log)
+        dvrun.run(args + (["--resume"] if (run / "last.ckpt").is_file() else recipe), log)
         (run / "done").write_text(json.dumps({"train_s": time.time() - t0}))
     model = run / f"{name}.onnx"
     if not model.is_file():
-        sh(DV + ["export", str(run / "best.ckpt"), "--out", str(model)], log)
+        dvrun.run(["export", str(run / "best.ckpt"), "--out", str(model)], log)
     return {"name": name, "what": what, "args": recipe, "model": str(model),
             "train": json.loads((run / "done").read_text())}
 
@@ -85,10 +75,10 @@ def score(results: list[dict], a: argparse.Namespace) -> dict:
         cached = json.loads(out.read_text())
         if cached.get("ablate_models") == models:
             return cached
-    args = DV + ["eval", "--evalset", str(a.evalset), "--out", str(out)]
+    args = ["eval", "--evalset", str(a.evalset), "--out", str(out)]
     for m in models:
         args += ["--model", m]
-    sh(args, a.out / "eval.log")
+    dvrun.run(args, a.out / "eval.log")
     result = json.loads(out.read_text())
     result["ablate_models"] = models
     out.write_text(json.dumps(result, indent=1))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import signal
@@ -22,8 +21,7 @@ from diviewer.scene import load_scene
 from diviewer.scene.sampler import in_test_stretch
 
 # Planning and the refusals need no path tracer; rendering a dataset does (skipped by what this machine has).
-needs_mitsuba = pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None,
-                                   reason="needs mitsuba (pip install 'diviewer[train]')")
+needs_mitsuba = pytest.mark.mitsuba  # tests/conftest.py skips it where mitsuba is not installed
 
 TINY = dict(width=32, height=32, spp=4, max_depth=4)
 
@@ -46,6 +44,7 @@ def test_plan_is_reproducible_and_keeps_test_objects_out_of_training():
     assert all(mesh[f["index"]] in r.test_meshes for f in a if f["split"] == "test")
 
 
+@pytest.mark.slow
 def test_atrium_test_stretches_never_in_training():
     scene = load_scene("atrium")
     plan = plan_frames(scene, CaptureSettings(frames=200, seed=1))
@@ -59,6 +58,7 @@ def test_atrium_test_stretches_never_in_training():
     assert any(in_test_stretch(path, s) for s in val) and not all(in_test_stretch(path, s) for s in val)
 
 
+@pytest.mark.slow
 @needs_mitsuba
 def test_small_capture_writes_a_sound_dataset(gl_context, tmp_path):
     out = tmp_path / "ds"
@@ -91,6 +91,7 @@ def _capture_cmd(out: Path, frames: int) -> list[str]:
             "--spp", "4", "--max-depth", "4", "--seed", "5", "--out", str(out)]
 
 
+@pytest.mark.slow
 @needs_mitsuba
 def test_killed_capture_resumes_to_the_uninterrupted_result(gl_context, tmp_path):
     frames = 10
@@ -133,6 +134,7 @@ def test_corrupted_frame_is_reported_and_rendered_again(gl_context, tmp_path, ca
     assert main(["data", "check", str(out)]) == 0
 
 
+@pytest.mark.slow
 @needs_mitsuba
 def test_shards_merge_into_the_whole(gl_context, tmp_path):
     settings = CaptureSettings(frames=6, seed=9, **TINY)

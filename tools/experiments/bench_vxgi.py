@@ -1,6 +1,6 @@
 """Time the VXGI pass per stage across grid and screen resolutions (headless EGL).
 
-Usage: python tools/bench_vxgi.py [--scene cornell] [--res 128 256] [--grid 32 64 128] [--trace-scale 1 2]
+Usage: python tools/experiments/bench_vxgi.py [--scene cornell] [--res 128 256] [--grid 32 64 128] [--trace-scale 1 2]
                                   [--bounces 1] [--frames 10] [--out bench_vxgi.json]
 
 Three kinds of frame, each timed over --frames frames after a warm-up (median milliseconds):

@@ -1,6 +1,6 @@
 """How close the viewer's frame is to the path tracer at window resolution: full resolution vs stretched.
 
-Usage: python tools/fullres_accuracy.py [--scene cornell] [--model assets/models/cornell.onnx] [--size 384]
+Usage: python tools/experiments/fullres_accuracy.py [--scene cornell] [--model assets/models/cornell.onnx] [--size 384]
        [--frames 6] [--spp 256] [--out runs/cornell/fullres_accuracy.json]
 
 For each frame (drawn from the sampler's train and test splits with seeds no capture uses), three images
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 STREAM = 0xF011E5  # seeds of their own: SeedSequence([STREAM, split, i])

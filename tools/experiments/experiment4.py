@@ -1,15 +1,15 @@
 """Deep Illumination's Experiment 4, measured: a model trained on VXGI ground truth against one trained on path tracing.
 
-Usage: python tools/experiment4.py --pt-run runs/cornell/ablate/l1 --pt-data runs/cornell/data64
+Usage: python tools/experiments/experiment4.py --pt-run runs/cornell/ablate/l1 --pt-data runs/cornell/data64
        --vxgi-data runs/cornell/data_vxgi --evalset runs/cornell/evalset --out runs/cornell/exp4_vxgi
        [--steps 400] [--train-frames 600] [--min-val 40] [--vxgi-res 64] [--table OUT.md]
-The path-tracing side is an existing run of tools/ablate.py (`--only l1`). The VXGI side: `diviewer capture
+The path-tracing side is an existing run of tools/experiments/ablate.py (`--only l1`). The VXGI side: `diviewer capture
 --gt vxgi` with the path-traced dataset's frames, resolution, splits and seed (the same configurations, frame for
 frame), stopped once it holds --train-frames train and --min-val val frames; `diviewer train` with ablate.py's
 l1 recipe, steps and frame count; export fp32. Both models are then scored by `diviewer eval` against the path
 tracer on the evaluation set (waiting until it is complete), beside VXGI itself (what the VXGI model was taught,
 rendered again for the set's configurations) and direct light. Each stage resumes: run the same command again after
-an interruption. Run it as `OMP_NUM_THREADS=1 nice -n 5 python tools/experiment4.py ...` beside other work: its
+an interruption. Run it as `OMP_NUM_THREADS=1 nice -n 5 python tools/experiments/experiment4.py ...` beside other work: its
 jobs run one at a time, each on one thread.
 """
 
@@ -18,24 +18,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import ablate  # noqa: E402  (the recipe is ablate.py's, not a copy of it)
-
-ENV = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", DIVIEWER_TORCH_THREADS="1")
-DV = [sys.executable, "-m", "diviewer"]
-
-
-def sh(args: list[str], log: Path) -> None:
-    with log.open("a") as f:
-        f.write("+ " + " ".join(args) + "\n")
-        f.flush()
-        subprocess.run(args, check=True, stdout=f, stderr=subprocess.STDOUT, env=ENV)
+import dvrun  # noqa: E402
 
 
 def recipe() -> list[str]:
@@ -57,7 +46,7 @@ def capture(a: argparse.Namespace, log: Path) -> dict[str, int]:
     """`diviewer capture --gt vxgi` with the path-traced dataset's plan, until enough train and val frames exist."""
     s = json.loads((a.pt_data / "manifest.json").read_text())["settings"]
     frame_list = json.loads((a.pt_data / "manifest.json").read_text())["frame_list"]
-    args = DV + ["capture", "--scene", json.loads((a.pt_data / "manifest.json").read_text())["scene"],
+    args = ["capture", "--scene", json.loads((a.pt_data / "manifest.json").read_text())["scene"],
                  "--frames", str(s["frames"]), "--res", f"{s['width']}x{s['height']}", "--spp", str(s["spp"]),
                  "--splits", ",".join(str(x) for x in s["split_fractions"]), "--seed", str(s["seed"]),
                  "--dtype", s["dtype"], "--gt", "vxgi", "--vxgi-res", str(a.vxgi_res), "--out", str(a.vxgi_data)]
@@ -68,10 +57,7 @@ def capture(a: argparse.Namespace, log: Path) -> dict[str, int]:
     counts = present(a.vxgi_data, frame_list) if (a.vxgi_data / "manifest.json").is_file() else {}
     if enough(counts):
         return counts
-    with log.open("a") as f:
-        f.write("+ " + " ".join(args) + "  (stopped once enough frames exist)\n")
-        f.flush()
-        proc = subprocess.Popen(args, stdout=f, stderr=subprocess.STDOUT, env=ENV)
+    proc = dvrun.start(args, log)  # stopped once enough frames exist
     try:
         while proc.poll() is None:
             time.sleep(10)
@@ -169,7 +155,7 @@ def check_pt_run(a: argparse.Namespace) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--pt-run", type=Path, required=True, help="tools/ablate.py's l1 run (model.onnx, done)")
+    ap.add_argument("--pt-run", type=Path, required=True, help="tools/experiments/ablate.py's l1 run (model.onnx, done)")
     ap.add_argument("--pt-data", type=Path, required=True, help="the path-traced dataset it was trained on")
     ap.add_argument("--vxgi-data", type=Path, required=True)
     ap.add_argument("--evalset", type=Path, required=True)
@@ -186,18 +172,18 @@ def main() -> None:
     counts = capture(a, log)
     print(f"VXGI dataset: {counts}", flush=True)
     if not (a.out / "done").is_file():
-        args = DV + ["train", "--data", str(a.vxgi_data), "--out", str(a.out), "--max-steps", str(a.steps),
+        args = ["train", "--data", str(a.vxgi_data), "--out", str(a.out), "--max-steps", str(a.steps),
                      "--train-frames", str(a.train_frames), "--val-every-steps", str(a.steps // 3), "--seed", "0"]
         t0 = time.time()
-        sh(args + (["--resume"] if (a.out / "last.ckpt").is_file() else recipe()), log)
+        dvrun.run(args + (["--resume"] if (a.out / "last.ckpt").is_file() else recipe()), log)
         (a.out / "done").write_text(json.dumps({"train_s": time.time() - t0}))
     model = a.out / "vxgi_l1.onnx"
     if not model.is_file():
-        sh(DV + ["export", str(a.out / "best.ckpt"), "--out", str(model)], log)
+        dvrun.run(["export", str(a.out / "best.ckpt"), "--out", str(model)], log)
     res = a.out / "eval.json"
     if not res.is_file():
         wait_for_evalset(a.evalset)
-        sh(DV + ["eval", "--model", str(a.pt_run / "model.onnx"), "--model", str(model), "--evalset", str(a.evalset),
+        dvrun.run(["eval", "--model", str(a.pt_run / "model.onnx"), "--model", str(model), "--evalset", str(a.evalset),
                  "--out", str(res)], log)
     gt_scores = a.out / "vxgi_gt_eval.json"
     if not gt_scores.is_file():

@@ -132,6 +132,8 @@ def tiny_bench_inputs(tmp_path_factory):
     return root
 
 
+@pytest.mark.mitsuba
+@pytest.mark.slow
 def test_quick_bench_without_torch_writes_every_row_stage_and_metric(gl_context, tiny_bench_inputs):
     root = tiny_bench_inputs
     code = (

@@ -1,6 +1,6 @@
 """A/B the viewer's neural frame (G-buffer, pack, inference, upsample) between two variants, interleaved.
 
-Usage: python tools/frame_probe.py --compare spin|direct [--scene cornell] [--model assets/models/cornell.onnx]
+Usage: python tools/experiments/frame_probe.py --compare spin|direct [--scene cornell] [--model assets/models/cornell.onnx]
                                    [--size 768] [--gi 128] [--frames 40] [--out runs/probe.json]
 
   spin:    onnxruntime's worker threads spinning after each run (its default) or sleeping (diviewer's).
@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 

@@ -62,6 +62,7 @@ def test_settings_are_checked(field, value):
         dataclasses.replace(GRID, **{field: value}).validate()
 
 
+@pytest.mark.slow
 def test_light_off_gives_zero_indirect(ctx, cornell):
     cfg = dataclasses.replace(cornell.default, lights=())
     frame, out = run_vxgi(ctx, cornell, cfg)
@@ -84,6 +85,7 @@ def test_indirect_finite_and_non_negative(ctx, cornell, seed):
         np.testing.assert_allclose(out["vxgi"], frame["direct"] + out["vxgi_indirect"], rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_colour_bleeding_next_to_the_coloured_walls(ctx, cornell):
     """Under a white sun, the white floor beside the red wall gets redder indirect light, beside the green greener."""
     cfg = cornell.default
@@ -100,6 +102,7 @@ def test_colour_bleeding_next_to_the_coloured_walls(ctx, cornell):
     assert green[1] > green[0] and green[1] > green[2], green
 
 
+@pytest.mark.slow
 def test_draw_order_leaves_the_grid_unchanged(ctx, cornell):
     cfg = sample_config(cornell, 5, "train")
     f0, base = run_vxgi(ctx, cornell, cfg)
@@ -165,6 +168,7 @@ def test_grid_is_rebuilt_only_when_something_changes(ctx, cornell):
         r.release()
 
 
+@pytest.mark.slow
 def test_lower_trace_resolution_stays_close(ctx, cornell):
     cfg = cornell.default
     _, full = run_vxgi(ctx, cornell, cfg, size=(48, 48))
@@ -174,6 +178,8 @@ def test_lower_trace_resolution_stays_close(ctx, cornell):
     assert np.abs(a - b).mean() < 0.1 * a.mean()
 
 
+@pytest.mark.mitsuba
+@pytest.mark.slow
 def test_closer_to_the_path_tracer_than_direct_light(ctx, cornell, record_property):
     """On a few cornell frames VXGI's error against the path tracer is below direct light's (both recorded)."""
     pytest.importorskip("mitsuba")
@@ -193,6 +199,7 @@ def test_closer_to_the_path_tracer_than_direct_light(ctx, cornell, record_proper
     assert np.mean(errors["vxgi"]) < np.mean(errors["direct"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", ["cornell", "atrium"])
 def test_render_command_writes_vxgi(gl_context, tmp_path, scene):
     """`diviewer render --vxgi` writes vxgi.exr = direct + vxgi_indirect.exr, and records the settings."""
@@ -227,6 +234,7 @@ def sealed_box(sun: bool = True):
     })
 
 
+@pytest.mark.slow
 def test_thin_walls_leak_little_of_the_light_outside(ctx):
     """Sun on the outside of a closed box with walls 3 voxels thick: the inside should stay dark.
 
@@ -248,6 +256,7 @@ def test_thin_walls_leak_little_of_the_light_outside(ctx):
     assert iso["indirect"].mean() > 1.5 * leak
 
 
+@pytest.mark.slow
 def test_point_light_inside_the_sealed_box(ctx):
     """A bulb inside the closed box: its shadow-mapped light is injected (the point-light path) and bounces."""
     scene = sealed_box(sun=False)

@@ -1,6 +1,6 @@
 """How a model trained on square frames does in a non-square window, three ways of feeding it.
 
-Usage: python tools/aspect_probe.py [--scene cornell] [--size 1024x768] [--spp 256] [--out runs/aspect.json]
+Usage: python tools/experiments/aspect_probe.py [--scene cornell] [--size 1024x768] [--spp 256] [--out runs/aspect.json]
 
 The viewer runs the network at the GI resolution (e.g. 128x128) whatever the window's shape, so a
 1024x768 window's buffers reach it squashed horizontally. This renders the window's view at the
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 

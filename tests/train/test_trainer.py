@@ -114,6 +114,7 @@ def read_csv(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_run_writes_metrics_curves_and_checkpoints(run):
     out, result = run
     assert result["epoch"] == 2 and result["step"] == 4 and len(result["losses"]) == 4
@@ -174,6 +175,7 @@ def test_rebuilt_generator_reproduces_the_recorded_validation(run, data):
         assert torch.equal(netG(x), netG2(x))  # eval mode: deterministic, no dropout
 
 
+@pytest.mark.slow
 def test_resume_equals_continuous_training(data, tmp_path):
     # 3 epochs of 2 steps straight, against: stop after 3 steps (inside epoch 2), resume to the end.
     straight = train(tiny(data, tmp_path / "a", epochs=3), log=quiet)
@@ -335,6 +337,7 @@ def test_bad_checkpoints_are_user_errors_naming_the_file(run, tmp_path):
         load_checkpoint(foreign)
 
 
+@pytest.mark.slow
 def test_cli_trains_resumes_and_refuses_conflicts(data, tmp_path):
     ap = argparse.ArgumentParser()
     add_train_parser(ap.add_subparsers(dest="command"))
@@ -417,6 +420,7 @@ def test_resumed_epoch_rows_average_only_their_own_epoch(run, data, tmp_path):
             assert float(rb[k]) == pytest.approx(float(ra[k]), rel=1e-5), k
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("options", [
     {"gan_weight": 0.0},
     {"gan_weight": 0.5, "gan_mode": "lsgan"},
@@ -519,6 +523,7 @@ def test_cosine_schedule_runs_from_lr_to_the_floor_and_none_is_constant(data, tm
     assert {lr_factor(flat, s, 100) for s in range(0, 101, 10)} == {1.0}
 
 
+@pytest.mark.slow
 def test_cosine_decay_is_applied_and_resumes_on_the_same_curve(data, tmp_path):
     # 3 epochs of 2 steps: the last step runs at the factor of step 5 of 6; a run stopped after 3 steps
     # and resumed ends with the same weights as the straight one (the rate is a function of the step).
@@ -552,6 +557,7 @@ def test_a_delayed_cosine_is_constant_then_anneals_to_the_floor(data, tmp_path):
         TrainConfig(data=data, out=tmp_path / "c", lr_decay="cosine", lr_decay_start=-1)
 
 
+@pytest.mark.slow
 def test_a_constant_run_resumes_into_an_anneal_like_a_straight_run(data, tmp_path):
     # 3 epochs of 2 steps: a constant run stopped after 3 steps and resumed into a cosine that starts
     # at step 3 ends with the weights of a straight run on that schedule; an anneal that would
@@ -571,6 +577,7 @@ def test_a_constant_run_resumes_into_an_anneal_like_a_straight_run(data, tmp_pat
         train(tiny(data, tmp_path / "c", epochs=3, lr_decay="cosine", lr_decay_start=1), resume=True, log=quiet)
 
 
+@pytest.mark.slow
 def test_a_warm_start_begins_from_the_parents_networks_and_records_it(data, tmp_path):
     # A run onto other frames of the same scene, from a finished run's networks: at a vanishing rate
     # its weights stay the parent's, its encoding is the parent's, and the checkpoint and the model

@@ -16,7 +16,7 @@ from diviewer.runtime import NeuralGI, read_metadata  # noqa: E402
 from diviewer.train.export import ExportSettings, export, gi_module, info  # noqa: E402
 from diviewer.train.checkpoint import build_generator_from_checkpoint  # noqa: E402
 from diviewer.train.trainer import train  # noqa: E402
-from test_train import make_dataset, quiet, tiny  # noqa: E402
+from train.test_trainer import make_dataset, quiet, tiny  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -29,6 +29,7 @@ def checkpoints(tmp_path_factory):
     return {"full": root / "full" / "best.ckpt", "indirect": root / "indirect" / "best.ckpt", "data": root / "data"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("target", ["full", "indirect"])
 def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, target):
     out = tmp_path / f"{target}.onnx"
@@ -64,6 +65,7 @@ def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, t
         np.testing.assert_allclose(got, ref, rtol=1e-4, atol=1e-5 * np.abs(ref).max())
 
 
+@pytest.mark.slow
 def test_indirect_model_adds_the_exact_direct_light(checkpoints, tmp_path):
     """With the indirect target the graph returns the input's direct light + netG's decoded indirect."""
     from diviewer.train.encoding_torch import decode_radiance, encode_inputs
@@ -83,6 +85,7 @@ def test_indirect_model_adds_the_exact_direct_light(checkpoints, tmp_path):
     np.testing.assert_allclose(y, np.maximum(x[..., 7:10] + indirect, 0.0), rtol=1e-4, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_fp16_export_is_finite_and_close(checkpoints, tmp_path):
     out = tmp_path / "h.onnx"
     card = export(checkpoints["full"], out, ExportSettings(fp16=True), log=quiet)
@@ -102,6 +105,7 @@ def test_fp16_export_is_finite_and_close(checkpoints, tmp_path):
         assert np.all(np.isfinite(NeuralGI(out).run(x)))
 
 
+@pytest.mark.slow
 def test_export_twice_is_byte_identical(checkpoints, tmp_path):
     a, b = tmp_path / "a.onnx", tmp_path / "b.onnx"
     export(checkpoints["full"], a, log=quiet)
@@ -109,6 +113,7 @@ def test_export_twice_is_byte_identical(checkpoints, tmp_path):
     assert a.read_bytes() == b.read_bytes()
 
 
+@pytest.mark.slow
 def test_cli_export_and_info(checkpoints, tmp_path, capsys):
     out = tmp_path / "m.onnx"
     assert main(["export", str(checkpoints["full"]), "--out", str(out)]) == 0
@@ -128,6 +133,7 @@ def test_bad_checkpoint_is_refused(tmp_path, capsys):
     assert not (tmp_path / "y.onnx").exists()
 
 
+@pytest.mark.slow
 def test_eval_of_the_exported_model_reproduces_training_validation(checkpoints, tmp_path):
     """`diviewer eval` (onnxruntime, torch-free) scores the val split as training's validation did."""
     from diviewer.evaluate import evaluate
@@ -153,6 +159,7 @@ def _buffers(rng, n: int, h: int, w: int) -> np.ndarray:
                            rng.uniform(0, 1, (n, h, w, 3)), rng.uniform(0, 3, (n, h, w, 3))], -1).astype(np.float32)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("upsample", ["transpose", "resize", "shuffle"])
 @pytest.mark.parametrize("norm", ["batch", "instance", "none"])
 def test_each_option_exports_and_matches_torch(upsample, norm):
@@ -233,6 +240,7 @@ def _rewrite_checkpoint(src, dst, upsample=None, norm=None, drop_options=False, 
     return dst
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("upsample", "norm"), [("resize", "instance"), ("shuffle", "none")])
 def test_export_of_a_checkpoint_with_options(checkpoints, tmp_path, upsample, norm):
     ckpt = _rewrite_checkpoint(checkpoints["indirect"], tmp_path / "o.ckpt", upsample, norm, divide_albedo=True)
@@ -248,6 +256,7 @@ def test_export_of_a_checkpoint_with_options(checkpoints, tmp_path, upsample, no
     np.testing.assert_allclose(NeuralGI(out).run(x), ref, rtol=1e-4, atol=1e-5 * np.abs(ref).max())
 
 
+@pytest.mark.slow
 def test_checkpoint_from_before_the_options_exports_the_same_graph(checkpoints, tmp_path):
     import onnx
 

@@ -310,7 +310,7 @@ def test_shortcut_list_comes_from_the_key_table():
     assert all(b.run is not None for b in BINDINGS if b.chords)
     assert {m.key for m in VIEW_MODES if m.key} <= set(chords)
     assert ("Shift+R", "reset the whole frame (lights, objects, camera)") in SHORTCUTS
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     assert shortcuts_markdown() in readme, "README's controls differ from viewer/input.py (paste shortcuts_markdown())"
 
 
@@ -321,7 +321,7 @@ def test_one_tone_map_list():
     render = build_parser()._subparsers._group_actions[0].choices["render"]
     tonemap = next(a for a in render._actions if a.dest == "tonemap")
     assert tuple(tonemap.choices) == tuple(TONEMAPS) and tonemap.default == DEFAULT_TONEMAP
-    shader = (Path(__file__).resolve().parents[1] / "shaders" / "tonemap.glsl").read_text()
+    shader = (Path(__file__).resolve().parents[2] / "shaders" / "tonemap.glsl").read_text()
     for name, code in TONEMAPS.items():  # the codes the shader's comment documents
         assert f"{code}: " in shader and (name[:4].lower() in shader.lower())
 
@@ -343,6 +343,7 @@ def test_view_command_line():
         ap.parse_args(["view", "--provider", "opengl"])
 
 
+@pytest.mark.slow
 def test_viewer_imports_no_torch():
     code = ("import sys, diviewer.viewer.app, diviewer.viewer.imgui_gl, diviewer.reference.progressive, "
             "diviewer.viewer.panel, diviewer.gl.neural, diviewer.runtime; assert 'torch' not in sys.modules, 'torch was imported'")
@@ -614,6 +615,7 @@ def _scripted_session(tmp_path: Path) -> None:
     np.testing.assert_allclose(last.lights[0].direction, now.lights[0].direction, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_scripted_session(display, tmp_path, ctx):
     """Camera moves, light moves, every view mode, picking, screenshots, a clean exit; each screenshot is the
     frame its JSON records, rendered again offscreen, and so is the window with the panel hidden."""
@@ -648,6 +650,7 @@ def _resize_session(tmp_path: Path) -> None:
     assert sizes == {2: (8, 8), 4: (1, 1), 7: (96, 64)}
 
 
+@pytest.mark.slow
 def test_resize_to_tiny_and_back(display, tmp_path, ctx):
     _in_window_process(_resize_session, tmp_path)
     _same(_png(tmp_path / "after.png"), _offscreen_view(ctx, tmp_path / "after.png"), "after resizing")
@@ -695,6 +698,7 @@ def _neural_session(tmp_path: Path) -> None:
     assert stats["direct_light"] == "inline"  # cornell has one light: the direct pass ran only for the direct view
 
 
+@pytest.mark.slow
 def test_neural_gi_every_frame(display, tmp_path, ctx):
     """A tiny ONNX model (2 x direct) runs each frame at its GI resolution (64x48) under a 128x96 window; the
     frame is the full-resolution direct light plus the upsampled indirect light; --stats writes the table."""
@@ -733,6 +737,7 @@ def _readback_session(tmp_path: Path) -> None:
                      3: ((96, 64), (48, 32))}, sizes
 
 
+@pytest.mark.slow
 def test_window_shows_the_offscreen_frame_at_every_size(display, tmp_path, ctx):
     """What the window really shows (its back buffer, read before the swap) is the offscreen render of the same
     frame at the window's size, for a window larger than, equal to and smaller than the GI, and after resizes."""
@@ -756,6 +761,7 @@ def _refused_session(tmp_path: Path) -> None:
     assert summary["gi_size"] == (128, 128) and summary["gl_error"] == "GL_NO_ERROR"
 
 
+@pytest.mark.slow
 def test_a_model_for_another_scene_is_refused_in_the_panel(display, tmp_path):
     pytest.importorskip("onnx")
     _in_window_process(_refused_session, tmp_path)
@@ -830,6 +836,7 @@ def _input_session(tmp_path: Path) -> None:
     assert record["user_meshes"] == {"file:ring": str(tmp_path / "ring.ply")}
 
 
+@pytest.mark.slow
 def test_keyboard_mouse_and_mesh_loading(display, tmp_path):
     """The input handlers (as GLFW calls them) drive the state; a mesh file loaded mid-session is drawn."""
     _in_window_process(_input_session, tmp_path)
@@ -837,6 +844,7 @@ def test_keyboard_mouse_and_mesh_loading(display, tmp_path):
 
 # --- the background reference ---------------------------------------------------------------------
 
+@pytest.mark.mitsuba
 def test_progressive_reference_refines_restarts_and_never_blocks(cornell):
     from diviewer.reference.progressive import ProgressiveReference, ReferenceSettings, mitsuba_missing
 
@@ -881,6 +889,7 @@ def test_reference_without_mitsuba_says_why(monkeypatch, cornell):
     ref.close()
 
 
+@pytest.mark.slow
 def test_view_command_saves_the_window_itself(display, tmp_path):
     """`diviewer view --frames N --window-screenshot` writes the last frame's window (panel included) at
     the window's size; right of the panel it is the view that `--screenshot` saves; without --frames

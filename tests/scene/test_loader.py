@@ -53,6 +53,7 @@ def test_box_is_faceted_and_sphere_is_smooth():
     assert np.min(np.sum(d * sphere.normals, axis=1)) > 0.999
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SHIPPED)
 def test_sampler_is_reproducible_and_respects_splits(name):
     scene = load_scene(name)

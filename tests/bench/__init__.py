@@ -1,0 +1,1 @@
+"""Tests of diviewer/bench/, one file per module (test_<module>.py)."""

@@ -1,0 +1,1 @@
+"""Tests of diviewer/train/, one file per module (test_<module>.py)."""

@@ -1,0 +1,1 @@
+"""Tests of diviewer/viewer/, one file per module (test_<module>.py)."""
