@@ -2,7 +2,7 @@
 
 Usage: python tools/restamp_scene_hash.py --scene cornell --old-toml OLD.toml FILE [FILE ...]
 
-Version 1 was the sha256 of the scene file's bytes; version 2 (diviewer.scene.loader.scene_identity)
+Version 1 was the sha256 of the scene file's bytes; version 2 (diviewer.scene.identity.scene_identity)
 covers what the scene looks like, the files it loads included. A file is restamped only when its
 recorded hash is the version-1 hash of OLD.toml (a dataset's own manifest text is used when it has
 one) and OLD.toml describes the same scene as today's file (equal once comments, the camera and the
@@ -22,7 +22,8 @@ from pathlib import Path
 from diviewer import imageio
 from diviewer.errors import DiviewerError
 from diviewer.scene import load_scene
-from diviewer.scene.loader import NOT_IDENTITY, resolve_scene_path
+from diviewer.scene.identity import NOT_IDENTITY
+from diviewer.scene.loader import resolve_scene_path
 
 
 def _content(text: str) -> dict:

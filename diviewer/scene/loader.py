@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 import math
-import os
 import tomllib
 from pathlib import Path
 
@@ -15,6 +12,7 @@ import numpy as np
 from diviewer.errors import DiviewerError
 from diviewer.paths import scenes_dir
 from diviewer.scene import gltf, shapes
+from diviewer.scene.identity import scene_identity
 from diviewer.scene.reads import recording_reads
 from diviewer.scene.model import (
     Camera, CameraRange, CameraRegion, DirectionalLight, FrameConfig, LightRange, Material, Object, ObjectRange,
@@ -134,48 +132,6 @@ def resolve_scene_path(scene: str | Path) -> Path:
         names = sorted(x.stem for x in scenes_dir().glob("*.toml"))
         raise DiviewerError(f"no shipped scene named '{scene}'; shipped scenes: {', '.join(names)}; or pass a path to a .toml file")
     return shipped
-
-
-IDENTITY_VERSION = 2
-"""Version of `scene_identity`'s definition (1 was the scene file's bytes alone)."""
-
-NOT_IDENTITY = ("camera", "ranges")
-"""Top-level tables of a scene file that do not change what the scene looks like: where the camera
-starts and what the sampler varies (a model records the ranges it was trained on separately)."""
-
-
-def scene_identity(data: dict, files: list[Path], base: Path) -> str:
-    """sha256 of what a scene looks like: its parsed TOML (less `NOT_IDENTITY` and the display exposure)
-    and the bytes of every file it loads (glTF, buffers, textures, mesh files), by path from the TOML."""
-    content = {k: v for k, v in data.items() if k not in NOT_IDENTITY}
-    if isinstance(content.get("scene"), dict):
-        content["scene"] = {k: v for k, v in content["scene"].items() if k != "exposure"}
-    deps = {}
-    for f in files:
-        try:
-            rel = os.path.relpath(f.resolve(), base.resolve())
-        except ValueError:  # another drive (Windows)
-            rel = str(f.resolve())
-        deps[rel.replace(os.sep, "/")] = _sha256_file(f)
-    blob = json.dumps({"identity_version": IDENTITY_VERSION, "scene": content, "files": dict(sorted(deps.items()))},
-                      sort_keys=True, default=str).encode()
-    return hashlib.sha256(blob).hexdigest()
-
-
-_hash_cache: dict[tuple, str] = {}
-
-
-def _sha256_file(f: Path) -> str:
-    """A file's sha256, cached on (path, mtime, size) as the texture and glTF caches are."""
-    st = f.stat()
-    key = (str(f.resolve()), st.st_mtime_ns, st.st_size)
-    if key not in _hash_cache:
-        h = hashlib.sha256()
-        with open(f, "rb") as fh:
-            for chunk in iter(lambda: fh.read(1 << 20), b""):
-                h.update(chunk)
-        _hash_cache[key] = h.hexdigest()
-    return _hash_cache[key]
 
 
 def load_scene(scene: str | Path) -> Scene:

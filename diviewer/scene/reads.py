@@ -1,4 +1,4 @@
-"""Which files a scene load reads, so that the scene's identity can cover them (loader.scene_identity)."""
+"""Which files a scene load reads, so that the scene's identity can cover them (identity.scene_identity)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ _reads: contextvars.ContextVar[list | None] = contextvars.ContextVar("diviewer_s
 @contextlib.contextmanager
 def recording_reads():
     """Collect every file a scene load reads (glTF, buffers, textures, mesh files) into the yielded list,
-    cache hits included: the scene's identity hash covers them (diviewer.scene.loader.scene_identity)."""
+    cache hits included: the scene's identity hash covers them (diviewer.scene.identity.scene_identity)."""
     files: list[Path] = []
     token = _reads.set(files)
     try:

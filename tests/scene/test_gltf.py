@@ -220,7 +220,7 @@ def test_sponza_mitsuba_matches_gl(ctx, sponza):
     import dataclasses
 
     from diviewer.reference import mitsuba as ref
-    from test_reference import agreement, grow
+    from reference.test_mitsuba import agreement, grow
 
     ref.select_variant()
     camera = dataclasses.replace(sponza.default.camera, position=(-3.0, 9.0, 0.5), target=(3.0, 4.0, -0.5))
