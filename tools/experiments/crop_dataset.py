@@ -1,12 +1,13 @@
 """A dataset of fixed-size crops of a wider capture, for trainers that take one frame shape.
 
 Usage: python tools/experiments/crop_dataset.py SRC OUT [--size 128] [--seed 0]
-           [--shade-boost N --object-albedo 0.8]
+           [--shade-boost N --object-albedo 0.8] [--below INDEX]
 
 Train frames are cropped at a seeded random offset (a crop of a wider render is the view of the same
 camera with its image centre shifted); val and test frames at the centre, so their scores compare
 with a square render of the same camera. Each frame's crop offset is recorded in the manifest's
-frame list. Resumable: frames already written (checked) are kept.
+frame list. Resumable: frames already written (checked) are kept. --below INDEX keeps only the source
+frames of lower index (a fixed snapshot of a capture that is still growing; captures render in index order).
 
 --shade-boost N (the "more frames with the object in shade" ablation of issue 25): each train frame
 whose object is mostly in shade (>= half of its visible pixels receive no direct light; the object's
@@ -50,13 +51,17 @@ def object_in_shade(frame: dict, albedo: float, tol: float = 0.004) -> bool:
 
 
 def crop_dataset(src_dir: Path, out: Path, size: int = 128, seed: int = 0, shade_boost: int = 0,
-                 object_albedo: float | None = None, log=print) -> int:
+                 object_albedo: float | None = None, below: int | None = None, log=print) -> int:
     src = Dataset(src_dir)
     offsets = crop_offsets(src, size, seed)
     manifest = json.loads(json.dumps(src.manifest))
+    if below is not None:
+        manifest["frame_list"] = [f for f in manifest["frame_list"] if f["index"] < below]
+        src.frames = [f for f in src.frames if f["index"] < below]
+        manifest["frames"] = len(manifest["frame_list"])
     manifest["resolution"] = [size, size]
     manifest["derived"] = {"from": str(src_dir), "from_hash": src.hash, "crop": size, "seed": seed,
-                           "shade_boost": shade_boost, "object_albedo": object_albedo,
+                           "shade_boost": shade_boost, "object_albedo": object_albedo, "below": below,
                            "tool": "tools/experiments/crop_dataset.py"}
     for f in manifest["frame_list"]:
         f["crop_xy"] = offsets[f["index"]]
@@ -107,9 +112,10 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shade-boost", type=int, default=0)
     ap.add_argument("--object-albedo", type=float, default=None)
+    ap.add_argument("--below", type=int, default=None)
     a = ap.parse_args(argv)
     try:
-        crop_dataset(a.src, a.out, a.size, a.seed, a.shade_boost, a.object_albedo)
+        crop_dataset(a.src, a.out, a.size, a.seed, a.shade_boost, a.object_albedo, a.below)
     except DiviewerError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
