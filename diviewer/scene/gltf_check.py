@@ -14,9 +14,7 @@ from urllib.parse import unquote, urlsplit
 import numpy as np
 
 from diviewer.errors import DiviewerError
-
-FLOAT32_MAX = float(np.finfo(np.float32).max)
-"""Positions, transforms and colours end up in float32 (GL, Mitsuba's rgb variants)."""
+from diviewer.scene.toml_table import FLOAT32_MAX
 
 MIN_SCALE = 1e-9
 """Smallest singular value of a node's world transform (as the scene file's smallest object scale):
