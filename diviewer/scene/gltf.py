@@ -18,7 +18,7 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.scene import camera as cam
-from diviewer.scene.gltf_check import Doc
+from diviewer.scene.gltf_check import Doc, is_int
 from diviewer.scene.model import Material, Mesh, Object
 from diviewer.scene.reads import note_read, recording_reads
 from diviewer.scene.textures import _frozen, file_key as _file_key, load_texture
@@ -54,7 +54,7 @@ class _Reader:
         acc = d.get("accessors", index, field)
         where = f"accessors[{index}]"
         ctype, kind = acc.get("componentType"), acc.get("type")
-        if ctype not in _COMPONENTS or kind not in _WIDTH:
+        if not is_int(ctype) or ctype not in _COMPONENTS or not isinstance(kind, str) or kind not in _WIDTH:
             raise d.err(where, f"unknown componentType {ctype!r} or type {kind!r}")
         norm = acc.get("normalized", False) is True and ctype in normalized
         if kind not in types or not (ctype in components or norm):

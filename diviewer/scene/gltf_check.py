@@ -29,6 +29,10 @@ def is_num(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and abs(v) <= FLOAT32_MAX
 
 
+def _bounds(lo, hi) -> str:
+    return f"in [{lo}, {hi}]" if lo is not None and hi is not None else f">= {lo}" if lo is not None else f"<= {hi}"
+
+
 class Doc:
     """One parsed glTF JSON document; getters check types and indices and name ``file: field`` on error."""
 
@@ -88,7 +92,7 @@ class Doc:
         if not is_num(v):
             raise self.err(field, f"expected a finite number, got {v!r}")
         if (lo is not None and v < lo) or (hi is not None and v > hi):
-            raise self.err(field, f"must be in [{lo}, {hi}], got {v}")
+            raise self.err(field, f"must be {_bounds(lo, hi)}, got {v}")
         return float(v)
 
     def nums(self, obj: dict, key: str, n: int, field: str, default, lo=None, hi=None) -> tuple[float, ...]:
@@ -96,7 +100,7 @@ class Doc:
         if not isinstance(v, (list, tuple)) or len(v) != n or not all(is_num(x) for x in v):
             raise self.err(field, f"expected {n} finite numbers (within float32), got {v!r}")
         if (lo is not None and min(v) < lo) or (hi is not None and max(v) > hi):
-            raise self.err(field, f"each value must be in [{lo}, {hi}], got {list(v)}")
+            raise self.err(field, f"each value must be {_bounds(lo, hi)}, got {list(v)}")
         return tuple(float(x) for x in v)
 
     def indices(self, obj: dict, key: str, kind: str, field: str) -> list[int]:
@@ -140,16 +144,17 @@ class Doc:
         return m
 
     def check_world(self, world: np.ndarray, bounds: np.ndarray | None, field: str) -> None:
-        """Refuse a composed world transform that is not finite, collapses a mesh, or (with the mesh's
-        object-space ``bounds``) places it beyond float32."""
+        """Refuse a composed world transform that is not finite in float32, or (for a node placing a mesh with
+        object-space ``bounds``) that collapses the mesh or places it beyond float32."""
         if not np.all(np.isfinite(world)) or np.abs(world).max() > FLOAT32_MAX:
             raise self.err(field, "the node's world transform (its own times its parents') is not finite in float32")
+        if bounds is None:
+            return  # a node placing no mesh may scale to zero (hidden children are refused where they place a mesh)
         s = np.linalg.svd(world[:3, :3], compute_uv=False)
         if s.min() < MIN_SCALE:
             raise self.err(field, f"the node's world transform collapses its mesh (smallest scale {s.min():.3g} "
                                   f"< {MIN_SCALE:g}): a zero scale or a degenerate matrix")
-        if bounds is not None:
-            corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-            placed = corners.astype(np.float64) @ world[:3, :3].T + world[:3, 3]
-            if not np.all(np.isfinite(placed)) or np.abs(placed).max() > FLOAT32_MAX:
-                raise self.err(field, "the node places its mesh beyond float32's range (+-3.4e38)")
+        corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        placed = corners.astype(np.float64) @ world[:3, :3].T + world[:3, 3]
+        if not np.all(np.isfinite(placed)) or np.abs(placed).max() > FLOAT32_MAX:
+            raise self.err(field, "the node places its mesh beyond float32's range (+-3.4e38)")
