@@ -6,9 +6,10 @@ At a few positions of the scene's camera path, the GL G-buffer's depth (one samp
 compared with the depth of Mitsuba rays through the same pixel centres (`centre_depth`: the path tracer's
 scene, its ``mask`` BSDF with the thresholded nearest-texel opacity, traced through cut-out texels as the
 path tracer does). Each renderer is run twice, with the masks and with the masked materials made opaque:
-the pixels whose depth the masks change are that renderer's "holes". The figures: the holes' IoU between
-the renderers, the per-pixel agreement inside their union, and the agreement on all pixels with and
-without masks (the second is the geometric baseline: rasterisation against ray casting at silhouettes).
+the pixels whose depth the masks change are that renderer's "holes". The figures (pixel counts per view,
+pooled over the views at the end): the holes' IoU between the renderers, the per-pixel agreement inside
+their union, and the agreement on all pixels with and without masks (the second is the geometric
+baseline: rasterisation against ray casting at silhouettes).
 One path-traced sample per pixel centre: no path-tracing noise enters (masks are binary).
 """
 
@@ -87,9 +88,9 @@ def compare(ctx, scene, config, width: int, height: int) -> dict:
     union = holes_gl | holes_mi
     same = agree(g, m)
     return {"pixels": int(g.size), "holes_gl": int(holes_gl.sum()), "holes_mitsuba": int(holes_mi.sum()),
-            "holes_iou": float((holes_gl & holes_mi).sum() / max(int(union.sum()), 1)),
-            "agree_in_holes": float(same[union].mean()) if union.any() else 1.0,
-            "agree_all_masked": float(same.mean()), "agree_all_opaque": float(agree(g0, m0).mean())}
+            "holes_both": int((holes_gl & holes_mi).sum()), "holes_union": int(union.sum()),
+            "agree_in_holes": int(same[union].sum()),
+            "agree_all_masked": int(same.sum()), "agree_all_opaque": int(agree(g0, m0).sum())}
 
 
 def main(argv=None) -> int:
@@ -115,12 +116,13 @@ def main(argv=None) -> int:
             row = {"s": s, **compare(ctx, scene, config, args.res, args.res)}
             rows.append(row)
             print(json.dumps(row))
-    total = {k: sum(r[k] for r in rows) for k in ("pixels", "holes_gl", "holes_mitsuba")}
-    print(json.dumps({"scene": args.scene, "res": args.res, "views": len(rows), **total,
-                      "holes_iou_mean": float(np.mean([r["holes_iou"] for r in rows])),
-                      "agree_in_holes_mean": float(np.mean([r["agree_in_holes"] for r in rows])),
-                      "agree_all_masked_mean": float(np.mean([r["agree_all_masked"] for r in rows])),
-                      "agree_all_opaque_mean": float(np.mean([r["agree_all_opaque"] for r in rows]))}))
+    t = {k: sum(r[k] for r in rows) for k in rows[0] if k != "s"}
+    union = max(t["holes_union"], 1)
+    # pooled over the views (a view without masks in sight has no IoU of its own)
+    print(json.dumps({"scene": args.scene, "res": args.res, "views": len(rows), **t,
+                      "holes_iou": t["holes_both"] / union, "agree_in_holes_share": t["agree_in_holes"] / union,
+                      "agree_all_masked_share": t["agree_all_masked"] / t["pixels"],
+                      "agree_all_opaque_share": t["agree_all_opaque"] / t["pixels"]}))
     if args.json:
         from diviewer.imageio import write_text
 
