@@ -321,6 +321,7 @@ needs_mitsuba = pytest.mark.skipif(__import__("importlib").util.find_spec("mitsu
                                    reason="needs mitsuba (pip install 'diviewer[train]')")
 
 
+@pytest.mark.slow
 @needs_mitsuba
 def test_a_capture_before_and_after_a_texture_edit_is_not_one_dataset(gl_context, tmp_path):
     from gltf_doc import write_scene

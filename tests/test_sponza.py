@@ -271,6 +271,7 @@ def fine_mask_scene(tmp_path, texels: int) -> Scene:
     return Scene("fine", None, "", base.meshes, materials, base.default)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("texels", [16, 100])  # 2 pixels a texel (magnified), 3.125 texels a pixel (minified)
 def test_gbuffer_and_path_tracer_agree_on_a_fine_checker_mask(ctx, tmp_path, texels):
     """At every pixel centre the G-buffer and Mitsuba's rays stop at the same surface (the same nearest-texel

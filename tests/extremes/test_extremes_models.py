@@ -64,6 +64,7 @@ def _dead(state):
             v.zero_()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("edit,words", [(_set_nan, "NaN/Inf"), (_set_inf, "NaN/Inf"),
                                         (_negative_var, "negative variance"), (_dead, "constant")])
 def test_export_refuses_a_broken_checkpoint(trained, tmp_path, edit, words):
@@ -75,6 +76,7 @@ def test_export_refuses_a_broken_checkpoint(trained, tmp_path, edit, words):
     assert not out.exists() and not out.with_suffix(".json").exists(), "nothing written"
 
 
+@pytest.mark.slow
 def test_fp16_export_refuses_weights_beyond_float16(trained, tmp_path):
     def huge(state):
         state[_first(state, ".weight")].view(-1)[0] = 2 * FP16_MAX
@@ -85,6 +87,7 @@ def test_fp16_export_refuses_weights_beyond_float16(trained, tmp_path):
     assert not (tmp_path / "m16.onnx").exists()
 
 
+@pytest.mark.slow
 def test_sound_exports_state_their_tolerance(trained, tmp_path):
     card32 = export(trained, tmp_path / "a.onnx", log=quiet)
     card16 = export(trained, tmp_path / "b.onnx", ExportSettings(fp16=True), log=quiet)
