@@ -169,6 +169,7 @@ class NeuralGI:
             raise DiviewerError(f"the graph takes {channels} input channels, the renderer provides "
                                 f"{sum(n for _, n in INPUT_CHANNELS)}", path=self.path, field="input")
         self.provider = self.session.get_providers()[0]
+        probe(self.session, inputs[0].shape, int(self.meta["multiple"]), self.path)
         self.multiple = int(self.meta["multiple"])
         self.resolution = tuple(int(x) for x in self.meta["resolution"])
         self.timer = StageTimer()
@@ -207,6 +208,32 @@ class NeuralGI:
         # np.maximum keeps NaN, so a broken pixel stays broken.
         np.maximum(y, 0.0, out=y)
         return y[0] if single else y
+
+
+def probe_frame(height: int, width: int) -> np.ndarray:
+    """(1, H, W, 10) plausible raw buffers (depth 1..3, unit normals, mid-grey albedo, direct light in 0..1)."""
+    yy, xx = np.mgrid[0:height, 0:width] / max(height, width, 1)
+    normal = np.stack([xx - 0.5, yy - 0.5, np.ones_like(xx)], -1)
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    albedo = np.stack([0.3 + 0.4 * xx, 0.5 + 0.0 * yy, 0.7 - 0.4 * yy], -1)
+    direct = albedo * (0.5 + 0.5 * np.sin(6.0 * xx) * np.cos(4.0 * yy))[..., None]
+    frame = np.concatenate([(1.0 + 2.0 * xx)[..., None], normal, albedo, direct], -1)
+    return np.ascontiguousarray(frame[None], dtype=np.float32)
+
+
+def probe(session, shape, multiple: int, path: Path) -> None:
+    """Refuse a model whose graph yields NaN/Inf radiance on a plausible probe frame (broken weights, an
+    fp16 overflow), before the viewer or the benchmark shows or times it."""
+    side = multiple * max(1, -(-16 // multiple))  # the smallest multiple of ``multiple`` >= 16
+    h, w = (d if isinstance(d, int) and d > 0 else side for d in shape[1:3])
+    try:
+        (y,) = session.run([OUTPUT_NAME], {INPUT_NAME: probe_frame(h, w)})
+    except Exception as exc:  # onnxruntime raises its own types for a graph that cannot run
+        raise DiviewerError(f"the model cannot run on a {w}x{h} probe frame: {exc}", path=path) from exc
+    bad = count_nonfinite(np.asarray(y))
+    if bad:
+        raise DiviewerError(f"the model's graph yields {bad} NaN/Inf values on a {w}x{h} probe frame of plausible "
+                            f"buffers: the model is broken (re-export it from a sound checkpoint)", path=path)
 
 
 def count_nonfinite(x: np.ndarray) -> int:

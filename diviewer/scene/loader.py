@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 import tomllib
 from pathlib import Path
 
@@ -14,110 +13,16 @@ from diviewer.paths import scenes_dir
 from diviewer.scene import gltf, shapes
 from diviewer.scene.identity import scene_identity
 from diviewer.scene.reads import recording_reads
-from diviewer.scene.model import (
-    Camera, CameraRange, CameraRegion, DirectionalLight, FrameConfig, LightRange, Material, Object, ObjectRange,
-    PointLight, Ranges, Scene, box_intersection, box_volume,
-)
+from diviewer.scene.model import Camera, DirectionalLight, FrameConfig, Material, Object, PointLight, Scene
+from diviewer.scene.scene_ranges import parse_ranges as _ranges
+from diviewer.scene.toml_table import FLOAT32_MAX, _entries, _f32, _Table  # noqa: F401 (FLOAT32_MAX: re-exported)
 
-
-FLOAT32_MAX = float(np.finfo(np.float32).max)
-"""Every number ends up in float32 (GL uniforms, Mitsuba's rgb variants): larger ones are refused."""
 
 MAX_FAR_NEAR = 1e5
 """Largest camera far/near ratio. The G-buffer's 24-bit depth buffer stores 1 - near/distance in
 effect, so at far/near = 2**24 (1.7e7) everything beyond that distance is clipped (measured: near
 1e-6, far 10 renders a wall at 9 black); at 1e5 surfaces 0.6 % of their distance apart still sort
 correctly at the far plane. Refused rather than rendered wrong (a reversed-Z buffer would lift it)."""
-
-
-def _f32(v: float) -> bool:
-    return abs(v) <= FLOAT32_MAX
-
-
-class _Table:
-    """One TOML table being read: typed getters that name the file and field in every error."""
-
-    def __init__(self, data, path, where: str):
-        if not isinstance(data, dict):
-            raise DiviewerError(f"expected a table, got {type(data).__name__}", path=path, field=where)
-        self.data, self.path, self.where, self.used = data, path, where, set()
-
-    def _field(self, key: str) -> str:
-        return f"{self.where}.{key}" if self.where else key
-
-    def err(self, key: str, msg: str) -> DiviewerError:
-        return DiviewerError(msg, path=self.path, field=self._field(key))
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def raw(self, key: str, default=None):
-        self.used.add(key)
-        return self.data.get(key, default)
-
-    def str(self, key: str, default=None, choices=None) -> str:
-        v = self.raw(key, default)
-        if v is None:
-            raise self.err(key, "missing required field")
-        if not isinstance(v, str):
-            raise self.err(key, f"expected a string, got {v!r}")
-        if choices is not None and v not in choices:
-            raise self.err(key, f"'{v}' is not one of {', '.join(choices)}")
-        return v
-
-    def num(self, key: str, default=None, lo=None, hi=None, lo_open=False, hi_open=False) -> float:
-        v = self.raw(key, default)
-        if v is None:
-            raise self.err(key, "missing required field")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise self.err(key, f"expected a finite number, got {v!r}")
-        v = float(v)
-        if not _f32(v):
-            raise self.err(key, f"{v:g} is outside float32's range (+-3.4e38), in which it is rendered")
-        if lo is not None and (v < lo or (lo_open and v == lo)):
-            raise self.err(key, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
-        if hi is not None and (v > hi or (hi_open and v == hi)):
-            raise self.err(key, f"must be {'<' if hi_open else '<='} {hi}, got {v}")
-        return v
-
-    def vec(self, key: str, n: int = 3, default=None, lo=None, hi=None):
-        v = self.raw(key, default)
-        if v is None:
-            raise self.err(key, "missing required field")
-        if (not isinstance(v, (list, tuple)) or len(v) != n
-                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
-            raise self.err(key, f"expected {n} finite numbers, got {v!r}")
-        if not all(_f32(float(x)) for x in v):
-            raise self.err(key, f"{v} is outside float32's range (+-3.4e38), in which it is rendered")
-        if lo is not None and min(v) < lo:
-            raise self.err(key, f"values must be >= {lo}, got {v}")
-        if hi is not None and max(v) > hi:
-            raise self.err(key, f"values must be <= {hi}, got {v}")
-        return tuple(float(x) for x in v)
-
-    def vecs(self, key: str, n: int = 3, default=None) -> tuple:
-        v = self.raw(key, default)
-        if v is None:
-            raise self.err(key, "missing required field")
-        if not isinstance(v, (list, tuple)):
-            raise self.err(key, f"expected a list of {n}-vectors, got {v!r}")
-        sub = _Table({str(i): x for i, x in enumerate(v)}, self.path, self._field(key))
-        return tuple(sub.vec(str(i), n) for i in range(len(v)))
-
-    def strs(self, key: str, default=()) -> tuple[str, ...]:
-        v = self.raw(key, default)
-        if not isinstance(v, (list, tuple)) or not all(isinstance(x, str) for x in v):
-            raise self.err(key, f"expected a list of strings, got {v!r}")
-        return tuple(v)
-
-    def table(self, key: str, default=None) -> "_Table":
-        v = self.raw(key, default if default is not None else {})
-        return _Table(v, self.path, self._field(key))
-
-    def finish(self) -> None:
-        unknown = sorted(set(self.data) - self.used)
-        if unknown:
-            raise self.err(unknown[0], f"unknown key '{unknown[0]}'" + (f" (and {unknown[1:]})" if unknown[1:] else ""))
 
 
 def resolve_scene_path(scene: str | Path) -> Path:
@@ -243,20 +148,6 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                  ranges=ranges, exposure=exposure, ambient=ambient)
 
 
-def _entries(tab: _Table, problem):
-    """Each entry of a table of tables (``[materials]``, ``[ranges.lights]``, ...) as (key, its table),
-    refusing a key for which ``problem(key)`` gives a reason; each entry, then the table, is checked for
-    unknown keys once the caller has read it."""
-    for key in list(tab.data):
-        why = problem(key)
-        if why:
-            raise tab.err(key, why)
-        t = tab.table(key)
-        yield key, t
-        t.finish()
-    tab.finish()
-
-
 def _not_in_gltf(defined: dict, what: str):
     """``_entries``' check for a name the glTF file already defined."""
     return lambda key: f"{what} '{key}' is already defined by the glTF file" if key in defined else None
@@ -300,94 +191,6 @@ def _light(t: _Table, i: int):
                                  f"(+-3.4e38), in which it is rendered")
     t.finish()
     return light
-
-
-def _ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
-    lights, objects, camera = {}, {}, None
-    known_lights = {l.name for l in default.lights}
-    for key, r in _entries(t.table("lights"), lambda k: None if k in known_lights else f"no light named '{k}'"):
-        angle = r.vec("angle", 2, (0.0, 0.0))
-        inten = r.vec("intensity", 2, (1.0, 1.0), lo=0.0)
-        if angle[0] > angle[1] or inten[0] > inten[1]:
-            raise r.err("angle", "ranges are [min, max] with min <= max")
-        if inten[0] <= 0.0:
-            raise r.err("intensity", "the intensity multiplier range must be positive (drawn log-uniformly)")
-        light = next(l for l in default.lights if l.name == key)
-        peak = max(light.color) * getattr(light, "irradiance", getattr(light, "intensity", 1.0)) * inten[1]
-        if not _f32(peak):
-            raise r.err("intensity", f"the brightest drawn light ({peak:.3g}) is outside float32's range (+-3.4e38)")
-        lights[key] = LightRange(axis=r.vec("axis", 3, (0.0, 1.0, 0.0)), angle=angle, intensity=inten)
-    known_objects = {o.name for o in default.objects}
-    for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else f"no object named '{k}'"):
-        train, test = r.strs("train_meshes"), r.strs("test_meshes")
-        for field_name, lst in (("train_meshes", train), ("test_meshes", test)):
-            for m in lst:
-                if m not in meshes:
-                    raise r.err(field_name, f"unknown mesh '{m}'")
-        if set(train) & set(test):
-            raise r.err("test_meshes", f"meshes in both train and test: {sorted(set(train) & set(test))}")
-        offset = r.vecs("offset", 3) if r.has("offset") else None
-        if offset is not None and len(offset) != 2:
-            raise r.err("offset", "expected [[min x, y, z], [max x, y, z]]")
-        objects[key] = ObjectRange(axes=r.vecs("axes", 3, []), angle=r.vec("angle", 2, (0.0, 360.0)),
-                                   offset=offset, train_meshes=train, test_meshes=test)
-    camera_region = None
-    if t.has("camera") and t.table("camera").has("region"):
-        camera_region = _camera_region(t.table("camera"), default.camera)
-    elif t.has("camera"):
-        r = t.table("camera")
-        positions, targets = r.vecs("positions", 3), r.vecs("targets", 3)
-        if len(positions) < 2 or len(positions) != len(targets):
-            raise r.err("positions", "a camera path needs at least 2 keyframes and as many targets as positions")
-        stretches = r.vecs("test_stretches", 2, [])
-        for a, b in stretches:
-            if not 0.0 <= a < b <= 1.0:
-                raise r.err("test_stretches", f"each stretch is [start, end] with 0 <= start < end <= 1, got {[a, b]}")
-        camera = CameraRange(positions=positions, targets=targets, closed=bool(r.raw("closed", False)),
-                             test_stretches=stretches)
-        r.finish()
-    t.finish()
-    return Ranges(lights=lights, objects=objects, camera=camera, camera_region=camera_region)
-
-
-def _box(r: _Table, key: str, value=None) -> tuple:
-    """[[min x, y, z], [max x, y, z]] with min < max on every axis."""
-    sub = r if value is None else _Table({key: value}, r.path, r.where)
-    box = sub.vecs(key, 3)
-    if len(box) != 2:
-        raise r.err(key, "expected [[min x, y, z], [max x, y, z]]")
-    if not all(a < b for a, b in zip(*box)):
-        raise r.err(key, f"each min must be below its max, got {[list(box[0]), list(box[1])]}")
-    return box
-
-
-def _camera_region(r: _Table, camera: Camera) -> CameraRegion:
-    """A free camera's ranges: a box of positions, a jittered look-at target, a field-of-view range."""
-    region = _box(r, "region")
-    target = r.vec("target", 3, camera.target)
-    jitter = r.vec("target_jitter", 3, (0.0, 0.0, 0.0), lo=0.0)
-    fov = r.vec("fov", 2, (camera.fov, camera.fov), lo=1.0, hi=170.0)
-    if fov[0] > fov[1]:
-        raise r.err("fov", f"[min, max] with min <= max, got {list(fov)}")
-    raw = r.raw("test_regions", [])
-    if not isinstance(raw, list):
-        raise r.err("test_regions", "expected a list of [[min x, y, z], [max x, y, z]] boxes")
-    tests = tuple(_box(r, f"test_regions[{i}]", b) for i, b in enumerate(raw))
-    share = r.num("default_share", 0.0, lo=0.0, hi=1.0)
-    result = CameraRegion(region=region, target=target, target_jitter=jitter, fov=fov, test_regions=tests,
-                          default_share=share)
-    inside = [box_volume(box_intersection(region, b)) for b in tests]
-    for i, v in enumerate(inside):
-        if v <= 0.0:
-            raise r.err("test_regions", f"test region {i} does not overlap 'region': no test camera could be drawn there")
-    # Overlapping test boxes count twice here, so this only refuses a region that is (nearly) all held out.
-    if tests and sum(inside) >= 0.9 * box_volume(region):
-        raise r.err("test_regions", "the test regions cover (almost) all of 'region': training needs the rest")
-    for p in (np.asarray(region[0]), np.asarray(region[1])):
-        if np.linalg.norm(np.asarray(target) - p) <= 1e-6:
-            raise r.err("target", "the look-at target is a corner of the camera region")
-    r.finish()
-    return result
 
 
 def add_mesh_file(scene: Scene, path: str | Path, key: str | None = None) -> tuple[Scene, str, str | None]:

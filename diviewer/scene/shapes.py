@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
 from diviewer.errors import DiviewerError
-from diviewer.scene.colour import srgb_to_linear
 from diviewer.scene.model import Mesh
 from diviewer.scene.reads import note_read
+from diviewer.scene.textures import MAX_TEXTURE_SIDE, decode
 
 CREASE_ANGLE_DEG = 30.0
 """Edges sharper than this get split normals (a box stays faceted, a sphere stays smooth)."""
@@ -186,6 +187,23 @@ def from_trimesh(name: str, tm: trimesh.Trimesh, *, source: str, path=None, fiel
     )
 
 
+class _RecordingResolver(trimesh.resolvers.FilePathResolver):
+    """trimesh's resolver next to a mesh file, recording every file it reads (an OBJ's .mtl and textures,
+    a glTF's buffers): the scene's identity covers them (diviewer.scene.loader.scene_identity)."""
+
+    def get(self, name: str):
+        data = super().get(name)
+        for candidate in (name.strip(), name.strip().lstrip("/"), os.path.split(name)[-1]):  # as the parent's get
+            try:
+                found = Path(self.absolute(candidate))
+            except ValueError:
+                continue
+            if found.is_file():
+                note_read(found)
+                break
+        return data
+
+
 def load_file(name: str, file: Path, *, path=None, field: str = "") -> tuple[Mesh, tuple | None, np.ndarray | None]:
     """Load a mesh file (OBJ, PLY, GLB/glTF, ...) through trimesh.
 
@@ -197,7 +215,7 @@ def load_file(name: str, file: Path, *, path=None, field: str = "") -> tuple[Mes
         raise DiviewerError(f"mesh file not found: {file}", path=path, field=field + ".file")
     note_read(file)
     try:
-        loaded = trimesh.load(file, force="mesh", process=False)
+        loaded = trimesh.load(file, force="mesh", process=False, resolver=_RecordingResolver(file))
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise DiviewerError(f"cannot read mesh file {file}: {exc}", path=path, field=field + ".file") from exc
     if not isinstance(loaded, trimesh.Trimesh):
@@ -210,8 +228,10 @@ def load_file(name: str, file: Path, *, path=None, field: str = "") -> tuple[Mes
             base_color = tuple(float(c) / 255.0 if np.asarray(factor).dtype == np.uint8 else float(c) for c in factor[:3])
         image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
         if image is not None:
-            srgb = np.asarray(image.convert("RGB"), dtype=np.float32) / 255.0
-            texture = srgb_to_linear(srgb).astype(np.float32)
+            if max(image.size) > MAX_TEXTURE_SIDE:
+                raise DiviewerError(f"the texture of {file} is {image.size[0]}x{image.size[1]}, larger than "
+                                    f"{MAX_TEXTURE_SIDE} px on a side; downscale it", path=path, field=field + ".file")
+            texture = decode(image, file, path=path, field=field + ".file")[0]
     mesh = from_trimesh(name, loaded, source=str(file), path=path, field=field, strict=True)
     return mesh, base_color, texture
 

@@ -258,3 +258,53 @@ def test_sponza_mitsuba_matches_gl(ctx, sponza):
     rel = np.abs(m - g["direct"]).max(-1) / np.maximum(g["direct"].max(-1), 1e-6)
     assert np.median(rel[lit]) < 0.05 and abs(m[lit].mean() / g["direct"][lit].mean() - 1) < 0.01
     assert np.mean(m[dark].max(-1) < 1e-3 * m.max()) >= 0.99
+
+
+# --- the G-buffer and the path tracer cut the same holes (issue 29 item 6) ----------------------------------
+def fine_mask_scene(tmp_path, texels: int) -> Scene:
+    """checker_scene's geometry with a white quad cut by a ``texels`` x ``texels`` one-texel checker, before a
+    black wall: a pixel's albedo is the quad's coverage of it."""
+    from PIL import Image
+
+    rgba = np.full((texels, texels, 4), 255, np.uint8)
+    rgba[..., 3] = np.where((np.add.outer(np.arange(texels), np.arange(texels)) % 2) == 0, 255, 0)
+    Image.fromarray(rgba, "RGBA").save(tmp_path / f"fine{texels}.png")
+    tex, alpha = load_texture(tmp_path / f"fine{texels}.png")
+    base = checker_scene(tmp_path)
+    materials = {"cut": Material("cut", albedo=(1.0, 1.0, 1.0), texture=tex, alpha=alpha, alpha_cutoff=0.5),
+                 "wall": Material("wall", albedo=(0.0, 0.0, 0.0))}
+    return Scene("fine", None, "", base.meshes, materials, base.default)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("texels", [16, 100])  # 2 pixels a texel (magnified), 3.125 texels a pixel (minified)
+def test_gbuffer_and_path_tracer_agree_on_a_fine_checker_mask(ctx, tmp_path, texels):
+    """At every pixel centre the G-buffer and Mitsuba's rays stop at the same surface (the same nearest-texel
+    test), and the coverage they give the quad agrees: per pixel where texels are larger than pixels, over
+    the quad where they are smaller (one sample at the centre against the pixel's area)."""
+    pytest.importorskip("mitsuba")
+    from diviewer.reference import mitsuba as ref
+    from tool_modules import load_tool
+
+    alpha_agreement = load_tool("experiments/alpha_agreement")
+    ref.select_variant()
+    scene, n = fine_mask_scene(tmp_path, texels), 64
+    r = Renderer(ctx, scene, n, n, RenderSettings(shadows=False))
+    try:
+        g = r.frame()
+    finally:
+        r.release()
+    quad = np.zeros((n, n), bool)
+    quad[n // 4: 3 * n // 4, n // 4: 3 * n // 4] = True
+    gl_cover = np.isclose(g["depth"], -QUAD_Z, rtol=1e-3)
+    assert not gl_cover[~quad].any()
+    assert 0.4 < gl_cover[quad].mean() < 0.6, "the G-buffer cuts about half the quad away"
+    centre = alpha_agreement.centre_depth(scene, scene.default, n, n)
+    assert np.array_equal(np.isclose(centre, -QUAD_Z, rtol=1e-3), gl_cover), "the same surface at every pixel centre"
+    assert np.isclose(centre[quad & ~gl_cover], -WALL_Z, rtol=1e-3).all(), "through the holes both see the wall"
+    mi_cover = ref.MitsubaFrame(scene, scene.default, n, n).aovs(16, 0)["albedo"].mean(-1)  # the quad's share
+    if texels <= n // 2:
+        assert np.abs(mi_cover - gl_cover)[quad].max() < 0.02
+    else:
+        assert abs(mi_cover[quad].mean() - 0.5) < 0.02, "the pixel areas see half the texels"
+        assert abs(gl_cover[quad].mean() - mi_cover[quad].mean()) < 0.06

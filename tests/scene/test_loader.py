@@ -249,3 +249,96 @@ def test_srgb_curve_round_trips_and_hits_known_values():
     assert srgb_to_linear(128 / 255) == pytest.approx(0.2158605, abs=1e-7)
     assert linear_to_srgb(0.0031308) == pytest.approx(0.04045, abs=1e-6)
     assert srgb8(np.array([np.nan, -1.0, 0.2158605, 2.0])).tolist() == [0, 0, 128, 255]
+
+
+# --- the scene's identity covers every file it loads (issue 29 item 3) ---------------------------------
+def _edit_png(path: Path) -> None:
+    from PIL import Image
+
+    img = np.array(Image.open(path))
+    img[0, 0, 1] ^= 0x40  # one channel of one texel
+    Image.fromarray(img).save(path)
+
+
+def test_editing_a_texture_or_a_buffer_changes_the_scene_identity(tmp_path):
+    from gltf_doc import write_scene
+
+    path = write_scene(tmp_path)
+    scene = load_scene(path)
+    before, texels = scene.file_hash, scene.materials["leaf"].texture
+    tex, bin_ = tmp_path / "tex.png", tmp_path / "tiny.bin"
+    original_tex, original_bin = tex.read_bytes(), bin_.read_bytes()
+    _edit_png(tex)
+    after_texture = load_scene(path)
+    assert after_texture.file_hash != before
+    assert not np.array_equal(after_texture.materials["leaf"].texture, texels), "the edited texture is what loads"
+    tex.write_bytes(original_tex)
+    assert load_scene(path).file_hash == before, "the identity is the content, not the file's mtime"
+    raw = bytearray(original_bin)
+    raw[0:4] = np.float32(-1.25).tobytes()  # the quad's first x coordinate
+    bin_.write_bytes(bytes(raw))
+    edited = load_scene(path)
+    assert edited.file_hash not in (before, after_texture.file_hash)
+    assert edited.meshes["quad"].vertices[0, 0] == -1.25, "the glTF cache reads an edited buffer again"
+    bin_.write_bytes(original_bin)
+    assert load_scene(path).file_hash == before
+
+
+def test_an_obj_files_material_and_texture_are_in_the_scene_identity(tmp_path):
+    from PIL import Image
+
+    (tmp_path / "m.obj").write_text("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\n"
+                                    "usemtl red\nf 1/1 2/2 3/3\n")
+    (tmp_path / "m.mtl").write_text("newmtl red\nKd 1 1 1\nmap_Kd tex.png\n")
+    Image.fromarray(np.full((4, 4, 3), (200, 50, 50), np.uint8)).save(tmp_path / "tex.png")
+    path = write(tmp_path, BASE + '\n[meshes.f]\nfile = "m.obj"\n')
+    before = load_scene(path)
+    assert before.materials["mesh:f"].texture is not None
+    _edit_png(tmp_path / "tex.png")
+    after_texture = load_scene(path).file_hash
+    assert after_texture != before.file_hash
+    (tmp_path / "m.mtl").write_text("newmtl red\nKd 1 1 1\nmap_Kd tex.png\n# edited\n")
+    assert load_scene(path).file_hash not in (before.file_hash, after_texture)
+
+
+def test_a_model_trained_before_a_texture_edit_is_refused_after_it(tmp_path):
+    pytest.importorskip("onnx")
+    from gltf_doc import write_scene
+    from onnx_models import base_meta, direct_times
+
+    from diviewer.runtime import NeuralGI
+
+    path = write_scene(tmp_path / "scene")
+    before = load_scene(path)
+    model = direct_times(tmp_path / "m.onnx", meta=base_meta(scene_hash=before.file_hash, scene=before.name))
+    NeuralGI(model, scene=before)  # accepted for the scene it was made for
+    _edit_png(tmp_path / "scene" / "tex.png")
+    with pytest.raises(DiviewerError, match="scene_hash") as exc:
+        NeuralGI(model, scene=load_scene(path))
+    assert "another version of its file" in str(exc.value)
+
+
+needs_mitsuba = pytest.mark.skipif(__import__("importlib").util.find_spec("mitsuba") is None,
+                                   reason="needs mitsuba (pip install 'diviewer[train]')")
+
+
+@pytest.mark.slow
+@needs_mitsuba
+def test_a_capture_before_and_after_a_texture_edit_is_not_one_dataset(gl_context, tmp_path):
+    from gltf_doc import write_scene
+
+    from diviewer.data.capture import CaptureSettings, build_manifest, capture, merge, open_or_create
+    from diviewer.data.dataset import Dataset
+
+    path = write_scene(tmp_path / "scene")
+    settings = CaptureSettings(frames=2, seed=0, width=16, height=16, spp=2, max_depth=3)
+    capture(path, tmp_path / "a", settings, shard=(1, 2), log=lambda *_: None)
+    assert len(Dataset(tmp_path / "a").indices()) == 1
+    _edit_png(tmp_path / "scene" / "tex.png")
+    with pytest.raises(DiviewerError, match="scene_hash"):  # resuming into the same folder after the edit
+        capture(path, tmp_path / "a", settings, shard=(2, 2), log=lambda *_: None)
+    # the other shard captured after the edit (its manifest is enough: the check comes before any frame)
+    open_or_create(tmp_path / "b", build_manifest(load_scene(path), settings))
+    with pytest.raises(DiviewerError, match="scene_hash"):
+        merge([tmp_path / "a", tmp_path / "b"], tmp_path / "merged", log=lambda *_: None)
+    assert not (tmp_path / "merged").exists()

@@ -1,0 +1,86 @@
+"""What `diviewer export` refuses before it writes a model: broken weights and outputs that verify nothing.
+
+A checkpoint with NaN/Inf weights or a negative BatchNorm running variance is broken however it was
+made (a diverged run, a hand edit, a truncated copy); a generator whose output is constant or
+non-finite on the verification frames is dead, and comparing two such outputs ("PSNR inf") verifies
+nothing. For ``--fp16`` every weight must fit float16 (largest 65504), and the fp16 graph must stay
+within `FP16_TOLERANCE` of the float32 PyTorch output.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from diviewer.errors import DiviewerError
+
+FP16_MAX = 65504.0
+"""Largest finite float16: a weight beyond it becomes infinite in an fp16 export."""
+
+FP16_TOLERANCE = 1e-2
+"""fp16 export fails if max |onnx fp16 - torch fp32| exceeds this fraction of the reference's peak radiance.
+Measured 3.9e-4 (the shipped cornell K=16 fp16 model) and 5.6e-4 (tests' tiny model): float16's 11-bit
+mantissa through a dozen layers; 1e-2 leaves room for deeper models and refuses a graph that overflowed
+or lost a layer's range."""
+
+CONSTANT_SPREAD = 1e-6
+"""The generator's output is constant when its spread (max - min over every pixel of every verification
+frame) is at most this fraction of its magnitude (or this absolute value for an all-zero output)."""
+
+
+def refuse_broken(netG, ref_module, frames: np.ndarray, fp16: bool, ckpt_path: Path) -> np.ndarray:
+    """Check the generator's weights, run the float32 reference on ``frames`` and check its outputs.
+
+    Returns:
+        The reference output of ``ref_module`` (N, H, W, 3), which export compares the ONNX graph against.
+
+    Raises:
+        DiviewerError: non-finite weights, a negative BatchNorm variance, weights beyond float16 with
+            ``fp16``, or an output that is non-finite or constant, naming the checkpoint and the tensor.
+    """
+    import torch
+
+    check_weights(netG, fp16, ckpt_path)
+    captured = []
+    hook = netG.register_forward_hook(lambda _m, _i, out: captured.append(out.detach().float().numpy()))
+    try:
+        with torch.no_grad():
+            reference = ref_module(torch.from_numpy(frames)).numpy()
+    finally:
+        hook.remove()
+    check_outputs(np.concatenate(captured), reference, len(frames), ckpt_path)
+    return reference
+
+
+def check_weights(netG, fp16: bool, ckpt_path: Path) -> None:
+    """Refuse non-finite weights or buffers, negative BatchNorm running variances, and (``fp16``) values
+    beyond float16's range, naming the first offending tensor."""
+    for name, t in netG.state_dict().items():
+        if not t.is_floating_point():
+            continue  # BatchNorm's num_batches_tracked
+        a = t.detach().double().cpu().numpy()
+        if not np.all(np.isfinite(a)):
+            raise DiviewerError(f"the generator's weights are broken: {name} has {int((~np.isfinite(a)).sum())} NaN/Inf "
+                                f"values (a diverged run?); export an earlier checkpoint", path=ckpt_path, field=name)
+        if name.endswith("running_var") and a.size and a.min() < 0:
+            raise DiviewerError(f"the generator's weights are broken: BatchNorm {name} has a negative variance "
+                                f"({a.min():.3g}); export an earlier checkpoint", path=ckpt_path, field=name)
+        if fp16 and a.size and np.abs(a).max() > FP16_MAX:
+            raise DiviewerError(f"{name} holds {np.abs(a).max():.3g}, beyond float16's range ({FP16_MAX:g}): "
+                                f"an fp16 export would make it infinite; export without --fp16",
+                                path=ckpt_path, field=name)
+
+
+def check_outputs(net_out: np.ndarray, reference: np.ndarray, frames: int, ckpt_path: Path) -> None:
+    """Refuse a generator whose raw output (``net_out``, before decoding) or final radiance (``reference``) is
+    non-finite, or whose raw output is constant, on the verification frames."""
+    for what, a in (("generator output", net_out), ("radiance", reference)):
+        if not np.all(np.isfinite(a)):
+            raise DiviewerError(f"the model's {what} has {int((~np.isfinite(a)).sum())} NaN/Inf values on the "
+                                f"{frames} verification frames: the model is broken; not exported", path=ckpt_path)
+    spread = float(net_out.max() - net_out.min()) if net_out.size else 0.0
+    if spread <= CONSTANT_SPREAD * max(float(np.abs(net_out).max()) if net_out.size else 0.0, 1.0):
+        raise DiviewerError(f"the generator's output is constant ({float(net_out.flat[0]) if net_out.size else 0:.4g}) "
+                            f"on the {frames} verification frames: a dead or diverged network, which no comparison "
+                            f"with PyTorch can verify; not exported", path=ckpt_path)
