@@ -45,6 +45,15 @@ def test_a_shipped_cards_recipe_is_its_scenes_recipe_file(card):
     assert bool(rec.export.get("fp16")) == (meta["precision"] == "fp16")
 
 
+@pytest.mark.parametrize("card", CARDS)
+def test_a_shipped_card_names_the_build_that_rebuilds_it_in_the_json_and_the_onnx_alike(card):
+    from diviewer.runtime import read_metadata
+
+    meta = json.loads((models_dir() / f"{card}.json").read_text())
+    assert meta["rebuild"] == f"diviewer build --scene {meta['scene']}"
+    assert read_metadata(models_dir() / f"{card}.onnx") == meta
+
+
 def test_the_default_is_the_best_measured_recipe_not_the_papers():
     assert DEFAULT_RECIPE == "cornell"
     args = _parse(["--data", "d", "--out", "o"])
