@@ -77,6 +77,11 @@ def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, cap
     assert "recipe cornell" in out and "estimated total:" in out and "capture 4600 frames at 128x128, 64 spp" in out
     assert "dry run: nothing was done" in out
     assert not work.exists()
+    assert main(["build", "--recipe", "sponza", "--dry-run", "--work", str(work)]) == 0  # the recipe's scene
+    out = capsys.readouterr().out
+    assert out.startswith("build sponza (sponza) with recipe sponza") and "train_k128" in out
+    assert main(["build", "--recipe", "paper", "--dry-run"]) == 2  # the paper's recipe names no scene
+    assert "recipe.scene" in capsys.readouterr().err
 
 
 def test_the_estimate_follows_the_measured_costs():
@@ -164,6 +169,10 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
     assert "ship" not in recorded
 
     capsys.readouterr()
+    assert main([*argv, "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert [line.split()[1] for line in out.splitlines() if line.split()[2:3] == ["done"]][:1] == ["capture"]
+    assert "left (stages done in" in out
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "capture: done before, outputs checked; skipped" in out

@@ -14,7 +14,8 @@ def add_build_parser(subparsers) -> argparse.ArgumentParser:
                       "train and export each K of the ladder, evaluate, pick the smallest sufficient K, ship",
         description="Build a scene's model with a recipe (assets/recipes/*.toml). Every stage resumes: run the same "
                     "command again after an interruption. Uses CUDA (Mitsuba cuda_ad_rgb, torch) where present.")
-    p.add_argument("--scene", required=True, help="a shipped scene's name (cornell, sponza, atrium) or a .toml path")
+    p.add_argument("--scene", default=None,
+                   help="a shipped scene's name (cornell, sponza, atrium) or a .toml path (default: the recipe's scene)")
     p.add_argument("--recipe", default=None, metavar="R",
                    help="a shipped recipe's name (cornell, sponza, paper) or a .toml file (default: the scene's own "
                         "recipe where one is shipped, else cornell's, the best measured)")
@@ -42,7 +43,7 @@ def default_recipe(scene: str) -> str:
 
 def rebuild_command(args: argparse.Namespace) -> str:
     """The command that rebuilds what this one builds (the card records it): the options that change the plan."""
-    words = ["diviewer", "build", "--scene", str(args.scene)]
+    words = ["diviewer", "build", "--scene", str(args.scene)]  # the scene is named even where the recipe has one
     if args.recipe and args.recipe != default_recipe(str(args.scene)):
         words += ["--recipe", str(args.recipe)]
     if args.budget is not None:
@@ -59,8 +60,13 @@ def run_build_command(args: argparse.Namespace) -> int:
     from diviewer.paths import models_dir, scenes_dir
     from diviewer.train.recipe import load_recipe
 
-    scene = str(args.scene)
-    recipe = load_recipe(args.recipe or default_recipe(scene))
+    if args.scene is None and args.recipe is None:
+        raise DiviewerError("give a scene (--scene NAME or a .toml path), or a recipe that names one", field="--scene")
+    recipe = load_recipe(args.recipe or default_recipe(str(args.scene)))
+    if args.scene is None and recipe.scene is None:
+        raise DiviewerError(f"the recipe names no scene ([recipe] scene); give --scene", path=recipe.path,
+                            field="recipe.scene")
+    scene = args.scene = str(args.scene or recipe.scene)
     shipped = Path(scene).suffix != ".toml" and (scenes_dir() / f"{scene}.toml").is_file()
     work = args.work or Path("runs") / Path(scene).stem
     ship = args.ship or (models_dir() if shipped else work)
@@ -70,7 +76,10 @@ def run_build_command(args: argparse.Namespace) -> int:
     plan = make_plan(scene, recipe, work, ship=ship, budget_hours=args.budget,
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides)
     if args.dry_run:
-        for line in describe(plan):
+        from diviewer.build.pipeline import finished_stages
+
+        done = finished_stages(plan)
+        for line in describe(plan, done):
             print(line)
         print(f"dry run: nothing was done; run it without --dry-run ({rebuild_command(args)})")
         return 0

@@ -29,10 +29,24 @@ def plan_key(plan: Plan) -> dict[str, Any]:
     """What a work folder's build is: a different key is another build, refused in the same folder."""
     import dataclasses
 
+    from diviewer.scene.loader import resolve_scene_path
+
     return json.loads(json.dumps({
-        "scene": plan.scene, "recipe": {"name": plan.recipe.name, "sha256": plan.recipe.sha256},
+        "scene": str(resolve_scene_path(plan.scene).resolve()), "recipe": {"name": plan.recipe.name, "sha256": plan.recipe.sha256},
         "capture": dataclasses.asdict(plan.capture), "evalset": dataclasses.asdict(plan.evalset),
         "train": {k: v for k, v in plan.train.items() if k not in RUN_ONLY}, "ks": list(plan.ks)}, default=str))
+
+
+def finished_stages(plan: Plan) -> set[str]:
+    """Stages a build of this plan in its work folder has finished, with outputs unchanged (none where there is no
+    build, or one of another plan)."""
+    if not (plan.work / STATE_FILE).is_file():
+        return set()
+    try:
+        state = BuildState(plan.work / STATE_FILE, plan_key(plan))
+    except DiviewerError:
+        return set()
+    return {s.name for s in plan.stages if state.done(s.name, plan.work) is not None}
 
 
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> dict[str, Any]:

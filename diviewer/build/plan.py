@@ -221,8 +221,9 @@ def _fit_scale(cap, train, ev, ks, scene, m, budget: float) -> float:
     return lo
 
 
-def describe(plan: Plan) -> list[str]:
-    """The plan for people: what each stage does and how long it should take on this machine."""
+def describe(plan: Plan, done: set[str] = frozenset()) -> list[str]:
+    """The plan for people: what each stage does and how long it should take on this machine (``done``: stages a
+    build in the work folder has finished, whose outputs still match; they are skipped)."""
     r = plan.recipe
     lines = [f"build {plan.scene_name} ({plan.scene}) with recipe {r.name} ({r.path}, sha256 {r.sha256[:12]})",
              f"machine: {plan.machine.kind}, {plan.machine.cpus} CPU cores; {plan.machine.why}",
@@ -237,9 +238,11 @@ def describe(plan: Plan) -> list[str]:
     lines.append(f"K ladder {', '.join(map(str, plan.ks))}; the smallest K within {r.tolerance_db} dB of the best "
                  f"(tone-mapped PSNR, the capture's test split) is shipped")
     for i, s in enumerate(plan.stages, 1):
-        lines.append(f"  {i:2d}. {s.name:<12} {_hms(s.seconds):>9}  {s.title}")
-    lines.append(f"estimated total: {_hms(plan.seconds)} (from the costs in diviewer/build/costs.py; stages "
-                 f"already done are skipped when the build resumes)")
+        lines.append(f"  {i:2d}. {s.name:<12} {'done' if s.name in done else _hms(s.seconds):>9}  {s.title}")
+    left = sum(s.seconds for s in plan.stages if s.name not in done)
+    lines.append(f"estimated total: {_hms(plan.seconds)}" + (f", {_hms(left)} left (stages done in {plan.work} are "
+                                                             f"skipped)" if done else "")
+                 + " (from the costs in diviewer/build/costs.py)")
     return lines
 
 

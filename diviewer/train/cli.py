@@ -98,6 +98,9 @@ def run_train(args: argparse.Namespace) -> int:
     last = Path(args.out) / "last.ckpt"
     old = load_checkpoint(last, mmap=True)["config"] if resume and last.is_file() else None
     cfg = resolve_config(args, old)
+    if cfg.recipe:
+        changed = ", ".join(f"{k}={v}" for k, v in cfg.recipe.get("overrides", {}).items())
+        print(f"recipe {cfg.recipe.get('name')} ({cfg.recipe.get('file')})" + (f"; changed: {changed}" if changed else ""))
     result = train(cfg, resume=resume)
     if result["best"] is not None:
         print(f"best tone-mapped SSIM {result['best']:.4f}; checkpoints in {cfg.out}")
