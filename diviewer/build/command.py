@@ -15,7 +15,8 @@ def add_build_parser(subparsers) -> argparse.ArgumentParser:
         description="Build a scene's model with a recipe (assets/recipes/*.toml). Every stage resumes: run the same "
                     "command again after an interruption. Uses CUDA (Mitsuba cuda_ad_rgb, torch) where present.")
     p.add_argument("--scene", default=None,
-                   help="a shipped scene's name (cornell, sponza, atrium) or a .toml path (default: the recipe's scene)")
+                   help="a shipped scene's name (cornell, sponza, atrium) or a .toml path "
+                        "(default: the recipe's scene)")
     p.add_argument("--recipe", default=None, metavar="R",
                    help="a shipped recipe's name (cornell, sponza, paper) or a .toml file (default: the scene's own "
                         "recipe where one is shipped, else cornell's, the best measured)")

@@ -32,7 +32,8 @@ def plan_key(plan: Plan) -> dict[str, Any]:
     from diviewer.scene.loader import resolve_scene_path
 
     return json.loads(json.dumps({
-        "scene": str(resolve_scene_path(plan.scene).resolve()), "recipe": {"name": plan.recipe.name, "sha256": plan.recipe.sha256},
+        "scene": str(resolve_scene_path(plan.scene).resolve()),
+        "recipe": {"name": plan.recipe.name, "sha256": plan.recipe.sha256},
         "capture": dataclasses.asdict(plan.capture), "evalset": dataclasses.asdict(plan.evalset),
         "train": {k: v for k, v in plan.train.items() if k not in RUN_ONLY}, "ks": list(plan.ks)}, default=str))
 
@@ -166,7 +167,8 @@ def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     for k in plan.ks:
         key = plan.model(k).stem
         rows.append({"K": k, "steps": stages[f"train_k{k}"]["result"]["step"],
-                     "bytes": plan.model(k).stat().st_size, "test_split": stages[f"export_k{k}"]["result"]["test_split"],
+                     "bytes": plan.model(k).stat().st_size,
+                     "test_split": stages[f"export_k{k}"]["result"]["test_split"],
                      "evalset": {s: {q: r["methods"][key][q]["mean"] for q in QUALITY if q in r["methods"][key]}
                                  for s, r in ev["splits"].items()}})
     tol = plan.recipe.tolerance_db
@@ -175,8 +177,8 @@ def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
               "rule": f"smallest K whose tone-mapped test-split PSNR is within {tol} dB of the best K's "
                       f"({pick['best_psnr']:.2f} dB)",
               "recipe": plan.recipe.record(plan.overrides), "scale": plan.scale, "machine": vars(plan.machine),
-              "frames": stages["check"]["result"]["frames"], "evalset": {"frames_per_split": plan.evalset.frames_per_split,
-                                                                         "spp": plan.evalset.spp}, "rows": rows}
+              "frames": stages["check"]["result"]["frames"],
+              "evalset": {"frames_per_split": plan.evalset.frames_per_split, "spp": plan.evalset.spp}, "rows": rows}
     out = plan.work / "ladder.json"
     imageio.write_text(out, json.dumps(record, indent=1) + "\n")
     for r in rows:
@@ -198,8 +200,8 @@ def _ship(plan: Plan, state: BuildState, log, command: str, **_) -> tuple[list[P
     card["rebuild"] = command
     write_model_card(plan.model(k), dst, card)
     outputs = [dst, dst.with_suffix(".json")]
-    for src, suffix in ((plan.run_dir(k) / "curves.png", "_curves.png"), (plan.run_dir(k) / "metrics.csv", "_metrics.csv"),
-                        (plan.work / "ladder.json", "_ladder.json")):
+    for src, suffix in ((plan.run_dir(k) / "curves.png", "_curves.png"),
+                        (plan.run_dir(k) / "metrics.csv", "_metrics.csv"), (plan.work / "ladder.json", "_ladder.json")):
         if src.is_file():
             with imageio.atomic_path(plan.ship / f"{name}{suffix}") as tmp:
                 shutil.copyfile(src, tmp)

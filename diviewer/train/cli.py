@@ -1,6 +1,6 @@
 """The `diviewer train` command line: a recipe (`--recipe`, default the best measured one), then options onto
-single `TrainConfig` fields (on --resume, the checkpoint's settings fill what is not given), then `train`. `python -m diviewer.train.cli` (e.g. under
-torchrun) runs the subcommand on its own::
+single `TrainConfig` fields (on --resume, the checkpoint's settings fill what is not given), then `train`.
+`python -m diviewer.train.cli` (e.g. under torchrun) runs the subcommand on its own::
 
     torchrun --standalone --nproc_per_node 4 -m diviewer.train.cli --data data/cornell --out runs/c4
 """
@@ -100,7 +100,8 @@ def run_train(args: argparse.Namespace) -> int:
     cfg = resolve_config(args, old)
     if cfg.recipe:
         changed = ", ".join(f"{k}={v}" for k, v in cfg.recipe.get("overrides", {}).items())
-        print(f"recipe {cfg.recipe.get('name')} ({cfg.recipe.get('file')})" + (f"; changed: {changed}" if changed else ""))
+        print(f"recipe {cfg.recipe.get('name')} ({cfg.recipe.get('file')})"
+              + (f"; changed: {changed}" if changed else ""))
     result = train(cfg, resume=resume)
     if result["best"] is not None:
         print(f"best tone-mapped SSIM {result['best']:.4f}; checkpoints in {cfg.out}")
