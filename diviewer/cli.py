@@ -280,11 +280,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--info", type=Path, metavar="MODEL", help="print a model's metadata and exit")
     p.set_defaults(func=_cmd_export)
 
+    from diviewer.build.command import add_build_parser
     from diviewer.train.cli import add_train_parser
     from diviewer.viewer.command import add_view_parser
 
     add_train_parser(sub)
     add_view_parser(sub)
+    add_build_parser(sub)
 
     p = sub.add_parser("eval", help="models against an evaluation set (PSNR, SSIM, FLIP, equivalent spp) or a "
                                     "dataset split, beside direct light alone")

@@ -22,3 +22,79 @@ def facing_plane(distance: float = 3.0, albedo=(0.5, 0.25, 0.75), lights=(), fov
         "lights": list(lights),
     }
     return parse_scene(data)
+
+
+TINY_SCENE_TOML = """
+[scene]
+name = "tiny"
+
+[camera]
+position = [0.0, 1.0, 3.0]
+target = [0.0, 0.6, 0.0]
+up = [0.0, 1.0, 0.0]
+fov = 45.0
+near = 0.1
+far = 10.0
+
+[materials.white]
+albedo = [0.7, 0.7, 0.7]
+[materials.red]
+albedo = [0.6, 0.1, 0.1]
+
+[meshes.floor]
+shape = "box"
+size = [3.0, 0.1, 3.0]
+[meshes.wall]
+shape = "box"
+size = [3.0, 2.0, 0.1]
+[meshes.cube]
+shape = "box"
+size = [0.6, 0.6, 0.6]
+[meshes.sphere]
+shape = "sphere"
+radius = 0.35
+
+[[objects]]
+name = "floor"
+mesh = "floor"
+material = "white"
+position = [0.0, -0.05, 0.0]
+[[objects]]
+name = "back"
+mesh = "wall"
+material = "red"
+position = [0.0, 1.0, -1.0]
+[[objects]]
+name = "center"
+mesh = "cube"
+material = "white"
+position = [0.0, 0.4, 0.0]
+
+[[lights]]
+name = "sun"
+type = "directional"
+direction = [0.3, -0.8, -0.5]
+color = [1.0, 1.0, 1.0]
+irradiance = 3.0
+
+[ranges.lights.sun]
+axis = [0.0, 1.0, 0.0]
+angle = [-60.0, 60.0]
+
+[ranges.objects.center]
+axes = [[0.0, 1.0, 0.0]]
+angle = [0.0, 360.0]
+train_meshes = ["cube"]
+test_meshes = ["sphere"]
+"""
+"""A procedural scene small enough to capture, train and evaluate end to end in seconds (`write_tiny_scene`)."""
+
+
+def write_tiny_scene(folder) -> "Path":
+    """Write the tiny scene as folder/tiny.toml (a scene file, as `diviewer build --scene` takes one)."""
+    from pathlib import Path
+
+    path = Path(folder) / "tiny.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(TINY_SCENE_TOML)
+    return path

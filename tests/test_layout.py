@@ -25,7 +25,7 @@ LAYERS = {
     # 4: training and evaluation
     "train/": 4, "evalset": 4, "evaluate": 4, "baseline": 4,
     # 5: the applications
-    "viewer/": 5, "bench/": 5,
+    "viewer/": 5, "bench/": 5, "build/": 5,
     # 6: the command line
     "cli": 6, "__main__": 6,
 }

@@ -1,28 +1,30 @@
 #!/usr/bin/env bash
-# Pack what tools/device_build.py made in /tmp/dv into $OUT (the device tool brings back 8 files of <= 16 MiB):
-# results.tar.gz (record, logs, curves, metrics, cards, evaluations, manifests, thumbnails) and the
-# exported models that fit, smallest first (or the models named after the work folder).
+# Pack what `diviewer build` (tools/device_lease.sh) made in /tmp/dv into $OUT (the device tool brings back 8
+# files of <= 16 MiB): results.tar.gz (state, log, ladder, curves, metrics, cards, evaluations, manifests,
+# thumbnails, the shipped folder's card and ladder) and the exported models that fit, the shipped one first,
+# then the ladder's smallest first (or the models named after the work folder).
 # Usage: bash tools/device_pack.sh [WORK [MODEL.onnx ...]]
 set -uo pipefail
 W=${1:-/tmp/dv}
 shift || true
 cd "$W" || exit 1
 files=()
-for p in record.json build.log logs/*.log */train_*/metrics.csv */train_*/curves.png */models/*.json */evalset_eval.json \
-         */evalset/manifest.json */evalset/summary.json */data/thumbs/*.png */evalset/thumbs/*.png; do
+for p in build.json build.log ladder.json train_k*/metrics.csv train_k*/curves.png models/*.json evalset_eval.json \
+         evalset/manifest.json evalset/summary.json data/thumbs/*.png evalset/thumbs/*.png ship/*.json ship/*.png \
+         ship/*.csv; do
   [ -e "$p" ] && files+=("$p")
 done
 python3 - "$W" <<'EOF'
 import json, sys, pathlib
 w = pathlib.Path(sys.argv[1])
-for m in w.glob("*/data/manifest.json"):  # the manifest without its frame list (which the settings rebuild)
+for m in w.glob("data/manifest.json"):  # the manifest without its frame list (which the settings rebuild)
     d = json.loads(m.read_text()); d["frame_list"] = f"{len(d.get('frame_list', []))} frames"
     m.with_name("manifest_head.json").write_text(json.dumps(d, indent=1))
 EOF
-for p in */data/manifest_head.json; do [ -e "$p" ] && files+=("$p"); done
+for p in data/manifest_head.json; do [ -e "$p" ] && files+=("$p"); done
 tar czf "$OUT/results.tar.gz" "${files[@]}"
 n=1
-if [ $# -gt 0 ]; then models=("$@"); else models=($(ls -S -r */models/*.onnx 2>/dev/null)); fi
+if [ $# -gt 0 ]; then models=("$@"); else models=($(ls ship/*.onnx 2>/dev/null) $(ls -S -r models/*.onnx 2>/dev/null)); fi
 for m in "${models[@]}"; do
   [ "$(stat -c %s "$m")" -le 16000000 ] || continue
   [ $n -le 7 ] || break

@@ -1,6 +1,6 @@
-"""The `diviewer train` command line: options onto `TrainConfig` (on --resume, the checkpoint's
-settings fill what is not given), then `train`. `python -m diviewer.train.cli` (e.g. under
-torchrun) runs the subcommand on its own::
+"""The `diviewer train` command line: a recipe (`--recipe`, default the best measured one), then options onto
+single `TrainConfig` fields (on --resume, the checkpoint's settings fill what is not given), then `train`.
+`python -m diviewer.train.cli` (e.g. under torchrun) runs the subcommand on its own::
 
     torchrun --standalone --nproc_per_node 4 -m diviewer.train.cli --data data/cornell --out runs/c4
 """
@@ -15,16 +15,24 @@ from typing import Any
 
 from diviewer.errors import DiviewerError
 from diviewer.train.config import CHOICES, RESUME_INHERITED, TrainConfig
+from diviewer.train.recipe import DEFAULT_RECIPE, load_recipe
 
 
 def add_train_parser(subparsers) -> argparse.ArgumentParser:
-    """The `train` subcommand; it calls `run_train`. On --resume, options left out come from the
-    checkpoint (see `RESUME_INHERITED`), and those that define the networks may not change."""
+    """The `train` subcommand; it calls `run_train`. A recipe gives every setting, options change single
+    ones; the defaults shown are TrainConfig's (the paper's), which a recipe replaces. On --resume, options
+    left out come from the checkpoint (see `RESUME_INHERITED`), and those that define the networks may not
+    change."""
     d = {f.name: f.default for f in dataclasses.fields(TrainConfig)}
     p = subparsers.add_parser("train", help="train the neural GI network (cGAN) for one scene's dataset",
-                              description="Train Deep Illumination's cGAN on a captured dataset; resumable.")
+                              description="Train Deep Illumination's cGAN on a captured dataset with a recipe "
+                                          "(assets/recipes/*.toml); options change single settings; resumable.")
     p.add_argument("--data", type=Path, required=True, help="dataset folder (diviewer capture --out)")
     p.add_argument("--out", type=Path, required=True, help="run folder: checkpoints, metrics.csv, curves.png")
+    p.add_argument("--recipe", default=None, metavar="R",
+                   help=f"a shipped recipe's name (cornell, sponza, paper) or a .toml file; its [train] table gives "
+                        f"every setting the options below do not (default {DEFAULT_RECIPE}: the best measured; "
+                        f"on --resume, the checkpoint's settings)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out exactly where it stopped")
     p.add_argument("--k", dest="K", type=int, default=None, help=f"generator base width (default {d['K']})")
     p.add_argument("--epochs", type=int, default=None, help=f"default {d['epochs']}")
@@ -74,32 +82,60 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
                    help="stop after N validations without a better tone-mapped SSIM (default 0: never)")
     g.add_argument("--val-every-steps", type=int, default=None,
                    help="also validate (and save) every N steps (default 0: epoch ends only)")
-    p.add_argument("--num-workers", type=int, default=d["num_workers"], help="DataLoader workers (default 0)")
-    p.add_argument("--device", default=d["device"], help="auto, cpu, cuda or cuda:N (default auto)")
+    p.add_argument("--num-workers", type=int, default=None, help="DataLoader workers (default 0)")
+    p.add_argument("--device", default=None, help="auto, cpu, cuda or cuda:N (default auto)")
     p.set_defaults(func=run_train)
     return p
 
 
 def run_train(args: argparse.Namespace) -> int:
-    """`diviewer train`: TrainConfig from the options (and, on --resume, the checkpoint's), then `train`."""
+    """`diviewer train`: TrainConfig from the options, then `train`."""
     from diviewer.train.checkpoint import load_checkpoint, require_torch
     from diviewer.train.trainer import train
 
     require_torch()
-    given = {k: getattr(args, k, None) for k in RESUME_INHERITED}
-    base: dict[str, Any] = {}
+    resume = bool(getattr(args, "resume", False))
     last = Path(args.out) / "last.ckpt"
-    if getattr(args, "resume", False) and last.is_file():
-        old = load_checkpoint(last, mmap=True)["config"]
-        base = {k: old[k] for k in RESUME_INHERITED if k in old}
-    fields = {**base, **{k: v for k, v in given.items() if v is not None}}
-    precision = args.precision or ("fp16" if args.amp else "auto")
-    cfg = TrainConfig(data=args.data, out=args.out, max_steps=args.max_steps, precision=precision,
-                      num_workers=args.num_workers, device=args.device, **fields)
-    result = train(cfg, resume=bool(getattr(args, "resume", False)))
+    old = load_checkpoint(last, mmap=True)["config"] if resume and last.is_file() else None
+    cfg = resolve_config(args, old)
+    if cfg.recipe:
+        changed = ", ".join(f"{k}={v}" for k, v in cfg.recipe.get("overrides", {}).items())
+        print(f"recipe {cfg.recipe.get('name')} ({cfg.recipe.get('file')})"
+              + (f"; changed: {changed}" if changed else ""))
+    result = train(cfg, resume=resume)
     if result["best"] is not None:
         print(f"best tone-mapped SSIM {result['best']:.4f}; checkpoints in {cfg.out}")
     return 0
+
+
+RUN_OPTIONS = ("max_steps", "precision", "num_workers", "device")
+"""Options that describe this invocation on this machine: never inherited from a checkpoint on --resume."""
+
+
+def resolve_config(args: argparse.Namespace, old: dict[str, Any] | None = None) -> TrainConfig:
+    """The run's settings: the recipe's [train] table (on a resume, the checkpoint's `old` config instead unless
+    --recipe is given again), then each option that was given. The recipe record names the fields the options
+    changed."""
+    given = {k: getattr(args, k, None) for k in (*RESUME_INHERITED, *RUN_OPTIONS) if k not in ("recipe",)}
+    if getattr(args, "amp", False) and given["precision"] is None:
+        given["precision"] = "fp16"
+    given = {k: v for k, v in given.items() if v is not None}
+    name = getattr(args, "recipe", None)
+    if old is not None and name is None:  # resumed: the checkpoint's settings and recipe record
+        base = {k: old[k] for k in RESUME_INHERITED if k in old}
+        return TrainConfig(data=args.data, out=args.out, recipe=old.get("recipe"), **{**base, **given})
+    rec = load_recipe(name or DEFAULT_RECIPE)
+    base = {k: old[k] for k in RESUME_INHERITED if k in old} if old is not None else {}
+    fields = {**base, **rec.train, **given}
+    overrides = {k: v for k, v in given.items() if k not in RUN_OPTIONS and rec.train.get(k, _DEFAULTS.get(k)) != v}
+    try:
+        return TrainConfig(data=args.data, out=args.out, recipe=rec.record(overrides), **fields)
+    except DiviewerError as exc:
+        where = "an option" if exc.field and exc.field.split(".")[-1] in given else f"recipe {rec.path}"
+        raise DiviewerError(f"{exc} (from {where})") from None
+
+
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(TrainConfig)}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -64,6 +64,10 @@ class TrainConfig:
     seed: int = 0
     """Seeds the weights, the data order and dropout; the same seed gives the same run."""
 
+    recipe: dict[str, Any] | None = None
+    """Where these settings came from (`diviewer.train.recipe.Recipe.record`: name, file, sha256, the fields the
+    command line changed); None for a run configured in code. The model card keeps it in ``recipe.train``."""
+
     dropout: float = 0.5
     """Dropout in the innermost generator decoders (pix2pix: 0.5)."""
 
@@ -180,6 +184,9 @@ class TrainConfig:
             fail("target", f"must be 'full' or 'indirect', got {self.target!r}")
         if self.divide_albedo and self.target != "indirect":
             fail("divide_albedo", "only applies to target 'indirect' (use --target indirect)")
+        if self.recipe is not None and not (isinstance(self.recipe, dict)
+                                            and all(isinstance(k, str) for k in self.recipe)):
+            fail("recipe", f"must be a recipe record (a table of name, file, sha256, overrides), got {self.recipe!r}")
         cuda_n = self.device.startswith("cuda:") and self.device[5:].isdigit()
         if not (self.device in ("auto", "cpu", "cuda") or cuda_n):
             fail("device", f"must be auto, cpu, cuda or cuda:N, got {self.device!r}")

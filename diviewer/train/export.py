@@ -218,7 +218,7 @@ _RUN_ONLY = ("data", "out", "max_steps", "device", "num_workers", "precision")
 
 def _recipe(meta: dict) -> dict:
     """How the model was made, for the card: capture settings, training settings, network settings
-    (`tools/build_shipped_model.py` rebuilds a shipped model from it). A warm-started run's recipe
+    (`diviewer build` rebuilds a shipped model from its recipe file). A warm-started run's recipe
     holds its parent's under ``init`` (with the parent checkpoint's hash and step), recursively; the
     parent's path on the machine that trained it is not a recipe."""
     rec = {"capture": meta.get("capture"),

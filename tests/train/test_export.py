@@ -42,7 +42,7 @@ def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, t
         assert key in meta, key
     assert meta["target"] == target and meta["precision"] == "fp32"
     assert json.loads(out.with_suffix(".json").read_text()) == meta
-    # the recipe: how to capture and train it again (tools/build_shipped_model.py reads it)
+    # the recipe: how to capture and train it again (diviewer build's recipe files hold the same)
     recipe = meta["recipe"]
     assert recipe["capture"]["spp"] == 4 and recipe["capture"]["frames"] == 10
     assert recipe["train"]["K"] == 4 and recipe["train"]["target"] == target and "device" not in recipe["train"]

@@ -1,0 +1,125 @@
+"""What each stage of `diviewer build` costs, from figures measured on this project's machines.
+
+Every constant says where it was measured. They size `--budget` plans and the `--dry-run` estimate; they are
+estimates (a loaded machine is slower; an accelerator shared with other jobs was slower than one alone), and
+the progress bars report the real rate as the build runs.
+"""
+
+from __future__ import annotations
+
+import ctypes.util
+import math
+import os
+import shutil
+from dataclasses import dataclass
+
+PIXELS_REF = 128 * 128
+"""The resolution every figure below was measured at."""
+
+PT_SECONDS_PER_SAMPLE = {
+    # 2-core CPU, Mitsuba llvm_ad_rgb (DESIGN.md, "Facts measured", 2026-11-24): cornell 128x128 at 256 spp 1.2 s.
+    ("cpu", "cornell"): 1.2 / (PIXELS_REF * 256),
+    # The same machine: Sponza 128x128 at 256 spp ~12 s (at 64 spp ~4 s).
+    ("cpu", "sponza"): 12.0 / (PIXELS_REF * 256),
+    # H100, cuda_ad_rgb (README, "The same recipes at full budget on an H100", 2026-11-23): 4,600 cornell frames
+    # at 256 spp in 3 minutes with 4 shards.
+    ("cuda", "cornell"): 180.0 / 4600 / (PIXELS_REF * 256),
+    # The same lease (README, "The Sponza model"): Sponza at 512 spp (528 effective), about 3.5 frames/s, 8 shards.
+    ("cuda", "sponza"): 1 / 3.5 / (PIXELS_REF * 528),
+}
+"""Seconds of path tracing per pixel per sample, by machine kind and scene; a scene not listed is costed as
+Sponza (262k triangles, textured, alpha-masked: the heaviest measured)."""
+
+GL_SECONDS_PER_FRAME = {"cpu": 0.05, "cuda": 0.0}
+"""The GL inputs of one 128x128 frame: +0.05 s on the 2-core CPU's llvmpipe (README, "Training on VXGI instead
+of path tracing"); on the H100 the capture figures above include them."""
+
+EVALSET_MEASURED = {"scene": "cornell", "kind": "cpu", "frames": 48, "spp": 1024, "ladder": (1, 4, 16, 64, 256),
+                    "width": 128, "height": 128, "seconds": 70 * 60}
+"""Cornell's evaluation set (24 + 24 frames, 1024 spp twice, ladder 1..256) took about 70 minutes on the
+2-core CPU (issue 27): several times what the capture figures predict (float32 frames, the direct-only render
+at 1024 spp, the exposure fit), so evaluation sets are costed with the ratio of the two (`EVALSET_FACTOR`)."""
+
+TRAIN_SECONDS_PER_STEP = {
+    # 2-core CPU, one torch thread, float32, batch 4, 128x128, no discriminator: the shipped cornell ladder (card
+    # cornell.json, ladder.rows[].train_seconds): K = 8 3,544 s and K = 16 5,911 s for 50,050 steps each.
+    ("cpu", 8): 3544.0 / 50050,
+    ("cpu", 16): 5911.0 / 50050,
+}
+"""Seconds per training step at batch 4, 128x128, without a discriminator, by machine kind and K."""
+
+CUDA_STEPS_PER_SECOND = {8: 17.0, 128: 7.0}
+"""H100, batch 16, 128x128, bf16, seven trainings sharing the GPU beside a capture (README, device lease of
+2026-11-23: "7-17 steps/s each"): the fastest rate for the smallest K, the slowest for the largest."""
+
+GAN_STEP_FACTOR = 2.0
+"""A step with the discriminator costs twice one without (README, "The neural GI model": `--gan-weight 0`
+halves the CPU step time)."""
+
+EXPORT_EVAL_ALLOWANCE = 60.0
+"""Seconds allowed per K for export (with its verification) and the test-split evaluation: not measured as a
+stage; an allowance so the plan's total is not short of them."""
+
+
+@dataclass(frozen=True)
+class Machine:
+    """What this machine trains and renders on, as the cost model sees it."""
+
+    kind: str
+    """"cuda" where a CUDA driver is present (Mitsuba cuda_ad_rgb, torch CUDA), else "cpu"."""
+    cpus: int
+    """CPU cores."""
+    why: str
+    """How it was told (one line for the plan)."""
+
+
+def detect_machine() -> Machine:
+    """The machine kind without importing torch or Mitsuba: a CUDA driver library or nvidia-smi means CUDA."""
+    cpus = os.cpu_count() or 1
+    if ctypes.util.find_library("cuda") or shutil.which("nvidia-smi"):
+        return Machine("cuda", cpus, "a CUDA driver is present: Mitsuba cuda_ad_rgb and torch CUDA where they run")
+    return Machine("cpu", cpus, f"no CUDA driver: Mitsuba llvm_ad_rgb (or scalar_rgb) and torch on {cpus} CPU cores")
+
+
+def pt_seconds_per_sample(kind: str, scene: str) -> tuple[float, str]:
+    """Path-tracing seconds per pixel-sample, and which measurement it is."""
+    key = (kind, scene) if (kind, scene) in PT_SECONDS_PER_SAMPLE else (kind, "sponza")
+    return PT_SECONDS_PER_SAMPLE[key], f"{key[1]} on {kind}"
+
+
+def capture_seconds(kind: str, scene: str, frames: int, width: int, height: int, spp: int) -> float:
+    """A capture of ``frames`` frames: path tracing (full and direct-only, counted in the measurements) + GL."""
+    per_sample, _ = pt_seconds_per_sample(kind, scene)
+    scale = width * height / PIXELS_REF
+    return frames * (per_sample * width * height * spp + GL_SECONDS_PER_FRAME[kind] * scale)
+
+
+def _evalset_predicted(kind: str, scene: str, frames: int, width: int, height: int, spp: int,
+                       ladder: tuple[int, ...]) -> float:
+    return capture_seconds(kind, scene, frames, width, height, 2 * spp + sum(ladder))
+
+
+EVALSET_FACTOR = EVALSET_MEASURED["seconds"] / _evalset_predicted(
+    EVALSET_MEASURED["kind"], EVALSET_MEASURED["scene"], EVALSET_MEASURED["frames"], EVALSET_MEASURED["width"],
+    EVALSET_MEASURED["height"], EVALSET_MEASURED["spp"], EVALSET_MEASURED["ladder"])
+"""How much longer an evaluation set took than its samples predict (see `EVALSET_MEASURED`)."""
+
+
+def evalset_seconds(kind: str, scene: str, frames: int, width: int, height: int, spp: int,
+                    ladder: tuple[int, ...]) -> float:
+    """An evaluation set of ``frames`` frames (both splits): two renders at ``spp``, the ladder, the direct light."""
+    return EVALSET_FACTOR * _evalset_predicted(kind, scene, frames, width, height, spp, ladder)
+
+
+def train_step_seconds(kind: str, K: int, batch_size: int, width: int, height: int, gan: bool) -> float:
+    """One training step. On the CPU: the two measured widths, a power law between and below them, K^2 (the
+    convolutions' work) above K = 16; on CUDA: the shared H100 rates, log-interpolated in K."""
+    scale = width * height / PIXELS_REF * (GAN_STEP_FACTOR if gan else 1.0)
+    if kind == "cuda":
+        (k0, r0), (k1, r1) = sorted(CUDA_STEPS_PER_SECOND.items())
+        t = min(max(math.log(K / k0) / math.log(k1 / k0), 0.0), 1.0)
+        rate = r0 * (r1 / r0) ** t
+        return scale * batch_size / 16 / rate * (K / k1) ** 2 if K > k1 else scale * batch_size / 16 / rate
+    s8, s16 = TRAIN_SECONDS_PER_STEP[("cpu", 8)], TRAIN_SECONDS_PER_STEP[("cpu", 16)]
+    per = s16 * (K / 16) ** 2 if K > 16 else s8 * (K / 8) ** math.log2(s16 / s8)
+    return scale * batch_size / 4 * per

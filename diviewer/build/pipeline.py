@@ -1,0 +1,230 @@
+"""`diviewer build`'s stages, run in order, each skipped when the state file says it finished and its outputs
+are unchanged: capture, check, evaluation set, train and export each K, score them, pick the smallest sufficient
+K, ship it with its card."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from diviewer import imageio
+from diviewer.build.plan import RUN_ONLY, Plan, describe
+from diviewer.build.state import BuildState
+from diviewer.console import progress_bar
+from diviewer.errors import DiviewerError
+
+STATE_FILE = "build.json"
+QUALITY = ("psnr", "ssim", "psnr_tm", "ssim_tm")
+
+
+class BuildInterrupted(Exception):
+    """A stage stopped before its end (Ctrl-C inside a training run): the build stops, and resumes when run again."""
+
+
+def plan_key(plan: Plan) -> dict[str, Any]:
+    """What a work folder's build is: a different key is another build, refused in the same folder."""
+    import dataclasses
+
+    from diviewer.scene.loader import resolve_scene_path
+
+    return json.loads(json.dumps({
+        "scene": str(resolve_scene_path(plan.scene).resolve()),
+        "recipe": {"name": plan.recipe.name, "sha256": plan.recipe.sha256},
+        "capture": dataclasses.asdict(plan.capture), "evalset": dataclasses.asdict(plan.evalset),
+        "train": {k: v for k, v in plan.train.items() if k not in RUN_ONLY}, "ks": list(plan.ks)}, default=str))
+
+
+def finished_stages(plan: Plan) -> set[str]:
+    """Stages a build of this plan in its work folder has finished, with outputs unchanged (none where there is no
+    build, or one of another plan)."""
+    if not (plan.work / STATE_FILE).is_file():
+        return set()
+    try:
+        state = BuildState(plan.work / STATE_FILE, plan_key(plan))
+    except DiviewerError:
+        return set()
+    return {s.name for s in plan.stages if state.done(s.name, plan.work) is not None}
+
+
+def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Run (or resume) every stage of ``plan``; returns the ladder record with the chosen K."""
+    for line in describe(plan):
+        log(line)
+    plan.work.mkdir(parents=True, exist_ok=True)
+    state = BuildState(plan.work / STATE_FILE, plan_key(plan))
+    bar = progress_bar(max(1, round(plan.seconds)), "build (estimated seconds of work)", "s")
+    try:
+        for i, stage in enumerate(plan.stages, 1):
+            rec = state.done(stage.name, plan.work)
+            if rec is not None and not (stage.name == "ship" and rec["result"].get("to") != str(plan.ship)):
+                log(f"[{i}/{len(plan.stages)}] {stage.name}: done before, outputs checked; skipped")
+            else:
+                log(f"[{i}/{len(plan.stages)}] {stage.name}: {stage.title}")
+                t0 = time.perf_counter()
+                kind, _, k = stage.name.partition("_k")
+                outputs, result = STAGES[kind](plan, state, log, k=int(k) if k else None, command=command)
+                state.finish(stage.name, plan.work, outputs, result, time.perf_counter() - t0)
+            bar.update(round(stage.seconds))
+    finally:
+        bar.close()
+    ladder = state.data["stages"]["pick"]["result"]
+    where = state.data["stages"]["ship"]["result"].get("model")
+    log(f"built {plan.scene_name}: K={ladder['chosen_K']} ({ladder['rule']})" + (f"; shipped {where}" if where else ""))
+    return ladder
+
+
+def _capture(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    from diviewer.data.capture import capture
+
+    summary = capture(plan.scene, plan.data, plan.capture, log=log)
+    return [plan.data / "manifest.json"], {k: summary.get(k) for k in ("present", "planned", "per_split", "seconds")}
+
+
+def _check(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    from diviewer.data.dataset import Dataset
+
+    ds = Dataset(plan.data)
+    problems = ds.check(verify_checksum=True)
+    if problems:
+        raise DiviewerError(f"{len(problems)} frame(s) missing or bad (frame {problems[0].index}: "
+                            f"{problems[0].problem}); run the same `diviewer build` again to render them",
+                            path=plan.data)
+    counts = {s: len(ds.indices(s)) for s in ("train", "val", "test")}
+    if not counts["train"] or not counts["val"] or not counts["test"]:
+        raise DiviewerError(f"the capture has {counts} frames per split; training needs train and val frames and "
+                            f"the ladder rule test frames: capture more frames or change split_fractions",
+                            path=plan.recipe.path, field="capture")
+    log(f"{plan.data}: all {sum(counts.values())} frames present and sound ({counts})")
+    result = {"dataset_hash": ds.hash, "frames": counts}
+    shipped = plan.ship / f"{plan.scene_name}.json" if plan.ship else None
+    if shipped is not None and shipped.is_file():  # rebuilding a shipped model: the same data it saw?
+        before = json.loads(shipped.read_text()).get("dataset_hash")
+        result["same_data_as_shipped"] = before == ds.hash
+        log(f"the capture {'is' if before == ds.hash else 'is not'} the one {shipped.name} was trained on "
+            f"(dataset hash {ds.hash[:16]}{'' if before == ds.hash else f', the card says {str(before)[:16]}'})")
+    return [plan.data / "manifest.json"], result
+
+
+def _evalset(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    from diviewer.evalset import build_evalset
+
+    summary = build_evalset(plan.scene, plan.evalset_dir, plan.evalset, log=log)
+    if summary["present"] != summary["planned"]:
+        raise BuildInterrupted(f"evaluation set: {summary['present']} of {summary['planned']} frames")
+    return [plan.evalset_dir / "manifest.json", plan.evalset_dir / "summary.json"], {"frames": summary["present"]}
+
+
+def _train(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path], dict]:
+    from diviewer.train.config import TrainConfig
+    from diviewer.train.trainer import train
+
+    cfg = TrainConfig(**plan.train_fields(k))
+    out = plan.run_dir(k)
+    result = train(cfg, resume=(out / "last.ckpt").is_file(), log=log)
+    n_train = min(state.data["stages"]["check"]["result"]["frames"]["train"], cfg.train_frames or math.inf)
+    planned = cfg.epochs * math.ceil(n_train / cfg.batch_size)
+    planned = min(planned, cfg.max_steps) if cfg.max_steps else planned
+    if result["step"] < planned and not result["stopped_early"]:
+        raise BuildInterrupted(f"training K={k} stopped at step {result['step']} of {planned}")
+    if not (out / "best.ckpt").is_file():
+        raise DiviewerError(f"training K={k} ended without a validated checkpoint", path=out / "best.ckpt")
+    return [out / "best.ckpt", out / "metrics.csv"], {"step": result["step"], "best_val_ssim_tm": result["best"],
+                                                      "stopped_early": result["stopped_early"]}
+
+
+def _export(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path], dict]:
+    from diviewer.evaluate import evaluate
+    from diviewer.train.export import export
+    from diviewer.train.recipe import export_settings
+
+    model = plan.model(k)
+    export(plan.run_dir(k) / "best.ckpt", model, export_settings(plan.recipe), log=log)
+    test = model.with_name(f"{model.stem}_test.json")
+    summary = evaluate(model, plan.data, split="test", out=test, log=log)
+    row = {m: {q: summary["methods"][m][q]["mean"] for q in QUALITY} for m in ("neural", "direct")}
+    return [model, model.with_suffix(".json"), test], {"test_split": row, "frames": summary["frames"]}
+
+
+def _evaluate(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    from diviewer.evaluate import evaluate_evalset
+
+    out = plan.work / "evalset_eval.json"
+    evaluate_evalset([plan.model(k) for k in plan.ks], plan.evalset_dir, out=out, log=log)
+    return [out], {}
+
+
+def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    """The bench's rule: the smallest K whose tone-mapped test-split PSNR is within the recipe's tolerance."""
+    from diviewer.bench.frontier import smallest_sufficient_k
+
+    stages = state.data["stages"]
+    ev = json.loads((plan.work / "evalset_eval.json").read_text())
+    rows = []
+    for k in plan.ks:
+        key = plan.model(k).stem
+        rows.append({"K": k, "steps": stages[f"train_k{k}"]["result"]["step"],
+                     "bytes": plan.model(k).stat().st_size,
+                     "test_split": stages[f"export_k{k}"]["result"]["test_split"],
+                     "evalset": {s: {q: r["methods"][key][q]["mean"] for q in QUALITY if q in r["methods"][key]}
+                                 for s, r in ev["splits"].items()}})
+    tol = plan.recipe.tolerance_db
+    pick = smallest_sufficient_k({r["K"]: r["test_split"]["neural"]["psnr_tm"] for r in rows}, tol)
+    record = {"scene": plan.scene_name, "chosen_K": pick["K"],
+              "rule": f"smallest K whose tone-mapped test-split PSNR is within {tol} dB of the best K's "
+                      f"({pick['best_psnr']:.2f} dB)",
+              "recipe": plan.recipe.record(plan.overrides), "scale": plan.scale, "machine": vars(plan.machine),
+              "frames": stages["check"]["result"]["frames"],
+              "evalset": {"frames_per_split": plan.evalset.frames_per_split, "spp": plan.evalset.spp}, "rows": rows}
+    out = plan.work / "ladder.json"
+    imageio.write_text(out, json.dumps(record, indent=1) + "\n")
+    for r in rows:
+        log(f"  K={r['K']:<4} test PSNR tm {r['test_split']['neural']['psnr_tm']:.2f} dB"
+            f"{'  <- chosen' if r['K'] == pick['K'] else ''}")
+    return [out], record
+
+
+def _ship(plan: Plan, state: BuildState, log, command: str, **_) -> tuple[list[Path], dict]:
+    """The chosen model as SCENE.onnx with its card (the ladder and the rebuild command added, in the JSON and in
+    the ONNX metadata alike), its curves, metrics and the ladder record."""
+    if plan.ship is None:
+        return [], {"to": None}
+    ladder = state.data["stages"]["pick"]["result"]
+    k, name = ladder["chosen_K"], plan.scene_name
+    dst = plan.ship / f"{name}.onnx"
+    card = json.loads(plan.model(k).with_suffix(".json").read_text())
+    card["ladder"] = {"chosen_K": k, "why": ladder["rule"], "file": f"{name}_ladder.json"}
+    card["rebuild"] = command
+    write_model_card(plan.model(k), dst, card)
+    outputs = [dst, dst.with_suffix(".json")]
+    for src, suffix in ((plan.run_dir(k) / "curves.png", "_curves.png"),
+                        (plan.run_dir(k) / "metrics.csv", "_metrics.csv"), (plan.work / "ladder.json", "_ladder.json")):
+        if src.is_file():
+            with imageio.atomic_path(plan.ship / f"{name}{suffix}") as tmp:
+                shutil.copyfile(src, tmp)
+            outputs.append(plan.ship / f"{name}{suffix}")
+    log(f"shipped K={k} as {dst} ({', '.join(p.name for p in outputs[1:])})")
+    return outputs, {"to": str(plan.ship), "model": str(dst)}
+
+
+STAGES = {"capture": _capture, "check": _check, "evalset": _evalset, "train": _train, "export": _export,
+          "evaluate": _evaluate, "pick": _pick, "ship": _ship}
+"""Each stage kind's function: (plan, state, log, k=K of a per-K stage, command=the rebuild command) ->
+(outputs whose sha256 the state records, a result record)."""
+
+
+def write_model_card(src: Path, dst: Path, card: dict) -> None:
+    """Write ``src``'s model to ``dst`` with ``card`` as its metadata and beside it as dst.json, so the two agree."""
+    import onnx
+
+    from diviewer.outputs import dumps, staged
+    from diviewer.runtime import META_KEY
+
+    model = onnx.load(str(src))
+    onnx.helper.set_model_props(model, {META_KEY: dumps(card, sort_keys=True)})
+    with staged() as stage:  # the model and its card land together, or neither does
+        onnx.save(model, str(stage(dst)))
+        imageio.write_text(stage(dst.with_suffix(".json")), dumps(card, indent=2, sort_keys=True))

@@ -1,0 +1,251 @@
+"""The plan of `diviewer build`: its stages, their settings, and their estimated time on this machine.
+
+A recipe (assets/recipes/*.toml) gives the capture, the evaluation set, the training and the K ladder;
+``--budget HOURS`` scales the frames and the steps together (the recipe's proportions kept) until the
+estimate fits, from the costs measured on this project's machines (`diviewer.build.costs`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from diviewer.build import costs
+from diviewer.errors import DiviewerError
+
+MIN_FRAMES = 100
+"""A budget never shrinks a capture below this many frames (nor below the recipe's own, if smaller)."""
+MIN_STEPS = 500
+"""... nor a training below this many steps."""
+MIN_EVALSET_FRAMES = 4
+"""... nor an evaluation set below this many frames per split."""
+RUN_ONLY = ("device", "num_workers")
+"""Training fields that say where a build runs, not what it builds (neither in the recipe record nor the plan key)."""
+EVALSET_SHARE = 0.2
+"""Under a budget, the evaluation set takes at most this share of it (fewer frames per split)."""
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One resumable step of a build."""
+
+    name: str
+    """Its key in the state file (capture, check, evalset, train_k8, export_k8, eval_k8, evaluate, pick, ship)."""
+    title: str
+    """What it does, in words."""
+    seconds: float
+    """Its estimated time on this machine."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Everything a build will do, resolved: the settings of each stage and where it writes."""
+
+    scene: str
+    """The scene as given (a shipped name or a .toml path)."""
+    scene_name: str
+    """The scene's own name (files are named after it)."""
+    recipe: Any
+    """The `diviewer.train.recipe.Recipe` it follows."""
+    capture: Any
+    """CaptureSettings of the capture."""
+    evalset: Any
+    """EvalSetSettings of the evaluation set."""
+    train: dict[str, Any]
+    """TrainConfig fields shared by every K (K, data, out, recipe are set per run)."""
+    ks: tuple[int, ...]
+    """The widths trained, one run each."""
+    steps: int
+    """Planned training steps of each run (epochs x steps per epoch, or max_steps)."""
+    scale: float
+    """Frames and steps relative to the recipe's (1: the recipe as written; below 1: sized to --budget)."""
+    machine: costs.Machine
+    """What the estimates assume."""
+    work: Path
+    """Folder of the data, the evaluation set, the runs, the models and the state file."""
+    ship: Path | None
+    """Folder the chosen model is shipped to (None: none)."""
+    stages: tuple[Stage, ...]
+    """The stages in order, with their estimates."""
+    overrides: dict[str, Any]
+    """The recipe's training fields changed (by --budget or the command line), for the recipe record."""
+
+    @property
+    def seconds(self) -> float:
+        return sum(s.seconds for s in self.stages)
+
+    @property
+    def data(self) -> Path:
+        return self.work / "data"
+
+    @property
+    def evalset_dir(self) -> Path:
+        return self.work / "evalset"
+
+    def run_dir(self, k: int) -> Path:
+        return self.work / f"train_k{k}"
+
+    def model(self, k: int) -> Path:
+        return self.work / "models" / f"{self.scene_name}_k{k}.onnx"
+
+    def train_fields(self, k: int) -> dict[str, Any]:
+        """The TrainConfig of the run at width ``k``."""
+        rec = self.recipe.record({**self.overrides, **({"K": k} if k != self.recipe.train.get("K") else {})})
+        return {**self.train, "K": k, "data": self.data, "out": self.run_dir(k), "recipe": rec}
+
+
+def train_frames_of(capture, train: dict[str, Any]) -> int:
+    """Frames of the train split a capture plans (its fractions), capped by the recipe's train_frames."""
+    f = capture.split_fractions
+    n = max(1, round(capture.frames * f[0] / sum(f)))
+    return min(n, train["train_frames"]) if train.get("train_frames") else n
+
+
+def planned_steps(capture, train: dict[str, Any]) -> int:
+    """Steps of one run: epochs x steps per epoch (or max_steps, if smaller)."""
+    from diviewer.train.config import TrainConfig
+
+    d = {f.name: f.default for f in dataclasses.fields(TrainConfig)}
+    batch, epochs = train.get("batch_size", d["batch_size"]), train.get("epochs", d["epochs"])
+    steps = epochs * math.ceil(train_frames_of(capture, train) / batch)
+    return min(steps, train["max_steps"]) if train.get("max_steps") else steps
+
+
+def scaled(capture, train: dict[str, Any], s: float) -> tuple[Any, dict[str, Any]]:
+    """Capture and training at ``s`` times the recipe's frames and steps: the step counts that mark the schedule
+    (lr_decay_start, validation, saving, train_frames) scale with them, patience (in validations) does not."""
+    if s >= 1.0:
+        return capture, dict(train)
+    steps = planned_steps(capture, train)
+    cap = dataclasses.replace(capture, frames=max(1, round(capture.frames * s)))
+    t = dict(train)
+    if t.get("train_frames"):
+        t["train_frames"] = max(1, round(t["train_frames"] * s))
+    target = max(1, round(steps * s))
+    per_epoch = max(1, planned_steps(cap, {**t, "epochs": 1, "max_steps": None}))
+    t["epochs"] = max(1, round(target / per_epoch))
+    if t.get("max_steps"):
+        t["max_steps"] = target
+    new = planned_steps(cap, t)
+    for key in ("lr_decay_start", "val_every_steps", "save_every"):
+        if t.get(key):
+            t[key] = max(1, round(t[key] * new / steps))
+    return cap, t
+
+
+def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_hours: float | None = None,
+              ks: tuple[int, ...] | None = None, train_overrides: dict[str, Any] | None = None,
+              machine: costs.Machine | None = None) -> Plan:
+    """The build's plan: the recipe's stages, sized to ``budget_hours`` if given."""
+    from diviewer.scene.loader import resolve_scene_path
+    from diviewer.train.recipe import capture_settings, evalset_settings
+
+    import tomllib
+
+    path = resolve_scene_path(scene)
+    try:
+        scene_name = tomllib.loads(path.read_text()).get("scene", {}).get("name", path.stem)
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise DiviewerError(f"not valid TOML: {exc}", path=path) from exc
+    machine = machine or costs.detect_machine()
+    ks = tuple(ks) if ks else recipe.ks()
+    train = {**recipe.train, **(train_overrides or {})}
+    capture, evalset = capture_settings(recipe), evalset_settings(recipe)
+    s = 1.0
+    if budget_hours is not None:
+        if not (math.isfinite(budget_hours) and budget_hours > 0):
+            raise DiviewerError(f"must be a positive number of hours, got {budget_hours}", field="--budget")
+        budget = budget_hours * 3600
+        evalset = _fit_evalset(evalset, scene_name, machine, budget * EVALSET_SHARE)
+        s = _fit_scale(capture, train, evalset, ks, scene_name, machine, budget)
+        capture, train = scaled(capture, train, s)
+    overrides = {k: v for k, v in train.items() if recipe.train.get(k) != v and k not in ("K", *RUN_ONLY)}
+    stages = _stages(scene_name, machine, capture, train, evalset, ks)
+    return Plan(scene=str(scene), scene_name=scene_name, recipe=recipe, capture=capture, evalset=evalset,
+                train={k: v for k, v in train.items() if k != "K"}, ks=ks, steps=planned_steps(capture, train),
+                scale=s, machine=machine, work=Path(work), ship=ship, stages=stages, overrides=overrides)
+
+
+def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tuple[int, ...]) -> tuple[Stage, ...]:
+    steps = planned_steps(cap, train)
+    gan = train.get("gan_weight", 1.0) > 0
+    batch = train.get("batch_size", 4)
+    frames = 2 * ev.frames_per_split
+    out = [Stage("capture", f"capture {cap.frames} frames at {cap.width}x{cap.height}, {cap.spp} spp",
+                 costs.capture_seconds(m.kind, scene, cap.frames, cap.width, cap.height, cap.spp)),
+           Stage("check", "check every frame of the capture", 0.0),
+           Stage("evalset", f"evaluation set: {frames} frames, {ev.spp} spp twice, ladder "
+                            f"{'/'.join(map(str, ev.ladder))}",
+                 costs.evalset_seconds(m.kind, scene, frames, ev.width, ev.height, ev.spp, tuple(ev.ladder)))]
+    for k in ks:
+        out.append(Stage(f"train_k{k}", f"train K={k}: {steps} steps of batch {batch}",
+                         steps * costs.train_step_seconds(m.kind, k, batch, cap.width, cap.height, gan)))
+        out.append(Stage(f"export_k{k}", f"export K={k} and score it on the capture's test split",
+                         costs.EXPORT_EVAL_ALLOWANCE))
+    out += [Stage("evaluate", "score every K on the evaluation set", 0.0),
+            Stage("pick", "pick the smallest sufficient K (the bench's rule)", 0.0),
+            Stage("ship", "ship the chosen model with its card, curves and ladder", 0.0)]
+    return tuple(out)
+
+
+def _total(cap, train, ev, ks, scene, m) -> float:
+    return sum(s.seconds for s in _stages(scene, m, cap, train, ev, ks))
+
+
+def _fit_evalset(ev, scene: str, m: costs.Machine, seconds: float):
+    """Fewer evaluation frames per split until they fit in ``seconds`` (never below MIN_EVALSET_FRAMES)."""
+    n = ev.frames_per_split
+    per = costs.evalset_seconds(m.kind, scene, 2, ev.width, ev.height, ev.spp, tuple(ev.ladder))
+    fit = max(min(n, MIN_EVALSET_FRAMES), min(n, int(seconds // per)))
+    return dataclasses.replace(ev, frames_per_split=fit)
+
+
+def _fit_scale(cap, train, ev, ks, scene, m, budget: float) -> float:
+    """The largest s <= 1 whose plan fits ``budget`` seconds; an error where even the smallest plan does not."""
+    steps = planned_steps(cap, train)
+    s_min = min(1.0, max(MIN_FRAMES / cap.frames, MIN_STEPS / max(steps, 1)))
+    if _total(cap, train, ev, ks, scene, m) <= budget:
+        return 1.0
+    smallest = _total(*scaled(cap, train, s_min), ev, ks, scene, m)
+    if smallest > budget:
+        raise DiviewerError(f"{budget / 3600:.2f} h is below the smallest plan this recipe allows on this machine "
+                            f"({smallest / 3600:.2f} h at {MIN_FRAMES} frames and {MIN_STEPS} steps per K); give "
+                            f"more hours, fewer K (--ks) or a lighter recipe", field="--budget")
+    lo, hi = s_min, 1.0
+    for _ in range(40):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if _total(*scaled(cap, train, mid), ev, ks, scene, m) <= budget else (lo, mid)
+    return lo
+
+
+def describe(plan: Plan, done: set[str] = frozenset()) -> list[str]:
+    """The plan for people: what each stage does and how long it should take on this machine (``done``: stages a
+    build in the work folder has finished, whose outputs still match; they are skipped)."""
+    r = plan.recipe
+    lines = [f"build {plan.scene_name} ({plan.scene}) with recipe {r.name} ({r.path}, sha256 {r.sha256[:12]})",
+             f"machine: {plan.machine.kind}, {plan.machine.cpus} CPU cores; {plan.machine.why}",
+             f"work folder: {plan.work}; ship to: {plan.ship if plan.ship else 'nowhere (no --ship)'}"]
+    if plan.scale < 1.0:
+        lines.append(f"sized to the budget: {plan.scale:.1%} of the recipe's frames and steps "
+                     f"({plan.capture.frames} frames, {plan.steps} steps per K, "
+                     f"{plan.evalset.frames_per_split} evaluation frames per split)")
+    changed = ", ".join(f"{k}={v}" for k, v in sorted(plan.overrides.items()))
+    if changed:
+        lines.append(f"training fields changed from the recipe: {changed}")
+    lines.append(f"K ladder {', '.join(map(str, plan.ks))}; the smallest K within {r.tolerance_db} dB of the best "
+                 f"(tone-mapped PSNR, the capture's test split) is shipped")
+    for i, s in enumerate(plan.stages, 1):
+        lines.append(f"  {i:2d}. {s.name:<12} {'done' if s.name in done else _hms(s.seconds):>9}  {s.title}")
+    left = sum(s.seconds for s in plan.stages if s.name not in done)
+    lines.append(f"estimated total: {_hms(plan.seconds)}" + (f", {_hms(left)} left (stages done in {plan.work} are "
+                                                             f"skipped)" if done else "")
+                 + " (from the costs in diviewer/build/costs.py)")
+    return lines
+
+
+def _hms(seconds: float) -> str:
+    m = round(seconds / 60)
+    return f"{m // 60} h {m % 60:02d} min" if m >= 60 else (f"{m} min" if m else f"{seconds:.0f} s")

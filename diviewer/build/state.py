@@ -1,0 +1,85 @@
+"""The state file of a build (WORK/build.json): which stages are finished and the outputs they left.
+
+Written atomically after every stage, so a killed build loses at most the stage it was in (whose own work
+resumes: capture and evaluation-set frames, training from last.ckpt). A finished stage is skipped only after
+its outputs are checked again: a file whose sha256 differs from the one recorded, or that is gone, runs the
+stage again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from diviewer import imageio
+from diviewer.errors import DiviewerError
+
+FORMAT = "diviewer-build"
+VERSION = 1
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+class BuildState:
+    """The stages a build in one work folder has finished, keyed by the plan they belong to."""
+
+    def __init__(self, path: Path, plan_key: dict[str, Any]):
+        self.path = Path(path)
+        self.data: dict[str, Any] = {"format": FORMAT, "version": VERSION, "plan": plan_key, "stages": {}}
+        if self.path.is_file():
+            try:
+                old = json.loads(self.path.read_text())
+            except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+                raise DiviewerError(f"not a build state file ({exc}); delete it to start the build again",
+                                    path=self.path) from exc
+            if old.get("format") != FORMAT:
+                raise DiviewerError("not a build state file; use another --work", path=self.path, field="format")
+            if old.get("plan") != plan_key:
+                changed = sorted(k for k in set(plan_key) | set(old.get("plan", {}))
+                                 if plan_key.get(k) != old.get("plan", {}).get(k))
+                raise DiviewerError(f"this work folder holds a build of another plan (differs in {', '.join(changed)});"
+                                    f" run the same command as before to resume it, or give another --work",
+                                    path=self.path, field="plan")
+            self.data = old
+
+    def done(self, stage: str, root: Path) -> dict[str, Any] | None:
+        """The stage's record if it finished and its outputs are still what it wrote, else None."""
+        rec = self.data["stages"].get(stage)
+        if not rec or not rec.get("done"):
+            return None
+        for rel, digest in rec.get("outputs", {}).items():
+            p = root / rel
+            if not p.is_file() or sha256_file(p) != digest:
+                return None
+        return rec
+
+    def finish(self, stage: str, root: Path, outputs: list[Path], result: dict[str, Any] | None = None,
+               seconds: float | None = None) -> None:
+        """Record a finished stage (its outputs' sha256, relative to ``root``) and write the file atomically."""
+        self.data["stages"][stage] = {
+            "done": True, "finished": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
+            "seconds": None if seconds is None else round(seconds, 1),
+            "outputs": {str(Path(p).resolve().relative_to(root.resolve())) if _inside(p, root) else str(p):
+                        sha256_file(Path(p)) for p in outputs},
+            "result": result or {}}
+        self.save()
+
+    def save(self) -> None:
+        imageio.write_text(self.path, json.dumps(self.data, indent=1, sort_keys=True, default=str) + "\n")
+
+
+def _inside(path: Path, root: Path) -> bool:
+    try:
+        Path(path).resolve().relative_to(root.resolve())
+        return True
+    except ValueError:
+        return False

@@ -1,0 +1,246 @@
+"""Recipes: how a scene's model is made, as a TOML file (assets/recipes/NAME.toml, or any path).
+
+A recipe has up to six tables, each the fields of one settings dataclass, spelled as its field names, so
+that a field added to a dataclass works in recipes without this module changing:
+
+- ``[recipe]``: ``name`` (default: the file's stem), ``description``, ``scene`` (the scene it was made for);
+- ``[capture]``: `diviewer.data.capture.CaptureSettings` (frames, width, height, spp, split_fractions, ...);
+- ``[evalset]``: `diviewer.evalset.EvalSetSettings` (frames_per_split, spp, ladder, ...; width and height
+  default to the capture's);
+- ``[train]``: `diviewer.train.config.TrainConfig`, every field but ``data``, ``out`` and ``recipe``;
+- ``[export]``: `diviewer.train.export.ExportSettings` (fp16, verify_frames);
+- ``[ladder]``: ``K`` (the widths `diviewer build` trains) and ``tolerance_db`` (the smallest K within this
+  many dB of the best K's tone-mapped test PSNR is shipped; `diviewer.bench.frontier.smallest_sufficient_k`).
+
+`diviewer train --recipe R` trains ``[train]``; `diviewer build` runs every table. A run records where its
+recipe came from (`record`): name, file, sha256 and the fields the command line changed; the checkpoint's
+config and the model card's ``recipe.train`` hold the resolved fields.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from diviewer.errors import DiviewerError
+from diviewer.paths import assets_dir
+
+DEFAULT_RECIPE = "cornell"
+"""The recipe `diviewer train` uses when none is given: the best measured one (the shipped cornell model's:
+transposed decoder, L1 alone, demodulated indirect target, cosine anneal), not the paper's (`paper`), which the
+README's ablations put about 10 dB behind at the same budget."""
+
+TABLES = ("recipe", "capture", "evalset", "train", "export", "ladder")
+"""The tables a recipe may hold."""
+
+NOT_TRAIN = ("data", "out", "recipe")
+"""TrainConfig fields a recipe cannot set: where this run reads and writes, and the recipe record itself."""
+
+LADDER_KEYS = {"K": "widths netG is trained at, one run each", "tolerance_db": "dB below the best K's tone-mapped "
+               "test PSNR that the shipped (smallest) K may be"}
+HEAD_KEYS = {"name": "the recipe's name (default: the file's stem)", "description": "one line: what it is",
+             "scene": "the scene it was made for (diviewer build's default --scene)"}
+
+
+def recipes_dir() -> Path:
+    """The folder of shipped recipes."""
+    return assets_dir() / "recipes"
+
+
+def shipped_recipes() -> list[str]:
+    """Names of the shipped recipes."""
+    return sorted(p.stem for p in recipes_dir().glob("*.toml"))
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A parsed recipe file; each table as a dict of dataclass fields (values checked by building them)."""
+
+    name: str
+    """Its name ([recipe] name, else the file's stem)."""
+    path: Path
+    """The file it was read from."""
+    sha256: str
+    """sha256 of the file's bytes: which version of the recipe a model was made with."""
+    description: str = ""
+    """One line: what it is and where it comes from."""
+    scene: str | None = None
+    """The scene the recipe was made for (a shipped name or a .toml path), if it names one."""
+    capture: dict[str, Any] = field(default_factory=dict)
+    """CaptureSettings fields."""
+    evalset: dict[str, Any] = field(default_factory=dict)
+    """EvalSetSettings fields."""
+    train: dict[str, Any] = field(default_factory=dict)
+    """TrainConfig fields (not data, out, recipe)."""
+    export: dict[str, Any] = field(default_factory=dict)
+    """ExportSettings fields."""
+    ladder: tuple[int, ...] = ()
+    """Widths K `diviewer build` trains (empty: the [train] K alone)."""
+    tolerance_db: float = 0.5
+    """The ladder rule's tolerance in dB (tone-mapped PSNR on the capture's test split)."""
+
+    def ks(self) -> tuple[int, ...]:
+        """The K ladder, or the recipe's own K (TrainConfig's default where it names none)."""
+        if self.ladder:
+            return self.ladder
+        from diviewer.train.config import TrainConfig
+
+        return (int(self.train.get("K", _defaults(TrainConfig)["K"])),)
+
+    def record(self, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+        """What a checkpoint and a model card record of the recipe: name, file, sha256, and the fields the
+        command line changed (``overrides``: field -> value)."""
+        return {"name": self.name, "file": display_path(self.path), "sha256": self.sha256,
+                "overrides": dict(sorted((overrides or {}).items()))}
+
+
+def display_path(path: Path) -> str:
+    """A shipped recipe as ``assets/recipes/NAME.toml`` (the same on every machine), any other as given."""
+    try:
+        return str(Path("assets") / Path(path).resolve().relative_to(assets_dir().resolve()))
+    except ValueError:
+        return str(path)
+
+
+def resolve_recipe_path(recipe: str | Path) -> Path:
+    """A shipped recipe's name (``cornell``) or a path to a .toml file."""
+    p = Path(recipe)
+    if p.suffix == ".toml" or len(p.parts) > 1 or p.is_file():
+        if not p.is_file():
+            raise DiviewerError(f"recipe file not found: {p}", field="--recipe")
+        return p
+    shipped = recipes_dir() / f"{recipe}.toml"
+    if not shipped.is_file():
+        raise DiviewerError(f"no shipped recipe named '{recipe}'; shipped recipes: {', '.join(shipped_recipes())}; "
+                            f"or pass a path to a .toml file", field="--recipe")
+    return shipped
+
+
+def load_recipe(recipe: str | Path) -> Recipe:
+    """Read and check a recipe by shipped name or path: unknown tables and keys, and values its dataclasses
+    refuse, are errors naming the file and the field."""
+    path = resolve_recipe_path(recipe)
+    blob = path.read_bytes()
+    try:
+        data = tomllib.loads(blob.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise DiviewerError(f"not valid TOML: {exc}", path=path) from exc
+    for table, value in data.items():
+        if table not in TABLES:
+            raise DiviewerError(f"unknown table [{table}]; a recipe has {', '.join(f'[{t}]' for t in TABLES)}",
+                                path=path, field=table)
+        if not isinstance(value, dict):
+            raise DiviewerError(f"must be a table [{table}], got {value!r}", path=path, field=table)
+    head = _known(path, "recipe", data.get("recipe", {}), HEAD_KEYS)
+    for key in head:
+        if not isinstance(head[key], str):
+            raise DiviewerError(f"must be a string, got {head[key]!r}", path=path, field=f"recipe.{key}")
+    ladder = _known(path, "ladder", data.get("ladder", {}), LADDER_KEYS)
+    ks = ladder.get("K", [])
+    if not (isinstance(ks, list) and all(isinstance(k, int) and not isinstance(k, bool) and k >= 1 for k in ks)
+            and ks == sorted(set(ks))):
+        raise DiviewerError(f"must be a list of increasing positive widths, e.g. [8, 16, 32], got {ks!r}",
+                            path=path, field="ladder.K")
+    tol = ladder.get("tolerance_db", 0.5)
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or tol < 0:
+        raise DiviewerError(f"must be a number of dB >= 0, got {tol!r}", path=path, field="ladder.tolerance_db")
+    rec = Recipe(name=head.get("name", path.stem), path=path, sha256=hashlib.sha256(blob).hexdigest(),
+                 description=head.get("description", ""), scene=head.get("scene"),
+                 capture=_fields(path, "capture", data.get("capture", {}), _capture_cls()),
+                 evalset=_fields(path, "evalset", data.get("evalset", {}), _evalset_cls()),
+                 train=_fields(path, "train", data.get("train", {}), _train_cls(), NOT_TRAIN),
+                 export=_fields(path, "export", data.get("export", {}), _export_cls()),
+                 ladder=tuple(ks), tolerance_db=float(tol))
+    _check_values(rec)
+    return rec
+
+
+def _known(path: Path, table: str, values: dict, known: dict[str, str]) -> dict:
+    unknown = sorted(set(values) - set(known))
+    if unknown:
+        raise DiviewerError(f"unknown key '{unknown[0]}'; [{table}] takes {', '.join(sorted(known))}",
+                            path=path, field=f"{table}.{unknown[0]}")
+    return dict(values)
+
+
+def _fields(path: Path, table: str, values: dict, cls, exclude: tuple[str, ...] = ()) -> dict[str, Any]:
+    """``values`` checked against the fields of ``cls`` (less ``exclude``); TOML arrays become tuples."""
+    known = {f.name for f in dataclasses.fields(cls)} - set(exclude)
+    unknown = sorted(set(values) - known)
+    if unknown:
+        why = " (set by the command, not the recipe)" if unknown[0] in exclude else ""
+        raise DiviewerError(f"unknown key '{unknown[0]}'{why}; [{table}] takes the fields of {cls.__name__}: "
+                            f"{', '.join(sorted(known))}", path=path, field=f"{table}.{unknown[0]}")
+    return {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+
+
+def _check_values(rec: Recipe) -> None:
+    """Build each table's dataclass once so a bad value is refused when the recipe is read, not hours later."""
+    where = rec.path
+    try:
+        train_cfg(rec, data=".", out=".")
+    except DiviewerError as exc:
+        raise DiviewerError(str(exc), path=where) from None
+    except TypeError as exc:
+        raise DiviewerError(f"a value has the wrong type: {exc}", path=where, field="train") from None
+    try:
+        cap = capture_settings(rec)
+        _evalset_cls()(**{**{"width": cap.width, "height": cap.height}, **rec.evalset}).check()
+        _export_cls()(**rec.export)
+    except DiviewerError as exc:
+        raise DiviewerError(str(exc), path=where) from None
+    except TypeError as exc:
+        raise DiviewerError(f"a value has the wrong type: {exc}", path=where) from None
+
+
+def train_cfg(rec: Recipe, overrides: dict[str, Any] | None = None, **fields):
+    """The TrainConfig of a recipe: its [train] fields, then ``overrides``, then ``fields`` (data, out, ...)."""
+    return _train_cls()(**{**rec.train, **(overrides or {}), **fields})
+
+
+def capture_settings(rec: Recipe, **overrides):
+    """The CaptureSettings of a recipe (split fractions as a tuple), with ``overrides``."""
+    return _capture_cls()(**{**rec.capture, **overrides})
+
+
+def evalset_settings(rec: Recipe, **overrides):
+    """The EvalSetSettings of a recipe; width and height default to its capture's."""
+    cap = capture_settings(rec)
+    return _evalset_cls()(**{"width": cap.width, "height": cap.height, **rec.evalset, **overrides})
+
+
+def export_settings(rec: Recipe):
+    """The ExportSettings of a recipe."""
+    return _export_cls()(**rec.export)
+
+
+def _defaults(cls) -> dict[str, Any]:
+    return {f.name: f.default for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
+
+
+def _train_cls():
+    from diviewer.train.config import TrainConfig
+
+    return TrainConfig
+
+
+def _capture_cls():
+    from diviewer.data.capture import CaptureSettings
+
+    return CaptureSettings
+
+
+def _evalset_cls():
+    from diviewer.evalset import EvalSetSettings
+
+    return EvalSetSettings
+
+
+def _export_cls():
+    from diviewer.train.export import ExportSettings
+
+    return ExportSettings

@@ -1,0 +1,204 @@
+"""`diviewer build`: the plan and its estimate (--dry-run, --budget), the state file, and the whole pipeline on
+a tiny procedural scene, killed and resumed."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from diviewer.build import costs
+from diviewer.build.plan import make_plan, planned_steps
+from diviewer.build.state import BuildState
+from diviewer.cli import main
+from diviewer.errors import DiviewerError
+from diviewer.train.recipe import load_recipe
+
+from scenes import write_tiny_scene
+
+CPU = costs.Machine("cpu", 2, "the test's machine")
+CUDA = costs.Machine("cuda", 16, "the test's machine")
+
+TINY_RECIPE = """
+[recipe]
+name = "tinyrecipe"
+description = "a build in seconds: 8 frames at 32x32, K 2 and 4, two steps each"
+
+[capture]
+frames = 8
+width = 32
+height = 32
+spp = 2
+max_depth = 3
+split_fractions = [0.5, 0.25, 0.25]
+thumbs = 0
+
+[evalset]
+frames_per_split = 1
+spp = 2
+ladder = [1]
+max_depth = 3
+thumbs = 0
+
+[train]
+K = 2
+ndf = 8
+batch_size = 2
+epochs = 1
+target = "indirect"
+divide_albedo = true
+gan_weight = 0.0
+device = "cpu"
+
+[export]
+fp16 = false
+verify_frames = 1
+
+[ladder]
+K = [2, 4]
+tolerance_db = 0.5
+"""
+
+
+def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, capsys):
+    work = tmp_path / "work"
+    assert main(["build", "--scene", "cornell", "--dry-run", "--work", str(work)]) == 0
+    out = capsys.readouterr().out
+    for stage in ("capture", "check", "evalset", "train_k8", "export_k8", "train_k16", "evaluate", "pick", "ship"):
+        assert f" {stage} " in out, stage
+    assert "recipe cornell" in out and "estimated total:" in out and "capture 4600 frames at 128x128, 64 spp" in out
+    assert "dry run: nothing was done" in out
+    assert not work.exists()
+    assert main(["build", "--recipe", "sponza", "--dry-run", "--work", str(work)]) == 0  # the recipe's scene
+    out = capsys.readouterr().out
+    assert out.startswith("build sponza (sponza) with recipe sponza") and "train_k128" in out
+    assert main(["build", "--recipe", "paper", "--dry-run"]) == 2  # the paper's recipe names no scene
+    assert "recipe.scene" in capsys.readouterr().err
+
+
+def test_the_estimate_follows_the_measured_costs():
+    plan = make_plan("cornell", load_recipe("cornell"), Path("w"), machine=CPU)
+    steps = planned_steps(plan.capture, {**plan.train, "K": 8})
+    est = {s.name: s.seconds for s in plan.stages}
+    assert est["train_k8"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 8)])
+    assert est["train_k16"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 16)])
+    # cornell's 4,002 train frames at batch 4, 50 epochs: the 50,050 steps the shipped model took
+    assert steps == 50050
+    assert est["evalset"] == pytest.approx(costs.EVALSET_MEASURED["seconds"])
+    on_gpu = make_plan("cornell", load_recipe("cornell"), Path("w"), machine=CUDA)
+    assert on_gpu.seconds < plan.seconds / 4
+
+
+def test_a_budget_scales_frames_and_steps_together_and_keeps_the_schedule():
+    rec = load_recipe("cornell")
+    full = make_plan("cornell", rec, Path("w"), machine=CPU)
+    plan = make_plan("cornell", rec, Path("w"), budget_hours=1.0, machine=CPU)
+    assert plan.seconds <= 3600 and plan.scale < 1
+    assert plan.capture.frames < full.capture.frames and plan.steps < full.steps
+    assert plan.capture.frames / full.capture.frames == pytest.approx(plan.scale, rel=0.02)
+    # the anneal starts at the same fraction of the run; validations in proportion
+    assert plan.train["lr_decay_start"] / plan.steps == pytest.approx(20000 / 50050, rel=0.05)
+    assert plan.overrides["lr_decay_start"] == plan.train["lr_decay_start"]
+    assert plan.train["patience"] == rec.train["patience"]
+    generous = make_plan("cornell", rec, Path("w"), budget_hours=1000, machine=CPU)
+    assert generous == full and generous.scale == 1.0, "a generous budget never grows the recipe"
+    with pytest.raises(DiviewerError, match="--budget.*below the smallest plan"):
+        make_plan("cornell", rec, Path("w"), budget_hours=0.01, machine=CPU)
+    with pytest.raises(DiviewerError, match="--budget"):
+        make_plan("cornell", rec, Path("w"), budget_hours=-1, machine=CPU)
+
+
+def test_the_state_skips_only_unchanged_outputs_and_refuses_another_plan(tmp_path):
+    out = tmp_path / "a.txt"
+    out.write_text("one")
+    state = BuildState(tmp_path / "build.json", {"scene": "x"})
+    state.finish("capture", tmp_path, [out], {"frames": 3})
+    again = BuildState(tmp_path / "build.json", {"scene": "x"})
+    assert again.done("capture", tmp_path)["result"] == {"frames": 3}
+    assert again.done("train_k8", tmp_path) is None
+    out.write_text("two")
+    assert again.done("capture", tmp_path) is None, "an output changed since: the stage runs again"
+    with pytest.raises(DiviewerError, match="another plan .*scene"):
+        BuildState(tmp_path / "build.json", {"scene": "y"})
+    (tmp_path / "bad.json").write_text("{")
+    with pytest.raises(DiviewerError, match="bad.json.*not a build state file"):
+        BuildState(tmp_path / "bad.json", {})
+
+
+needs_pipeline = pytest.mark.skipif(any(importlib.util.find_spec(m) is None for m in ("torch", "mitsuba", "onnx")),
+                                    reason="the pipeline needs the train extra: pip install 'diviewer[train]'")
+
+
+@pytest.mark.slow
+@needs_pipeline
+def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
+    """The whole pipeline shrunk: killed (SIGKILL) once the capture is recorded, resumed to the shipped model,
+    then run again with nothing left to do."""
+    from diviewer.runtime import read_metadata
+
+    scene, recipe = write_tiny_scene(tmp_path), tmp_path / "tinyrecipe.toml"
+    recipe.write_text(TINY_RECIPE)
+    work, ship = tmp_path / "work", tmp_path / "ship"
+    argv = ["build", "--scene", str(scene), "--recipe", str(recipe), "--work", str(work), "--ship", str(ship)]
+    proc = subprocess.Popen([sys.executable, "-m", "diviewer", *argv], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    state = work / "build.json"
+    try:
+        deadline = time.monotonic() + 600
+        while time.monotonic() < deadline and proc.poll() is None:
+            if state.is_file() and "capture" in json.loads(state.read_text())["stages"]:
+                os.killpg(proc.pid, signal.SIGKILL)
+                break
+            time.sleep(0.05)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert proc.returncode == -signal.SIGKILL, "killed after its capture was recorded, before the end"
+    frames = {p: p.stat().st_mtime_ns for p in (work / "data" / "frames").glob("*.npy")}
+    assert len(frames) == 8
+    recorded = json.loads(state.read_text())["stages"]
+    assert "ship" not in recorded
+
+    capsys.readouterr()
+    assert main([*argv, "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert [line.split()[1] for line in out.splitlines() if line.split()[2:3] == ["done"]][:1] == ["capture"]
+    assert "left (stages done in" in out
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "capture: done before, outputs checked; skipped" in out
+    assert {p: p.stat().st_mtime_ns for p in (work / "data" / "frames").glob("*.npy")} == frames, "not rendered again"
+
+    card = json.loads((ship / "tiny.json").read_text())
+    assert read_metadata(ship / "tiny.onnx") == card, "the card beside the model is the model's own metadata"
+    ladder = json.loads((ship / "tiny_ladder.json").read_text())
+    assert card["K"] == ladder["chosen_K"] in (2, 4) and [r["K"] for r in ladder["rows"]] == [2, 4]
+    assert card["ladder"]["chosen_K"] == card["K"] and card["ladder"]["file"] == "tiny_ladder.json"
+    assert card["rebuild"].startswith("diviewer build --scene ") and "--recipe" in card["rebuild"]
+    rec = card["recipe"]["train"]["recipe"]
+    assert rec["name"] == "tinyrecipe" and rec["sha256"] == load_recipe(recipe).sha256
+    assert rec["overrides"] == ({"K": 4} if card["K"] == 4 else {})
+    assert (ship / "tiny_curves.png").is_file() and (ship / "tiny_metrics.csv").is_file()
+    for r in ladder["rows"]:
+        assert set(r["evalset"]) == {"unseen_configs", "unseen_objects"} and r["steps"] == 2
+
+    assert main(argv) == 0  # nothing left to do: every stage skipped after its outputs are checked
+    out = capsys.readouterr().out
+    assert out.count("done before, outputs checked; skipped") == 10
+
+    # `diviewer train --recipe` on the build's data records the recipe in the checkpoint
+    from diviewer.train.checkpoint import load_checkpoint
+
+    run = tmp_path / "run"
+    assert main(["train", "--data", str(work / "data"), "--out", str(run), "--recipe", str(recipe), "--k", "4",
+                 "--max-steps", "1"]) == 0
+    cfg = load_checkpoint(run / "last.ckpt")["config"]
+    assert cfg["K"] == 4 and cfg["recipe"]["name"] == "tinyrecipe" and cfg["recipe"]["overrides"] == {"K": 4}

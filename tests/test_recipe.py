@@ -1,0 +1,136 @@
+"""Recipes as files: the shipped ones match their model cards, bad files are refused naming file and field, and
+`diviewer train` resolves recipe, checkpoint and options in that order."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import pytest
+
+from diviewer.errors import DiviewerError
+from diviewer.paths import models_dir
+from diviewer.train.cli import add_train_parser, resolve_config
+from diviewer.train.config import TrainConfig
+from diviewer.train.recipe import DEFAULT_RECIPE, load_recipe, shipped_recipes
+
+CARDS = sorted(p.stem for p in models_dir().glob("*.onnx")
+               if json.loads(p.with_suffix(".json").read_text()).get("recipe"))
+
+
+def test_the_shipped_recipes_are_cornell_sponza_and_the_papers():
+    assert {"cornell", "sponza", "paper"} <= set(shipped_recipes())
+    paper = load_recipe("paper")
+    # What the project calls the paper's recipe: TrainConfig's defaults (pix2pix: L1 100 + GAN, Adam 2e-4, batch 4).
+    defaults = TrainConfig(data=".", out=".")
+    for field in ("K", "gan_weight", "lambda_L1", "lr", "beta1", "batch_size", "epochs", "target", "upsample",
+                  "norm", "gan_mode", "divide_albedo"):
+        assert paper.train[field] == getattr(defaults, field), field
+    assert paper.ks() == (32, 64, 128) and paper.capture["width"] == 256
+
+
+@pytest.mark.parametrize("card", CARDS)
+def test_a_shipped_cards_recipe_is_its_scenes_recipe_file(card):
+    """Every setting the card's recipe records is the recipe file's (the file is the card's recipe, as TOML)."""
+    meta = json.loads((models_dir() / f"{card}.json").read_text())
+    rec = load_recipe(meta["scene"])
+    cfg = TrainConfig(data=".", out=".", **rec.train).to_dict()
+    for key, value in meta["recipe"]["train"].items():
+        assert cfg[key] == value, key
+    cap = meta["recipe"]["capture"]
+    assert {**rec.capture, "split_fractions": list(rec.capture["split_fractions"])} == {
+        **{k: v for k, v in cap.items()}, "width": meta["resolution"][0], "height": meta["resolution"][1]}
+    assert meta["K"] in rec.ks() and meta["ladder"]["chosen_K"] == meta["K"]
+    assert bool(rec.export.get("fp16")) == (meta["precision"] == "fp16")
+
+
+@pytest.mark.parametrize("card", CARDS)
+def test_a_shipped_card_names_the_build_that_rebuilds_it_in_the_json_and_the_onnx_alike(card):
+    from diviewer.runtime import read_metadata
+
+    meta = json.loads((models_dir() / f"{card}.json").read_text())
+    assert meta["rebuild"] == f"diviewer build --scene {meta['scene']}"
+    assert read_metadata(models_dir() / f"{card}.onnx") == meta
+
+
+def test_the_default_is_the_best_measured_recipe_not_the_papers():
+    assert DEFAULT_RECIPE == "cornell"
+    args = _parse(["--data", "d", "--out", "o"])
+    cfg = resolve_config(args)
+    assert cfg.gan_weight == 0.0 and cfg.target == "indirect" and cfg.divide_albedo and cfg.K == 8
+    assert cfg.recipe["name"] == "cornell" and cfg.recipe["file"] == "assets/recipes/cornell.toml"
+    assert cfg.recipe["sha256"] == load_recipe("cornell").sha256 and cfg.recipe["overrides"] == {}
+
+
+def test_options_override_single_fields_and_are_recorded(tmp_path):
+    cfg = resolve_config(_parse(["--data", "d", "--out", "o", "--recipe", "paper", "--k", "64", "--lr", "1e-4",
+                                 "--device", "cpu"]))
+    paper = load_recipe("paper")
+    assert (cfg.K, cfg.lr, cfg.gan_weight, cfg.target, cfg.device) == (64, 1e-4, 1.0, "full", "cpu")
+    assert cfg.recipe["name"] == "paper" and cfg.recipe["overrides"] == {"K": 64, "lr": 1e-4}
+    assert cfg.epochs == paper.train["epochs"]
+    own = tmp_path / "mine.toml"
+    own.write_text('[recipe]\nname = "mine"\n[train]\nK = 4\nndf = 8\n')
+    cfg = resolve_config(_parse(["--data", "d", "--out", "o", "--recipe", str(own)]))
+    assert (cfg.K, cfg.ndf, cfg.recipe["name"], cfg.recipe["file"]) == (4, 8, "mine", str(own))
+    assert cfg.gan_weight == TrainConfig(data=".", out=".").gan_weight, "fields a recipe leaves out: TrainConfig's"
+
+
+def test_a_resume_keeps_the_checkpoints_settings_and_recipe_unless_one_is_given():
+    old = TrainConfig(data="d", out="o", K=4, seed=3, recipe=load_recipe("paper").record({"K": 4})).to_dict()
+    cfg = resolve_config(_parse(["--data", "d", "--out", "o", "--resume"]), old)
+    assert (cfg.K, cfg.seed, cfg.gan_weight, cfg.recipe["name"]) == (4, 3, 1.0, "paper")
+    cfg = resolve_config(_parse(["--data", "d", "--out", "o", "--resume", "--recipe", "cornell"]), old)
+    assert (cfg.K, cfg.gan_weight, cfg.recipe["name"]) == (8, 0.0, "cornell")  # check_resume then refuses K 4 -> 8
+
+
+@pytest.mark.parametrize("text,field", [
+    ("[train]\nKK = 4\n", "train.KK"),
+    ("[train]\ndata = 'x'\n", "train.data"),
+    ("[capture]\nfps = 4\n", "capture.fps"),
+    ("[ladder]\nK = [16, 8]\n", "ladder.K"),
+    ("[ladder]\nwidths = [8]\n", "ladder.widths"),
+    ("[recipe]\nauthor = 'me'\n", "recipe.author"),
+    ("[training]\nK = 4\n", "training"),
+    ("[train]\nK = -1\n", "train.K"),
+    ("[train]\nupsample = 'bilinear'\n", "train.upsample"),
+    ("[evalset]\nspp = 8\nladder = [16]\n", "--ladder"),
+    ("[train\nK = 4\n", "not valid TOML"),
+])
+def test_a_bad_recipe_is_refused_naming_the_file_and_the_field(tmp_path, text, field):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(DiviewerError) as e:
+        load_recipe(path)
+    assert str(path) in str(e.value) and field in str(e.value)
+
+
+def test_unknown_recipe_names_list_the_shipped_ones():
+    with pytest.raises(DiviewerError, match="shipped recipes: .*cornell.*paper"):
+        load_recipe("nonesuch")
+    with pytest.raises(DiviewerError, match="recipe file not found"):
+        load_recipe("missing/recipe.toml")
+
+
+def test_a_new_trainconfig_field_works_in_a_recipe_without_the_loader_changing(tmp_path, monkeypatch):
+    """The loader takes TrainConfig's fields as they are: a field another change adds is a recipe key at once."""
+    import dataclasses
+
+    import diviewer.train.recipe as recipe_mod
+
+    @dataclasses.dataclass(frozen=True)
+    class Wider(TrainConfig):
+        light_scale: float = 1.0
+        """A field added later."""
+
+    monkeypatch.setattr(recipe_mod, "_train_cls", lambda: Wider)
+    path = tmp_path / "r.toml"
+    path.write_text("[train]\nK = 4\nlight_scale = 0.25\n")
+    assert load_recipe(path).train == {"K": 4, "light_scale": 0.25}
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    ap = argparse.ArgumentParser()
+    add_train_parser(ap.add_subparsers(dest="command"))
+    return ap.parse_args(["train", *argv])
