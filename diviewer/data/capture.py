@@ -18,6 +18,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
 from diviewer.errors import DiviewerError
+from diviewer.locks import run_lock, shard_part
 from diviewer.console import progress_bar
 from diviewer.provenance import versions
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
@@ -212,23 +213,24 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
     scene = load_scene(scene_name)
     manifest = build_manifest(scene, settings)
     _check_size(settings)  # before the folder is created: a size the GL context cannot hold leaves nothing
-    ds = open_or_create(out, manifest)
     k, n = shard
-    mine = [f for f in ds.frames if f["index"] % n == k - 1]
-    _clean_stale(ds, {f["index"] for f in mine})
-    todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
-    gt_text = f"{settings.spp} spp" if settings.gt == "pt" else f"VXGI {settings.vxgi_resolution}^3"
-    log(f"capture {scene.name}: {len(mine) - len(todo)} of {len(mine)} frames of shard {k}/{n} already done, "
-        f"{len(todo)} to render at {settings.width}x{settings.height}, {gt_text}")
-    t0 = time.perf_counter()
-    if todo:
-        _render_frames(scene, ds, todo, settings, log)
-    summary = summarize(ds)
-    summary["seconds"] = round(time.perf_counter() - t0, 2)
-    summary["rendered"] = len(todo)
-    log(f"done: {summary['present']}/{summary['planned']} frames present "
-        f"({', '.join(f'{s} {c}' for s, c in summary['per_split'].items())}), "
-        f"{summary['disk_mb']:.1f} MB, {summary['seconds']:.0f} s")
+    with run_lock(out, "capture", shard_part(k, n)):  # a second run into this folder refuses at once
+        ds = open_or_create(out, manifest)
+        mine = [f for f in ds.frames if f["index"] % n == k - 1]
+        _clean_stale(ds, {f["index"] for f in mine})
+        todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
+        gt_text = f"{settings.spp} spp" if settings.gt == "pt" else f"VXGI {settings.vxgi_resolution}^3"
+        log(f"capture {scene.name}: {len(mine) - len(todo)} of {len(mine)} frames of shard {k}/{n} already done, "
+            f"{len(todo)} to render at {settings.width}x{settings.height}, {gt_text}")
+        t0 = time.perf_counter()
+        if todo:
+            _render_frames(scene, ds, todo, settings, log)
+        summary = summarize(ds)
+        summary["seconds"] = round(time.perf_counter() - t0, 2)
+        summary["rendered"] = len(todo)
+        log(f"done: {summary['present']}/{summary['planned']} frames present "
+            f"({', '.join(f'{s} {c}' for s, c in summary['per_split'].items())}), "
+            f"{summary['disk_mb']:.1f} MB, {summary['seconds']:.0f} s")
     return summary
 
 

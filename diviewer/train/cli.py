@@ -8,12 +8,15 @@ torchrun) runs the subcommand on its own::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import os
 import sys
 from pathlib import Path
 from typing import Any
 
 from diviewer.errors import DiviewerError
+from diviewer.locks import run_lock
 from diviewer.train.config import CHOICES, RESUME_INHERITED, TrainConfig
 
 
@@ -93,10 +96,15 @@ def run_train(args: argparse.Namespace) -> int:
         old = load_checkpoint(last, mmap=True)["config"]
         base = {k: old[k] for k in RESUME_INHERITED if k in old}
     fields = {**base, **{k: v for k, v in given.items() if v is not None}}
+    if args.lr_decay_start is not None and fields.get("lr_decay", "none") == "none":
+        raise DiviewerError("sets where a decay starts, and this run has none; add --lr-decay cosine, or leave "
+                            "--lr-decay-start out", field="--lr-decay-start")
     precision = args.precision or ("fp16" if args.amp else "auto")
     cfg = TrainConfig(data=args.data, out=args.out, max_steps=args.max_steps, precision=precision,
                       num_workers=args.num_workers, device=args.device, **fields)
-    result = train(cfg, resume=bool(getattr(args, "resume", False)))
+    # One run per folder: a second train into --out refuses at once (under torchrun, rank 0 holds it).
+    with run_lock(cfg.out, "train") if os.environ.get("RANK", "0") == "0" else contextlib.nullcontext():
+        result = train(cfg, resume=bool(getattr(args, "resume", False)))
     if result["best"] is not None:
         print(f"best tone-mapped SSIM {result['best']:.4f}; checkpoints in {cfg.out}")
     return 0
