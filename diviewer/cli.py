@@ -12,7 +12,7 @@ from pathlib import Path
 from diviewer import __version__
 from diviewer.errors import DiviewerError
 from diviewer.locks import run_lock
-from diviewer.outputs import ENVIRONMENT_ERRNOS, check_output_dir, check_output_file
+from diviewer.outputs import ENVIRONMENT_ERRNOS, check_command_outputs, is_scratch
 
 # Numeric options by destination, the same rule in every subcommand: (lowest, highest or None).
 # Seeds seed numpy (0 <= seed < 2**32); counts are at least 1 unless 0 means "none".
@@ -23,16 +23,6 @@ INT_OPTIONS = {
     "save_every": (0, None), "num_workers": (0, 256), "max_frames": (1, None),
 }
 FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None)}
-# Outputs by (command, destination), checked before any work (diviewer.outputs: the one rule of every writer).
-# Folders: the kind of folder the command writes (it resumes or replaces one of its own kind, no other).
-OUTPUT_DIRS = {("render", "out"): "render", ("capture", "out"): "dataset", ("train", "out"): "run",
-               ("data", "out"): "dataset", ("evalset", "out"): "evalset"}
-# Files: (the suffix required, the kind of file the command may replace, the companion files written beside it).
-OUTPUT_FILES = {("eval", "out"): (".json", None, ()), ("bench", "json"): (".json", None, ()),
-                ("bench", "plot"): (".png", None, ()), ("view", "screenshot"): (".png", None, (".json",)),
-                ("view", "window_screenshot"): (".png", None, ()), ("view", "stats"): (".json", None, ()),
-                ("baseline", "out"): (".onnx", "model", (".json",)), ("export", "out"): (".onnx", "model", (".json",))}
-OUTPUT_DESTS = ("out", "screenshot", "window_screenshot", "stats", "json", "plot")
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
@@ -376,20 +366,6 @@ def _chosen_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> arg
     return parser
 
 
-INPUT_DESTS = ("model", "models", "checkpoint", "data", "evalset", "calib_data", "init_from", "sources", "config")
-"""Options naming what a command reads: never one of its outputs."""
-
-
-def _inputs(args: argparse.Namespace) -> list[Path]:
-    found = []
-    for dest in INPUT_DESTS:
-        v = getattr(args, dest, None)
-        for item in v if isinstance(v, list) else [v]:
-            if item is not None and str(item).lower() not in ("auto", "none"):
-                found.append(Path(item))
-    return found
-
-
 def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """One rule per option name across subcommands: numbers in range and finite, outputs writable."""
     options = {a.dest: a.option_strings[0] if a.option_strings else a.dest
@@ -404,22 +380,7 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None
         if dest in options and v is not None and not (math.isfinite(v) and v >= lo and (hi is None or v <= hi)):
             rng = f"from {lo} to {hi}" if hi is not None else f"at least {lo}"
             raise DiviewerError(f"must be a finite number {rng}, got {v}", field=options[dest])
-    inputs = _inputs(args)
-    for dest in OUTPUT_DESTS:
-        v = getattr(args, dest, None)
-        if v is None or dest not in options:
-            continue
-        if (args.command, dest) in OUTPUT_DIRS:
-            check_output_dir(v, options[dest], writes=OUTPUT_DIRS[args.command, dest])
-            for source in inputs:
-                if source.exists() and Path(v).exists() and source.resolve() == Path(v).resolve():
-                    raise DiviewerError(f"{v} is also the input {source}; give another folder", field=options[dest])
-        elif (args.command, dest) in OUTPUT_FILES:
-            suffix, replaces, companions = OUTPUT_FILES[args.command, dest]
-            check_output_file(v, options[dest], protect=tuple(inputs), suffix=suffix, replaces=replaces)
-            for companion in companions:
-                check_output_file(Path(v).with_suffix(companion), options[dest], protect=tuple(inputs),
-                                  replaces=replaces)
+    check_command_outputs(args.command, args, options)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -441,6 +402,8 @@ def main(argv: list[str] | None = None) -> int:
         where = exc.filename or ""
         hint = ("; free some space and run the same command again (nothing half-written was kept)"
                 if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG) else "")
+        if where and is_scratch(where):
+            hint += " (a scratch file of this command: point TMPDIR at a folder with space)"
         print(f"diviewer {args.command}: error: {where}{': ' if where else ''}{exc.strerror or exc}{hint}",
               file=sys.stderr)
         return 2

@@ -101,9 +101,9 @@ def owner(path: str | Path) -> tuple[str, str] | None:
         inside = parts[len(parts) - depth:]
         if not (folder / "manifest.json").is_file():
             continue
-        if inside[0] in ("manifest.json", "frames", "thumbs"):
-            kind = folder_kind(folder)
-            what = "the manifest" if inside == ("manifest.json",) else "a frame"
+        kind = folder_kind(folder)
+        if inside[0] in ("manifest.json", "frames", "thumbs") or (kind == "evalset" and inside == ("summary.json",)):
+            what = {"manifest.json": "the manifest", "summary.json": "the summary"}.get(inside[0], "a frame")
             return kind, f"{what} of the {_KIND_NAMES[kind]} {_shown(folder, path)}"
     kind = folder_kind(path.parent)
     if kind == "run" and path.name in RUN_FILES:
@@ -316,3 +316,58 @@ def staged():
         if fault is not None:
             raise fault from exc
         raise
+
+
+# Outputs by (command, destination), checked before any work (diviewer.outputs: the one rule of every writer).
+# Folders: the kind of folder the command writes (it resumes or replaces one of its own kind, no other).
+OUTPUT_DIRS = {("render", "out"): "render", ("capture", "out"): "dataset", ("train", "out"): "run",
+               ("data", "out"): "dataset", ("evalset", "out"): "evalset"}
+# Files: (the suffix required, the kind of file the command may replace, the companion files written beside it).
+OUTPUT_FILES = {("eval", "out"): (".json", None, ()), ("bench", "json"): (".json", None, ()),
+                ("bench", "plot"): (".png", None, ()), ("view", "screenshot"): (".png", None, (".json",)),
+                ("view", "window_screenshot"): (".png", None, ()), ("view", "stats"): (".json", None, ()),
+                ("baseline", "out"): (".onnx", "model", (".json",)), ("export", "out"): (".onnx", "model", (".json",))}
+OUTPUT_DESTS = ("out", "screenshot", "window_screenshot", "stats", "json", "plot")
+INPUT_DESTS = ("model", "models", "checkpoint", "data", "evalset", "calib_data", "init_from", "sources", "config")
+"""Options naming what a command reads: never one of its outputs."""
+
+
+def _inputs(args) -> list[Path]:
+    """The paths a parsed command line reads."""
+    found = []
+    for dest in INPUT_DESTS:
+        v = getattr(args, dest, None)
+        for item in v if isinstance(v, list) else [v]:
+            if item is not None and str(item).lower() not in ("auto", "none"):
+                found.append(Path(item))
+    return found
+
+
+def check_command_outputs(command: str, args, options: dict[str, str]) -> None:
+    """Every output option of ``command`` (parsed ``args``; ``options``: destination -> option string) checked
+    by the one rule, before any work: folders by kind, files by suffix and owner, never one of the inputs."""
+    inputs = _inputs(args)
+    for dest in OUTPUT_DESTS:
+        v = getattr(args, dest, None)
+        if v is None or dest not in options:
+            continue
+        if (command, dest) in OUTPUT_DIRS:
+            check_output_dir(v, options[dest], writes=OUTPUT_DIRS[command, dest])
+            for source in inputs:
+                if source.exists() and Path(v).exists() and source.resolve() == Path(v).resolve():
+                    raise DiviewerError(f"{v} is also the input {source}; give another folder", field=options[dest])
+        elif (command, dest) in OUTPUT_FILES:
+            suffix, replaces, companions = OUTPUT_FILES[command, dest]
+            check_output_file(v, options[dest], protect=tuple(inputs), suffix=suffix, replaces=replaces)
+            for companion in companions:
+                check_output_file(Path(v).with_suffix(companion), options[dest], protect=tuple(inputs),
+                                  replaces=replaces)
+
+
+def is_scratch(name: str) -> bool:
+    """Whether ``name`` is a command's scratch file (the benchmark's converted models), not one of the user's."""
+    import tempfile
+
+    tmp, path = Path(tempfile.gettempdir()).resolve(), Path(name).resolve()
+    inside = path.relative_to(tmp).parts if path.is_relative_to(tmp) else ()
+    return bool(inside) and inside[0].startswith("diviewer-")

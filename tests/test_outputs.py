@@ -54,6 +54,7 @@ def test_each_folder_is_known_by_whose_it_is(files):
 @pytest.mark.parametrize("name, kind", [("lin.onnx", "model"), ("lin.json", "model"), ("old.ckpt", "checkpoint"),
                                         ("data/manifest.json", "dataset"), ("data/frames/000000.npy", "dataset"),
                                         ("data/frames/new.json", "dataset"), ("es/frames/000001.json", "evalset"),
+                                        ("es/summary.json", "evalset"), ("data/summary.json", None),
                                         ("run/last.ckpt", "checkpoint"), ("run/metrics.csv", "run"),
                                         ("run/curves.png", "run"), ("notes.json", None), ("new.json", None),
                                         ("data/report.json", None)])

@@ -17,6 +17,7 @@ from typing import Any
 
 from diviewer.errors import DiviewerError
 from diviewer.locks import run_lock
+from diviewer.outputs import check_output_dir
 from diviewer.train.config import CHOICES, RESUME_INHERITED, TrainConfig
 
 
@@ -89,6 +90,7 @@ def run_train(args: argparse.Namespace) -> int:
     from diviewer.train.trainer import train
 
     require_torch()
+    check_output_dir(args.out, "--out", writes="run")  # also under torchrun, which bypasses diviewer.cli
     given = {k: getattr(args, k, None) for k in RESUME_INHERITED}
     base: dict[str, Any] = {}
     last = Path(args.out) / "last.ckpt"
