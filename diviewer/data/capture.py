@@ -1,8 +1,11 @@
 """`diviewer capture`: GL inputs + path-traced ground truth for sampled configurations.
 
-Resumable (a killed capture, run again, finishes with exactly the frames an uninterrupted run
-writes) and shardable (``--shard k/n`` renders every n-th frame; shards written into one folder,
-or copied together, form one dataset).
+Resumable: a killed capture, run again, keeps its finished frames and renders the rest from the same per-frame
+seeds, so it ends with the frames an uninterrupted run writes, bit for bit on the same machine and Mitsuba
+variant (llvm_ad_rgb gave the same image at 1 and 2 threads); resumed under another variant, the frames
+rendered after the resume differ within the path tracer's noise. Shardable (``--shard k/n`` renders every
+n-th frame; shards written into one folder, or copied together, form one dataset). One run per folder
+(diviewer.locks): a second capture into it refuses, except another shard with frames of its own.
 """
 
 from __future__ import annotations
