@@ -149,6 +149,14 @@ def build_baseline(data_dir: Path, out: Path, split: str = "train", max_frames: 
     """Fit on a dataset's split, write ``out`` (ONNX) and its model card (``out`` with .json); returns the card."""
     import onnx
 
+    from diviewer.outputs import check_output_file
+
+    if max_frames is not None and (isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 1):
+        raise DiviewerError(f"must be at least 1 (or left out: every present frame), got {max_frames!r}",
+                            field="--max-frames")
+    out = Path(out)
+    for path in (out, out.with_suffix(".json")):  # before the fit: the model's and the card's names are free
+        check_output_file(path, "--out", suffix=".onnx" if path == out else None, replaces="model")
     ds = Dataset(data_dir)
     log(f"fitting the linear baseline on {data_dir} ({split} split, {len(ds.indices(split))} frames present)")
     r = fit(ds, split, max_frames, log)

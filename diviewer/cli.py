@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import math
 import os
 import sys
@@ -10,7 +11,8 @@ from pathlib import Path
 
 from diviewer import __version__
 from diviewer.errors import DiviewerError
-from diviewer.outputs import ENVIRONMENT_ERRNOS, check_output_dir, check_output_file
+from diviewer.locks import run_lock
+from diviewer.outputs import ENVIRONMENT_ERRNOS, check_command_outputs, is_scratch
 
 # Numeric options by destination, the same rule in every subcommand: (lowest, highest or None).
 # Seeds seed numpy (0 <= seed < 2**32); counts are at least 1 unless 0 means "none".
@@ -18,12 +20,9 @@ INT_OPTIONS = {
     "seed": (0, 2**32 - 1), "pt_seed": (0, 2**32 - 2), "frames": (1, 1_000_000), "spp": (1, 1 << 20),
     "max_depth": (2, 1024), "thumbs": (0, 1000), "verify_frames": (1, 1000), "K": (1, 4096), "epochs": (1, None),
     "batch_size": (1, None), "ndf": (1, 4096), "max_steps": (1, None), "val_every": (1, None),
-    "save_every": (0, None), "num_workers": (0, 256),
+    "save_every": (0, None), "num_workers": (0, 256), "max_frames": (1, None),
 }
 FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None)}
-# Outputs by (command, destination): a folder or a file, checked before any work.
-OUTPUT_DIRS = {("render", "out"), ("capture", "out"), ("train", "out"), ("data", "out")}
-OUTPUT_FILES = {("eval", "out"), ("view", "screenshot"), ("view", "window_screenshot"), ("view", "stats")}
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
@@ -103,7 +102,8 @@ def _cmd_data_check(args: argparse.Namespace) -> int:
     for p in problems:
         print(f"frame {p.index:6d}: {p.problem}")
     if problems:
-        print(f"{len(problems)} frame(s) missing or bad; run the same `diviewer capture` again to render them")
+        command = "evalset" if ds.manifest.get("kind") == "evalset" else "capture"  # whose folder this is
+        print(f"{len(problems)} frame(s) missing or bad; run the same `diviewer {command}` again to render them")
         return 1
     print("all frames present and sound")
     return 0
@@ -116,7 +116,8 @@ def _cmd_data_merge(args: argparse.Namespace) -> int:
         if src.exists() and args.out.exists() and src.resolve() == args.out.resolve():
             raise DiviewerError(f"{src} is both a source and the output", field="--out")
 
-    merge(args.sources, args.out)
+    with run_lock(args.out, "data merge"):  # the same lock as a capture into this folder
+        merge(args.sources, args.out)
     return 0
 
 
@@ -159,7 +160,8 @@ def _cmd_evalset(args: argparse.Namespace) -> int:
                             field="--ladder") from None
     settings = EvalSetSettings(frames_per_split=args.frames_per_split, width=width, height=height, spp=args.spp,
                                ladder=ladder, max_depth=args.max_depth, seed=args.seed)
-    build_evalset(args.scene, args.out, settings)
+    with run_lock(args.out, "evalset"):  # a second run into this folder refuses at once
+        build_evalset(args.scene, args.out, settings)
     return 0
 
 
@@ -388,14 +390,7 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None
         if dest in options and v is not None and not (math.isfinite(v) and v >= lo and (hi is None or v <= hi)):
             rng = f"from {lo} to {hi}" if hi is not None else f"at least {lo}"
             raise DiviewerError(f"must be a finite number {rng}, got {v}", field=options[dest])
-    for dest in ("out", "screenshot", "window_screenshot", "stats"):
-        v = getattr(args, dest, None)
-        if v is None or dest not in options:
-            continue
-        if (args.command, dest) in OUTPUT_DIRS:
-            check_output_dir(v, options[dest])
-        elif (args.command, dest) in OUTPUT_FILES:
-            check_output_file(v, options[dest])
+    check_command_outputs(args.command, args, options)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -415,7 +410,12 @@ def main(argv: list[str] | None = None) -> int:
         if exc.errno not in ENVIRONMENT_ERRNOS:
             raise
         where = exc.filename or ""
-        print(f"diviewer {args.command}: error: {where}{': ' if where else ''}{exc.strerror or exc}", file=sys.stderr)
+        hint = ("; free some space and run the same command again (nothing half-written was kept)"
+                if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG) else "")
+        if where and is_scratch(where):
+            hint += " (a scratch file of this command: point TMPDIR at a folder with space)"
+        print(f"diviewer {args.command}: error: {where}{': ' if where else ''}{exc.strerror or exc}{hint}",
+              file=sys.stderr)
         return 2
     except MemoryError:
         print(f"diviewer {args.command}: error: out of memory; use a smaller size or fewer frames", file=sys.stderr)

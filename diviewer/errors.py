@@ -25,8 +25,8 @@ class DiviewerError(Exception):
 
 def missing_extra(module: str, extra: str = "train") -> DiviewerError:
     """Error for an optional dependency that is not installed, naming the extra that provides it."""
+    torch_hint = " (for a CPU-only torch first run: pip install torch==2.13.0)" if module == "torch" else ""
     return DiviewerError(
         f"this command needs the Python package '{module}', which is not installed; "
-        f"install the '{extra}' extra: pip install 'diviewer[{extra}]' "
-        f"(for a CPU-only torch first run: pip install torch==2.13.0)"
+        f"install the '{extra}' extra: pip install 'diviewer[{extra}]'{torch_hint}"
     )

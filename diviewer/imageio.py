@@ -14,17 +14,28 @@ from diviewer.errors import DiviewerError
 
 @contextmanager
 def atomic_path(path: str | Path, suffix: str | None = None):
-    """Yield a temporary path beside ``path``; on success it is renamed onto ``path``."""
+    """Yield a temporary path beside ``path``; on success it is renamed onto ``path``.
+
+    A fault while writing (a full disk) removes the temporary file and is raised naming ``path``.
+    """
+    from diviewer.outputs import write_error
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix, dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix, dir=path.parent)
+    except OSError as exc:
+        raise (write_error(exc, {exc.filename: path}) or exc) from None
     os.close(fd)
     try:
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; the result gets ordinary permissions
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
+        fault = write_error(exc, {tmp: path})  # before the unlink: a full disk is still full
         Path(tmp).unlink(missing_ok=True)
+        if fault is not None:
+            raise fault from exc
         raise
 
 

@@ -37,31 +37,148 @@ def _writable_from(path: Path, option: str, folder: Path | None = None) -> None:
         raise DiviewerError(f"folder {anchor} is not writable", field=option)
 
 
-def check_output_dir(path: str | Path, option: str = "--out") -> Path:
-    """Refuse an output folder that is a file or cannot be created or written, before any work."""
+# What each command's folder holds, by the file that marks it, and the command that writes it.
+FOLDER_WRITERS = {"dataset": "diviewer capture", "evalset": "diviewer evalset", "run": "diviewer train",
+                  "render": "diviewer render"}
+RUN_FILES = ("last.ckpt", "best.ckpt", "metrics.csv", "curves.png")
+"""A training run's own files (diviewer train): never written by another command."""
+CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth")
+MANIFEST_BYTES = 1 << 28
+"""Manifests larger than this are not parsed to tell a dataset from an evaluation set (both are protected)."""
+
+
+def folder_kind(folder: str | Path) -> str | None:
+    """Whose folder ``folder`` is: 'dataset', 'evalset', 'run' (training), 'render', or None (nobody's)."""
+    folder = Path(folder)
+    manifest = folder / "manifest.json"
+    try:
+        if manifest.is_file():
+            kind = None
+            if manifest.stat().st_size < MANIFEST_BYTES:
+                try:
+                    data = json.loads(manifest.read_text())
+                    kind = data.get("kind") if isinstance(data, dict) else None
+                except (ValueError, UnicodeDecodeError):
+                    pass  # a damaged manifest still marks a dataset: protected all the same
+            return "evalset" if kind == "evalset" else "dataset"
+        if any((folder / name).is_file() for name in RUN_FILES[:3]):
+            return "run"
+        if (folder / "frame.json").is_file() and any(folder.glob("*.exr")):
+            return "render"
+    except OSError:
+        return None
+    return None
+
+
+def _is_model_card(path: Path) -> bool:
+    if path.with_suffix(".onnx").is_file():
+        return True
+    try:
+        if path.is_file() and path.stat().st_size < MANIFEST_BYTES:
+            data = json.loads(path.read_text())
+            return isinstance(data, dict) and {"format", "input", "output", "scene_hash"} <= data.keys()
+    except (OSError, ValueError, UnicodeDecodeError):
+        pass
+    return False
+
+
+def owner(path: str | Path) -> tuple[str, str] | None:
+    """What another command made at ``path`` (existing, or a name inside such a folder): (kind, description).
+
+    Kinds: 'model', 'checkpoint', 'dataset', 'evalset', 'run', 'render'. None: nobody's file, free to write.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".onnx" and path.exists():
+        return "model", "a model"
+    if suffix == ".json" and _is_model_card(path):
+        return "model", "a model card"
+    if suffix in CHECKPOINT_SUFFIXES and path.exists():
+        return "checkpoint", "a checkpoint"
+    parts = path.absolute().parts
+    for depth in range(1, len(parts)):  # the dataset or evaluation set this lies in, at any depth
+        folder = Path(*parts[:-depth])
+        inside = parts[len(parts) - depth:]
+        if not (folder / "manifest.json").is_file():
+            continue
+        kind = folder_kind(folder)
+        if inside[0] in ("manifest.json", "frames", "thumbs") or (kind == "evalset" and inside == ("summary.json",)):
+            what = {"manifest.json": "the manifest", "summary.json": "the summary"}.get(inside[0], "a frame")
+            return kind, f"{what} of the {_KIND_NAMES[kind]} {_shown(folder, path)}"
+    kind = folder_kind(path.parent)
+    if kind == "run" and path.name in RUN_FILES:
+        return "run", f"a file of the training run {path.parent}"
+    if kind == "render" and path.exists() and suffix in (".exr", ".png", ".json"):
+        return "render", f"a file of the render {path.parent}"
+    return None
+
+
+def check_output_dir(path: str | Path, option: str = "--out", writes: str | None = None) -> Path:
+    """Refuse an output folder that is a file, cannot be created or written, or is another command's folder
+    (or lies inside a dataset or an evaluation set), before any work.
+
+    Args:
+        writes: the kind of folder the command writes ('dataset', 'evalset', 'run', 'render'): one of its
+            own kind is resumed or replaced; None checks only that the folder can be written.
+    """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise DiviewerError(f"{path} is a file; give a folder", field=option)
+    if writes is not None:
+        kind = folder_kind(path) if path.is_dir() else None
+        if kind is not None and kind != writes:
+            raise DiviewerError(f"{path} is {_a(_KIND_NAMES[kind])} ({FOLDER_WRITERS[kind]} wrote it), not "
+                                f"{_a(_KIND_NAMES[writes])}; give another folder", field=option)
+        for parent in path.absolute().parents:
+            if (parent / "manifest.json").is_file():
+                kind = folder_kind(parent)
+                raise DiviewerError(f"{path} lies inside the {_KIND_NAMES[kind]} {_shown(parent, path)}; give a "
+                                    f"folder outside it",
+                                    field=option)
     _writable_from(path, option)
     return path
 
 
-def check_output_file(path: str | Path, option: str = "--out", protect: tuple = (), suffix: str | None = None) -> Path:
-    """Refuse an output file that is a folder, lies under a file, is unwritable, or is one of ``protect``.
+def _a(noun: str) -> str:
+    return ("an " if noun[0] in "aeiou" else "a ") + noun
+
+
+def _shown(folder: Path, path: Path) -> str:
+    """``folder`` as the user would write it: relative when they gave a relative path."""
+    return os.path.relpath(folder) if not path.is_absolute() else str(folder)
+
+
+_KIND_NAMES = {"dataset": "dataset", "evalset": "evaluation set", "run": "training run folder",
+               "render": "render folder"}
+
+
+def check_output_file(path: str | Path, option: str = "--out", protect: tuple = (), suffix: str | tuple | None = None,
+                      replaces: str | None = None) -> Path:
+    """Refuse an output file that is a folder, lies under a file, is unwritable, has the wrong suffix, is one of
+    ``protect``, or is another command's file (a model, a model card, a checkpoint, a dataset's or an
+    evaluation set's manifest or frames, a training run's files): the one rule of every writer.
 
     Args:
         protect: files the command reads (its inputs) or writes besides this one: never overwritten.
-        suffix: the extension the file must have (e.g. ``.onnx``), or None.
+        suffix: the extension (or extensions) the file must have (e.g. ``.onnx``), or None.
+        replaces: the kind of file the command itself writes (e.g. 'model' for export): one of that kind
+            may be replaced; every other kind is refused.
     """
     path = Path(path)
     if path.is_dir() or str(path).endswith(os.sep):
         raise DiviewerError(f"{path} is a folder; give a file name", field=option)
-    if suffix is not None and path.suffix.lower() != suffix:
-        raise DiviewerError(f"expected a {suffix} file name, got {path.name}", field=option)
+    if suffix is not None:
+        allowed = (suffix,) if isinstance(suffix, str) else tuple(suffix)
+        if path.suffix.lower() not in allowed:
+            raise DiviewerError(f"expected a {' or '.join(allowed)} file name, got {path.name}", field=option)
     for other in protect:
         if other is not None and _same_file(path, Path(other)):
             raise DiviewerError(f"{path} is also {other}, which this command reads or writes itself; "
                                 f"give another file name", field=option)
+    found = owner(path)
+    if found is not None and found[0] != replaces:
+        raise DiviewerError(f"{path} is {found[1]}, which this command must not overwrite; give another file name",
+                            field=option)
     _writable_from(path, option, folder=path.parent)  # an existing file is overwritten, not made a folder
     if path.exists() and not os.access(path, os.W_OK):
         raise DiviewerError(f"{path} is not writable", field=option)
@@ -75,6 +192,46 @@ def _same_file(a: Path, b: Path) -> bool:
     except OSError:
         pass
     return a.resolve() == b.resolve()
+
+
+def write_error(exc: BaseException, written: dict) -> BaseException | None:
+    """The one-line fault a failed write is, naming the user's file instead of a temporary one, or None.
+
+    Args:
+        exc: what the write raised (an OSError; or a library's RuntimeError on a full disk: OpenEXR says
+            "No space left on device", torch.save only "unexpected pos").
+        written: {temporary path: the user's path} of the files being written.
+    """
+    names = {str(k): str(v) for k, v in written.items()}
+    user = next(iter(names.values()), None)
+    if isinstance(exc, OSError) and exc.errno in ENVIRONMENT_ERRNOS:
+        name = names.get(str(exc.filename), exc.filename if exc.filename is not None else user)
+        if name == exc.filename and exc.filename2 is None:
+            return None  # already names the user's file
+        return OSError(exc.errno, exc.strerror, name)
+    # OpenEXR and torch.save raise RuntimeError, numpy's tofile an OSError without an errno
+    # ("4096 requested and 1984 written"): a full disk all the same.
+    if type(exc) in (RuntimeError, OSError) and user is not None:
+        text = str(exc)
+        if os.strerror(errno.ENOSPC) in text or disk_full(Path(user).parent):
+            return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), user)
+        for tmp, final in names.items():
+            if tmp in text:
+                return type(exc)(text.replace(tmp, final))
+    return None
+
+
+FULL_BYTES = 1 << 20
+"""A folder with less space than this left is full: a library that does not say ENOSPC ran out of it."""
+
+
+def disk_full(folder: Path) -> bool:
+    """Whether the file system holding ``folder`` has (almost) no space or no inodes left."""
+    try:
+        st = os.statvfs(_nearest_existing(folder))
+    except OSError:
+        return False
+    return st.f_bavail * st.f_frsize < FULL_BYTES or (st.f_files > 0 and st.f_favail == 0)
 
 
 def strict(obj):
@@ -114,8 +271,11 @@ class Staging:
 
     def __call__(self, final: str | Path) -> Path:
         final = Path(final)
-        final.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=final.suffix, dir=final.parent)
+        try:
+            final.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=final.suffix, dir=final.parent)
+        except OSError as exc:
+            raise (write_error(exc, {exc.filename: final}) or exc) from None
         os.close(fd)
         self._pending.append((Path(tmp), final))
         return Path(tmp)
@@ -136,11 +296,78 @@ class Staging:
 
 @contextmanager
 def staged():
-    """A Staging committed when the block succeeds and discarded when it raises."""
+    """A Staging committed when the block succeeds and discarded when it raises (a full disk then names
+    the user's file, not the temporary one)."""
     st = Staging()
     try:
         yield st
-    except BaseException:
+    except BaseException as exc:
+        pending = {tmp: final for tmp, final in st._pending}
         st.discard()
+        fault = write_error(exc, pending) if pending else None
+        if fault is not None:
+            raise fault from exc
         raise
-    st.commit()
+    try:
+        st.commit()
+    except OSError as exc:
+        fault = write_error(exc, {tmp: final for tmp, final in st._pending})
+        st.discard()
+        if fault is not None:
+            raise fault from exc
+        raise
+
+
+# Outputs by (command, destination), checked before any work (diviewer.outputs: the one rule of every writer).
+# Folders: the kind of folder the command writes (it resumes or replaces one of its own kind, no other).
+OUTPUT_DIRS = {("render", "out"): "render", ("capture", "out"): "dataset", ("train", "out"): "run",
+               ("data", "out"): "dataset", ("evalset", "out"): "evalset"}
+# Files: (the suffix required, the kind of file the command may replace, the companion files written beside it).
+OUTPUT_FILES = {("eval", "out"): (".json", None, ()), ("bench", "json"): (".json", None, ()),
+                ("bench", "plot"): (".png", None, ()), ("view", "screenshot"): (".png", None, (".json",)),
+                ("view", "window_screenshot"): (".png", None, ()), ("view", "stats"): (".json", None, ()),
+                ("baseline", "out"): (".onnx", "model", (".json",)), ("export", "out"): (".onnx", "model", (".json",))}
+OUTPUT_DESTS = ("out", "screenshot", "window_screenshot", "stats", "json", "plot")
+INPUT_DESTS = ("model", "models", "checkpoint", "data", "evalset", "calib_data", "init_from", "sources", "config")
+"""Options naming what a command reads: never one of its outputs."""
+
+
+def _inputs(args) -> list[Path]:
+    """The paths a parsed command line reads."""
+    found = []
+    for dest in INPUT_DESTS:
+        v = getattr(args, dest, None)
+        for item in v if isinstance(v, list) else [v]:
+            if item is not None and str(item).lower() not in ("auto", "none"):
+                found.append(Path(item))
+    return found
+
+
+def check_command_outputs(command: str, args, options: dict[str, str]) -> None:
+    """Every output option of ``command`` (parsed ``args``; ``options``: destination -> option string) checked
+    by the one rule, before any work: folders by kind, files by suffix and owner, never one of the inputs."""
+    inputs = _inputs(args)
+    for dest in OUTPUT_DESTS:
+        v = getattr(args, dest, None)
+        if v is None or dest not in options:
+            continue
+        if (command, dest) in OUTPUT_DIRS:
+            check_output_dir(v, options[dest], writes=OUTPUT_DIRS[command, dest])
+            for source in inputs:
+                if source.exists() and Path(v).exists() and source.resolve() == Path(v).resolve():
+                    raise DiviewerError(f"{v} is also the input {source}; give another folder", field=options[dest])
+        elif (command, dest) in OUTPUT_FILES:
+            suffix, replaces, companions = OUTPUT_FILES[command, dest]
+            check_output_file(v, options[dest], protect=tuple(inputs), suffix=suffix, replaces=replaces)
+            for companion in companions:
+                check_output_file(Path(v).with_suffix(companion), options[dest], protect=tuple(inputs),
+                                  replaces=replaces)
+
+
+def is_scratch(name: str) -> bool:
+    """Whether ``name`` is a command's scratch file (the benchmark's converted models), not one of the user's."""
+    import tempfile
+
+    tmp, path = Path(tempfile.gettempdir()).resolve(), Path(name).resolve()
+    inside = path.relative_to(tmp).parts if path.is_relative_to(tmp) else ()
+    return bool(inside) and inside[0].startswith("diviewer-")

@@ -126,6 +126,30 @@ def _variants(paths: list[Path], tmp: Path, notes: list[str], log) -> list[dict]
     return out
 
 
+def _check_extras(plot_out: Path | None) -> None:
+    """The optional packages the benchmark needs, before any work: onnx always, matplotlib for --plot."""
+    import importlib.util
+
+    from diviewer.errors import missing_extra
+
+    for module, needed in (("onnx", True), ("matplotlib", plot_out is not None)):
+        if needed and importlib.util.find_spec(module) is None:
+            raise missing_extra(module, "bench")
+
+
+def _check_calib_data(settings, scene) -> None:
+    """A --calib-data capture of the benchmark's scene (the same scene file), before any work."""
+    if not settings.calib_data:
+        return
+    from diviewer.data.dataset import Dataset
+
+    ds = Dataset(settings.calib_data)
+    if ds.manifest.get("scene_hash") != scene.file_hash:
+        raise DiviewerError(f"is a capture of scene '{ds.manifest.get('scene')}' (another scene file than the "
+                            f"benchmark's '{scene.name}'); give a capture of this scene", path=settings.calib_data,
+                            field="--calib-data")
+
+
 def _calibration(settings, scene, gb, width: int, height: int) -> tuple[list[np.ndarray], str]:
     """Model inputs of training frames: a capture's train split when given, else GL renders of training configs."""
     if settings.calib_data:
@@ -148,6 +172,7 @@ def _calibration(settings, scene, gb, width: int, height: int) -> tuple[list[np.
 def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: Path | None = None,
               log=print) -> dict:
     """Measure every row; print the table; write the JSON and the plot when asked. Returns the result."""
+    _check_extras(plot_out)
     import onnx
 
     from diviewer.bench import report
@@ -160,6 +185,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
     settings.check()
     t_start = time.perf_counter()
     scene = load_scene(settings.scene)
+    _check_calib_data(settings, scene)
     notes: list[str] = []
     ds = _open_evalset(settings, scene, notes)
     tmp_dir = tempfile.TemporaryDirectory(prefix="diviewer-bench-")

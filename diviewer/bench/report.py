@@ -226,7 +226,11 @@ def plot(result: dict, out: Path) -> Path:
     fig.text(0.01, 0.01, "x: where the paper's ratios would put VXGI / path tracing at the network's quality; "
              "*: this path tracer's time at the network's error", fontsize=6)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
-    Path(out).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
-    plt.close(fig)
+    from diviewer import imageio
+
+    try:
+        with imageio.atomic_path(out) as tmp:
+            fig.savefig(tmp, format="png")
+    finally:
+        plt.close(fig)
     return Path(out)

@@ -1,8 +1,11 @@
 """`diviewer capture`: GL inputs + path-traced ground truth for sampled configurations.
 
-Resumable (a killed capture, run again, finishes with exactly the frames an uninterrupted run
-writes) and shardable (``--shard k/n`` renders every n-th frame; shards written into one folder,
-or copied together, form one dataset).
+Resumable: a killed capture, run again, keeps its finished frames and renders the rest from the same per-frame
+seeds, so it ends with the frames an uninterrupted run writes, bit for bit on the same machine and Mitsuba
+variant (llvm_ad_rgb gave the same image at 1 and 2 threads); resumed under another variant, the frames
+rendered after the resume differ within the path tracer's noise. Shardable (``--shard k/n`` renders every
+n-th frame; shards written into one folder, or copied together, form one dataset). One run per folder
+(diviewer.locks): a second capture into it refuses, except another shard with frames of its own.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
 from diviewer.errors import DiviewerError
+from diviewer.locks import run_lock, shard_part
 from diviewer.console import progress_bar
 from diviewer.provenance import versions
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
@@ -212,23 +216,24 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
     scene = load_scene(scene_name)
     manifest = build_manifest(scene, settings)
     _check_size(settings)  # before the folder is created: a size the GL context cannot hold leaves nothing
-    ds = open_or_create(out, manifest)
     k, n = shard
-    mine = [f for f in ds.frames if f["index"] % n == k - 1]
-    _clean_stale(ds, {f["index"] for f in mine})
-    todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
-    gt_text = f"{settings.spp} spp" if settings.gt == "pt" else f"VXGI {settings.vxgi_resolution}^3"
-    log(f"capture {scene.name}: {len(mine) - len(todo)} of {len(mine)} frames of shard {k}/{n} already done, "
-        f"{len(todo)} to render at {settings.width}x{settings.height}, {gt_text}")
-    t0 = time.perf_counter()
-    if todo:
-        _render_frames(scene, ds, todo, settings, log)
-    summary = summarize(ds)
-    summary["seconds"] = round(time.perf_counter() - t0, 2)
-    summary["rendered"] = len(todo)
-    log(f"done: {summary['present']}/{summary['planned']} frames present "
-        f"({', '.join(f'{s} {c}' for s, c in summary['per_split'].items())}), "
-        f"{summary['disk_mb']:.1f} MB, {summary['seconds']:.0f} s")
+    with run_lock(out, "capture", shard_part(k, n)):  # a second run into this folder refuses at once
+        ds = open_or_create(out, manifest)
+        mine = [f for f in ds.frames if f["index"] % n == k - 1]
+        _clean_stale(ds, {f["index"] for f in mine})
+        todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
+        gt_text = f"{settings.spp} spp" if settings.gt == "pt" else f"VXGI {settings.vxgi_resolution}^3"
+        log(f"capture {scene.name}: {len(mine) - len(todo)} of {len(mine)} frames of shard {k}/{n} already done, "
+            f"{len(todo)} to render at {settings.width}x{settings.height}, {gt_text}")
+        t0 = time.perf_counter()
+        if todo:
+            _render_frames(scene, ds, todo, settings, log)
+        summary = summarize(ds)
+        summary["seconds"] = round(time.perf_counter() - t0, 2)
+        summary["rendered"] = len(todo)
+        log(f"done: {summary['present']}/{summary['planned']} frames present "
+            f"({', '.join(f'{s} {c}' for s, c in summary['per_split'].items())}), "
+            f"{summary['disk_mb']:.1f} MB, {summary['seconds']:.0f} s")
     return summary
 
 

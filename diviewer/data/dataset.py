@@ -234,4 +234,8 @@ def write_frame(ds: Dataset, index: int, arr: np.ndarray, info: dict) -> None:
             f.flush()
             os.fsync(f.fileno())
     info = {**info, "sha256": sha256_file(ds.path(index))}
-    imageio.write_text(ds.path(index, ".json"), json.dumps(info, indent=1))
+    try:
+        imageio.write_text(ds.path(index, ".json"), json.dumps(info, indent=1))
+    except BaseException:
+        ds.path(index).unlink(missing_ok=True)  # no array without its sidecar: the frame is absent, not half there
+        raise

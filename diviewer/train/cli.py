@@ -8,12 +8,16 @@ single `TrainConfig` fields (on --resume, the checkpoint's settings fill what is
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import os
 import sys
 from pathlib import Path
 from typing import Any
 
 from diviewer.errors import DiviewerError
+from diviewer.locks import run_lock
+from diviewer.outputs import check_output_dir
 from diviewer.train.config import CHOICES, RESUME_INHERITED, TrainConfig
 from diviewer.train.recipe import DEFAULT_RECIPE, load_recipe
 
@@ -94,15 +98,21 @@ def run_train(args: argparse.Namespace) -> int:
     from diviewer.train.trainer import train
 
     require_torch()
+    check_output_dir(args.out, "--out", writes="run")  # also under torchrun, which bypasses diviewer.cli
     resume = bool(getattr(args, "resume", False))
     last = Path(args.out) / "last.ckpt"
     old = load_checkpoint(last, mmap=True)["config"] if resume and last.is_file() else None
     cfg = resolve_config(args, old)
+    if args.lr_decay_start is not None and cfg.lr_decay == "none":
+        raise DiviewerError("sets where a decay starts, and this run has none; add --lr-decay cosine, or leave "
+                            "--lr-decay-start out", field="--lr-decay-start")
     if cfg.recipe:
         changed = ", ".join(f"{k}={v}" for k, v in cfg.recipe.get("overrides", {}).items())
         print(f"recipe {cfg.recipe.get('name')} ({cfg.recipe.get('file')})"
               + (f"; changed: {changed}" if changed else ""))
-    result = train(cfg, resume=resume)
+    # One run per folder: a second train into --out refuses at once (under torchrun, rank 0 holds it).
+    with run_lock(cfg.out, "train") if os.environ.get("RANK", "0") == "0" else contextlib.nullcontext():
+        result = train(cfg, resume=resume)
     if result["best"] is not None:
         print(f"best tone-mapped SSIM {result['best']:.4f}; checkpoints in {cfg.out}")
     return 0

@@ -191,6 +191,14 @@ class TrainConfig:
         if not (self.device in ("auto", "cpu", "cuda") or cuda_n):
             fail("device", f"must be auto, cpu, cuda or cuda:N, got {self.device!r}")
 
+    def check_schedule(self, steps_per_epoch: int) -> None:
+        """Refuse a decay that would start at or after the run's last step (it would never decay)."""
+        horizon = self.epochs * steps_per_epoch
+        if self.lr_decay != "none" and self.lr_decay_start >= horizon:
+            raise DiviewerError(f"is {self.lr_decay_start}, but the run ends at step {horizon} ({self.epochs} epochs of "
+                                f"{steps_per_epoch} steps): the decay would never start; give a smaller step or more "
+                                f"epochs", field="train.lr_decay_start")
+
     def to_dict(self) -> dict[str, Any]:
         """Plain dict (paths as strings) for checkpoints."""
         d = dataclasses.asdict(self)

@@ -123,8 +123,8 @@ def check_export_paths(ckpt_path: Path, out: Path) -> None:
     if not ckpt_path.is_file():
         raise DiviewerError(f"checkpoint not found: {ckpt_path}", field="checkpoint")
     card = out.with_suffix(".json")
-    check_output_file(out, "--out", protect=(ckpt_path,), suffix=".onnx")
-    check_output_file(card, "--out", protect=(ckpt_path,))
+    check_output_file(out, "--out", protect=(ckpt_path,), suffix=".onnx", replaces="model")
+    check_output_file(card, "--out", protect=(ckpt_path,), replaces="model")
 
 
 def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = ExportSettings(), log=print) -> dict:

@@ -157,6 +157,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
     say = log if dev.main else (lambda *_: None)
     try:
         ds, train_idx, train_arr, val_arr = _load_splits(cfg, dev, say)
+        cfg.check_schedule(len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world)))
         ckpt = _open_run(cfg, ds, train_idx, resume, say)
         parent = open_parent(cfg, ds) if ckpt is None and cfg.init_from else None
         if ckpt:

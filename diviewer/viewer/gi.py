@@ -30,6 +30,7 @@ class GIControl:
         """How the inputs are reduced and the output upsampled, and whether inference runs a frame behind."""
         self.model = None
         self.neural = None
+        self._fits: set[tuple[int, int]] = set()
 
     @property
     def render_size(self) -> tuple[int, int]:
@@ -41,7 +42,13 @@ class GIControl:
         return self.neural.gi_size if self.neural is not None else self.render_size
 
     def _size_for(self, model, gi_res: str, render_size: tuple[int, int]) -> tuple[int, int]:
-        return gi_resolution(gi_res, render_size, model.resolution, model.multiple)
+        size = gi_resolution(gi_res, render_size, model.resolution, model.multiple)
+        if size not in self._fits:  # a size beyond the GL limits is refused cleanly, before a pass allocates
+            from diviewer.gl.context import check_render_size
+
+            check_render_size(self.ctx, size[0], size[1], "--gi-res")
+            self._fits.add(size)
+        return size
 
     def _build(self, model) -> None:
         from diviewer.gl.neural import NeuralPass

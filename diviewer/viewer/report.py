@@ -60,6 +60,7 @@ def write_stats(path: Path, viewer, per_frame: list[dict[str, float]]) -> dict:
         "gl_renderer": viewer.gl_renderer,
         "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(record, indent=2))
+    from diviewer import imageio
+
+    imageio.write_text(path, json.dumps(record, indent=2))  # atomic: a full disk leaves no half file
     return record

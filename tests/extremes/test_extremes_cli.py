@@ -89,6 +89,15 @@ BAD = [
     ("view --model {t}/missing.onnx --frames 1", "--model"),
     ("view --screenshot {t} --frames 1", "--screenshot"),
     ("view --screenshot {t}/afile/s.png --frames 1", "--screenshot"),
+    # one rule for every writer (issue 29): the suffix required, never over another command's file
+    ("baseline --data {t} --out {t}/lin.json", "--out"),
+    ("baseline --data {t} --out {t}/m.onnx --max-frames 0", "--max-frames"),
+    ("eval --model {t}/afile --data {t} --out {t}/run.ckpt", "--out"),
+    ("bench --quick --plot {t}/p.json", "--plot"),
+    ("bench --quick --json {t}/run.ckpt", "--json"),
+    ("view --stats {t}/run.ckpt --frames 1", "--stats"),
+    ("view --screenshot {t}/s.jpg --frames 1", "--screenshot"),
+    ("train --data {t} --out {t}/r --lr-decay-start 10", "--lr-decay-start"),
 ]
 
 

@@ -1,0 +1,205 @@
+"""The one rule of every writer (diviewer.outputs): the suffix required, never over a model, a card, a checkpoint,
+a dataset's or an evaluation set's manifest and frames or a training run's files, checked before the work; and
+write faults that name the user's file, never a temporary one."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from diviewer.errors import DiviewerError
+from diviewer.outputs import check_output_dir, check_output_file, folder_kind, owner, staged, write_error
+
+sys.path.insert(0, str(Path(__file__).parent / "extremes"))
+from test_extremes_files import make_dataset  # noqa: E402
+
+
+def _snapshot(root: Path) -> dict:
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(root.rglob("*"))}
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A dataset, an evaluation-set manifest, a training run, a model with its card: other commands' files."""
+    t = tmp_path_factory.mktemp("outputs")
+    from diviewer.cli import main
+
+    make_dataset(t / "data", frames=8, width=16, height=16)
+    es = make_dataset(t / "es", frames=2, width=16, height=16)
+    manifest = json.loads((es.root / "manifest.json").read_text())
+    (es.root / "manifest.json").write_text(json.dumps({**manifest, "kind": "evalset"}))
+    other = make_dataset(t / "other", frames=2, width=16, height=16)  # a capture of another scene file
+    manifest = json.loads((other.root / "manifest.json").read_text())
+    (other.root / "manifest.json").write_text(json.dumps({**manifest, "scene": "elsewhere", "scene_hash": "0" * 64}))
+    (t / "run").mkdir()
+    for name in ("last.ckpt", "best.ckpt", "metrics.csv", "curves.png"):
+        (t / "run" / name).write_bytes(b"x")
+    assert main(["baseline", "--data", str(t / "data"), "--out", str(t / "lin.onnx")]) == 0
+    (t / "old.ckpt").write_bytes(b"x")
+    (t / "notes.json").write_text("{}")
+    return t
+
+
+def test_each_folder_is_known_by_whose_it_is(files):
+    assert folder_kind(files / "data") == "dataset" and folder_kind(files / "es") == "evalset"
+    assert folder_kind(files / "run") == "run" and folder_kind(files) is None
+
+
+@pytest.mark.parametrize("name, kind", [("lin.onnx", "model"), ("lin.json", "model"), ("old.ckpt", "checkpoint"),
+                                        ("data/manifest.json", "dataset"), ("data/frames/000000.npy", "dataset"),
+                                        ("data/frames/new.json", "dataset"), ("es/frames/000001.json", "evalset"),
+                                        ("es/summary.json", "evalset"), ("data/summary.json", None),
+                                        ("run/last.ckpt", "checkpoint"), ("run/metrics.csv", "run"),
+                                        ("run/curves.png", "run"), ("notes.json", None), ("new.json", None),
+                                        ("data/report.json", None)])
+def test_owner_names_other_commands_files(files, name, kind):
+    found = owner(files / name)
+    assert (found[0] if found else None) == kind
+
+
+def test_a_command_replaces_its_own_kind_and_no_other(files):
+    assert check_output_file(files / "lin.onnx", suffix=".onnx", replaces="model") == files / "lin.onnx"
+    with pytest.raises(DiviewerError, match="lin.onnx is a model, which this command must not overwrite"):
+        check_output_file(files / "lin.onnx", "--json")
+    with pytest.raises(DiviewerError, match="expected a .json file name"):
+        check_output_file(files / "r.png", "--out", suffix=".json")
+    with pytest.raises(DiviewerError, match="a frame of the dataset"):
+        check_output_file(files / "data" / "frames" / "000000.npy", replaces="model")
+    assert check_output_file(files / "notes.json", suffix=".json") == files / "notes.json"  # nobody's: rewritten
+
+
+def test_folders_of_another_kind_and_folders_inside_a_dataset_are_refused(files):
+    assert check_output_dir(files / "data", writes="dataset") == files / "data"  # resumed
+    assert check_output_dir(files / "run", writes="run") == files / "run"
+    with pytest.raises(DiviewerError, match="is a dataset .diviewer capture wrote it., not a training run folder"):
+        check_output_dir(files / "data", writes="run")
+    with pytest.raises(DiviewerError, match="is an evaluation set"):
+        check_output_dir(files / "es", writes="dataset")
+    with pytest.raises(DiviewerError, match="lies inside the dataset"):
+        check_output_dir(files / "data" / "frames" / "x", writes="render")
+    assert check_output_dir(files / "data", "--out") == files / "data"  # no kind given: only writability
+
+
+BAD = [  # (argv, needle): each refused before any work, nothing written
+    ("baseline --data {t}/data --out {t}/lin2.json", "expected a .onnx file name"),  # was: the card over the model
+    ("baseline --data {t}/data --out {t}/data/manifest.json", "expected a .onnx"),
+    ("baseline --data {t}/data --out {t}/data/frames/x.onnx", "a frame of the dataset"),
+    ("baseline --data {t}/data --out {t}/m.onnx --max-frames 0", "--max-frames: must be at least 1"),
+    ("baseline --data {t}/data --out {t}/m.onnx --max-frames -3", "--max-frames: must be at least 1"),
+    ("eval --model {t}/lin.onnx --data {t}/data --out {t}/lin.json", "is a model card"),
+    ("eval --model {t}/lin.onnx --data {t}/data --out {t}/lin.onnx", "expected a .json"),
+    ("eval --model {t}/lin.onnx --data {t}/data --out {t}/data/manifest.json", "the manifest of the dataset"),
+    ("eval --model {t}/lin.onnx --data {t}/data --out {t}/old.ckpt", "expected a .json"),
+    ("eval --model {t}/lin.onnx --data {t}/data --out {t}", "is a folder"),
+    ("bench --quick --json {t}/lin.json", "is a model card"),
+    ("bench --quick --json {t}/es/manifest.json", "the manifest of the evaluation set"),
+    ("bench --quick --plot {t}/run/curves.png", "a file of the training run"),
+    ("bench --quick --plot {t}/plot.json", "expected a .png"),
+    ("bench --quick --calib-data {t}/other", "is a capture of scene 'elsewhere'"),
+    ("view --frames 1 --screenshot {t}/lin.png", "lin.json is a model card"),
+    ("view --frames 1 --screenshot {t}/shot.onnx", "expected a .png"),
+    ("view --frames 1 --stats {t}/lin.json", "is a model card"),
+    ("render --res 16 --out {t}/data", "is a dataset"),
+    ("render --res 16 --out {t}/run", "is a training run folder"),
+    ("capture --frames 2 --res 16 --out {t}/run", "is a training run folder"),
+    ("capture --frames 2 --res 16 --out {t}/es", "is an evaluation set"),
+    ("capture --frames 2 --res 16 --out {t}/data/frames", "lies inside the dataset"),
+    ("evalset --frames-per-split 1 --res 16 --out {t}/data", "is a dataset"),
+    ("train --data {t}/data --out {t}/data", "is a dataset"),
+    ("train --data {t}/data --out {t}/es/sub", "lies inside the evaluation set"),
+    ("data merge {t}/data --out {t}/run", "is a training run folder"),
+]
+
+
+@pytest.mark.parametrize("argv, needle", BAD)
+def test_every_writer_refuses_other_commands_files_before_the_work(files, capsys, argv, needle):
+    from diviewer.cli import main
+
+    before = _snapshot(files)
+    rc = main(argv.format(t=files).split())
+    err = capsys.readouterr().err
+    assert rc == 2 and needle in err and err.count("\n") == 1 and "Traceback" not in err, err
+    assert _snapshot(files) == before
+
+
+def test_baseline_writes_its_model_and_card_and_replaces_its_own(files, tmp_path):
+    from diviewer.cli import main
+    from diviewer.runtime import read_metadata
+
+    out = tmp_path / "b.onnx"
+    for _ in range(2):  # the second run replaces the first run's model and card
+        assert main(["baseline", "--data", str(files / "data"), "--out", str(out), "--max-frames", "2"]) == 0
+        assert read_metadata(out)["kind"] == "linear_baseline"
+        assert json.loads(out.with_suffix(".json").read_text())["fit"]["frames"] == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.json", "b.onnx"]
+
+
+def test_a_full_disk_names_the_users_file_not_the_temporary_one(tmp_path, monkeypatch):
+    from diviewer import imageio
+
+    target = tmp_path / "a.exr"
+
+    class Full:  # what OpenEXR raises on a full disk: the temporary name and "No space left on device."
+        def __init__(self, header, channels):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *a):
+            return False
+
+        def write(self, name):
+            raise RuntimeError(f'Failed to write pixel data to image file "{name}". No space left on device.')
+
+    import OpenEXR
+
+    monkeypatch.setattr(OpenEXR, "File", Full)
+    with pytest.raises(OSError) as exc:
+        imageio.write_exr(target, np.zeros((4, 4, 3), np.float32))
+    assert exc.value.errno == errno.ENOSPC and exc.value.filename == str(target)
+    assert list(tmp_path.iterdir()) == []  # the temporary file is gone
+
+
+def test_staged_writes_name_the_final_file(tmp_path):
+    final = tmp_path / "out" / "frame.json"
+    with pytest.raises(OSError) as exc:
+        with staged() as stage:
+            tmp = stage(final)
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp))
+    assert exc.value.filename == str(final) and list((tmp_path / "out").iterdir()) == []
+
+
+def test_write_error_maps_only_the_machines_faults(tmp_path, monkeypatch):
+    import diviewer.outputs as outputs
+
+    tmp, final = tmp_path / ".a.npy.123.npy", tmp_path / "a.npy"
+    # numpy's tofile on a full disk: an OSError with no errno
+    monkeypatch.setattr(outputs, "disk_full", lambda folder: True)
+    fault = write_error(OSError("4096 requested and 1984 written"), {tmp: final})
+    assert fault.errno == errno.ENOSPC and fault.filename == str(final)
+    monkeypatch.setattr(outputs, "disk_full", lambda folder: False)
+    assert write_error(OSError("4096 requested and 1984 written"), {tmp: final}) is None
+    assert write_error(DiviewerError("a bad scene"), {tmp: final}) is None  # a user error stays itself
+    assert write_error(ValueError("a bug"), {tmp: final}) is None  # and a bug keeps its traceback
+    renamed = write_error(OSError(errno.EACCES, "Permission denied", str(tmp)), {tmp: final})
+    assert renamed.filename == str(final)
+
+
+def test_bench_refuses_a_plot_without_matplotlib_before_the_work(monkeypatch, capsys, tmp_path):
+    import importlib.util
+
+    from diviewer.cli import main
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "matplotlib" else real(name, *a))
+    rc = main(["bench", "--quick", "--plot", str(tmp_path / "p.png")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "'matplotlib'" in err and "diviewer[bench]" in err and "torch" not in err, err
+    assert list(tmp_path.iterdir()) == []
