@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer.errors import DiviewerError
+from diviewer.faults import write_error
 
 
 @contextmanager
@@ -18,8 +19,6 @@ def atomic_path(path: str | Path, suffix: str | None = None):
 
     A fault while writing (a full disk) removes the temporary file and is raised naming ``path``.
     """
-    from diviewer.outputs import write_error
-
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

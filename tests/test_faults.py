@@ -17,6 +17,9 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from diviewer.errors import DiviewerError
+from diviewer.faults import write_error
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -108,11 +111,11 @@ def test_render_on_a_full_disk_writes_nothing(gl_context, tmp_path):
 
 def test_train_on_a_full_disk_leaves_no_half_checkpoint(tmp_path):
     torch = pytest.importorskip("torch")
-    from test_train import make_dataset
+    from train.test_trainer import make_dataset
 
     make_dataset(tmp_path / "data")
     argv = ["train", "--data", str(tmp_path / "data"), "--out", "{disk}/run", "--k", "4", "--ndf", "8", "--epochs", "1",
-            "--batch-size", "4", "--device", "cpu"]
+            "--batch-size", "4", "--lr-decay", "none", "--device", "cpu"]
     p, disk, kept = on_small_disk(tmp_path, 1024, argv)  # metrics fit, a 1.4 MB checkpoint does not
     assert p.returncode == 2, p.stderr
     named = _one_line_naming(p.stderr, disk / "run")
@@ -196,7 +199,7 @@ def test_evalset_full_disk_monkeypatched(tmp_path, capsys, monkeypatch):
 
 def test_train_full_disk_monkeypatched(tmp_path, capsys, monkeypatch):
     torch = pytest.importorskip("torch")
-    from test_train import make_dataset
+    from train.test_trainer import make_dataset
 
     from diviewer.cli import main
 
@@ -209,6 +212,7 @@ def test_train_full_disk_monkeypatched(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(torch, "save", full)
     out = tmp_path / "run"
     rc = main(["train", "--data", str(tmp_path / "data"), "--out", str(out), "--k", "4", "--ndf", "8", "--epochs", "1",
+                "--lr-decay", "none",
                "--batch-size", "4", "--device", "cpu", "--max-steps", "1"])
     line = _last_line(capsys)
     assert rc == 2 and NO_SPACE in line and f"{out}{os.sep}" in line and ".ckpt" in line, line
@@ -232,3 +236,19 @@ def test_bench_full_disk_monkeypatched(gl_context, tmp_path, capsys, monkeypatch
     line = _last_line(capsys)
     assert NO_SPACE in line and str(tmp_path / "b.json") in line, line
     assert list(tmp_path.iterdir()) == []
+
+
+def test_write_error_maps_only_the_machines_faults(tmp_path, monkeypatch):
+    import diviewer.faults as faults
+
+    tmp, final = tmp_path / ".a.npy.123.npy", tmp_path / "a.npy"
+    # numpy's tofile on a full disk: an OSError with no errno
+    monkeypatch.setattr(faults, "disk_full", lambda folder: True)
+    fault = write_error(OSError("4096 requested and 1984 written"), {tmp: final})
+    assert fault.errno == errno.ENOSPC and fault.filename == str(final)
+    monkeypatch.setattr(faults, "disk_full", lambda folder: False)
+    assert write_error(OSError("4096 requested and 1984 written"), {tmp: final}) is None
+    assert write_error(DiviewerError("a bad scene"), {tmp: final}) is None  # a user error stays itself
+    assert write_error(ValueError("a bug"), {tmp: final}) is None  # and a bug keeps its traceback
+    renamed = write_error(OSError(errno.EACCES, "Permission denied", str(tmp)), {tmp: final})
+    assert renamed.filename == str(final)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from diviewer.errors import DiviewerError
-from diviewer.outputs import check_output_dir, check_output_file, folder_kind, owner, staged, write_error
+from diviewer.outputs import check_output_dir, check_output_file, folder_kind, owner, staged
 
 sys.path.insert(0, str(Path(__file__).parent / "extremes"))
 from test_extremes_files import make_dataset  # noqa: E402
@@ -174,22 +174,6 @@ def test_staged_writes_name_the_final_file(tmp_path):
             tmp = stage(final)
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp))
     assert exc.value.filename == str(final) and list((tmp_path / "out").iterdir()) == []
-
-
-def test_write_error_maps_only_the_machines_faults(tmp_path, monkeypatch):
-    import diviewer.outputs as outputs
-
-    tmp, final = tmp_path / ".a.npy.123.npy", tmp_path / "a.npy"
-    # numpy's tofile on a full disk: an OSError with no errno
-    monkeypatch.setattr(outputs, "disk_full", lambda folder: True)
-    fault = write_error(OSError("4096 requested and 1984 written"), {tmp: final})
-    assert fault.errno == errno.ENOSPC and fault.filename == str(final)
-    monkeypatch.setattr(outputs, "disk_full", lambda folder: False)
-    assert write_error(OSError("4096 requested and 1984 written"), {tmp: final}) is None
-    assert write_error(DiviewerError("a bad scene"), {tmp: final}) is None  # a user error stays itself
-    assert write_error(ValueError("a bug"), {tmp: final}) is None  # and a bug keeps its traceback
-    renamed = write_error(OSError(errno.EACCES, "Permission denied", str(tmp)), {tmp: final})
-    assert renamed.filename == str(final)
 
 
 def test_bench_refuses_a_plot_without_matplotlib_before_the_work(monkeypatch, capsys, tmp_path):

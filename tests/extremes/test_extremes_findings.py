@@ -15,11 +15,11 @@ from diviewer.errors import DiviewerError
 def test_train_refuses_a_decay_start_without_a_decay_or_beyond_the_run(tmp_path, capsys):
     pytest.importorskip("torch")
     sys.path.insert(0, str(Path(__file__).parents[1]))
-    from test_train import make_dataset
+    from train.test_trainer import make_dataset
 
     make_dataset(tmp_path / "data")  # 8 train frames: 2 steps per epoch at batch 4
     base = ["train", "--data", str(tmp_path / "data"), "--out", str(tmp_path / "run"), "--k", "4", "--ndf", "8",
-            "--batch-size", "4", "--device", "cpu", "--epochs", "2"]
+            "--batch-size", "4", "--device", "cpu", "--epochs", "2", "--recipe", "paper"]  # the paper's: no decay
     for extra, needle in ((["--lr-decay-start", "1"], "--lr-decay-start: sets where a decay starts"),
                           (["--lr-decay", "cosine", "--lr-decay-start", "4"], "the run ends at step 4"),
                           (["--lr-decay", "cosine", "--lr-decay-start", "99"], "the decay would never start")):
@@ -29,7 +29,7 @@ def test_train_refuses_a_decay_start_without_a_decay_or_beyond_the_run(tmp_path,
         assert not (tmp_path / "run").exists()  # refused before the run folder was made
 
 
-def test_view_refuses_a_gi_resolution_beyond_the_gl_limits(gl_context):
+def test_view_refuses_a_gi_resolution_beyond_the_gl_limits(ctx):
     from types import SimpleNamespace
 
     from diviewer.gl.context import max_render_size
@@ -37,16 +37,16 @@ def test_view_refuses_a_gi_resolution_beyond_the_gl_limits(gl_context):
     from diviewer.viewer.gi import GIControl
 
     renderer = SimpleNamespace(width=64, height=64)
-    gi = GIControl(gl_context, renderer, SimpleNamespace(), "model", GISettings())
+    gi = GIControl(ctx, renderer, SimpleNamespace(), "model", GISettings())
     model = SimpleNamespace(resolution=(64, 64), multiple=16)
-    mw, _ = max_render_size(gl_context)
+    mw, _ = max_render_size(ctx)
     # beyond the context's limits (a fraction of the window can ask for any size), and within them but too large
     # to allocate (llvmpipe: no float RGBA target of 2 GiB or more)
     for spec in (f"{mw // 64 + 1}/1", "11600x11600"):
         with pytest.raises(DiviewerError, match="--gi-res: .*(larger than this GL context allows|too large for)"):
             gi._size_for(model, spec, (64, 64))
     assert gi._size_for(model, "1/2", (64, 64)) == (32, 32)
-    assert gl_context.error == "GL_NO_ERROR"
+    assert ctx.error == "GL_NO_ERROR"
 
 
 def test_data_check_on_an_evaluation_set_names_evalset(tmp_path, capsys):

@@ -17,10 +17,7 @@ from diviewer.train.checks import FP16_MAX, FP16_TOLERANCE, check_outputs  # noq
 from diviewer.train.checkpoint import load_checkpoint  # noqa: E402
 from diviewer.train.export import ExportSettings, export  # noqa: E402
 from diviewer.train.trainer import train  # noqa: E402
-try:  # the trainer's tests: tests/train/test_trainer.py once tests mirror the package, tests/test_train.py before
-    from train.test_trainer import make_dataset, quiet, tiny  # noqa: E402
-except ImportError:
-    from test_train import make_dataset, quiet, tiny  # noqa: E402
+from train.test_trainer import make_dataset, quiet, tiny  # noqa: E402
 
 
 @pytest.fixture(scope="module")
