@@ -33,8 +33,11 @@ manifest's ``evalset.left_out`` with the reason; eval prints it.
 
 Shapes: every frame is rendered once at the widest shape (``render_width`` x ``height``) and each split
 is scored on centred crops (``crop``): at the same vertical field of view a centred crop of a wider
-render is exactly the narrower frame (the projection's pixel centres coincide when the widths differ by
-an even number of pixels, which ``check`` enforces; shadow maps fit the scene's bounds, not the view).
+render is the narrower frame (the projection's pixel centres coincide when the widths differ by an even
+number of pixels, which ``check`` enforces; shadow maps fit the scene's bounds, not the view): GL buffers
+agree to rounding, except that a pixel centre on the edge between two surfaces at the same depth (a wall's
+corner) may rasterise to the other one (< 1 % of a 32-pixel frame's pixels, fewer at 128), and the path
+tracer's frames differ only in their noise.
 One stored resolution keeps the dataset format, its checks and resume unchanged.
 
 The tone map's exposure is fitted once, on the GL direct light of the square crops of streams 0 and 1
@@ -55,6 +58,7 @@ import numpy as np
 
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, Dataset, read_manifest
 from diviewer.errors import DiviewerError
+from diviewer.evalframes import crop
 from diviewer.provenance import versions
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
 
@@ -142,15 +146,6 @@ class EvalSetSettings:
                                 field="--ladder")
         if self.dtype not in ("float16", "float32"):
             raise DiviewerError(f"dtype must be float16 or float32, got {self.dtype}", field="--dtype")
-
-
-def crop(image: np.ndarray, width: int) -> np.ndarray:
-    """The centred ``width`` columns of an (H, W, ...) image: the narrower frame at the same vertical fov."""
-    w = image.shape[1]
-    if width > w or (w - width) % 2:
-        raise ValueError(f"cannot crop {w} columns centrally to {width}")
-    o = (w - width) // 2
-    return image[:, o:o + width]
 
 
 def movable_objects(scene: Scene) -> tuple[str, ...]:
