@@ -167,7 +167,8 @@ def _cmd_evalset(args: argparse.Namespace) -> int:
     if args.compact is not None:
         from diviewer.evalframes import write_compact
 
-        write_compact(args.compact, args.out, frames_per_split=6 if args.frames_per_split is None else args.frames_per_split)
+        n = 6 if args.frames_per_split is None else args.frames_per_split
+        write_compact(args.compact, args.out, frames_per_split=n)
         return 0
     width, height = parse_resolution(args.res)
     try:
@@ -182,7 +183,8 @@ def _cmd_evalset(args: argparse.Namespace) -> int:
         except ValueError:
             raise DiviewerError(f"--window-widths takes widths like 170,228, got '{args.window_widths}'",
                                 field="--window-widths") from None
-    settings = EvalSetSettings(frames_per_split=24 if args.frames_per_split is None else args.frames_per_split, width=width, height=height,
+    n = 24 if args.frames_per_split is None else args.frames_per_split
+    settings = EvalSetSettings(frames_per_split=n, width=width, height=height,
                                window_widths=windows, spp=args.spp, ladder=ladder, max_depth=args.max_depth,
                                seed=args.seed)
     build_evalset(args.scene, args.out, settings)
@@ -359,7 +361,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="base widths of untrained generators for the cost curve (default 8 16 32 64 128)")
     p.add_argument("--gi-steps", type=int, nargs="*", default=None,
                    help="GI at 1/step of the frame resolution where the model allows (default 2)")
-    p.add_argument("--evalset", type=Path, default=None, help="evaluation set (default runs/<scene>/evalset)")
+    p.add_argument("--evalset", type=Path, default=None,
+                   help="evaluation set (default the scene's compact set, assets/evalsets/<scene>)")
     p.add_argument("--eval-frames", type=int, default=None, help="frames per split scored (default all)")
     p.add_argument("--calib-data", type=Path, default=None,
                    help="a capture whose train split calibrates int8 (default GL renders of training configurations)")

@@ -34,14 +34,17 @@ COMPACT_FILE = "frames.zip"
 COMPACT_DTYPE = np.float16
 COMPACT_CHANNELS = ("depth", "normal", "albedo", "direct", "pt", "pt_b", "object")
 """Channels a compact set stores as images (those the full set has)."""
-DEFAULT_EVALSETS = Path(__file__).resolve().parent.parent / "assets" / "evalsets"
+DEFAULT_EVALSETS: Path | None = None
+"""Where the shipped compact sets are; None: ``assets/evalsets`` (diviewer.paths: the checkout's or the wheel's)."""
 ABSENT = ("missing", "incomplete")
 """Frame problems that mean 'not rendered yet' (eval --partial scores around them); any other is refused."""
 
 
 def default_evalset(scene_name: str) -> Path:
     """The compact evaluation set the repository ships for a scene (eval and bench default to it)."""
-    return DEFAULT_EVALSETS / scene_name
+    from diviewer.paths import assets_dir
+
+    return (DEFAULT_EVALSETS or assets_dir() / "evalsets") / scene_name
 
 
 def split_key(split: str, shape, shapes) -> str:
@@ -230,7 +233,8 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=prin
         idx = [f["index"] for f in src.frames if f["split"] == split][:frames_per_split]
         missing = [i for i in idx if i in problems]
         if missing:
-            raise DiviewerError(f"split {split}: frame(s) {', '.join(map(str, missing))} of the first {frames_per_split} "
+            raise DiviewerError(f"split {split}: frame(s) {', '.join(map(str, missing))} of the first "
+                                f"{frames_per_split} "
                                 f"are not ready ({problems[missing[0]]}); let `diviewer evalset` finish them, or ask "
                                 f"for fewer with --frames-per-split", path=full_dir)
         stored = max(w for w, _ in shapes)

@@ -11,7 +11,8 @@ with the share of frames in which each model scores below direct light. Every sp
 shapes (centred crops, diviewer.evalframes); a model the runtime refuses at a shape is reported as refused.
 The frames' checksums are verified first; an incomplete set is refused unless ``partial`` (which names the
 frames scored). On a dataset split (``--data``) the tone map is the scene's too: the shipped evaluation
-set's exposure when it is of the same scene file, else one fitted on the split's GL direct light.
+set's exposure when it is of the same scene file, else the dataset's: fitted on its train split's GL direct
+light as training fits it (so a model trained on the dataset is scored at its own exposure).
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ def run_model(net: NeuralGI, frame: dict[str, np.ndarray]) -> np.ndarray:
     return net.run(pack_buffers(frame))
 
 
-def scene_exposure(scene_name: str, scene_hash: str, direct_frames, log=print) -> tuple[float, str]:
+def scene_exposure(scene_name: str, scene_hash: str, direct_frames) -> tuple[float, str]:
     """The scene's tone-map exposure: the shipped evaluation set's (same scene file), else fitted on the
     given GL direct-light frames (deterministic); never a model's."""
     from diviewer.data.dataset import read_manifest
@@ -54,7 +55,8 @@ def scene_exposure(scene_name: str, scene_hash: str, direct_frames, log=print) -
         m = read_manifest(path)
         if m.get("scene_hash") == scene_hash:
             return float(m["evalset"]["tonemap"]["exposure"]), f"the scene's evaluation set ({path})"
-    return float(fit_exposure(list(direct_frames))), "fitted on the split's GL direct light (no shipped evaluation set)"
+    return float(fit_exposure(list(direct_frames))), ("fitted on the dataset's train split GL direct light, as "
+                                                      "training fits it (no shipped evaluation set of this scene)")
 
 
 def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: str | None = None,
@@ -72,8 +74,10 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
     idx = ds.indices(split)
     if not idx:
         raise DiviewerError(f"the dataset has no '{split}' frames", path=data_dir)
+    direct = ds.slices["direct"]
     exposure, exposure_from = scene_exposure(ds.manifest["scene"], ds.manifest["scene_hash"],
-                                             (ds.load(i)["direct"] for i in idx))
+                                             (np.array(np.load(ds.path(i), mmap_mode="r")[..., direct])
+                                              for i in ds.indices("train")))
     rows, times, black = {"neural": [], "direct": []}, [], []
     for i in idx:
         f = ds.load(i)
@@ -126,7 +130,8 @@ def check_frames(ev: EvalFrames, partial: bool, log=print) -> list:
     bad = [p for p in problems if not p.problem.startswith(ABSENT)]
     if bad:
         listed = "; ".join(f"frame {p.index}: {p.problem}" for p in bad[:3])
-        raise DiviewerError(f"{len(bad)} frame(s) of the evaluation set are unsound ({listed}{'; ...' if len(bad) > 3 else ''}); "
+        more = "; ..." if len(bad) > 3 else ""
+        raise DiviewerError(f"{len(bad)} frame(s) of the evaluation set are unsound ({listed}{more}); "
                             f"`diviewer data check {ev.root}` lists them, the `diviewer evalset` command that made the "
                             f"set renders them again", path=ev.root)
     if problems and not partial:
@@ -281,7 +286,8 @@ def format_tables(result: dict) -> list[str]:
             lines.append(f"{m['label']:<34} {m['psnr']['mean']:6.2f} {m['ssim']['mean']:6.4f} "
                          f"{m['psnr_tm']['mean']:7.2f} {m['ssim_tm']['mean']:7.4f} {m['flip_hdr']['mean']:8.4f} "
                          f"{m['flip_ldr']['mean']:8.4f} {eq['text'] if eq else '-':>8} {_num(m['checkerboard']):>7} "
-                         f"{_pct(m.get('bias')):>7} {_pct(m.get('bias_indirect')):>8} {obj:>13} {unlit:>13} {below:>14}")
+                         f"{_pct(m.get('bias')):>7} {_pct(m.get('bias_indirect')):>8} {obj:>13} {unlit:>13} "
+                         f"{below:>14}")
         for name, why in r.get("refused", {}).items():
             lines.append(f"{why['label']:<34} refused by the runtime at this shape: {why['reason']}")
     return lines

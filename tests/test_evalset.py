@@ -275,6 +275,14 @@ def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, mo
     assert main(["eval", "--model", str(model)]) == 2
     assert "frame 2: checksum" in capsys.readouterr().err
     assert main(["data", "check", str(compact)]) == 1
+    # eval --data of this scene takes the scene's tone map from its evaluation set, never from a model
+    from diviewer.evaluate import scene_exposure
+
+    frames = [np.full((4, 4, 3), 2.0)]
+    assert scene_exposure("cornell", ev.manifest["scene_hash"], frames)[0] == ev.exposure
+    from diviewer.encoding import fit_exposure
+
+    assert scene_exposure("cornell", "another", frames)[0] == fit_exposure(frames)
     with pytest.raises(DiviewerError, match="already a compact"):
         write_compact(compact, tmp_path / "again", log=quiet)
     with pytest.raises(DiviewerError, match="not ready"):

@@ -40,7 +40,7 @@ class BenchSettings:
     gi_steps: tuple[int, ...] = (2,)
     """GI below frame resolution: frame / step, for each step the model's size multiple allows."""
     evalset: str | None = None
-    """The scene's evaluation set (diviewer evalset); default runs/<scene>/evalset."""
+    """The scene's evaluation set (diviewer evalset); default its compact set, assets/evalsets/<scene>."""
     eval_frames: int | None = None
     """Frames per split of the evaluation set scored (None: all)."""
     calib_data: str | None = None
