@@ -114,7 +114,8 @@ def _cmd_data_check(args: argparse.Namespace) -> int:
     for p in problems:
         print(f"frame {p.index:6d}: {p.problem}")
     if problems:
-        print(f"{len(problems)} frame(s) missing or bad; run the same `diviewer capture` again to render them")
+        again = "evalset" if ds.manifest.get("kind") == "evalset" else "capture"
+        print(f"{len(problems)} frame(s) missing or bad; run the same `diviewer {again}` again to render them")
         return 1
     print("all frames present and sound")
     return 0
