@@ -92,8 +92,19 @@ def parse_splits(text: str) -> tuple[float, float, float]:
 
 def _cmd_data_check(args: argparse.Namespace) -> int:
     from diviewer.data.capture import summarize
-    from diviewer.data.dataset import Dataset
+    from diviewer.data.dataset import Dataset, read_manifest
 
+    if "compact" in read_manifest(args.dir):  # a compact evaluation set: one zip, checksums in its manifest
+        from diviewer.evalframes import EvalFrames
+
+        ev = EvalFrames(args.dir)
+        problems = ev.problems()
+        for p in problems:
+            print(f"frame {p.index:6d}: {p.problem}")
+        print(f"{args.dir}: compact evaluation set of {ev.manifest['scene']}, {len(ev.frames)} frames: "
+              + (f"{len(problems)} bad; write it again with `diviewer evalset --compact FULL_DIR --out {args.dir}`"
+                 if problems else "all present and sound"))
+        return 1 if problems else 0
     ds = Dataset(args.dir)
     problems = ds.check(verify_checksum=not args.fast)
     s = summarize(ds)
@@ -121,47 +132,10 @@ def _cmd_data_merge(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_eval(args: argparse.Namespace) -> int:
-    from diviewer.evaluate import evaluate, evaluate_evalset, strict_json
-
-    if (args.evalset is None) == (args.data is None):
-        raise DiviewerError("give an evaluation set (--evalset DIR) or a dataset split (--data DIR), one of them",
-                            field="--evalset")
-    if args.evalset is not None:
-        evaluate_evalset(args.model, args.evalset, provider=args.provider, out=args.out)
-        return 0
-    if len(args.model) == 1:
-        evaluate(args.model[0], args.data, split=args.split, provider=args.provider, out=args.out)
-        return 0
-    results = [evaluate(m, args.data, split=args.split, provider=args.provider) for m in args.model]
-    if args.out is not None:
-        from diviewer import imageio
-
-        imageio.write_text(args.out, strict_json({"results": results}))
-    return 0
-
-
 def _cmd_baseline(args: argparse.Namespace) -> int:
     from diviewer.baseline import build_baseline
 
     build_baseline(args.data, args.out, split=args.split, max_frames=args.max_frames)
-    return 0
-
-
-def _cmd_evalset(args: argparse.Namespace) -> int:
-    from diviewer.evalset import EvalSetSettings, build_evalset
-    from diviewer.frames import parse_resolution
-
-    width, height = parse_resolution(args.res)
-    try:
-        ladder = tuple(int(x) for x in args.ladder.split(","))
-    except ValueError:
-        raise DiviewerError(f"--ladder takes sample counts like 1,4,16, got '{args.ladder}'",
-                            field="--ladder") from None
-    settings = EvalSetSettings(frames_per_split=args.frames_per_split, width=width, height=height, spp=args.spp,
-                               ladder=ladder, max_depth=args.max_depth, seed=args.seed)
-    with run_lock(args.out, "evalset"):  # a second run into this folder refuses at once
-        build_evalset(args.scene, args.out, settings)
     return 0
 
 
@@ -284,22 +258,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     from diviewer.build.command import add_build_parser
     from diviewer.train.cli import add_train_parser
+    from diviewer.evalcommand import add_eval_parsers
     from diviewer.viewer.command import add_view_parser
 
     add_train_parser(sub)
     add_view_parser(sub)
     add_build_parser(sub)
 
-    p = sub.add_parser("eval", help="models against an evaluation set (PSNR, SSIM, FLIP, equivalent spp) or a "
-                                    "dataset split, beside direct light alone")
-    p.add_argument("--model", type=Path, action="append", required=True,
-                   help="an ONNX model (diviewer export, or diviewer baseline); repeat for several")
-    p.add_argument("--evalset", type=Path, default=None, help="an evaluation set (diviewer evalset): both splits")
-    p.add_argument("--data", type=Path, default=None, help="or a dataset of the model's scene (diviewer capture)")
-    p.add_argument("--split", default="test", choices=("train", "val", "test"), help="with --data")
-    p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
-    p.add_argument("--out", type=Path, default=None, help="write the results as JSON (strict: no NaN/Infinity)")
-    p.set_defaults(func=_cmd_eval)
+    add_eval_parsers(sub, _add_variant_arg)
 
     p = sub.add_parser("baseline", help="fit the per-pixel linear-regression baseline on a dataset; write it as "
                                         "an ONNX model that eval, bench and view run like any model")
@@ -308,20 +274,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", default="train", choices=("train", "val", "test"), help="split to fit on (train)")
     p.add_argument("--max-frames", type=int, default=None, help="fit on the first N present frames only")
     p.set_defaults(func=_cmd_baseline)
-
-    p = sub.add_parser("evalset", help="render a scene's fixed evaluation set: >= 1024-spp truth, its noise floor "
-                                       "and a ladder of lower sample counts (resumable)")
-    p.add_argument("--scene", default="cornell", help=_scene_help())
-    p.add_argument("--out", type=Path, required=True, help="evaluation set folder (created, or resumed)")
-    p.add_argument("--frames-per-split", type=int, default=24, help="frames in each split (default 24)")
-    p.add_argument("--res", default="128", help="N or WxH; default 128")
-    p.add_argument("--spp", type=int, default=1024, help="samples per pixel of the ground truth (default 1024)")
-    p.add_argument("--ladder", default=",".join(map(str, (1, 4, 16, 64, 256))),
-                   help="lower sample counts for the equivalent spp (default 1,4,16,64,256)")
-    p.add_argument("--max-depth", type=int, default=16, help="path length limit of the full renders")
-    p.add_argument("--seed", type=int, default=0, help="which evaluation set of its own seed stream (default 0)")
-    _add_variant_arg(p)
-    p.set_defaults(func=_cmd_evalset)
 
     p = sub.add_parser("bench", help="headless frame timing per stage and the speed/accuracy table: direct light, "
                                      "the baseline, models (fp32/fp16/int8, GI resolutions), untrained K, VXGI, path tracer")
@@ -335,7 +287,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="base widths of untrained generators for the cost curve (default 8 16 32 64 128)")
     p.add_argument("--gi-steps", type=int, nargs="*", default=None,
                    help="GI at 1/step of the frame resolution where the model allows (default 2)")
-    p.add_argument("--evalset", type=Path, default=None, help="evaluation set (default runs/<scene>/evalset)")
+    p.add_argument("--evalset", type=Path, default=None,
+                   help="evaluation set (default the scene's compact set, assets/evalsets/<scene>)")
     p.add_argument("--eval-frames", type=int, default=None, help="frames per split scored (default all)")
     p.add_argument("--calib-data", type=Path, default=None,
                    help="a capture whose train split calibrates int8 (default GL renders of training configurations)")

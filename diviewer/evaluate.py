@@ -6,12 +6,17 @@ validation: MSE, PSNR (peak 1) and SSIM on linear radiance, and the same on the 
 LDR-FLIP on the tone-mapped images, the checkerboard ratio over flat regions, and the equivalent sample
 count; beside the models, direct light alone, the noise floor (a second seed at the reference's spp)
 and the path tracer at each ladder count, per split. One tone map (the evaluation set's exposure)
-for every row. On a dataset split (``--data``) the tone map is the model's exposure, as in training.
+for every row, and region metrics (the object's pixels, those of them without direct light: diviewer.evalscore)
+with the share of frames in which each model scores below direct light. Every split is scored at each of its
+shapes (centred crops, diviewer.evalframes); a model the runtime refuses at a shape is reported as refused.
+The frames' checksums are verified first; an incomplete set is refused unless ``partial`` (which names the
+frames scored). On a dataset split (``--data``) the tone map is the scene's too: the shipped evaluation
+set's exposure when it is of the same scene file, else the dataset's: fitted on its train split's GL direct
+light as training fits it (so a model trained on the dataset is scored at its own exposure).
 """
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from pathlib import Path
@@ -21,20 +26,37 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
-from diviewer.metrics import (equivalent_spp, flat_mask, flip, highpass_power, mse, power_ratio, psnr, psnr_error,
-                              ssim, tonemap)
-from diviewer.outputs import check_output_file, strict, write_json
+from diviewer.evalframes import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
+from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, aggregate, below_direct, equivalent,
+                                ladder_methods, pooled_bias, score, score_frame, score_frame_regions, strict_json)
+from diviewer.metrics import flat_mask
+from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
 
 SSIM_MIN = 11
 """SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
-KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
+__all__ = ["EQUIVALENT_BY", "EVAL_KEYS", "KEYS", "aggregate", "equivalent", "evaluate", "evaluate_evalset",
+           "pooled_bias", "run_model", "score", "score_frame", "strict_json"]
 
 
-def score(image: np.ndarray, truth: np.ndarray, exposure: float) -> dict[str, float]:
-    a, b = tonemap(image, exposure), tonemap(truth, exposure)
-    return {"mse": mse(image, truth), "psnr": psnr(image, truth), "ssim": ssim(image, truth),
-            "mse_tm": mse(a, b), "psnr_tm": psnr(a, b), "ssim_tm": ssim(a, b)}
+def run_model(net: NeuralGI, frame: dict[str, np.ndarray]) -> np.ndarray:
+    """A model's linear radiance for one frame's buffers: the one place eval and bench call the runtime."""
+    return net.run(pack_buffers(frame))
+
+
+def scene_exposure(scene_name: str, scene_hash: str, direct_frames) -> tuple[float, str]:
+    """The scene's tone-map exposure: the shipped evaluation set's (same scene file), else fitted on the
+    given GL direct-light frames (deterministic); never a model's."""
+    from diviewer.data.dataset import read_manifest
+    from diviewer.encoding import fit_exposure
+
+    path = default_evalset(scene_name)
+    if (path / "manifest.json").is_file():
+        m = read_manifest(path)
+        if m.get("scene_hash") == scene_hash:
+            return float(m["evalset"]["tonemap"]["exposure"]), f"the scene's evaluation set ({path})"
+    return float(fit_exposure(list(direct_frames))), ("fitted on the dataset's train split GL direct light, as "
+                                                      "training fits it (no shipped evaluation set of this scene)")
 
 
 def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: str | None = None,
@@ -52,14 +74,17 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
     idx = ds.indices(split)
     if not idx:
         raise DiviewerError(f"the dataset has no '{split}' frames", path=data_dir)
-    exposure = float(model.meta["encoding"]["exposure"])
+    direct = ds.slices["direct"]
+    exposure, exposure_from = scene_exposure(ds.manifest["scene"], ds.manifest["scene_hash"],
+                                             (np.array(np.load(ds.path(i), mmap_mode="r")[..., direct])
+                                              for i in ds.indices("train")))
     rows, times, black = {"neural": [], "direct": []}, [], []
     for i in idx:
         f = ds.load(i)
         if not np.any(f["pt"] > 0):
             black.append(i)
         t0 = time.perf_counter()
-        y = model.run(pack_buffers(f))
+        y = run_model(model, f)
         times.append((time.perf_counter() - t0) * 1e3)
         rows["neural"].append(score(y, f["pt"], exposure))
         rows["direct"].append(score(f["direct"], f["pt"], exposure))
@@ -67,12 +92,14 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
         "model": str(model_path), "data": str(data_dir), "split": split, "frames": len(idx),
         "scene": ds.manifest["scene"], "reference_spp": ds.manifest["spp"], "provider": model.provider,
         "K": model.meta["K"], "target": model.meta["target"], "precision": model.meta["precision"],
+        "tonemap": {"exposure": exposure, "from": exposure_from},
         "inference_ms": {"median": float(np.median(times)), "p95": float(np.percentile(times, 95))},
         "black_reference_frames": black,
         "methods": {m: {k: {"mean": float(np.mean([r[k] for r in rs])), "std": float(np.std([r[k] for r in rs]))}
                         for k in KEYS} for m, rs in rows.items()},
     }
-    log(f"{summary['scene']} {split} split, {len(idx)} frames, against path tracing at {summary['reference_spp']} spp")
+    log(f"{summary['scene']} {split} split, {len(idx)} frames, against path tracing at {summary['reference_spp']} spp; "
+        f"tone map exposure {exposure:.4g} ({exposure_from})")
     log(f"{'method':<34} {'PSNR':>7} {'SSIM':>7} {'PSNR tm':>8} {'SSIM tm':>8}")
     for m, label in (("neural", _model_label(model.meta, Path(model_path))), ("direct", "direct light only")):
         s = summary["methods"][m]
@@ -90,134 +117,82 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
 
 # --- evaluation sets ---------------------------------------------------------------------------------------------
 
-EVAL_KEYS = KEYS + ("flip_hdr", "flip_ldr")
-EQUIVALENT_BY = ("psnr_tm", "psnr", "flip_ldr")
-"""Metrics the equivalent sample count is read from; the first is the headline (tables, targets)."""
-
-
-def score_frame(image: np.ndarray, truth: np.ndarray, exposure: float, mask: np.ndarray,
-                direct: np.ndarray | None = None) -> dict[str, float]:
-    """Every evaluation-set metric of one frame, plus the sums behind the pooled checkerboard ratio and
-    the pooled bias (given the frame's GL ``direct`` light, also the bias of the indirect light alone)."""
-    a, b = tonemap(image, exposure), tonemap(truth, exposure)
-    s = score(image, truth, exposure)
-    s["flip_hdr"] = flip(truth, image, "HDR")
-    s["flip_ldr"] = flip(b, a, "LDR")
-    s["hf_power"], s["hf_power_ref"] = highpass_power(a, mask), highpass_power(b, mask)
-    s["sum"], s["sum_ref"] = float(np.sum(image, dtype=np.float64)), float(np.sum(truth, dtype=np.float64))
-    if direct is not None:
-        d = float(np.sum(direct, dtype=np.float64))
-        s["sum_indirect"], s["sum_indirect_ref"] = s["sum"] - d, s["sum_ref"] - d
-    return s
-
-
-def pooled_bias(rows: list[dict], key: str = "sum") -> float | None:
-    """Signed relative error of the summed radiance over all frames, (sum image / sum truth) - 1: negative
-    where a method is darker than the truth on the whole. An unbiased estimator (the path tracer at any
-    sample count) scores ~0; L1 training on noisy targets converges to the per-pixel median, which is
-    darker than the mean where fireflies are. None without the sums or with a black truth."""
-    if not rows or any(key not in r for r in rows):
-        return None
-    ref = sum(r[f"{key}_ref"] for r in rows)
-    return sum(r[key] for r in rows) / ref - 1.0 if ref > 0 else None
-
-
-def aggregate(rows: list[dict]) -> dict:
-    """Per-frame scores (``score_frame``) of one method as mean and std per key, plus the pooled checkerboard
-    ratio; what evaluate and the bench report per method."""
-    out = {k: {"mean": float(np.mean([r[k] for r in rows])), "std": float(np.std([r[k] for r in rows]))}
-           for k in EVAL_KEYS}
-    # Pooled over frames (each frame's flat pixels weigh alike), not a mean of per-frame ratios.
-    out["checkerboard"] = power_ratio(sum(r["hf_power"] for r in rows), sum(r["hf_power_ref"] for r in rows))
-    out["bias"] = pooled_bias(rows)
-    out["bias_indirect"] = pooled_bias(rows, "sum_indirect")
-    return out
-
-
-def _error(summary: dict, key: str) -> float:
-    v = summary[key]["mean"]
-    return psnr_error(v) if key.startswith("psnr") else v
-
-
-def equivalent(summary: dict, ladder_spp: list[int], ladder: list[dict]) -> dict:
-    """The path-traced sample count whose error matches ``summary``'s (an ``aggregate``), per key of
-    ``EQUIVALENT_BY``, read off the ladder (``ladder[i]`` aggregated at ``ladder_spp[i]``); None where none can be."""
-    out = {}
-    for key in EQUIVALENT_BY:
-        try:
-            out[key] = equivalent_spp(ladder_spp, [_error(r, key) for r in ladder], _error(summary, key))
-        except ValueError:  # a perfect score (error 0) or a ladder with one: no sample count to read
-            out[key] = None
-    return out
-
-
 def _model_label(meta: dict, path: Path) -> str:
     if meta.get("kind") == "linear_baseline":
         return f"linear baseline ({meta.get('parameters', '?')} params)"
     return f"neural K={meta['K']} {meta['precision']} ({path.stem})"
 
 
-def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str | None = None,
-                     out: Path | None = None, log=print) -> dict:
-    """Score models, direct light, the noise floor and the path-tracer ladder on an evaluation set, per split."""
-    from diviewer.data.evalset_format import EVAL_SPLITS, load_evalset
+def check_frames(ev: EvalFrames, partial: bool, log=print) -> list:
+    """The frames' problems after refusing what cannot be scored honestly: a corrupt frame always, an absent
+    one unless ``partial``."""
+    problems = ev.problems()
+    bad = [p for p in problems if not p.problem.startswith(ABSENT)]
+    if bad:
+        listed = "; ".join(f"frame {p.index}: {p.problem}" for p in bad[:3])
+        more = "; ..." if len(bad) > 3 else ""
+        raise DiviewerError(f"{len(bad)} frame(s) of the evaluation set are unsound ({listed}{more}); "
+                            f"`diviewer data check {ev.root}` lists them, the `diviewer evalset` command that made the "
+                            f"set renders them again", path=ev.root)
+    if problems and not partial:
+        raise DiviewerError(f"the evaluation set is incomplete: {len(ev.frames) - len(problems)} of {len(ev.frames)} "
+                            f"frames present; finish it with the `diviewer evalset` command that started it, or pass "
+                            f"--partial to score the frames present", path=ev.root)
+    if problems:
+        log(f"--partial: {len(problems)} of {len(ev.frames)} frames absent; the frames scored are listed per split")
+    return problems
+
+
+def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, provider: str | None = None,
+                     out: Path | None = None, log=print, partial: bool = False) -> dict:
+    """Score models, direct light, the noise floor and the path-tracer ladder on an evaluation set, per split
+    and shape, with region metrics; ``evalset_dir`` None: the shipped compact set of the models' scene."""
     from diviewer.console import progress_bar
 
-    ds = load_evalset(evalset_dir)
-    info = ds.manifest["evalset"]
-    exposure = float(info["tonemap"]["exposure"])
-    ladder_spp, ladder_ch = [int(n) for n in info["ladder_spp"]], list(info["ladder_channels"])
+    nets = [NeuralGI(p, provider=provider) for p in model_paths]
+    if evalset_dir is None:
+        if not nets:
+            raise DiviewerError("give an evaluation set (--evalset DIR)", field="--evalset")
+        evalset_dir = default_evalset(nets[0].meta["scene"])
+        if not (evalset_dir / "manifest.json").is_file():
+            raise DiviewerError(f"no evaluation set ships for scene '{nets[0].meta['scene']}'; make one with "
+                                f"`diviewer evalset --scene S --out DIR` and pass --evalset DIR", path=evalset_dir)
+    ev = EvalFrames(evalset_dir)
     models = {}
-    for path in model_paths:
-        net = NeuralGI(path, provider=provider)
-        if net.meta["scene_hash"] != ds.manifest["scene_hash"]:
+    for path, net in zip(model_paths, nets):
+        if net.meta["scene_hash"] != ev.manifest["scene_hash"]:
             raise DiviewerError(f"the model was made for scene '{net.meta['scene']}' (another scene file than the "
-                                f"evaluation set's '{ds.manifest['scene']}')", path=path, field="scene_hash")
-        key = path.stem if path.stem not in models else f"{path.stem}_{len(models)}"
-        models[key] = net
-    rows_of = {"direct": "direct", "noise_floor": info["second_seed_channel"],
-               **{f"pt_spp{n}": ch for n, ch in zip(ladder_spp, ladder_ch)}}
-    result = {"evalset": str(evalset_dir), "scene": ds.manifest["scene"], "reference_spp": ds.manifest["spp"],
-              "resolution": ds.manifest["resolution"], "tonemap_exposure": exposure, "ladder_spp": ladder_spp,
+                                f"evaluation set's '{ev.manifest['scene']}')", path=path, field="scene_hash")
+        models[path.stem if path.stem not in models else f"{path.stem}_{len(models)}"] = net
+    problems = check_frames(ev, partial, log)
+    exposure = ev.exposure
+    info = ev.info
+    ladder_spp = [int(n) for n in info["ladder_spp"]]
+    ladder = ladder_methods(ev)
+    images = {"direct": "direct", "noise_floor": info["second_seed_channel"],
+              **(ladder if ev.ladder_images() else {})}
+    result = {"evalset": str(evalset_dir), "compact": ev.compact, "scene": ev.manifest["scene"],
+              "reference_spp": ev.manifest["spp"], "tonemap_exposure": exposure,
+              "tonemap_from": "the evaluation set's manifest (one per scene)", "ladder_spp": ladder_spp,
               "flip": {"flip_hdr": "HDR-FLIP on linear radiance (negative values clamped to 0)",
                        "flip_ldr": "LDR-FLIP on the tone-mapped images"},
-              "equivalent_spp_by": EQUIVALENT_BY[0], "splits": {}}
-    progress = progress_bar(len(ds.indices()), "eval", "frame")
-    for split in EVAL_SPLITS:
-        idx = ds.indices(split)
+              "equivalent_spp_by": EQUIVALENT_BY[0], "left_out": ev.left_out(), "not_scored": {},
+              "regions_left_out": info.get("regions_left_out"), "splits": {}}
+    for split, why in result["left_out"].items():
+        log(f"split {split} left out: {why}")
+    splits = ev.splits()
+    present = {s: ev.present(s, problems) for s in splits}
+    progress = progress_bar(sum(len(present[s]) * len(sh) for s, sh in splits.items()), "eval", "frame")
+    for split, shapes in splits.items():
+        idx = present[split]
         if not idx:
+            result["not_scored"][split] = "no frame of this split is present"
+            log(f"split {split}: no frame present, not scored")
             continue
-        rows = {k: [] for k in (*models, *rows_of)}
-        times = {k: [] for k in models}
-        flat = 0
-        for i in idx:
-            f = ds.load(i)
-            mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # flat and no shadow edge
-            flat += int(mask.sum())
-            for key, net in models.items():
-                t0 = time.perf_counter()
-                y = net.run(pack_buffers(f))
-                times[key].append((time.perf_counter() - t0) * 1e3)
-                rows[key].append(score_frame(y, f["pt"], exposure, mask, f["direct"]))
-            for key, ch in rows_of.items():
-                rows[key].append(score_frame(f[ch], f["pt"], exposure, mask, f["direct"]))
-            progress.update()
-        methods = {k: aggregate(r) for k, r in rows.items()}
-        ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
-        for key, m in methods.items():
-            m["equivalent_spp"] = equivalent(m, ladder_spp, ladder)
-            if key in models:
-                net = models[key]
-                m.update(kind=net.meta.get("kind", "neural"), label=_model_label(net.meta, net.path),
-                         model=str(net.path), provider=net.provider,
-                         inference_ms={"median": float(np.median(times[key]))})
-            elif key == "direct":
-                m.update(kind="direct", label="direct light only (GL)")
-            elif key == "noise_floor":
-                m.update(kind="noise_floor", label=f"noise floor ({ds.manifest['spp']} spp, 2nd seed)")
-            else:
-                m.update(kind="path_tracer", label=f"path traced {key[6:]} spp")
-        result["splits"][split] = {"frames": len(idx), "flat_pixels_per_frame": flat / len(idx), "methods": methods}
+        for shape in shapes:
+            key = split_key(split, shape, shapes)
+            result["splits"][key] = _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp,
+                                                 progress, partial)
     progress.close()
     for line in format_tables(result):
         log(line)
@@ -226,23 +201,95 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
     return result
 
 
+def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp, progress, partial) -> dict:
+    rows = {k: [] for k in (*models, *images)}
+    if not ev.ladder_images():
+        rows.update({m: [] for m in ev.ladder_rows(idx[0], key)})
+    times, refused, flat = {k: [] for k in models}, {}, 0
+    for i in idx:
+        f = crop_frame(ev.load(i), shape[0])
+        mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # flat and no shadow edge
+        flat += int(mask.sum())
+        for name, net in models.items():
+            if name in refused:
+                continue
+            t0 = time.perf_counter()
+            try:
+                y = run_model(net, f)
+            except DiviewerError as exc:  # the runtime refuses this shape: say so, score the rest
+                refused[name] = str(exc)
+                continue
+            times[name].append((time.perf_counter() - t0) * 1e3)
+            rows[name].append(score_frame_regions(y, f, exposure, mask))
+        for name, ch in images.items():
+            rows[name].append(score_frame_regions(f[ch], f, exposure, mask))
+        if not ev.ladder_images():
+            for name, row in ev.ladder_rows(i, key).items():
+                rows[name].append(row)
+        progress.update()
+    methods = {k: aggregate(r) for k, r in rows.items() if r}
+    ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
+    for name, m in methods.items():
+        m["equivalent_spp"] = equivalent(m, ladder_spp, ladder)
+        if name in models:
+            net = models[name]
+            m.update(kind=net.meta.get("kind", "neural"), label=_model_label(net.meta, net.path),
+                     model=str(net.path), provider=net.provider, below_direct=below_direct(rows[name], rows["direct"]),
+                     inference_ms={"median": float(np.median(times[name]))})
+        elif name == "direct":
+            m.update(kind="direct", label="direct light only (GL)")
+        elif name == "noise_floor":
+            m.update(kind="noise_floor", label=f"noise floor ({ev.manifest['spp']} spp, 2nd seed)")
+        else:
+            m.update(kind="path_tracer", label=f"path traced {name[6:]} spp")
+    out = {"split": split, "shape": list(shape), "frames": len(idx), "flat_pixels_per_frame": flat / len(idx),
+           "methods": methods, "refused": {name: {"label": _model_label(models[name].meta, models[name].path),
+                                                  "reason": why} for name, why in refused.items()}}
+    if partial:
+        out["frames_scored"] = list(idx)
+    return out
+
+
+def _cell(m: dict, key: str, fmt: str) -> str:
+    v = m.get(key)
+    return "-" if v is None else (format(v["mean"], fmt) if math.isfinite(v["mean"]) else "inf")
+
+
 def format_tables(result: dict) -> list[str]:
     """The per-split tables for people."""
     lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; tm = tone-mapped at "
-             f"exposure {result['tonemap_exposure']:.3g}; FLIP-HDR on linear radiance, FLIP-LDR on tone-mapped; "
-             f"eq. spp from PSNR tm; checker = high-frequency power over flat, shadow-edge-free regions / "
-             f"the reference's; bias = summed radiance / the reference's - 1 (indirect: minus GL direct light)"]
+             f"exposure {result['tonemap_exposure']:.3g} (the scene's); FLIP-HDR on linear radiance, FLIP-LDR on "
+             f"tone-mapped; eq. spp from PSNR tm; checker = high-frequency power over flat, shadow-edge-free regions "
+             f"/ the reference's; bias = summed radiance / the reference's - 1 (indirect: minus GL direct light); "
+             f"object / unlit = tone-mapped PSNR and SSIM over the moving object's pixels / those without direct "
+             f"light; < direct = share of frames below direct light alone (whole frame / object / unlit)"]
+    for split, why in result.get("left_out", {}).items():
+        lines.append(f"{split}: left out ({why})")
+    for split, why in result.get("not_scored", {}).items():
+        lines.append(f"{split}: not scored ({why})")
+    if result.get("regions_left_out"):
+        lines.append(f"object regions: left out ({result['regions_left_out']})")
     for split, r in result["splits"].items():
         lines.append("")
-        lines.append(f"{split} ({r['frames']} frames)")
+        lines.append(f"{split} ({r['frames']} frames at {r['shape'][0]}x{r['shape'][1]})"
+                     + (f"; frames scored: {', '.join(map(str, r['frames_scored']))}" if "frames_scored" in r else ""))
         lines.append(f"{'method':<34} {'PSNR':>6} {'SSIM':>6} {'PSNR tm':>7} {'SSIM tm':>7} {'FLIP-HDR':>8} "
-                     f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7} {'bias':>7} {'indirect':>8}")
+                     f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7} {'bias':>7} {'indirect':>8} {'object':>13} "
+                     f"{'unlit':>13} {'< direct':>14}")
         for m in r["methods"].values():
             eq = m["equivalent_spp"][EQUIVALENT_BY[0]]
+            obj = f"{_cell(m, 'psnr_tm_object', '.2f')}/{_cell(m, 'ssim_tm_object', '.3f')}"
+            unlit = f"{_cell(m, 'psnr_tm_object_unlit', '.2f')}/{_cell(m, 'ssim_tm_object_unlit', '.3f')}"
+            below = m.get("below_direct")
+            below = "/".join(f"{100 * below[k]['share']:.0f}%" if k in below else "-" for k in ("frame", *REGIONS)) \
+                if below is not None else ""
             lines.append(f"{m['label']:<34} {m['psnr']['mean']:6.2f} {m['ssim']['mean']:6.4f} "
                          f"{m['psnr_tm']['mean']:7.2f} {m['ssim_tm']['mean']:7.4f} {m['flip_hdr']['mean']:8.4f} "
                          f"{m['flip_ldr']['mean']:8.4f} {eq['text'] if eq else '-':>8} {_num(m['checkerboard']):>7} "
-                         f"{_pct(m.get('bias')):>7} {_pct(m.get('bias_indirect')):>8}")
+                         f"{_pct(m.get('bias')):>7} {_pct(m.get('bias_indirect')):>8} {obj:>13} {unlit:>13} "
+                         f"{below:>14}")
+        for name, why in r.get("refused", {}).items():
+            lines.append(f"{why['label']:<34} refused by the runtime at this shape: {why['reason']}")
     return lines
 
 
@@ -252,8 +299,3 @@ def _pct(v: float | None) -> str:
 
 def _num(v: float) -> str:
     return f"{v:.3g}" if math.isfinite(v) else "inf"
-
-
-def strict_json(obj) -> str:
-    """JSON without NaN or Infinity (a perfect PSNR, a ratio over a perfectly smooth reference): they become null."""
-    return json.dumps(strict(obj), indent=1, allow_nan=False)

@@ -1,5 +1,5 @@
-"""Image error metrics (numpy only, no torch): MSE, PSNR, SSIM, FLIP, a checkerboard measure and the
-equivalent sample count.
+"""Image error metrics (numpy only, no torch): MSE, PSNR, SSIM (whole frame and over a region), FLIP, a
+checkerboard measure and the equivalent sample count.
 
 Conventions, the same everywhere this package reports a number:
 
@@ -12,6 +12,8 @@ Conventions, the same everywhere this package reports a number:
   and averaged over windows and channels. It is computed on images scaled by their common peak (SSIM is
   unchanged when images and data range scale together), so huge values neither overflow nor lose the
   variance to cancellation; it always lies in [-1, 1].
+- Region metrics (``masked_psnr``, ``masked_ssim``) take an (H, W) mask: PSNR over the masked pixels
+  squared error; SSIM averaged over the windows centred on masked pixels. An empty region gives None.
 - FLIP is NVIDIA's perceptual difference (the ``flip-evaluator`` package): HDR-FLIP on linear radiance,
   LDR-FLIP on display-encoded images in [0, 1]; 0 is identical, 1 the largest difference.
 """
@@ -97,6 +99,47 @@ def ssim_map(a, b, data_range: float = 1.0, win_size: int = 11, sigma: float = 1
 def ssim(a, b, data_range: float = 1.0) -> float:
     """Mean structural similarity (1 for identical images); see the module docstring for the conventions."""
     return float(np.mean(ssim_map(a, b, data_range)))
+
+
+def _mask(mask, shape) -> np.ndarray:
+    m = np.asarray(mask)
+    m = m[..., 0] if m.ndim == 3 else m
+    if m.shape != tuple(shape[:2]):
+        raise ValueError(f"mask of shape {m.shape} for images of shape {tuple(shape)}")
+    return m > 0.5 if m.dtype != bool else m
+
+
+def masked_mse(a, b, mask) -> float | None:
+    """Mean squared error over the masked pixels (all channels); None for an empty mask."""
+    a, b = _pair(a, b)
+    m = _mask(mask, a.shape)
+    if not m.any():
+        return None
+    return float(np.mean((a[m] - b[m]) ** 2))
+
+
+def masked_psnr(a, b, mask, peak: float = 1.0) -> float | None:
+    """PSNR (dB) over the masked pixels only, ``10 log10(peak^2 / masked MSE)``; inf when they agree, None
+    for an empty mask: a region's error is not diluted by the rest of the frame."""
+    if peak <= 0:
+        raise ValueError(f"peak must be positive, got {peak}")
+    e = masked_mse(a, b, mask)
+    if e is None:
+        return None
+    return math.inf if e == 0.0 else float(10.0 * math.log10(peak * peak / e))
+
+
+def masked_ssim(a, b, mask, data_range: float = 1.0) -> float | None:
+    """Mean SSIM of the windows centred on masked pixels (the windows of ``ssim_map``, each wholly inside
+    the image, so a region's structure is judged with its surroundings as SSIM always does); None when
+    no window is centred on the mask (an empty mask, or one only within 5 pixels of the border)."""
+    a, b = _pair(a, b)
+    m = _mask(mask, a.shape)
+    r = 11 // 2
+    centres = m[r:m.shape[0] - r, r:m.shape[1] - r]
+    if not centres.any():
+        return None
+    return float(np.mean(ssim_map(a, b, data_range)[centres]))
 
 
 TONEMAP_GAMMA = 2.2

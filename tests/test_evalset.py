@@ -1,9 +1,12 @@
-"""The evaluation set (resumable, apart from training data) and `diviewer eval` on it: every row, strict JSON."""
+"""The evaluation set (splits, shapes, object mask, resumable, apart from training data), its compact form, and
+`diviewer eval` on both: every row and region, strict JSON, refusals of what cannot be scored honestly."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -12,12 +15,18 @@ from diviewer.cli import main
 from diviewer.data.capture import CaptureSettings, plan_frames
 from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
-from diviewer.evalset import EVAL_SPLITS, EvalSetSettings, build_evalset, configs_apart, plan_evalset
-from diviewer.scene import load_scene
+from diviewer.evalframes import EvalFrames, crop, default_evalset, write_compact
+from diviewer.evaluate import evaluate_evalset
+from diviewer.evalset import (EVAL_SPLITS, EvalSetSettings, build_evalset, configs_apart, plan_evalset,
+                              plan_splits)
+from diviewer.scene import load_scene, sample_config
+from diviewer.scene.sampler import in_test_stretch, path_parameter
 
 from onnx_models import base_meta, direct_times
 
 TINY = EvalSetSettings(frames_per_split=2, width=16, height=16, spp=16, ladder=(1, 4), max_depth=4, thumbs=1)
+WINDOW_KEYS = ("window_shapes_22x16", "window_shapes_28x16")
+SPLIT_KEYS = ("unseen_configs", "unseen_objects", "moved_camera", *WINDOW_KEYS)
 
 
 def quiet(*_):
@@ -29,22 +38,49 @@ def _center_mesh(f: dict) -> str:
 
 
 @pytest.mark.slow
-def test_plan_is_reproducible_split_by_objects_and_apart_from_captures():
+def test_plan_splits_cameras_meshes_and_seeds():
     scene = load_scene("cornell")
     plan = plan_evalset(scene, EvalSetSettings(frames_per_split=24))
     assert plan == plan_evalset(scene, EvalSetSettings(frames_per_split=24))
-    assert [f["index"] for f in plan] == list(range(48))
-    r = scene.ranges.objects["center"]
-    for split, meshes in zip(EVAL_SPLITS, (r.train_meshes, r.test_meshes)):
-        frames = [f for f in plan if f["split"] == split]
-        assert len(frames) == 24 and all(_center_mesh(f) in meshes for f in frames)
+    assert [f["index"] for f in plan] == list(range(96))
+    r, region = scene.ranges.objects["center"], scene.ranges.camera_region
+    by = {s: [f for f in plan if f["split"] == s] for s in EVAL_SPLITS}
+    assert all(len(v) == 24 for v in by.values())
+    for split, meshes in (("unseen_configs", r.train_meshes), ("unseen_objects", r.test_meshes),
+                          ("moved_camera", r.train_meshes), ("window_shapes", r.train_meshes)):
+        assert all(_center_mesh(f) in meshes for f in by[split]), split
+    scene_camera = dataclasses.asdict(scene.default.camera)
+    for split in ("unseen_configs", "unseen_objects", "window_shapes"):  # the paper's fixed camera
+        assert all(tuple(f["config"]["camera"]["position"]) == tuple(scene_camera["position"]) for f in by[split])
+    for f in by["moved_camera"]:  # every moved camera in a held-out box, none at the scene's camera
+        assert region.in_test_region(f["config"]["camera"]["position"])
+    # The scene-camera splits keep the lights and objects of the sampler's draw (the camera has a stream
+    # of its own): the frames of the evaluation sets before the camera region, comparable with them.
+    for f in by["unseen_configs"][:4] + by["unseen_objects"][:4]:
+        drawn = sample_config(scene, f["seed"], f["sampler_split"], camera="sampled").to_dict()
+        assert f["config"]["lights"] == drawn["lights"] and f["config"]["objects"] == drawn["objects"]
+    assert [f["widths"] for f in by["window_shapes"]][0] == [170, 228]
+    assert {tuple(f["widths"]) for f in plan if f["split"] != "window_shapes"} == {(128,)}
     seeds = [s for f in plan for s in (f["pt_seeds"]["reference"], f["pt_seeds"]["second"], *f["pt_seeds"]["ladder"])]
     assert len(set(seeds)) == len(seeds), "every render of the set has a seed of its own"
-    # a capture with the same base seed draws other configurations (its own seed stream)
-    for seed in (0, 1):
-        capture_plan = plan_frames(scene, CaptureSettings(frames=500, seed=seed))
-        assert configs_apart(plan, capture_plan)
+    for seed in (0, 1):  # a capture with the same base seed draws other configurations (its own seed stream)
+        assert configs_apart(plan, plan_frames(scene, CaptureSettings(frames=500, seed=seed)))
     assert plan_evalset(scene, EvalSetSettings(frames_per_split=24, seed=1)) != plan
+
+
+def test_a_path_scene_leaves_out_what_it_cannot_have_and_says_why():
+    scene = load_scene("atrium")
+    splits, left_out = plan_splits(scene, TINY)
+    assert "unseen_objects" not in splits and "no test_meshes" in left_out["unseen_objects"]
+    assert splits["moved_camera"]["stream"] == 1  # the frames its unseen_objects split had
+    plan = plan_evalset(scene, TINY)
+    for f in plan:
+        s = path_parameter(scene, f["seed"], f["sampler_split"])
+        assert in_test_stretch(scene.ranges.camera, s) == (f["split"] == "moved_camera")
+    still = dataclasses.replace(scene, ranges=dataclasses.replace(scene.ranges, camera=None, camera_region=None))
+    splits, left_out = plan_splits(still, TINY)
+    assert "moved_camera" not in splits and "no camera ranges" in left_out["moved_camera"]
+    assert list(splits) == ["unseen_configs", "window_shapes"]
 
 
 def test_bad_settings_are_refused():
@@ -52,6 +88,36 @@ def test_bad_settings_are_refused():
         EvalSetSettings(spp=64, ladder=(1, 256)).check()
     with pytest.raises(DiviewerError, match="16x16"):
         EvalSetSettings(width=8).check()
+    with pytest.raises(DiviewerError, match="odd number"):
+        EvalSetSettings(window_widths=(171, 228)).check()
+    assert EvalSetSettings().windows == (170, 228) and EvalSetSettings().render_width == 228
+
+
+def test_a_centred_crop_of_a_wider_render_is_the_narrower_frame(gl_context):
+    from diviewer.gl.renderer import Renderer
+
+    scene = load_scene("cornell")
+    config = plan_evalset(scene, TINY)[0]["config"]
+    from diviewer.scene.loader import config_from_dict
+
+    config = config_from_dict(scene, config)
+    wide, narrow = Renderer(gl_context, scene, 56, 32), Renderer(gl_context, scene, 32, 32)
+    try:
+        a, b = wide.frame(config), narrow.frame(config)
+    finally:
+        wide.release()
+        narrow.release()
+    # The same pixel centres: equal up to rounding, except where a centre lies on the edge between two
+    # surfaces (a wall's corner), where rasterisation's tie can go either way (here < 1 % of pixels).
+    differ = np.zeros((32, 32), bool)
+    for name in ("depth", "normal", "albedo", "direct"):
+        x, y = crop(a[name], 32), b[name]
+        close = np.isclose(x, y, rtol=1e-4, atol=1e-5)
+        differ |= ~(close if close.ndim == 2 else close.all(axis=-1))
+    np.testing.assert_allclose(crop(a["depth"], 32), b["depth"], rtol=1e-4)  # the same surfaces, where they tie
+    assert differ.mean() < 0.02, differ.mean()
+    with pytest.raises(ValueError):
+        crop(a["depth"], 31)
 
 
 @pytest.fixture(scope="module")
@@ -62,89 +128,193 @@ def evalset(tmp_path_factory, gl_context):
     return out, summary
 
 
-@pytest.mark.mitsuba
 @pytest.mark.slow
-def test_build_writes_a_sound_set_with_its_noise_floor(evalset):
+def test_build_writes_a_sound_set_with_its_noise_floor_and_object_mask(evalset):
     out, summary = evalset
     ds = Dataset(out)
-    assert summary["present"] == 4 and ds.check() == []
+    assert summary["present"] == 8 and ds.check() == [] and (ds.width, ds.height) == (28, 16)
     names = [n for n, _ in ds.channels]
-    assert names[-3:] == ["pt_b", "pt_spp1", "pt_spp4"]
+    assert names[-4:] == ["pt_b", "pt_spp1", "pt_spp4", "object"]
     f = ds.load(0)
     assert not np.array_equal(f["pt"], f["pt_b"]), "the second render has a seed of its own"
     m = json.loads((out / "manifest.json").read_text())
     assert m["kind"] == "evalset" and m["evalset"]["ladder_spp"] == [1, 4] and m["evalset"]["tonemap"]["exposure"] > 0
+    assert m["evalset"]["left_out"] == {}
+    seen = 0
+    for i in ds.indices():  # the object's material (albedo 0.8) is exactly where the mask says
+        f = ds.load(i)
+        obj = f["object"][..., 0] > 0.5
+        grey = np.all(np.abs(f["albedo"] - 0.8) < 1e-3, axis=-1)
+        assert np.array_equal(obj, grey), i
+        seen += int(obj.sum())
+    assert seen > 0
     s = json.loads((out / "summary.json").read_text())
-    for split in EVAL_SPLITS:
-        floor = s["splits"][split]["methods"]["noise_floor"]
+    assert set(s["splits"]) == set(SPLIT_KEYS)
+    for key in SPLIT_KEYS:
+        floor = s["splits"][key]["methods"]["noise_floor"]
         assert math.isfinite(floor["psnr_tm"]["mean"]) and 0 < floor["flip_ldr"]["mean"] < 1
-        assert summary["noise_floor"][split]["psnr"]["mean"] == floor["psnr"]["mean"]
-        one, four = (s["splits"][split]["methods"][k] for k in ("pt_spp1", "pt_spp4"))
-        assert one["psnr"]["mean"] < four["psnr"]["mean"] < floor["psnr"]["mean"], "more samples, less error"
+        assert summary["noise_floor"][key]["psnr"]["mean"] == floor["psnr"]["mean"]
 
 
-@pytest.mark.mitsuba
 @pytest.mark.slow
 def test_build_resumes_a_lost_frame_to_the_same_bytes(evalset, tmp_path):
     out, _ = evalset
-    import shutil
-
     copy = tmp_path / "copy"
     shutil.copytree(out, copy)
     (copy / "frames" / "000003.json").unlink()  # as if killed before the sidecar was written
     summary = build_evalset("cornell", copy, TINY, log=quiet)
-    assert summary["present"] == 4
+    assert summary["present"] == 8
     assert (copy / "frames" / "000003.npy").read_bytes() == (out / "frames" / "000003.npy").read_bytes()
     with pytest.raises(DiviewerError, match="differs in"):
         build_evalset("cornell", copy, EvalSetSettings(**{**TINY.__dict__, "spp": 64}), log=quiet)
 
 
-@pytest.mark.mitsuba
-@pytest.mark.slow
-def test_eval_scores_every_row_per_split_as_strict_json(evalset, tmp_path):
-    out, _ = evalset
+def _models(tmp_path):
     scene = load_scene("cornell")
-    model = direct_times(tmp_path / "twice.onnx", 1.5, meta=base_meta(scene.file_hash, "cornell"))
+    any_shape = direct_times(tmp_path / "twice.onnx", 1.5, meta={**base_meta(scene.file_hash, "cornell"),
+                                                                 "multiple": 2})
+    square = direct_times(tmp_path / "square.onnx", 1.5, meta=base_meta(scene.file_hash, "cornell"))  # multiple 16
+    return any_shape, square
+
+
+@pytest.mark.slow
+def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_path):
+    out, _ = evalset
+    model, square = _models(tmp_path)
     res = tmp_path / "eval.json"
-    assert main(["eval", "--model", str(model), "--model", str(model), "--evalset", str(out), "--out", str(res)]) == 0
+    args = ["eval", "--model", str(model), "--model", str(model), "--model", str(square), "--evalset", str(out)]
+    assert main(args + ["--out", str(res)]) == 0
     text = res.read_text()
     assert "NaN" not in text and "Infinity" not in text
     r = json.loads(text)
-    assert set(r["splits"]) == set(EVAL_SPLITS)
-    for split in EVAL_SPLITS:
-        methods = r["splits"][split]["methods"]
-        assert set(methods) == {"twice", "twice_1", "direct", "noise_floor", "pt_spp1", "pt_spp4"}
+    assert set(r["splits"]) == set(SPLIT_KEYS) and r["left_out"] == {} and r["not_scored"] == {}
+    for key in SPLIT_KEYS:
+        split = r["splits"][key]
+        methods = split["methods"]
+        expected = {"twice", "twice_1", "direct", "noise_floor", "pt_spp1", "pt_spp4"}
+        if key in WINDOW_KEYS:  # the strict model cannot run 22 or 28 columns: refused, said, not dropped
+            assert "multiple" in split["refused"]["square"]["reason"]
+        else:
+            expected.add("square")
+        assert set(methods) == expected
         for m in methods.values():
             for k in ("psnr", "ssim", "psnr_tm", "ssim_tm", "flip_hdr", "flip_ldr"):
                 assert math.isfinite(m[k]["mean"]), k
-            assert -1 <= m["ssim"]["mean"] <= 1 and 0 <= m["flip_hdr"]["mean"] <= 1
             assert m["equivalent_spp"]["psnr_tm"]["text"]
+            assert m["psnr_tm_object"] is not None and m["psnr_tm_object"]["frames"] >= 1
         assert methods["pt_spp1"]["equivalent_spp"]["psnr_tm"]["text"] == "1"
-        assert methods["noise_floor"]["equivalent_spp"]["psnr_tm"]["bound"] == ">="
         assert methods["twice"]["psnr"] == methods["twice_1"]["psnr"]
-        # Pooled bias: the model returns 1.5 x direct light, so its summed radiance is 1.5 x the direct
-        # light's, and its indirect light (minus the GL direct light) is half the direct light's sum.
-        frames = [Dataset(out).load(i) for i in Dataset(out).indices(split)]
+        below = methods["twice"]["below_direct"]
+        assert below["frame"]["frames"] == 2 and 0 <= below["frame"]["share"] <= 1
+        # Pooled bias: the model returns 1.5 x direct light, so its summed radiance is 1.5 x the direct light's.
+        ev = EvalFrames(out)
+        frames = [{k: crop(v, split["shape"][0]) for k, v in ev.load(i).items()}
+                  for i in ev.present(split["split"], [])]
         d, pt = (sum(float(np.sum(f[c], dtype=np.float64)) for f in frames) for c in ("direct", "pt"))
         assert methods["twice"]["bias"] == pytest.approx(1.5 * d / pt - 1, rel=1e-4)
-        assert methods["twice"]["bias_indirect"] == pytest.approx(0.5 * d / (pt - d) - 1, rel=1e-4)
         assert methods["direct"]["bias_indirect"] == pytest.approx(-1.0)
-        assert abs(methods["noise_floor"]["bias"]) < 0.2  # a second unbiased render
 
 
-@pytest.mark.slow  # alone, it pays for the module's evaluation set (14 s of setup in the inner loop)
-@pytest.mark.mitsuba
+def test_eval_refuses_corrupt_and_incomplete_sets_unless_partial(evalset, tmp_path, capsys):
+    out, _ = evalset
+    model, _ = _models(tmp_path)
+    corrupt = tmp_path / "corrupt"
+    shutil.copytree(out, corrupt)
+    npy = corrupt / "frames" / "000002.npy"
+    data = bytearray(npy.read_bytes())
+    data[-7] ^= 0x5A  # one byte of one pixel
+    npy.write_bytes(bytes(data))
+    assert main(["eval", "--model", str(model), "--evalset", str(corrupt)]) == 2
+    assert "checksum" in capsys.readouterr().err
+    assert main(["eval", "--model", str(model), "--evalset", str(corrupt), "--partial"]) == 2
+
+    part = tmp_path / "part"
+    shutil.copytree(out, part)
+    for i in (2, 3):  # the whole unseen_objects split, and nothing else
+        (part / "frames" / f"{i:06d}.json").unlink()
+    (part / "frames" / "000000.npy").unlink()
+    assert main(["eval", "--model", str(model), "--evalset", str(part)]) == 2
+    assert "incomplete" in capsys.readouterr().err
+    res = tmp_path / "p.json"
+    assert main(["eval", "--model", str(model), "--evalset", str(part), "--partial", "--out", str(res)]) == 0
+    printed = capsys.readouterr().out
+    r = json.loads(res.read_text())
+    assert "unseen_objects" not in r["splits"] and "no frame" in r["not_scored"]["unseen_objects"]
+    assert "unseen_objects: not scored" in printed
+    assert r["splits"]["unseen_configs"]["frames_scored"] == [1] and "frames scored: 1" in printed
+
+
+def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, monkeypatch, capsys):
+    out, _ = evalset
+    model, _ = _models(tmp_path)
+    compact = tmp_path / "evalsets" / "cornell"
+    assert main(["evalset", "--compact", str(out), "--out", str(compact), "--frames-per-split", "1"]) == 0
+    ev = EvalFrames(compact)
+    assert ev.compact and len(ev.frames) == 4 and ev.problems() == []
+    assert {f["stored_width"] for f in ev.frames} == {16, 28}  # square splits stored cropped
+    assert not (compact / "frames").exists() and main(["data", "check", str(compact)]) == 0
+    monkeypatch.setattr("diviewer.evalframes.DEFAULT_EVALSETS", tmp_path / "evalsets")
+    assert default_evalset("cornell") == compact
+    res = tmp_path / "c.json"
+    assert main(["eval", "--model", str(model), "--out", str(res)]) == 0  # no --evalset: the compact set
+    r = json.loads(res.read_text())
+    assert r["compact"] and set(r["splits"]) == set(SPLIT_KEYS)
+    # One frame per split: the compact set holds each split's first frame; scores match the full set's on it.
+    single = tmp_path / "first"
+    shutil.copytree(out, single)
+    for f in Dataset(out).frames:
+        if f["index"] % 2:
+            (single / "frames" / f"{f['index']:06d}.json").unlink()
+    full = evaluate_evalset([model], single, log=quiet, partial=True)
+    for key in SPLIT_KEYS:
+        for m in ("twice", "direct", "noise_floor", "pt_spp1", "pt_spp4"):
+            a, b = r["splits"][key]["methods"][m], full["splits"][key]["methods"][m]
+            assert a["psnr_tm"]["mean"] == pytest.approx(b["psnr_tm"]["mean"], abs=0.05), (key, m)
+            assert a["ssim_tm"]["mean"] == pytest.approx(b["ssim_tm"]["mean"], abs=2e-3), (key, m)
+    # A changed byte in the compact set is refused, naming the frame.
+    m = json.loads((compact / "manifest.json").read_text())
+    m["frame_list"][1]["sha256"] = "0" * 64
+    (compact / "manifest.json").write_text(json.dumps(m))
+    capsys.readouterr()
+    assert main(["eval", "--model", str(model)]) == 2
+    assert "frame 2: checksum" in capsys.readouterr().err
+    assert main(["data", "check", str(compact)]) == 1
+    # eval --data of this scene takes the scene's tone map from its evaluation set, never from a model
+    from diviewer.evaluate import scene_exposure
+
+    frames = [np.full((4, 4, 3), 2.0)]
+    assert scene_exposure("cornell", ev.manifest["scene_hash"], frames)[0] == ev.exposure
+    from diviewer.encoding import fit_exposure
+
+    assert scene_exposure("cornell", "another", frames)[0] == fit_exposure(frames)
+    with pytest.raises(DiviewerError, match="already a compact"):
+        write_compact(compact, tmp_path / "again", log=quiet)
+    with pytest.raises(DiviewerError, match="not ready"):
+        write_compact(single, tmp_path / "two", frames_per_split=2, log=quiet)
+
+
 def test_eval_refuses_a_capture_as_evalset_and_models_of_other_scenes(evalset, tmp_path):
     out, _ = evalset
     other = direct_times(tmp_path / "other.onnx", meta=base_meta("f" * 64, "elsewhere"))
     assert main(["eval", "--model", str(other), "--evalset", str(out)]) == 2
-    assert main(["eval", "--model", str(other)]) == 2  # neither --evalset nor --data
+    assert main(["eval", "--model", str(other)]) == 2  # no --evalset, and no set ships for scene 'elsewhere'
     capture_like = tmp_path / "cap"
     capture_like.mkdir()
     m = json.loads((out / "manifest.json").read_text())
     m.pop("kind")
     (capture_like / "manifest.json").write_text(json.dumps(m))
     with pytest.raises(DiviewerError, match="not an evaluation set"):
-        from diviewer.evaluate import evaluate_evalset
-
         evaluate_evalset([], capture_like, log=quiet)
+
+
+SHIPPED = default_evalset("cornell")
+
+
+@pytest.mark.skipif(not (SHIPPED / "manifest.json").is_file(), reason="no compact evaluation set shipped yet")
+def test_the_shipped_compact_set_is_sound_small_and_of_todays_scene():
+    ev = EvalFrames(SHIPPED)
+    assert ev.compact and ev.problems() == []
+    assert ev.manifest["scene_hash"] == load_scene("cornell").file_hash
+    assert ev.manifest["spp"] >= 1024 and set(ev.splits()) == set(EVAL_SPLITS)
+    size = sum(p.stat().st_size for p in SHIPPED.iterdir())
+    assert size < 5 * 2**20, size

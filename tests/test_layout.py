@@ -24,11 +24,11 @@ LAYERS = {
     # 3: datasets and single renders
     "data/": 3, "render": 3,
     # 4: training and evaluation
-    "train/": 4, "evalset": 4, "evaluate": 4, "baseline": 4,
+    "train/": 4, "evalset": 4, "evaluate": 4, "evalframes": 4, "evalscore": 4, "baseline": 4,
     # 5: the applications
     "viewer/": 5, "bench/": 5, "build/": 5,
     # 6: the command line
-    "cli": 6, "__main__": 6,
+    "cli": 6, "evalcommand": 6, "__main__": 6,
 }
 """Each unit (a subpackage, or a top-level module) and its floor: a unit imports only its own floor or lower."""
 

@@ -152,3 +152,66 @@ def test_pooled_bias_is_the_signed_relative_error_of_the_summed_radiance():
     assert pooled_bias(same) == 0.0 and pooled_bias(same, "sum_indirect") is None  # no direct light given
     black = np.zeros((16, 16, 3))
     assert pooled_bias([score_frame(truths[0], black, 0.0, mask)]) is None  # nothing to be relative to
+
+
+def test_masked_psnr_counts_only_the_region():
+    a = np.zeros((16, 16, 3))
+    b = a.copy()
+    b[:, :8] = 0.1  # an error of 0.1 on the left half ...
+    b[:, 8:] = 0.5  # ... and of 0.5 on the right half
+    left = np.zeros((16, 16), bool)
+    left[:, :8] = True
+    assert metrics.masked_psnr(a, b, left) == pytest.approx(20.0)  # 10 log10(1 / 0.01)
+    assert metrics.masked_psnr(a, b, ~left) == pytest.approx(-20 * math.log10(0.5))
+    assert metrics.masked_psnr(a, b, np.ones((16, 16), bool)) == pytest.approx(metrics.psnr(a, b))
+    assert metrics.masked_psnr(a, a, left) == math.inf
+    assert metrics.masked_psnr(a, b, np.zeros((16, 16), bool)) is None  # an empty region has no score
+    assert metrics.masked_psnr(a, b, left.astype(np.float32)[..., None]) == pytest.approx(20.0)  # a mask channel
+    with pytest.raises(ValueError):
+        metrics.masked_psnr(a, b, left[:8])
+
+
+def test_masked_ssim_known_answers():
+    rng = np.random.default_rng(0)
+    a = np.full((32, 32, 3), 0.5)
+    b = a.copy()
+    b[:, 16:] = rng.uniform(0, 1, (32, 16, 3))  # noise on the right half only
+    left = np.zeros((32, 32), bool)
+    left[:, :10] = True  # windows centred here (radius 5) never reach column 16
+    assert metrics.masked_ssim(a, b, left) == 1.0
+    assert metrics.masked_ssim(a, b, ~left) < 0.9
+    # A constant offset on a flat region: SSIM's luminance term alone, (2 mu_a mu_b + c1) / (mu_a^2 + mu_b^2 + c1).
+    c = a + 0.1
+    c1 = 0.01 ** 2
+    expected = (2 * 0.5 * 0.6 + c1) / (0.5 ** 2 + 0.6 ** 2 + c1)
+    assert metrics.masked_ssim(a, c, left) == pytest.approx(expected, rel=1e-9)
+    assert metrics.masked_ssim(a, b, np.ones((32, 32), bool)) == pytest.approx(metrics.ssim(a, b))
+    border = np.zeros((32, 32), bool)
+    border[:, :5] = True  # no window is centred within 5 pixels of the border
+    assert metrics.masked_ssim(a, b, border) is None
+
+
+def test_regions_and_below_direct_share_on_a_synthetic_frame():
+    from diviewer.evalscore import below_direct, regions, score_frame_regions
+
+    direct = np.zeros((16, 16, 3))
+    direct[:8] = 0.5  # the top half is lit
+    obj = np.zeros((16, 16, 1), np.float32)
+    obj[4:12, 4:12] = 1  # the object straddles the shadow line
+    truth = direct + 0.2
+    frame = {"direct": direct, "object": obj, "pt": truth}
+    masks = regions(frame, exposure=1.0)
+    assert masks["object"].sum() == 64 and masks["object_unlit"].sum() == 32
+    assert not masks["object_unlit"][:8].any()
+    assert regions({"direct": direct, "pt": truth}, 1.0) is None  # no mask: no regions
+    good = truth.copy()
+    good[masks["object_unlit"]] += 0.01  # small error only in the object's shade
+    row = score_frame_regions(good, frame, 1.0, np.ones((16, 16), bool))
+    row_direct = score_frame_regions(direct, frame, 1.0, np.ones((16, 16), bool))
+    assert row["pixels_object_unlit"] == 32 and row["psnr_tm_object_unlit"] < row["psnr_tm_object"] < math.inf
+    assert row["psnr_tm_object_unlit"] > row_direct["psnr_tm_object_unlit"]
+    bad = dict(row, psnr_tm_object_unlit=row_direct["psnr_tm_object_unlit"] - 1)
+    share = below_direct([row, bad], [row_direct, row_direct])
+    assert share["frame"] == {"share": 0.0, "frames": 2}
+    assert share["object_unlit"] == {"share": 0.5, "frames": 2}
+    assert "object" not in below_direct([dict(row, psnr_tm_object=None)], [row_direct])  # a frame without the region

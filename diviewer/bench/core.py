@@ -40,7 +40,7 @@ class BenchSettings:
     gi_steps: tuple[int, ...] = (2,)
     """GI below frame resolution: frame / step, for each step the model's size multiple allows."""
     evalset: str | None = None
-    """The scene's evaluation set (diviewer evalset); default runs/<scene>/evalset."""
+    """The scene's evaluation set (diviewer evalset); default its compact set, assets/evalsets/<scene>."""
     eval_frames: int | None = None
     """Frames per split of the evaluation set scored (None: all)."""
     calib_data: str | None = None
@@ -310,20 +310,19 @@ def _row(kind: str, label: str, res: int, gi_res: int, timing: dict) -> dict:
 
 
 def _open_evalset(settings, scene, notes):
-    from diviewer.evalset import load_evalset
+    from diviewer.evalframes import EvalFrames, default_evalset
+    from diviewer.evaluate import check_frames
 
-    path = Path(settings.evalset or f"runs/{scene.name}/evalset")
+    path = Path(settings.evalset) if settings.evalset else default_evalset(scene.name)
     if not (path / "manifest.json").is_file():
         notes.append(f"no evaluation set at {path}: accuracy columns are empty (make one with "
-                     f"`diviewer evalset --scene {scene.name} --out {path}`)")
+                     f"`diviewer evalset --scene {scene.name} --out DIR` and pass --evalset DIR)")
         return None
-    ds = load_evalset(path)
+    ds = EvalFrames(path)
     if ds.manifest["scene_hash"] != scene.file_hash:
         notes.append(f"the evaluation set {path} was made from another version of the scene file: accuracy left out")
         return None
-    if not ds.indices():
-        notes.append(f"the evaluation set {path} has no frames yet: accuracy left out")
-        return None
+    check_frames(ds, partial=False)  # a corrupt or incomplete set is refused, as by `diviewer eval`
     return ds
 
 
@@ -333,28 +332,29 @@ def _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log) -> d
         return None
     from diviewer.bench.runner import GlBench, score_evalset
 
-    E = ds.width
+    idx, (E, H) = ds.bench_frames()
     models = {}
     for v in variants:
         net = net_of(v)
         steps = [1] + (list(settings.gi_steps) if v["kind"] == "neural" and v["precision"] == v["meta"]["precision"]
                        else [])
         for step in steps:
-            if ds.width % step or ds.height % step or (ds.width // step) % net.multiple or (ds.height // step) % net.multiple:
+            if E % step or H % step or (E // step) % net.multiple or (H // step) % net.multiple:
                 notes.append(f"{v['name']} {v['precision']}" + (f" GI 1/{step}" if step > 1 else "") +
                              f": no accuracy (the evaluation set's {E} px / {step} is not a multiple of {net.multiple})")
                 continue
             models[f"{v['path']}|{step}"] = (net, step)
     vxgi = {f"vxgi{g}": settings.vxgi(g) for g in settings.vxgi_grids}
-    log(f"scoring {len(models)} model variants and {len(vxgi)} VXGI grids on {ds.root} ({ds.width}x{ds.height})")
-    gl = GlBench(ctx, scene, ds.width, ds.height, mode) if vxgi or any(step > 1 for _, step in models.values()) else None
+    log(f"scoring {len(models)} model variants and {len(vxgi)} VXGI grids on {ds.root} ({E}x{H})")
+    gl = GlBench(ctx, scene, E, H, mode) if vxgi or any(step > 1 for _, step in models.values()) else None
     try:
-        scored = score_evalset(ds, models, settings.eval_frames, gl, log, vxgi=vxgi)
+        scored = score_evalset(ds, idx, (E, H), models, settings.eval_frames, gl, log, vxgi=vxgi)
     finally:
         if gl is not None:
             gl.release()
     scored["path"] = str(ds.root)
-    scored["resolution"] = [ds.width, ds.height]
+    scored["resolution"] = [E, H]
+    scored["compact"] = ds.compact
     scored["reference_spp"] = ds.manifest["spp"]
     return scored
 
@@ -374,7 +374,7 @@ def _temporal(ctx, settings, scene, ds, variants, net_of, mode, notes, log) -> d
     except DiviewerError as exc:
         notes.append(f"no temporal stability: {exc}")
         return None
-    res = ds.width if ds is not None else settings.resolutions[0]
+    res = ds.bench_frames()[1][0] if ds is not None else settings.resolutions[0]
     seq = temporal_configs(scene, settings.temporal_frames)
     log(f"temporal stability: {len(seq)} frames at {res}x{res}, reference {settings.temporal_spp} spp")
     gb = GlBench(ctx, scene, res, res, mode)

@@ -186,14 +186,16 @@ def read_final(tex) -> np.ndarray:
     return np.ascontiguousarray(np.flipud(raw), dtype=np.float32)
 
 
-def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | None = None, log=print,
-                  vxgi: dict | None = None) -> dict:
-    """Every method's pooled metrics over the evaluation set's frames (both splits).
+def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, frames_per_split: int | None,
+                  gl: GlBench | None = None, log=print, vxgi: dict | None = None) -> dict:
+    """Every method's pooled metrics over the evaluation set's frames ``idx`` cropped to ``shape``
+    (diviewer.evalframes.EvalFrames.bench_frames: the scene-camera splits at the model's square).
 
     A model at its full resolution (step 1) is scored on its output for the stored buffers, as `diviewer eval`
     does; below it (step > 1) on the frame the viewer shows: the configuration rendered again by ``gl`` (at
-    the set's resolution: the same buffers), packed at the GI resolution, upsampled and composited. VXGI is
-    scored on its composited frame of the configuration rendered again by ``gl``.
+    ``shape``: the same buffers), packed at the GI resolution, upsampled and composited. VXGI is scored on its
+    composited frame of the configuration rendered again by ``gl``. The path tracer's ladder comes from its
+    stored frames, or from a compact set's stored scores.
 
     Args:
         models: key -> (NeuralGI, step).
@@ -202,33 +204,37 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
         ``{"frames", "ladder_spp", "methods": {key: aggregate}}`` with ``direct``, ``noise_floor`` and
         ``pt_spp<n>`` beside the models; each aggregate carries its ``equivalent_spp``.
     """
-    from diviewer.evalset import EVAL_SPLITS
-    from diviewer.evaluate import aggregate, equivalent, score_frame
+    from diviewer.evalframes import crop_frame, split_key
+    from diviewer.evalscore import aggregate, equivalent, ladder_methods, score_frame
+    from diviewer.evaluate import run_model
     from diviewer.metrics import flat_mask
-    from diviewer.runtime import pack_buffers
-
-    info = ds.manifest["evalset"]
-    exposure = float(info["tonemap"]["exposure"])
-    ladder_spp = [int(n) for n in info["ladder_spp"]]
-    channels = {"direct": "direct", "noise_floor": info["second_seed_channel"],
-                **{f"pt_spp{n}": ch for n, ch in zip(ladder_spp, info["ladder_channels"])}}
-    idx = [i for s in EVAL_SPLITS for i in ds.indices(s)[:frames_per_split]]
     from diviewer.scene.loader import config_from_dict
 
+    info = ds.manifest["evalset"]
+    exposure = ds.exposure
+    ladder_spp = [int(n) for n in info["ladder_spp"]]
+    channels = {"direct": "direct", "noise_floor": info["second_seed_channel"],
+                **(ladder_methods(ds) if ds.ladder_images() else {})}
+    if frames_per_split is not None:
+        by_split: dict[str, list[int]] = {}
+        for i in idx:
+            by_split.setdefault(ds.entry(i)["split"], []).append(i)
+        idx = [i for s in by_split.values() for i in s[:frames_per_split]]
+    splits = ds.splits()
     vxgi = vxgi or {}
-    rows = {k: [] for k in (*models, *vxgi, *channels)}
-    configs = [config_from_dict(gl.scene, _entry(ds, i)["config"]) for i in idx] if vxgi else []
+    rows = {k: [] for k in (*models, *vxgi, *channels, *([] if ds.ladder_images() else ladder_methods(ds)))}
+    configs = [config_from_dict(gl.scene, ds.entry(i)["config"]) for i in idx] if vxgi else []
     vx_images = {key: gl.vxgi_frames(s, configs) for key, s in vxgi.items()}
     passes = {key: gl.neural_pass(net, step) for key, (net, step) in models.items() if step > 1}
     try:
         for n, i in enumerate(idx):
-            f = ds.load(i)
+            f = crop_frame(ds.load(i), shape[0])
             mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # as diviewer eval
             if passes:
-                gl.renderer.render(config_from_dict(gl.scene, _entry(ds, i)["config"]), direct=False)  # as timed
+                gl.renderer.render(config_from_dict(gl.scene, ds.entry(i)["config"]), direct=False)  # as timed
             for key, (net, step) in models.items():
                 if step == 1:
-                    image = net.run(pack_buffers(f))
+                    image = run_model(net, f)
                 else:
                     passes[key].run()
                     image = read_final(passes[key].composite())
@@ -237,6 +243,10 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
                 rows[key].append(score_frame(images[n], f["pt"], exposure, mask))
             for key, ch in channels.items():
                 rows[key].append(score_frame(f[ch], f["pt"], exposure, mask))
+            if not ds.ladder_images():
+                split = ds.entry(i)["split"]
+                for key, row in ds.ladder_rows(i, split_key(split, list(shape), splits[split])).items():
+                    rows[key].append(row)
     finally:
         for p in passes.values():
             p.release()
@@ -245,10 +255,6 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
     for m in methods.values():
         m["equivalent_spp"] = equivalent(m, ladder_spp, ladder)
     return {"frames": len(idx), "ladder_spp": ladder_spp, "exposure": exposure, "methods": methods}
-
-
-def _entry(ds, index: int) -> dict:
-    return next(f for f in ds.frames if f["index"] == index)
 
 
 # --- temporal stability --------------------------------------------------------------------------------------------

@@ -194,3 +194,29 @@ def test_quick_bench_without_torch_writes_every_row_stage_and_metric(gl_context,
     env = result["environment"]
     assert env["gl_renderer"] and "CPUExecutionProvider" in env["onnxruntime_available_providers"]
     assert "timer queries" in env["gl_timing"] or "glFinish" in env["gl_timing"]
+
+
+def test_bench_accuracy_from_a_compact_set_matches_the_full_set(tiny_bench_inputs, tmp_path, monkeypatch):
+    """The bench's default evaluation set is the scene's compact one; its ladder (stored as scores) and its
+    images score as the full set's frames do."""
+    from diviewer.bench.core import BenchSettings, _open_evalset
+    from diviewer.bench.runner import score_evalset
+    from diviewer.evalframes import EvalFrames, write_compact
+    from diviewer.scene import load_scene
+
+    root = tiny_bench_inputs
+    write_compact(root / "es", tmp_path / "evalsets" / "cornell", frames_per_split=1, log=lambda *_: None)
+    monkeypatch.setattr("diviewer.evalframes.DEFAULT_EVALSETS", tmp_path / "evalsets")
+    notes: list[str] = []
+    compact = _open_evalset(BenchSettings(), load_scene("cornell"), notes)  # no --evalset given
+    assert compact is not None and compact.compact and notes == []
+    full = EvalFrames(root / "es")
+    idx, shape = full.bench_frames()
+    assert shape == (32, 32) and compact.bench_frames() == (idx, shape)
+    assert [full.entry(i)["split"] for i in idx] == ["unseen_configs", "unseen_objects"]  # the scene's camera
+    a = score_evalset(compact, idx, shape, {}, None)["methods"]
+    b = score_evalset(full, idx, shape, {}, None)["methods"]
+    assert set(a) == set(b) == {"direct", "noise_floor", "pt_spp1", "pt_spp4"}
+    for k in a:
+        assert a[k]["psnr_tm"]["mean"] == pytest.approx(b[k]["psnr_tm"]["mean"], abs=0.05), k
+        assert a[k]["equivalent_spp"]["psnr_tm"]["text"] == b[k]["equivalent_spp"]["psnr_tm"]["text"], k

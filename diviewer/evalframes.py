@@ -1,0 +1,287 @@
+"""An evaluation set's frames for scoring, from a full set (diviewer.evalset) or a compact one, checked first.
+
+The compact set is what the repository ships (``assets/evalsets/<scene>/``, the default of ``eval`` and
+``bench``): the first frames of every split of a full set, written by ``diviewer evalset --compact``:
+
+- ``manifest.json``: the full set's manifest fields (scene, hash, splits, left-out splits, the scene's
+  tone-map exposure, ladder sample counts) with its frame list cut to the chosen frames; each frame records
+  its stored width (the split's widest shape: the square splits are stored cropped to the model's width),
+  the sha256 of its decoded array and, for the path-tracer ladder, its scores (below);
+- ``frames.zip``: per frame and channel, the float16 array split into its high and low bytes (the
+  high bytes, sign and exponent, compress well), LZMA-compressed in a zip (``np.load`` reads it).
+
+Stored images: the GL inputs, the >= 1024-spp truth ``pt``, the second-seed render ``pt_b`` (noise floor) and
+the object mask. The ladder (1 to 256 spp) is stored as its per-frame scores, computed with
+``diviewer.evaluate.score_frame`` on the full set's float32 frames at export, per shape: its images are only
+ever compared with ``pt``, and as noise they would not compress (each rung costs as much as ``pt``;
+cornell's 24 frames with the ladder's images would be ~10 MB, without ~4 MB).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from diviewer import imageio
+from diviewer.data.dataset import FrameProblem, read_manifest
+from diviewer.errors import DiviewerError
+
+COMPACT_FILE = "frames.zip"
+COMPACT_DTYPE = np.float16
+COMPACT_CHANNELS = ("depth", "normal", "albedo", "direct", "pt", "pt_b", "object")
+"""Channels a compact set stores as images (those the full set has)."""
+DEFAULT_EVALSETS: Path | None = None
+"""Where the shipped compact sets are; None: ``assets/evalsets`` (diviewer.paths: the checkout's or the wheel's)."""
+ABSENT = ("missing", "incomplete")
+"""Frame problems that mean 'not rendered yet' (eval --partial scores around them); any other is refused."""
+
+
+def default_evalset(scene_name: str) -> Path:
+    """The compact evaluation set the repository ships for a scene (eval and bench default to it)."""
+    from diviewer.paths import assets_dir
+
+    return (DEFAULT_EVALSETS or assets_dir() / "evalsets") / scene_name
+
+
+def split_key(split: str, shape, shapes) -> str:
+    """The result key of a split at one shape: the split's name, or ``name_WxH`` where it has several."""
+    return split if len(shapes) == 1 else f"{split}_{shape[0]}x{shape[1]}"
+
+
+def crop(image: np.ndarray, width: int) -> np.ndarray:
+    """The centred ``width`` columns of an (H, W, ...) image: the narrower frame at the same vertical fov."""
+    w = image.shape[1]
+    if width > w or (w - width) % 2:
+        raise ValueError(f"cannot crop {w} columns centrally to {width}")
+    o = (w - width) // 2
+    return image[:, o:o + width]
+
+
+def crop_frame(frame: dict[str, np.ndarray], width: int) -> dict[str, np.ndarray]:
+    return {k: crop(v, width) for k, v in frame.items()}
+
+
+def array_sha256(a: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
+
+
+class EvalFrames:
+    """An evaluation set opened for scoring: its splits, shapes and frames, full or compact."""
+
+    def __init__(self, path: str | Path):
+        self.root = Path(path)
+        if not (self.root / "manifest.json").is_file():
+            raise DiviewerError("no evaluation set here (no manifest.json); make one with `diviewer evalset --scene "
+                                "S --out DIR`, or leave --evalset out for the shipped compact set", path=self.root)
+        manifest = read_manifest(self.root)
+        if manifest.get("kind") != "evalset":
+            raise DiviewerError("not an evaluation set (a training capture?); make one with "
+                                "`diviewer evalset --scene S --out DIR`, or pass a capture with --data", path=path)
+        self.compact = "compact" in manifest
+        if self.compact:
+            self.manifest, self.ds = manifest, None
+        else:
+            from diviewer.data.dataset import Dataset
+
+            self.ds = Dataset(self.root)
+            self.manifest = self.ds.manifest
+        self.info = self.manifest["evalset"]
+        self.frames = self.manifest["frame_list"]
+        self._entry = {f["index"]: f for f in self.frames}
+        self._zip = None
+
+    # --- what the set holds ----------------------------------------------------------------------------------------
+
+    @property
+    def exposure(self) -> float:
+        return float(self.info["tonemap"]["exposure"])
+
+    @property
+    def height(self) -> int:
+        return int(self.manifest["resolution"][1])
+
+    def splits(self) -> dict[str, list[list[int]]]:
+        """Split -> its shapes [[w, h], ...], in plan order (an evaluation set from before shapes: its resolution)."""
+        out = {}
+        for name, info in self.info["splits"].items():
+            out[name] = info["shapes"] if isinstance(info, dict) else [list(self.manifest["resolution"])]
+        return out
+
+    def left_out(self) -> dict[str, str]:
+        return dict(self.info.get("left_out") or {})
+
+    def entry(self, index: int) -> dict:
+        return self._entry[index]
+
+    def stream(self, index: int) -> int | None:
+        return self._entry[index].get("stream")
+
+    def bench_frames(self) -> tuple[list[int], tuple[int, int]]:
+        """The frames the bench scores and their shape: those of seed streams 0 and 1 (the scene's camera
+        protocol: the frames evaluation sets had before moved_camera and window_shapes) at their square
+        shape; every frame at the set's resolution for an evaluation set from before streams."""
+        if not all("stream" in f for f in self.frames):
+            return [f["index"] for f in self.frames], tuple(self.manifest["resolution"])
+        idx = [f["index"] for f in self.frames if f["stream"] in (0, 1)]
+        shapes = self.splits()
+        shape = shapes[self._entry[idx[0]]["split"]][0]
+        return idx, (int(shape[0]), int(shape[1]))
+
+    def ladder_images(self) -> bool:
+        """True when the ladder's frames are stored (full set); a compact set has their scores instead."""
+        return not self.compact
+
+    def ladder_rows(self, index: int, key: str) -> dict[str, dict]:
+        """A compact set's stored ladder scores of one frame at one split key: method -> score_frame row."""
+        return self._entry[index]["ladder_scores"][key]
+
+    # --- checks ---------------------------------------------------------------------------------------------------
+
+    def problems(self) -> list[FrameProblem]:
+        """Every listed frame that is missing, incomplete or unsound (checksums verified, as `data check`)."""
+        if not self.compact:
+            return self.ds.check(verify_checksum=True)
+        out = []
+        for f in self.frames:
+            try:
+                arr = self._read(f["index"])
+            except FileNotFoundError:
+                out.append(FrameProblem(f["index"], "missing"))
+                continue
+            except Exception as exc:  # a broken zip: zipfile and numpy raise several types
+                out.append(FrameProblem(f["index"], f"unreadable: {type(exc).__name__}: {exc}"))
+                continue
+            if array_sha256(arr) != f.get("sha256"):
+                out.append(FrameProblem(f["index"], "checksum mismatch (corrupted or edited)"))
+            elif not np.all(np.isfinite(arr)):
+                out.append(FrameProblem(f["index"], "non-finite values"))
+        return out
+
+    def present(self, split: str, problems: list[FrameProblem]) -> list[int]:
+        bad = {p.index for p in problems}
+        return [f["index"] for f in self.frames if f["split"] == split and f["index"] not in bad]
+
+    # --- frames ---------------------------------------------------------------------------------------------------
+
+    def load(self, index: int) -> dict[str, np.ndarray]:
+        """One frame as float32 arrays by channel (depth (H, W), the others (H, W, C)) at its stored width."""
+        if not self.compact:
+            return self.ds.load(index)
+        arr = self._read(index).astype(np.float32)
+        out, c = {}, 0
+        for name, n in self.manifest["channels"]:
+            out[name] = arr[..., c:c + n]
+            c += n
+        out["depth"] = out["depth"][..., 0]
+        return out
+
+    def _read(self, index: int) -> np.ndarray:
+        path = self.root / COMPACT_FILE
+        if self._zip is None:
+            if not path.is_file():
+                raise FileNotFoundError(path)
+            self._zip = zipfile.ZipFile(path)
+        name = f"{index:06d}"
+        try:
+            hi = np.load(io.BytesIO(self._zip.read(f"{name}.hi.npy")))
+            lo = np.load(io.BytesIO(self._zip.read(f"{name}.lo.npy")))
+        except KeyError:
+            raise FileNotFoundError(f"{path}:{name}") from None
+        if hi.shape != lo.shape or hi.dtype != np.uint8 or lo.dtype != np.uint8:
+            raise ValueError("high and low bytes differ in shape or type")
+        return ((hi.astype(np.uint16) << 8) | lo).view(COMPACT_DTYPE)
+
+
+# --- the compact set ----------------------------------------------------------------------------------------------
+
+def _bytes_npy(a: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.ascontiguousarray(a), allow_pickle=False)
+    return buf.getvalue()
+
+
+def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=print) -> dict:
+    """Write the compact set of a full evaluation set: the first ``frames_per_split`` frames of each split.
+
+    The chosen frames must be present and sound in the full set (they are rendered first: evalset's
+    ``render_order``); the rest of the full set need not be complete.
+    """
+    from diviewer.evalscore import ladder_methods, score_frame_regions
+    from diviewer.metrics import flat_mask
+
+    src = EvalFrames(full_dir)
+    if src.compact:
+        raise DiviewerError("already a compact evaluation set; give the full set it came from", path=full_dir)
+    if frames_per_split < 1:
+        raise DiviewerError(f"must be at least 1, got {frames_per_split}", field="--frames-per-split")
+    out = Path(out)
+    if out.resolve() == src.root.resolve():
+        raise DiviewerError("the compact set cannot be written into the full set it is made from", path=out)
+    if (out / "manifest.json").is_file() and "compact" not in read_manifest(out):
+        raise DiviewerError("a dataset that is not a compact evaluation set is already there; use another --out",
+                            path=out)
+    problems = {p.index: p.problem for p in src.problems()}
+    splits = src.splits()
+    names = [n for n, _ in src.manifest["channels"] if n in COMPACT_CHANNELS]
+    ladder = ladder_methods(src)
+    chosen, blobs = [], {}
+    for split, shapes in splits.items():
+        idx = [f["index"] for f in src.frames if f["split"] == split][:frames_per_split]
+        missing = [i for i in idx if i in problems]
+        if missing:
+            raise DiviewerError(f"split {split}: frame(s) {', '.join(map(str, missing))} of the first "
+                                f"{frames_per_split} "
+                                f"are not ready ({problems[missing[0]]}); let `diviewer evalset` finish them, or ask "
+                                f"for fewer with --frames-per-split", path=full_dir)
+        stored = max(w for w, _ in shapes)
+        for i in idx:
+            f = crop_frame(src.load(i), stored)
+            arr = np.concatenate([f[n][..., None] if f[n].ndim == 2 else f[n] for n in names], axis=-1)
+            arr16 = arr.astype(COMPACT_DTYPE)
+            if not np.all(np.isfinite(arr16)):
+                raise DiviewerError(f"frame {i}: values beyond float16's range; the compact set cannot hold it",
+                                    path=full_dir)
+            u = arr16.view(np.uint16)
+            blobs[f"{i:06d}.hi.npy"] = _bytes_npy((u >> 8).astype(np.uint8))
+            blobs[f"{i:06d}.lo.npy"] = _bytes_npy((u & 0xFF).astype(np.uint8))
+            scores = {}
+            for shape in shapes:
+                g = crop_frame(f, shape[0])
+                mask = flat_mask(g["depth"], g["normal"], g["albedo"], g["direct"])
+                scores[split_key(split, shape, shapes)] = {
+                    m: score_frame_regions(g[ch], g, src.exposure, mask) for m, ch in ladder.items()}
+            entry = {k: v for k, v in src.entry(i).items()}
+            entry.update(stored_width=stored, sha256=array_sha256(arr16), ladder_scores=scores)
+            chosen.append(entry)
+    manifest = {k: v for k, v in src.manifest.items() if k not in ("frame_list",)}
+    manifest.update(resolution=[max(e["stored_width"] for e in chosen), src.height], dtype="float16",
+                    channels=[[n, c] for n, c in src.manifest["channels"] if n in names], frames=len(chosen),
+                    frame_list=chosen)
+    manifest["compact"] = {
+        "from": str(src.root), "frames_per_split": frames_per_split, "file": COMPACT_FILE,
+        "storage": "per frame and channel group: float16 split into high and low bytes (uint8 .npy), LZMA zip",
+        "ladder": "scores per frame and shape (diviewer.evaluate.score_frame on the full set's float32 frames); "
+                  "its images are not stored", "full_frames": len(src.frames)}
+    out.mkdir(parents=True, exist_ok=True)
+    with imageio.atomic_path(out / COMPACT_FILE) as tmp:
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_LZMA) as z:
+            for name, blob in blobs.items():
+                z.writestr(name, blob)
+    from diviewer.evalscore import strict_json
+
+    imageio.write_text(out / "manifest.json", strict_json(manifest))
+    size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
+    log(f"compact evaluation set: {len(chosen)} frames ({frames_per_split} per split of "
+        f"{', '.join(splits)}) in {out}, {size / 2**20:.2f} MB")
+    return {"frames": len(chosen), "bytes": size}
+
+
+def summary_line(ev: EvalFrames) -> str:
+    kind = "compact " if ev.compact else ""
+    return (f"{kind}evaluation set {ev.root}: {ev.manifest['scene']}, {len(ev.frames)} frames, truth "
+            f"{ev.manifest['spp']} spp, tone map exposure {ev.exposure:.4g} (the scene's, from the set's manifest)")
+

@@ -1,0 +1,143 @@
+"""Per-frame scores of one method against the path-traced truth, and their aggregates (numpy only).
+
+What ``eval`` and ``bench`` report for every split of an evaluation set: MSE, PSNR and SSIM on linear
+radiance and tone-mapped (diviewer.metrics.tonemap at the scene's exposure), HDR- and LDR-FLIP, the sums
+behind the pooled checkerboard ratio and bias, and the region metrics: tone-mapped PSNR and SSIM over the
+movable object's pixels (``object``) and over those of them that receive no direct light
+(``object_unlit``: the GL direct light's luminance, exposed by the scene's exposure, below ``UNLIT``).
+A region a frame does not have (the object off screen, or wholly lit) scores None for that frame and the
+aggregate counts the frames that had it.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from diviewer.metrics import (equivalent_spp, flip, highpass_power, masked_psnr, masked_ssim, mse, power_ratio,
+                              psnr, psnr_error, ssim, tonemap)
+from diviewer.outputs import strict
+
+KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
+EVAL_KEYS = KEYS + ("flip_hdr", "flip_ldr")
+EQUIVALENT_BY = ("psnr_tm", "psnr", "flip_ldr")
+"""Metrics the equivalent sample count is read from; the first is the headline (tables, targets)."""
+REGIONS = ("object", "object_unlit")
+REGION_KEYS = tuple(f"{k}_{r}" for r in REGIONS for k in ("psnr_tm", "ssim_tm"))
+UNLIT = 1e-3
+"""A pixel receives no direct light when its GL direct luminance times the exposure is below this (the
+tone map's white is at 1): shadowed or facing away from every light."""
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def score(image: np.ndarray, truth: np.ndarray, exposure: float) -> dict[str, float]:
+    a, b = tonemap(image, exposure), tonemap(truth, exposure)
+    return {"mse": mse(image, truth), "psnr": psnr(image, truth), "ssim": ssim(image, truth),
+            "mse_tm": mse(a, b), "psnr_tm": psnr(a, b), "ssim_tm": ssim(a, b)}
+
+
+def score_frame(image: np.ndarray, truth: np.ndarray, exposure: float, mask: np.ndarray,
+                direct: np.ndarray | None = None) -> dict[str, float]:
+    """Every evaluation-set metric of one frame, plus the sums behind the pooled checkerboard ratio and
+    the pooled bias (given the frame's GL ``direct`` light, also the bias of the indirect light alone)."""
+    a, b = tonemap(image, exposure), tonemap(truth, exposure)
+    s = score(image, truth, exposure)
+    s["flip_hdr"] = flip(truth, image, "HDR")
+    s["flip_ldr"] = flip(b, a, "LDR")
+    s["hf_power"], s["hf_power_ref"] = highpass_power(a, mask), highpass_power(b, mask)
+    s["sum"], s["sum_ref"] = float(np.sum(image, dtype=np.float64)), float(np.sum(truth, dtype=np.float64))
+    if direct is not None:
+        d = float(np.sum(direct, dtype=np.float64))
+        s["sum_indirect"], s["sum_indirect_ref"] = s["sum"] - d, s["sum_ref"] - d
+    return s
+
+
+def regions(frame: dict[str, np.ndarray], exposure: float) -> dict[str, np.ndarray] | None:
+    """The frame's region masks (H, W) bool, or None when the evaluation set has no object mask."""
+    if "object" not in frame:
+        return None
+    obj = np.asarray(frame["object"])
+    obj = (obj[..., 0] if obj.ndim == 3 else obj) > 0.5
+    lum = np.asarray(frame["direct"], dtype=np.float64) @ LUMINANCE
+    return {"object": obj, "object_unlit": obj & (lum * exposure < UNLIT)}
+
+
+def score_frame_regions(image: np.ndarray, frame: dict[str, np.ndarray], exposure: float,
+                        mask: np.ndarray) -> dict:
+    """``score_frame`` against ``frame["pt"]``, plus the region metrics and each region's pixel count."""
+    s = score_frame(image, frame["pt"], exposure, mask, frame["direct"])
+    masks = regions(frame, exposure)
+    if masks:
+        a, b = tonemap(image, exposure), tonemap(frame["pt"], exposure)
+        for name, m in masks.items():
+            s[f"psnr_tm_{name}"], s[f"ssim_tm_{name}"] = masked_psnr(a, b, m), masked_ssim(a, b, m)
+            s[f"pixels_{name}"] = int(m.sum())
+    return s
+
+
+def pooled_bias(rows: list[dict], key: str = "sum") -> float | None:
+    """Signed relative error of the summed radiance over all frames, (sum image / sum truth) - 1: negative
+    where a method is darker than the truth on the whole. An unbiased estimator (the path tracer at any
+    sample count) scores ~0; L1 training on noisy targets converges to the per-pixel median, which is
+    darker than the mean where fireflies are. None without the sums or with a black truth."""
+    if not rows or any(key not in r for r in rows):
+        return None
+    ref = sum(r[f"{key}_ref"] for r in rows)
+    return sum(r[key] for r in rows) / ref - 1.0 if ref > 0 else None
+
+
+def aggregate(rows: list[dict]) -> dict:
+    """Per-frame scores (``score_frame``) of one method as mean and std per key, plus the pooled checkerboard
+    ratio; what evaluate and the bench report per method. Region keys: over the frames that have the region
+    (``frames``), None where none has."""
+    out = {k: {"mean": float(np.mean([r[k] for r in rows])), "std": float(np.std([r[k] for r in rows]))}
+           for k in EVAL_KEYS}
+    # Pooled over frames (each frame's flat pixels weigh alike), not a mean of per-frame ratios.
+    out["checkerboard"] = power_ratio(sum(r["hf_power"] for r in rows), sum(r["hf_power_ref"] for r in rows))
+    out["bias"] = pooled_bias(rows)
+    out["bias_indirect"] = pooled_bias(rows, "sum_indirect")
+    if any(k in r for r in rows for k in REGION_KEYS):
+        for k in REGION_KEYS:
+            v = [r[k] for r in rows if r.get(k) is not None]
+            out[k] = {"mean": float(np.mean(v)), "std": float(np.std(v)), "frames": len(v)} if v else None
+    return out
+
+
+def below_direct(rows: list[dict], direct: list[dict]) -> dict:
+    """Share of frames in which a method's tone-mapped PSNR is below direct light alone's, over the whole
+    frame and over each region (frames that have it); ``frames`` counts the frames compared."""
+    out = {}
+    for name, key in (("frame", "psnr_tm"), *((r, f"psnr_tm_{r}") for r in REGIONS)):
+        pairs = [(a[key], d[key]) for a, d in zip(rows, direct) if a.get(key) is not None and d.get(key) is not None]
+        if pairs:
+            out[name] = {"share": sum(a < d for a, d in pairs) / len(pairs), "frames": len(pairs)}
+    return out
+
+
+def _error(summary: dict, key: str) -> float:
+    v = summary[key]["mean"]
+    return psnr_error(v) if key.startswith("psnr") else v
+
+
+def equivalent(summary: dict, ladder_spp: list[int], ladder: list[dict]) -> dict:
+    """The path-traced sample count whose error matches ``summary``'s (an ``aggregate``), per key of
+    ``EQUIVALENT_BY``, read off the ladder (``ladder[i]`` aggregated at ``ladder_spp[i]``); None where none can be."""
+    out = {}
+    for key in EQUIVALENT_BY:
+        try:
+            out[key] = equivalent_spp(ladder_spp, [_error(r, key) for r in ladder], _error(summary, key))
+        except ValueError:  # a perfect score (error 0) or a ladder with one: no sample count to read
+            out[key] = None
+    return out
+
+
+def ladder_methods(ev) -> dict[str, str]:
+    """The path tracer's rows an evaluation set (diviewer.evalframes.EvalFrames) holds: method -> channel."""
+    info = ev.info
+    return {f"pt_spp{int(n)}": ch for n, ch in zip(info["ladder_spp"], info["ladder_channels"])}
+
+
+def strict_json(obj) -> str:
+    """JSON without NaN or Infinity (a perfect PSNR, a ratio over a perfectly smooth reference): they become null."""
+    return json.dumps(strict(obj), indent=1, allow_nan=False)
