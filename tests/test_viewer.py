@@ -437,7 +437,7 @@ def _settings(**changes):
     from diviewer.viewer.app import ViewerSettings
     from diviewer.reference.progressive import ReferenceSettings
 
-    base = dict(size=(128, 128), vsync=False, model="none", render=RenderSettings(shadow_size=256),
+    base = dict(size=(128, 128), vsync=False, model="none", render=RenderSettings(shadow_size=256), target_fps=0.0,
                 reference=ReferenceSettings(variant="scalar_rgb", max_spp=2, pass_spp=1, max_depth=4))
     return ViewerSettings(**{**base, **changes})
 
@@ -729,7 +729,8 @@ def _readback_session(tmp_path: Path) -> None:
     summary = run_viewer("cornell", model=model, frames=3 * len(plan), script=script,
                          settings=_settings(size=(128, 96)))
     assert summary["gl_error"] == "GL_NO_ERROR"
-    assert sizes == {0: ((128, 96), (64, 48)), 1: ((64, 48), (64, 48)), 2: ((32, 32), (64, 48)),
+    # "model": the training rows (48) at the window's shape (a 32x32 window: 48x48, not the trained 64x48)
+    assert sizes == {0: ((128, 96), (64, 48)), 1: ((64, 48), (64, 48)), 2: ((32, 32), (48, 48)),
                      3: ((96, 64), (48, 32))}, sizes
 
 

@@ -7,6 +7,8 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
+
 from diviewer.timing import summarize
 from diviewer.viewer.stats import STAGES
 
@@ -19,6 +21,9 @@ def run_summary(viewer) -> dict:
         "frames": viewer.frame_index,
         "gi_size": viewer.gi_size,
         "render_size": viewer.render_size,
+        "view_size": viewer.view_size,
+        "render_scale": viewer.render_scale,
+        "out_of_range": list(st.out_of_range()),
         "shadow_renders": viewer.renderer.shadow_renders,
         "window_size": viewer.window.size,
         "model": st.model_name,
@@ -34,10 +39,15 @@ def run_summary(viewer) -> dict:
     }
 
 
-def write_stats(path: Path, viewer, per_frame: list[dict[str, float]]) -> dict:
+def write_stats(path: Path, viewer, per_frame: list[dict[str, float]],
+                shown: list[tuple[float, int]] | None = None) -> dict:
     """The stage table of a scripted run as JSON: per stage median/p95/mean ms over the frames (the first,
-    which compiles shaders and warms onnxruntime, left out when there are others), fps, resolutions."""
+    which compiles shaders and warms onnxruntime, left out when there are others), fps, resolutions, the
+    render scales and the training-range check (``shown``: per frame, its scale and its number of reasons)."""
     frames = per_frame[1:] if len(per_frame) > 1 else per_frame
+    shown = (shown[1:] if len(shown or ()) > 1 else shown) or [(viewer.render_scale, 0)]
+    scales = np.array([s for s, _ in shown], np.float64)
+    st, scaler = viewer.state, viewer.scaler
     table = summarize(frames)
     frame_ms = table.get("frame", {}).get("median", 0.0)
     gi, neural = viewer.gi, viewer.neural
@@ -46,6 +56,17 @@ def write_stats(path: Path, viewer, per_frame: list[dict[str, float]]) -> dict:
         "fps": 1000.0 / frame_ms if frame_ms > 0 else 0.0,
         "stages_ms": table,
         "render_size": list(viewer.render_size),
+        "window_size": list(viewer.view_size),
+        "render_scale": viewer.render_scale,
+        "render_scales": {"min": float(scales.min()), "median": float(np.median(scales)), "max": float(scales.max()),
+                          "changes": int(np.count_nonzero(np.diff(scales)))},
+        "target_fps": scaler.settings.target_fps if scaler.enabled else None,
+        "scale_floor": scaler.settings.floor,
+        "gi_note": viewer.gi.note or None,
+        "out_of_range": list(st.out_of_range()),
+        "frames_out_of_range": sum(1 for _, n in shown if n),
+        "exposure": st.exposure,
+        "auto_exposure": st.auto_exposure,
         "gi_size": list(viewer.gi_size) if neural is not None else None,
         "gi_res": gi.gi_res if neural is not None else None,
         "gi": dataclasses.asdict(gi.settings),
@@ -60,6 +81,8 @@ def write_stats(path: Path, viewer, per_frame: list[dict[str, float]]) -> dict:
         "gl_renderer": viewer.gl_renderer,
         "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
     }
+    from diviewer.imageio import write_text
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(record, indent=2))
+    write_text(path, json.dumps(record, indent=2))
     return record
