@@ -1049,3 +1049,27 @@ def test_auto_exposure_follows_the_frame_and_is_deterministic(display, tmp_path)
     assert a[3] - a[6] < 2.0  # ... gradually (2 stops is where it goes)
     stats = json.loads((tmp_path / "a.json").read_text())
     assert stats["auto_exposure"] is True and stats["exposure"] < a[3]
+
+
+def test_scale_accuracy_tool_scores_each_scale_against_full_resolution(tmp_path):
+    """tools/scale_accuracy.py renders the viewer's frame at each scale, upscales it to the window and scores
+    it against the scale-1 frame (a tiny window and model: the figures themselves are the lead's to measure)."""
+    pytest.importorskip("onnx")
+    from tool_modules import load_tool
+
+    tool = load_tool("scale_accuracy")
+    assert tool.parse_scales("0.5,0.75") == [1.0, 0.75, 0.5]
+    with pytest.raises(DiviewerError, match="render scale"):
+        tool.parse_scales("1,1.5")
+    model = _cornell_model(tmp_path / "cornell_k8.onnx")
+    out = tmp_path / "acc.json"
+    result = tool.main(["--model", str(model), "--size", "96x72", "--scales", "1,0.5", "--frames", "1",
+                        "--exposure", "1", "--out", str(out)])
+    assert json.loads(out.read_text())["summary"] == result["summary"]
+    assert result["render_sizes"] == {"1.0": [96, 72], "0.5": [48, 36]}
+    assert result["gi_sizes"] == {"1.0": [64, 48], "0.5": [64, 48]}  # the model's rows at the window's shape
+    for split in ("train", "test", "all"):
+        half = result["summary"][split]["0.5"]["vs_full"]
+        assert 10.0 < half["psnr_tm"] < 60.0 and 0.5 < half["ssim_tm"] < 1.0
+        assert result["summary"][split]["1.0"]["vs_full"]["psnr_tm"] is None
+        assert half is not None and result["summary"][split]["0.5"]["vs_truth"]["psnr_tm"] is None
