@@ -996,6 +996,8 @@ def _dynamic_session(tmp_path: Path) -> None:
     assert stats["target_fps"] == 10000.0 and stats["render_scale"] == 0.5 and stats["render_size"] == [64, 48]
     assert stats["render_scales"]["min"] == 0.5 and stats["render_scales"]["max"] == 1.0
     assert stats["render_scales"]["changes"] == 1 and stats["window_size"] == [128, 96]
+    settled = stats["at_final_scale"]  # frames 8-29 were drawn at the floor
+    assert settled["frames"] == 22 and settled["fps"] > 0 and settled["frame_ms_median"] > 0
 
 
 def test_target_fps_lowers_the_scale_to_its_floor(display, tmp_path):
@@ -1073,3 +1075,27 @@ def test_scale_accuracy_tool_scores_each_scale_against_full_resolution(tmp_path)
         assert 10.0 < half["psnr_tm"] < 60.0 and 0.5 < half["ssim_tm"] < 1.0
         assert result["summary"][split]["1.0"]["vs_full"]["psnr_tm"] is None
         assert half is not None and result["summary"][split]["0.5"]["vs_truth"]["psnr_tm"] is None
+
+
+def _shape_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained 64x48, stride 16; main's runtime does not pad
+    seen = {}
+    script = [(1, lambda v: seen.setdefault("wide", (v.gi_size, v.gi.note))),
+              (1, "resize", {"width": 96, "height": 160}),
+              (3, lambda v: seen.setdefault("portrait", (v.gi_size, v.gi.note)))]
+    summary = run_viewer("cornell", model=model, frames=4, script=script, stats=tmp_path / "stats.json",
+                         settings=_settings(size=(160, 96)))
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    # A 5:3 window: the network runs at the model's 48 rows and the window's shape, 80x48 (not squashed to 64x48).
+    assert seen["wide"] == ((80, 48), "")
+    # Portrait 3:5 would be 29x48; a runtime that runs only multiples of 16 gets 32x48, and the viewer says so.
+    (size, note) = seen["portrait"]
+    assert size == (32, 48) and "GI 32x48 instead of 29x48" in note
+    assert json.loads((tmp_path / "stats.json").read_text())["gi_note"] == note
+
+
+def test_the_network_sees_the_window_shape(display, tmp_path):
+    pytest.importorskip("onnx")
+    _in_window_process(_shape_session, tmp_path)

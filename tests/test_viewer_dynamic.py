@@ -198,3 +198,19 @@ def test_runtime_pads_asks_the_runtime():
             return None
 
     assert not runtime_pads(Strict()) and runtime_pads(Padding())
+    # The viewer's GI control: the shape it asks for, and what a runtime without padding runs instead.
+    from diviewer.gl.neural import GISettings
+    from diviewer.scene import load_scene
+    from diviewer.viewer.gi import GIControl
+    from diviewer.viewer.state import ViewerState
+
+    class Renderer:
+        width, height = 75, 48  # a 150x96 window at render scale 0.5
+
+    gi = GIControl(None, Renderer(), ViewerState(load_scene("cornell")), "model", GISettings())
+    gi.view_size = (150, 96)
+    assert gi.sizes(Padding(), "model") == ((75, 48), (75, 48))
+    assert gi.sizes(Strict(), "model") == ((80, 48), (75, 48))
+    assert gi.sizes(Padding(), "1/3") == ((25, 16), (25, 16))
+    assert gi._size_for(Strict(), "model", (75, 48)) == (80, 48) and "instead of 75x48" in gi.note
+    assert gi._size_for(Padding(), "model", (75, 48)) == (75, 48) and gi.note == ""

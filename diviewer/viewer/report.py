@@ -39,6 +39,14 @@ def run_summary(viewer) -> dict:
     }
 
 
+def _settled(frames: list[dict[str, float]], scales: np.ndarray) -> dict:
+    """The frames drawn at the run's last render scale (after dynamic resolution settled): count, median ms, fps."""
+    n = len(scales) - int(np.flatnonzero(np.diff(scales))[-1] + 1) if np.any(np.diff(scales)) else len(scales)
+    ms = [f["frame"] for f in frames[-n:] if "frame" in f] if len(frames) == len(scales) else []
+    median = float(np.median(ms)) if ms else 0.0
+    return {"frames": len(ms), "frame_ms_median": median, "fps": 1000.0 / median if median > 0 else 0.0}
+
+
 def write_stats(path: Path, viewer, per_frame: list[dict[str, float]],
                 shown: list[tuple[float, int]] | None = None) -> dict:
     """The stage table of a scripted run as JSON: per stage median/p95/mean ms over the frames (the first,
@@ -60,6 +68,7 @@ def write_stats(path: Path, viewer, per_frame: list[dict[str, float]],
         "render_scale": viewer.render_scale,
         "render_scales": {"min": float(scales.min()), "median": float(np.median(scales)), "max": float(scales.max()),
                           "changes": int(np.count_nonzero(np.diff(scales)))},
+        "at_final_scale": _settled(frames, scales),
         "target_fps": scaler.settings.target_fps if scaler.enabled else None,
         "scale_floor": scaler.settings.floor,
         "gi_note": viewer.gi.note or None,
