@@ -968,6 +968,7 @@ def _scaled_session(tmp_path: Path) -> None:
     assert stats["render_scale"] == 0.5 and stats["render_size"] == [64, 48] and stats["window_size"] == [128, 96]
     assert stats["render_scales"] == {"min": 0.5, "median": 0.5, "max": 0.5, "changes": 0}
     assert stats["target_fps"] is None and stats["out_of_range"] == [] and stats["frames_out_of_range"] == 0
+    assert stats["culling"] is True and stats["drawn_last_frame"]["gbuffer"]["triangles"] > 0
 
 
 def test_fixed_render_scale_window_is_the_offscreen_render_upscaled(display, tmp_path, ctx):
