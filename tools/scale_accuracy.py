@@ -1,18 +1,19 @@
-"""What dynamic resolution costs in accuracy: the viewer's frame at each render scale against its full-resolution frame.
+"""What dynamic resolution costs in accuracy: the viewer's frame at each render scale against full resolution.
 
 Usage: python tools/scale_accuracy.py [--scene cornell] [--model assets/models/cornell.onnx] [--size 768x768]
-       [--scales 1,0.875,0.75,0.625,0.5] [--frames 6] [--spp 0] [--gi-res model] [--out runs/<scene>/scale_accuracy.json]
+       [--scales 1,0.875,0.75,0.625,0.5] [--frames 6] [--spp 0] [--gi-res model] [--exposure X]
+       [--out runs/<scene>/scale_accuracy.json]
 
-The successor of tools/fullres_accuracy.py (which compared the full-resolution frame with the old stretched one).
-For each frame (drawn from the sampler's train and test splits with seeds no capture uses) and each scale s:
-the G-buffer, shadow lookup and direct light at s times the window's size, the network at the GI resolution
-the viewer picks (``--gi-res``, as `diviewer view`: ``model`` keeps the model's rows at the window's shape),
-its indirect light upsampled by the joint bilateral filter over the direct light (gl/neural.py, the viewer's
-pass), then upscaled to the window bilinearly (GL's LINEAR magnification, which the viewer's display applies).
-Each is scored against the scale-1 frame with `diviewer eval`'s metrics (PSNR/SSIM linear and tone-mapped at
-the model's exposure, or ``--exposure``); with ``--spp N`` also against Mitsuba at the window's size and N spp. The table goes
-to stdout and, with every frame's scores, to the JSON. Long on a 2-core CPU with --spp: run it on a quiet
-machine.
+The successor of tools/fullres_accuracy.py (which compared the full-resolution frame with the old stretched
+one). For each frame (drawn from the sampler's train and test splits with seeds no capture uses) and each
+scale s: the G-buffer, shadow lookup and direct light at s times the window's size, the network at the GI
+resolution the viewer picks (``--gi-res``, as `diviewer view`: ``model`` keeps the model's rows at the
+window's shape), its indirect light upsampled by the joint bilateral filter over the direct light
+(gl/neural.py, the viewer's pass), then upscaled to the window bilinearly (GL's LINEAR magnification, which
+the viewer's display applies). Each is scored against the scale-1 frame with `diviewer eval`'s metrics
+(PSNR/SSIM linear and tone-mapped at the model's exposure, or ``--exposure``); with ``--spp N`` also against
+Mitsuba at the window's size and N spp. The table goes to stdout and, with every frame's scores, to the JSON.
+Long on a 2-core CPU with --spp: run it on a quiet machine.
 """
 
 from __future__ import annotations
@@ -124,14 +125,16 @@ def measure(scene_name: str, model_path: Path, size: tuple[int, int], scales: li
 
 def table(result: dict) -> str:
     """The summary as text: per split and scale, PSNR/SSIM tone-mapped against full resolution (and the truth)."""
-    lines = [f"{'split':6} {'scale':>6} {'shaded':>10}  {'dB vs full':>10} {'SSIM':>6}  {'dB vs truth':>11} {'SSIM':>6}"]
+    lines = [f"{'split':6} {'scale':>6} {'shaded':>10}  {'dB vs full':>10} {'SSIM':>6}  "
+             f"{'dB vs truth':>11} {'SSIM':>6}"]
     for split, by_scale in result["summary"].items():
         for s, d in by_scale.items():
             f, t = d["vs_full"], d["vs_truth"]
             w, h = result["render_sizes"][s]
             cell = lambda v, fmt: format(v, fmt) if v is not None else "-"
             lines.append(f"{split:6} {float(s):6.3f} {f'{w}x{h}':>10}  {cell(f['psnr_tm'], '10.2f'):>10} "
-                         f"{cell(f['ssim_tm'], '6.4f'):>6}  {cell(t['psnr_tm'], '11.2f'):>11} {cell(t['ssim_tm'], '6.4f'):>6}")
+                         f"{cell(f['ssim_tm'], '6.4f'):>6}  {cell(t['psnr_tm'], '11.2f'):>11} "
+                         f"{cell(t['ssim_tm'], '6.4f'):>6}")
     return "\n".join(lines)
 
 

@@ -254,7 +254,8 @@ class Renderer:
         items, boxes = self._draw_list(config)
         keep = boxes_visible(frustum_planes(clip), boxes) if self.culling else np.ones(len(items), bool)
         draws, triangles = self.drawn.get(stage, (0, 0))
-        self.drawn[stage] = (draws + int(keep.sum()), triangles + sum(it[0].triangles for it, k in zip(items, keep) if k))
+        triangles += sum(it[0].triangles for it, k in zip(items, keep) if k)
+        self.drawn[stage] = (draws + int(keep.sum()), triangles)
         for (gmesh, mat_name, model, _), k in zip(items, keep):
             if not k:
                 continue

@@ -53,7 +53,8 @@ def camera_region_reasons(region: CameraRegion, camera, default_camera=None) -> 
     out = []
     p = np.asarray(camera.position, np.float64)
     if not box_contains(region.region, p, margin=1e-6):
-        out.append(f"camera at {_fmt(p)} is outside the trained region {_fmt(region.region[0])}-{_fmt(region.region[1])}")
+        box = f"{_fmt(region.region[0])}-{_fmt(region.region[1])}"
+        out.append(f"camera at {_fmt(p)} is outside the trained region {box}")
     elif region.in_test_region(p):
         out.append(f"camera at {_fmt(p)} is in a held-out test region (never in training)")
     to_target = np.asarray(region.target, np.float64) - p
@@ -61,7 +62,8 @@ def camera_region_reasons(region: CameraRegion, camera, default_camera=None) -> 
         off = _angle(_view_dir(camera), to_target)
         reach = math.degrees(region.max_look_offset(p))
         if off > reach + ANGLE_TOL:
-            out.append(f"camera looks {off:.0f} deg away from the scene's target; trained within {reach:.0f} deg from here")
+            out.append(f"camera looks {off:.0f} deg away from the scene's target; trained within {reach:.0f} deg "
+                       f"from here")
     lo, hi = region.fov
     if not lo - ANGLE_TOL <= camera.fov <= hi + ANGLE_TOL:
         out.append(f"field of view {camera.fov:.0f} deg is outside the trained {lo:.0f}-{hi:.0f} deg")

@@ -10,8 +10,8 @@ at the shading resolution (the window's framebuffer times the render scale, whic
 hold ``--target-fps``); the neural pass reduces them to the GI resolution (``gi_res``: the model's row
 count at the window's shape, or a fraction of the shading size), runs the network (optionally one frame
 behind, on a worker thread), and upsamples its indirect light over the direct light; the display pass
-draws the view mode's image into the window (bilinear where it is upscaled), and the panel goes on top. Nothing here
-imports torch. The rooms: window.py (size, scale, letterbox), input.py (key table), panel.py,
+draws the view mode's image into the window (bilinear where it is upscaled), and the panel goes on top.
+Nothing here imports torch. The rooms: window.py (size, scale, letterbox), input.py (key table), panel.py,
 screenshots.py, sources.py (the view modes' textures), models.py (which model), gi.py (the model's neural
 pass and the GI resolution policy), script.py (scripted runs), report.py (the run's summary and stats
 JSON), state.py (what is shown, no GL), scale.py (dynamic resolution), exposure.py and meter.py (auto exposure).
@@ -32,6 +32,7 @@ from diviewer.viewer.settings import BACKGROUND, ViewerSettings, check_render_sc
 from diviewer.viewer.view_modes import Unavailable, view_mode
 
 __all__ = ["BACKGROUND", "Viewer", "ViewerSettings", "run_viewer"]
+
 
 class Viewer:
     """The window, its GL resources and the frame loop. ``run_viewer`` is the usual entry point."""
@@ -221,8 +222,8 @@ class Viewer:
         self.window.resize(width, height)
 
     def view_rect(self) -> tuple[int, int, int, int]:
-        """Where the image is drawn in the framebuffer: (x, y, w, h), y from the bottom (all of it, but for
-        the frame after a resize, still drawn at the old size and letterboxed)."""
+        """Where the image is drawn in the framebuffer: (x, y, w, h), y from the bottom; all of it (letterboxed
+        only if the framebuffer's size changed since the frame started)."""
         return self.window.view_rect(self.view_size)
 
     def pick_window_point(self, x: float, y: float) -> str | None:
