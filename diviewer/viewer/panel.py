@@ -196,11 +196,11 @@ class Panel:
         if changed:
             st.set_auto_exposure(False)
             st.set_exposure(ev)
-        changed, on = imgui.checkbox("auto exposure (metered from the frame)", st.auto_exposure)
+        changed, on = imgui.checkbox("auto exposure (metered)", st.auto_exposure)
         if changed:
             st.set_auto_exposure(on)
         fps = self.actions.scaler.settings.target_fps
-        changed, fps = imgui.slider_int("target fps (0: fixed scale)", int(round(fps)), 0, 120)
+        changed, fps = imgui.slider_int("target fps (0 off)", int(round(fps)), 0, 120)
         if changed:
             self.actions.set_target_fps(fps)
         changed, scale = imgui.slider_float("render scale", self.actions.render_scale, 0.25, 1.0, "%.2f")
