@@ -76,7 +76,8 @@ class NeuralPass:
             raise DiviewerError(f"unknown GI downsample '{settings.downsample}'; use one of {', '.join(DOWNSAMPLES)}",
                                 field="downsample")
         w, h = gi_size or (renderer.width, renderer.height)
-        model.check_size(w, h)
+        if hasattr(model, "check_size"):  # a runtime that pads any size to its stride may drop the check
+            model.check_size(w, h)
         self.gi_size = (w, h)
         self._pack_defines = dict(PACK_DEFINES, **({"AREA": 1} if settings.downsample == "area" else {}))
         self.guide = renderer.shaders.compute("gi_guide.glsl", PACK_DEFINES)

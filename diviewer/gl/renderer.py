@@ -15,6 +15,7 @@ import numpy as np
 
 from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import unbind_framebuffer
+from diviewer.gl.culling import boxes_visible, draw_list, frustum_planes
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shadow_fit import fit_directional, point_faces
 from diviewer.gl.shaders import ShaderCache
@@ -63,8 +64,12 @@ class Renderer:
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, width: int, height: int,
                  settings: RenderSettings = RenderSettings(), shaders: ShaderCache | None = None,
-                 timer: StageTimer | None = None):
+                 timer: StageTimer | None = None, culling: bool = True):
         self.ctx, self.scene, self.settings = ctx, scene, settings
+        self.culling = culling
+        """Leave out what lies outside each pass's frustum (gl/culling.py); the image is the same either way."""
+        self.drawn: dict[str, tuple[int, int]] = {}
+        """The last frame's (draw calls, triangles) per pass: gbuffer, shadows (maps rendered this frame)."""
         self.shaders = shaders or ShaderCache(ctx)
         self.timer = timer or StageTimer()
         """Times each pass as a stage; the frame's owner resets it (GL passes need its sync or queries)."""
@@ -192,6 +197,7 @@ class Renderer:
                           self._bounds[2])
         self.frame_view = frame
         self.direct_pending = not direct
+        self.drawn = {}
         for name, run in self.passes:
             if name == "direct" and not direct:
                 continue
@@ -230,36 +236,29 @@ class Renderer:
         self.set_light_uniforms(prog, light, self._shadows.get(light.name))
 
     def _draw_list(self, config: FrameConfig) -> list:
-        """(GPU mesh, material, model matrix or None for world space) per draw call, opaque first.
+        """culling.draw_list, cached per (scene, objects tuple), with the boxes as one (N, 2, 3) array."""
+        if self._draw_cache[0] is not self.scene or self._draw_cache[1] is not config.objects:
+            items = draw_list(self.scene, config, self.gpu, self.ctx)
+            boxes = np.array([it[3] for it in items], np.float64).reshape(-1, 2, 3)
+            self._draw_cache = (self.scene, config.objects, (items, boxes))
+        return self._draw_cache[2]
 
-        Objects that the scene's ranges never move are merged per material into static buffers once
-        (Sponza: 24 draws instead of 170); they are used while the frame holds all of them unchanged,
-        and the moving objects are drawn one by one. Cached per (scene, objects tuple).
-        """
-        if self._draw_cache[0] is self.scene and self._draw_cache[1] is config.objects:
-            return self._draw_cache[2]
-        scene = self.scene
-        static = [o for o in scene.default.objects if o.name not in scene.ranges.objects]
-        static_set = set(static)
-        items = []
-        if len(static) > 1 and static_set <= set(config.objects):
-            self.gpu.set_static(self.ctx, scene.meshes, static, key=scene)
-            items = [(m, name, None) for name, m in self.gpu.static.items()]
-            moving = [o for o in config.objects if o not in static_set]
-        else:
-            moving = config.objects
-        items += [(self.gpu.meshes[o.mesh], o.material, o.matrix()) for o in moving]
-        items.sort(key=lambda it: scene.materials[it[1]].is_masked)  # opaque first: early depth test
-        self._draw_cache = (scene, config.objects, items)
-        return items
-
-    def _draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None) -> None:
-        """Draw the frame's objects with shaders/<file>; alpha-masked materials use its ALPHA_TEST variant.
+    def _draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None,
+                      clip: np.ndarray, stage: str) -> None:
+        """Draw the frame's objects inside the frustum of ``clip`` (world to clip space) with shaders/<file>;
+        alpha-masked materials use its ALPHA_TEST variant. Counts draws and triangles in ``drawn[stage]``.
 
         ``setup(prog)`` sets the pass's uniforms on each program variant before its first draw.
         """
         progs: dict[bool, moderngl.Program] = {}
-        for gmesh, mat_name, model in self._draw_list(config):
+        items, boxes = self._draw_list(config)
+        keep = boxes_visible(frustum_planes(clip), boxes) if self.culling else np.ones(len(items), bool)
+        draws, triangles = self.drawn.get(stage, (0, 0))
+        triangles += sum(it[0].triangles for it, k in zip(items, keep) if k)
+        self.drawn[stage] = (draws + int(keep.sum()), triangles)
+        for (gmesh, mat_name, model, _), k in zip(items, keep):
+            if not k:
+                continue
             mat = self.scene.materials[mat_name]
             masked = mat.is_masked
             if masked not in progs:
@@ -297,7 +296,7 @@ class Renderer:
         def setup(prog):
             set_uniform(prog, "m_proj", proj)
             set_uniform(prog, "m_view", view)
-        self._draw_objects(config, "gbuffer.glsl", {}, setup, view)
+        self._draw_objects(config, "gbuffer.glsl", {}, setup, view, proj @ view, "gbuffer")
 
     def _shadow_key(self, config: FrameConfig, light, bounds: np.ndarray) -> tuple:
         """Everything a light's shadow map depends on: the light, each object's pose and the GPU mesh it draws
@@ -335,7 +334,8 @@ class Renderer:
             m_light, extent, depth_range = fit_directional(bounds, light.direction)
             fbo.use()
             fbo.clear(depth=1.0)
-            self._draw_objects(config, "shadow.glsl", {}, lambda prog: set_uniform(prog, "m_light", m_light), None)
+            self._draw_objects(config, "shadow.glsl", {}, lambda prog: set_uniform(prog, "m_light", m_light), None,
+                               m_light, "shadows")
             return {"map": tex, "m_light": m_light, "texel_world": extent / self.settings.shadow_size,
                     "depth_range": depth_range}
         faces = point_faces(light.position, bounds)
@@ -348,7 +348,7 @@ class Renderer:
             def setup(prog, m=m):
                 set_uniform(prog, "u_light_pos", tuple(light.position))
                 set_uniform(prog, "m_light", m)
-            self._draw_objects(config, "shadow.glsl", {"POINT_LIGHT": 1}, setup, None)
+            self._draw_objects(config, "shadow.glsl", {"POINT_LIGHT": 1}, setup, None, m, "shadows")
         fbo.viewport = (0, 0, 3 * s, 2 * s)
         return {"map": tex, "faces": faces}
 

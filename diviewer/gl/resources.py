@@ -5,6 +5,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from diviewer.gl.culling import split_mesh
 from diviewer.scene import camera as cam
 from diviewer.scene.model import Material, Mesh
 
@@ -34,6 +35,9 @@ class GpuMesh:
         self.ibo = ctx.buffer(np.ascontiguousarray(mesh.faces, dtype="u4").tobytes())
         self.ctx = ctx
         self._vaos: dict[int, moderngl.VertexArray] = {}
+        self.triangles = len(mesh.faces)
+        self.bounds = np.asarray(mesh.bounds, np.float64) if len(mesh.vertices) else np.zeros((2, 3))
+        """Object-space box (2, 3): what culling tests."""
 
     def vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
         """A vertex array for ``prog``, binding only the attributes it declares."""
@@ -106,17 +110,19 @@ class GpuScene:
                          if m.texture is not None}
         self._sources: dict[str, object] = {**meshes, **{f"material:{k}": m for k, m in materials.items()}}
         """What each GPU copy was made from, so ``sync`` uploads only what changed."""
-        self.static: dict[str, GpuMesh] = {}
-        """Per material, the merged geometry of the objects that never move (see Renderer)."""
+        self.static: list[tuple[str, GpuMesh]] = []
+        """The geometry of the objects that never move, merged per material and cut into spatial chunks
+        (gl/culling.py): (material, GPU mesh in world space) each (see Renderer)."""
         self.static_key: object = None
 
     def set_static(self, ctx: moderngl.Context, meshes: dict[str, Mesh], objects, key: object) -> None:
-        """Upload the merged static geometry of ``objects`` (once per ``key``, compared by identity)."""
+        """Upload the merged, chunked static geometry of ``objects`` (once per ``key``, compared by identity)."""
         if key is self.static_key:
             return
-        for m in self.static.values():
+        for _, m in self.static:
             m.release()
-        self.static = {k: GpuMesh(ctx, m) for k, m in merge_static(meshes, objects).items()}
+        self.static = [(material, GpuMesh(ctx, chunk))
+                       for material, mesh in merge_static(meshes, objects).items() for chunk in split_mesh(mesh)]
         self.static_key = key
 
     def add_mesh(self, ctx: moderngl.Context, mesh: Mesh) -> None:
@@ -139,7 +145,7 @@ class GpuScene:
                 self._sources[f"material:{key}"] = mat
 
     def release(self) -> None:
-        for m in (*self.meshes.values(), *self.static.values()):
+        for m in (*self.meshes.values(), *(g for _, g in self.static)):
             m.release()
         for t in self.textures.values():
             t.release()

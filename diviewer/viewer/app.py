@@ -6,63 +6,32 @@ Usage::
     diviewer view --frames 60 --screenshot shot.png    # scripted: 60 frames, save the last, exit
 
 Each frame: the GL renderer draws shadows (cached while nothing moves), the G-buffer and direct light
-at the window's framebuffer resolution; the neural pass reduces them to the GI resolution (``gi_res``:
-the model's training size or a fraction of the window), runs the network (optionally one frame
-behind, on a worker thread), and upsamples its indirect light over the full-resolution direct light;
-the display pass draws the view mode's image into the window, and the panel goes on top. Nothing here
-imports torch. The rooms: window.py (size, scale, letterbox), input.py (key table), panel.py,
+at the shading resolution (the window's framebuffer times the render scale, which ``scale.py`` moves to
+hold ``--target-fps``); the neural pass reduces them to the GI resolution (``gi_res``: the model's row
+count at the window's shape, or a fraction of the shading size), runs the network (optionally one frame
+behind, on a worker thread), and upsamples its indirect light over the direct light; the display pass
+draws the view mode's image into the window (bilinear where it is upscaled), and the panel goes on top.
+Nothing here imports torch. The rooms: window.py (size, scale, letterbox), input.py (key table), panel.py,
 screenshots.py, sources.py (the view modes' textures), models.py (which model), gi.py (the model's neural
 pass and the GI resolution policy), script.py (scripted runs), report.py (the run's summary and stats
-JSON), state.py (what is shown, no GL).
+JSON), state.py (what is shown, no GL), scale.py (dynamic resolution), exposure.py and meter.py (auto exposure).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
+import moderngl
+
 from diviewer.gl.display import Image, Look, depth_range
-from diviewer.gl.neural import GISettings
-from diviewer.gl.renderer import RenderSettings
-from diviewer.reference.progressive import ReferenceSettings
 from diviewer.scene.model import Scene
 from diviewer.viewer.models import model_candidates
+from diviewer.viewer.settings import BACKGROUND, ViewerSettings, check_render_scale, scale_settings
 from diviewer.viewer.view_modes import Unavailable, view_mode
 
-BACKGROUND = (0.08, 0.08, 0.09)
-"""Colour of the bars around the GI image when the window's aspect ratio differs."""
-
-
-@dataclass(frozen=True)
-class ViewerSettings:
-    """Settings a viewer session opens with (the GI resolution, pipelining and timing then change live:
-    ``Viewer.gi`` and ``Viewer.timer`` hold the current ones)."""
-
-    size: tuple[int, int] = (768, 768)
-    """Window size in screen units (the framebuffer may be larger on HiDPI screens)."""
-    vsync: bool = True
-    model: str = "auto"
-    """A model file, ``auto`` (the first compatible assets/models/<scene>*.onnx) or ``none``."""
-    provider: str | None = None
-    """onnxruntime execution provider (cpu, cuda, tensorrt); None picks the fastest available."""
-    controller: str = "fly"
-    """Camera controller at start: fly or orbit."""
-    timing: bool = True
-    """Time each stage: GL stages by GPU timer queries (by waiting for the GPU around them where the driver
-    has none), the rest by the wall clock."""
-    gi_res: str = "model"
-    """The neural GI's resolution: ``model`` (its training size), a fraction of the window (``1/4``: snapped
-    to the model's stride) or ``WxH`` (a multiple of the stride, else refused)."""
-    gi: GISettings = field(default_factory=GISettings)
-    """How the GI inputs are reduced, the output upsampled, and whether inference runs one frame behind."""
-    panel: bool = True
-    render: RenderSettings = field(default_factory=RenderSettings)
-    reference: ReferenceSettings = field(default_factory=ReferenceSettings)
-    reference_max_size: int = 512
-    """Longest side of the path-traced reference (it is scaled to the view)."""
-    title: str = "diviewer"
+__all__ = ["BACKGROUND", "Viewer", "ViewerSettings", "run_viewer"]
 
 
 class Viewer:
@@ -103,6 +72,8 @@ class Viewer:
         from diviewer.viewer.panel import Panel
         from diviewer.viewer.screenshots import Screenshots
         from diviewer.viewer.sources import ReferenceTexture, black_texture
+        from diviewer.viewer.meter import Meter
+        from diviewer.viewer.scale import ScaleController, render_size
         from diviewer.viewer.state import ViewerState
 
         imgui, settings = self.imgui, self.settings
@@ -115,7 +86,17 @@ class Viewer:
         """One timer for every stage of a frame: renderer passes, neural pass, inference, display, panel."""
         self.set_timing(settings.timing)
         fb_w, fb_h = (max(1, s) for s in self.window.fb_size)
-        self.renderer = Renderer(self.ctx, scene, fb_w, fb_h, settings.render, self.shaders, timer=self.timer)
+        self.scaler = ScaleController(scale_settings(settings))
+        self.view_size = (fb_w, fb_h)
+        """The window's framebuffer size the image is shown at (the renderer's is this times the scale)."""
+        self.drawn_scale = self.scaler.scale
+        """The render scale of the frame drawn last."""
+        self.renderer = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
+                                 self.shaders, timer=self.timer)
+        self.upscale = self.ctx.sampler(filter=(moderngl.LINEAR, moderngl.LINEAR), repeat_x=False, repeat_y=False)
+        """Bound over the display's texture units where the image is upscaled to the window: bilinear."""
+        self.meter = Meter(self.ctx, self.shaders)
+        self.state.set_auto_exposure(settings.auto_exposure)
         self.display = DisplayPass(self.ctx, self.shaders)
         self.black = black_texture(self.ctx)
         self.reference_texture = ReferenceTexture(self.ctx, self.reference, settings.reference_max_size)
@@ -123,6 +104,7 @@ class Viewer:
         self.shot_path = f"diviewer_{scene.name}.png"
         self._scene_revision = 0
         self.gi = GIControl(self.ctx, self.renderer, self.state, settings.gi_res, settings.gi, settings.provider)
+        self.gi.view_size = self.view_size
         self.vxgi = None
         """The VXGI pass, made the first time the VXGI view mode is shown."""
         self.imgui_ctx = imgui.create_context()
@@ -146,8 +128,13 @@ class Viewer:
 
     @property
     def render_size(self) -> tuple[int, int]:
-        """The G-buffer's resolution: the window's framebuffer."""
+        """The G-buffer's resolution (the shading resolution): the window's framebuffer times the render scale."""
         return self.renderer.width, self.renderer.height
+
+    @property
+    def render_scale(self) -> float:
+        """The render scale of the frame drawn last (the controller's; each side is rounded to whole pixels)."""
+        return self.drawn_scale
 
     @property
     def gi_size(self) -> tuple[int, int]:
@@ -175,10 +162,30 @@ class Viewer:
     def set_model(self, spec: str | Path | None) -> None:
         """Load a model (path, ``auto`` or ``none``); without one the viewer shows direct light and says why."""
         self.gi.release()
-        fb_w, fb_h = self.window.fb_size
-        if fb_w > 0 and fb_h > 0:
-            self.renderer.resize(fb_w, fb_h)
+        self._follow_window()
         self.gi.load(spec)
+
+    def _follow_window(self) -> None:
+        """Size the renderer to the window's framebuffer times the render scale (the GI follows)."""
+        from diviewer.viewer.scale import render_size
+
+        fb_w, fb_h = self.window.fb_size
+        if fb_w <= 0 or fb_h <= 0:
+            return
+        want = render_size((fb_w, fb_h), self.scaler.scale)
+        if want != self.render_size or (fb_w, fb_h) != self.view_size:
+            self.view_size = (fb_w, fb_h)
+            self.renderer.resize(*want)
+            self.gi.follow_window(self.view_size)
+        self.drawn_scale = self.scaler.scale
+
+    def set_render_scale(self, scale: float) -> float:
+        """Fix the render scale (0 < scale <= 1; dynamic resolution turns off); applied at the next frame."""
+        return self.scaler.fix(check_render_scale(scale))
+
+    def set_target_fps(self, fps: float) -> float:
+        """Hold ``fps`` by moving the render scale from the current one (0: keep the current scale)."""
+        return self.scaler.hold(fps)
 
     def request_model(self, spec: str) -> None:
         """Switch models at the next frame's start (this frame's images are in use)."""
@@ -215,20 +222,20 @@ class Viewer:
         self.window.resize(width, height)
 
     def view_rect(self) -> tuple[int, int, int, int]:
-        """Where the image is drawn in the framebuffer: (x, y, w, h), y from the bottom (all of it, but for
-        the frame after a resize, still drawn at the old size and letterboxed)."""
-        return self.window.view_rect(self.render_size)
+        """Where the image is drawn in the framebuffer: (x, y, w, h), y from the bottom; all of it (letterboxed
+        only if the framebuffer's size changed since the frame started)."""
+        return self.window.view_rect(self.view_size)
 
     def pick_window_point(self, x: float, y: float) -> str | None:
         """Select the object under window point (x, y) (screen units, y down)."""
-        point = self.window.to_image(x, y, self.render_size)
+        point = self.window.to_image(x, y, self.view_size)
         if point is None:
             return self.state.select_object(None)
-        return self.state.pick(*point, *self.render_size)
+        return self.state.pick(*point, *self.view_size)
 
     def screenshot(self, path: str | Path) -> Path:
-        """Save the view (without the panel) at the render resolution as PNG, and the frame as JSON, at the
-        end of the next frame (so image and configuration agree)."""
+        """Save the view (without the panel) at the window's resolution (upscaled from the shading resolution)
+        as PNG, and the frame as JSON, at the end of the next frame (so image and configuration agree)."""
         return self.shots.request(path)
 
     def window_screenshot(self, path: str | Path) -> Path:
@@ -256,15 +263,24 @@ class Viewer:
         st = self.state
         look = Look(st.exposure, st.tonemap, depth_range(st.scene, st.config), st.split_position,
                     2.0 ** st.diff_gain_ev)
+        upscaled = tuple(rect[2:]) != self.render_size
+        if upscaled:  # the G-buffer's textures filter nearest; shown larger than drawn they are filtered bilinearly
+            self.upscale.use(location=0)
+            self.upscale.use(location=1)
         self.display.show(target, rect, images[0], images[-1], view_mode(st.view_mode).layout, look)
+        if upscaled:
+            self.upscale.clear(location=0)
+            self.upscale.clear(location=1)
 
     def _save_view(self, path: Path, images: list[Image]) -> Path:
         from diviewer.viewer.screenshots import view_record
 
-        st, size = self.state, self.render_size
+        st, size = self.state, self.view_size
         record = view_record(st, size, self.model.path if self.model is not None else None, self.gl_renderer,
                              gi_size=self.gi_size if self.neural is not None else None,
-                             gi_settings=dataclasses.asdict(self.gi.settings) if self.neural is not None else None)
+                             gi_settings=dataclasses.asdict(self.gi.settings) if self.neural is not None else None,
+                             render_size=list(self.render_size), render_scale=self.render_scale,
+                             out_of_range=st.out_of_range())
         self.shots.save_view(path, size, lambda fbo, rect: self._draw_view(fbo, rect, images), record)
         st.message = f"saved {path} and {path.with_suffix('.json').name}"
         return path
@@ -291,9 +307,9 @@ class Viewer:
         self.input.held_keys(dt)
         st.step(dt)
         self._sync_scene()
-        if self.render_size != (fb_w, fb_h):
-            self.renderer.resize(fb_w, fb_h)
-            self.gi.follow_window()
+        if frame_ms > 0:
+            self.scaler.update(frame_ms, self.drawn_scale)  # the last frame's time, at the scale it was drawn at
+        self._follow_window()
         self.timer.reset()
         # The direct pass is deferred: the neural pass computes the direct light inline where it can,
         # and whatever else reads the buffer (a view mode, VXGI) runs the pass first.
@@ -306,6 +322,8 @@ class Viewer:
         screen.clear(*BACKGROUND, 1.0, viewport=(0, 0, fb_w, fb_h))
         rect = self.view_rect()
         images, notes = self._images(FrameImages(self))
+        if st.auto_exposure and images[0].kind == "radiance":
+            st.meter(self.meter.read(images[0].texture))
         with self.timer.stage("composite", gpu=True):
             self._draw_view(screen, rect, images)
         screen.viewport = (0, 0, fb_w, fb_h)
@@ -344,6 +362,8 @@ class Viewer:
             self.imgui_renderer.release()
             self.imgui.destroy_context(self.imgui_ctx)
             self.black.release()
+            self.meter.release()
+            self.upscale.release()
             self.display.release()
             if self.vxgi is not None:
                 self.vxgi.release()
@@ -373,7 +393,8 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
             actions (resize, screenshot, window_screenshot, set_model, set_vsync, pick_window_point) or
             ViewerState methods (set_view_mode, set_light_direction, fly, drag, ...).
         stats: write the per-stage times of every frame drawn (median, p95, mean ms), the frame rate, the
-            window and GI resolutions and how the stages were timed, as JSON, here.
+            window, shading and GI resolutions, the render scales, how the stages were timed and whether the
+            frames were inside the model's training ranges, as JSON, here.
 
     Returns:
         A summary: frames drawn, GI size, model, screenshots, view modes drawn, the reasons of those
@@ -401,6 +422,7 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
     viewer = Viewer(scene, settings)
     summary: dict = {}
     per_frame: list[dict[str, float]] = []
+    shown: list[tuple[float, int]] = []  # per frame: its render scale, how many reasons it was out of range
     try:
         while frames is None or viewer.frame_index < frames:
             for action in steps.get(viewer.frame_index, ()):
@@ -410,6 +432,7 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
                 break
             if stats is not None and viewer.frame_index > drawn:
                 per_frame.append(viewer.state.stats.last())
+                shown.append((viewer.render_scale, len(viewer.state.out_of_range())))
         if screenshot is not None:
             if viewer.frame_index == 0:
                 viewer.frame()
@@ -417,7 +440,7 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
             viewer._save_view(Path(screenshot).with_suffix(".png"), viewer._images(FrameImages(viewer))[0])
         summary = run_summary(viewer)
         if stats is not None:
-            summary["stats"] = write_stats(Path(stats), viewer, per_frame)
+            summary["stats"] = write_stats(Path(stats), viewer, per_frame, shown)
     finally:
         viewer.close()
     return summary

@@ -35,6 +35,15 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
                    help="how the full-resolution buffers are reduced to the GI resolution (default nearest)")
     p.add_argument("--pipelined", action="store_true",
                    help="run inference one frame behind on a worker thread (GL and onnxruntime overlap)")
+    p.add_argument("--target-fps", type=float, default=30.0,
+                   help="hold this frame rate by scaling the shading resolution between --scale-floor and the "
+                        "window's size, then upscaling (default 30; 0 turns it off)")
+    p.add_argument("--render-scale", type=float, default=None,
+                   help="shade at this fixed fraction of the window's size per side (0 < S <= 1; turns "
+                        "--target-fps off)")
+    p.add_argument("--scale-floor", type=float, default=0.5, help="lowest render scale --target-fps goes to")
+    p.add_argument("--auto-exposure", action="store_true",
+                   help="start with the exposure metered from the frame (the panel toggles it)")
     p.add_argument("--light-moving", action="store_true", help="start with the light animated")
     p.add_argument("--stats", type=Path, default=None,
                    help="with --frames: write per-stage times, fps and the resolutions as JSON here")
@@ -54,6 +63,14 @@ def run_view(args: argparse.Namespace) -> int:
         raise DiviewerError("--window-screenshot needs --frames (it saves the last frame's window)",
                             field="--window-screenshot")
     size = parse_resolution(args.size, "--size")
+    if args.target_fps < 0:
+        raise DiviewerError(f"--target-fps must be 0 (off) or more, got {args.target_fps}", field="--target-fps")
+    if not 0.0 < args.scale_floor <= 1.0:
+        raise DiviewerError(f"--scale-floor must be in (0, 1], got {args.scale_floor}", field="--scale-floor")
+    if args.render_scale is not None:
+        from diviewer.viewer.settings import check_render_scale
+
+        check_render_scale(args.render_scale)
     if args.frames is not None and str(args.model).lower() not in ("auto", "none"):
         # Scripted mode: a model the user named and the viewer refuses is a user error (exit 2),
         # found before a window opens; interactively the panel says why and offers the others.
@@ -64,7 +81,9 @@ def run_view(args: argparse.Namespace) -> int:
         if model is None:
             raise DiviewerError(message, field="--model")
     settings = ViewerSettings(size=size, vsync=not args.no_vsync, model=args.model, provider=args.provider,
-                              controller=args.camera, gi_res=args.gi_res,
+                              controller=args.camera, gi_res=args.gi_res, target_fps=args.target_fps,
+                              render_scale=args.render_scale, scale_floor=args.scale_floor,
+                              auto_exposure=args.auto_exposure,
                               gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
     script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else []
     if args.window_screenshot is not None:
@@ -74,7 +93,9 @@ def run_view(args: argparse.Namespace) -> int:
     if args.frames is not None:
         gw, gh = summary["gi_size"]
         rw, rh = summary["render_size"]
-        print(f"viewer: {summary['frames']} frames at {rw}x{rh}, GI {gw}x{gh}, "
+        vw, vh = summary["view_size"]
+        print(f"viewer: {summary['frames']} frames at {vw}x{vh} (shaded at {rw}x{rh}, scale "
+              f"{summary['render_scale']:.2f}), GI {gw}x{gh}, "
               f"{summary['stages_ms']['frame']:.1f} ms/frame"
               + "".join(f", saved {p}" for p in (args.screenshot, args.window_screenshot) if p))
     return 0

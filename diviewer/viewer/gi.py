@@ -1,9 +1,10 @@
 """The viewer's neural GI: which model runs, and its neural pass at the GI resolution asked for.
 
-The GI resolution policy lives here: ``gi_res`` is ``model`` (the training size), a fraction of the window
-(it follows the window when it is resized) or ``WxH``; a size the model cannot run at is refused and
-changes nothing. The pass is rebuilt when the resolution, the pipelining or (for a fraction) the window's
-size changes. The sizes themselves are computed by ``models.gi_resolution``.
+The GI resolution policy lives here: ``gi_res`` is ``model`` (the training row count, the window's shape), a
+fraction of the shading resolution (it follows the window and the dynamic scale) or ``WxH``; a size the
+model cannot run at is refused and changes nothing. The pass is rebuilt when the resolution, the pipelining
+or the sizes it follows change. The sizes themselves are computed by ``models.gi_resolution``; where the
+runtime cannot pad a shape to its stride, ``note`` says what was run instead.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 
 from diviewer.errors import DiviewerError
 from diviewer.gl.neural import GISettings
-from diviewer.viewer.models import gi_resolution, open_model
+from diviewer.viewer.models import gi_resolution, open_model, runtime_pads
 from diviewer.viewer.state import ViewerState
 
 
@@ -31,6 +32,10 @@ class GIControl:
         self.model = None
         self.neural = None
         self._fits: set[tuple[int, int]] = set()
+        self.view_size: tuple[int, int] | None = None
+        """The window's framebuffer size (the shape ``model`` follows); None: the render size."""
+        self.note = ""
+        """Why the GI runs at another shape than the window's (a runtime that pads no shape), or empty."""
 
     @property
     def render_size(self) -> tuple[int, int]:
@@ -41,8 +46,21 @@ class GIControl:
         """The GI resolution the network runs at (the render size without a model)."""
         return self.neural.gi_size if self.neural is not None else self.render_size
 
+    def sizes(self, model, gi_res: str, render_size: tuple[int, int] | None = None) -> tuple[tuple, tuple]:
+        """(the GI size the runtime will run, the size asked for) for ``gi_res`` at ``render_size`` (default:
+        the renderer's); they differ where the runtime cannot pad the asked shape to the model's stride."""
+        render_size = render_size or self.render_size
+        shape = self.view_size or render_size
+        wanted = gi_resolution(gi_res, render_size, model.resolution, model.multiple, pads=True, shape=shape)
+        if runtime_pads(model):
+            return wanted, wanted
+        return gi_resolution(gi_res, render_size, model.resolution, model.multiple, shape=shape), wanted
+
     def _size_for(self, model, gi_res: str, render_size: tuple[int, int]) -> tuple[int, int]:
-        size = gi_resolution(gi_res, render_size, model.resolution, model.multiple)
+        size, wanted = self.sizes(model, gi_res, render_size)
+        self.note = "" if size == wanted else (
+            f"the runtime runs this model only at multiples of {model.multiple}: GI {size[0]}x{size[1]} instead "
+            f"of {wanted[0]}x{wanted[1]} (the window's shape is squashed)")
         if size not in self._fits:  # a size beyond the GL limits is refused cleanly, before a pass allocates
             from diviewer.gl.context import check_render_size
 
@@ -98,9 +116,12 @@ class GIControl:
         if self.model is not None:
             self._rebuild()
 
-    def follow_window(self) -> None:
-        """After the renderer was resized: a fraction of the window follows it; other sizes stay."""
-        if self.neural is not None and "/" in self.gi_res:
+    def follow_window(self, view_size: tuple[int, int] | None = None) -> None:
+        """After the renderer was resized (the window, or the dynamic scale): ``model`` follows the window's
+        shape, a fraction the shading resolution; an explicit WxH stays."""
+        if view_size is not None:
+            self.view_size = tuple(view_size)
+        if self.neural is not None:
             if self._size_for(self.model, self.gi_res, self.render_size) != self.neural.gi_size:
                 self._rebuild()
 

@@ -63,17 +63,37 @@ GI_FRACTIONS = ("1/1", "1/2", "1/3", "1/4", "1/6", "1/8")
 """GI resolutions offered as fractions of the window's framebuffer (the panel's list, ``--gi-res``)."""
 
 
-def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], multiple: int) -> tuple[int, int]:
+def runtime_pads(model) -> bool:
+    """Whether the runtime runs ``model`` at any size (padding to its stride inside), or only at multiples of
+    its stride: asked of the runtime's own size check, with a width one past a multiple."""
+    check = getattr(model, "check_size", None)
+    if check is None:
+        return True
+    try:
+        check(int(model.multiple) + 1, int(model.resolution[1]))
+    except DiviewerError:
+        return False
+    return True
+
+
+def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], multiple: int,
+                  pads: bool = False, shape: tuple[int, int] | None = None) -> tuple[int, int]:
     """The GI resolution ``spec`` asks for, for a model of stride ``multiple`` trained at ``trained``.
 
-    ``model`` is the training resolution. A fraction (``1/4``) of the window is snapped to the nearest
-    multiple of the stride on each side (at least one stride): it names a ratio, not a size. An explicit
-    ``WxH`` must already be a multiple of the stride, or it is refused with the nearest sizes that are.
+    ``model`` keeps the training row count and takes the width from the shape of ``shape`` (the window; default
+    ``window``): a 1024x768 window gives 171x128 for a model trained at 128x128, the network seeing the
+    window's own shape. A fraction (``1/4``) scales ``window`` (the shading resolution). Where the runtime
+    ``pads`` to the stride these sizes are used as they are; where it does not, each side is snapped to the
+    nearest multiple of the stride (at least one stride; ``model`` then squashes a wide window into the
+    training width). An explicit ``WxH`` must then already be a multiple of the stride, or it is refused.
     """
     spec = str(spec).strip().lower()
     m = max(1, int(multiple))
+    snap = (lambda v: max(1, round(v))) if pads else (lambda v: max(m, round(v / m) * m))
     if spec == "model":
-        return int(trained[0]), int(trained[1])
+        sw, sh = shape or window
+        rows = int(trained[1])
+        return snap(rows * sw / max(sh, 1)), rows
     if "/" in spec:
         try:
             num, den = (float(x) for x in spec.split("/"))
@@ -81,7 +101,7 @@ def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], 
             num = den = 0.0
         if not (num > 0 and den > 0):
             raise DiviewerError(f"GI resolution '{spec}' is not a fraction like 1/4", field="--gi-res")
-        return tuple(max(m, round(s * num / den / m) * m) for s in window)
+        return tuple(snap(s * num / den) for s in window)
     from diviewer.frames import parse_resolution
 
     try:
@@ -89,7 +109,7 @@ def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], 
     except (DiviewerError, ValueError) as exc:
         raise DiviewerError(f"GI resolution '{spec}': use 'model', a fraction of the window (1/2, 1/4, 1/6) "
                             f"or WxH", field="--gi-res") from exc
-    if w % m or h % m:
+    if not pads and (w % m or h % m):
         near = lambda s: f"{m}" if s < m else f"{s // m * m} or {(s // m + 1) * m}"
         raise DiviewerError(f"GI resolution {w}x{h} is not a multiple of the model's stride {m} "
                             f"(width {near(w)}, height {near(h)})", field="--gi-res")

@@ -16,7 +16,7 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.display import TONEMAPS
 from diviewer.scene.model import DirectionalLight
 from diviewer.viewer.input import SHORTCUTS
-from diviewer.viewer.models import GI_FRACTIONS, gi_resolution
+from diviewer.viewer.models import GI_FRACTIONS
 from diviewer.viewer.state import ViewerState
 from diviewer.viewer.stats import STAGES
 from diviewer.viewer.view_modes import VIEW_MODES, single_modes, view_mode
@@ -123,7 +123,11 @@ class Panel:
             imgui.push_item_width(-150)
             gw, gh = self.actions.gi_size
             rw, rh = self.actions.render_size
-            imgui.text(f"{st.scene.name}   {rw}x{rh}   GI {gw}x{gh}   {st.stats.fps:5.1f} fps")
+            imgui.text(f"{st.scene.name}  {rw}x{rh} (scale {self.actions.render_scale:.2f})  GI {gw}x{gh}  "
+                       f"{st.stats.fps:5.1f} fps")
+            reasons = st.out_of_range()
+            if reasons:
+                self._wrapped("outside what the model was trained on: " + "; ".join(reasons), WARN)
             neural = self.actions.neural
             if neural is not None and neural.pipelined:
                 imgui.text_colored(imgui.ImVec4(*DIM), f"GI one frame behind: {neural.latency_ms:.1f} ms old")
@@ -190,7 +194,18 @@ class Panel:
                 _, st.diff_gain_ev = imgui.slider_float("gain (stops)", st.diff_gain_ev, 0.0, 8.0, "%.1f")
         changed, ev = imgui.slider_float("exposure (EV)", st.exposure, -8.0, 8.0, "%.1f")
         if changed:
+            st.set_auto_exposure(False)
             st.set_exposure(ev)
+        changed, on = imgui.checkbox("auto exposure (metered)", st.auto_exposure)
+        if changed:
+            st.set_auto_exposure(on)
+        fps = self.actions.scaler.settings.target_fps
+        changed, fps = imgui.slider_int("target fps (0 off)", int(round(fps)), 0, 120)
+        if changed:
+            self.actions.set_target_fps(fps)
+        changed, scale = imgui.slider_float("render scale", self.actions.render_scale, 0.25, 1.0, "%.2f")
+        if changed:
+            self.actions.set_render_scale(scale)
         chosen = self._combo("tone map", st.tonemap, [(t, t) for t in TONEMAPS])
         if chosen:
             st.set_tonemap(chosen)
@@ -330,14 +345,16 @@ class Panel:
             items = []
             for spec in ("model",) + GI_FRACTIONS:
                 try:
-                    w, h = gi_resolution(spec, self.actions.render_size, model.resolution, model.multiple)
+                    w, h = self.actions.gi.sizes(model, spec)[0]
                 except DiviewerError:
                     continue
-                items.append((spec, f"{'training size' if spec == 'model' else spec + ' of the window'}: {w}x{h}"))
+                items.append((spec, f"{'training rows, window shape' if spec == 'model' else spec + ' of the shading size'}: "
+                                    f"{w}x{h}"))
             chosen = self._combo("GI resolution", st.gi_res, items)
             if chosen:
                 self.actions.set_gi_res(chosen)
-            self._wrapped(f"fractions snap to multiples of the model's stride ({model.multiple})", DIM)
+            if self.actions.gi.note:
+                self._wrapped(self.actions.gi.note, WARN)
             neural = self.actions.neural
             changed, on = imgui.checkbox("inference one frame behind (worker thread)",
                                          neural is not None and neural.pipelined)

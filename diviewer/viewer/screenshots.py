@@ -33,7 +33,7 @@ def view_record(state: ViewerState, size: tuple[int, int], model_path: Path | No
                         compare=list(st.compare) if view_mode(st.view_mode).layout != "single" else None,
                         model=str(model_path) if model_path is not None else None,
                         model_message=st.model_message or None, provider=st.provider or None,
-                        display={"exposure": st.exposure, "tonemap": st.tonemap},
+                        display={"exposure": st.exposure, "tonemap": st.tonemap, "auto_exposure": st.auto_exposure},
                         gl_renderer=gl_renderer, user_meshes=dict(st.user_meshes) or None, **extra)
 
 

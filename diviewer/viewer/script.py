@@ -9,7 +9,7 @@ from __future__ import annotations
 from diviewer.errors import DiviewerError
 
 SCRIPT_ACTIONS = ("resize", "screenshot", "window_screenshot", "set_model", "set_vsync", "pick_window_point",
-                  "set_gi_res", "set_pipelined", "set_timing")
+                  "set_gi_res", "set_pipelined", "set_timing", "set_render_scale", "set_target_fps")
 """Viewer methods a script may call; any other name is looked up on the viewer's state."""
 
 

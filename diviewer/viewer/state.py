@@ -19,7 +19,9 @@ from diviewer.scene.lights import angles_to_vector, power_field, rotate_light, v
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
 from diviewer.scene.picking import pick_object, pixel_ray
 from diviewer.scene.sampler import camera_on_path
+from diviewer.scene.ranges_check import out_of_range
 from diviewer.viewer.controls import Controller, make_controller
+from diviewer.viewer.exposure import AutoExposure
 from diviewer.viewer.stats import Stats
 from diviewer.viewer.view_modes import ViewMode, view_mode
 
@@ -49,6 +51,10 @@ class ViewerState:
         self.diff_gain_ev = 2.0
         """The difference image is brightened by this many stops."""
         self.exposure = float(scene.exposure)
+        self.auto_exposure = False
+        """Meter the exposure from the shown frame each frame (``auto``), instead of the slider's."""
+        self.auto = AutoExposure()
+        self._ranges: tuple = (None, None, [])
         self.tonemap = DEFAULT_TONEMAP
         self.animate_light = False
         self.light_time = 0.0
@@ -331,6 +337,26 @@ class ViewerState:
     def set_exposure(self, ev: float) -> float:
         self.exposure = float(ev)
         return self.exposure
+
+    def set_auto_exposure(self, on: bool) -> bool:
+        """Meter the exposure from each shown frame (smoothed; restarts from the next frame), or keep the slider's."""
+        if on and not self.auto_exposure:
+            self.auto.reset()
+        self.auto_exposure = bool(on)
+        return self.auto_exposure
+
+    def meter(self, samples) -> float:
+        """Auto exposure: feed one shown frame's radiance samples; the exposure follows (when on)."""
+        ev = self.auto.update(samples)
+        if self.auto_exposure and ev is not None:
+            self.exposure = float(ev)
+        return self.exposure
+
+    def out_of_range(self) -> list[str]:
+        """Why the current frame lies outside what the scene's model was trained on (empty: inside)."""
+        if self._ranges[0] is not self.scene or self._ranges[1] is not self.config:
+            self._ranges = (self.scene, self.config, out_of_range(self.scene, self.config))
+        return self._ranges[2]
 
     def set_tonemap(self, name: str) -> str:
         tonemap_code(name)  # refuses an unknown name

@@ -413,3 +413,77 @@ def test_gathered_pcf_equals_the_mean_of_bilinear_comparison_taps(ctx, radius):
             obj.release()
     assert got[:, 1].min() < 0.1 and got[:, 1].max() > 0.9  # both lit and shadowed queries
     np.testing.assert_allclose(got[:, 0], got[:, 1], atol=2e-5)
+
+
+# --- culling --------------------------------------------------------------------------------------------
+
+def test_split_mesh_keeps_every_triangle_in_compact_chunks():
+    from diviewer.gl.culling import split_mesh
+    from diviewer.scene.model import Mesh
+
+    rng = np.random.default_rng(0)
+    v = rng.uniform(-10, 10, (3000, 3)).astype(np.float32)
+    f = rng.integers(0, 3000, (5000, 3)).astype(np.uint32)
+    base = Mesh("m", v, np.tile([0, 0, 1], (3000, 1)).astype(np.float32), f,
+                rng.uniform(0, 1, (3000, 2)).astype(np.float32))
+    chunks = split_mesh(base, 700)
+    assert len(chunks) >= 8 and all(len(c.faces) <= 700 for c in chunks)
+    assert sum(len(c.faces) for c in chunks) == len(f)
+    # The same triangles (positions, normals and uvs of each corner), each in exactly one chunk.
+    corners = lambda m: np.concatenate([m.vertices, m.normals, m.uvs], axis=1)[m.faces].reshape(len(m.faces), -1)
+    whole = np.unique(corners(base), axis=0)
+    parts = np.concatenate([corners(c) for c in chunks])
+    np.testing.assert_array_equal(np.unique(parts, axis=0), whole)
+    # Compact: each chunk's triangle centres span a small part of the whole's.
+    span = lambda m: np.ptp(m.vertices[m.faces].mean(axis=1), axis=0).prod()
+    assert max(span(c) for c in chunks) < 0.3 * span(base)
+    assert split_mesh(base, 5000) == [base]
+
+
+def test_frustum_culling_keeps_what_the_camera_sees():
+    from diviewer.gl.culling import boxes_visible, frustum_planes
+
+    view = cam.look_at((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))
+    clip = cam.perspective(60.0, 1.0, 0.1, 50.0) @ view
+    boxes = np.array([
+        [[-1, -1, -6], [1, 1, -4]],       # ahead
+        [[-1, -1, 4], [1, 1, 6]],         # behind
+        [[30, -1, -6], [32, 1, -4]],      # far to the right of the 60 degree cone
+        [[-1, -1, -80], [1, 1, -60]],     # beyond the far plane
+        [[-50, -50, -3], [50, 50, 3]],    # around the camera
+        [[2.5, -1, -6], [4.0, 1, -4]],    # straddling the right plane
+    ], np.float64)
+    np.testing.assert_array_equal(boxes_visible(frustum_planes(clip), boxes), [True, False, False, False, True, True])
+    ortho = cam.orthographic(2.0, 2.0, 0.0, 10.0) @ view
+    np.testing.assert_array_equal(boxes_visible(frustum_planes(ortho), boxes[:3]), [True, False, False])
+
+
+@pytest.fixture(scope="module")
+def sponza():
+    from diviewer.scene import load_scene
+
+    return load_scene("sponza")
+
+
+def test_sponza_culling_draws_less_at_a_wall_and_changes_no_pixel(ctx, sponza):
+    """A camera facing the east wall draws fewer triangles than one looking down the atrium; every buffer is
+    bit for bit the same with and without culling."""
+    cam0 = sponza.default.camera
+    views = {"atrium": sponza.default,
+             "wall": dataclasses.replace(sponza.default, camera=dataclasses.replace(cam0, target=(25.0, 5.6, 0.0)))}
+    drawn, frames = {}, {}
+    for culling in (True, False):
+        r = Renderer(ctx, sponza, 48, 48, RenderSettings(shadow_size=256), culling=culling)
+        try:
+            for name, config in views.items():
+                frames[name, culling] = r.frame(config)
+                drawn[name, culling] = r.drawn["gbuffer"]
+        finally:
+            r.release()
+    total = drawn["atrium", False][1]
+    assert drawn["wall", False][1] == total == drawn["atrium", False][1]  # without culling: everything
+    assert drawn["wall", True][1] < 0.25 * drawn["atrium", True][1] <= 0.25 * total
+    for name in views:
+        assert frames[name, True]["albedo"].std() > 0.01, f"{name}: the view shows nothing"
+        for buf in frames[name, True]:
+            np.testing.assert_array_equal(frames[name, True][buf], frames[name, False][buf], err_msg=f"{name} {buf}")

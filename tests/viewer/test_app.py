@@ -438,7 +438,7 @@ def _settings(**changes):
     from diviewer.viewer.app import ViewerSettings
     from diviewer.reference.progressive import ReferenceSettings
 
-    base = dict(size=(128, 128), vsync=False, model="none", render=RenderSettings(shadow_size=256),
+    base = dict(size=(128, 128), vsync=False, model="none", render=RenderSettings(shadow_size=256), target_fps=0.0,
                 reference=ReferenceSettings(variant="scalar_rgb", max_spp=2, pass_spp=1, max_depth=4))
     return ViewerSettings(**{**base, **changes})
 
@@ -733,7 +733,8 @@ def _readback_session(tmp_path: Path) -> None:
     summary = run_viewer("cornell", model=model, frames=3 * len(plan), script=script,
                          settings=_settings(size=(128, 96)))
     assert summary["gl_error"] == "GL_NO_ERROR"
-    assert sizes == {0: ((128, 96), (64, 48)), 1: ((64, 48), (64, 48)), 2: ((32, 32), (64, 48)),
+    # "model": the training rows (48) at the window's shape (a 32x32 window: 48x48, not the trained 64x48)
+    assert sizes == {0: ((128, 96), (64, 48)), 1: ((64, 48), (64, 48)), 2: ((32, 32), (48, 48)),
                      3: ((96, 64), (48, 32))}, sizes
 
 
@@ -910,3 +911,201 @@ def test_view_command_saves_the_window_itself(display, tmp_path):
     r = subprocess.run(cmd[:-6] + ["--window-screenshot", str(tmp_path / "w2.png")], capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 2 and "--window-screenshot" in r.stderr and not (tmp_path / "w2.png").exists()
+
+
+# --- dynamic resolution, the training-range flag, auto exposure -----------------------------------------------
+
+def _bilinear(img: np.ndarray, w: int, h: int) -> np.ndarray:
+    """GL's LINEAR magnification of an (H, W, C) image to (h, w, C): texel centres, clamped to the edge."""
+    H, W = img.shape[:2]
+    ys = np.clip((np.arange(h) + 0.5) * H / h - 0.5, 0, H - 1)
+    xs = np.clip((np.arange(w) + 0.5) * W / w - 0.5, 0, W - 1)
+    y0, x0 = np.floor(ys).astype(int), np.floor(xs).astype(int)
+    y1, x1 = np.minimum(y0 + 1, H - 1), np.minimum(x0 + 1, W - 1)
+    fy, fx = (ys - y0)[:, None, None], (xs - x0)[None, :, None]
+    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
+    bottom = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
+    return (top * (1 - fy) + bottom * fy).astype(np.float32)
+
+
+def _upscaled_offscreen(ctx, shot: Path) -> np.ndarray:
+    """The frame a screenshot recorded, rendered offscreen at its recorded shading resolution with the recorded
+    model, composited, upscaled to the window's size in numpy and tone-mapped by the display pass."""
+    from diviewer.frames import load_frame_json, scene_for_frame_json
+    from diviewer.gl.display import DisplayPass
+    from diviewer.gl.neural import GISettings, NeuralPass
+    from diviewer.gl.renderer import Renderer, RenderSettings
+    from diviewer.runtime import NeuralGI
+
+    path = shot.with_suffix(".json")
+    record = json.loads(path.read_text())
+    scene = scene_for_frame_json(load_scene(record["scene"]), path)
+    config = load_frame_json(scene, path)
+    (w, h), (W, H) = record["render_size"], record["resolution"]
+    renderer = Renderer(ctx, scene, w, h, RenderSettings(shadow_size=256))
+    display = DisplayPass(ctx, renderer.shaders)
+    gi = GISettings(**{**record["gi_settings"], "pipelined": False})
+    neural = NeuralPass(ctx, renderer, NeuralGI(record["model"], scene=scene), tuple(record["gi_size"]), gi)
+    try:
+        renderer.frame(config)
+        neural.run()
+        tex = neural.composite()
+        hdr = np.flipud(np.frombuffer(tex.read(), dtype="f2").reshape(h, w, 4)[..., :3]).astype(np.float32)
+        up = _bilinear(hdr, W, H)
+        return display.to_ldr(up, record["display"]["exposure"], record["display"]["tonemap"]).astype(np.float32)
+    finally:
+        neural.release()
+        display.release()
+        renderer.release()
+
+
+def _scaled_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained 64x48, stride 16
+    script = [(0, lambda v: setattr(v.state, "show_panel", False)),
+              (3, "screenshot", {"path": tmp_path / "scaled.png"}),
+              (3, "window_screenshot", {"path": tmp_path / "window.png"})]
+    summary = run_viewer("cornell", model=model, frames=4, script=script, stats=tmp_path / "stats.json",
+                         settings=_settings(size=(128, 96), render_scale=0.5))
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    assert summary["render_size"] == (64, 48) and summary["view_size"] == (128, 96)
+    assert summary["render_scale"] == 0.5 and summary["gi_size"] == (64, 48)
+    record = json.loads((tmp_path / "scaled.json").read_text())
+    assert record["resolution"] == [128, 96] and record["render_size"] == [64, 48] and record["render_scale"] == 0.5
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["render_scale"] == 0.5 and stats["render_size"] == [64, 48] and stats["window_size"] == [128, 96]
+    assert stats["render_scales"] == {"min": 0.5, "median": 0.5, "max": 0.5, "changes": 0}
+    assert stats["target_fps"] is None and stats["out_of_range"] == [] and stats["frames_out_of_range"] == 0
+    assert stats["culling"] is True and stats["drawn_last_frame"]["gbuffer"]["triangles"] > 0
+
+
+def test_fixed_render_scale_window_is_the_offscreen_render_upscaled(display, tmp_path, ctx):
+    """At --render-scale 0.5 a 128x96 window shades 64x48 and shows it upscaled: both the view screenshot and
+    the window's own back buffer equal the offscreen render at 64x48, upscaled bilinearly, tone-mapped."""
+    pytest.importorskip("onnx")
+    _in_window_process(_scaled_session, tmp_path)
+    expected = _upscaled_offscreen(ctx, tmp_path / "scaled.png")
+    _same(_png(tmp_path / "scaled.png"), expected, "the screenshot at scale 0.5")
+    _same(_png(tmp_path / "window.png"), expected, "the window at scale 0.5")
+    _check_image(expected, (128, 96))
+
+
+def _dynamic_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    scales = {}
+    script = [(f, lambda v, f=f: scales.setdefault(f, (v.render_scale, v.render_size))) for f in (0, 5, 20, 29)]
+    summary = run_viewer("cornell", frames=30, script=script, stats=tmp_path / "stats.json",
+                         settings=_settings(size=(128, 96), target_fps=10000.0, scale_floor=0.5))
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    # 10,000 fps cannot be held: after its first measurement (2 settling frames + 6) the scale drops to the floor.
+    assert scales[0] == (1.0, (128, 96)) and scales[5] == (1.0, (128, 96))
+    assert scales[20] == scales[29] == (0.5, (64, 48))
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["target_fps"] == 10000.0 and stats["render_scale"] == 0.5 and stats["render_size"] == [64, 48]
+    assert stats["render_scales"]["min"] == 0.5 and stats["render_scales"]["max"] == 1.0
+    assert stats["render_scales"]["changes"] == 1 and stats["window_size"] == [128, 96]
+    settled = stats["at_final_scale"]  # frames 8-29 were drawn at the floor
+    assert settled["frames"] == 22 and settled["fps"] > 0 and settled["frame_ms_median"] > 0
+
+
+def test_target_fps_lowers_the_scale_to_its_floor(display, tmp_path):
+    _in_window_process(_dynamic_session, tmp_path)
+
+
+def _range_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    seen = {}
+    script = [(2, lambda v: seen.setdefault("start", list(v.state.out_of_range()))),
+              (3, "fly", {"forward": -1.0, "dt": 2.0}),  # back out of the box, past the region's far side
+              (4, "screenshot", {"path": tmp_path / "away.png"}),
+              (5, lambda v: seen.setdefault("away", list(v.state.out_of_range())))]
+    summary = run_viewer("cornell", frames=6, script=script, stats=tmp_path / "stats.json", settings=_settings())
+    assert seen["start"] == []
+    assert len(seen["away"]) == 1 and "outside the trained region" in seen["away"][0], seen
+    assert summary["out_of_range"] == seen["away"]
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["out_of_range"] == seen["away"] and stats["frames_out_of_range"] == 3  # frames 3, 4 and 5 (of 1-5)
+    assert json.loads((tmp_path / "away.json").read_text())["out_of_range"] == seen["away"]
+
+
+def test_the_out_of_range_flag_turns_on_when_the_camera_leaves(display, tmp_path):
+    """Flying the camera out of cornell's declared region turns the flag on: the state, the screenshot's
+    record and --stats say why."""
+    _in_window_process(_range_session, tmp_path)
+
+
+def _exposure_session(tmp_path: Path, out: str) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    evs = []
+    script = [(f, lambda v: evs.append(v.state.exposure)) for f in range(1, 8)]
+    script.append((4, "set_light_intensity", {"ev": 2.0}))  # four times the sun
+    summary = run_viewer("cornell", frames=8, script=script, stats=tmp_path / f"{out}.json",
+                         settings=_settings(auto_exposure=True))
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    (tmp_path / f"{out}_evs.json").write_text(json.dumps(evs))
+
+
+def test_auto_exposure_follows_the_frame_and_is_deterministic(display, tmp_path):
+    """With auto exposure the exposure is metered from the shown frame (a brighter sun: a lower exposure, reached
+    gradually); two runs of the same frames give the same exposures; --stats records it."""
+    for out in ("a", "b"):
+        _in_window_process(_exposure_session, tmp_path, out)
+    a, b = (json.loads((tmp_path / f"{o}_evs.json").read_text()) for o in ("a", "b"))
+    assert a == b
+    assert a[0] != 0.0 and a[1] == a[2] == a[0]  # metered on the first frame; the same frame, the same exposure
+    assert a[4] < a[3] and a[5] < a[4] and a[6] < a[5]  # four times the light: the exposure comes down ...
+    assert a[3] - a[6] < 2.0  # ... gradually (2 stops is where it goes)
+    stats = json.loads((tmp_path / "a.json").read_text())
+    assert stats["auto_exposure"] is True and stats["exposure"] < a[3]
+
+
+def test_scale_accuracy_tool_scores_each_scale_against_full_resolution(tmp_path):
+    """tools/scale_accuracy.py renders the viewer's frame at each scale, upscales it to the window and scores
+    it against the scale-1 frame (a tiny window and model: the figures themselves are the lead's to measure)."""
+    pytest.importorskip("onnx")
+    from tool_modules import load_tool
+
+    tool = load_tool("scale_accuracy")
+    assert tool.parse_scales("0.5,0.75") == [1.0, 0.75, 0.5]
+    with pytest.raises(DiviewerError, match="render scale"):
+        tool.parse_scales("1,1.5")
+    model = _cornell_model(tmp_path / "cornell_k8.onnx")
+    out = tmp_path / "acc.json"
+    result = tool.main(["--model", str(model), "--size", "96x72", "--scales", "1,0.5", "--frames", "1",
+                        "--exposure", "1", "--out", str(out)])
+    assert json.loads(out.read_text())["summary"] == result["summary"]
+    assert result["render_sizes"] == {"1.0": [96, 72], "0.5": [48, 36]}
+    assert result["gi_sizes"] == {"1.0": [64, 48], "0.5": [64, 48]}  # the model's rows at the window's shape
+    for split in ("train", "test", "all"):
+        half = result["summary"][split]["0.5"]["vs_full"]
+        assert 10.0 < half["psnr_tm"] < 60.0 and 0.5 < half["ssim_tm"] < 1.0
+        assert result["summary"][split]["1.0"]["vs_full"]["psnr_tm"] is None
+        assert half is not None and result["summary"][split]["0.5"]["vs_truth"]["psnr_tm"] is None
+
+
+def _shape_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained 64x48, stride 16; main's runtime does not pad
+    seen = {}
+    script = [(1, lambda v: seen.setdefault("wide", (v.gi_size, v.gi.note))),
+              (1, "resize", {"width": 96, "height": 160}),
+              (3, lambda v: seen.setdefault("portrait", (v.gi_size, v.gi.note)))]
+    summary = run_viewer("cornell", model=model, frames=4, script=script, stats=tmp_path / "stats.json",
+                         settings=_settings(size=(160, 96)))
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    # A 5:3 window: the network runs at the model's 48 rows and the window's shape, 80x48 (not squashed to 64x48).
+    assert seen["wide"] == ((80, 48), "")
+    # Portrait 3:5 would be 29x48; a runtime that runs only multiples of 16 gets 32x48, and the viewer says so.
+    (size, note) = seen["portrait"]
+    assert size == (32, 48) and "GI 32x48 instead of 29x48" in note
+    assert json.loads((tmp_path / "stats.json").read_text())["gi_note"] == note
+
+
+def test_the_network_sees_the_window_shape(display, tmp_path):
+    pytest.importorskip("onnx")
+    _in_window_process(_shape_session, tmp_path)

@@ -1,0 +1,98 @@
+"""What a pass draws: the static geometry in spatial chunks, each with its bounding box, culled against the
+pass's frustum (the camera's, or a light's). No GL calls here: the GPU copies live in resources.GpuScene.
+
+Sponza's static geometry merged per material is 24 draws that cover the whole atrium, so every pass drew
+all 262k triangles wherever the camera looked. Each material's triangles are split here into chunks of at
+most ``CHUNK_TRIANGLES`` (halving along the longest side of their centroids' box), so a frustum test on the
+chunks' boxes leaves out what is behind or beside the camera. The test is conservative (a box is dropped
+only when it lies wholly outside one plane), so culling changes which draws run, never a pixel.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from diviewer.scene.model import FrameConfig, Mesh, Scene
+
+CHUNK_TRIANGLES = 8192
+"""Most triangles in one static chunk: small enough to cull by, large enough to keep draws few (Sponza: ~60)."""
+
+
+def split_mesh(mesh: Mesh, max_triangles: int = CHUNK_TRIANGLES) -> list[Mesh]:
+    """``mesh`` cut into spatially compact pieces of at most ``max_triangles`` triangles (vertices re-indexed
+    per piece); the pieces' triangles, in their original order within each piece, are exactly the mesh's."""
+    faces = np.asarray(mesh.faces)
+    if len(faces) <= max_triangles:
+        return [mesh]
+    centroids = mesh.vertices[faces].mean(axis=1)
+    groups, todo = [], [np.arange(len(faces))]
+    while todo:
+        idx = todo.pop()
+        if len(idx) <= max_triangles:
+            groups.append(np.sort(idx))
+            continue
+        c = centroids[idx]
+        axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
+        order = np.argsort(c[:, axis], kind="stable")
+        half = len(idx) // 2
+        todo += [idx[order[half:]], idx[order[:half]]]
+    out = []
+    for i, idx in enumerate(sorted(groups, key=lambda g: int(g[0]))):
+        f = faces[idx]
+        used, inverse = np.unique(f.ravel(), return_inverse=True)
+        out.append(Mesh(f"{mesh.name}#{i}", mesh.vertices[used], mesh.normals[used],
+                        inverse.reshape(f.shape).astype(np.uint32),
+                        mesh.uvs[used] if mesh.uvs is not None else None, source=mesh.source))
+    return out
+
+
+def world_box(bounds: np.ndarray, model: np.ndarray | None) -> np.ndarray:
+    """The world-space box (2, 3) of an object-space box under ``model`` (None: the box is world-space)."""
+    if model is None:
+        return np.asarray(bounds, np.float64)
+    b = np.asarray(bounds, np.float64)
+    corners = np.array([[b[i, 0], b[j, 1], b[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    w = corners @ model[:3, :3].T + model[:3, 3]
+    return np.stack([w.min(axis=0), w.max(axis=0)])
+
+
+def frustum_planes(clip: np.ndarray) -> np.ndarray:
+    """The six planes (6, 4) of the frustum of a world-to-clip matrix, ``n . p + d >= 0`` inside (Gribb and
+    Hartmann's rows; works for perspective and orthographic matrices alike)."""
+    m = np.asarray(clip, np.float64)
+    planes = np.array([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] + m[2], m[3] - m[2]])
+    return planes / np.maximum(np.linalg.norm(planes[:, :3], axis=1, keepdims=True), 1e-30)
+
+
+def boxes_visible(planes: np.ndarray, boxes: np.ndarray, margin: float = 1e-4) -> np.ndarray:
+    """Which boxes (N, 2, 3) are not wholly outside any plane: per box, the corner furthest along each plane's
+    normal must lie inside it (``margin`` in world units of slack against round-off)."""
+    if len(boxes) == 0:
+        return np.zeros(0, bool)
+    lo, hi = boxes[:, 0, :], boxes[:, 1, :]
+    n, d = planes[:, :3], planes[:, 3]
+    far = np.where(n[None, :, :] >= 0.0, hi[:, None, :], lo[:, None, :])  # (N, 6, 3)
+    return np.all(np.einsum("npk,pk->np", far, n) + d[None, :] >= -margin, axis=1)
+
+
+def draw_list(scene: Scene, config: FrameConfig, gpu, ctx) -> list[tuple]:
+    """(GPU mesh, material, model matrix or None for world space, world box) per draw, opaque first.
+
+    Objects that the scene's ranges never move are merged per material and cut into chunks once (``gpu``, a
+    resources.GpuScene, holds them); they are used while the frame holds all of them unchanged, and the
+    moving objects are drawn one by one.
+    """
+    static = [o for o in scene.default.objects if o.name not in scene.ranges.objects]
+    static_set = set(static)
+    items = []
+    if len(static) > 1 and static_set <= set(config.objects):
+        gpu.set_static(ctx, scene.meshes, static, key=scene)
+        items = [(m, material, None, m.bounds) for material, m in gpu.static]
+        moving = [o for o in config.objects if o not in static_set]
+    else:
+        moving = config.objects
+    for o in moving:
+        gmesh, m = gpu.meshes[o.mesh], o.matrix()
+        items.append((gmesh, o.material, m, world_box(gmesh.bounds, m)))
+    items.sort(key=lambda it: scene.materials[it[1]].is_masked)  # opaque first: early depth test
+    return items

@@ -1,0 +1,70 @@
+"""The viewer's settings (``ViewerSettings``) and the render scale they open with (no GL calls)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from diviewer.errors import DiviewerError
+from diviewer.gl.neural import GISettings
+from diviewer.gl.renderer import RenderSettings
+from diviewer.reference.progressive import ReferenceSettings
+
+BACKGROUND = (0.08, 0.08, 0.09)
+"""Colour of the bars around the GI image when the window's aspect ratio differs."""
+
+
+def check_render_scale(scale: float) -> float:
+    """A render scale the viewer can draw at: in (0, 1]; else the user's error."""
+    if not 0.0 < float(scale) <= 1.0:
+        raise DiviewerError(f"render scale must be in (0, 1] (a fraction of the window per side), got {scale}",
+                            field="--render-scale")
+    return float(scale)
+
+
+def scale_settings(settings: "ViewerSettings"):
+    """The dynamic-resolution controller's settings for a session: a fixed ``render_scale`` turns it off."""
+    from diviewer.viewer.scale import ScaleSettings
+
+    if settings.render_scale is not None:
+        scale = check_render_scale(settings.render_scale)
+        return ScaleSettings(target_fps=0.0, start=scale, floor=min(settings.scale_floor, scale))
+    return ScaleSettings(target_fps=max(float(settings.target_fps), 0.0), floor=settings.scale_floor)
+
+
+@dataclass(frozen=True)
+class ViewerSettings:
+    """Settings a viewer session opens with (the GI resolution, pipelining and timing then change live:
+    ``Viewer.gi`` and ``Viewer.timer`` hold the current ones)."""
+
+    size: tuple[int, int] = (768, 768)
+    """Window size in screen units (the framebuffer may be larger on HiDPI screens)."""
+    vsync: bool = True
+    model: str = "auto"
+    """A model file, ``auto`` (the first compatible assets/models/<scene>*.onnx) or ``none``."""
+    provider: str | None = None
+    """onnxruntime execution provider (cpu, cuda, tensorrt); None picks the fastest available."""
+    controller: str = "fly"
+    """Camera controller at start: fly or orbit."""
+    timing: bool = True
+    """Time each stage: GL stages by GPU timer queries (by waiting for the GPU around them where the driver
+    has none), the rest by the wall clock."""
+    gi_res: str = "model"
+    """The neural GI's resolution: ``model`` (its training size), a fraction of the window (``1/4``: snapped
+    to the model's stride) or ``WxH`` (a multiple of the stride, else refused)."""
+    target_fps: float = 30.0
+    """Frame rate the render scale is moved to hold (dynamic resolution); 0 keeps ``render_scale``."""
+    render_scale: float | None = None
+    """A fixed render scale (shading resolution / window, per side), which turns ``target_fps`` off; None: 1
+    at the start, then whatever holds the frame rate."""
+    scale_floor: float = 0.5
+    """The lowest render scale dynamic resolution goes to."""
+    auto_exposure: bool = False
+    """Start with the exposure metered from the frame (the panel toggles it)."""
+    gi: GISettings = field(default_factory=GISettings)
+    """How the GI inputs are reduced, the output upsampled, and whether inference runs one frame behind."""
+    panel: bool = True
+    render: RenderSettings = field(default_factory=RenderSettings)
+    reference: ReferenceSettings = field(default_factory=ReferenceSettings)
+    reference_max_size: int = 512
+    """Longest side of the path-traced reference (it is scaled to the view)."""
+    title: str = "diviewer"

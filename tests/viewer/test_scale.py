@@ -1,0 +1,216 @@
+"""Dynamic resolution's scale controller, auto exposure and the GI shape policy: pure Python, no window."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from diviewer.errors import DiviewerError
+from diviewer.viewer.exposure import AutoExposure, ExposureSettings, metered_ev
+from diviewer.viewer.models import gi_resolution, runtime_pads
+from diviewer.viewer.scale import ScaleController, ScaleSettings, render_size
+
+# (a, b): frame ms = a + b * scale^2 (a: the network and fixed costs, b: per-pixel work), at 30 fps (33.3 ms).
+COSTS = [(5.0, 60.0), (20.0, 40.0), (10.0, 25.0), (2.0, 200.0), (30.0, 10.0), (5.0, 20.0), (15.0, 100.0)]
+
+
+def _run(a: float, b: float, seed: int, frames: int = 600, noise: float = 0.05, settings=ScaleSettings()):
+    """Drive a controller with a noisy synthetic cost model; the scale of every frame."""
+    rng = np.random.default_rng(seed)
+    c = ScaleController(settings)
+    scales = []
+    for _ in range(frames):
+        s = c.scale
+        scales.append(s)
+        c.update((a + b * s * s) * (1.0 + noise * rng.standard_normal()), s)
+    return c, np.array(scales)
+
+
+@pytest.mark.parametrize("a,b", COSTS)
+def test_scale_converges_stays_in_bounds_and_does_not_oscillate(a, b):
+    target = 1e3 / 30.0
+    cost = lambda s: a + b * s * s
+    for seed in range(4):
+        c, scales = _run(a, b, seed)
+        assert scales.min() >= 0.5 and scales.max() <= 1.0, "left its bounds"
+        # Converged: from frame 300 on, the scale is within one step of where it ends (noise at the edge of
+        # the dead band may still take one more step, in the same direction) ...
+        s = scales[-1]
+        assert np.ptp(scales[300:]) <= 1 / 32 + 1e-12, f"still moving: {np.unique(scales[300:])}"
+        # ... at a scale that holds the frame rate where the floor allows it, and is not needlessly low: at the
+        # window's size, at the floor, or where one step up would leave the dead band's lower edge.
+        if cost(0.5) <= target:
+            assert cost(s) <= target * 1.03, f"scale {s} costs {cost(s):.1f} ms > {target:.1f}"
+        else:
+            assert s == 0.5
+        assert s == 1.0 or s == 0.5 or cost(s + 2 / 32) >= 0.8 * target
+        # No oscillation: the scale moved in one direction only, a handful of times.
+        moves = np.sign(np.diff(scales)[np.diff(scales) != 0])
+        assert len(set(moves.tolist())) <= 1, f"the scale went both ways: {moves}"
+        assert c.changes == len(moves) <= 12
+
+
+def test_scale_rises_from_the_floor_when_the_frame_is_cheap():
+    c, scales = _run(2.0, 8.0, 0, settings=ScaleSettings(start=0.5))
+    assert scales[0] == 0.5 and scales[-1] == 1.0
+    assert np.all(np.diff(scales) >= 0)
+
+
+def test_scale_holds_in_the_dead_band_and_ignores_stale_or_broken_times():
+    c = ScaleController(ScaleSettings(start=0.75))
+    for _ in range(100):  # 30 ms: inside [0.8, 1] of the 33.3 ms target
+        c.update(30.0)
+    assert c.scale == 0.75 and c.changes == 0
+    for bad in (float("nan"), float("inf"), 0.0, -3.0):
+        assert c.update(bad) == 0.75
+    for _ in range(100):  # times measured at another scale (before a change) are not this scale's
+        c.update(500.0, scale=0.6)
+    assert c.scale == 0.75
+    off = ScaleController(ScaleSettings(target_fps=0.0, start=0.6))
+    assert not off.enabled and all(off.update(t) == 0.6 for t in (1.0, 500.0))
+
+
+def test_fix_and_hold():
+    c = ScaleController()
+    assert c.fix(0.3) == 0.3 and not c.enabled and c.settings.floor == 0.3
+    for _ in range(50):
+        c.update(1000.0)
+    assert c.scale == 0.3
+    assert c.hold(60.0) == 60.0 and c.enabled and c.scale == 0.3
+    with pytest.raises(ValueError):
+        ScaleController(ScaleSettings(floor=0.0))
+
+
+def test_render_size_rounds_and_keeps_a_pixel():
+    assert render_size((768, 768), 0.5) == (384, 384)
+    assert render_size((1024, 768), 0.71875) == (736, 552)
+    assert render_size((1, 3), 0.25) == (1, 1)
+
+
+def test_render_scale_setting_and_command_line():
+    import argparse
+
+    from diviewer.viewer.command import add_view_parser
+    from diviewer.viewer.settings import ViewerSettings, check_render_scale, scale_settings
+
+    assert scale_settings(ViewerSettings()).target_fps == 30.0
+    fixed = scale_settings(ViewerSettings(render_scale=0.4))
+    assert fixed.target_fps == 0.0 and fixed.start == 0.4 and fixed.floor == 0.4
+    for bad in (0.0, -1.0, 1.5):
+        with pytest.raises(DiviewerError, match="render scale"):
+            check_render_scale(bad)
+    ap = argparse.ArgumentParser()
+    add_view_parser(ap.add_subparsers(dest="command"))
+    args = ap.parse_args(["view"])
+    assert args.target_fps == 30.0 and args.render_scale is None and args.scale_floor == 0.5 and not args.auto_exposure
+    args = ap.parse_args(["view", "--target-fps", "0", "--render-scale", "0.5", "--auto-exposure"])
+    assert args.target_fps == 0.0 and args.render_scale == 0.5 and args.auto_exposure
+
+
+# --- auto exposure -------------------------------------------------------------------------------------
+
+def test_metered_exposure_maps_the_log_average_to_middle_grey():
+    rng = np.random.default_rng(1)
+    grey = np.exp(rng.normal(np.log(0.05), 0.5, (64, 64, 1))).repeat(3, axis=-1).astype(np.float32)
+    ev = metered_ev(grey)
+    s = ExposureSettings()
+    lum = np.sort(grey[..., 0].ravel())
+    k = int(len(lum) * s.trim)
+    assert ev == pytest.approx(math.log2(0.18) - np.log2(lum[k:len(lum) - k]).mean(), abs=1e-5)
+    assert metered_ev(grey * 2.0) == pytest.approx(ev - 1.0, abs=1e-5)  # twice the light: one stop less
+    # Unlit samples (the void), NaN and infinities are not metered; nothing lit gives no exposure.
+    holed = grey.copy()
+    holed[:32] = 0.0
+    holed[0, 0] = np.nan
+    holed[1, 1] = np.inf
+    assert metered_ev(holed) == pytest.approx(metered_ev(grey[32:]), abs=1e-5)
+    assert metered_ev(np.zeros((8, 8, 3), np.float32)) is None
+    assert metered_ev(np.full((8, 8, 3), 1e-9, np.float32)) is None
+    assert metered_ev(np.full((4, 4, 3), 1e-5, np.float32)) == ExposureSettings().limits[1]  # clamped
+
+
+def test_auto_exposure_is_smoothed_and_deterministic():
+    frames = [np.full((8, 8, 3), v, np.float32) for v in [0.18] * 3 + [0.72] * 40 + [0.0] * 3]
+    runs = []
+    for _ in range(2):
+        auto = AutoExposure()
+        runs.append([auto.update(f) for f in frames])
+    assert runs[0] == runs[1]  # the same frames give the same exposures
+    evs = runs[0]
+    assert evs[0] == pytest.approx(0.0, abs=1e-6)  # the first frame snaps to its metered exposure
+    assert evs[3] == pytest.approx(-2.0 * ExposureSettings().rate, abs=1e-6)  # then 15 % of the way per frame
+    assert all(b < a for a, b in zip(evs[3:42], evs[4:43]))  # monotone towards the new exposure ...
+    assert evs[42] == pytest.approx(-2.0, abs=0.01)  # ... which it reaches
+    assert evs[-1] == evs[42]  # black frames leave it alone
+    auto = AutoExposure()
+    auto.update(frames[5])
+    auto.reset()
+    assert auto.ev is None and auto.update(frames[0]) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_state_auto_exposure_follows_the_meter_only_when_on():
+    from diviewer.scene import load_scene
+    from diviewer.viewer.state import ViewerState
+
+    st = ViewerState(load_scene("cornell"))
+    bright = np.full((4, 4, 3), 0.72, np.float32)
+    assert st.meter(bright) == st.exposure == 0.0  # off: the slider's exposure stays
+    st.set_auto_exposure(True)
+    assert st.meter(bright) == pytest.approx(-2.0, abs=1e-6)
+    st.set_auto_exposure(False)
+    st.set_exposure(1.5)
+    assert st.meter(bright) == 1.5
+
+
+# --- the GI's shape -------------------------------------------------------------------------------------
+
+def test_gi_resolution_follows_the_window_shape_at_the_model_rows():
+    model = (128, 128)
+    assert gi_resolution("model", (1024, 768), model, 128, pads=True) == (171, 128)
+    assert gi_resolution("model", (768, 1024), model, 128, pads=True) == (96, 128)
+    assert gi_resolution("model", (1920, 1080), model, 128, pads=True) == (228, 128)
+    assert gi_resolution("model", (768, 768), model, 128, pads=True) == (128, 128)
+    # The shape comes from the window, the fraction from the shading size (the render scale's).
+    assert gi_resolution("model", (512, 384), model, 128, pads=True, shape=(1024, 768)) == (171, 128)
+    assert gi_resolution("1/4", (512, 384), model, 128, pads=True, shape=(1024, 768)) == (128, 96)
+    assert gi_resolution("200x120", (512, 384), model, 128, pads=True) == (200, 120)
+    # A runtime that cannot pad: snapped to its stride (a wide window squashed into the training width) ...
+    assert gi_resolution("model", (1024, 768), model, 128) == (128, 128)
+    assert gi_resolution("model", (1920, 1080), model, 128) == (256, 128)
+    assert gi_resolution("1/2", (300, 200), (64, 48), 16) == (144, 96)
+    # ... and an explicit size off the stride is refused.
+    with pytest.raises(DiviewerError, match="multiple of the model's stride 128"):
+        gi_resolution("200x120", (512, 384), model, 128)
+
+
+def test_runtime_pads_asks_the_runtime(ctx):
+    class Strict:
+        multiple, resolution = 16, (64, 48)
+
+        def check_size(self, w, h):
+            if w % 16 or h % 16:
+                raise DiviewerError("multiples of 16")
+
+    class Padding(Strict):
+        def check_size(self, w, h):
+            return None
+
+    assert not runtime_pads(Strict()) and runtime_pads(Padding())
+    # The viewer's GI control: the shape it asks for, and what a runtime without padding runs instead.
+    from diviewer.gl.neural import GISettings
+    from diviewer.scene import load_scene
+    from diviewer.viewer.gi import GIControl
+    from diviewer.viewer.state import ViewerState
+
+    class Renderer:
+        width, height = 75, 48  # a 150x96 window at render scale 0.5
+
+    gi = GIControl(ctx, Renderer(), ViewerState(load_scene("cornell")), "model", GISettings())  # ctx: the GL size check
+    gi.view_size = (150, 96)
+    assert gi.sizes(Padding(), "model") == ((75, 48), (75, 48))
+    assert gi.sizes(Strict(), "model") == ((80, 48), (75, 48))
+    assert gi.sizes(Padding(), "1/3") == ((25, 16), (25, 16))
+    assert gi._size_for(Strict(), "model", (75, 48)) == (80, 48) and "instead of 75x48" in gi.note
+    assert gi._size_for(Padding(), "model", (75, 48)) == (75, 48) and gi.note == ""
