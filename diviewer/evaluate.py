@@ -24,6 +24,7 @@ from diviewer.errors import DiviewerError
 from diviewer.metrics import (equivalent_spp, flat_mask, flip, highpass_power, mse, power_ratio, psnr, psnr_error,
                               ssim, tonemap)
 from diviewer.outputs import check_output_file, strict, write_json
+from diviewer.data.scales import light_scales
 from diviewer.runtime import NeuralGI, pack_buffers
 
 SSIM_MIN = 11
@@ -54,12 +55,13 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
         raise DiviewerError(f"the dataset has no '{split}' frames", path=data_dir)
     exposure = float(model.meta["encoding"]["exposure"])
     rows, times, black = {"neural": [], "direct": []}, [], []
-    for i in idx:
+    scales = light_scales(ds, idx) if model.light_scaled else [None] * len(idx)  # encoding 2: each frame's light
+    for i, s in zip(idx, scales):
         f = ds.load(i)
         if not np.any(f["pt"] > 0):
             black.append(i)
         t0 = time.perf_counter()
-        y = model.run(pack_buffers(f))
+        y = model.run(pack_buffers(f), light_scale=s)
         times.append((time.perf_counter() - t0) * 1e3)
         rows["neural"].append(score(y, f["pt"], exposure))
         rows["direct"].append(score(f["direct"], f["pt"], exposure))
@@ -190,13 +192,14 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path, provider: str |
         rows = {k: [] for k in (*models, *rows_of)}
         times = {k: [] for k in models}
         flat = 0
-        for i in idx:
+        scales = light_scales(ds, idx) if any(n.light_scaled for n in models.values()) else [None] * len(idx)
+        for i, s in zip(idx, scales):
             f = ds.load(i)
             mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # flat and no shadow edge
             flat += int(mask.sum())
             for key, net in models.items():
                 t0 = time.perf_counter()
-                y = net.run(pack_buffers(f))
+                y = net.run(pack_buffers(f), light_scale=s)
                 times[key].append((time.perf_counter() - t0) * 1e3)
                 rows[key].append(score_frame(y, f["pt"], exposure, mask, f["direct"]))
             for key, ch in rows_of.items():

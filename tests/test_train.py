@@ -33,6 +33,30 @@ from diviewer.train.trainer import train  # noqa: E402
 RES = 32
 FAR = 10.0
 SPLITS = ["train"] * 8 + ["val"] * 2
+SCENE_TOML = """
+[scene]
+name = "NAME"
+[camera]
+position = [0, 0, 5]
+target = [0, 0, 0]
+near = 0.05
+far = 10
+[materials.m]
+albedo = [0.5, 0.5, 0.5]
+[meshes.box]
+shape = "box"
+size = [1, 1, 1]
+[[objects]]
+name = "box"
+mesh = "box"
+material = "m"
+[[lights]]
+type = "directional"
+name = "sun"
+direction = [0, -1, 0]
+irradiance = 2.0
+"""
+"""The scene make_dataset's manifest records (its lights give each frame's light scale: encoding 2)."""
 
 
 def _frame(seed: int, res: int = RES) -> np.ndarray:
@@ -59,11 +83,14 @@ def make_dataset(root: Path, scene: str = "synthetic", seed0: int = 0, res: int 
                  splits: list[str] = SPLITS) -> Dataset:
     """A dataset folder like `diviewer capture` writes, with analytic frames (no GL, no Mitsuba)."""
     root.mkdir(parents=True)
+    # _frame's light has strength 2: the light scale of every frame (encoding 2 divides by it)
+    sun = {"type": "directional", "name": "sun", "direction": [0, -1, 0], "color": [1, 1, 1], "irradiance": 2.0}
     frames = [{"index": i, "split": s, "seed": seed0 + i,
-               "config": {"camera": {"position": [0, 0, 5], "near": 0.05, "far": FAR}, "lights": [], "objects": []}}
+               "config": {"camera": {"position": [0, 0, 5], "near": 0.05, "far": FAR}, "lights": [sun], "objects": []}}
               for i, s in enumerate(splits)]
     manifest = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "scene": scene, "scene_hash": f"hash-of-{scene}",
+        "scene_file": str(root / f"{scene}.toml"), "scene_toml": SCENE_TOML.replace("NAME", scene),
         "resolution": [res, res], "channels": [list(c) for c in CHANNELS], "dtype": "float16", "gt": "pt",
         "spp": 4, "max_depth": 4, "seed": seed0, "frames": len(frames), "split_fractions": [0.8, 0.2, 0.0],
         "render_settings": {}, "frame_list": frames,
@@ -153,7 +180,10 @@ def test_checkpoints_are_self_describing_and_weights_only(run, data):
         "seed": 0, "epoch": 2, "batch": 0, "world": 1, "batch_size": 4}
     # The encoding was fixed from the train split: exposure from its GL direct light, depth from the far plane.
     _, train_arr = ds.array("train")
-    assert last["encoding"]["exposure"] == pytest.approx(fit_exposure([f[..., ds.slices["direct"]] for f in train_arr]))
+    # Encoding 2 (the default): fitted on the direct light divided by each frame's light scale (2 here).
+    assert last["encoding"]["version"] == 2
+    assert last["encoding"]["exposure"] == pytest.approx(
+        fit_exposure([f[..., ds.slices["direct"]].astype(np.float32) / 2.0 for f in train_arr]))
     assert last["encoding"]["depth_scale"] == FAR
 
 
@@ -166,7 +196,9 @@ def test_rebuilt_generator_reproduces_the_recorded_validation(run, data):
     ds = Dataset(data)
     _, val = ds.array("val")
     cfg = TrainConfig.from_dict(ckpt["config"])
-    again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"))
+    from diviewer.data.scales import light_scales
+
+    again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"), scales=light_scales(ds, ds.indices("val")))
     assert again == pytest.approx(ckpt["val"], rel=1e-6)  # the weights that produced the recorded metrics
     x = torch.randn(2, 10, RES, RES)
     netG2, _, _ = build_generator_from_checkpoint(out / "best.ckpt")

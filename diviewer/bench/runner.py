@@ -96,7 +96,7 @@ class GlBench:
         neural = self.neural_pass(net, step)
         try:
             def frame(config):
-                neural.run()
+                neural.run(light_scale=net.light_scale(config, self.scene) if net.light_scaled else None)
                 return neural.composite(), False
 
             return self.run(configs, warmup, frame, direct=False)
@@ -224,13 +224,15 @@ def score_evalset(ds, models: dict, frames_per_split: int | None, gl: GlBench | 
         for n, i in enumerate(idx):
             f = ds.load(i)
             mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # as diviewer eval
+            config = config_from_dict(gl.scene, _entry(ds, i)["config"])
             if passes:
-                gl.renderer.render(config_from_dict(gl.scene, _entry(ds, i)["config"]), direct=False)  # as timed
+                gl.renderer.render(config, direct=False)  # as timed
             for key, (net, step) in models.items():
+                s = net.light_scale(config, gl.scene) if net.light_scaled else None  # encoding 2
                 if step == 1:
-                    image = net.run(pack_buffers(f))
+                    image = net.run(pack_buffers(f), light_scale=s)
                 else:
-                    passes[key].run()
+                    passes[key].run(light_scale=s)
                     image = read_final(passes[key].composite())
                 rows[key].append(score_frame(image, f["pt"], exposure, mask))
             for key, images in vx_images.items():

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from diviewer.errors import DiviewerError
-from diviewer.train.config import CHOICES, RESUME_INHERITED, TrainConfig
+from diviewer.train.config import CHOICES, LEGACY_DEFAULTS, RESUME_INHERITED, TrainConfig
 
 
 def add_train_parser(subparsers) -> argparse.ArgumentParser:
@@ -72,12 +72,35 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
                    help="use only the first N train frames by index (default: all present)")
     g.add_argument("--patience", type=int, default=None,
                    help="stop after N validations without a better tone-mapped SSIM (default 0: never)")
+    g.add_argument("--light-scale", action=argparse.BooleanOptionalAction, default=None,
+                   help="divide radiance by each frame's light scale: linear in the light, black without it "
+                        "(encoding 2; default on; --no-light-scale: encoding 1)")
+    g.add_argument("--aspect-crops", type=_aspect_range, default=None, metavar="LO:HI",
+                   help="random-width crops per batch, width/height in LO..HI at full height, e.g. 0.5625:1.7778 "
+                        "(9:16 to 16:9), or 'off' (default off)")
     g.add_argument("--val-every-steps", type=int, default=None,
                    help="also validate (and save) every N steps (default 0: epoch ends only)")
     p.add_argument("--num-workers", type=int, default=d["num_workers"], help="DataLoader workers (default 0)")
     p.add_argument("--device", default=d["device"], help="auto, cpu, cuda or cuda:N (default auto)")
     p.set_defaults(func=run_train)
     return p
+
+
+def _aspect_range(text: str):
+    """--aspect-crops LO:HI (or W/H fractions such as 9/16:16/9), or 'off'."""
+    if text.strip().lower() in ("off", "none"):
+        return ()
+    try:
+        lo, hi = (float(eval_fraction(v)) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LO:HI (e.g. 0.5625:1.7778 or 9/16:16/9) or off, got {text!r}")
+    return (lo, hi)
+
+
+def eval_fraction(v: str) -> float:
+    """'9/16' or '0.5625' as a float."""
+    num, _, den = v.strip().partition("/")
+    return float(num) / float(den) if den else float(num)
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -90,9 +113,11 @@ def run_train(args: argparse.Namespace) -> int:
     base: dict[str, Any] = {}
     last = Path(args.out) / "last.ckpt"
     if getattr(args, "resume", False) and last.is_file():
-        old = load_checkpoint(last, mmap=True)["config"]
+        old = {**LEGACY_DEFAULTS, **load_checkpoint(last, mmap=True)["config"]}
         base = {k: old[k] for k in RESUME_INHERITED if k in old}
     fields = {**base, **{k: v for k, v in given.items() if v is not None}}
+    if fields.get("aspect_crops") == ():  # --aspect-crops off
+        fields["aspect_crops"] = None
     precision = args.precision or ("fp16" if args.amp else "auto")
     cfg = TrainConfig(data=args.data, out=args.out, max_steps=args.max_steps, precision=precision,
                       num_workers=args.num_workers, device=args.device, **fields)
