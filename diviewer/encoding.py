@@ -335,40 +335,6 @@ def encode_inputs(depth: Any, normal: Any, albedo: Any, direct: Any, enc: Encodi
     return ops.cat(parts, axis)
 
 
-def graph_table(enc: Encoding) -> dict[str, np.ndarray]:
-    """`encode_inputs` as per-channel constants (float32, one per input channel), for a graph that encodes
-    all ten channels with a few whole-tensor operators (`diviewer.train.graph.LeanGI`)::
-
-        t = x * (scale_geometry + scale_direct * k) + offset   # k = 1, or 1 / light scale (version 2)
-        keep = (t >= keep_lo) & (t <= keep_hi)                 # False: NaN, background or infinite depth
-        c = min(max(t, clip_lo), clip_hi)
-        y = where(keep, where(is_direct, sign(c) * log(1 + |c|) / log1p(R), c), fallback)
-
-    This equals `encode_inputs` (up to log1p's last digits near 0): depth / depth_scale clipped to [0, 1]
-    with -1 where it is not in (0, inf); normals clipped, NaN 0; albedo 2a - 1 clipped, NaN -1 (black);
-    direct light exposed, clipped to radiance_max, through the curve, NaN 0.
-    """
-    n = INPUT_CHANNEL_COUNT
-    tab = {k: np.zeros(n, np.float32) for k in ("scale_geometry", "scale_direct", "offset", "fallback")}
-    tab["keep_lo"], tab["keep_hi"] = np.full(n, -np.inf, np.float32), np.full(n, np.inf, np.float32)
-    tab["clip_lo"], tab["clip_hi"] = np.full(n, -1.0, np.float32), np.full(n, 1.0, np.float32)
-    tab["is_direct"] = np.zeros(n, bool)
-    s = input_channel_slices()
-    tab["scale_geometry"][s["depth"]] = 1.0 / enc.depth_scale
-    tab["keep_lo"][s["depth"]] = np.nextafter(np.float32(0), np.float32(1))  # > 0
-    tab["keep_hi"][s["depth"]] = _FLOAT32_MAX  # finite
-    tab["clip_lo"][s["depth"]] = 0.0
-    tab["fallback"][s["depth"]] = -1.0
-    tab["scale_geometry"][s["normal"]] = 1.0
-    tab["scale_geometry"][s["albedo"]] = 2.0
-    tab["offset"][s["albedo"]] = -1.0
-    tab["fallback"][s["albedo"]] = -1.0
-    tab["scale_direct"][s["direct"]] = enc.exposure
-    tab["clip_lo"][s["direct"]], tab["clip_hi"][s["direct"]] = -enc.radiance_max, enc.radiance_max
-    tab["is_direct"][s["direct"]] = True
-    return tab
-
-
 def fit_exposure(direct_images: Any, *, percentile: float = 99.0, target: float = 1.0, max_samples: int = 1 << 22) -> float:
     """Dataset exposure that maps the given percentile of lit-pixel luminance to `target`.
 

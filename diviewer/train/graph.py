@@ -2,21 +2,22 @@
 reference it is verified against (training's own encode, netG, decode and composition).
 
 The lean graph computes what training computes (`diviewer.encoding`, `diviewer.train.targets`) with few
-whole-tensor operators, because onnxruntime spends about as long on each small elementwise node as on a
-convolution layer of a small U-Net (issue 28):
+cheap operators, because onnxruntime's CPU kernels for Where, Sign and Cast of a whole frame cost as much as
+several convolution layers of a small U-Net (issue 28; measured per operator on 10 x 128 x 128 float32):
 
-- inputs: per-channel constants (`encoding.graph_table`) turn all ten channels at once:
-  ``t = x * scale + offset``; one ``keep`` test (geometry depth in (0, inf), everything not NaN) and one
-  clip; the sign-preserving log on the direct channels; NaN, background and broken depth all land in
-  one final Where on per-channel fallbacks. NaN is handled there once, nowhere else.
-- output: netG's tanh is in [-1, 1] already, so decoding is ``(exp(|y| L) - 1) * sign(y) * k`` with k =
-  1 / exposure (times the frame's light scale for encoding version 2), then the composition.
+- NaN is handled once, in an If: the common frame (finite everywhere) pays one sum; a frame with NaN or an
+  infinite value takes the branch that makes NaN 0 and infinite depth 0, as the encoding treats them.
+- inputs: split into depth, normal + albedo, and direct light. Depth: ``clip(d, 0, 1) - clip(1 - d HUGE, 0,
+  1)`` (-1 for background without a Where); normal/albedo: one scale, offset and clip; direct: exposed,
+  clipped to radiance_max, ``log(1 + |c|) * c / max(|c|, TINY)`` (a sign without Sign).
+- output: netG's tanh is in [-1, 1] already, so decoding is ``(exp(|y| L) - 1) * y / max(|y|, TINY) * k``
+  with k = 1 / exposure (times the frame's light scale for encoding version 2), then the composition (the
+  albedo floor from the encoded albedo, the raw direct light added, so a NaN there stays visible).
 - log1p and expm1 are ``log(1 + a)`` and ``exp(z) - 1`` here: against training's exact-cancellation forms
   they differ by under 1e-8 in encoded units and 1e-7 of the exposure's radiance, far below the fp32
-  export tolerance, for 10 fewer nodes.
-- layout "NCHW" takes the buffers channel-first, so no transpose precedes the first convolution;
-  "NHWC" (the GL pack's order, the contract of models exported before) transposes once on the way in.
-  The output is NHWC radiance either way (the viewer uploads interleaved RGB).
+  export tolerance.
+- layout "NCHW" takes the buffers channel-first; "NHWC" (the GL pack's order, the contract of models
+  exported before) transposes once on the way in. The output is NHWC radiance either way.
 """
 
 from __future__ import annotations
@@ -81,6 +82,9 @@ class LeanGI(torch.nn.Module):
 
     def forward(self, buffers: torch.Tensor, light_scale: torch.Tensor | None = None) -> torch.Tensor:
         raw = buffers if self.layout == "NCHW" else buffers.permute(0, 3, 1, 2)
+        # The raw direct light, sliced before the If (the tracer would alias raw with its unchanged output): a
+        # NaN there stays visible where it arose (the runtime counts it) instead of being hidden.
+        raw_direct = raw[:, self.split[0] + self.split[1]:]
         x = finite_inputs(raw)
         enc = self.enc
         # half: the albedo floor below is (e + 1) / 2 of the encoded albedo e
@@ -109,8 +113,7 @@ class LeanGI(torch.nn.Module):
         else:
             if self.divide_albedo:  # max(albedo, floor) from the encoded albedo (NaN there is already black)
                 pred = pred * (torch.clamp(e_geo[:, 3:], min=self.floor_lo) + 1.0)
-            # the raw direct light: a NaN there stays visible where it arose (the runtime counts it)
-            out = torch.relu(raw[:, self.split[0] + self.split[1]:] + pred)
+            out = torch.relu(raw_direct + pred)
         return out.permute(0, 2, 3, 1)
 
 
