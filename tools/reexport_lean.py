@@ -185,9 +185,18 @@ def reexport(path: Path, out: Path, n_frames: int = 4, log=print) -> dict:
     model.producer_name, model.producer_version = "diviewer", card["exported_with"]["diviewer"]
     with staged() as stage:
         onnx.save(model, str(stage(out)))
-        imageio.write_text(stage(out.with_suffix(".json")), dumps(card, indent=2, sort_keys=True))
+        imageio.write_text(stage(out.with_suffix(".json")),
+                           dumps(card_with_extras(path.with_suffix(".json"), card), indent=2, sort_keys=True))
     log(f"wrote {out} and {out.with_suffix('.json').name}")
     return card
+
+
+def card_with_extras(old_card: Path, card: dict) -> dict:
+    """The new card plus what the old card file held beyond the model's metadata (e.g. the K ladder's record)."""
+    import json
+
+    extra = json.loads(old_card.read_text()) if old_card.is_file() else {}
+    return {**{k: v for k, v in extra.items() if k not in card}, **card}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -26,6 +26,7 @@ from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
 from diviewer.outputs import check_output_file, dumps, staged
+from diviewer.padding import pad_nhwc
 from diviewer.provenance import versions
 from diviewer.runtime import INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
 
@@ -242,6 +243,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     res = tuple(int(x) for x in meta["resolution"])
     frames, scales, source = _verification_frames(meta, meta["config"].get("data"), settings.verify_frames, res,
                                                   encoding.light_scaled)
+    frames = pad_nhwc(frames, 2 ** levels)  # a capture of another shape (e.g. 228x128): padded as the runtime pads
     model, check = verified_onnx(lambda: build_generator_from_checkpoint(ckpt)[0], encoding, meta, settings, frames,
                                  scales, source, out, log)
     precision = "fp16" if settings.fp16 else "fp32"
