@@ -190,7 +190,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         return 0
     if args.checkpoint is None or args.out is None:
         raise DiviewerError("give a checkpoint and --out (or --info MODEL)", field="export")
-    export(args.checkpoint, args.out, ExportSettings(fp16=args.fp16, verify_frames=args.verify_frames))
+    export(args.checkpoint, args.out, ExportSettings(fp16=args.fp16, verify_frames=args.verify_frames,
+                                                     layout=args.layout))
     return 0
 
 
@@ -252,6 +253,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("checkpoint", type=Path, nargs="?", help="RUN/best.ckpt")
     p.add_argument("--out", type=Path, help="model.onnx (a model card model.json is written beside it)")
     p.add_argument("--fp16", action="store_true", help="float16 weights and generator (encoding stays float32)")
+    p.add_argument("--layout", choices=("NHWC", "NCHW"), default="NHWC",
+                   help="the graph's input layout: NHWC as the GL pack writes it (default), or NCHW")
     p.add_argument("--verify-frames", type=int, default=4, help="frames compared with PyTorch before writing")
     p.add_argument("--info", type=Path, metavar="MODEL", help="print a model's metadata and exit")
     p.set_defaults(func=_cmd_export)

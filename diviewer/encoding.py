@@ -61,8 +61,13 @@ INPUT_CHANNEL_COUNT: int = sum(n for _, n in INPUT_CHANNELS)
 OUTPUT_CHANNELS: int = 3
 """Network output channels: linear RGB radiance (full GI or indirect only), encoded."""
 
-ENCODING_VERSION: int = 1
-"""Version of the encoding functions below; bump it whenever a curve or the layout changes."""
+ENCODING_VERSION: int = 2
+"""The newest encoding version this diviewer reads and writes; bump it whenever a curve or the layout changes.
+
+1: radiance (the direct-light input and the output) as is, times the dataset exposure.
+2: as 1, but divided by the frame's light scale (`diviewer.scene.lights.light_scale`) on the way in and
+multiplied by it on the way out, inside the graph (its second input ``light_scale``): the model is linear
+in the light by construction (no light gives exactly 0, twice the light exactly twice the output)."""
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
@@ -106,8 +111,9 @@ class Encoding:
     (+-1); brighter values saturate there but stay finite. The default spans 10 orders of
     magnitude above 1e-5 (and float32 keeps relative precision far below that)."""
 
-    version: int = ENCODING_VERSION
-    """Version of the encoding functions that produced the data; see `ENCODING_VERSION`."""
+    version: int = 1
+    """Version of the encoding (see `ENCODING_VERSION`): 1 radiance as is, 2 divided by the frame's light
+    scale (training chooses with ``TrainConfig.light_scale``)."""
 
     def __post_init__(self) -> None:
         for name in ("exposure", "depth_scale", "radiance_max"):
@@ -131,6 +137,11 @@ class Encoding:
                 f"(version {ENCODING_VERSION}); upgrade diviewer to read this data or model",
                 field="encoding.version",
             )
+
+    @property
+    def light_scaled(self) -> bool:
+        """Whether radiance is divided by the frame's light scale (version 2 and later)."""
+        return self.version >= 2
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict for JSON manifests, checkpoints and ONNX metadata."""
@@ -224,6 +235,17 @@ def _expm1(z: Any, ops: ArrayOps) -> Any:
 
 # ---------------------------------------------------------------------------------------------
 # Encodings
+
+
+def inverse_light_scale(s: Any, ops: ArrayOps = NUMPY_OPS) -> Any:
+    """1 / s where the light scale s is > 0 (and finite), else 0: a frame without light maps to exactly 0.
+
+    Version 2 multiplies the radiance input by this and the decoded output by s itself, so s = 0 gives
+    0 * (finite decoded value) = 0, never 0/0.
+    """
+    s = ops.prepare(s, "light scale")
+    ok = (s > 0) & ~ops.isinf(s)  # NaN compares false
+    return ops.where(ok, 1.0 / ops.where(ok, s, 1.0), 0.0)
 
 
 def encode_radiance(x: Any, enc: Encoding, ops: ArrayOps = NUMPY_OPS) -> Any:

@@ -26,6 +26,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
+from diviewer.data.scales import light_scales
 from diviewer.evalframes import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
 from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, aggregate, below_direct, equivalent,
                                 ladder_methods, pooled_bias, score, score_frame, score_frame_regions, strict_json)
@@ -39,9 +40,10 @@ __all__ = ["EQUIVALENT_BY", "EVAL_KEYS", "KEYS", "aggregate", "equivalent", "eva
            "pooled_bias", "run_model", "score", "score_frame", "strict_json"]
 
 
-def run_model(net: NeuralGI, frame: dict[str, np.ndarray]) -> np.ndarray:
-    """A model's linear radiance for one frame's buffers: the one place eval and bench call the runtime."""
-    return net.run(pack_buffers(frame))
+def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | None = None) -> np.ndarray:
+    """A model's linear radiance for one frame's buffers: the one place eval and bench call the runtime.
+    ``light_scale``: the frame's (diviewer.scene.lights.light_scale), which encoding-2 models need."""
+    return net.run(pack_buffers(frame), light_scale=light_scale)
 
 
 def scene_exposure(scene_name: str, scene_hash: str, direct_frames) -> tuple[float, str]:
@@ -79,12 +81,13 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
                                              (np.array(np.load(ds.path(i), mmap_mode="r")[..., direct])
                                               for i in ds.indices("train")))
     rows, times, black = {"neural": [], "direct": []}, [], []
-    for i in idx:
+    scales = light_scales(ds, idx) if model.light_scaled else [None] * len(idx)  # encoding 2: each frame's light
+    for i, s in zip(idx, scales):
         f = ds.load(i)
         if not np.any(f["pt"] > 0):
             black.append(i)
         t0 = time.perf_counter()
-        y = run_model(model, f)
+        y = run_model(model, f, s)
         times.append((time.perf_counter() - t0) * 1e3)
         rows["neural"].append(score(y, f["pt"], exposure))
         rows["direct"].append(score(f["direct"], f["pt"], exposure))
@@ -206,6 +209,8 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
     if not ev.ladder_images():
         rows.update({m: [] for m in ev.ladder_rows(idx[0], key)})
     times, refused, flat = {k: [] for k in models}, {}, 0
+    # encoding 2: each frame's light scale from its stored configuration
+    scales = dict(zip(idx, light_scales(ev, idx))) if any(n.light_scaled for n in models.values()) else {}
     for i in idx:
         f = crop_frame(ev.load(i), shape[0])
         mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # flat and no shadow edge
@@ -215,7 +220,7 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
                 continue
             t0 = time.perf_counter()
             try:
-                y = run_model(net, f)
+                y = run_model(net, f, scales.get(i))
             except DiviewerError as exc:  # the runtime refuses this shape: say so, score the rest
                 refused[name] = str(exc)
                 continue

@@ -2,9 +2,14 @@
 
 The model contract (written by ``diviewer export``, read here; torch-free):
 
-- one input ``buffers``: float32 (N, H, W, 10), NHWC, linear and raw, channels in
-  ``diviewer.encoding.INPUT_CHANNELS`` order (depth, normal xyz, albedo rgb, direct rgb), rows top
-  first; H and W multiples of the model's ``multiple``;
+- input ``buffers``: float32, linear and raw, channels in ``diviewer.encoding.INPUT_CHANNELS`` order
+  (depth, normal xyz, albedo rgb, direct rgb), rows top first; (N, H, W, 10) when the metadata's
+  ``layout`` is "NHWC" (every model before the lean graph), (N, 10, H, W) when it is "NCHW" (no
+  transpose before the first convolution); H and W multiples of the model's ``multiple``: ``run``
+  pads any other size to it (`diviewer.padding`, as training pads) and crops the output back;
+- for encoding version 2 a second input ``light_scale``: float32 (N,), each frame's light scale
+  (`diviewer.scene.lights.light_scale`): the graph divides the direct light by it and multiplies its
+  output by it, so the model is linear in the light (0 gives exactly 0);
 - one output ``radiance``: float32 (N, H, W, 3) linear radiance of the final image (for a model of
   the ``indirect`` target the exact direct light is already added inside the graph);
 - the encoding and decoding live inside the graph; the metadata key ``diviewer`` holds a JSON
@@ -21,9 +26,13 @@ import numpy as np
 
 from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNELS, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
+from diviewer.padding import crop_nhwc, pad_nhwc
 from diviewer.timing import StageTimer
 
 INPUT_NAME = "buffers"
+LIGHT_SCALE_NAME = "light_scale"
+LAYOUTS = ("NHWC", "NCHW")
+"""Input layouts a model may take (its metadata's ``layout``); the output is NHWC radiance either way."""
 OUTPUT_NAME = "radiance"
 META_KEY = "diviewer"
 MODEL_FORMAT = 1
@@ -107,9 +116,10 @@ def check_compatible(meta: dict, path: Path, scene=None) -> None:
     if [list(c) for c in meta["channels"]] != expected:
         raise DiviewerError(f"the model expects input channels {meta['channels']}, the renderer provides {expected}",
                             path=path, field="channels")
-    if meta["layout"] != "NHWC" or meta["input"] != INPUT_NAME or meta["output"] != OUTPUT_NAME:
+    if meta["layout"] not in LAYOUTS or meta["input"] != INPUT_NAME or meta["output"] != OUTPUT_NAME:
         raise DiviewerError(f"the model's inputs/outputs ({meta['input']} -> {meta['output']}, {meta['layout']}) "
-                            f"are not diviewer's ({INPUT_NAME} -> {OUTPUT_NAME}, NHWC)", path=path, field="layout")
+                            f"are not diviewer's ({INPUT_NAME} -> {OUTPUT_NAME}, {' or '.join(LAYOUTS)})", path=path,
+                            field="layout")
     if scene is not None and meta["scene_hash"] != scene.file_hash:
         same_name = meta["scene"] == scene.name
         raise DiviewerError(
@@ -142,6 +152,7 @@ class NeuralGI:
         import onnxruntime as ort
 
         self.path = Path(path)
+        self.scene = scene
         if not self.path.is_file():
             raise DiviewerError(f"model file not found: {self.path}")
         opts = ort.SessionOptions()
@@ -161,10 +172,16 @@ class NeuralGI:
         self.meta = _metadata(self.session, self.path)
         check_compatible(self.meta, self.path, scene)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
-        if [i.name for i in inputs] != [INPUT_NAME] or OUTPUT_NAME not in [o.name for o in outputs]:
+        self.light_scaled = int(self.meta["encoding"].get("version", 1)) >= 2
+        """Encoding version 2: ``run`` needs each frame's light scale."""
+        wanted = [INPUT_NAME] + ([LIGHT_SCALE_NAME] if self.light_scaled else [])
+        if [i.name for i in inputs] != wanted or OUTPUT_NAME not in [o.name for o in outputs]:
             raise DiviewerError(f"the graph's inputs {[i.name for i in inputs]} / outputs {[o.name for o in outputs]} "
-                                f"are not diviewer's", path=self.path)
-        channels = inputs[0].shape[-1]
+                                f"are not diviewer's for encoding version {self.meta['encoding'].get('version')} "
+                                f"({wanted} -> {OUTPUT_NAME})", path=self.path)
+        self.layout = self.meta["layout"]
+        """The input layout the graph takes: "NHWC" or "NCHW" (``run`` takes NHWC and transposes if needed)."""
+        channels = inputs[0].shape[1 if self.layout == "NCHW" else -1]
         if channels != sum(n for _, n in INPUT_CHANNELS):
             raise DiviewerError(f"the graph takes {channels} input channels, the renderer provides "
                                 f"{sum(n for _, n in INPUT_CHANNELS)}", path=self.path, field="input")
@@ -184,24 +201,53 @@ class NeuralGI:
         return hashlib.sha256(self.path.read_bytes()).hexdigest()
 
     def check_size(self, width: int, height: int) -> None:
-        if width % self.multiple or height % self.multiple:
-            raise DiviewerError(f"the model needs width and height that are multiples of {self.multiple}, "
-                                f"got {width}x{height} (it was trained at {self.resolution[0]}x{self.resolution[1]})",
-                                path=self.path)
+        """Any size of at least one pixel runs: ``run`` pads it to the model's multiple and crops back."""
+        if not (isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))
+                and width >= 1 and height >= 1):
+            raise DiviewerError(f"the model needs a frame of at least 1x1 pixels, got {width}x{height}", path=self.path)
 
-    def run(self, buffers: np.ndarray, timer: StageTimer | None = None) -> np.ndarray:
-        """(N, H, W, 10) or (H, W, 10) float32 raw buffers to radiance of the same leading shape."""
+    def light_scale(self, config, scene=None) -> float:
+        """The light scale of a frame (`diviewer.scene.lights.light_scale`) of ``scene`` (default: the
+        scene the model was loaded for), to pass to ``run``."""
+        from diviewer.scene.lights import light_scale
+
+        scene = scene if scene is not None else self.scene
+        if scene is None:
+            raise ValueError("light_scale needs the scene: load the model with scene= or pass it")
+        return light_scale(scene, config)
+
+    def run(self, buffers: np.ndarray, timer: StageTimer | None = None, light_scale=None) -> np.ndarray:
+        """(N, H, W, 10) or (H, W, 10) float32 raw buffers to radiance of the same leading shape.
+
+        Any H x W: frames that are not multiples of the model's stride are edge-padded to it and the
+        output cropped back (`diviewer.padding`, exactly as training pads). ``light_scale``: each frame's
+        light scale, a number or (N,) (`light_scale`); needed by encoding-2 models, ignored by older ones.
+        """
         single = buffers.ndim == 3
         x = buffers[None] if single else buffers
         if x.dtype != np.float32 or not x.flags.c_contiguous:
             x = np.ascontiguousarray(x, dtype=np.float32)
-        self.check_size(x.shape[2], x.shape[1])
+        n, height, width = x.shape[:3]
+        self.check_size(width, height)
         # Counted, not replaced: the exported graph's encoding maps non-finite network inputs to 0, and
         # what the graph returns non-finite (a NaN in the direct light it adds) stays visible where it
         # arose (the display flags it) instead of being hidden; the counts say how many.
         self.nonfinite_inputs = count_nonfinite(x)
+        feed = pad_nhwc(x, self.multiple)
+        if self.layout == "NCHW":
+            feed = np.ascontiguousarray(feed.transpose(0, 3, 1, 2))
+        feeds = {INPUT_NAME: feed}
+        if self.light_scaled:
+            if light_scale is None:
+                raise ValueError(f"{self.path.name} uses encoding version 2: run() needs each frame's light scale "
+                                 "(NeuralGI.light_scale(config))")
+            s = np.asarray(light_scale, np.float32).reshape(-1)
+            feeds[LIGHT_SCALE_NAME] = np.ascontiguousarray(np.broadcast_to(s, (n,)) if s.size == 1 else s)
+            if feeds[LIGHT_SCALE_NAME].shape != (n,):
+                raise ValueError(f"light_scale: expected one value or {n}, got {s.size}")
         with (timer or self.timer).stage("inference"):
-            (y,) = self.session.run([OUTPUT_NAME], {INPUT_NAME: x})
+            (y,) = self.session.run([OUTPUT_NAME], feeds)
+        y = crop_nhwc(y, height, width, self.multiple)
         self.nonfinite_outputs = count_nonfinite(y)
         # Radiance is never negative: the runtime clamps (models exported before the graph did so,
         # e.g. an indirect-target model's undershoot, would otherwise darken the composite below 0).
@@ -251,4 +297,4 @@ def pack_buffers(frame: dict[str, np.ndarray]) -> np.ndarray:
 
 
 __all__ = ["NeuralGI", "pack_buffers", "read_metadata", "check_compatible", "choose_providers", "INPUT_NAME",
-           "OUTPUT_NAME", "META_KEY", "OUTPUT_CHANNELS"]
+           "LIGHT_SCALE_NAME", "OUTPUT_NAME", "META_KEY", "OUTPUT_CHANNELS"]

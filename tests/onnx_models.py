@@ -7,14 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNEL_COUNT, INPUT_CHANNELS, input_channel_slices
+from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, input_channel_slices
 
 
 def base_meta(scene_hash: str = "0" * 64, scene: str = "plane") -> dict:
     return {
         "format": 1, "input": "buffers", "output": "radiance", "layout": "NHWC",
         "channels": [list(c) for c in INPUT_CHANNELS], "resolution": [32, 32], "multiple": 16, "K": 8, "levels": 4,
-        "target": "full", "encoding": {"version": ENCODING_VERSION}, "precision": "fp32",
+        "target": "full", "encoding": {"version": 1}, "precision": "fp32",
         "scene": scene, "scene_hash": scene_hash, "dataset_hash": "d" * 64,
     }
 

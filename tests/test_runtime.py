@@ -90,11 +90,22 @@ def test_model_for_another_scene_is_refused(tmp_path):
     NeuralGI(ok, scene=scene)
 
 
-def test_size_must_be_a_multiple():
+def test_any_size_is_padded_to_the_stride_and_cropped_back():
+    """A shipped model (stride 128) at sizes that are not multiples of it: the output has the frame's size, is
+    finite, and each pixel equals that pixel of a run on the frame padded by hand (diviewer.padding)."""
+    from diviewer.padding import crop_nhwc, pad_nhwc
+
     model = NeuralGI(SHIPPED[0])  # a shipped model: no onnx package needed
     m = model.multiple
-    with pytest.raises(DiviewerError, match=f"multiples of {m}"):
-        model.run(np.zeros((1, m + 4, 2 * m, 10), np.float32))
+    rng = np.random.default_rng(0)
+    for h, w in [(24, 24), (20, 36), (40, 12)]:
+        x = np.concatenate([rng.uniform(1, 5, (h, w, 1)), np.tile([0, 0, 1.0], (h, w, 1)),
+                            rng.uniform(0, 1, (h, w, 6))], -1).astype(np.float32)
+        y = model.run(x)
+        assert y.shape == (h, w, 3) and np.all(np.isfinite(y))
+        padded = pad_nhwc(x[None], m)
+        assert padded.shape[1] % m == 0 and padded.shape[2] % m == 0
+        np.testing.assert_array_equal(y, crop_nhwc(np.maximum(model.run(padded), 0), h, w, m)[0])
 
 
 def test_pack_shader_refuses_a_layout_it_does_not_write(ctx):
@@ -237,4 +248,25 @@ def test_render_with_model_writes_neural_exr(gl_context, tmp_path):
     np.testing.assert_allclose(neural, 2 * direct, rtol=1e-6)
     assert (out / "neural.png").is_file()
     assert main(["render", "--scene", "atrium", "--model", str(path), "--out", str(tmp_path / "a")]) == 2
-    assert main(["render", "--scene", "cornell", "--model", str(path), "--res", "40", "--out", str(tmp_path / "b")]) == 2
+
+
+@pytest.mark.parametrize("res", ["40x40", "56x24", "24x44"])
+def test_render_with_model_at_any_shape(gl_context, tmp_path, res):
+    """`render --res WxH --model` at a square and two other shapes, none a multiple of the models' strides
+    (16 for the toy, 128 for the shipped cornell model): finite output of the asked shape, each pixel the
+    model's own (the toy returns 2 x direct, so a misplaced crop would show)."""
+    from diviewer.cli import main
+    from diviewer.imageio import read_exr
+    from diviewer.paths import models_dir
+    from diviewer.scene import load_scene
+
+    cornell = load_scene("cornell")
+    w, h = (int(v) for v in res.split("x"))
+    toy = direct_times(tmp_path / "m.onnx", meta=base_meta(scene_hash=cornell.file_hash, scene="cornell"))
+    for name, model in (("toy", toy), ("shipped", models_dir() / "cornell.onnx")):
+        out = tmp_path / name
+        assert main(["render", "--scene", "cornell", "--model", str(model), "--res", res, "--out", str(out)]) == 0
+        neural = read_exr(out / "neural.exr")
+        assert neural.shape == (h, w, 3) and np.all(np.isfinite(neural))
+        if name == "toy":
+            np.testing.assert_allclose(neural, 2 * read_exr(out / "direct.exr"), rtol=1e-6)

@@ -270,7 +270,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
     rows.extend(pt["rows"])
     result = report.assemble(settings, scene, rows, accuracy, temporal, pt, env, notes,
                              seconds=time.perf_counter() - t_start)
-    for line in report.table(result):
+    for line in report.table(result) + bare_ratio_lines(result["rows"]):
         log(line)
     if json_out is not None:
         from diviewer import imageio
@@ -281,6 +281,25 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
         report.plot(result, plot_out)
     tmp_dir.cleanup()
     return result
+
+
+def bare_ratio_lines(rows: list[dict]) -> list[str]:
+    """Each model's inference time over a bare (untrained) generator's of the same K at the same size, in
+    the same run: what the model's graph costs beyond its convolutions (issue 28: <= 1.2). Also recorded
+    in the rows (``bare_ratio``)."""
+    def inference(r):
+        return r["timing"]["stages"].get("inference", {}).get("median")
+
+    bare = {(r["K"], r["resolution"][0]): r for r in rows if r.get("untrained")}
+    lines = []
+    for r in rows:
+        b = bare.get((r.get("K"), r["gi_resolution"][0]))
+        if r["kind"] != "neural" or r.get("untrained") or b is None or not inference(r) or not inference(b):
+            continue
+        r["bare_ratio"] = inference(r) / inference(b)
+        lines.append(f"  {r['label'][:36]:<36} {r['gi_resolution'][0]:>4}: inference {inference(r):.2f} ms = "
+                     f"{r['bare_ratio']:.2f} x the bare K={r['K']} fp32 generator's {inference(b):.2f} ms")
+    return ["", "model / bare generator of the same K and size (inference, median):"] + lines if lines else []
 
 
 def _levels(res: int) -> int:
@@ -391,7 +410,8 @@ def _temporal(ctx, settings, scene, ds, variants, net_of, mode, notes, log) -> d
     for v in variants:
         net = net_of(v)
         if res % net.multiple == 0:
-            seqs[f"{v['path']}|1"] = [net.run(pack_buffers(b)) for b in buffers]
+            seqs[f"{v['path']}|1"] = [net.run(pack_buffers(b), light_scale=net.light_scale(c, scene) if net.light_scaled
+                                              else None) for b, c in zip(buffers, seq)]
     ladder = [int(n) for n in ds.manifest["evalset"]["ladder_spp"]] if ds is not None else list(settings.pt_spp)
     for n in ladder:  # a real-time path tracer draws new samples every frame
         seqs[f"pt_spp{n}"] = [f.full(n, 1 + k) for k, f in enumerate(frames)]

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNEL_COUNT, INPUT_CHANNELS, OUTPUT_CHANNELS, input_channel_slices
+from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, OUTPUT_CHANNELS, input_channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.runtime import INPUT_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
 
@@ -140,7 +140,7 @@ def untrained_generator(K: int, levels: int, scene, resolution: int, fp16: bool 
     meta = {"format": MODEL_FORMAT, "kind": "untrained", "input": INPUT_NAME, "output": OUTPUT_NAME, "layout": "NHWC",
             "channels": [list(c) for c in INPUT_CHANNELS], "resolution": [resolution, resolution],
             "multiple": 2 ** levels, "K": K, "levels": levels, "upsample": "transpose", "target": "indirect",
-            "encoding": {"version": ENCODING_VERSION}, "precision": "fp16" if fp16 else "fp32",
+            "encoding": {"version": 1}, "precision": "fp16" if fp16 else "fp32",
             "scene": scene.name, "scene_hash": scene.file_hash, "dataset_hash": "untrained (random weights)",
             "description": "untrained U-Net for timing only (random weights, no accuracy)"}
     set_meta(model, meta)

@@ -96,7 +96,7 @@ class GlBench:
         neural = self.neural_pass(net, step)
         try:
             def frame(config):
-                neural.run()
+                neural.run(light_scale=net.light_scale(config, self.scene) if net.light_scaled else None)
                 return neural.composite(), False
 
             return self.run(configs, warmup, frame, direct=False)
@@ -230,13 +230,15 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
         for n, i in enumerate(idx):
             f = crop_frame(ds.load(i), shape[0])
             mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # as diviewer eval
+            config = config_from_dict(gl.scene, ds.entry(i)["config"]) if models else None  # models need a GL scene
             if passes:
-                gl.renderer.render(config_from_dict(gl.scene, ds.entry(i)["config"]), direct=False)  # as timed
+                gl.renderer.render(config, direct=False)  # as timed
             for key, (net, step) in models.items():
+                s = net.light_scale(config, gl.scene) if net.light_scaled else None  # encoding 2
                 if step == 1:
-                    image = run_model(net, f)
+                    image = run_model(net, f, s)
                 else:
-                    passes[key].run()
+                    passes[key].run(light_scale=s)
                     image = read_final(passes[key].composite())
                 rows[key].append(score_frame(image, f["pt"], exposure, mask))
             for key, images in vx_images.items():

@@ -23,3 +23,12 @@ def linear_to_srgb(c: np.ndarray) -> np.ndarray:
 def srgb8(linear: np.ndarray) -> np.ndarray:
     """A linear [0, 1] image (e.g. albedo) as uint8 sRGB, rounded; NaN shows as black."""
     return (linear_to_srgb(np.nan_to_num(linear)) * 255 + 0.5).astype(np.uint8)
+
+
+LUMINANCE_WEIGHTS: tuple[float, float, float] = (0.2126, 0.7152, 0.0722)
+"""Rec. 709 / sRGB primaries: relative luminance of linear RGB."""
+
+
+def luminance(rgb) -> float:
+    """Relative luminance of one linear RGB triple."""
+    return float(sum(w * float(c) for w, c in zip(LUMINANCE_WEIGHTS, rgb)))

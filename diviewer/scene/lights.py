@@ -46,3 +46,28 @@ def vector_to_angles(v) -> tuple[float, float]:
     """Inverse of ``angles_to_vector``: (azimuth, elevation) in degrees of a direction."""
     x, y, z = cam.normalize(v)
     return math.degrees(math.atan2(x, z)), math.degrees(math.asin(float(np.clip(y, -1.0, 1.0))))
+
+
+def light_scale(scene, config) -> float:
+    """The frame's light scale: how much light enters it, from its light sources (never from an image).
+
+    Sum over the lights of luminance(color) x irradiance (a sun) or x intensity (a point light), plus the
+    emission luminance of every emissive material the frame's objects use, plus the sky's (the scene's
+    ambient radiance, an emitter of the path tracer). Encoding version 2 divides the network's radiance
+    input by it and multiplies its output back, so GI is linear in the light by construction: zero light
+    gives exactly zero, twice the light twice the frame. A camera looking into a shaded corner sees no
+    direct light but has GI, which is why the scale comes from the sources and not from the pixels.
+    Training, export checks, the runtime and the viewer all call this one function.
+    """
+    from diviewer.scene.colour import luminance
+
+    s = 0.0
+    for l in config.lights:
+        s += luminance(l.color) * float(getattr(l, power_field(l)))
+    used = {o.material for o in config.objects}
+    for name in sorted(used):
+        m = scene.materials.get(name)
+        if m is not None and m.is_emissive:
+            s += luminance(m.emission)
+    s += luminance(scene.ambient)
+    return s

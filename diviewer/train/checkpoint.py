@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from diviewer import imageio
 from diviewer.errors import DiviewerError, missing_extra
-from diviewer.train.config import RESUME_FIXED, TrainConfig
+from diviewer.train.config import LEGACY_DEFAULTS, RESUME_FIXED, TrainConfig
 from diviewer.train.targets import ALBEDO_FLOOR
 
 if TYPE_CHECKING:
@@ -143,7 +143,7 @@ def check_resume(cfg: TrainConfig, ckpt: Mapping[str, Any], ds: Dataset, train_i
                             path=path)
     old = ckpt["config"]
     # Settings a checkpoint from before they existed does not record had their default then.
-    default = {f.name: f.default for f in dataclasses.fields(TrainConfig)}
+    default = {**{f.name: f.default for f in dataclasses.fields(TrainConfig)}, **LEGACY_DEFAULTS}
     # The schedule may change only where it leaves the steps already taken as they were: a run at a
     # constant rate resumed into an anneal that starts at or after its step (see lr_decay_start).
     from diviewer.train.step import constant_until

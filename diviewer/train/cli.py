@@ -18,7 +18,7 @@ from typing import Any
 from diviewer.errors import DiviewerError
 from diviewer.locks import run_lock
 from diviewer.outputs import check_output_dir
-from diviewer.train.config import CHOICES, RESUME_INHERITED, TrainConfig
+from diviewer.train.config import CHOICES, LEGACY_DEFAULTS, RESUME_INHERITED, TrainConfig
 from diviewer.train.recipe import DEFAULT_RECIPE, load_recipe
 
 
@@ -84,12 +84,35 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
                    help="use only the first N train frames by index (default: all present)")
     g.add_argument("--patience", type=int, default=None,
                    help="stop after N validations without a better tone-mapped SSIM (default 0: never)")
+    g.add_argument("--light-scale", action=argparse.BooleanOptionalAction, default=None,
+                   help="divide radiance by each frame's light scale: linear in the light, black without it "
+                        "(encoding 2; default on; --no-light-scale: encoding 1)")
+    g.add_argument("--aspect-crops", type=_aspect_range, default=None, metavar="LO:HI",
+                   help="random-width crops per batch, width/height in LO..HI at full height, e.g. 0.5625:1.7778 "
+                        "(9:16 to 16:9), or 'off' (default off)")
     g.add_argument("--val-every-steps", type=int, default=None,
                    help="also validate (and save) every N steps (default 0: epoch ends only)")
     p.add_argument("--num-workers", type=int, default=None, help="DataLoader workers (default 0)")
     p.add_argument("--device", default=None, help="auto, cpu, cuda or cuda:N (default auto)")
     p.set_defaults(func=run_train)
     return p
+
+
+def _aspect_range(text: str):
+    """--aspect-crops LO:HI (or W/H fractions such as 9/16:16/9), or 'off'."""
+    if text.strip().lower() in ("off", "none"):
+        return ()
+    try:
+        lo, hi = (float(eval_fraction(v)) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LO:HI (e.g. 0.5625:1.7778 or 9/16:16/9) or off, got {text!r}")
+    return (lo, hi)
+
+
+def eval_fraction(v: str) -> float:
+    """'9/16' or '0.5625' as a float."""
+    num, _, den = v.strip().partition("/")
+    return float(num) / float(den) if den else float(num)
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -101,7 +124,8 @@ def run_train(args: argparse.Namespace) -> int:
     check_output_dir(args.out, "--out", writes="run")  # also under torchrun, which bypasses diviewer.cli
     resume = bool(getattr(args, "resume", False))
     last = Path(args.out) / "last.ckpt"
-    old = load_checkpoint(last, mmap=True)["config"] if resume and last.is_file() else None
+    # a checkpoint from before a setting existed trained with its legacy value (LEGACY_DEFAULTS)
+    old = {**LEGACY_DEFAULTS, **load_checkpoint(last, mmap=True)["config"]} if resume and last.is_file() else None
     cfg = resolve_config(args, old)
     if args.lr_decay_start is not None and cfg.lr_decay == "none":
         raise DiviewerError("sets where a decay starts, and this run has none; add --lr-decay cosine, or leave "
@@ -130,6 +154,8 @@ def resolve_config(args: argparse.Namespace, old: dict[str, Any] | None = None) 
     if getattr(args, "amp", False) and given["precision"] is None:
         given["precision"] = "fp16"
     given = {k: v for k, v in given.items() if v is not None}
+    if given.get("aspect_crops") == ():  # --aspect-crops off
+        given["aspect_crops"] = None
     name = getattr(args, "recipe", None)
     if old is not None and name is None:  # resumed: the checkpoint's settings and recipe record
         base = {k: old[k] for k in RESUME_INHERITED if k in old}

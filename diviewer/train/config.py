@@ -141,6 +141,16 @@ class TrainConfig:
     (K, levels, decoder, normalisation, target); optimizers, step and schedule start afresh. The
     checkpoint's own recipe is recorded (model card: ``recipe.init``) so the model can be rebuilt."""
 
+    light_scale: bool = True
+    """Encoding version 2: divide each frame's direct light and target by its light scale (from its lights
+    and emitters, `diviewer.scene.lights.light_scale`) and multiply the output back, so the model is linear
+    in the light by construction (no light: exactly black). False: version 1, radiance as is."""
+
+    aspect_crops: tuple[float, float] | None = None
+    """Random-width crops of the (wider) dataset frames, one width per batch, width / height drawn in this
+    range at full height (e.g. (0.5625, 1.7778): 9:16 to 16:9), edge-padded to the network's stride as the
+    runtime pads them, the loss over the frame's pixels only. None: whole frames."""
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "data", Path(self.data))
         object.__setattr__(self, "out", Path(self.out))
@@ -187,6 +197,16 @@ class TrainConfig:
         if self.recipe is not None and not (isinstance(self.recipe, dict)
                                             and all(isinstance(k, str) for k in self.recipe)):
             fail("recipe", f"must be a recipe record (a table of name, file, sha256, overrides), got {self.recipe!r}")
+        if not isinstance(self.light_scale, bool):
+            fail("light_scale", f"must be true or false, got {self.light_scale!r}")
+        if self.aspect_crops is not None:
+            a = self.aspect_crops
+            ok = (isinstance(a, (tuple, list)) and len(a) == 2
+                  and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+                          for v in a) and a[0] <= a[1])
+            if not ok:
+                fail("aspect_crops", f"must be two positive numbers lo <= hi (width / height), got {a!r}")
+            object.__setattr__(self, "aspect_crops", (float(a[0]), float(a[1])))
         cuda_n = self.device.startswith("cuda:") and self.device[5:].isdigit()
         if not (self.device in ("auto", "cpu", "cuda") or cuda_n):
             fail("device", f"must be auto, cpu, cuda or cuda:N, got {self.device!r}")
@@ -210,6 +230,7 @@ class TrainConfig:
         """Rebuild from `to_dict()` output; unknown keys are an error (checkpoints written before
         `precision` recorded `amp`: True meant float16 autocast)."""
         data = dict(data)
+        data = {**LEGACY_DEFAULTS, **data}
         if "amp" in data and "precision" not in data:
             data["precision"] = "fp16" if data.pop("amp") else "auto"
         check_known_keys(cls, data, "train")
@@ -227,7 +248,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
 RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "lr_decay_start", "beta1", "beta2",
                                  "lambda_L1", "target", "divide_albedo", "seed", "dropout", "ndf", "gan_weight",
                                  "gan_mode", "recon_loss", "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample",
-                                 "norm", "train_frames", "init_from")
+                                 "norm", "train_frames", "init_from", "light_scale", "aspect_crops")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change); the schedule
 (lr_decay, lr_decay_start) may change while both the old and the new one are constant up to the
 checkpoint's step (train.checkpoint.check_resume)."""
@@ -235,3 +256,7 @@ checkpoint's step (train.checkpoint.check_resume)."""
 RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save_every", "patience", "val_every_steps")
 """Settings `diviewer train --resume` takes from the checkpoint unless given again (max_steps, precision,
 device and num_workers describe this invocation and this machine, so they are not inherited)."""
+
+LEGACY_DEFAULTS: dict[str, Any] = {"light_scale": False, "aspect_crops": None}
+"""What a checkpoint from before these settings existed trained with (radiance as is, whole frames), where
+it does not record them; a new run's defaults differ."""

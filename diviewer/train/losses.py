@@ -88,7 +88,7 @@ def exposed_radiance(y: torch.Tensor, encoding: Encoding) -> torch.Tensor:
 
 
 def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = "l1", space: str = "encoded",
-                        encoding: Encoding | None = None) -> torch.Tensor:
+                        encoding: Encoding | None = None, mask: torch.Tensor | None = None) -> torch.Tensor:
     """The reconstruction term between netG's output and the target, both encoded; see the module
     docstring for which statistic of a noisy target each (mode, space) converges to.
 
@@ -98,6 +98,8 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
         mode: "l1" or "l2" (`RECONSTRUCTION_MODES`).
         space: "encoded", "linear" or "log" (`RECONSTRUCTION_SPACES`); the last two need `encoding`.
         encoding: the dataset's encoding, to decode to linear radiance (times its exposure).
+        mask: (1 or N, 1, H, W), 1 on the frame's pixels and 0 on the stride padding (`diviewer.padding`):
+            the mean is then over the frame's pixels only. None: every pixel.
 
     Returns:
         The mean over all elements (a scalar tensor), unweighted: the caller applies lambda.
@@ -113,6 +115,10 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
         fake, real = exposed_radiance(fake, encoding), exposed_radiance(real, encoding)
     if space == "log":
         fake, real = torch.log(fake.clamp_min(0.0) + LOG_EPSILON), torch.log(real.clamp_min(0.0) + LOG_EPSILON)
+    if mask is not None:
+        err = (fake - real).abs() if mode == "l1" else (fake - real).square()
+        m = mask.to(err.dtype).expand_as(err)
+        return (err * m).sum() / m.sum().clamp(min=1.0)
     if mode == "l1":
         return nn.functional.l1_loss(fake, real)
     return nn.functional.mse_loss(fake, real)
@@ -139,9 +145,10 @@ class LossConfig:
             if value not in choices:
                 raise DiviewerError(f"must be one of {list(choices)}, got {value!r}", field=f"loss.{name}")
 
-    def reconstruction_loss(self, fake_B: torch.Tensor, real_B: torch.Tensor, encoding: Encoding) -> torch.Tensor:
-        """`reconstruction_loss` with this config's mode and space."""
-        return reconstruction_loss(fake_B, real_B, self.reconstruction, self.space, encoding)
+    def reconstruction_loss(self, fake_B: torch.Tensor, real_B: torch.Tensor, encoding: Encoding,
+                            mask: torch.Tensor | None = None) -> torch.Tensor:
+        """`reconstruction_loss` with this config's mode and space (over the frame's pixels: ``mask``)."""
+        return reconstruction_loss(fake_B, real_B, self.reconstruction, self.space, encoding, mask)
 
     def gan_loss(self) -> GANLoss:
         """The adversarial criterion for this config."""

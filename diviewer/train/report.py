@@ -32,13 +32,15 @@ not validated) and wall-clock seconds since the run began (summed over resumed p
 
 
 def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, cfg: TrainConfig, device,
-             dtype=None) -> dict[str, float]:
+             dtype=None, scales: np.ndarray | None = None, multiple: int = 1) -> dict[str, float]:
     """Mean per-frame metrics of the composed image against the path-traced `pt`, netG in eval mode.
 
     Linear: MSE, PSNR (peak 1) and SSIM (data_range 1) on radiance as stored, as `diviewer.metrics`
     defines them. Tone-mapped (_tm): the same on `tonemap(x, enc.exposure)`. With target
     "indirect" the image is GL direct + predicted indirect, as the viewer composes it. dtype: the
-    autocast dtype netG runs in (None: float32).
+    autocast dtype netG runs in (None: float32). scales: each val frame's light scale (encoding version
+    2: the decoded output is multiplied by it). Frames are padded to ``multiple`` as the runtime pads them,
+    and the metrics taken on the frame's own pixels.
     """
     import torch
 
@@ -51,13 +53,17 @@ def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, 
     with torch.no_grad():
         for start in range(0, len(val), cfg.batch_size):
             x16 = torch.from_numpy(val[start:start + cfg.batch_size]).to(device)
-            b = split_batch(x16, slices, enc, cfg)
+            scale = None if scales is None else torch.from_numpy(scales[start:start + cfg.batch_size])
+            b = split_batch(x16, slices, enc, cfg, scale=scale, multiple=multiple)
             with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
                 fake_B = netG(b["real_A"])
-            pred = compose_radiance(decode_radiance(fake_B.float(), enc), b["direct"], b["albedo"], cfg.target,
-                                    cfg.divide_albedo)
-            pred = pred.permute(0, 2, 3, 1).cpu().numpy()
-            truth = b["pt"].permute(0, 2, 3, 1).cpu().numpy()
+            radiance = decode_radiance(fake_B.float(), enc)
+            if "scale" in b:
+                radiance = radiance * b["scale"]
+            pred = compose_radiance(radiance, b["direct"], b["albedo"], cfg.target, cfg.divide_albedo)
+            rows, cols = b["crop"]
+            pred = pred[:, :, rows, cols].permute(0, 2, 3, 1).cpu().numpy()
+            truth = b["pt"][:, :, rows, cols].permute(0, 2, 3, 1).cpu().numpy()
             for p, t in zip(pred, truth):
                 p_tm, t_tm = tonemap(p, enc.exposure), tonemap(t, enc.exposure)
                 sums["mse"] += metrics.mse(p, t)

@@ -141,7 +141,7 @@ def train_step(nets: Nets, b: dict[str, Any]) -> dict[str, float]:
         out.update(loss_D=loss_D.detach(), D_acc_real=_accuracy(pred_real.detach(), True, nets.loss.gan_mode),
                    D_acc_fake=_accuracy(pred_fake.detach(), False, nets.loss.gan_mode))
     with torch.autocast(**autocast):
-        loss_G = loss_G_L1 = nets.loss.reconstruction_loss(fake_B, real_B, nets.encoding) * nets.lambda_L1
+        loss_G = loss_G_L1 = nets.loss.reconstruction_loss(fake_B, real_B, nets.encoding, b.get("mask")) * nets.lambda_L1
         if nets.adversarial:
             # netG: fool the updated netD. The bare module: under DDP no gradient of netD is
             # reduced in this pass.

@@ -5,8 +5,10 @@ input and target. Export imports the composition from here, so the ONNX graph co
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
+
 
 import numpy as np
 
@@ -62,17 +64,38 @@ def _albedo_floor(albedo: Any) -> Any:
     return np.clip(np.where(np.isnan(albedo), 0.0, albedo), ALBEDO_FLOOR, 1.0)
 
 
-def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray) -> Encoding:
+def run_light_scales(cfg: TrainConfig, ds: Dataset, train_idx: list[int],
+                  with_val: bool) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """A run's train (and val) frames' light scales (None, None without ``cfg.light_scale``: encoding 1)."""
+    from diviewer.errors import DiviewerError
+
+    if not cfg.light_scale:
+        return None, None
+    from diviewer.data.scales import light_scales
+
+    train_scales = light_scales(ds, train_idx)
+    if not np.any(train_scales > 0):
+        raise DiviewerError("no train frame has any light (every light scale is 0: no lights, emitters or sky "
+                            "in the frame configurations); train with --no-light-scale", path=ds.root)
+    return train_scales, light_scales(ds, sorted(ds.indices("val"))) if with_val else None
+
+
+def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: np.ndarray | None = None) -> Encoding:
     """The dataset's encoding, fixed from the train split.
 
-    exposure: `fit_exposure` over the train frames' GL direct light; depth_scale: the camera's far
-    plane from the frame configurations (all visible geometry then maps into [0, 1]), else the
-    largest train depth; radiance_max: the default.
+    exposure: `fit_exposure` over the train frames' GL direct light (divided by each frame's light scale
+    when ``scales`` is given: encoding version 2); depth_scale: the camera's far plane from the frame
+    configurations (all visible geometry then maps into [0, 1]), else the largest train depth;
+    radiance_max: the default.
     """
-    from diviewer.encoding import Encoding, fit_exposure
+    from diviewer.encoding import Encoding, fit_exposure, inverse_light_scale
 
     direct = ds.slices["direct"]
-    exposure = fit_exposure([frame[..., direct] for frame in train])
+    if scales is None:
+        exposure = fit_exposure([frame[..., direct] for frame in train])
+    else:
+        inv = inverse_light_scale(scales.astype(np.float64))
+        exposure = fit_exposure([frame[..., direct].astype(np.float32) * np.float32(k) for frame, k in zip(train, inv)])
     wanted = set(train_idx)
     fars = []
     for f in ds.frames:
@@ -85,20 +108,68 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray) -> Encodi
         depth = train[..., ds.slices["depth"]].astype(np.float32)
         finite = depth[np.isfinite(depth) & (depth > 0)]
         depth_scale = float(finite.max()) if finite.size else 1.0
-    return Encoding(exposure=float(exposure), depth_scale=float(depth_scale))
+    return Encoding(exposure=float(exposure), depth_scale=float(depth_scale), version=1 if scales is None else 2)
 
 
-def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding,
-                cfg: TrainConfig) -> dict[str, torch.Tensor]:
+def crop_plan(cfg: TrainConfig, epoch: int, batch: int, n: int, height: int, width: int) -> tuple[int, list[int]] | None:
+    """This batch's random aspect crop, or None: one width for the whole batch (within
+    ``cfg.aspect_crops`` x height, at most the frame's width) and each frame's left edge. A pure function of
+    (seed, epoch, batch), like the data order, so a resumed run crops exactly as an uninterrupted one."""
+    if not cfg.aspect_crops:
+        return None
+    lo, hi = cfg.aspect_crops
+    w_lo = max(2, min(width, int(math.ceil(lo * height))))
+    w_hi = max(w_lo, min(width, int(math.floor(hi * height))))
+    rng = np.random.default_rng([cfg.seed, 0xA5EC7, epoch, batch])
+    w = int(rng.integers(w_lo, w_hi + 1))
+    return w, [int(x) for x in rng.integers(0, width - w + 1, size=n)]
+
+
+def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, cfg: TrainConfig,
+                scale: torch.Tensor | None = None, multiple: int = 1,
+                crop: tuple[int, list[int]] | None = None) -> dict[str, torch.Tensor]:
     """A stored (N, H, W, C) batch on the device -> real_A (encoded inputs), real_B (encoded target),
     and the raw NCHW planes the composition, the losses and the metrics need (direct, albedo, pt,
-    target: the linear target radiance)."""
-    from diviewer.train.encoding_torch import encode_inputs, encode_radiance
+    target: the linear target radiance, divided by the light scale for encoding version 2).
 
-    x = x16.permute(0, 3, 1, 2).float().contiguous()
+    Args:
+        scale: (N,) each frame's light scale (encoding version 2; ignored for version 1).
+        multiple: frames are edge-padded to multiples of this (`diviewer.padding`, as the runtime pads);
+            ``mask`` (1 on the frame's pixels, 0 on the padding) and ``crop`` (the frame's rows and columns
+            in the padded planes) say where the frame lies.
+        crop: (width, left edges): each frame cut to that width first (`crop_plan`).
+    """
+    import torch
+
+    from diviewer.encoding import inverse_light_scale
+    from diviewer.padding import crop_slice, pad_index, valid_mask
+    from diviewer.train.encoding_torch import TORCH_OPS, encode_inputs, encode_radiance
+
+    x = x16.permute(0, 3, 1, 2).float()
+    if crop is not None:
+        w, left = crop
+        x = torch.stack([x[i, :, :, o:o + w] for i, o in enumerate(left)])
+    h, w = x.shape[2], x.shape[3]
+    mask = None
+    if h % multiple or w % multiple:
+        rows, cols = (torch.from_numpy(pad_index(n, multiple)).to(x.device) for n in (h, w))
+        x = x.index_select(2, rows).index_select(3, cols)
+        mask = torch.from_numpy(np.outer(valid_mask(h, multiple), valid_mask(w, multiple))).to(x.device)[None, None]
+    x = x.contiguous()
     p = {name: x[:, s] for name, s in slices.items()}
-    real_A = encode_inputs(p["depth"], p["normal"], p["albedo"], p["direct"], enc, channel_axis=1)
+    direct_in, inv = p["direct"], None
+    if enc.light_scaled:
+        if scale is None:
+            raise ValueError("encoding version 2 needs each frame's light scale")
+        inv = inverse_light_scale(scale.to(x.device, torch.float32), TORCH_OPS).reshape(-1, 1, 1, 1)
+        direct_in = direct_in * inv
+    real_A = encode_inputs(p["depth"], p["normal"], p["albedo"], direct_in, enc, channel_axis=1)
     target = target_radiance(p["pt"], p["pt_direct"], p["albedo"], cfg.target, cfg.divide_albedo)
+    if inv is not None:
+        target = target * inv
     real_B = encode_radiance(target, enc)
-    return {"real_A": real_A, "real_B": real_B, "direct": p["direct"], "albedo": p["albedo"], "pt": p["pt"],
-            "target": target}
+    out = {"real_A": real_A, "real_B": real_B, "direct": p["direct"], "albedo": p["albedo"], "pt": p["pt"],
+           "target": target, "mask": mask, "crop": (crop_slice(h, multiple), crop_slice(w, multiple))}
+    if inv is not None:
+        out["scale"] = scale.to(x.device, torch.float32).reshape(-1, 1, 1, 1)
+    return out

@@ -44,7 +44,7 @@ from diviewer.train.checkpoint import (check_resume, init_record, load_checkpoin
 from diviewer.train.config import TrainConfig
 from diviewer.train.distributed import Dist, epoch_batches
 from diviewer.train.report import METRIC_KEYS, draw_curves, read_metrics, validate, write_metrics
-from diviewer.train.targets import fit_encoding, split_batch
+from diviewer.train.targets import crop_plan, fit_encoding, run_light_scales, split_batch
 
 if TYPE_CHECKING:
     from diviewer.data.dataset import Dataset
@@ -122,6 +122,12 @@ class Run:
     meta: dict[str, Any]
     say: Callable[[str], None]
     steps_per_epoch: int
+    multiple: int = 1
+    """Frames are edge-padded to multiples of this (2**levels) before netG, as the runtime pads them."""
+    train_scales: np.ndarray | None = None
+    """Each train frame's light scale (encoding version 2), in train_arr's order."""
+    val_scales: np.ndarray | None = None
+    """Each val frame's light scale (encoding version 2), in val_arr's order."""
     t_start: float = field(default_factory=time.perf_counter)
     elapsed0: float = 0.0
 
@@ -160,12 +166,17 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
         cfg.check_schedule(len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world)))
         ckpt = _open_run(cfg, ds, train_idx, resume, say)
         parent = open_parent(cfg, ds) if ckpt is None and cfg.init_from else None
+        train_scales, val_scales = run_light_scales(cfg, ds, train_idx, val_arr is not None)
         if ckpt:
             enc = Encoding.from_dict(ckpt["encoding"])
         elif parent:  # the parent's weights were trained on its encoding: keep it
             enc = Encoding.from_dict(parent["encoding"])
+            if enc.light_scaled != cfg.light_scale:
+                raise DiviewerError(f"--init-from's model was trained with encoding {enc.version}; pass "
+                                    f"--{'' if enc.light_scaled else 'no-'}light-scale to warm-start from it",
+                                    path=cfg.init_from)
         else:
-            enc = fit_encoding(ds, train_idx, train_arr)
+            enc = fit_encoding(ds, train_idx, train_arr, train_scales)
         net_cfg = _net_config(cfg, ds)
         _check_trainable(net_cfg, cfg, ds, len(train_idx))
         nets = build_nets(cfg, net_cfg, enc, dev, say)
@@ -191,7 +202,8 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
         if parent or (ckpt and ckpt.get("init")):
             meta["init"] = init_record(parent) if parent else ckpt["init"]
         run = Run(cfg=cfg, dev=dev, ds=ds, train_arr=train_arr, val_arr=val_arr, enc=enc, say=say,
-                  meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed)
+                  meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed, multiple=2 ** net_cfg.levels,
+                  train_scales=train_scales, val_scales=val_scales)
 
         total = horizon = cfg.epochs * steps_per_epoch  # the lr schedule's horizon ignores max_steps
         if cfg.max_steps is not None:
@@ -202,7 +214,8 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
         say(f"train {ds.manifest.get('scene')} K={cfg.K} target={cfg.target}{' /albedo' if cfg.divide_albedo else ''}: "
             f"{len(train_idx)} train frames at {ds.width}x{ds.height}, {steps_per_epoch} steps/epoch, "
             f"{dev.world} process(es) on {dev.device}{f' with {nets.dtype} autocast' if nets.dtype else ''}, "
-            f"exposure {enc.exposure:.4g}, depth_scale {enc.depth_scale:.4g}")
+            f"exposure {enc.exposure:.4g}, depth_scale {enc.depth_scale:.4g}, encoding {enc.version}"
+            + (f", aspect crops {cfg.aspect_crops[0]:.3g}-{cfg.aspect_crops[1]:.3g}" if cfg.aspect_crops else ""))
 
         progress = progress_bar(total - st.step, "train", "step") if dev.main else None
         stop = {"stop": False}
@@ -213,9 +226,11 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
             while st.epoch < cfg.epochs and st.step < total and not _patience_spent(cfg, st):
                 t_epoch = time.perf_counter()
                 batches = epoch_batches(len(train_arr), st.epoch, cfg.seed, cfg.batch_size, dev.rank, dev.world)
-                for x16 in distributed.loader(train_arr, batches[st.batch_in_epoch:], cfg, dev):
+                todo = batches[st.batch_in_epoch:]
+                for k, x16 in enumerate(distributed.loader(train_arr, todo, cfg, dev)):
                     set_learning_rate(nets, cfg, st.step, horizon)
-                    numbers = train_step(nets, split_batch(x16.to(dev.device, non_blocking=True), ds.slices, enc, cfg))
+                    numbers = train_step(nets, _batch(run, x16.to(dev.device, non_blocking=True), todo[k],
+                                                      st.epoch, st.batch_in_epoch))
                     if not nets.scaler.is_enabled() and not all(map(math.isfinite, numbers.values())):
                         raise DiviewerError(f"training diverged at step {st.step + 1} ({_fmt(numbers)}); "
                                             "--resume continues from last.ckpt; try a lower --lr", path=cfg.out)
@@ -290,6 +305,16 @@ def _load_splits(cfg: TrainConfig, dev: Dist, say) -> tuple[Dataset, list[int], 
     return ds, train_idx, train_arr, val_arr
 
 
+def _batch(run: Run, x16, indices: list[int], epoch: int, batch: int) -> dict[str, Any]:
+    """One training batch for `train_step`: this batch's aspect crop, light scales and padding applied."""
+    import torch
+
+    cfg, ds = run.cfg, run.ds
+    plan = crop_plan(cfg, epoch, batch, x16.shape[0], ds.height, ds.width)
+    scale = None if run.train_scales is None else torch.from_numpy(run.train_scales[indices])
+    return split_batch(x16, ds.slices, run.enc, cfg, scale=scale, multiple=run.multiple, crop=plan)
+
+
 def _open_run(cfg: TrainConfig, ds: Dataset, train_idx: list[int], resume: bool, say) -> dict[str, Any] | None:
     """The checkpoint a resumed run continues (checked against the settings), or None for a new run."""
     last = cfg.out / "last.ckpt"
@@ -316,7 +341,9 @@ def _net_config(cfg: TrainConfig, ds: Dataset) -> NetConfig:
     from diviewer.train.networks import NetConfig, levels_for_resolution
 
     try:
-        levels = min(levels_for_resolution(ds.width), levels_for_resolution(ds.height))
+        # Cropped (or any wider) frames are padded to the stride: the network's depth follows the height.
+        levels = (levels_for_resolution(min(ds.width, ds.height)) if cfg.aspect_crops else
+                  min(levels_for_resolution(ds.width), levels_for_resolution(ds.height)))
     except ValueError:
         raise DiviewerError(f"resolution {ds.width}x{ds.height} must be even on both sides to train a U-Net",
                             path=ds.root) from None
@@ -339,7 +366,10 @@ def _check_trainable(net_cfg: NetConfig, cfg: TrainConfig, ds: Dataset, n_train:
     try:
         with torch.device("meta"):
             netG, netD = net_cfg.build_generator().train(), net_cfg.build_discriminator().train()
-            real_A = torch.zeros(smallest, netG.in_channels, ds.height, ds.width)
+            from diviewer.padding import padded_size
+
+            m = 2 ** net_cfg.levels
+            real_A = torch.zeros(smallest, netG.in_channels, padded_size(ds.height, m), padded_size(ds.width, m))
             netD(torch.cat([real_A, netG(real_A)], 1))
     except (RuntimeError, ValueError) as exc:
         reason = (str(exc).splitlines() or [type(exc).__name__])[0]
@@ -359,7 +389,8 @@ def _end_of_stretch(run: Run, nets: Nets, st: TrainState, do_val: bool) -> dict[
     st.elapsed = run.elapsed()
     if run.dev.main:
         if do_val and run.val_arr is not None:
-            val = validate(nets.netG_m, run.val_arr, run.ds.slices, run.enc, run.cfg, run.dev.device, nets.dtype)
+            val = validate(nets.netG_m, run.val_arr, run.ds.slices, run.enc, run.cfg, run.dev.device, nets.dtype,
+                           scales=run.val_scales, multiple=run.multiple)
             st.last_val = val
             st.since_best += 1
             if val["ssim_tm"] > st.best["ssim_tm"]:

@@ -69,7 +69,8 @@ class FrameImages:
         if v.neural is None:
             raise Unavailable(v.state.model_message or "no model loaded")
         if self._neural is None:
-            self._neural = Image(v.neural.run(), flip=True)  # stages go to the viewer's timer
+            scale = v.neural.light_scale_for(v.state.scene, v.state.config)  # encoding 2: the frame's lights
+            self._neural = Image(v.neural.run(light_scale=scale), flip=True)  # stages go to the viewer's timer
         return self._neural
 
     def final(self) -> Image:

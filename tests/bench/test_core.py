@@ -220,3 +220,19 @@ def test_bench_accuracy_from_a_compact_set_matches_the_full_set(tiny_bench_input
     for k in a:
         assert a[k]["psnr_tm"]["mean"] == pytest.approx(b[k]["psnr_tm"]["mean"], abs=0.05), k
         assert a[k]["equivalent_spp"]["psnr_tm"]["text"] == b[k]["equivalent_spp"]["psnr_tm"]["text"], k
+
+
+def test_bare_generator_ratio_is_reported_per_model_row():
+    """bench prints each model's inference time over the bare generator's of the same K and size (issue 28)."""
+    from diviewer.bench.core import bare_ratio_lines
+
+    def row(kind, K, res, ms, **kw):
+        return {"kind": kind, "label": f"{kind} K={K}", "K": K, "resolution": [res, res], "gi_resolution": [res, res],
+                "timing": {"stages": {"inference": {"median": ms}}}, **kw}
+
+    rows = [row("neural", 8, 128, 3.0), row("neural", 8, 64, 1.0), row("untrained", 8, 128, 2.5, untrained=True),
+            row("direct", None, 128, 0.5)]
+    lines = bare_ratio_lines(rows)
+    assert rows[0]["bare_ratio"] == pytest.approx(1.2) and "bare_ratio" not in rows[1]  # no bare K=8 at 64
+    assert len(lines) == 3 and "1.20 x the bare K=8" in lines[-1]
+    assert bare_ratio_lines(rows[1:2]) == []

@@ -208,6 +208,19 @@ def test_pipelined_inference_shows_the_previous_frame(ctx, tmp_path):
         renderer.release()
 
 
-def test_gi_size_must_fit_the_model(ctx, tmp_path):
-    with pytest.raises(DiviewerError, match="multiples of 4"):
-        _pass(ctx, tmp_path, gi=(10, 12))
+def test_any_gi_size_runs_padded_to_the_models_stride(ctx, tmp_path):
+    """A GI size that is not a multiple of the model's stride (4 here) is padded and cropped back by the
+    runtime: the output has the GI size, and a per-pixel model's output lands on its own pixels."""
+    from diviewer.runtime import pack_buffers
+
+    renderer, neural = _pass(ctx, tmp_path, gi=(10, 13))
+    try:
+        renderer.frame()
+        neural.run()
+        assert neural.image().shape == (13, 10, 3)
+        np.testing.assert_allclose(neural.image(), 2.0 * neural.packed[0][..., 7:10], rtol=1e-6)
+        with pytest.raises(DiviewerError, match="at least 1x1"):
+            neural.model.check_size(0, 12)
+    finally:
+        neural.release()
+        renderer.release()

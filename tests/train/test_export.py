@@ -23,7 +23,8 @@ from train.test_trainer import make_dataset, quiet, tiny  # noqa: E402
 def checkpoints(tmp_path_factory):
     root = tmp_path_factory.mktemp("export")
     make_dataset(root / "data")
-    full = train(tiny(root / "data", root / "full"), log=quiet)
+    # one model of each encoding: full radiance as is (1), indirect divided by the light scale (2)
+    full = train(tiny(root / "data", root / "full", light_scale=False), log=quiet)
     indirect = train(tiny(root / "data", root / "indirect", target="indirect"), log=quiet)
     assert full and indirect
     return {"full": root / "full" / "best.ckpt", "indirect": root / "indirect" / "best.ckpt", "data": root / "data"}
@@ -34,8 +35,11 @@ def checkpoints(tmp_path_factory):
 def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, target):
     out = tmp_path / f"{target}.onnx"
     card = export(checkpoints[target], out, log=quiet)
-    assert card["verification"]["max_rel_to_peak"] <= 1e-4
-    assert "frames of" in card["verification"]["frames"], "verified on real dataset frames"
+    v = card["verification"]
+    assert v["max_rel_to_peak"] <= 1e-4 and v["extremes_same_nonfinite"] and v["extremes_max_rel_to_peak"] <= 1e-4
+    assert "frames of" in v["frames"], "verified on real dataset frames"
+    if target == "indirect":  # encoding 2: checked black at zero light, linear in the light
+        assert v["zero_light_max"] == 0.0 and v["twice_light_max_rel_to_peak"] <= 1e-6
     meta = read_metadata(out)
     for key in ("scene", "scene_hash", "dataset_hash", "K", "levels", "target", "encoding", "resolution",
                 "channels", "epochs", "validation", "exported_with"):
@@ -52,15 +56,18 @@ def test_fp32_export_matches_torch_and_carries_metadata(checkpoints, tmp_path, t
     assert meta["trained_on"]["torch_threads"] >= 1 and "before" not in meta["trained_on"]
     # the runtime's output equals the torch module's on new buffers, at the trained size and larger
     netG, enc, m = build_generator_from_checkpoint(checkpoints[target])
-    module = gi_module(netG, enc, m)
+    assert meta["encoding"]["version"] == (2 if target == "indirect" else 1) == enc.version
+    module = gi_module(netG, enc, m, lean=False)  # training's own functions
     model = NeuralGI(out)
+    assert model.light_scaled == enc.light_scaled
+    s = np.array([1.7], np.float32) if enc.light_scaled else None
     rng = np.random.default_rng(1)
     for h, w in [(32, 32), (64, 96)]:
         x = np.concatenate([rng.uniform(1, 5, (1, h, w, 1)), rng.uniform(-1, 1, (1, h, w, 3)),
                             rng.uniform(0, 1, (1, h, w, 3)), rng.uniform(0, 3, (1, h, w, 3))], -1).astype(np.float32)
         with torch.no_grad():
-            ref = module(torch.from_numpy(x)).numpy()
-        got = model.run(x)
+            ref = module(torch.from_numpy(x), None if s is None else torch.from_numpy(s)).numpy()
+        got = model.run(x, light_scale=s)
         assert got.shape == (1, h, w, 3)
         np.testing.assert_allclose(got, ref, rtol=1e-4, atol=1e-5 * np.abs(ref).max())
 
@@ -75,7 +82,7 @@ def test_indirect_model_adds_the_exact_direct_light(checkpoints, tmp_path):
     rng = np.random.default_rng(3)
     x = np.concatenate([rng.uniform(1, 5, (1, 32, 32, 1)), rng.uniform(-1, 1, (1, 32, 32, 3)),
                         rng.uniform(0, 1, (1, 32, 32, 3)), rng.uniform(0, 3, (1, 32, 32, 3))], -1).astype(np.float32)
-    y = NeuralGI(out).run(x)
+    y = NeuralGI(out).run(x, light_scale=1.0)  # encoding 2 at light scale 1: no scaling
     netG, enc, meta = build_generator_from_checkpoint(checkpoints["indirect"])
     t = torch.from_numpy(x).permute(0, 3, 1, 2)
     with torch.no_grad():
@@ -252,8 +259,8 @@ def test_export_of_a_checkpoint_with_options(checkpoints, tmp_path, upsample, no
     netG, enc, meta = build_generator_from_checkpoint(ckpt)
     x = np.random.default_rng(2).uniform(0.1, 2, (1, 64, 32, 10)).astype(np.float32)
     with torch.no_grad():
-        ref = gi_module(netG, enc, meta)(torch.from_numpy(x)).numpy()
-    np.testing.assert_allclose(NeuralGI(out).run(x), ref, rtol=1e-4, atol=1e-5 * np.abs(ref).max())
+        ref = gi_module(netG, enc, meta, lean=False)(torch.from_numpy(x), torch.tensor([0.8])).numpy()
+    np.testing.assert_allclose(NeuralGI(out).run(x, light_scale=0.8), ref, rtol=1e-4, atol=1e-5 * np.abs(ref).max())
 
 
 @pytest.mark.slow
@@ -267,3 +274,85 @@ def test_checkpoint_from_before_the_options_exports_the_same_graph(checkpoints, 
     assert (card["upsample"], card["norm"]) == ("transpose", "batch")
     assert card["trained_on"] == {"device": "cpu", "autocast": "fp32", "recorded": False}  # from --device cpu
     assert onnx.load(str(a)).graph.SerializeToString() == onnx.load(str(b)).graph.SerializeToString()
+
+
+# ---------------------------------------------------------------------------------------------
+# Encoding 2 (linear in the light), the lean graph, any frame size
+
+
+def _frame_of(rng, h=32, w=32):
+    return _buffers(rng, 1, h, w)
+
+
+@pytest.mark.parametrize("fp16", [False, True])
+def test_encoding_2_is_black_without_light_and_linear_in_it(checkpoints, tmp_path, fp16):
+    """In onnxruntime: zero light (no direct light, light scale 0) gives exactly 0; twice the light (direct x 2,
+    light scale x 2) gives exactly twice the output, in the fp16 export too (the network sees the same input)."""
+    out = tmp_path / "lin.onnx"
+    export(checkpoints["indirect"], out, ExportSettings(fp16=fp16), log=quiet)
+    model = NeuralGI(out)
+    x = _frame_of(np.random.default_rng(11))
+    dark = x.copy()
+    dark[..., 7:10] = 0.0
+    assert np.all(model.run(dark, light_scale=0.0) == 0.0)
+    once = model.run(x, light_scale=1.3)
+    bright = x.copy()
+    bright[..., 7:10] *= 2.0
+    twice = model.run(bright, light_scale=2.6)
+    assert once.max() > 0 and np.array_equal(twice, 2.0 * once)
+    with pytest.raises(ValueError, match="light scale"):
+        model.run(x)  # an encoding-2 model needs it
+
+
+def test_lean_graph_equals_training_functions_on_broken_buffers(checkpoints):
+    """NaN, +-Inf, +-1e30, 0 and 1e-30 in every channel: the lean graph (If-guarded NaN handling, no Where, Sign
+    or per-pixel transpose in the common path) gives what training's encode/decode/compose give."""
+    import onnxruntime as ort
+
+    from diviewer.train.export import extreme_frame, onnx_bytes
+
+    netG, enc, meta = build_generator_from_checkpoint(checkpoints["indirect"])
+    lean, ref = gi_module(netG, enc, meta), gi_module(netG, enc, meta, lean=False)
+    x = extreme_frame(_frame_of(np.random.default_rng(4))[0])[None]
+    s = torch.tensor([1.5])
+    session = ort.InferenceSession(onnx_bytes(lean, torch.from_numpy(x), s), providers=["CPUExecutionProvider"])
+    got = session.run(None, {"buffers": x, "light_scale": s.numpy()})[0]
+    with torch.no_grad():
+        want = ref(torch.from_numpy(x), s).numpy()
+    np.testing.assert_array_equal(np.isfinite(got), np.isfinite(want))
+    ok = np.isfinite(want)
+    assert np.abs(got[ok] - want[ok]).max() <= 1e-5 * np.abs(want[ok]).max()
+    clean = _frame_of(np.random.default_rng(5))
+    got = session.run(None, {"buffers": clean, "light_scale": s.numpy()})[0]
+    with torch.no_grad():
+        want = ref(torch.from_numpy(clean), s).numpy()
+    assert np.abs(got - want).max() <= 1e-5 * np.abs(want).max()
+    import onnx
+
+    nodes = onnx.load_from_string(onnx_bytes(lean, torch.from_numpy(clean), s)).graph.node
+    # the slow ones run only inside the If's rare branch; the one Where of the main graph is 1/s on (N,) scales
+    assert "Sign" not in {n.op_type for n in nodes} and sum(n.op_type == "Where" for n in nodes) == 1
+    assert "If" in {n.op_type for n in nodes}
+
+
+def test_nchw_export_and_any_frame_size(checkpoints, tmp_path):
+    """An NCHW export runs through the runtime like the NHWC one; any H x W is padded to the stride (as
+    training pads, diviewer.padding) and cropped back."""
+    from diviewer.padding import crop_nhwc, pad_nhwc
+
+    a, b = tmp_path / "nhwc.onnx", tmp_path / "nchw.onnx"
+    export(checkpoints["full"], a, log=quiet)
+    card = export(checkpoints["full"], b, ExportSettings(layout="NCHW"), log=quiet)
+    assert card["layout"] == "NCHW" and card["multiple"] == 32
+    ma, mb = NeuralGI(a), NeuralGI(b)
+    netG, enc, meta = build_generator_from_checkpoint(checkpoints["full"])
+    ref = gi_module(netG, enc, meta, lean=False)
+    rng = np.random.default_rng(8)
+    for h, w in [(32, 32), (20, 45), (37, 16)]:
+        x = _frame_of(rng, h, w)
+        ya, yb = ma.run(x), mb.run(x)
+        assert ya.shape == (1, h, w, 3) and np.all(np.isfinite(ya))
+        np.testing.assert_allclose(ya, yb, rtol=1e-5, atol=1e-6 * np.abs(ya).max())
+        with torch.no_grad():
+            want = crop_nhwc(ref(torch.from_numpy(pad_nhwc(x, 32))).numpy(), h, w, 32)
+        np.testing.assert_allclose(ya, want, rtol=1e-4, atol=1e-5 * np.abs(want).max())

@@ -121,13 +121,13 @@ def test_a_new_trainconfig_field_works_in_a_recipe_without_the_loader_changing(t
 
     @dataclasses.dataclass(frozen=True)
     class Wider(TrainConfig):
-        light_scale: float = 1.0
+        future_knob: float = 1.0
         """A field added later."""
 
     monkeypatch.setattr(recipe_mod, "_train_cls", lambda: Wider)
     path = tmp_path / "r.toml"
-    path.write_text("[train]\nK = 4\nlight_scale = 0.25\n")
-    assert load_recipe(path).train == {"K": 4, "light_scale": 0.25}
+    path.write_text("[train]\nK = 4\nfuture_knob = 0.25\n")
+    assert load_recipe(path).train == {"K": 4, "future_knob": 0.25}
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import math
 import os
@@ -33,6 +34,30 @@ from diviewer.train.trainer import train  # noqa: E402
 RES = 32
 FAR = 10.0
 SPLITS = ["train"] * 8 + ["val"] * 2
+SCENE_TOML = """
+[scene]
+name = "NAME"
+[camera]
+position = [0, 0, 5]
+target = [0, 0, 0]
+near = 0.05
+far = 10
+[materials.m]
+albedo = [0.5, 0.5, 0.5]
+[meshes.box]
+shape = "box"
+size = [1, 1, 1]
+[[objects]]
+name = "box"
+mesh = "box"
+material = "m"
+[[lights]]
+type = "directional"
+name = "sun"
+direction = [0, -1, 0]
+irradiance = 2.0
+"""
+"""The scene make_dataset's manifest records (its lights give each frame's light scale: encoding 2)."""
 
 
 def _frame(seed: int, res: int = RES) -> np.ndarray:
@@ -59,11 +84,14 @@ def make_dataset(root: Path, scene: str = "synthetic", seed0: int = 0, res: int 
                  splits: list[str] = SPLITS) -> Dataset:
     """A dataset folder like `diviewer capture` writes, with analytic frames (no GL, no Mitsuba)."""
     root.mkdir(parents=True)
+    # _frame's light has strength 2: the light scale of every frame (encoding 2 divides by it)
+    sun = {"type": "directional", "name": "sun", "direction": [0, -1, 0], "color": [1, 1, 1], "irradiance": 2.0}
     frames = [{"index": i, "split": s, "seed": seed0 + i,
-               "config": {"camera": {"position": [0, 0, 5], "near": 0.05, "far": FAR}, "lights": [], "objects": []}}
+               "config": {"camera": {"position": [0, 0, 5], "near": 0.05, "far": FAR}, "lights": [sun], "objects": []}}
               for i, s in enumerate(splits)]
     manifest = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "scene": scene, "scene_hash": f"hash-of-{scene}",
+        "scene_file": str(root / f"{scene}.toml"), "scene_toml": SCENE_TOML.replace("NAME", scene),
         "resolution": [res, res], "channels": [list(c) for c in CHANNELS], "dtype": "float16", "gt": "pt",
         "spp": 4, "max_depth": 4, "seed": seed0, "frames": len(frames), "split_fractions": [0.8, 0.2, 0.0],
         "render_settings": {}, "frame_list": frames,
@@ -154,7 +182,10 @@ def test_checkpoints_are_self_describing_and_weights_only(run, data):
         "seed": 0, "epoch": 2, "batch": 0, "world": 1, "batch_size": 4}
     # The encoding was fixed from the train split: exposure from its GL direct light, depth from the far plane.
     _, train_arr = ds.array("train")
-    assert last["encoding"]["exposure"] == pytest.approx(fit_exposure([f[..., ds.slices["direct"]] for f in train_arr]))
+    # Encoding 2 (the default): fitted on the direct light divided by each frame's light scale (2 here).
+    assert last["encoding"]["version"] == 2
+    assert last["encoding"]["exposure"] == pytest.approx(
+        fit_exposure([f[..., ds.slices["direct"]].astype(np.float32) / 2.0 for f in train_arr]))
     assert last["encoding"]["depth_scale"] == FAR
 
 
@@ -167,7 +198,9 @@ def test_rebuilt_generator_reproduces_the_recorded_validation(run, data):
     ds = Dataset(data)
     _, val = ds.array("val")
     cfg = TrainConfig.from_dict(ckpt["config"])
-    again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"))
+    from diviewer.data.scales import light_scales
+
+    again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"), scales=light_scales(ds, ds.indices("val")))
     assert again == pytest.approx(ckpt["val"], rel=1e-6)  # the weights that produced the recorded metrics
     x = torch.randn(2, 10, RES, RES)
     netG2, _, _ = build_generator_from_checkpoint(out / "best.ckpt")
@@ -638,3 +671,106 @@ def test_a_cuda_device_always_has_an_index(data, tmp_path, monkeypatch, asked, i
     monkeypatch.delenv("WORLD_SIZE", raising=False)
     dev = distributed.setup(TrainConfig(data=data, out=tmp_path / "c", device=asked))
     assert dev.device == torch.device("cuda", index) and chosen == [dev.device]
+
+
+# ---------------------------------------------------------------------------------------------
+# Any window shape: random aspect crops of wider frames, padded to the stride as the runtime pads
+
+
+def make_wide_dataset(root: Path, width: int = 48) -> Dataset:
+    """make_dataset's frames cut to RES rows x ``width`` columns (a wide capture, like cornell's 228x128)."""
+    ds = make_dataset(root)
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["resolution"] = [width, RES]
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    ds = Dataset(root)
+    for f in ds.frames:
+        write_frame(ds, f["index"], _frame(f["seed"], width)[:RES], {"index": f["index"], "split": f["split"]})
+    return ds
+
+
+def test_crop_plan_is_a_pure_function_within_the_range():
+    from diviewer.train.targets import crop_plan
+
+    cfg = TrainConfig(data=Path("d"), out=Path("o"), aspect_crops=(9 / 16, 16 / 9))
+    plans = [crop_plan(cfg, e, b, 4, 128, 228) for e in range(3) for b in range(20)]
+    assert plans == [crop_plan(cfg, e, b, 4, 128, 228) for e in range(3) for b in range(20)]  # resumable
+    widths = {w for w, _ in plans}
+    assert min(widths) >= 72 and max(widths) <= 227 and len(widths) > 10
+    assert all(0 <= o <= 228 - w for w, left in plans for o in left)
+    assert crop_plan(dataclasses.replace(cfg, aspect_crops=None), 0, 0, 4, 128, 228) is None
+
+
+def test_masked_loss_counts_the_frames_pixels_only():
+    from diviewer.train.losses import reconstruction_loss
+
+    fake, real = torch.zeros(2, 3, 4, 8), torch.ones(2, 3, 4, 8)
+    mask = torch.zeros(1, 1, 4, 8)
+    mask[..., 2:6] = 1.0
+    real[..., :2] = 100.0  # on the padding: not counted
+    assert reconstruction_loss(fake, real, mask=mask).item() == pytest.approx(1.0)
+    assert reconstruction_loss(fake, real, "l2", mask=mask).item() == pytest.approx(1.0)
+
+
+def test_training_on_aspect_crops_of_wide_frames(tmp_path):
+    """A 48x32 capture trained on random-width crops (one width per batch, padded to the stride 32 with the
+    loss on the frame's pixels): the network's depth follows the height, validation runs on whole padded
+    frames, and the export runs at the capture's own shape and at others."""
+    from diviewer.runtime import NeuralGI
+    from diviewer.train.export import export
+
+    make_wide_dataset(tmp_path / "wide")
+    seen = []
+    real_split = trainer.split_batch
+
+    def spy(x16, *a, **kw):
+        b = real_split(x16, *a, **kw)
+        seen.append((kw.get("crop"), tuple(b["real_A"].shape), None if b["mask"] is None else float(b["mask"].sum())))
+        return b
+
+    trainer.split_batch = spy
+    try:
+        result = train(tiny(tmp_path / "wide", tmp_path / "run", aspect_crops=(0.5, 1.5)), log=quiet)
+    finally:
+        trainer.split_batch = real_split
+    assert result["val"] is not None and all(math.isfinite(v) for v in result["val"].values())
+    ckpt = load_checkpoint(tmp_path / "run" / "last.ckpt")
+    assert ckpt["model_args"]["levels"] == 5 and ckpt["config"]["aspect_crops"] == (0.5, 1.5)
+    for crop, shape, valid in seen:
+        w, left = crop
+        assert 16 <= w <= 48 and shape[2] == 32 and shape[3] % 32 == 0
+        assert valid == (None if w % 32 == 0 else 32 * w)
+    out = tmp_path / "wide.onnx"
+    export(tmp_path / "run" / "best.ckpt", out, log=quiet)
+    model = NeuralGI(out)
+    rng = np.random.default_rng(0)
+    for h, w in [(32, 48), (32, 57), (24, 24)]:
+        x = rng.uniform(0.1, 2.0, (h, w, 10)).astype(np.float32)
+        y = model.run(x, light_scale=2.0)
+        assert y.shape == (h, w, 3) and np.all(np.isfinite(y))
+
+
+def test_light_scale_and_aspect_crop_settings():
+    with pytest.raises(DiviewerError, match="aspect_crops"):
+        TrainConfig(data=Path("d"), out=Path("o"), aspect_crops=(2.0, 1.0))
+    with pytest.raises(DiviewerError, match="light_scale"):
+        TrainConfig(data=Path("d"), out=Path("o"), light_scale="yes")
+    # a checkpoint from before these settings trained on encoding 1, whole frames
+    old = {k: v for k, v in tiny(Path("d"), Path("o")).to_dict().items() if k not in ("light_scale", "aspect_crops")}
+    cfg = TrainConfig.from_dict(old)
+    assert cfg.light_scale is False and cfg.aspect_crops is None
+    p = argparse.ArgumentParser()
+    add_train_parser(p.add_subparsers())
+    args = p.parse_args(["train", "--data", "d", "--out", "o", "--no-light-scale", "--aspect-crops", "9/16:16/9"])
+    assert args.light_scale is False and args.aspect_crops == pytest.approx((9 / 16, 16 / 9))
+
+
+def test_encoding_2_training_needs_light(tmp_path):
+    ds = make_dataset(tmp_path / "dark")
+    manifest = json.loads((tmp_path / "dark" / "manifest.json").read_text())
+    for f in manifest["frame_list"]:
+        f["config"]["lights"] = []
+    (tmp_path / "dark" / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DiviewerError, match="no-light-scale"):
+        train(tiny(tmp_path / "dark", tmp_path / "run"), log=quiet)
+    assert ds is not None

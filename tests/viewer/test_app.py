@@ -1064,12 +1064,12 @@ def test_auto_exposure_follows_the_frame_and_is_deterministic(display, tmp_path)
 
 
 def test_scale_accuracy_tool_scores_each_scale_against_full_resolution(tmp_path):
-    """tools/scale_accuracy.py renders the viewer's frame at each scale, upscales it to the window and scores
+    """tools/experiments/scale_accuracy.py renders the viewer's frame at each scale, upscales it to the window and scores
     it against the scale-1 frame (a tiny window and model: the figures themselves are the lead's to measure)."""
     pytest.importorskip("onnx")
     from tool_modules import load_tool
 
-    tool = load_tool("scale_accuracy")
+    tool = load_tool("experiments/scale_accuracy")
     assert tool.parse_scales("0.5,0.75") == [1.0, 0.75, 0.5]
     with pytest.raises(DiviewerError, match="render scale"):
         tool.parse_scales("1,1.5")

@@ -1,6 +1,6 @@
 """What dynamic resolution costs in accuracy: the viewer's frame at each render scale against full resolution.
 
-Usage: python tools/scale_accuracy.py [--scene cornell] [--model assets/models/cornell.onnx] [--size 768x768]
+Usage: python tools/experiments/scale_accuracy.py [--scene cornell] [--model assets/models/cornell.onnx] [--size 768x768]
        [--scales 1,0.875,0.75,0.625,0.5] [--frames 6] [--spp 0] [--gi-res model] [--exposure X]
        [--out runs/<scene>/scale_accuracy.json]
 
@@ -91,7 +91,7 @@ def measure(scene_name: str, model_path: Path, size: tuple[int, int], scales: li
                 images = {}
                 for s, (r, npass) in passes.items():
                     r.render(config)
-                    npass.run()
+                    npass.run(light_scale=npass.light_scale_for(scene, config))
                     tex = npass.composite()
                     hdr = np.flipud(np.frombuffer(tex.read(), dtype="f2").reshape(r.height, r.width, 4)[..., :3])
                     images[s] = bilinear(np.ascontiguousarray(hdr, dtype=np.float32), W, H)

@@ -1,0 +1,44 @@
+"""diviewer.scene.lights.light_scale: a frame's light from its sources (encoding 2 divides radiance by it)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from diviewer.scene.colour import luminance
+from diviewer.scene.lights import light_scale, scale_light
+from scenes import facing_plane
+
+SUN = {"name": "sun", "type": "directional", "direction": [0, 0, -1], "color": [1.0, 0.5, 0.25], "irradiance": 3.0}
+BULB = {"name": "bulb", "type": "point", "position": [0, 1, -1], "color": [0.2, 0.4, 1.0], "intensity": 5.0}
+
+
+def test_sum_of_luminance_times_power():
+    scene = facing_plane(lights=[SUN, BULB])
+    want = 3.0 * luminance((1.0, 0.5, 0.25)) + 5.0 * luminance((0.2, 0.4, 1.0))
+    assert light_scale(scene, scene.default) == pytest.approx(want)
+    assert luminance((1, 1, 1)) == pytest.approx(1.0)
+
+
+def test_linear_in_every_light_and_zero_without_light():
+    scene = facing_plane(lights=[SUN, BULB])
+    s = light_scale(scene, scene.default)
+    doubled = dataclasses.replace(scene.default, lights=tuple(scale_light(l, 2.0) for l in scene.default.lights))
+    assert light_scale(scene, doubled) == pytest.approx(2 * s)
+    off = dataclasses.replace(scene.default, lights=tuple(scale_light(l, 0.0) for l in scene.default.lights))
+    assert light_scale(scene, off) == 0.0
+    assert light_scale(facing_plane(), facing_plane().default) == 0.0  # no lights at all
+
+
+def test_emitters_and_the_sky_count():
+    from diviewer.scene.loader import parse_scene
+
+    data = {"scene": {"name": "e", "ambient": [0.1, 0.1, 0.1]},
+            "camera": {"position": [0, 0, 0], "target": [0, 0, -1], "up": [0, 1, 0], "fov": 40},
+            "materials": {"lamp": {"albedo": [0.5, 0.5, 0.5], "emission": [2.0, 2.0, 2.0]},
+                          "unused": {"albedo": [0.5, 0.5, 0.5], "emission": [50.0, 0, 0]}},
+            "meshes": {"box": {"shape": "box", "size": [1, 1, 1]}},
+            "objects": [{"name": "lamp", "mesh": "box", "material": "lamp", "position": [0, 0, -3]}], "lights": []}
+    scene = parse_scene(data)
+    assert light_scale(scene, scene.default) == pytest.approx(2.0 + 0.1)  # only the emitters in the frame
