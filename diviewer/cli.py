@@ -196,11 +196,9 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _scene_help(default: str | None = None) -> str:
-    """--scene's help: the shipped scenes as the assets folder has them (not a list kept by hand)."""
-    from diviewer.paths import shipped_scenes
+    from diviewer.paths import scene_help
 
-    tail = f" (default {default})" if default else ""
-    return f"shipped scene name ({', '.join(shipped_scenes())}) or a .toml path{tail}"
+    return scene_help(default)
 
 
 def build_parser() -> argparse.ArgumentParser:

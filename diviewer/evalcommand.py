@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from diviewer.errors import DiviewerError
+from diviewer.paths import scene_help
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
@@ -83,7 +84,7 @@ def add_eval_parsers(sub, add_variant_arg) -> None:
 
     p = sub.add_parser("evalset", help="render a scene's fixed evaluation set: >= 1024-spp truth, its noise floor "
                                        "and a ladder of lower sample counts (resumable)")
-    p.add_argument("--scene", default="cornell", help="shipped scene name or a .toml path")
+    p.add_argument("--scene", default="cornell", help=scene_help())
     p.add_argument("--out", type=Path, required=True, help="evaluation set folder (created, or resumed)")
     p.add_argument("--frames-per-split", type=int, default=None,
                    help="frames in each split (default 24; with --compact the first 6 of each split)")

@@ -37,3 +37,9 @@ def shipped_scenes() -> list[str]:
 
 def models_dir() -> Path:
     return assets_dir() / "models"
+
+
+def scene_help(default: str | None = None) -> str:
+    """--scene's help: the shipped scenes as the assets folder has them (not a list kept by hand)."""
+    tail = f" (default {default})" if default else ""
+    return f"shipped scene name ({', '.join(shipped_scenes())}) or a .toml path{tail}"
