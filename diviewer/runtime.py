@@ -186,7 +186,6 @@ class NeuralGI:
             raise DiviewerError(f"the graph takes {channels} input channels, the renderer provides "
                                 f"{sum(n for _, n in INPUT_CHANNELS)}", path=self.path, field="input")
         self.provider = self.session.get_providers()[0]
-        probe(self.session, inputs[0].shape, int(self.meta["multiple"]), self.path)
         self.multiple = int(self.meta["multiple"])
         self.resolution = tuple(int(x) for x in self.meta["resolution"])
         self.timer = StageTimer()
@@ -195,6 +194,9 @@ class NeuralGI:
         """Input values of the last frame that were NaN or infinite (the graph's encoding maps them to 0)."""
         self.nonfinite_outputs = 0
         """Output values of the last frame that were NaN or infinite (left in place: the display flags them)."""
+        probe(self)
+        self.timer = StageTimer()  # the probe's run is not a frame
+        self.nonfinite_inputs = self.nonfinite_outputs = 0
 
     @property
     def file_sha256(self) -> str:
@@ -267,19 +269,19 @@ def probe_frame(height: int, width: int) -> np.ndarray:
     return np.ascontiguousarray(frame[None], dtype=np.float32)
 
 
-def probe(session, shape, multiple: int, path: Path) -> None:
+def probe(model: "NeuralGI") -> None:
     """Refuse a model whose graph yields NaN/Inf radiance on a plausible probe frame (broken weights, an
-    fp16 overflow), before the viewer or the benchmark shows or times it."""
-    side = multiple * max(1, -(-16 // multiple))  # the smallest multiple of ``multiple`` >= 16
-    h, w = (d if isinstance(d, int) and d > 0 else side for d in shape[1:3])
+    fp16 overflow), before the viewer or the benchmark shows or times it: through ``model.run``, so the
+    probe is padded, laid out and light-scaled as every frame is."""
+    w, h = (min(int(d), 64) for d in model.resolution)
     try:
-        (y,) = session.run([OUTPUT_NAME], {INPUT_NAME: probe_frame(h, w)})
+        y = model.run(probe_frame(h, w)[0], light_scale=1.0 if model.light_scaled else None)
     except Exception as exc:  # onnxruntime raises its own types for a graph that cannot run
-        raise DiviewerError(f"the model cannot run on a {w}x{h} probe frame: {exc}", path=path) from exc
+        raise DiviewerError(f"the model cannot run on a {w}x{h} probe frame: {exc}", path=model.path) from exc
     bad = count_nonfinite(np.asarray(y))
     if bad:
         raise DiviewerError(f"the model's graph yields {bad} NaN/Inf values on a {w}x{h} probe frame of plausible "
-                            f"buffers: the model is broken (re-export it from a sound checkpoint)", path=path)
+                            f"buffers: the model is broken (re-export it from a sound checkpoint)", path=model.path)
 
 
 def count_nonfinite(x: np.ndarray) -> int:

@@ -424,7 +424,8 @@ def test_a_folder_left_from_an_earlier_run_is_not_replaced(run, data, tmp_path, 
     for resume in (False, True):
         with pytest.raises(DiviewerError, match="best.ckpt.*earlier run"):
             train(tiny(data, out, epochs=1), resume=resume, log=quiet)
-    argv = ["train", "--data", str(data), "--out", str(out), "--k", "4", "--ndf", "8", "--device", "cpu"]
+    argv = ["train", "--data", str(data), "--out", str(out), "--k", "4", "--ndf", "8", "--device", "cpu",
+            "--lr-decay", "none"]  # the default recipe's decay starts at step 20,000, beyond this tiny run
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "best.ckpt" in err[0] and "Traceback" not in err[0]
@@ -534,7 +535,8 @@ def test_cli_maps_the_options_onto_the_config(data, tmp_path):
     args = ap.parse_args(["train", "--data", str(data), "--out", str(out), "--device", "cpu", "--k", "4", "--ndf", "8",
                           "--epochs", "1", "--gan-weight", "0", "--recon-loss", "l2", "--recon-space", "linear",
                           "--n-layers-d", "2", "--d-lr", "1e-3", "--upsample", "resize", "--norm", "instance",
-                          "--train-frames", "8", "--patience", "3", "--val-every-steps", "1", "--precision", "fp32"])
+                          "--train-frames", "8", "--patience", "3", "--val-every-steps", "1", "--precision", "fp32",
+                          "--lr-decay", "none"])  # the default recipe decays from step 20,000
     assert run_train(args) == 0
     cfg = load_checkpoint(out / "last.ckpt")["config"]
     assert (cfg["gan_weight"], cfg["recon_loss"], cfg["recon_space"], cfg["n_layers_D"], cfg["d_lr"]) == (
