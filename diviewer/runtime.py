@@ -275,10 +275,10 @@ def probe(model: "NeuralGI") -> None:
     probe is padded, laid out and light-scaled as every frame is."""
     w, h = (min(int(d), 64) for d in model.resolution)
     try:
-        y = model.run(probe_frame(h, w)[0], light_scale=1.0 if model.light_scaled else None)
+        model.run(probe_frame(h, w)[0], light_scale=1.0 if model.light_scaled else None)
     except Exception as exc:  # onnxruntime raises its own types for a graph that cannot run
         raise DiviewerError(f"the model cannot run on a {w}x{h} probe frame: {exc}", path=model.path) from exc
-    bad = count_nonfinite(np.asarray(y))
+    bad = model.nonfinite_outputs  # counted before the clamp at 0, which would hide a -Inf
     if bad:
         raise DiviewerError(f"the model's graph yields {bad} NaN/Inf values on a {w}x{h} probe frame of plausible "
                             f"buffers: the model is broken (re-export it from a sound checkpoint)", path=model.path)

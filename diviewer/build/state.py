@@ -8,25 +8,17 @@ stage again.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 from pathlib import Path
 from typing import Any
 
 from diviewer import imageio
+from diviewer.data.dataset import sha256_file
 from diviewer.errors import DiviewerError
 
 FORMAT = "diviewer-build"
 VERSION = 1
-
-
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 class BuildState:

@@ -211,13 +211,19 @@ class TrainConfig:
         if not (self.device in ("auto", "cpu", "cuda") or cuda_n):
             fail("device", f"must be auto, cpu, cuda or cuda:N, got {self.device!r}")
 
-    def check_schedule(self, steps_per_epoch: int) -> None:
-        """Refuse a decay that would start at or after the run's last step (it would never decay)."""
+    def check_schedule(self, steps_per_epoch: int) -> str | None:
+        """Refuse a decay that would start at or after the run's last step (it would never decay), where the
+        decay start was asked for; where it came from the recipe (a run the user shortened with --epochs),
+        return the note to print instead: the rate stays constant."""
         horizon = self.epochs * steps_per_epoch
-        if self.lr_decay != "none" and self.lr_decay_start >= horizon:
-            raise DiviewerError(f"is {self.lr_decay_start}, but the run ends at step {horizon} ({self.epochs} epochs of "
-                                f"{steps_per_epoch} steps): the decay would never start; give a smaller step or more "
-                                f"epochs", field="train.lr_decay_start")
+        if self.lr_decay == "none" or self.lr_decay_start < horizon:
+            return None
+        text = (f"is {self.lr_decay_start}, but the run ends at step {horizon} ({self.epochs} epochs of "
+                f"{steps_per_epoch} steps): the decay would never start")
+        from_recipe = self.recipe is not None and "lr_decay_start" not in self.recipe.get("overrides", {})
+        if from_recipe:
+            return f"recipe {self.recipe.get('name')}: lr_decay_start {text}; the learning rate stays constant"
+        raise DiviewerError(f"{text}; give a smaller step or more epochs", field="train.lr_decay_start")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict (paths as strings) for checkpoints."""

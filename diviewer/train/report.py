@@ -32,7 +32,8 @@ not validated) and wall-clock seconds since the run began (summed over resumed p
 
 
 def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, cfg: TrainConfig, device,
-             dtype=None, scales: np.ndarray | None = None, multiple: int = 1) -> dict[str, float]:
+             dtype=None, scales: np.ndarray | None = None, multiple: int = 1,
+             tonemap_exposure: float | None = None) -> dict[str, float]:
     """Mean per-frame metrics of the composed image against the path-traced `pt`, netG in eval mode.
 
     Linear: MSE, PSNR (peak 1) and SSIM (data_range 1) on radiance as stored, as `diviewer.metrics`
@@ -40,7 +41,8 @@ def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, 
     "indirect" the image is GL direct + predicted indirect, as the viewer composes it. dtype: the
     autocast dtype netG runs in (None: float32). scales: each val frame's light scale (encoding version
     2: the decoded output is multiplied by it). Frames are padded to ``multiple`` as the runtime pads them,
-    and the metrics taken on the frame's own pixels.
+    and the metrics taken on the frame's own pixels. tonemap_exposure: the tone map's (default
+    ``enc.exposure``; with encoding 2 the trainer passes the one fitted on the raw direct light, as eval fits it).
     """
     import torch
 
@@ -65,7 +67,8 @@ def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, 
             pred = pred[:, :, rows, cols].permute(0, 2, 3, 1).cpu().numpy()
             truth = b["pt"][:, :, rows, cols].permute(0, 2, 3, 1).cpu().numpy()
             for p, t in zip(pred, truth):
-                p_tm, t_tm = tonemap(p, enc.exposure), tonemap(t, enc.exposure)
+                tm = enc.exposure if tonemap_exposure is None else tonemap_exposure
+                p_tm, t_tm = tonemap(p, tm), tonemap(t, tm)
                 sums["mse"] += metrics.mse(p, t)
                 sums["psnr"] += metrics.psnr(p, t)
                 sums["ssim"] += metrics.ssim(p, t)

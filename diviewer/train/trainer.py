@@ -128,6 +128,9 @@ class Run:
     """Each train frame's light scale (encoding version 2), in train_arr's order."""
     val_scales: np.ndarray | None = None
     """Each val frame's light scale (encoding version 2), in val_arr's order."""
+    tonemap_exposure: float | None = None
+    """Validation's tone map: `fit_exposure` on the train frames' raw GL direct light, as `diviewer eval --data`
+    fits it (with encoding 2 the encoding's exposure is the light-normalised data's); None: the encoding's."""
     t_start: float = field(default_factory=time.perf_counter)
     elapsed0: float = 0.0
 
@@ -163,7 +166,9 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
     say = log if dev.main else (lambda *_: None)
     try:
         ds, train_idx, train_arr, val_arr = _load_splits(cfg, dev, say)
-        cfg.check_schedule(len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world)))
+        note = cfg.check_schedule(len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world)))
+        if note:
+            say(note)
         ckpt = _open_run(cfg, ds, train_idx, resume, say)
         parent = open_parent(cfg, ds) if ckpt is None and cfg.init_from else None
         train_scales, val_scales = run_light_scales(cfg, ds, train_idx, val_arr is not None)
@@ -203,7 +208,8 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
             meta["init"] = init_record(parent) if parent else ckpt["init"]
         run = Run(cfg=cfg, dev=dev, ds=ds, train_arr=train_arr, val_arr=val_arr, enc=enc, say=say,
                   meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed, multiple=2 ** net_cfg.levels,
-                  train_scales=train_scales, val_scales=val_scales)
+                  train_scales=train_scales, val_scales=val_scales,
+                  tonemap_exposure=None if enc.version < 2 else _raw_exposure(ds, train_arr))
 
         total = horizon = cfg.epochs * steps_per_epoch  # the lr schedule's horizon ignores max_steps
         if cfg.max_steps is not None:
@@ -390,7 +396,7 @@ def _end_of_stretch(run: Run, nets: Nets, st: TrainState, do_val: bool) -> dict[
     if run.dev.main:
         if do_val and run.val_arr is not None:
             val = validate(nets.netG_m, run.val_arr, run.ds.slices, run.enc, run.cfg, run.dev.device, nets.dtype,
-                           scales=run.val_scales, multiple=run.multiple)
+                           scales=run.val_scales, multiple=run.multiple, tonemap_exposure=run.tonemap_exposure)
             st.last_val = val
             st.since_best += 1
             if val["ssim_tm"] > st.best["ssim_tm"]:
@@ -432,3 +438,10 @@ def _result(cfg: TrainConfig, st: TrainState) -> dict[str, Any]:
             "best": None if st.best["ssim_tm"] == -math.inf else st.best["ssim_tm"], "losses": st.history,
             "out": cfg.out, "stopped_early": _patience_spent(cfg, st)}
 
+
+def _raw_exposure(ds: Dataset, train_arr: np.ndarray) -> float:
+    """`fit_exposure` on the train frames' GL direct light as stored (not divided by the light scale): the
+    tone map `diviewer eval --data` fits, so validation and eval score alike."""
+    from diviewer.encoding import fit_exposure
+
+    return float(fit_exposure([frame[..., ds.slices["direct"]] for frame in train_arr]))

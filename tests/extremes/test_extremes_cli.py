@@ -97,7 +97,7 @@ BAD = [
     ("bench --quick --json {t}/run.ckpt", "--json"),
     ("view --stats {t}/run.ckpt --frames 1", "--stats"),
     ("view --screenshot {t}/s.jpg --frames 1", "--screenshot"),
-    ("train --data {t} --out {t}/r --lr-decay-start 10", "--lr-decay-start"),
+    ("train --data {t} --out {t}/r --recipe paper --lr-decay-start 10", "--lr-decay-start"),
 ]
 
 
