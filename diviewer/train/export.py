@@ -29,7 +29,7 @@ from diviewer.outputs import check_output_file, dumps, staged
 from diviewer.padding import pad_nhwc
 from diviewer.provenance import versions
 from diviewer.runtime import INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
-from diviewer.train.checks import FP16_TOLERANCE, check_outputs, check_weights
+from diviewer.train.checks import FP16_TOLERANCE, refuse_broken
 
 OPSET = 17
 FP32_TOLERANCE = 1e-4
@@ -170,19 +170,11 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     import onnxruntime as ort
 
     netG = make_netG()
-    weights_from = weights_from or out
-    check_weights(netG, settings.fp16, weights_from)  # non-finite, a negative BatchNorm variance, beyond fp16
     ref_module = gi_module(netG, encoding, meta, lean=False)
+    # broken weights, or an output that is constant or non-finite: refused, naming the checkpoint
+    reference = refuse_broken(netG, ref_module, frames, settings.fp16, weights_from or out, scales)
     ext = extreme_frame(frames[0])[None]
     s_t = None if scales is None else torch.from_numpy(scales.astype(np.float32))
-    captured: list[np.ndarray] = []
-    hook = netG.register_forward_hook(lambda _m, _i, y: captured.append(y.detach().float().numpy()))
-    try:
-        with torch.no_grad():
-            reference = ref_module(torch.from_numpy(frames), s_t).numpy()
-    finally:
-        hook.remove()
-    check_outputs(np.concatenate(captured), reference, len(frames), weights_from)  # constant or non-finite: no model
     with torch.no_grad():
         ref_ext = ref_module(torch.from_numpy(ext), None if s_t is None else s_t[:1]).numpy()
         module = gi_module(make_netG(), encoding, meta, fp16=settings.fp16, layout=settings.layout)
@@ -212,19 +204,7 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     }
     precision = "fp16" if settings.fp16 else "fp32"
     if scales is not None:
-        dark = frames.copy()
-        dark[..., channel_slices()["direct"]] = 0.0
-        zero = run_session(session, dark, np.zeros_like(scales), settings.layout)
-        bright = frames.copy()
-        bright[..., channel_slices()["direct"]] *= 2.0
-        twice = run_session(session, bright, 2.0 * scales, settings.layout)
-        check["zero_light_max"] = float(np.abs(zero).max())
-        check["twice_light_max_rel_to_peak"] = float(np.abs(twice - 2.0 * got).max() / (2.0 * peak))
-        log(f"light: zero light max {check['zero_light_max']:.3g}, twice the light off by "
-            f"{check['twice_light_max_rel_to_peak']:.3g} of peak")
-        if check["zero_light_max"] != 0.0:
-            raise DiviewerError(f"the {precision} ONNX model is not black at zero light (max "
-                                f"{check['zero_light_max']:.3g}); not written", path=out)
+        check.update(_light_checks(session, frames, scales, got, peak, settings.layout, precision, out, log))
     log(f"verify {precision} against torch on {source}: max |diff| {check['max_abs_diff']:.3g} "
         f"({check['max_rel_to_peak']:.2g} of peak {peak:.3g}), mean {check['mean_abs_diff']:.3g}, "
         f"PSNR {check['psnr_db']:.1f} dB; extremes {check['extremes_max_rel_to_peak']:.2g} of peak")
@@ -242,6 +222,26 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
                             f"({check['extremes_max_rel_to_peak']:.2g} on extreme buffers; tolerance "
                             f"{FP32_TOLERANCE}); not written", path=out)
     return model, check
+
+
+def _light_checks(session, frames: np.ndarray, scales: np.ndarray, got: np.ndarray, peak: float, layout: str,
+                  precision: str, out: Path, log) -> dict:
+    """Encoding 2 on the exported graph: zero light gives exactly 0 (refused otherwise), twice the light
+    twice the output (recorded)."""
+    dark = frames.copy()
+    dark[..., channel_slices()["direct"]] = 0.0
+    zero = run_session(session, dark, np.zeros_like(scales), layout)
+    bright = frames.copy()
+    bright[..., channel_slices()["direct"]] *= 2.0
+    twice = run_session(session, bright, 2.0 * scales, layout)
+    check = {"zero_light_max": float(np.abs(zero).max()),
+             "twice_light_max_rel_to_peak": float(np.abs(twice - 2.0 * got).max() / (2.0 * peak))}
+    log(f"light: zero light max {check['zero_light_max']:.3g}, twice the light off by "
+        f"{check['twice_light_max_rel_to_peak']:.3g} of peak")
+    if check["zero_light_max"] != 0.0:
+        raise DiviewerError(f"the {precision} ONNX model is not black at zero light (max "
+                            f"{check['zero_light_max']:.3g}); not written", path=out)
+    return check
 
 
 def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = ExportSettings(), log=print) -> dict:
