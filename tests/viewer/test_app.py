@@ -916,16 +916,10 @@ def test_view_command_saves_the_window_itself(display, tmp_path):
 # --- dynamic resolution, the training-range flag, auto exposure -----------------------------------------------
 
 def _bilinear(img: np.ndarray, w: int, h: int) -> np.ndarray:
-    """GL's LINEAR magnification of an (H, W, C) image to (h, w, C): texel centres, clamped to the edge."""
-    H, W = img.shape[:2]
-    ys = np.clip((np.arange(h) + 0.5) * H / h - 0.5, 0, H - 1)
-    xs = np.clip((np.arange(w) + 0.5) * W / w - 0.5, 0, W - 1)
-    y0, x0 = np.floor(ys).astype(int), np.floor(xs).astype(int)
-    y1, x1 = np.minimum(y0 + 1, H - 1), np.minimum(x0 + 1, W - 1)
-    fy, fx = (ys - y0)[:, None, None], (xs - x0)[None, :, None]
-    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
-    bottom = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
-    return (top * (1 - fy) + bottom * fy).astype(np.float32)
+    """GL's LINEAR magnification in numpy: the accuracy tool's own (tools/experiments/scale_accuracy.py)."""
+    from tool_modules import load_tool
+
+    return load_tool("experiments/scale_accuracy").bilinear(img, w, h)
 
 
 def _upscaled_offscreen(ctx, shot: Path) -> np.ndarray:

@@ -31,18 +31,7 @@ sys.path.insert(0, str(ROOT))
 
 STREAM = 0xF011E5  # seeds of their own: SeedSequence([STREAM, split, i])
 
-
-def bilinear(img: np.ndarray, w: int, h: int) -> np.ndarray:
-    """GL's LINEAR magnification of an (H, W, C) image to (h, w, C): texel centres, clamped to the edge."""
-    H, W = img.shape[:2]
-    ys = np.clip((np.arange(h) + 0.5) * H / h - 0.5, 0, H - 1)
-    xs = np.clip((np.arange(w) + 0.5) * W / w - 0.5, 0, W - 1)
-    y0, x0 = np.floor(ys).astype(int), np.floor(xs).astype(int)
-    y1, x1 = np.minimum(y0 + 1, H - 1), np.minimum(x0 + 1, W - 1)
-    fy, fx = (ys - y0)[:, None, None], (xs - x0)[None, :, None]
-    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
-    bottom = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
-    return (top * (1 - fy) + bottom * fy).astype(np.float32)
+from scale_accuracy import bilinear  # noqa: E402  (this folder is on sys.path: GL LINEAR magnification)
 
 
 def main() -> None:

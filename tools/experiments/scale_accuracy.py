@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # tools/experiments/ -> the repository
 sys.path.insert(0, str(ROOT))
 
 STREAM = 0x5CA1E  # seeds of their own: SeedSequence([STREAM, split, i])
