@@ -256,9 +256,8 @@ class Renderer:
         draws, triangles = self.drawn.get(stage, (0, 0))
         triangles += sum(it[0].triangles for it, k in zip(items, keep) if k)
         self.drawn[stage] = (draws + int(keep.sum()), triangles)
-        for (gmesh, mat_name, model, _), k in zip(items, keep):
-            if not k:
-                continue
+        for i in self._draw_order(items, boxes, keep, view):
+            gmesh, mat_name, model, _ = items[i]
             mat = self.scene.materials[mat_name]
             masked = mat.is_masked
             if masked not in progs:
@@ -282,6 +281,20 @@ class Renderer:
                 set_uniform(prog, "u_alpha_cutoff", float(mat.alpha_cutoff))
             gmesh.vao(prog).render(moderngl.TRIANGLES)
         self.ctx.front_face = "ccw"
+
+    def _draw_order(self, items: list, boxes: np.ndarray, keep: np.ndarray, view: np.ndarray | None) -> np.ndarray:
+        """The indices of the kept items in drawing order. With a camera (``view``): opaque materials front to
+        back by each box's nearest point, then the alpha-masked ones, so that the depth test rejects hidden
+        fragments before they are shaded (llvmpipe tests depth early unless a shader discards). Without, the
+        list's order."""
+        idx = np.flatnonzero(keep)
+        if view is None or len(idx) < 2:
+            return idx
+        eye = cam.view_to_world(view)[:3, 3]
+        near = np.clip(eye, boxes[idx, 0], boxes[idx, 1])
+        dist = np.linalg.norm(near - eye, axis=1)
+        masked = np.array([self.scene.materials[items[i][1]].is_masked for i in idx], bool)
+        return idx[np.lexsort((dist, masked))]
 
     def _gbuffer_pass(self, frame: "FrameView") -> None:
         ctx, config, view, proj = self.ctx, frame.config, frame.view, frame.proj

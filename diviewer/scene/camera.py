@@ -9,6 +9,7 @@ run bottom to top; every image this package returns runs top to bottom.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -88,7 +89,19 @@ def euler_xyz(degrees) -> np.ndarray:
 
 
 def trs(position, rotation_deg, scale) -> np.ndarray:
-    """Model matrix: translate @ rotate (euler xyz, degrees) @ scale."""
+    """Model matrix: translate @ rotate (euler xyz, degrees) @ scale.
+
+    Memoised on the nine numbers (a copy each call): pyrr's helpers inspect their signature on every call,
+    and the viewer asks for every object's matrix every frame (a Sponza frame has 180 objects)."""
+    key = tuple(float(v) for v in (*np.ravel(position), *np.ravel(rotation_deg), *np.ravel(scale)))
+    if len(key) != 9:
+        raise ValueError(f"trs wants three 3-vectors, got {len(key)} numbers")
+    return _trs(key).copy()
+
+
+@functools.lru_cache(maxsize=8192)
+def _trs(key: tuple[float, ...]) -> np.ndarray:
+    position, rotation_deg, scale = key[0:3], key[3:6], key[6:9]
     t = matrix44.create_from_translation(np.asarray(position, dtype=_F64), dtype=_F64).T
     r = matrix44.create_from_matrix33(euler_xyz(rotation_deg), dtype=_F64)  # 3x3 block only: no transpose issue
     s = matrix44.create_from_scale(np.asarray(scale, dtype=_F64), dtype=_F64)  # diagonal

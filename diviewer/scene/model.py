@@ -289,11 +289,25 @@ class Scene:
     ambient: Vec3 = (0.0, 0.0, 0.0)
     """Constant background radiance seen where no geometry is (the sky); black by default."""
 
+    _bounds_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    """bounds() per objects tuple: the viewer asks every frame, and only a moved object changes it."""
+
     def bounds(self, config: FrameConfig | None = None) -> np.ndarray:
         """(2, 3) world-space bounding box of the objects in a frame."""
         config = config or self.default
+        try:
+            cached = self._bounds_cache.get(config.objects)
+        except TypeError:  # an unhashable pose (a list): computed each time
+            return self._objects_bounds(config.objects)
+        if cached is None:
+            if len(self._bounds_cache) >= 64:
+                self._bounds_cache.clear()
+            cached = self._bounds_cache[config.objects] = self._objects_bounds(config.objects)
+        return cached.copy()
+
+    def _objects_bounds(self, objects) -> np.ndarray:
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for o in config.objects:
+        for o in objects:
             b = self.meshes[o.mesh].bounds
             corners = np.array([[b[i, 0], b[j, 1], b[k, 2], 1.0] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
             w = (o.matrix() @ corners.T).T[:, :3]

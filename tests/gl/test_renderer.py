@@ -487,3 +487,30 @@ def test_sponza_culling_draws_less_at_a_wall_and_changes_no_pixel(ctx, sponza):
         assert frames[name, True]["albedo"].std() > 0.01, f"{name}: the view shows nothing"
         for buf in frames[name, True]:
             np.testing.assert_array_equal(frames[name, True][buf], frames[name, False][buf], err_msg=f"{name} {buf}")
+
+
+def test_sponza_draws_opaque_front_to_back_then_masked_and_changes_no_pixel(ctx, sponza):
+    """The G-buffer pass draws the opaque pieces nearest first and the alpha-masked ones last; the buffers are
+    bit for bit those of the list's order."""
+    r = Renderer(ctx, sponza, 48, 48, RenderSettings(shadow_size=256))
+    try:
+        config = sponza.default
+        items, boxes = r._draw_list(config)
+        keep = np.ones(len(items), bool)
+        view = config.camera.view_matrix()
+        order = r._draw_order(items, boxes, keep, view)
+        assert sorted(order.tolist()) == list(range(len(items)))
+        masked = [sponza.materials[items[i][1]].is_masked for i in order]
+        assert 0 < sum(masked) < len(masked) and masked == sorted(masked)  # every masked piece after the opaque
+        eye = cam.view_to_world(view)[:3, 3]
+        dist = [np.linalg.norm(np.clip(eye, boxes[i, 0], boxes[i, 1]) - eye) for i in order if not
+                sponza.materials[items[i][1]].is_masked]
+        assert dist == sorted(dist)
+        assert r._draw_order(items, boxes, keep, None).tolist() == list(range(len(items)))  # no camera: the list
+        sorted_frame = r.frame(config)
+        r._draw_order = lambda items, boxes, keep, view: np.flatnonzero(keep)
+        listed = r.frame(config)
+        for buf in sorted_frame:
+            np.testing.assert_array_equal(sorted_frame[buf], listed[buf], err_msg=buf)
+    finally:
+        r.release()

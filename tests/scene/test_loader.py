@@ -342,3 +342,26 @@ def test_a_capture_before_and_after_a_texture_edit_is_not_one_dataset(gl_context
     with pytest.raises(DiviewerError, match="scene_hash"):
         merge([tmp_path / "a", tmp_path / "b"], tmp_path / "merged", log=lambda *_: None)
     assert not (tmp_path / "merged").exists()
+
+
+def test_model_matrices_and_bounds_are_memoised_but_never_shared():
+    """trs and Scene.bounds are cached (the viewer asks every frame), yet each call returns its own array and a
+    moved object gets its own matrix and box."""
+    m = cam.trs((1.0, 2.0, 3.0), (10.0, 20.0, 30.0), (1.0, 2.0, 0.5))
+    m[0, 0] = 99.0
+    again = cam.trs([1, 2, 3], np.array([10.0, 20.0, 30.0]), (1, 2, 0.5))
+    assert again[0, 0] != 99.0
+    expected = np.identity(4)
+    expected[:3, :3] = cam.euler_xyz((10.0, 20.0, 30.0)) @ np.diag([1.0, 2.0, 0.5])
+    expected[:3, 3] = (1.0, 2.0, 3.0)
+    np.testing.assert_allclose(again, expected, atol=1e-12)
+    with pytest.raises(ValueError, match="three 3-vectors"):
+        cam.trs((0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
+
+    scene = load_scene("cornell")
+    b = scene.bounds()
+    b[:] = 0.0
+    assert np.ptp(scene.bounds(), axis=0).min() > 0.1
+    name = scene.default.objects[-1].name
+    moved = scene.default.replace_object(name, position=(0.0, 5.0, 0.0))
+    assert scene.bounds(moved)[1, 1] >= 5.0 > scene.bounds()[1, 1]
