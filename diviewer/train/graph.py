@@ -16,6 +16,8 @@ several convolution layers of a small U-Net (issue 28; measured per operator on 
 - log1p and expm1 are ``log(1 + a)`` and ``exp(z) - 1`` here: against training's exact-cancellation forms
   they differ by under 1e-8 in encoded units and 1e-7 of the exposure's radiance, far below the fp32
   export tolerance.
+- batch norm is folded into the convolution before it (``fold_batchnorm``): the generator's graph is then
+  convolutions, activations and concatenations only, the bare generator's.
 - layout "NCHW" takes the buffers channel-first; "NHWC" (the GL pack's order, the contract of models
   exported before) transposes once on the way in. The output is NHWC radiance either way.
 """
@@ -59,6 +61,39 @@ with warnings.catch_warnings():  # TorchScript is how the legacy exporter writes
     finite_inputs = torch.jit.script(_finite_inputs)
 
 
+def fold_batchnorm(netG: torch.nn.Module) -> torch.nn.Module:
+    """A copy of ``netG`` (in eval mode) with each BatchNorm2d that follows a convolution in a Sequential folded
+    into that convolution's weights and bias, and replaced by Identity: the graph then has the bare
+    generator's operators (bench's untrained U-Net has no normalisation). onnxruntime folds a BatchNorm into a
+    Conv itself, but not into a ConvTranspose. Per output channel o, with g = gamma / sqrt(var + eps):
+    W'[o] = W[o] g, b' = (b - mean) g + beta (a ConvTranspose2d's output channels are its weight's axis 1; a
+    convolution followed by PixelShuffle(r) has r^2 output channels per normalised one)."""
+    import copy
+
+    net = copy.deepcopy(netG).eval()
+    convs = (torch.nn.Conv2d, torch.nn.ConvTranspose2d)
+    with torch.no_grad():
+        for seq in [m for m in net.modules() if isinstance(m, torch.nn.Sequential)]:
+            for i in range(len(seq) - 1):
+                conv, bn, repeat = seq[i], seq[i + 1], 1
+                if (isinstance(conv, torch.nn.Sequential) and len(conv) >= 2
+                        and isinstance(conv[-1], torch.nn.PixelShuffle)):
+                    # conv -> PixelShuffle(r) -> BN: BN's channel c is the conv's channels c r^2 ... c r^2 + r^2 - 1
+                    repeat, conv = conv[-1].upscale_factor ** 2, conv[-2]
+                if not (isinstance(conv, convs) and isinstance(bn, torch.nn.BatchNorm2d)
+                        and bn.track_running_stats and bn.running_mean is not None and conv.groups == 1):
+                    continue
+                g = (bn.weight if bn.affine else torch.ones_like(bn.running_var)) / torch.sqrt(bn.running_var + bn.eps)
+                beta = bn.bias if bn.affine else torch.zeros_like(bn.running_mean)
+                g, shift = g.repeat_interleave(repeat), (beta - bn.running_mean * g).repeat_interleave(repeat)
+                shape = (1, -1, 1, 1) if isinstance(conv, torch.nn.ConvTranspose2d) else (-1, 1, 1, 1)
+                conv.weight.mul_(g.reshape(shape))
+                bias = conv.bias if conv.bias is not None else torch.zeros_like(g)
+                conv.bias = torch.nn.Parameter(bias * g + shift)
+                seq[i + 1] = torch.nn.Identity()
+    return net
+
+
 class LeanGI(torch.nn.Module):
     """Raw buffers (and, for encoding version 2, the light scale (N,)) -> linear radiance (N, H, W, 3)."""
 
@@ -66,7 +101,8 @@ class LeanGI(torch.nn.Module):
         super().__init__()
         if layout not in LAYOUTS:
             raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
-        self.netG = netG.half() if fp16 else netG
+        folded = fold_batchnorm(netG)  # folded in float32, then rounded once
+        self.netG = folded.half() if fp16 else folded
         self.fp16, self.layout, self.enc = fp16, layout, encoding
         self.target, self.divide_albedo = meta["target"], bool(meta["divide_albedo"])
         self.log_r = math.log1p(encoding.radiance_max)

@@ -359,3 +359,41 @@ def test_nchw_export_and_any_frame_size(checkpoints, tmp_path):
         with torch.no_grad():
             want = crop_nhwc(ref(torch.from_numpy(pad_nhwc(x, 32))).numpy(), h, w, 32)
         np.testing.assert_allclose(ya, want, rtol=1e-4, atol=1e-5 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("upsample", ["transpose", "resize", "shuffle"])
+def test_batch_norm_is_folded_into_the_convolutions(upsample):
+    """The lean graph has no BatchNormalization: each is folded into the convolution before it (a transposed
+    one included), and the folded generator equals the original in eval mode; the original is untouched."""
+    import onnx
+
+    from diviewer.encoding import Encoding
+    from diviewer.train.export import onnx_bytes
+    from diviewer.train.graph import fold_batchnorm
+    from diviewer.train.networks import NetConfig, init_weights
+
+    torch.manual_seed(1)
+    netG = init_weights(NetConfig(K=4, resolution=32, upsample=upsample, norm="batch").build_generator())
+    with torch.no_grad():
+        for m in netG.modules():  # statistics and affine terms far from their initial values
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.running_mean.uniform_(-0.5, 0.5)
+                m.running_var.uniform_(0.05, 4.0)
+                m.weight.uniform_(0.5, 1.5)
+                m.bias.uniform_(-0.3, 0.3)
+    netG.eval()
+    before = {k: v.clone() for k, v in netG.state_dict().items()}
+    folded = fold_batchnorm(netG)
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in folded.modules())
+    assert sum(isinstance(m, torch.nn.BatchNorm2d) for m in netG.modules()) > 0
+    for k, v in netG.state_dict().items():
+        assert torch.equal(v, before[k]), k
+    x = torch.randn(2, 10, 32, 32)
+    with torch.no_grad():
+        ref, got = netG(x), folded(x)
+    assert (got - ref).abs().max() <= 1e-5 * max(1.0, ref.abs().max())
+
+    module = gi_module(netG, Encoding(exposure=2.0, depth_scale=10.0), {"target": "indirect", "divide_albedo": True})
+    graph = onnx.load_from_string(onnx_bytes(module, torch.from_numpy(_buffers(np.random.default_rng(0), 1, 32, 32))))
+    ops = {n.op_type for n in graph.graph.node}
+    assert "BatchNormalization" not in ops and ("ConvTranspose" in ops) == (upsample == "transpose")
