@@ -97,15 +97,16 @@ def test_any_size_is_padded_to_the_stride_and_cropped_back():
 
     model = NeuralGI(SHIPPED[0])  # a shipped model: no onnx package needed
     m = model.multiple
+    scale = 1.0 if model.light_scaled else None  # encoding 2 takes each frame's light scale
     rng = np.random.default_rng(0)
     for h, w in [(24, 24), (20, 36), (40, 12)]:
         x = np.concatenate([rng.uniform(1, 5, (h, w, 1)), np.tile([0, 0, 1.0], (h, w, 1)),
                             rng.uniform(0, 1, (h, w, 6))], -1).astype(np.float32)
-        y = model.run(x)
+        y = model.run(x, light_scale=scale)
         assert y.shape == (h, w, 3) and np.all(np.isfinite(y))
         padded = pad_nhwc(x[None], m)
         assert padded.shape[1] % m == 0 and padded.shape[2] % m == 0
-        np.testing.assert_array_equal(y, crop_nhwc(np.maximum(model.run(padded), 0), h, w, m)[0])
+        np.testing.assert_array_equal(y, crop_nhwc(np.maximum(model.run(padded, light_scale=scale), 0), h, w, m)[0])
 
 
 def test_pack_shader_refuses_a_layout_it_does_not_write(ctx):
@@ -220,8 +221,9 @@ def test_shipped_model_runs_a_frame_of_its_scene(ctx, path):
     renderer = Renderer(ctx, scene, w, h)
     neural = NeuralPass(ctx, renderer, model)
     try:
-        frame = renderer.frame(sample_config(scene, 0, "test"))
-        neural.run()
+        config = sample_config(scene, 0, "test")
+        frame = renderer.frame(config)
+        neural.run(light_scale=model.light_scale(config) if model.light_scaled else None)
         np.testing.assert_array_equal(neural.packed[0], pack_buffers(frame))
         out = neural.image()
         assert out.shape == (h, w, 3) and out.dtype == np.float32

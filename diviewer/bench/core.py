@@ -99,6 +99,7 @@ def _model_paths(settings: BenchSettings, scene) -> list[Path]:
 def _variants(paths: list[Path], tmp: Path, notes: list[str], log) -> list[dict]:
     """Each given model as fp32 and fp16 files (converted without torch where needed); baselines as given."""
     import onnx
+    import onnxruntime as ort
 
     from diviewer.bench.onnx_tools import to_fp16, to_fp32
     from diviewer.runtime import read_metadata
@@ -114,12 +115,12 @@ def _variants(paths: list[Path], tmp: Path, notes: list[str], log) -> list[dict]
         out.append({**base, "kind": "neural", "precision": given, "path": path})
         other = "fp32" if given == "fp16" else "fp16"
         try:
-            model = onnx.load(str(path))
-            converted = to_fp32(model) if other == "fp32" else to_fp16(model)
+            converted = (to_fp32 if other == "fp32" else to_fp16)(onnx.load(str(path)))
+            ort.InferenceSession(converted.SerializeToString(), providers=["CPUExecutionProvider"])
             dst = tmp / f"{path.stem}_{other}.onnx"
             onnx.save(converted, str(dst))
             out.append({**base, "kind": "neural", "precision": other, "path": dst, "converted_from": given})
-        except Exception as exc:  # a graph the converter does not handle: the row is left out, and said so
+        except Exception as exc:  # a graph the converter does not handle (or onnxruntime then refuses): said so
             notes.append(f"{path.name}: no {other} variant ({type(exc).__name__}: {exc})")
     names = ", ".join(f"{v['name']} {v['precision']}" for v in out)
     log(f"models: {names or 'none'}")

@@ -96,3 +96,16 @@ def draw_list(scene: Scene, config: FrameConfig, gpu, ctx) -> list[tuple]:
         items.append((gmesh, o.material, m, world_box(gmesh.bounds, m)))
     items.sort(key=lambda it: scene.materials[it[1]].is_masked)  # opaque first: early depth test
     return items
+
+
+def draw_order(boxes: np.ndarray, keep: np.ndarray, masked: np.ndarray, eye: np.ndarray | None) -> np.ndarray:
+    """The indices of the kept boxes in drawing order. With a camera position ``eye``: unmasked (opaque) items
+    front to back by each world box's nearest point, then the alpha-masked ones the same way, so that the depth
+    test rejects hidden fragments before they are shaded (llvmpipe tests depth early unless a shader
+    discards). Without one (a shadow map), the list's order."""
+    idx = np.flatnonzero(keep)
+    if eye is None or len(idx) < 2:
+        return idx
+    near = np.clip(eye, boxes[idx, 0], boxes[idx, 1])
+    dist = np.linalg.norm(near - eye, axis=1)
+    return idx[np.lexsort((dist, masked[idx]))]

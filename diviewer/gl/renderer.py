@@ -15,7 +15,7 @@ import numpy as np
 
 from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import unbind_framebuffer
-from diviewer.gl.culling import boxes_visible, draw_list, frustum_planes
+from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shadow_fit import fit_directional, point_faces
 from diviewer.gl.shaders import ShaderCache
@@ -256,7 +256,9 @@ class Renderer:
         draws, triangles = self.drawn.get(stage, (0, 0))
         triangles += sum(it[0].triangles for it, k in zip(items, keep) if k)
         self.drawn[stage] = (draws + int(keep.sum()), triangles)
-        for i in self._draw_order(items, boxes, keep, view):
+        eye = cam.view_to_world(view)[:3, 3] if view is not None else None
+        masked = np.array([self.scene.materials[it[1]].is_masked for it in items], bool)
+        for i in draw_order(boxes, keep, masked, eye):
             gmesh, mat_name, model, _ = items[i]
             mat = self.scene.materials[mat_name]
             masked = mat.is_masked
@@ -281,20 +283,6 @@ class Renderer:
                 set_uniform(prog, "u_alpha_cutoff", float(mat.alpha_cutoff))
             gmesh.vao(prog).render(moderngl.TRIANGLES)
         self.ctx.front_face = "ccw"
-
-    def _draw_order(self, items: list, boxes: np.ndarray, keep: np.ndarray, view: np.ndarray | None) -> np.ndarray:
-        """The indices of the kept items in drawing order. With a camera (``view``): opaque materials front to
-        back by each box's nearest point, then the alpha-masked ones, so that the depth test rejects hidden
-        fragments before they are shaded (llvmpipe tests depth early unless a shader discards). Without, the
-        list's order."""
-        idx = np.flatnonzero(keep)
-        if view is None or len(idx) < 2:
-            return idx
-        eye = cam.view_to_world(view)[:3, 3]
-        near = np.clip(eye, boxes[idx, 0], boxes[idx, 1])
-        dist = np.linalg.norm(near - eye, axis=1)
-        masked = np.array([self.scene.materials[items[i][1]].is_masked for i in idx], bool)
-        return idx[np.lexsort((dist, masked))]
 
     def _gbuffer_pass(self, frame: "FrameView") -> None:
         ctx, config, view, proj = self.ctx, frame.config, frame.view, frame.proj

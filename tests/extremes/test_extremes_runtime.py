@@ -148,13 +148,21 @@ def cornell_frames(gl_context):
     with gl_context:
         r = Renderer(gl_context, scene, 128, 128)
         try:
-            out = {}
+            out, configs = {}, {}
             for k in (0.0, 1e-8, 1.0, 8.0):
                 lights = tuple(dataclasses.replace(l, irradiance=l.irradiance * k) for l in scene.default.lights)
-                out[k] = pack_buffers(r.frame(dataclasses.replace(scene.default, lights=lights)))
+                configs[k] = dataclasses.replace(scene.default, lights=lights)
+                out[k] = pack_buffers(r.frame(configs[k]))
         finally:
             r.release()
-    return scene, out
+    return scene, out, configs
+
+
+def _run_shipped(net, cornell_frames, k, x=None):
+    """The shipped model on the frame at light factor k (or ``x``, that frame's buffers altered), with the
+    frame's light scale where the model takes one (encoding 2), as the viewer runs it."""
+    scale = net.light_scale(cornell_frames[2][k]) if net.light_scaled else None
+    return net.run(cornell_frames[1][k] if x is None else x, light_scale=scale)
 
 
 @pytest.fixture(scope="module")
@@ -170,20 +178,22 @@ def test_shipped_model_sanitises_bad_geometry_buffers(cornell_frames, shipped, c
     """The exported graph's encoding keeps NaN/Inf/1e30 in depth, normal and albedo out of the output."""
     x = cornell_frames[1][1.0].copy()
     x[10:14, 20:30, channel] = value
-    y = shipped.run(x)
+    y = _run_shipped(shipped, cornell_frames, 1.0, x)
     assert np.all(np.isfinite(y)) and np.all(y >= 0)
     assert shipped.nonfinite_inputs == (0 if value == 1e30 else 40)
 
 
 @pytest.mark.parametrize("k", [0.0, 1e-8, 1.0, 8.0])
 def test_shipped_model_output_is_finite_and_not_negative(cornell_frames, shipped, k):
-    y = shipped.run(cornell_frames[1][k])
+    y = _run_shipped(shipped, cornell_frames, k)
     assert np.all(np.isfinite(y)) and np.all(y >= 0)
 
 
 def test_shipped_model_is_darker_without_light(cornell_frames, shipped):
-    dark, lit = (float(shipped.run(cornell_frames[1][k]).mean()) for k in (0.0, 1.0))
+    dark, lit = (float(_run_shipped(shipped, cornell_frames, k).mean()) for k in (0.0, 1.0))
     assert dark < 0.25 * lit
+    if shipped.light_scaled:  # linear in the light by construction: no light, no light out
+        assert dark == 0.0 < lit
 
 
 def test_a_light_scaled_model_is_black_at_zero_light_and_linear_in_it(cornell_frames, tmp_path):
@@ -202,7 +212,7 @@ def test_a_light_scaled_model_is_black_at_zero_light_and_linear_in_it(cornell_fr
     from diviewer.scene.lights import light_scale
     from diviewer.train.export import gi_module, onnx_bytes
 
-    scene, frames = cornell_frames
+    scene, frames, _ = cornell_frames
     old = onnx.load(str(models_dir() / "cornell.onnx"))
     meta = get_meta(old)
     enc = Encoding.from_dict({**meta["encoding"], "version": 2})

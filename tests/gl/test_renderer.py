@@ -489,26 +489,26 @@ def test_sponza_culling_draws_less_at_a_wall_and_changes_no_pixel(ctx, sponza):
             np.testing.assert_array_equal(frames[name, True][buf], frames[name, False][buf], err_msg=f"{name} {buf}")
 
 
-def test_sponza_draws_opaque_front_to_back_then_masked_and_changes_no_pixel(ctx, sponza):
+def test_sponza_draws_opaque_front_to_back_then_masked_and_changes_no_pixel(ctx, sponza, monkeypatch):
     """The G-buffer pass draws the opaque pieces nearest first and the alpha-masked ones last; the buffers are
     bit for bit those of the list's order."""
+    from diviewer.gl import culling, renderer
+
     r = Renderer(ctx, sponza, 48, 48, RenderSettings(shadow_size=256))
     try:
         config = sponza.default
         items, boxes = r._draw_list(config)
         keep = np.ones(len(items), bool)
-        view = config.camera.view_matrix()
-        order = r._draw_order(items, boxes, keep, view)
+        masked = np.array([sponza.materials[it[1]].is_masked for it in items], bool)
+        eye = cam.view_to_world(config.camera.view_matrix())[:3, 3]
+        order = culling.draw_order(boxes, keep, masked, eye)
         assert sorted(order.tolist()) == list(range(len(items)))
-        masked = [sponza.materials[items[i][1]].is_masked for i in order]
-        assert 0 < sum(masked) < len(masked) and masked == sorted(masked)  # every masked piece after the opaque
-        eye = cam.view_to_world(view)[:3, 3]
-        dist = [np.linalg.norm(np.clip(eye, boxes[i, 0], boxes[i, 1]) - eye) for i in order if not
-                sponza.materials[items[i][1]].is_masked]
+        assert 0 < masked.sum() < len(items) and masked[order].tolist() == sorted(masked[order].tolist())
+        dist = [np.linalg.norm(np.clip(eye, boxes[i, 0], boxes[i, 1]) - eye) for i in order if not masked[i]]
         assert dist == sorted(dist)
-        assert r._draw_order(items, boxes, keep, None).tolist() == list(range(len(items)))  # no camera: the list
+        assert culling.draw_order(boxes, keep, masked, None).tolist() == list(range(len(items)))  # no camera
         sorted_frame = r.frame(config)
-        r._draw_order = lambda items, boxes, keep, view: np.flatnonzero(keep)
+        monkeypatch.setattr(renderer, "draw_order", lambda boxes, keep, masked, eye: np.flatnonzero(keep))
         listed = r.frame(config)
         for buf in sorted_frame:
             np.testing.assert_array_equal(sorted_frame[buf], listed[buf], err_msg=buf)
