@@ -105,9 +105,9 @@ def _variants(paths: list[Path], tmp: Path, notes: list[str], log) -> list[dict]
     from diviewer.runtime import read_metadata
 
     out = []
-    for path in paths:
+    for n, path in enumerate(paths):  # n: two models of one name (a/cornell.onnx, b/cornell.onnx) convert apart
         meta = read_metadata(path)
-        base = {"source": str(path), "name": path.stem, "meta": meta}
+        base = {"source": str(path), "name": path.stem, "meta": meta, "n": n}
         if meta.get("kind") == "linear_baseline":
             out.append({**base, "kind": "baseline", "precision": meta["precision"], "path": path})
             continue
@@ -117,7 +117,7 @@ def _variants(paths: list[Path], tmp: Path, notes: list[str], log) -> list[dict]
         try:
             converted = (to_fp32 if other == "fp32" else to_fp16)(onnx.load(str(path)))
             ort.InferenceSession(converted.SerializeToString(), providers=["CPUExecutionProvider"])
-            dst = tmp / f"{path.stem}_{other}.onnx"
+            dst = tmp / f"{n}_{path.stem}_{other}.onnx"
             onnx.save(converted, str(dst))
             out.append({**base, "kind": "neural", "precision": other, "path": dst, "converted_from": given})
         except Exception as exc:  # a graph the converter does not handle (or onnxruntime then refuses): said so
@@ -213,7 +213,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
                 calib, calib_note = _calibration(settings, scene, gb, w, h)
             finally:
                 gb.release()
-            dst = tmp / f"{v['name']}_int8.onnx"
+            dst = tmp / f"{v['n']}_{v['name']}_int8.onnx"
             try:
                 quantize_int8(Path(v["path"]), dst, calib)
                 variants.append({**v, "precision": "int8", "path": dst, "calibration": calib_note,

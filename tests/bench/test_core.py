@@ -6,6 +6,7 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -236,3 +237,26 @@ def test_bare_generator_ratio_is_reported_per_model_row():
     assert rows[0]["bare_ratio"] == pytest.approx(1.2) and "bare_ratio" not in rows[1]  # no bare K=8 at 64
     assert len(lines) == 3 and "1.20 x the bare K=8" in lines[-1]
     assert bare_ratio_lines(rows[1:2]) == []
+
+
+def test_two_models_of_one_name_get_precision_twins_of_their_own(tmp_path):
+    """bench converts each model to its other precision in a scratch folder: a/sponza.onnx and b/sponza.onnx must
+    not share one converted file (the second overwrote the first, and both rows timed it)."""
+    pytest.importorskip("onnx")
+    import shutil
+
+    from diviewer.bench.core import _variants
+    from diviewer.paths import models_dir
+
+    paths = []
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        paths.append(tmp_path / name / "sponza.onnx")
+        shutil.copyfile(models_dir() / "sponza.onnx", paths[-1])
+    (tmp_path / "scratch").mkdir()
+    notes = []
+    out = _variants(paths, tmp_path / "scratch", notes, log=lambda *_: None)
+    twins = [v for v in out if v.get("converted_from")]
+    assert len(twins) == 2 and not notes
+    assert twins[0]["path"] != twins[1]["path"] and all(Path(v["path"]).is_file() for v in twins)
+    assert [v["source"] for v in twins] == [str(p) for p in paths]
