@@ -151,25 +151,6 @@ def _check_calib_data(settings, scene) -> None:
                             field="--calib-data")
 
 
-def _calibration(settings, scene, gb, width: int, height: int) -> tuple[list[np.ndarray], str]:
-    """Model inputs of training frames: a capture's train split when given, else GL renders of training configs."""
-    if settings.calib_data:
-        from diviewer.data.dataset import Dataset
-        from diviewer.runtime import pack_buffers
-
-        ds = Dataset(settings.calib_data)
-        idx = ds.indices("train")[: settings.calib_frames]
-        if not idx:
-            raise DiviewerError("no train frames to calibrate int8 on", path=settings.calib_data)
-        frames = [pack_buffers(ds.load(i)) for i in idx]
-        if frames[0].shape[:2] == (height, width):
-            return [f[None] for f in frames], f"{len(idx)} train frames of {settings.calib_data}"
-    from diviewer.scene import sample_config
-
-    return ([gb.buffers(sample_config(scene, 9000 + i, "train")) for i in range(settings.calib_frames)],
-            f"GL inputs of {settings.calib_frames} training configurations")
-
-
 def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: Path | None = None,
               log=print) -> dict:
     """Measure every row; print the table; write the JSON and the plot when asked. Returns the result."""
@@ -178,7 +159,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
 
     from diviewer.bench import report
     from diviewer.bench.onnx_tools import generator_flops, quantize_int8, untrained_generator
-    from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_configs, time_path_tracer
+    from diviewer.bench.runner import GlBench, calibration, gl_timing_mode, temporal_configs, time_path_tracer
     from diviewer.gl.context import headless_context
     from diviewer.runtime import NeuralGI
     from diviewer.scene import load_scene, sample_config
@@ -210,7 +191,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
             w, h = (int(x) for x in v["meta"]["resolution"])
             gb = GlBench(ctx, scene, w, h, mode)
             try:
-                calib, calib_note = _calibration(settings, scene, gb, w, h)
+                calib, calib_note = calibration(settings, scene, gb, w, h)
             finally:
                 gb.release()
             dst = tmp / f"{v['n']}_{v['name']}_int8.onnx"

@@ -21,7 +21,7 @@ import numpy as np
 
 from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, OUTPUT_CHANNELS, input_channel_slices
 from diviewer.errors import DiviewerError, missing_extra
-from diviewer.runtime import INPUT_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
+from diviewer.runtime import INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
 
 OPSET = 17
 UPSAMPLE_MACS = {"transpose": 4, "resize": 9}
@@ -205,19 +205,25 @@ def to_fp16(model):
     return m
 
 
-def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[np.ndarray]) -> Path:
+def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple[np.ndarray, float]]) -> Path:
     """Static int8 quantisation (QDQ, per-channel weights) of the convolutions, calibrated on ``calibration``
-    ((1, H, W, 10) buffers); the encoding and decoding stay float."""
+    ((1, H, W, 10) buffers, each with its frame's light scale, fed where the model takes one: encoding 2); the
+    encoding and decoding stay float."""
     onnx = _onnx()
     from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+
+    scaled = int(get_meta(onnx.load(str(fp32_path))).get("encoding", {}).get("version", 1)) >= 2
 
     class Reader(CalibrationDataReader):
         def __init__(self):
             self.it = iter(calibration)
 
         def get_next(self):
-            x = next(self.it, None)
-            return None if x is None else {INPUT_NAME: x}
+            item = next(self.it, None)
+            if item is None:
+                return None
+            x, scale = item
+            return {INPUT_NAME: x, LIGHT_SCALE_NAME: np.full(len(x), scale, np.float32)} if scaled else {INPUT_NAME: x}
 
     root = logging.getLogger()
     level = root.level

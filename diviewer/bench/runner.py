@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from diviewer.errors import DiviewerError
 from diviewer.timing import StageTimer
 
 STAGES = ("shadows", "gbuffer", "direct", "readback", "inference", "upload", "upsample", "composite")
@@ -282,3 +283,28 @@ def temporal_configs(scene, n: int, span: float = 0.25) -> list:
         camera = base.camera if scene.ranges.camera is None else camera_on_path(scene, t)
         out.append(dataclasses.replace(base, lights=tuple(lights), camera=camera))
     return out
+
+
+def calibration(settings, scene, gb, width: int, height: int) -> tuple[list[tuple[np.ndarray, float]], str]:
+    """Model inputs of training frames with their light scales (what an encoding-2 model also takes): a capture's
+    train split when given, else GL renders of training configs."""
+    from diviewer.scene.lights import light_scale
+
+    if settings.calib_data:
+        from diviewer.data.dataset import Dataset
+        from diviewer.data.scales import light_scales
+        from diviewer.runtime import pack_buffers
+
+        ds = Dataset(settings.calib_data)
+        idx = ds.indices("train")[: settings.calib_frames]
+        if not idx:
+            raise DiviewerError("no train frames to calibrate int8 on", path=settings.calib_data)
+        frames = [pack_buffers(ds.load(i)) for i in idx]
+        if frames[0].shape[:2] == (height, width):
+            return ([(f[None], float(s)) for f, s in zip(frames, light_scales(ds, idx))],
+                    f"{len(idx)} train frames of {settings.calib_data}")
+    from diviewer.scene import sample_config
+
+    configs = [sample_config(scene, 9000 + i, "train") for i in range(settings.calib_frames)]
+    return ([(gb.buffers(c), light_scale(scene, c)) for c in configs],
+            f"GL inputs of {settings.calib_frames} training configurations")

@@ -260,3 +260,27 @@ def test_two_models_of_one_name_get_precision_twins_of_their_own(tmp_path):
     assert len(twins) == 2 and not notes
     assert twins[0]["path"] != twins[1]["path"] and all(Path(v["path"]).is_file() for v in twins)
     assert [v["source"] for v in twins] == [str(p) for p in paths]
+
+
+def test_int8_quantisation_calibrates_an_encoding_2_model_with_its_light_scales(tmp_path):
+    """The shipped cornell model takes each frame's light scale (encoding 2): calibration feeds it, and the int8
+    model runs (it failed with 'Required inputs (['light_scale']) are missing')."""
+    pytest.importorskip("onnx")
+    from diviewer.bench.onnx_tools import get_meta, quantize_int8
+    from diviewer.paths import models_dir
+    from diviewer.runtime import NeuralGI, read_metadata
+
+    src = models_dir() / "cornell.onnx"
+    assert read_metadata(src)["encoding"]["version"] == 2
+    rng = np.random.default_rng(3)
+    calib = []
+    for scale in (0.5, 2.0):
+        x = np.concatenate([rng.uniform(1, 5, (1, 128, 128, 1)), np.tile([0, 0, 1.0], (1, 128, 128, 1)),
+                            rng.uniform(0, 1, (1, 128, 128, 6))], -1).astype(np.float32)
+        calib.append((x, scale))
+    out = quantize_int8(src, tmp_path / "int8.onnx", calib)
+    import onnx
+
+    assert get_meta(onnx.load(str(out)))["precision"] == "int8"
+    y = NeuralGI(out).run(calib[0][0][0], light_scale=0.5)
+    assert y.shape == (128, 128, 3) and np.isfinite(y).all() and y.max() > 0
