@@ -194,8 +194,70 @@ FP16_OPS = ("Conv", "ConvTranspose", "Relu", "LeakyRelu", "Tanh", "Concat", "Bat
 """The generator's operators, converted to fp16; the encoding and decoding stay fp32 (as ``export --fp16``)."""
 
 
+GENERATOR_PREFIX = "/netG/"
+"""The exporter's name prefix of the generator's nodes (``LeanGI.netG``)."""
+
+
+def _generator_to_fp16(model):
+    """The generator of a diviewer export (its nodes named ``/netG/...``) in float16, as ``export --fp16`` writes
+    it: its float weights halved, one Cast to float16 on each tensor it takes from the encoding, one Cast back on
+    each it gives to the decoding; the rest of the graph (the encoding, its NaN guard's If) untouched. None for
+    a graph without such nodes."""
+    onnx = _onnx()
+    from onnx import TensorProto, helper, numpy_helper
+
+    m = onnx.ModelProto()
+    m.CopyFrom(model)
+    g = m.graph
+    net = [n for n in g.node if n.name.startswith(GENERATOR_PREFIX)]
+    if not net:
+        return None
+    inside = {o for n in net for o in n.output}
+    inits = {i.name: i for i in g.initializer}
+    users = {}
+    for n in g.node:
+        for i in n.input:
+            users.setdefault(i, set()).add(n.name.startswith(GENERATOR_PREFIX))
+    for name, init in inits.items():  # weights only the generator reads
+        if init.data_type == TensorProto.FLOAT and users.get(name) == {True}:
+            init.CopyFrom(numpy_helper.from_array(numpy_helper.to_array(init).astype(np.float16), name))
+    casts, renamed = [], {}
+    for n in net:
+        for k, i in enumerate(n.input):
+            if i and i not in inside and i not in inits:  # an encoded tensor: into float16 once
+                if i not in renamed:
+                    renamed[i] = f"{i}_fp16"
+                    casts.append(helper.make_node("Cast", [i], [renamed[i]], name=f"{i}_to_fp16", to=TensorProto.FLOAT16))
+                n.input[k] = renamed[i]
+    outside = {i for n in g.node if not n.name.startswith(GENERATOR_PREFIX) for i in n.input} | {o.name for o in g.output}
+    for n in net:
+        for k, o in enumerate(n.output):
+            if o in outside:  # back to float32 for the decoding, under the name it reads
+                n.output[k] = f"{o}_fp16"
+                casts.append(helper.make_node("Cast", [n.output[k]], [o], name=f"{o}_to_fp32", to=TensorProto.FLOAT))
+    keep = [vi for vi in g.value_info if vi.name not in inside]
+    del g.value_info[:]
+    g.value_info.extend(keep)
+    # each Cast right after the node that makes its input (at the start for a graph input): still in order
+    after: dict[str, list] = {}
+    for c in casts:
+        after.setdefault(c.input[0], []).append(c)
+    nodes = [c for i in g.input for c in after.pop(i.name, [])]
+    for n in g.node:
+        nodes += [n] + [c for o in n.output for c in after.pop(o, [])]
+    del g.node[:]
+    g.node.extend(nodes)
+    return m
+
+
 def to_fp16(model):
-    """An fp32 export as fp16 (onnxruntime.transformers.float16): the generator in fp16, encoding kept fp32."""
+    """An fp32 export as fp16: a diviewer export's generator in fp16 (``_generator_to_fp16``), else
+    onnxruntime.transformers.float16 with the non-generator operators kept fp32."""
+    lean = _generator_to_fp16(model)
+    if lean is not None:
+        meta = get_meta(lean)
+        set_meta(lean, {**meta, "precision": "fp16", "converted_from": meta.get("precision")})
+        return lean
     from onnxruntime.transformers.float16 import convert_float_to_float16
 
     blocked = sorted({n.op_type for n in model.graph.node} - set(FP16_OPS))

@@ -284,3 +284,34 @@ def test_int8_quantisation_calibrates_an_encoding_2_model_with_its_light_scales(
     assert get_meta(onnx.load(str(out)))["precision"] == "int8"
     y = NeuralGI(out).run(calib[0][0][0], light_scale=0.5)
     assert y.shape == (128, 128, 3) and np.isfinite(y).all() and y.max() > 0
+
+
+def test_fp16_twin_of_a_lean_export_halves_the_generator_only():
+    """bench's fp16 twin of the shipped fp32 model: the generator in float16 between one Cast in and one out,
+    the encoding and its NaN guard untouched (onnxruntime's converter mistyped the guard's If and the file did
+    not load); within export's fp16 tolerance (1e-2 of peak) of the fp32 model, NaN and Inf still sanitised."""
+    onnx = pytest.importorskip("onnx")
+    import onnxruntime as ort
+
+    from diviewer.bench.onnx_tools import GENERATOR_PREFIX, get_meta, to_fp16
+    from diviewer.paths import models_dir
+
+    src = onnx.load(str(models_dir() / "cornell.onnx"))
+    assert get_meta(src)["precision"] == "fp32"
+    half = to_fp16(src)
+    onnx.checker.check_model(half)
+    assert get_meta(half)["precision"] == "fp16"
+    casts = [n for n in half.graph.node if n.op_type == "Cast" and n.name.endswith(("_to_fp16", "_to_fp32"))]
+    assert len(casts) == 2
+    weights = {i.input[1] for i in half.graph.node if i.op_type in ("Conv", "ConvTranspose")}
+    assert all(w.data_type == onnx.TensorProto.FLOAT16 for w in half.graph.initializer if w.name in weights)
+    assert any(n.op_type == "If" for n in half.graph.node if not n.name.startswith(GENERATOR_PREFIX))
+    runs = [ort.InferenceSession(m.SerializeToString(), providers=["CPUExecutionProvider"]) for m in (src, half)]
+    rng = np.random.default_rng(7)
+    x = np.concatenate([rng.uniform(1, 5, (1, 128, 128, 1)), np.tile([0, 0, 1.0], (1, 128, 128, 1)),
+                        rng.uniform(0, 1, (1, 128, 128, 6))], -1).astype(np.float32)
+    feed = {"buffers": x, "light_scale": np.full(1, 0.7, np.float32)}
+    ref, got = (r.run(None, feed)[0] for r in runs)
+    assert np.abs(got - ref).max() <= 1e-2 * np.abs(ref).max()
+    x[0, 3, 3, 2], x[0, 5, 5, 0] = np.nan, np.inf  # a NaN normal and an infinite depth
+    assert np.isfinite(runs[1].run(None, feed)[0]).all()
