@@ -312,7 +312,7 @@ def test_the_shipped_compact_set_is_sound_small_and_of_todays_scene(name):
     ev = EvalFrames(SHIPPED[name])
     assert ev.compact and ev.problems() == []
     assert ev.manifest["scene_hash"] == load_scene(name).file_hash
-    left_out = set(ev.left_out)
+    left_out = set(ev.left_out())
     assert ev.manifest["spp"] >= 1024 and set(ev.splits()) == set(EVAL_SPLITS) - left_out
     size = sum(p.stat().st_size for p in SHIPPED[name].iterdir())
     assert size < 5 * 2**20, size
