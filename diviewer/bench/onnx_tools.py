@@ -269,12 +269,16 @@ def to_fp16(model):
 
 def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple[np.ndarray, float]]) -> Path:
     """Static int8 quantisation (QDQ, per-channel weights) of the convolutions, calibrated on ``calibration``
-    ((1, H, W, 10) buffers, each with its frame's light scale, fed where the model takes one: encoding 2); the
-    encoding and decoding stay float."""
+    ((1, H, W, 10) buffers, padded to the model's stride as the runtime pads them, each with its frame's light
+    scale, fed where the model takes one: encoding 2); the encoding and decoding stay float."""
     onnx = _onnx()
     from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
 
-    scaled = int(get_meta(onnx.load(str(fp32_path))).get("encoding", {}).get("version", 1)) >= 2
+    from diviewer.padding import pad_nhwc
+
+    meta = get_meta(onnx.load(str(fp32_path)))
+    scaled = int(meta.get("encoding", {}).get("version", 1)) >= 2
+    multiple = int(meta.get("multiple", 1))  # padded as the runtime pads (a 228x128 model runs at 256x128)
 
     class Reader(CalibrationDataReader):
         def __init__(self):
@@ -284,7 +288,7 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple[np.nd
             item = next(self.it, None)
             if item is None:
                 return None
-            x, scale = item
+            x, scale = pad_nhwc(item[0], multiple), item[1]
             return {INPUT_NAME: x, LIGHT_SCALE_NAME: np.full(len(x), scale, np.float32)} if scaled else {INPUT_NAME: x}
 
     root = logging.getLogger()
@@ -297,7 +301,6 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple[np.nd
     finally:
         root.setLevel(level)
     m = onnx.load(str(out_path))
-    meta = get_meta(onnx.load(str(fp32_path)))
     set_meta(m, {**meta, "precision": "int8", "quantization": {"format": "QDQ", "ops": ["Conv", "ConvTranspose"],
                                                                "calibration_frames": len(calibration)}})
     onnx.save(m, str(out_path))
