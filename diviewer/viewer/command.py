@@ -45,6 +45,9 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--auto-exposure", action="store_true",
                    help="start with the exposure metered from the frame (the panel toggles it)")
     p.add_argument("--light-moving", action="store_true", help="start with the light animated")
+    p.add_argument("--camera-moving", action="store_true",
+                   help="start playing the scene's camera path (sponza's walk; as the P key), to time a moving "
+                        "camera: culling, the shadow cache and the render scale then see what a walk shows")
     p.add_argument("--stats", type=Path, default=None,
                    help="with --frames: write per-stage times, fps and the resolutions as JSON here")
     p.set_defaults(func=run_view)
@@ -86,6 +89,8 @@ def run_view(args: argparse.Namespace) -> int:
                               auto_exposure=args.auto_exposure,
                               gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
     script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else []
+    if args.camera_moving:
+        script.append((0, _play_camera_path))
     if args.window_screenshot is not None:
         script.append((args.frames - 1, "window_screenshot", {"path": args.window_screenshot}))
     summary = run_viewer(args.scene, frames=args.frames, screenshot=args.screenshot, settings=settings,
@@ -99,3 +104,10 @@ def run_view(args: argparse.Namespace) -> int:
               f"{summary['stages_ms']['frame']:.1f} ms/frame"
               + "".join(f", saved {p}" for p in (args.screenshot, args.window_screenshot) if p))
     return 0
+
+
+def _play_camera_path(viewer) -> None:
+    """--camera-moving: play the scene's camera path from the first frame; a scene without one is refused."""
+    if not (viewer.state.play_path or viewer.state.toggle_path()):
+        raise DiviewerError(f"scene {viewer.state.scene.name} has no camera path to play (a free-camera region is "
+                            "not a path)", field="--camera-moving")

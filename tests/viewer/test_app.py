@@ -1103,3 +1103,25 @@ def _shape_session(tmp_path: Path) -> None:
 def test_the_network_sees_the_window_shape(display, tmp_path):
     pytest.importorskip("onnx")
     _in_window_process(_shape_session, tmp_path)
+
+
+def _camera_path_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+    from diviewer.viewer.command import _play_camera_path
+
+    seen = []
+    script = [(0, _play_camera_path)] + [(f, lambda v: seen.append(v.state.config.camera.position)) for f in (1, 2, 3)]
+    run_viewer("atrium", frames=4, script=script, settings=_settings(size=(64, 64)))
+    assert len(set(seen)) == 3, seen  # the camera walks the path, one step a frame
+
+
+def test_camera_moving_plays_the_path_and_is_refused_without_one(display, tmp_path, capsys):
+    """--camera-moving starts the scene's camera path at the first frame (atrium walks it); cornell declares a
+    free-camera region, not a path: a one-line error naming the flag, before anything is timed."""
+    from diviewer.cli import main
+
+    _in_window_process(_camera_path_session, tmp_path)
+    assert main(["view", "--scene", "cornell", "--size", "32x32", "--frames", "2", "--model", "none",
+                 "--camera-moving"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--camera-moving" in err and "no camera path" in err and len(err.splitlines()) == 1
