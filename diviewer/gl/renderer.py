@@ -257,8 +257,8 @@ class Renderer:
         triangles += sum(it[0].triangles for it, k in zip(items, keep) if k)
         self.drawn[stage] = (draws + int(keep.sum()), triangles)
         eye = cam.view_to_world(view)[:3, 3] if view is not None else None
-        masked = np.array([self.scene.materials[it[1]].is_masked for it in items], bool)
-        for i in draw_order(boxes, keep, masked, eye):
+        cut_out = np.array([self.scene.materials[it[1]].is_masked for it in items], bool)
+        for i in draw_order(boxes, keep, cut_out, eye):
             gmesh, mat_name, model, _ = items[i]
             mat = self.scene.materials[mat_name]
             masked = mat.is_masked
