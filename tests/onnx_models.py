@@ -41,3 +41,13 @@ def direct_times(path: Path, factor: float = 2.0, meta: dict | None = None, chan
         helper.set_model_props(model, {"diviewer": json.dumps(meta if meta is not None else base_meta())})
     onnx.save(model, str(path))
     return path
+
+
+def random_buffers(rng, height: int, width: int, batch: int | None = None):
+    """Plausible raw G-buffers (H, W, 10) float32, or (batch, H, W, 10): depth 1-5, normals facing the camera,
+    albedo and direct light uniform in [0, 1)."""
+    lead = () if batch is None else (batch,)
+    x = np.concatenate([rng.uniform(1, 5, (*lead, height, width, 1)), np.tile([0, 0, 1.0], (*lead, height, width, 1)),
+                        rng.uniform(0, 1, (*lead, height, width, 6))], -1)
+    return x.astype(np.float32)
+

@@ -13,7 +13,7 @@ from diviewer.errors import DiviewerError
 from diviewer.paths import models_dir
 from diviewer.runtime import NeuralGI, choose_providers, pack_buffers, read_metadata
 
-from onnx_models import base_meta, direct_times
+from onnx_models import base_meta, direct_times, random_buffers
 from scenes import facing_plane
 
 # The hand-built test models need the `onnx` package (train extra); the runtime itself needs only
@@ -100,8 +100,7 @@ def test_any_size_is_padded_to_the_stride_and_cropped_back():
     scale = 1.0 if model.light_scaled else None  # encoding 2 takes each frame's light scale
     rng = np.random.default_rng(0)
     for h, w in [(24, 24), (20, 36), (40, 12)]:
-        x = np.concatenate([rng.uniform(1, 5, (h, w, 1)), np.tile([0, 0, 1.0], (h, w, 1)),
-                            rng.uniform(0, 1, (h, w, 6))], -1).astype(np.float32)
+        x = random_buffers(rng, h, w)
         y = model.run(x, light_scale=scale)
         assert y.shape == (h, w, 3) and np.all(np.isfinite(y))
         padded = pad_nhwc(x[None], m)

@@ -15,6 +15,9 @@ from diviewer.bench.frontier import (equal_error, equal_time, smallest_sufficien
                                      temporal_stability)
 from diviewer.bench.onnx_tools import generator_flops
 
+from onnx_models import random_buffers
+
+
 # --- cost model ----------------------------------------------------------------------------------------------------
 
 
@@ -275,9 +278,7 @@ def test_int8_quantisation_calibrates_an_encoding_2_model_with_its_light_scales(
     rng = np.random.default_rng(3)
     calib = []
     for scale in (0.5, 2.0):  # at the model's 228x128 (16:9), which the graph runs padded to 256x128
-        x = np.concatenate([rng.uniform(1, 5, (1, 128, 228, 1)), np.tile([0, 0, 1.0], (1, 128, 228, 1)),
-                            rng.uniform(0, 1, (1, 128, 228, 6))], -1).astype(np.float32)
-        calib.append((x, scale))
+        calib.append((random_buffers(rng, 128, 228, batch=1), scale))
     out = quantize_int8(src, tmp_path / "int8.onnx", calib)
     import onnx
 
@@ -308,8 +309,7 @@ def test_fp16_twin_of_a_lean_export_halves_the_generator_only():
     assert any(n.op_type == "If" for n in half.graph.node if not n.name.startswith(GENERATOR_PREFIX))
     runs = [ort.InferenceSession(m.SerializeToString(), providers=["CPUExecutionProvider"]) for m in (src, half)]
     rng = np.random.default_rng(7)
-    x = np.concatenate([rng.uniform(1, 5, (1, 128, 128, 1)), np.tile([0, 0, 1.0], (1, 128, 128, 1)),
-                        rng.uniform(0, 1, (1, 128, 128, 6))], -1).astype(np.float32)
+    x = random_buffers(rng, 128, 128, batch=1)
     feed = {"buffers": x, "light_scale": np.full(1, 0.7, np.float32)}
     ref, got = (r.run(None, feed)[0] for r in runs)
     assert np.abs(got - ref).max() <= 1e-2 * np.abs(ref).max()
