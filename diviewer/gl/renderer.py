@@ -235,12 +235,13 @@ class Renderer:
         set_uniform(prog, "u_tan_half_fov", (t * self.width / self.height, t))
         self.set_light_uniforms(prog, light, self._shadows.get(light.name))
 
-    def _draw_list(self, config: FrameConfig) -> list:
-        """culling.draw_list, cached per (scene, objects tuple), with the boxes as one (N, 2, 3) array."""
+    def _draw_list(self, config: FrameConfig) -> tuple:
+        """culling.draw_list per (scene, objects tuple), its boxes (N, 2, 3) and its alpha-masked items (N,)."""
         if self._draw_cache[0] is not self.scene or self._draw_cache[1] is not config.objects:
             items = draw_list(self.scene, config, self.gpu, self.ctx)
             boxes = np.array([it[3] for it in items], np.float64).reshape(-1, 2, 3)
-            self._draw_cache = (self.scene, config.objects, (items, boxes))
+            cut_out = np.array([self.scene.materials[it[1]].is_masked for it in items], bool)
+            self._draw_cache = (self.scene, config.objects, (items, boxes, cut_out))
         return self._draw_cache[2]
 
     def _draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None,
@@ -251,13 +252,12 @@ class Renderer:
         ``setup(prog)`` sets the pass's uniforms on each program variant before its first draw.
         """
         progs: dict[bool, moderngl.Program] = {}
-        items, boxes = self._draw_list(config)
+        items, boxes, cut_out = self._draw_list(config)
         keep = boxes_visible(frustum_planes(clip), boxes) if self.culling else np.ones(len(items), bool)
         draws, triangles = self.drawn.get(stage, (0, 0))
         triangles += sum(it[0].triangles for it, k in zip(items, keep) if k)
         self.drawn[stage] = (draws + int(keep.sum()), triangles)
         eye = cam.view_to_world(view)[:3, 3] if view is not None else None
-        cut_out = np.array([self.scene.materials[it[1]].is_masked for it in items], bool)
         for i in draw_order(boxes, keep, cut_out, eye):
             gmesh, mat_name, model, _ = items[i]
             mat = self.scene.materials[mat_name]

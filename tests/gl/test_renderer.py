@@ -497,9 +497,9 @@ def test_sponza_draws_opaque_front_to_back_then_masked_and_changes_no_pixel(ctx,
     r = Renderer(ctx, sponza, 48, 48, RenderSettings(shadow_size=256))
     try:
         config = sponza.default
-        items, boxes = r._draw_list(config)
+        items, boxes, masked = r._draw_list(config)
         keep = np.ones(len(items), bool)
-        masked = np.array([sponza.materials[it[1]].is_masked for it in items], bool)
+        assert masked.tolist() == [sponza.materials[it[1]].is_masked for it in items]
         eye = cam.view_to_world(config.camera.view_matrix())[:3, 3]
         order = culling.draw_order(boxes, keep, masked, eye)
         assert sorted(order.tolist()) == list(range(len(items)))
