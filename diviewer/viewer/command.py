@@ -7,6 +7,7 @@ from pathlib import Path
 
 from diviewer.errors import DiviewerError
 from diviewer.paths import shipped_scenes
+from diviewer.viewer.scale import DEFAULT_FLOOR
 
 
 def add_view_parser(subparsers) -> argparse.ArgumentParser:
@@ -41,7 +42,8 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--render-scale", type=float, default=None,
                    help="shade at this fixed fraction of the window's size per side (0 < S <= 1; turns "
                         "--target-fps off)")
-    p.add_argument("--scale-floor", type=float, default=0.5, help="lowest render scale --target-fps goes to")
+    p.add_argument("--scale-floor", type=float, default=DEFAULT_FLOOR,
+                   help=f"lowest render scale --target-fps goes to (default {DEFAULT_FLOOR})")
     p.add_argument("--auto-exposure", action="store_true",
                    help="start with the exposure metered from the frame (the panel toggles it)")
     p.add_argument("--light-moving", action="store_true", help="start with the light animated")

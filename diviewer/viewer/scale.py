@@ -25,6 +25,11 @@ import math
 import statistics
 from dataclasses import dataclass
 
+DEFAULT_FLOOR = 0.4
+"""The default lowest scale: at 768x768 Sponza's still worst-case view holds 15 fps only there on the 2-core
+development machine (0.5: 14.0 fps), at 37.3 dB tone-mapped from its full-resolution frame (0.5: 38.4;
+docs/speed.md); cornell at 768x768 settles at 0.66 and never reaches it."""
+
 
 @dataclass(frozen=True)
 class ScaleSettings:
@@ -32,7 +37,7 @@ class ScaleSettings:
 
     target_fps: float = 30.0
     """Frame rate to hold; 0 turns the controller off (the scale stays at ``start``)."""
-    floor: float = 0.5
+    floor: float = DEFAULT_FLOOR
     """Lowest scale (fraction of the window's size per side)."""
     start: float = 1.0
     """Scale of the first frame."""

@@ -8,6 +8,7 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.neural import GISettings
 from diviewer.gl.renderer import RenderSettings
 from diviewer.reference.progressive import ReferenceSettings
+from diviewer.viewer.scale import DEFAULT_FLOOR
 
 BACKGROUND = (0.08, 0.08, 0.09)
 """Colour of the bars around the GI image when the window's aspect ratio differs."""
@@ -56,7 +57,7 @@ class ViewerSettings:
     render_scale: float | None = None
     """A fixed render scale (shading resolution / window, per side), which turns ``target_fps`` off; None: 1
     at the start, then whatever holds the frame rate."""
-    scale_floor: float = 0.5
+    scale_floor: float = DEFAULT_FLOOR
     """The lowest render scale dynamic resolution goes to."""
     auto_exposure: bool = False
     """Start with the exposure metered from the frame (the panel toggles it)."""

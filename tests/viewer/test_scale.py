@@ -10,7 +10,7 @@ import pytest
 from diviewer.errors import DiviewerError
 from diviewer.viewer.exposure import AutoExposure, ExposureSettings, metered_ev
 from diviewer.viewer.models import gi_resolution, runtime_pads
-from diviewer.viewer.scale import ScaleController, ScaleSettings, render_size
+from diviewer.viewer.scale import DEFAULT_FLOOR, ScaleController, ScaleSettings, render_size
 
 # (a, b): frame ms = a + b * scale^2 (a: the network and fixed costs, b: per-pixel work), at 30 fps (33.3 ms).
 COSTS = [(5.0, 60.0), (20.0, 40.0), (10.0, 25.0), (2.0, 200.0), (30.0, 10.0), (5.0, 20.0), (15.0, 100.0)]
@@ -30,22 +30,22 @@ def _run(a: float, b: float, seed: int, frames: int = 600, noise: float = 0.05, 
 
 @pytest.mark.parametrize("a,b", COSTS)
 def test_scale_converges_stays_in_bounds_and_does_not_oscillate(a, b):
-    target = 1e3 / 30.0
+    target, floor = 1e3 / 30.0, ScaleSettings().floor
     cost = lambda s: a + b * s * s
     for seed in range(4):
         c, scales = _run(a, b, seed)
-        assert scales.min() >= 0.5 and scales.max() <= 1.0, "left its bounds"
+        assert scales.min() >= floor and scales.max() <= 1.0, "left its bounds"
         # Converged: from frame 300 on, the scale is within one step of where it ends (noise at the edge of
         # the dead band may still take one more step, in the same direction) ...
         s = scales[-1]
         assert np.ptp(scales[300:]) <= 1 / 32 + 1e-12, f"still moving: {np.unique(scales[300:])}"
         # ... at a scale that holds the frame rate where the floor allows it, and is not needlessly low: at the
         # window's size, at the floor, or where one step up would leave the dead band's lower edge.
-        if cost(0.5) <= target:
+        if cost(floor) <= target:
             assert cost(s) <= target * 1.03, f"scale {s} costs {cost(s):.1f} ms > {target:.1f}"
         else:
-            assert s == 0.5
-        assert s == 1.0 or s == 0.5 or cost(s + 2 / 32) >= 0.8 * target
+            assert s == floor
+        assert s == 1.0 or s == floor or cost(s + 2 / 32) >= 0.8 * target
         # No oscillation: the scale moved in one direction only, a handful of times.
         moves = np.sign(np.diff(scales)[np.diff(scales) != 0])
         assert len(set(moves.tolist())) <= 1, f"the scale went both ways: {moves}"
@@ -104,7 +104,8 @@ def test_render_scale_setting_and_command_line():
     ap = argparse.ArgumentParser()
     add_view_parser(ap.add_subparsers(dest="command"))
     args = ap.parse_args(["view"])
-    assert args.target_fps == 30.0 and args.render_scale is None and args.scale_floor == 0.5 and not args.auto_exposure
+    assert args.target_fps == 30.0 and args.render_scale is None and not args.auto_exposure
+    assert args.scale_floor == DEFAULT_FLOOR == ScaleSettings().floor == 0.4
     args = ap.parse_args(["view", "--target-fps", "0", "--render-scale", "0.5", "--auto-exposure"])
     assert args.target_fps == 0.0 and args.render_scale == 0.5 and args.auto_exposure
 
