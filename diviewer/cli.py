@@ -132,6 +132,14 @@ def _cmd_data_merge(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_data_refine(args: argparse.Namespace) -> int:
+    from diviewer.data.capture import parse_shard
+    from diviewer.data.refine import refine
+
+    refine(args.dir, args.out, args.spp, parse_shard(args.shard))
+    return 0
+
+
 def _cmd_baseline(args: argparse.Namespace) -> int:
     from diviewer.baseline import build_baseline
 
@@ -316,6 +324,13 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("sources", type=Path, nargs="+")
     q.add_argument("--out", type=Path, required=True)
     q.set_defaults(func=_cmd_data_merge)
+    q = data.add_parser("refine", help="raise a path-traced dataset's sample count into a new folder (renders only "
+                                       "the extra samples; resumable)")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--spp", type=int, required=True, help="the refined dataset's samples per pixel (above the source's)")
+    q.add_argument("--out", type=Path, required=True)
+    q.add_argument("--shard", default=None, help="k/n: refine every n-th frame starting at the k-th")
+    q.set_defaults(func=_cmd_data_refine)
     return ap
 
 

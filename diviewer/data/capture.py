@@ -124,7 +124,7 @@ def build_manifest(scene: Scene, settings: CaptureSettings) -> dict:
 
 
 def _same_identity(a: dict, b: dict) -> list[str]:
-    return [k for k in IDENTITY if json.loads(json.dumps(a.get(k))) != json.loads(json.dumps(b.get(k)))]
+    return [k for k in (*IDENTITY, "refined") if json.loads(json.dumps(a.get(k))) != json.loads(json.dumps(b.get(k)))]
 
 
 def open_or_create(out: Path, manifest: dict) -> Dataset:

@@ -39,6 +39,15 @@ IDENTITY = ("format", "format_version", "scene", "scene_hash", "resolution", "ch
             "max_depth", "seed", "frames", "split_fractions", "render_settings")
 
 
+def identity(manifest: dict) -> dict:
+    """The fields that make a dataset what it is (``Dataset.hash``): IDENTITY, and the ``refined`` record of a
+    dataset made by `diviewer.data.refine` (absent from every other manifest, whose hash it leaves as it was)."""
+    ident = {k: manifest.get(k) for k in IDENTITY}
+    if "refined" in manifest:
+        ident["refined"] = manifest["refined"]
+    return ident
+
+
 def frame_name(index: int) -> str:
     return f"{index:06d}"
 
@@ -138,8 +147,7 @@ class Dataset:
     @property
     def hash(self) -> str:
         """Identity of the dataset: sha256 of its identity fields (checkpoints record it)."""
-        ident = {k: self.manifest.get(k) for k in IDENTITY}
-        return hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()
+        return hashlib.sha256(json.dumps(identity(self.manifest), sort_keys=True).encode()).hexdigest()
 
     def path(self, index: int, suffix: str = ".npy") -> Path:
         return self.root / "frames" / (frame_name(index) + suffix)

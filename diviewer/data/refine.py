@@ -1,0 +1,126 @@
+"""Raise a path-traced dataset's sample count without rendering it again: ``diviewer data refine``.
+
+A capture's ground truth at s spp is the mean of s independent samples per pixel. Rendering each frame again
+with s' more samples under another seed and taking the weighted mean ``(s pt + s' pt') / (s + s')`` gives
+the mean of s + s' independent samples: the same estimate, statistically, as a capture at s + s' spp, for
+the cost of the s' samples only. So a dataset captured quickly at a low count (64 spp: trainable today)
+becomes, frame by frame and across sessions, one whose truth is clean enough to measure a model against
+(Sponza's 64-spp truth is 35-38 dB from a 1024-spp one, its 256-spp 41-43: docs/sponza.md).
+
+- The refined dataset is written into a new folder (the source stays as it was; trainings that used it keep
+  resuming). Its manifest is the source's with ``spp`` (and ``settings.spp``) raised, a ``refined``
+  record (the source's hash and count, how the new seeds derive) and ``refined_from`` (its folder); the record
+  is part of the dataset's identity, so a refined dataset never has the hash of a capture made at that count directly.
+- Both ground-truth channels are refined, ``pt`` and ``pt_direct``, with one new seed per frame, so their
+  noise stays correlated as a capture's is (indirect = pt - pt_direct).
+- The GL inputs are copied as they are. Resumable like a capture: frames already refined (and sound) are kept,
+  ``--shard k/n`` splits the work over processes or machines (`diviewer data merge` joins them).
+- Sample counts are the sampler's effective ones (`diviewer.reference.mitsuba.effective_spp`): the weights of
+  the mean, and each frame's sidecar, use what was really taken.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from diviewer.console import progress_bar
+from diviewer.data.dataset import Dataset, write_frame
+from diviewer.errors import DiviewerError
+from diviewer.locks import run_lock, shard_part
+
+REFINE_STREAM = 0x4EF1
+"""Tag of the new seeds' stream: a frame's extra seed is ``SeedSequence([its seed, REFINE_STREAM, source spp])``."""
+
+FLOAT16_MAX = float(np.finfo(np.float16).max)
+
+
+def refine_seed(frame_seed: int, source_spp: int) -> int:
+    """The seed of a frame's extra samples: independent of the capture's own (its seed) and of other refinements."""
+    return int(np.random.SeedSequence([int(frame_seed), REFINE_STREAM, int(source_spp)]).generate_state(1)[0] & 0x7FFFFFFF)
+
+
+def refined_manifest(src: Dataset, spp: int) -> dict:
+    """The source's manifest with the new sample count and the ``refined`` record."""
+    m = json.loads(json.dumps(src.manifest))
+    if m.get("gt") != "pt":
+        raise DiviewerError(f"only a path-traced dataset can be refined (its ground truth is '{m.get('gt')}')",
+                            path=src.root / "manifest.json", field="gt")
+    old = m.get("spp")
+    if not isinstance(old, int) or spp <= old:
+        raise DiviewerError(f"--spp must be above the dataset's {old} spp, got {spp}", field="--spp")
+    missing = [c for c in ("pt", "pt_direct") if c not in src.slices]
+    if missing:
+        raise DiviewerError(f"the dataset has no {', '.join(missing)} channel to refine",
+                            path=src.root / "manifest.json", field="channels")
+    # Part of the identity (where the source lies is not: refined_from); a second refinement keeps the first's.
+    m["refined"] = {"from_hash": src.hash, "from_spp": old, "seed": f"SeedSequence([frame seed, {REFINE_STREAM:#x}, {old}])",
+                    **({"before": m["refined"]} if "refined" in m else {})}
+    m["refined_from"] = str(src.root)
+    m["spp"] = spp
+    if isinstance(m.get("settings"), dict):
+        m["settings"]["spp"] = spp
+    return m
+
+
+def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), log=print) -> dict:
+    """Refine the present frames of ``src_dir`` (this shard's) to ``spp`` into ``out``; returns a summary."""
+    from diviewer.data.capture import open_or_create, summarize
+    from diviewer.reference import mitsuba as ref
+    from diviewer.scene.loader import config_from_dict, load_scene
+
+    src = Dataset(src_dir)
+    if out.exists() and Path(src_dir).resolve() == out.resolve():
+        raise DiviewerError(f"{src_dir} is both the source and the output", field="--out")
+    manifest = refined_manifest(src, spp)
+    scene = load_scene(manifest["scene"])
+    if scene.file_hash != manifest["scene_hash"]:
+        raise DiviewerError(f"the scene file of '{scene.name}' has changed since the capture; refine it with the "
+                            f"scene it was captured with", path=src.root / "manifest.json", field="scene_hash")
+    k, n = shard
+    old = manifest["refined"]["from_spp"]
+    variant = ref.select_variant()
+    eff_old, eff_extra = ref.effective_spp(old), ref.effective_spp(spp - old)
+    width, height = src.width, src.height
+    with run_lock(out, "data refine", shard_part(k, n)):
+        ds = open_or_create(out, manifest)
+        mine = [f for f in src.frames if f["index"] % n == k - 1 and src.check_frame(f["index"], False) is None]
+        todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
+        log(f"refine {src.root} ({old} spp) -> {out} ({spp} spp): {len(mine) - len(todo)} of {len(mine)} present "
+            f"frames of shard {k}/{n} already refined, {len(todo)} to render ({eff_extra} spp each, {variant})")
+        progress = progress_bar(len(todo), "refine", "frame")
+        t_all = time.perf_counter()
+        try:
+            for f in todo:
+                i = f["index"]
+                arr = np.load(src.path(i)).astype(np.float32)
+                seed = refine_seed(f["seed"], old)
+                t0 = time.perf_counter()
+                frame = ref.load_frame(scene, config_from_dict(scene, f["config"]), width, height)
+                extra = {"pt": frame.full(spp - old, seed, manifest["max_depth"]), "pt_direct": frame.direct(spp - old, seed)}
+                seconds = time.perf_counter() - t0
+                for name, new in extra.items():
+                    s = src.slices[name]
+                    arr[..., s] = (eff_old * arr[..., s] + eff_extra * new) / (eff_old + eff_extra)
+                if not np.all(np.isfinite(arr)):
+                    raise DiviewerError(f"frame {i}: non-finite values after refining; nothing was written for it",
+                                        path=src.path(i))
+                if ds.dtype == np.float16 and np.abs(arr).max() > FLOAT16_MAX:
+                    raise DiviewerError(f"frame {i}: radiance {np.abs(arr).max():.3g} exceeds float16's range",
+                                        path=src.path(i))
+                info = json.loads(src.path(i, ".json").read_text())
+                info.pop("sha256", None)
+                info["refined"] = {"from_spp": eff_old, "extra_spp": eff_extra, "seed": seed, "variant": variant,
+                                   "seconds": round(seconds, 3)}
+                write_frame(ds, i, arr.astype(ds.dtype), info)
+                progress.set_postfix_str(f"{seconds:.1f}s/frame", refresh=False)
+                progress.update()
+        finally:
+            progress.close()
+        summary = summarize(ds)
+        summary["rendered"], summary["seconds"] = len(todo), round(time.perf_counter() - t_all, 2)
+        log(f"done: {summary['present']}/{summary['planned']} frames present, {summary['seconds']:.0f} s")
+    return summary
