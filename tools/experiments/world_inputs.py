@@ -2,7 +2,7 @@
 
 Usage:
   python tools/experiments/world_inputs.py derive SRC OUT --source-width 228 [--center 0,1,0 --half 1.2]
-  python tools/experiments/world_inputs.py train --data OUT --out RUN -- TRAIN_ARGS...
+  python tools/experiments/world_inputs.py train [--like BASE_RUN] -- --data OUT --out RUN [TRAIN_ARGS...]
   python tools/experiments/world_inputs.py score --data OUT --split test --object-albedo 0.8
          --run base=RUN_A --run world=RUN_B [--out JSON]
 
@@ -15,7 +15,8 @@ is, as a radiance cache does. Resumable: frames already written (checked) are ke
 
 train: `diviewer train` in this process with the generator taking 16 channels: the 10 encoded inputs of
 `split_batch` followed by the 6 world channels as stored (square frames only: no aspect crops, no padding).
-Pass the base run's own arguments after ``--`` so that the two differ in the inputs alone.
+``--like BASE_RUN`` takes every setting from the base run's checkpoint (as a recipe file in RUN), so that the
+two differ in the inputs alone (today's default recipe is not the one the base run trained with).
 
 score: the runs' best checkpoints on a split, in torch (so that a run without an ONNX path scores through the
 same code as the base): the whole frame (PSNR and SSIM after `diviewer.metrics.tonemap`) and, as
@@ -162,6 +163,24 @@ def score(data: Path, split: str, runs: dict[str, Path], object_albedo: float) -
     return result
 
 
+def recipe_like(run: Path, path: Path) -> Path:
+    """A recipe file holding ``run``'s own train settings (its best checkpoint's config), written to ``path``:
+    `diviewer train --recipe` fills every setting from it, not from today's shipped recipe."""
+    from diviewer.train.checkpoint import load_checkpoint
+
+    config = load_checkpoint(run / "best.ckpt")["config"]
+    skip = {"data", "out", "device", "num_workers", "init_from", "train_frames", "recipe", "d_lr", "aspect_crops"}
+    lines = [f"# {run}'s settings (its best.ckpt's config), written by tools/experiments/world_inputs.py",
+             "[recipe]", f'description = "the settings of {run}"', 'scene = "cornell"', "", "[train]"]
+    for k, v in config.items():
+        if k not in skip and v is not None:
+            lines.append(f"{k} = " + json.dumps(v))
+    if "light_scale" not in config:  # runs from before encoding 2 used encoding 1
+        lines.append("light_scale = false")
+    imageio.write_text(path, "\n".join(lines) + "\n")
+    return path
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -172,6 +191,7 @@ def main() -> None:
     d.add_argument("--center", default="0,1,0")
     d.add_argument("--half", type=float, default=1.2)
     t = sub.add_parser("train")
+    t.add_argument("--like", type=Path, help="take every train setting from this run (its best.ckpt), as a recipe")
     t.add_argument("rest", nargs=argparse.REMAINDER)
     s = sub.add_parser("score")
     s.add_argument("--data", type=Path, required=True)
@@ -185,8 +205,13 @@ def main() -> None:
     elif a.cmd == "train":
         from diviewer.train.cli import main as train_main
 
+        rest = [x for x in a.rest if x != "--"]
+        if a.like is not None:
+            out = Path(rest[rest.index("--out") + 1])
+            out.mkdir(parents=True, exist_ok=True)
+            rest += ["--recipe", str(recipe_like(a.like, out / "like_recipe.toml"))]
         patch_world_inputs()
-        sys.exit(train_main([x for x in a.rest if x != "--"]))
+        sys.exit(train_main(rest))
     else:
         runs = dict((kv.split("=", 1)[0], Path(kv.split("=", 1)[1])) for kv in a.run)
         text = json.dumps(score(a.data, a.split, runs, a.object_albedo), indent=1)
