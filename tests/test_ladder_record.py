@@ -1,0 +1,73 @@
+"""tools/ladder_record.py: the ladder rule on two eval JSONs, the record, and the verdict on the shipped card."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from onnx_models import base_meta, direct_times
+from tool_modules import load_tool
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _model(path: Path, K: int) -> Path:
+    meta = {**base_meta(), "K": K, "steps": 100 * K}
+    direct_times(path, meta=meta)
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    return path
+
+
+def _stat(v: float) -> dict:
+    return {"mean": v, "std": 0.0}
+
+
+def _files(tmp: Path, psnr: dict[int, float]) -> tuple[Path, Path, dict[int, Path]]:
+    models = {k: _model(tmp / f"k{k}.onnx", k) for k in psnr}
+    q = lambda v: {"psnr": _stat(v + 5), "ssim": _stat(0.9), "psnr_tm": _stat(v), "ssim_tm": _stat(0.8)}
+    test = {"results": [{"model": str(p), "frames": 10, "reference_spp": 64, "inference_ms": {"median": 1.0},
+                         "methods": {"neural": q(psnr[k]), "direct": q(15.0)}} for k, p in models.items()]}
+    ev = {"splits": {s: {"methods": {p.stem: {**q(psnr[k] + 1), "psnr_tm_object_unlit": _stat(20.0)}
+                                     for k, p in models.items()}} for s in ("moved_camera", "window_shapes")}}
+    (tmp / "test.json").write_text(json.dumps(test))
+    (tmp / "ev.json").write_text(json.dumps(ev))
+    return tmp / "test.json", tmp / "ev.json", models
+
+
+@pytest.mark.parametrize("psnr,chosen", [({8: 31.55, 16: 31.79}, 8), ({8: 30.0, 16: 31.0, 32: 31.2}, 16)])
+def test_the_rule_picks_the_smallest_sufficient_k(tmp_path, psnr, chosen):
+    tool = load_tool("ladder_record")
+    test, ev, models = _files(tmp_path, psnr)
+    record = tool.ladder("plane", json.loads(test.read_text()), json.loads(ev.read_text()), models, 0.5)
+    assert record["chosen_K"] == chosen and [r["K"] for r in record["rows"]] == sorted(psnr)
+    row = record["rows"][0]
+    assert row["test_split"]["neural"]["psnr_tm"] == psnr[min(psnr)] and row["steps"] == 100 * min(psnr)
+    assert row["evalset"]["moved_camera"]["psnr_tm_object_unlit"] == 20.0
+
+
+def test_ship_writes_the_record_and_the_card_in_both_places(tmp_path):
+    import onnx
+
+    test, ev, models = _files(tmp_path, {8: 31.55, 16: 31.79})
+    ship = tmp_path / "ship"
+    ship.mkdir()
+    shipped = _model(ship / "plane.onnx", 8)
+    cmd = [sys.executable, str(ROOT / "tools" / "ladder_record.py"), "--scene", "plane", "--test-split", str(test),
+           "--evalset", str(ev), "--model", f"K8={models[8]}", "--model", f"K16={models[16]}", "--ship", str(ship),
+           "--note", "a note"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((ship / "plane_ladder.json").read_text())["chosen_K"] == 8
+    card = json.loads(shipped.with_suffix(".json").read_text())
+    assert card["ladder"]["chosen_K"] == 8 and card["ladder"]["file"] == "plane_ladder.json"
+    assert card["ladder"]["why"].endswith("; a note")
+    meta = json.loads({p.key: p.value for p in onnx.load(str(shipped)).metadata_props}["diviewer"])
+    assert meta["ladder"] == card["ladder"]
+    # A ladder that chose another K than the one shipped is refused: this tool records, it does not swap models.
+    _files(tmp_path, {8: 29.0, 16: 31.79})
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode != 0 and "ship that model first" in r.stderr

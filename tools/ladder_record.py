@@ -1,0 +1,87 @@
+"""Write a scene's K-ladder record from two kinds of `diviewer eval` JSON, and put its verdict on the shipped card.
+
+Usage: python tools/ladder_record.py --scene cornell --test-split TEST.json --evalset EVAL.json
+           --model K8=assets/models/cornell.onnx --model K16=runs/cornell/fly_eval/fly_k16_fp32.onnx
+           [--tolerance 0.5] [--ship assets/models] [--note TEXT]
+
+TEST.json: `diviewer eval --data CAPTURE --split test --model ...` (the rule's figure: tone-mapped PSNR on the
+capture's test split); EVAL.json: `diviewer eval --model ...` on the evaluation set (recorded beside it). The rule
+is the bench's and `diviewer build`'s (`diviewer.bench.frontier.smallest_sufficient_k`): the smallest K within the
+tolerance of the best. With --ship, SCENE_ladder.json is written there and the shipped SCENE.onnx's card (its
+JSON and its ONNX metadata alike, `diviewer.build.pipeline.write_model_card`) gets the verdict; the chosen K must
+be the one shipped (this tool records a ladder, it does not swap models).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from diviewer import imageio  # noqa: E402
+from diviewer.bench.frontier import smallest_sufficient_k  # noqa: E402
+from diviewer.build.pipeline import QUALITY, write_model_card  # noqa: E402
+from diviewer.errors import DiviewerError  # noqa: E402
+
+
+def _test_row(test: dict, model: Path) -> dict:
+    """The `diviewer eval --data` result of ``model`` (its JSON holds one result per model)."""
+    for r in test["results"]:
+        if Path(r["model"]).resolve() == model.resolve():
+            return r
+    raise DiviewerError(f"{model} is not in the test-split results", field="--test-split")
+
+
+def ladder(scene: str, test: dict, ev: dict, models: dict[int, Path], tol: float) -> dict:
+    rows = []
+    for k, path in sorted(models.items()):
+        t = _test_row(test, path)
+        key = path.stem
+        if any(key not in r["methods"] for r in ev["splits"].values()):
+            raise DiviewerError(f"{key} is not among the evaluation set's methods", field="--evalset")
+        card = json.loads(path.with_suffix(".json").read_text())
+        rows.append({"K": k, "model": str(path), "steps": card.get("steps"), "bytes": path.stat().st_size,
+                     "test_split": {"frames": t["frames"], "reference_spp": t.get("reference_spp"),
+                                    "inference_ms": t.get("inference_ms"),
+                                    **{m: {q: t["methods"][m][q]["mean"] for q in QUALITY} for m in ("neural", "direct")}},
+                     "evalset": {s: {q: r["methods"][key][q]["mean"] for q in (*QUALITY, "psnr_tm_object_unlit")
+                                     if q in r["methods"][key]} for s, r in ev["splits"].items()}})
+    pick = smallest_sufficient_k({r["K"]: r["test_split"]["neural"]["psnr_tm"] for r in rows}, tol)
+    return {"scene": scene, "chosen_K": pick["K"],
+            "rule": f"smallest K whose tone-mapped test-split PSNR is within {tol} dB of the best K's "
+                    f"({pick['best_psnr']:.2f} dB)", "rows": rows}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", required=True)
+    ap.add_argument("--test-split", type=Path, required=True)
+    ap.add_argument("--evalset", type=Path, required=True)
+    ap.add_argument("--model", action="append", required=True, help="KN=PATH")
+    ap.add_argument("--tolerance", type=float, default=0.5)
+    ap.add_argument("--ship", type=Path)
+    ap.add_argument("--note", default="")
+    a = ap.parse_args()
+    models = {int(m.split("=", 1)[0].lstrip("Kk")): Path(m.split("=", 1)[1]) for m in a.model}
+    test = json.loads(a.test_split.read_text())
+    record = ladder(a.scene, test, json.loads(a.evalset.read_text()), models, a.tolerance)
+    record.update({"test_split_json": str(a.test_split), "evalset_json": str(a.evalset), "note": a.note})
+    text = json.dumps(record, indent=1) + "\n"
+    print(text)
+    if a.ship:
+        shipped = a.ship / f"{a.scene}.onnx"
+        card = json.loads(shipped.with_suffix(".json").read_text())
+        if card["K"] != record["chosen_K"]:
+            raise SystemExit(f"the ladder chose K={record['chosen_K']}, {shipped} is K={card['K']}: ship that model first")
+        imageio.write_text(a.ship / f"{a.scene}_ladder.json", text)
+        card["ladder"] = {"chosen_K": record["chosen_K"], "why": record["rule"] + (f"; {a.note}" if a.note else ""),
+                          "file": f"{a.scene}_ladder.json"}
+        write_model_card(shipped, shipped, card)
+
+
+if __name__ == "__main__":
+    main()
