@@ -61,13 +61,17 @@ INPUT_CHANNEL_COUNT: int = sum(n for _, n in INPUT_CHANNELS)
 OUTPUT_CHANNELS: int = 3
 """Network output channels: linear RGB radiance (full GI or indirect only), encoded."""
 
-ENCODING_VERSION: int = 2
+ENCODING_VERSION: int = 3
 """The newest encoding version this diviewer reads and writes; bump it whenever a curve or the layout changes.
 
 1: radiance (the direct-light input and the output) as is, times the dataset exposure.
 2: as 1, but divided by the frame's light scale (`diviewer.scene.lights.light_scale`) on the way in and
 multiplied by it on the way out, inside the graph (its second input ``light_scale``): the model is linear
-in the light by construction (no light gives exactly 0, twice the light exactly twice the output)."""
+in the light by construction (no light gives exactly 0, twice the light exactly twice the output).
+3: as 2, plus each pixel's world-space position and normal as six more network inputs, computed inside the graph
+from the depth and normal buffers and the frame's camera (its third input ``camera``,
+`diviewer.scene.camera.camera_params`), the position normalised by ``world_center`` and ``world_half``
+(`diviewer.train.world`)."""
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
@@ -113,7 +117,13 @@ class Encoding:
 
     version: int = 1
     """Version of the encoding (see `ENCODING_VERSION`): 1 radiance as is, 2 divided by the frame's light
-    scale (training chooses with ``TrainConfig.light_scale``)."""
+    scale (training chooses with ``TrainConfig.light_scale``), 3 also world-space inputs (``world_inputs``)."""
+
+    world_center: tuple[float, float, float] | None = None
+    """Version 3: the world point that encodes to 0 (the centre of the scene's bounds)."""
+
+    world_half: tuple[float, float, float] | None = None
+    """Version 3: per axis, the distance from ``world_center`` that encodes to +-1 (half the bounds' size)."""
 
     def __post_init__(self) -> None:
         for name in ("exposure", "depth_scale", "radiance_max"):
@@ -138,14 +148,36 @@ class Encoding:
                 field="encoding.version",
             )
 
+        given = [v is not None for v in (self.world_center, self.world_half)]
+        if any(given) != all(given) or all(given) != (self.version >= 3):
+            raise DiviewerError(f"version {self.version} {'needs' if self.version >= 3 else 'has no'} world_center "
+                                "and world_half", field="encoding.world_center")
+        for name in ("world_center", "world_half"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if not (isinstance(v, (list, tuple)) and len(v) == 3 and all(
+                    isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
+                raise DiviewerError(f"must be three finite numbers, got {v!r}", field=f"encoding.{name}")
+            object.__setattr__(self, name, tuple(float(x) for x in v))
+        if self.world_half is not None and min(self.world_half) <= 0:
+            raise DiviewerError(f"must be > 0, got {self.world_half!r}", field="encoding.world_half")
+
+    @property
+    def world_inputs(self) -> bool:
+        """Whether the network also takes each pixel's world position and normal (version 3)."""
+        return self.version >= 3
+
     @property
     def light_scaled(self) -> bool:
         """Whether radiance is divided by the frame's light scale (version 2 and later)."""
         return self.version >= 2
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict for JSON manifests, checkpoints and ONNX metadata."""
-        return dataclasses.asdict(self)
+        """Plain dict for JSON manifests, checkpoints and ONNX metadata (the world fields only for version 3)."""
+        d = dataclasses.asdict(self)
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()
+                if not (k.startswith("world_") and v is None)}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Encoding:

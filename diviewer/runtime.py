@@ -112,6 +112,9 @@ def check_compatible(meta: dict, path: Path, scene=None) -> None:
     if enc_version > ENCODING_VERSION:
         raise DiviewerError(f"the model uses encoding version {enc_version}, newer than this diviewer's "
                             f"({ENCODING_VERSION}); upgrade diviewer", path=path, field="encoding.version")
+    if enc_version >= 3:  # training writes such checkpoints; export and the runtime's camera input come next
+        raise DiviewerError("the model takes world-space inputs (encoding version 3), which the runtime does not "
+                            "feed yet; use an encoding 1 or 2 model", path=path, field="encoding.version")
     expected = [list(c) for c in INPUT_CHANNELS]
     if [list(c) for c in meta["channels"]] != expected:
         raise DiviewerError(f"the model expects input channels {meta['channels']}, the renderer provides {expected}",

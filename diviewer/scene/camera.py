@@ -74,6 +74,33 @@ def view_to_world(view: np.ndarray) -> np.ndarray:
     return m
 
 
+CAMERA_PARAMS = 20
+"""Length of `camera_params`' vector: camera-to-world rotation (9, row-major) and translation (3), the pixel-to-ray
+affines along x and y (ax, bx, ay, by) and the column and row bounds the rays clamp to (x_lo, x_hi, y_lo, y_hi)."""
+
+
+def camera_params(position, target, up, fov_y_deg: float, width: int, height: int, *, x0: int = 0, y0: int = 0,
+                  source: tuple[int, int] | None = None, pad: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """A frame's camera as the (CAMERA_PARAMS,) float32 vector the world-space inputs are computed from.
+
+    The frame is ``width`` x ``height`` pixels cut at (x0, y0) out of a render of ``source`` (width, height;
+    default the frame itself), then padded with ``pad`` (left, top) pixels before it (`diviewer.padding`). A
+    pixel (column c, row r) of the padded frame sees along the view-space ray ``(ax (c' + 0.5) + bx, ay (r' + 0.5)
+    + by, -1)`` with c' = clip(c, x_lo, x_hi) and r' = clip(r, y_lo, y_hi): `pixel_rays_view` of the render at the
+    frame's pixels, and on the padding the edge pixel's ray (padding replicates edge pixels; so do their rays).
+    The world point is then ``R (depth ray) + t`` and the world normal ``R n`` (R, t: `view_to_world`).
+    """
+    sw, sh = source if source is not None else (width, height)
+    t = math.tan(math.radians(fov_y_deg) / 2.0)
+    tx = t * sw / sh
+    ax, ay = 2.0 * tx / sw, -2.0 * t / sh
+    px, py = pad
+    m = view_to_world(look_at(position, target, up))
+    return np.array([*m[:3, :3].ravel(), *m[:3, 3],
+                     ax, tx * (2.0 * x0 / sw - 1.0) - ax * px, ay, t * (1.0 - 2.0 * y0 / sh) - ay * py,
+                     px, px + width - 1, py, py + height - 1], np.float32)
+
+
 def axis_angle(axis, degrees: float) -> np.ndarray:
     """Rotation matrix (3x3) of ``degrees`` about ``axis`` (right-handed)."""
     return matrix33.create_from_axis_rotation(normalize(axis), math.radians(degrees), dtype=_F64).T

@@ -283,6 +283,18 @@ def open_parent(cfg: TrainConfig, ds: Dataset) -> dict[str, Any]:
     return parent
 
 
+def parent_encoding(parent: Mapping[str, Any], cfg: TrainConfig):
+    """The encoding a warm start keeps (its weights were trained on it), refused where this run asks another."""
+    from diviewer.encoding import Encoding
+
+    enc = Encoding.from_dict(parent["encoding"])
+    if enc.light_scaled != cfg.light_scale or enc.world_inputs != cfg.world_inputs:
+        raise DiviewerError(f"--init-from's model was trained with encoding {enc.version}; pass "
+                            f"--{'' if enc.light_scaled else 'no-'}light-scale --{'' if enc.world_inputs else 'no-'}"
+                            "world-inputs to warm-start from it", path=cfg.init_from)
+    return enc
+
+
 def warm_start(nets: Any, parent: Mapping[str, Any], cfg: TrainConfig, say) -> None:
     """Load the parent's generator (and its discriminator where it is the same network) into ``nets``."""
     args, then = nets.netG_m.model_args(), parent["model_args"]

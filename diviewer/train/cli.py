@@ -87,6 +87,8 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--light-scale", action=argparse.BooleanOptionalAction, default=None,
                    help="divide radiance by each frame's light scale: linear in the light, black without it "
                         "(encoding 2; default on; --no-light-scale: encoding 1)")
+    g.add_argument("--world-inputs", action=argparse.BooleanOptionalAction, default=None,
+                   help="also feed each pixel's world-space position and normal (encoding 3; default off)")
     g.add_argument("--aspect-crops", type=_aspect_range, default=None, metavar="LO:HI",
                    help="random-width crops per batch, width/height in LO..HI at full height, e.g. 0.5625:1.7778 "
                         "(9:16 to 16:9), or 'off' (default off)")

@@ -255,6 +255,9 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     check_export_paths(ckpt_path, out)
     ckpt = load_checkpoint(ckpt_path)
     netG, encoding, meta = build_generator_from_checkpoint(ckpt)
+    if encoding.world_inputs:  # the graph's camera input and the runtime that feeds it come with the next change
+        raise DiviewerError("the checkpoint takes world-space inputs (encoding version 3), which export does not "
+                            "write yet", path=ckpt_path, field="encoding.version")
     levels = int(meta["model_args"]["levels"])
     res = tuple(int(x) for x in meta["resolution"])
     frames, scales, source = _verification_frames(meta, meta["config"].get("data"), settings.verify_frames, res,

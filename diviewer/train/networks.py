@@ -382,14 +382,15 @@ class NetConfig:
         """The generator's levels: explicit, or derived from the resolution."""
         return self.levels if self.levels is not None else levels_for_resolution(self.resolution)
 
-    def build_generator(self) -> UnetGenerator:
-        """netG for this config (weights not yet initialised: see `init_weights`)."""
-        return UnetGenerator(INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS, K=self.K, levels=self.resolved_levels(),
+    def build_generator(self, in_channels: int = INPUT_CHANNEL_COUNT) -> UnetGenerator:
+        """netG for this config (weights not yet initialised: see `init_weights`); ``in_channels``: the encoded
+        inputs (10, and 16 with encoding version 3's world planes)."""
+        return UnetGenerator(in_channels, OUTPUT_CHANNELS, K=self.K, levels=self.resolved_levels(),
                              dropout=self.dropout, upsample=self.upsample, norm=self.norm)
 
-    def build_discriminator(self) -> NLayerDiscriminator:
+    def build_discriminator(self, in_channels: int = INPUT_CHANNEL_COUNT) -> NLayerDiscriminator:
         """netD for this config, conditioned on the input buffers (input channels + 3)."""
-        return NLayerDiscriminator(INPUT_CHANNEL_COUNT + OUTPUT_CHANNELS, ndf=self.ndf, n_layers=self.n_layers_D,
+        return NLayerDiscriminator(in_channels + OUTPUT_CHANNELS, ndf=self.ndf, n_layers=self.n_layers_D,
                                    norm=self.norm_D)
 
     def to_dict(self) -> dict[str, Any]:

@@ -80,13 +80,15 @@ def run_light_scales(cfg: TrainConfig, ds: Dataset, train_idx: list[int],
     return train_scales, light_scales(ds, sorted(ds.indices("val"))) if with_val else None
 
 
-def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: np.ndarray | None = None) -> Encoding:
+def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: np.ndarray | None = None,
+                 world: bool = False) -> Encoding:
     """The dataset's encoding, fixed from the train split.
 
     exposure: `fit_exposure` over the train frames' GL direct light (divided by each frame's light scale
     when ``scales`` is given: encoding version 2); depth_scale: the camera's far plane from the frame
     configurations (all visible geometry then maps into [0, 1]), else the largest train depth;
-    radiance_max: the default.
+    radiance_max: the default. ``world`` (encoding version 3, with ``scales``): world_center and world_half
+    from the bounds of the scene's objects (`Scene.bounds`), the scene the dataset was captured from.
     """
     from diviewer.encoding import Encoding, fit_exposure, inverse_light_scale
 
@@ -108,7 +110,43 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: n
         depth = train[..., ds.slices["depth"]].astype(np.float32)
         finite = depth[np.isfinite(depth) & (depth > 0)]
         depth_scale = float(finite.max()) if finite.size else 1.0
-    return Encoding(exposure=float(exposure), depth_scale=float(depth_scale), version=1 if scales is None else 2)
+    if not world:
+        return Encoding(exposure=float(exposure), depth_scale=float(depth_scale), version=1 if scales is None else 2)
+    lo, hi = _scene_of(ds).bounds()
+    return Encoding(exposure=float(exposure), depth_scale=float(depth_scale), version=3,
+                    world_center=tuple(float(v) for v in (lo + hi) / 2),
+                    world_half=tuple(float(v) for v in np.maximum((hi - lo) / 2, 1e-3)))
+
+
+def _scene_of(ds: Dataset):
+    """The scene a dataset was captured from (refused if its file changed since: other geometry)."""
+    from diviewer.errors import DiviewerError
+    from diviewer.scene.loader import load_scene
+
+    from pathlib import Path
+
+    file = ds.manifest.get("scene_file")
+    scene = load_scene(file if file and Path(file).is_file() else ds.manifest["scene"])
+    if scene.file_hash != ds.manifest["scene_hash"]:
+        raise DiviewerError(f"the scene file {scene.path} changed since the capture", path=ds.root / "manifest.json",
+                            field="scene_hash")
+    return scene
+
+
+def run_cameras(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool) -> tuple[Any, Any]:
+    """Each train (and val) frame's camera (`diviewer.scene.camera.camera_params` of its whole stored frame),
+    (N, CAMERA_PARAMS) float32 in the order of the frames' arrays; (None, None) unless encoding version 3."""
+    if not enc.world_inputs:
+        return None, None
+    from diviewer.scene.camera import camera_params
+
+    config = {f["index"]: f["config"]["camera"] for f in ds.frames}
+
+    def cams(idx: list[int]) -> np.ndarray:
+        return np.stack([camera_params(c["position"], c["target"], c["up"], c["fov"], ds.width, ds.height)
+                         for c in (config[i] for i in idx)])
+
+    return cams(train_idx), cams(sorted(ds.indices("val"))) if with_val else None
 
 
 def crop_plan(cfg: TrainConfig, epoch: int, batch: int, n: int, height: int, width: int) -> tuple[int, list[int]] | None:
@@ -127,7 +165,7 @@ def crop_plan(cfg: TrainConfig, epoch: int, batch: int, n: int, height: int, wid
 
 def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, cfg: TrainConfig,
                 scale: torch.Tensor | None = None, multiple: int = 1,
-                crop: tuple[int, list[int]] | None = None) -> dict[str, torch.Tensor]:
+                crop: tuple[int, list[int]] | None = None, cams: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
     """A stored (N, H, W, C) batch on the device -> real_A (encoded inputs), real_B (encoded target),
     and the raw NCHW planes the composition, the losses and the metrics need (direct, albedo, pt,
     target: the linear target radiance, divided by the light scale for encoding version 2).
@@ -138,6 +176,8 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
             ``mask`` (1 on the frame's pixels, 0 on the padding) and ``crop`` (the frame's rows and columns
             in the padded planes) say where the frame lies.
         crop: (width, left edges): each frame cut to that width first (`crop_plan`).
+        cams: (N, CAMERA_PARAMS) each frame's camera over its whole stored frame (encoding version 3: the world
+            planes are computed on the padded crop, as the graph computes them on the runtime's padded frame).
     """
     import torch
 
@@ -146,6 +186,7 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
     from diviewer.train.encoding_torch import TORCH_OPS, encode_inputs, encode_radiance
 
     x = x16.permute(0, 3, 1, 2).float()
+    left = [0] * x.shape[0]
     if crop is not None:
         w, left = crop
         x = torch.stack([x[i, :, :, o:o + w] for i, o in enumerate(left)])
@@ -164,6 +205,15 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
         inv = inverse_light_scale(scale.to(x.device, torch.float32), TORCH_OPS).reshape(-1, 1, 1, 1)
         direct_in = direct_in * inv
     real_A = encode_inputs(p["depth"], p["normal"], p["albedo"], direct_in, enc, channel_axis=1)
+    if enc.world_inputs:
+        from diviewer.padding import pad_before
+        from diviewer.train.world import shift_cameras, world_planes
+
+        if cams is None:
+            raise ValueError("encoding version 3 needs each frame's camera")
+        cams = shift_cameras(cams.to(x.device, torch.float32), left, (pad_before(w, multiple), pad_before(h, multiple)),
+                             (w, h))
+        real_A = torch.cat([real_A, world_planes(p["depth"], p["normal"], cams, enc.world_center, enc.world_half)], 1)
     target = target_radiance(p["pt"], p["pt_direct"], p["albedo"], cfg.target, cfg.divide_albedo)
     if inv is not None:
         target = target * inv

@@ -39,12 +39,12 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.train import distributed
-from diviewer.train.checkpoint import (check_resume, init_record, load_checkpoint, open_parent, require_torch,
-                                       restore_run, run_metadata, save_run, warm_start)
+from diviewer.train.checkpoint import (check_resume, init_record, load_checkpoint, open_parent, parent_encoding,
+                                       require_torch, restore_run, run_metadata, save_run, warm_start)
 from diviewer.train.config import TrainConfig
 from diviewer.train.distributed import Dist, epoch_batches
 from diviewer.train.report import METRIC_KEYS, draw_curves, read_metrics, validate, write_metrics
-from diviewer.train.targets import crop_plan, fit_encoding, run_light_scales, split_batch
+from diviewer.train.targets import crop_plan, fit_encoding, run_cameras, run_light_scales, split_batch
 
 if TYPE_CHECKING:
     from diviewer.data.dataset import Dataset
@@ -128,6 +128,9 @@ class Run:
     """Each train frame's light scale (encoding version 2), in train_arr's order."""
     val_scales: np.ndarray | None = None
     """Each val frame's light scale (encoding version 2), in val_arr's order."""
+    train_cams: np.ndarray | None = None
+    val_cams: np.ndarray | None = None
+    """Each train / val frame's camera (encoding version 3, `targets.run_cameras`), in the arrays' order."""
     tonemap_exposure: float | None = None
     """Validation's tone map: `fit_exposure` on the train frames' raw GL direct light, as `diviewer eval --data`
     fits it (with encoding 2 the encoding's exposure is the light-normalised data's); None: the encoding's."""
@@ -175,13 +178,10 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
         if ckpt:
             enc = Encoding.from_dict(ckpt["encoding"])
         elif parent:  # the parent's weights were trained on its encoding: keep it
-            enc = Encoding.from_dict(parent["encoding"])
-            if enc.light_scaled != cfg.light_scale:
-                raise DiviewerError(f"--init-from's model was trained with encoding {enc.version}; pass "
-                                    f"--{'' if enc.light_scaled else 'no-'}light-scale to warm-start from it",
-                                    path=cfg.init_from)
+            enc = parent_encoding(parent, cfg)
         else:
-            enc = fit_encoding(ds, train_idx, train_arr, train_scales)
+            enc = fit_encoding(ds, train_idx, train_arr, train_scales, world=cfg.world_inputs)
+        train_cams, val_cams = run_cameras(enc, ds, train_idx, val_arr is not None)
         net_cfg = _net_config(cfg, ds)
         _check_trainable(net_cfg, cfg, ds, len(train_idx))
         nets = build_nets(cfg, net_cfg, enc, dev, say)
@@ -208,7 +208,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
             meta["init"] = init_record(parent) if parent else ckpt["init"]
         run = Run(cfg=cfg, dev=dev, ds=ds, train_arr=train_arr, val_arr=val_arr, enc=enc, say=say,
                   meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed, multiple=2 ** net_cfg.levels,
-                  train_scales=train_scales, val_scales=val_scales,
+                  train_scales=train_scales, val_scales=val_scales, train_cams=train_cams, val_cams=val_cams,
                   tonemap_exposure=None if enc.version < 2 else _raw_exposure(ds, train_arr))
 
         total = horizon = cfg.epochs * steps_per_epoch  # the lr schedule's horizon ignores max_steps
@@ -318,7 +318,8 @@ def _batch(run: Run, x16, indices: list[int], epoch: int, batch: int) -> dict[st
     cfg, ds = run.cfg, run.ds
     plan = crop_plan(cfg, epoch, batch, x16.shape[0], ds.height, ds.width)
     scale = None if run.train_scales is None else torch.from_numpy(run.train_scales[indices])
-    return split_batch(x16, ds.slices, run.enc, cfg, scale=scale, multiple=run.multiple, crop=plan)
+    cams = None if run.train_cams is None else torch.from_numpy(run.train_cams[indices])
+    return split_batch(x16, ds.slices, run.enc, cfg, scale=scale, multiple=run.multiple, crop=plan, cams=cams)
 
 
 def _open_run(cfg: TrainConfig, ds: Dataset, train_idx: list[int], resume: bool, say) -> dict[str, Any] | None:
@@ -396,7 +397,8 @@ def _end_of_stretch(run: Run, nets: Nets, st: TrainState, do_val: bool) -> dict[
     if run.dev.main:
         if do_val and run.val_arr is not None:
             val = validate(nets.netG_m, run.val_arr, run.ds.slices, run.enc, run.cfg, run.dev.device, nets.dtype,
-                           scales=run.val_scales, multiple=run.multiple, tonemap_exposure=run.tonemap_exposure)
+                           scales=run.val_scales, multiple=run.multiple, tonemap_exposure=run.tonemap_exposure,
+                           cams=run.val_cams)
             st.last_val = val
             st.since_best += 1
             if val["ssim_tm"] > st.best["ssim_tm"]:

@@ -50,3 +50,26 @@ def test_world_buffers_clip_positions_outside_the_box():
     normal = np.tile(np.array([0.0, 0.0, 1.0], np.float32), (4, 4, 1))
     pos, _ = tool.world_buffers(depth, normal, camera, (4, 4), (0, 0), np.zeros(3), 1.0)
     assert pos.min() >= -1.0 and pos.max() <= 1.0 and (np.abs(pos) == 1.0).any()
+
+
+@pytest.mark.parametrize("x0,pad", [(0, (0, 0)), (37, (0, 0)), (50, (14, 0)), (100, (3, 7))])
+def test_camera_params_give_the_renders_rays_on_crops_and_the_edge_rays_on_padding(x0, pad):
+    """The rays the parameters describe are `pixel_rays_view` of the whole render at the crop's pixels, and on
+    the padding the nearest frame pixel's ray (as padding replicates edge pixels)."""
+    sw, sh, w, h = 228, 128, 100, 128
+    pos, tgt, up, fov = (0.3, 1.2, 3.0), (0.0, 1.0, 0.0), (0.0, 1.0, 0.0), 41.0
+    p = cam.camera_params(pos, tgt, up, fov, w, h, x0=x0, source=(sw, sh), pad=pad)
+    assert p.shape == (cam.CAMERA_PARAMS,) and p.dtype == np.float32
+    px, py = pad
+    cols, rows = np.arange(w + 2 * px), np.arange(h + 2 * py)
+    c = np.clip(cols, p[16], p[17]) + 0.5
+    r = np.clip(rows, p[18], p[19]) + 0.5
+    rx, ry = p[12] * c + p[13], p[14] * r + p[15]
+    want = cam.pixel_rays_view(sw, sh, fov)
+    src_c = np.clip(cols - px, 0, w - 1) + x0
+    src_r = np.clip(rows - py, 0, h - 1)
+    np.testing.assert_allclose(rx, want[0, src_c, 0], atol=1e-5)
+    np.testing.assert_allclose(ry, want[src_r, 0, 1], atol=1e-5)
+    m = cam.view_to_world(cam.look_at(pos, tgt, up))
+    np.testing.assert_allclose(p[:9].reshape(3, 3), m[:3, :3], atol=1e-6)
+    np.testing.assert_allclose(p[9:12], m[:3, 3], atol=1e-6)
