@@ -60,3 +60,15 @@ def crop_nhwc(y: np.ndarray, height: int, width: int, multiple: int) -> np.ndarr
     if y.shape[1] == height and y.shape[2] == width:
         return y
     return np.ascontiguousarray(y[:, crop_slice(height, multiple), crop_slice(width, multiple)])
+
+
+def pad_camera_params(cams, width: int, height: int, multiple: int) -> np.ndarray:
+    """Cameras (`diviewer.scene.camera.camera_params`, (..., 20)) of ``width`` x ``height`` frames -> those of the
+    frames padded to ``multiple``: rays shifted by the padding before the frame, clamped to the frame's pixels (so
+    the padding replicates the edge rays, as it replicates the edge pixels)."""
+    px, py = pad_before(width, multiple), pad_before(height, multiple)
+    out = np.array(cams, np.float32, copy=True)
+    out[..., 13] -= out[..., 12] * px
+    out[..., 15] -= out[..., 14] * py
+    out[..., 16], out[..., 17], out[..., 18], out[..., 19] = px, px + width - 1, py, py + height - 1
+    return out

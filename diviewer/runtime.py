@@ -26,11 +26,14 @@ import numpy as np
 
 from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNELS, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
-from diviewer.padding import crop_nhwc, pad_nhwc
+from diviewer.padding import crop_nhwc, pad_camera_params, pad_nhwc
+from diviewer.scene.camera import CAMERA_PARAMS
 from diviewer.timing import StageTimer
 
 INPUT_NAME = "buffers"
 LIGHT_SCALE_NAME = "light_scale"
+CAMERA_NAME = "camera"
+"""Encoding version 3's third input: each frame's camera, (N, CAMERA_PARAMS) (`diviewer.scene.camera.camera_params`)."""
 LAYOUTS = ("NHWC", "NCHW")
 """Input layouts a model may take (its metadata's ``layout``); the output is NHWC radiance either way."""
 OUTPUT_NAME = "radiance"
@@ -112,9 +115,6 @@ def check_compatible(meta: dict, path: Path, scene=None) -> None:
     if enc_version > ENCODING_VERSION:
         raise DiviewerError(f"the model uses encoding version {enc_version}, newer than this diviewer's "
                             f"({ENCODING_VERSION}); upgrade diviewer", path=path, field="encoding.version")
-    if enc_version >= 3:  # training writes such checkpoints; export and the runtime's camera input come next
-        raise DiviewerError("the model takes world-space inputs (encoding version 3), which the runtime does not "
-                            "feed yet; use an encoding 1 or 2 model", path=path, field="encoding.version")
     expected = [list(c) for c in INPUT_CHANNELS]
     if [list(c) for c in meta["channels"]] != expected:
         raise DiviewerError(f"the model expects input channels {meta['channels']}, the renderer provides {expected}",
@@ -177,7 +177,9 @@ class NeuralGI:
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         self.light_scaled = int(self.meta["encoding"].get("version", 1)) >= 2
         """Encoding version 2: ``run`` needs each frame's light scale."""
-        wanted = [INPUT_NAME] + ([LIGHT_SCALE_NAME] if self.light_scaled else [])
+        self.world = int(self.meta["encoding"].get("version", 1)) >= 3
+        """Encoding version 3: ``run`` also needs each frame's camera (`camera`)."""
+        wanted = [INPUT_NAME] + ([LIGHT_SCALE_NAME] if self.light_scaled else []) + ([CAMERA_NAME] if self.world else [])
         if [i.name for i in inputs] != wanted or OUTPUT_NAME not in [o.name for o in outputs]:
             raise DiviewerError(f"the graph's inputs {[i.name for i in inputs]} / outputs {[o.name for o in outputs]} "
                                 f"are not diviewer's for encoding version {self.meta['encoding'].get('version')} "
@@ -221,12 +223,24 @@ class NeuralGI:
             raise ValueError("light_scale needs the scene: load the model with scene= or pass it")
         return light_scale(scene, config)
 
-    def run(self, buffers: np.ndarray, timer: StageTimer | None = None, light_scale=None) -> np.ndarray:
+    @staticmethod
+    def camera(camera, width: int, height: int) -> np.ndarray:
+        """The ``camera`` input of a ``width`` x ``height`` frame seen by a scene camera (position, target, up, fov:
+        `diviewer.scene.Camera` or its dict), for ``run``."""
+        from diviewer.scene.camera import camera_params
+
+        get = (lambda k: camera[k]) if isinstance(camera, dict) else (lambda k: getattr(camera, k))
+        return camera_params(get("position"), get("target"), get("up"), get("fov"), width, height)
+
+    def run(self, buffers: np.ndarray, timer: StageTimer | None = None, light_scale=None,
+            camera=None) -> np.ndarray:
         """(N, H, W, 10) or (H, W, 10) float32 raw buffers to radiance of the same leading shape.
 
         Any H x W: frames that are not multiples of the model's stride are edge-padded to it and the
         output cropped back (`diviewer.padding`, exactly as training pads). ``light_scale``: each frame's
         light scale, a number or (N,) (`light_scale`); needed by encoding-2 models, ignored by older ones.
+        ``camera``: each frame's camera over its own H x W pixels, (CAMERA_PARAMS,) or (N, CAMERA_PARAMS)
+        (`camera`); needed by encoding-3 models, ignored by older ones.
         """
         single = buffers.ndim == 3
         x = buffers[None] if single else buffers
@@ -250,6 +264,14 @@ class NeuralGI:
             feeds[LIGHT_SCALE_NAME] = np.ascontiguousarray(np.broadcast_to(s, (n,)) if s.size == 1 else s)
             if feeds[LIGHT_SCALE_NAME].shape != (n,):
                 raise ValueError(f"light_scale: expected one value or {n}, got {s.size}")
+        if self.world:
+            if camera is None:
+                raise ValueError(f"{self.path.name} uses encoding version 3: run() needs each frame's camera "
+                                 "(NeuralGI.camera(config.camera, width, height))")
+            c = np.asarray(camera, np.float32).reshape(-1, CAMERA_PARAMS)
+            if c.shape[0] not in (1, n):
+                raise ValueError(f"camera: expected one or {n}, got {c.shape[0]}")
+            feeds[CAMERA_NAME] = pad_camera_params(np.broadcast_to(c, (n, CAMERA_PARAMS)), width, height, self.multiple)
         with (timer or self.timer).stage("inference"):
             (y,) = self.session.run([OUTPUT_NAME], feeds)
         y = crop_nhwc(y, height, width, self.multiple)
@@ -277,8 +299,10 @@ def probe(model: "NeuralGI") -> None:
     fp16 overflow), before the viewer or the benchmark shows or times it: through ``model.run``, so the
     probe is padded, laid out and light-scaled as every frame is."""
     w, h = (min(int(d), 64) for d in model.resolution)
+    camera = {"position": (0.0, 0.0, 4.0), "target": (0.0, 0.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 45.0}
     try:
-        model.run(probe_frame(h, w)[0], light_scale=1.0 if model.light_scaled else None)
+        model.run(probe_frame(h, w)[0], light_scale=1.0 if model.light_scaled else None,
+                  camera=NeuralGI.camera(camera, w, h) if model.world else None)
     except Exception as exc:  # onnxruntime raises its own types for a graph that cannot run
         raise DiviewerError(f"the model cannot run on a {w}x{h} probe frame: {exc}", path=model.path) from exc
     bad = model.nonfinite_outputs  # counted before the clamp at 0, which would hide a -Inf

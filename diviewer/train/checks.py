@@ -29,7 +29,8 @@ CONSTANT_SPREAD = 1e-6
 frame) is at most this fraction of its magnitude (or this absolute value for an all-zero output)."""
 
 
-def refuse_broken(netG, ref_module, frames: np.ndarray, fp16: bool, ckpt_path: Path, scales=None) -> np.ndarray:
+def refuse_broken(netG, ref_module, frames: np.ndarray, fp16: bool, ckpt_path: Path, scales=None,
+                  cams=None) -> np.ndarray:
     """Check the generator's weights, run the float32 reference on ``frames`` and check its outputs.
 
     Returns:
@@ -46,8 +47,8 @@ def refuse_broken(netG, ref_module, frames: np.ndarray, fp16: bool, ckpt_path: P
     hook = netG.register_forward_hook(lambda _m, _i, out: captured.append(out.detach().float().numpy()))
     try:
         with torch.no_grad():
-            reference = (ref_module(torch.from_numpy(frames)) if scales is None  # scales: encoding 2's light
-                         else ref_module(torch.from_numpy(frames), torch.from_numpy(scales.astype(np.float32)))).numpy()
+            extra = [torch.from_numpy(a.astype(np.float32)) for a in (scales, cams) if a is not None]
+            reference = ref_module(torch.from_numpy(frames), *extra).numpy()  # encoding 2's light, 3's camera
     finally:
         hook.remove()
     check_outputs(np.concatenate(captured), reference, len(frames), ckpt_path)

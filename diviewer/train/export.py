@@ -26,9 +26,9 @@ from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
 from diviewer.outputs import check_output_file, dumps, staged
-from diviewer.padding import pad_nhwc
+from diviewer.padding import pad_camera_params, pad_nhwc
 from diviewer.provenance import versions
-from diviewer.runtime import INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
+from diviewer.runtime import CAMERA_NAME, INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
 from diviewer.train.checks import FP16_TOLERANCE, refuse_broken
 
 OPSET = 17
@@ -68,9 +68,10 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False, layout: str = "NHW
     return module.eval()
 
 
-def onnx_bytes(module, example, light_scale=None) -> bytes:
-    """`module` (buffers [, light_scale] -> NHWC radiance) as ONNX bytes: the legacy TorchScript exporter at
-    `OPSET`, dynamic batch, height and width. `example` is a (1, H, W, 10) or (1, 10, H, W) float32 tensor."""
+def onnx_bytes(module, example, light_scale=None, camera=None) -> bytes:
+    """`module` (buffers [, light_scale [, camera]] -> NHWC radiance) as ONNX bytes: the legacy TorchScript
+    exporter at `OPSET`, dynamic batch, height and width. `example` is a (1, H, W, 10) or (1, 10, H, W) float32
+    tensor; ``camera`` (encoding 3) a (1, CAMERA_PARAMS) one."""
     torch = _torch()
     buf = io.BytesIO()
     layout = getattr(module, "layout", "NHWC")
@@ -79,6 +80,9 @@ def onnx_bytes(module, example, light_scale=None) -> bytes:
     if light_scale is not None:
         names, args = names + [LIGHT_SCALE_NAME], (example, light_scale)
         axes[LIGHT_SCALE_NAME] = {0: "N"}
+    if camera is not None:
+        names, args = names + [CAMERA_NAME], (*args, camera)
+        axes[CAMERA_NAME] = {0: "N"}
     with torch.no_grad(), warnings.catch_warnings():
         # InstanceNorm without running statistics normalises with each image's own statistics in
         # eval mode too, which is what it should export; the exporter warns about exactly that.
@@ -100,10 +104,25 @@ def extreme_frame(frame: np.ndarray) -> np.ndarray:
     return x
 
 
-def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[int, int],
-                         light_scaled: bool = False) -> tuple[np.ndarray, np.ndarray | None, str]:
+def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[int, int], light_scaled: bool = False,
+                         world: bool = False) -> tuple[np.ndarray, np.ndarray | None, str, np.ndarray | None]:
     """Real frames from the training dataset's val split when it is there, else procedural buffers; with
-    their light scales for encoding 2 (the dataset's, or 0.5 to 2 for procedural frames)."""
+    their light scales for encoding 2 (the dataset's, or 0.5 to 2 for procedural frames) and, for encoding 3,
+    their cameras (the dataset's, or one looking at the procedural frames' surface) over the whole frame."""
+    frames, scales, source, configs = _frames_and_scales(data_dir, n, res, light_scaled)
+    if not world:
+        return frames, scales, source, None
+    from diviewer.scene.camera import camera_params
+
+    h, w = frames.shape[1:3]
+    default = {"position": [0.0, 1.0, 3.0], "target": [0.0, 1.0, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0}
+    cams = np.stack([camera_params(c["position"], c["target"], c["up"], c["fov"], w, h)
+                     for c in (configs or [default] * len(frames))])
+    return frames, scales, source, cams
+
+
+def _frames_and_scales(data_dir: str | None, n: int, res: tuple[int, int], light_scaled: bool):
+    """`_verification_frames` less the cameras, and the frames' camera configurations (None for procedural ones)."""
     from diviewer.data.dataset import Dataset
 
     if data_dir and (Path(data_dir) / "manifest.json").is_file():
@@ -119,7 +138,9 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
                 from diviewer.data.scales import light_scales
 
                 scales = light_scales(ds, idx)
-            return np.stack(frames).astype(np.float32), scales, f"{len(idx)} frames of {data_dir}"
+            configs = {f["index"]: f.get("config", {}).get("camera") for f in ds.frames}
+            return (np.stack(frames).astype(np.float32), scales, f"{len(idx)} frames of {data_dir}",
+                    [configs[i] for i in idx] if all(configs[i] for i in idx) else None)
     # No dataset: smooth synthetic buffers with plausible ranges (depth 1..far, unit normals).
     rng = np.random.default_rng(0)
     w, h = res
@@ -134,7 +155,7 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
         direct = albedo * np.maximum(0, np.sin(5 * xx * a[0]) * np.cos(4 * yy * a[1]))[..., None] * a[2]
         frames.append(np.concatenate([depth[..., None], normal, albedo, direct], -1))
     scales = rng.uniform(0.5, 2.0, n).astype(np.float32) if light_scaled else None
-    return np.stack(frames).astype(np.float32), scales, f"{n} synthetic frames (dataset {data_dir} not found)"
+    return np.stack(frames).astype(np.float32), scales, f"{n} synthetic frames (dataset {data_dir} not found)", None
 
 
 def check_export_paths(ckpt_path: Path, out: Path) -> None:
@@ -146,19 +167,23 @@ def check_export_paths(ckpt_path: Path, out: Path) -> None:
     check_output_file(card, "--out", protect=(ckpt_path,), replaces="model")
 
 
-def run_session(session, frames: np.ndarray, scales: np.ndarray | None, layout: str) -> np.ndarray:
+def run_session(session, frames: np.ndarray, scales: np.ndarray | None, layout: str,
+                cams: np.ndarray | None = None) -> np.ndarray:
     """An export's onnxruntime session on NHWC frames (one at a time), as the runtime feeds it."""
     out = []
     for k, f in enumerate(frames):
         feed = {INPUT_NAME: np.ascontiguousarray(f[None].transpose(0, 3, 1, 2) if layout == "NCHW" else f[None])}
         if scales is not None:
             feed[LIGHT_SCALE_NAME] = scales[k:k + 1].astype(np.float32)
+        if cams is not None:
+            feed[CAMERA_NAME] = cams[k:k + 1].astype(np.float32)
         out.append(session.run([OUTPUT_NAME], feed)[0])
     return np.concatenate(out)
 
 
 def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, frames: np.ndarray,
-                  scales: np.ndarray | None, source: str, out: Path, log=print, weights_from: Path | None = None):
+                  scales: np.ndarray | None, source: str, out: Path, log=print, weights_from: Path | None = None,
+                  cams: np.ndarray | None = None):
     """The lean graph of ``make_netG()`` as an ONNX model, checked in onnxruntime against training's own
     functions in PyTorch (`diviewer.train.graph.ReferenceGI`, fp32) before anything is written: on the
     frames, on a copy with NaN/Inf/extreme values in every channel, and, for encoding 2, at zero light
@@ -172,19 +197,22 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     netG = make_netG()
     ref_module = gi_module(netG, encoding, meta, lean=False)
     # broken weights, or an output that is constant or non-finite: refused, naming the checkpoint
-    reference = refuse_broken(netG, ref_module, frames, settings.fp16, weights_from or out, scales)
+    reference = refuse_broken(netG, ref_module, frames, settings.fp16, weights_from or out, scales, cams)
     ext = extreme_frame(frames[0])[None]
     s_t = None if scales is None else torch.from_numpy(scales.astype(np.float32))
+    c_t = None if cams is None else torch.from_numpy(cams.astype(np.float32))
     with torch.no_grad():
-        ref_ext = ref_module(torch.from_numpy(ext), None if s_t is None else s_t[:1]).numpy()
+        ref_ext = ref_module(torch.from_numpy(ext), None if s_t is None else s_t[:1],
+                             None if c_t is None else c_t[:1]).numpy()
         module = gi_module(make_netG(), encoding, meta, fp16=settings.fp16, layout=settings.layout)
     example = torch.from_numpy(frames[:1])
     example = example.permute(0, 3, 1, 2).contiguous() if settings.layout == "NCHW" else example
-    data = onnx_bytes(module, example, None if s_t is None else s_t[:1])
+    data = onnx_bytes(module, example, None if s_t is None else s_t[:1], None if c_t is None else c_t[:1])
     model = onnx.load_from_string(data)
     session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
-    got = run_session(session, frames, scales, settings.layout)
-    got_ext = run_session(session, ext, None if scales is None else scales[:1], settings.layout)
+    got = run_session(session, frames, scales, settings.layout, cams)
+    got_ext = run_session(session, ext, None if scales is None else scales[:1], settings.layout,
+                          None if cams is None else cams[:1])
     diff = np.abs(got.astype(np.float64) - reference)
     peak = float(np.abs(reference).max()) or 1.0
     same_nonfinite = bool(np.array_equal(np.isfinite(got_ext), np.isfinite(ref_ext)))
@@ -204,7 +232,7 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     }
     precision = "fp16" if settings.fp16 else "fp32"
     if scales is not None:
-        check.update(_light_checks(session, frames, scales, got, peak, settings.layout, precision, out, log))
+        check.update(_light_checks(session, frames, scales, got, peak, settings.layout, precision, out, log, cams))
     log(f"verify {precision} against torch on {source}: max |diff| {check['max_abs_diff']:.3g} "
         f"({check['max_rel_to_peak']:.2g} of peak {peak:.3g}), mean {check['mean_abs_diff']:.3g}, "
         f"PSNR {check['psnr_db']:.1f} dB; extremes {check['extremes_max_rel_to_peak']:.2g} of peak")
@@ -225,15 +253,15 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
 
 
 def _light_checks(session, frames: np.ndarray, scales: np.ndarray, got: np.ndarray, peak: float, layout: str,
-                  precision: str, out: Path, log) -> dict:
+                  precision: str, out: Path, log, cams: np.ndarray | None = None) -> dict:
     """Encoding 2 on the exported graph: zero light gives exactly 0 (refused otherwise), twice the light
     twice the output (recorded)."""
     dark = frames.copy()
     dark[..., channel_slices()["direct"]] = 0.0
-    zero = run_session(session, dark, np.zeros_like(scales), layout)
+    zero = run_session(session, dark, np.zeros_like(scales), layout, cams)
     bright = frames.copy()
     bright[..., channel_slices()["direct"]] *= 2.0
-    twice = run_session(session, bright, 2.0 * scales, layout)
+    twice = run_session(session, bright, 2.0 * scales, layout, cams)
     check = {"zero_light_max": float(np.abs(zero).max()),
              "twice_light_max_rel_to_peak": float(np.abs(twice - 2.0 * got).max() / (2.0 * peak))}
     log(f"light: zero light max {check['zero_light_max']:.3g}, twice the light off by "
@@ -255,16 +283,15 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     check_export_paths(ckpt_path, out)
     ckpt = load_checkpoint(ckpt_path)
     netG, encoding, meta = build_generator_from_checkpoint(ckpt)
-    if encoding.world_inputs:  # the graph's camera input and the runtime that feeds it come with the next change
-        raise DiviewerError("the checkpoint takes world-space inputs (encoding version 3), which export does not "
-                            "write yet", path=ckpt_path, field="encoding.version")
     levels = int(meta["model_args"]["levels"])
     res = tuple(int(x) for x in meta["resolution"])
-    frames, scales, source = _verification_frames(meta, meta["config"].get("data"), settings.verify_frames, res,
-                                                  encoding.light_scaled)
+    frames, scales, source, cams = _verification_frames(meta, meta["config"].get("data"), settings.verify_frames,
+                                                        res, encoding.light_scaled, encoding.world_inputs)
+    if cams is not None:  # the cameras of the padded frames, as the runtime shifts them
+        cams = pad_camera_params(cams, frames.shape[2], frames.shape[1], 2 ** levels)
     frames = pad_nhwc(frames, 2 ** levels)  # a capture of another shape (e.g. 228x128): padded as the runtime pads
     model, check = verified_onnx(lambda: build_generator_from_checkpoint(ckpt)[0], encoding, meta, settings, frames,
-                                 scales, source, out, log, weights_from=ckpt_path)
+                                 scales, source, out, log, weights_from=ckpt_path, cams=cams)
     precision = "fp16" if settings.fp16 else "fp32"
     card = {
         "format": MODEL_FORMAT,

@@ -31,6 +31,7 @@ import torch
 
 from diviewer.encoding import INPUT_CHANNELS, Encoding, channel_slices
 from diviewer.train.targets import ALBEDO_FLOOR, compose_radiance
+from diviewer.train.world import world_planes
 
 LAYOUTS = ("NHWC", "NCHW")
 """Input layouts an export can take: the GL pack's interleaved NHWC, or channel-first NCHW."""
@@ -95,7 +96,8 @@ def fold_batchnorm(netG: torch.nn.Module) -> torch.nn.Module:
 
 
 class LeanGI(torch.nn.Module):
-    """Raw buffers (and, for encoding version 2, the light scale (N,)) -> linear radiance (N, H, W, 3)."""
+    """Raw buffers (and, for encoding version 2, the light scale (N,); for version 3 also the camera (N,
+    CAMERA_PARAMS)) -> linear radiance (N, H, W, 3)."""
 
     def __init__(self, netG, encoding: Encoding, meta: dict, fp16: bool = False, layout: str = "NHWC"):
         super().__init__()
@@ -116,7 +118,8 @@ class LeanGI(torch.nn.Module):
         self.register_buffer("geo_offset", torch.tensor([0.0] * 3 + [-1.0] * 3).reshape(1, n, 1, 1), persistent=False)
         self.floor_lo = 2.0 * ALBEDO_FLOOR - 1.0  # the albedo floor, in encoded albedo (2a - 1)
 
-    def forward(self, buffers: torch.Tensor, light_scale: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(self, buffers: torch.Tensor, light_scale: torch.Tensor | None = None,
+                camera: torch.Tensor | None = None) -> torch.Tensor:
         raw = buffers if self.layout == "NCHW" else buffers.permute(0, 3, 1, 2)
         # The raw direct light, sliced before the If (the tracer would alias raw with its unchanged output): a
         # NaN there stays visible where it arose (the runtime counts it) instead of being hidden.
@@ -139,7 +142,10 @@ class LeanGI(torch.nn.Module):
         c = torch.clamp(direct * in_k, -enc.radiance_max, enc.radiance_max)
         a = torch.abs(c)
         e_direct = torch.log(a + 1.0) * (c / torch.clamp(a * self.log_r, min=TINY * self.log_r))
-        encoded = torch.cat([e_depth, e_geo, e_direct], 1)
+        parts = [e_depth, e_geo, e_direct]
+        if enc.world_inputs:  # encoding 3: world position and normal from the (finite) depth, normal and camera
+            parts.append(world_planes(depth, geo[:, :3], camera, enc.world_center, enc.world_half))
+        encoded = torch.cat(parts, 1)
         y = self.netG(encoded.half() if self.fp16 else encoded)
         y = y.float() if self.fp16 else y
         ay = torch.abs(y)
@@ -161,7 +167,8 @@ class ReferenceGI(torch.nn.Module):
         self.netG = netG.half() if fp16 else netG
         self.fp16, self.enc, self.meta = fp16, encoding, meta
 
-    def forward(self, buffers: torch.Tensor, light_scale: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(self, buffers: torch.Tensor, light_scale: torch.Tensor | None = None,
+                camera: torch.Tensor | None = None) -> torch.Tensor:
         from diviewer.train.encoding_torch import TORCH_OPS, decode_radiance, encode_inputs
         from diviewer.encoding import inverse_light_scale
 
@@ -172,6 +179,10 @@ class ReferenceGI(torch.nn.Module):
             s = light_scale.reshape(-1, 1, 1, 1)
             inv = inverse_light_scale(light_scale, TORCH_OPS).reshape(-1, 1, 1, 1)
         inp = encode_inputs(depth, normal, albedo, direct if inv is None else direct * inv, self.enc, channel_axis=1)
+        if self.enc.world_inputs:  # the buffers made finite as the lean graph's guard makes them (training's are)
+            geometry = torch.where(torch.isfinite(depth), depth, torch.zeros_like(depth))
+            normal = torch.where(torch.isnan(normal), torch.zeros_like(normal), normal)
+            inp = torch.cat([inp, world_planes(geometry, normal, camera, self.enc.world_center, self.enc.world_half)], 1)
         y = self.netG(inp.half() if self.fp16 else inp)
         radiance = decode_radiance(y.float() if self.fp16 else y, self.enc)
         if s is not None:

@@ -9,7 +9,7 @@ puts in the graph (so the runtime feeds the camera, not two more buffers).
 
     ray(c, r) = (ax (clip(c, x_lo, x_hi) + 0.5) + bx, ay (clip(r, y_lo, y_hi) + 0.5) + by, -1)
     world position  p = R (depth ray) + t        encoded clip((p - world_center) / world_half, -1, 1)
-    world normal    n = R normal                  encoded clip(n, -1, 1)
+    world normal    n = R clip(normal, -1, 1)     encoded clip(n, -1, 1)
 
 Both are 0 where there is no surface (depth <= 0), with the mask ``clip(depth HUGE, 0, 1)`` (1 for any depth
 >= 1e-38, a Where without onnxruntime's slow Where). Inputs must be finite (the graph's NaN guard runs first).
@@ -38,7 +38,7 @@ def world_planes(depth: torch.Tensor, normal: torch.Tensor, cams: torch.Tensor, 
     cols = torch.minimum(torch.maximum(cols, c[:, 16:17]), c[:, 17:18]) + 0.5
     rows = torch.minimum(torch.maximum(rows, c[:, 18:19]), c[:, 19:20]) + 0.5
     view = (depth * (c[:, 12:13] * cols + c[:, 13:14]), depth * (c[:, 14:15] * rows + c[:, 15:16]), -depth)
-    nrm = torch.split(normal, 1, 1)
+    nrm = torch.split(torch.clamp(normal, -1.0, 1.0), 1, 1)  # unit normals as they are; an infinite one stays finite
     center = torch.as_tensor(center, dtype=depth.dtype, device=depth.device).reshape(1, 3, 1, 1)
     inv_half = 1.0 / torch.as_tensor(half, dtype=depth.dtype, device=depth.device).reshape(1, 3, 1, 1)
     pos = torch.cat([c[:, 3 * k:3 * k + 1] * view[0] + c[:, 3 * k + 1:3 * k + 2] * view[1]

@@ -104,9 +104,65 @@ def test_a_run_trains_on_world_inputs_and_records_them(tmp_path):
     np.testing.assert_allclose(enc["world_half"], np.maximum((hi - lo) / 2, 1e-3))
     # resumes (the cameras are the run's, not the checkpoint's) ...
     assert train(tiny(data, out, world_inputs=True, epochs=3), resume=True, log=quiet)["step"] == 6
-    # ... and export says plainly that it does not write such a model yet
-    with pytest.raises(DiviewerError, match="world-space inputs"):
-        export(out / "last.ckpt", tmp_path / "m.onnx", log=quiet)
+    # ... exports, verified against PyTorch with the frames' cameras, with the camera as the graph's third input ...
+    card = export(out / "last.ckpt", tmp_path / "m.onnx", log=quiet)
+    assert card["encoding"]["version"] == 3 and card["verification"]["max_rel_to_peak"] < 1e-4
+    assert card["verification"]["zero_light_max"] == 0.0
+    # ... and the runtime runs it at any size given each frame's camera, refusing it without one.
+    from diviewer.runtime import NeuralGI
+
+    model = NeuralGI(tmp_path / "m.onnx")
+    assert model.world and [i.name for i in model.session.get_inputs()] == ["buffers", "light_scale", "camera"]
+    frame = np.load(data / "frames" / "000008.npy").astype(np.float32)[..., :10]
+    config = json.loads((data / "manifest.json").read_text())["frame_list"][8]["config"]["camera"]
+    for w in (32, 24, 40):
+        x = frame[:, :w] if w <= 32 else np.concatenate([frame, frame[:, :w - 32]], 1)
+        y = model.run(x, light_scale=2.0, camera=NeuralGI.camera(config, w, 32))
+        assert y.shape == (32, w, 3) and np.isfinite(y).all()
+    with pytest.raises(ValueError, match="camera"):
+        model.run(frame, light_scale=2.0)
+
+
+def test_the_graph_matches_training_on_a_padded_crop(tmp_path):
+    """The exported graph on a crop the runtime pads gives what training's own functions give on the same crop
+    padded by split_batch: the world planes line up with the pixels on both paths."""
+    from diviewer.encoding import Encoding
+    from diviewer.train.config import TrainConfig
+    from diviewer.train.graph import ReferenceGI
+    from diviewer.train.networks import UnetGenerator
+    from diviewer.train.targets import split_batch
+
+    torch.manual_seed(0)
+    netG = UnetGenerator(16, 3, K=4, levels=4).eval()
+    enc = Encoding(exposure=1.0, depth_scale=10.0, version=3, world_center=(0, 1, 0), world_half=(1.5, 1.5, 1.5))
+    rng = np.random.default_rng(0)
+    h, w, x0 = 32, 24, 5
+    depth, normal = _buffers(rng, h, 40)
+    albedo = rng.uniform(0, 1, (h, 40, 3)).astype(np.float32)
+    direct = rng.uniform(0, 2, (h, 40, 3)).astype(np.float32)
+    stored = np.concatenate([depth[..., None], normal, albedo, direct, direct * 1.5, direct], -1)[None]
+    full_cam = _params(width=40, height=h)[None]
+    slices = {"depth": slice(0, 1), "normal": slice(1, 4), "albedo": slice(4, 7), "direct": slice(7, 10),
+              "pt": slice(10, 13), "pt_direct": slice(13, 16)}
+    cfg = TrainConfig(data=tmp_path, out=tmp_path / "r", world_inputs=True)
+    b = split_batch(torch.from_numpy(stored), slices, enc, cfg, scale=torch.ones(1), multiple=16, crop=(w, [x0]),
+                    cams=torch.from_numpy(full_cam))
+    with torch.no_grad():
+        want = netG(b["real_A"])[:, :, b["crop"][0], b["crop"][1]]
+    # The runtime's way: the crop as a frame of its own, its camera over its own pixels (x0 in the source).
+    crop_cam = _params(width=w, height=h, x0=x0, source=(40, h))
+    from diviewer.padding import pad_camera_params, pad_nhwc
+
+    frame = pad_nhwc(stored[:, :, x0:x0 + w, :10], 16)
+    cam_p = pad_camera_params(crop_cam[None], w, h, 16)
+    ref = ReferenceGI(netG, enc, {"target": "indirect", "divide_albedo": True})
+    captured = {}
+    netG.register_forward_hook(lambda m, i, o: captured.update(x=i[0]))  # returns None: the output stays
+    with torch.no_grad():
+        ref(torch.from_numpy(frame), torch.ones(1), torch.from_numpy(cam_p))
+        got = netG(captured["x"])[:, :, b["crop"][0], b["crop"][1]]
+    np.testing.assert_allclose(captured["x"].numpy(), b["real_A"].numpy(), atol=1e-5)
+    np.testing.assert_allclose(got.numpy(), want.numpy(), atol=1e-5)
 
 
 def test_world_inputs_need_the_light_scale(tmp_path):
