@@ -40,10 +40,24 @@ __all__ = ["EQUIVALENT_BY", "EVAL_KEYS", "KEYS", "aggregate", "equivalent", "eva
            "pooled_bias", "run_model", "score", "score_frame", "strict_json"]
 
 
-def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | None = None) -> np.ndarray:
+def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | None = None,
+              camera=None) -> np.ndarray:
     """A model's linear radiance for one frame's buffers: the one place eval and bench call the runtime.
-    ``light_scale``: the frame's (diviewer.scene.lights.light_scale), which encoding-2 models need."""
-    return net.run(pack_buffers(frame), light_scale=light_scale)
+    ``light_scale``: the frame's (diviewer.scene.lights.light_scale), which encoding-2 models need; ``camera``: the
+    frame's camera at its size (`NeuralGI.camera`), which encoding-3 models need."""
+    return net.run(pack_buffers(frame), light_scale=light_scale, camera=camera)
+
+
+def _camera(net: NeuralGI, entry: dict, frame: dict[str, np.ndarray]):
+    """An encoding-3 model's camera input for a stored frame (its configuration's camera at the frame's size; the
+    evaluation set's narrower shapes are centred crops at the same vertical fov, i.e. renders of that size)."""
+    if not getattr(net, "world", False):
+        return None
+    if "crop_xy" in entry:
+        raise DiviewerError("frames cropped off-centre from a wider render (crop_xy) have no camera of their own "
+                            "to give a model with world-space inputs", field="--data")
+    h, w = frame["depth"].shape[:2]
+    return net.camera(entry["config"]["camera"], w, h)
 
 
 def scene_exposure(scene_name: str, scene_hash: str, direct_frames) -> tuple[float, str]:
@@ -87,7 +101,7 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
         if not np.any(f["pt"] > 0):
             black.append(i)
         t0 = time.perf_counter()
-        y = run_model(model, f, s)
+        y = run_model(model, f, s, _camera(model, ds.entry(i), f))
         times.append((time.perf_counter() - t0) * 1e3)
         rows["neural"].append(score(y, f["pt"], exposure))
         rows["direct"].append(score(f["direct"], f["pt"], exposure))
@@ -220,7 +234,7 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
                 continue
             t0 = time.perf_counter()
             try:
-                y = run_model(net, f, scales.get(i))
+                y = run_model(net, f, scales.get(i), _camera(net, ev.entry(i), f))
             except DiviewerError as exc:  # the runtime refuses this shape: say so, score the rest
                 refused[name] = str(exc)
                 continue

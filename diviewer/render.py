@@ -87,7 +87,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 from diviewer.gl.neural import NeuralPass
 
                 neural = NeuralPass(ctx, renderer, net)  # at the frame's own size: the model pads it to its stride
-                neural.run(light_scale=net.light_scale(config, scene) if net.light_scaled else None)
+                neural.run(**neural.inputs_for(scene, config))
                 frame["neural"] = neural.image()
                 neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
                                "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}

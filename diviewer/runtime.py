@@ -223,6 +223,16 @@ class NeuralGI:
             raise ValueError("light_scale needs the scene: load the model with scene= or pass it")
         return light_scale(scene, config)
 
+    def frame_inputs(self, config, width: int, height: int, scene=None) -> dict:
+        """What ``run`` needs besides the buffers for a ``width`` x ``height`` frame of ``config`` (a FrameConfig):
+        its light scale (encoding 2 and later) and its camera (encoding 3), as keyword arguments."""
+        out = {}
+        if self.light_scaled:
+            out["light_scale"] = self.light_scale(config, scene)
+        if self.world:
+            out["camera"] = self.camera(config.camera, width, height)
+        return out
+
     @staticmethod
     def camera(camera, width: int, height: int) -> np.ndarray:
         """The ``camera`` input of a ``width`` x ``height`` frame seen by a scene camera (position, target, up, fov:

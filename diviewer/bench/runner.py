@@ -97,7 +97,7 @@ class GlBench:
         neural = self.neural_pass(net, step)
         try:
             def frame(config):
-                neural.run(light_scale=net.light_scale(config, self.scene) if net.light_scaled else None)
+                neural.run(**neural.inputs_for(self.scene, config))
                 return neural.composite(), False
 
             return self.run(configs, warmup, frame, direct=False)
@@ -235,11 +235,10 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
             if passes:
                 gl.renderer.render(config, direct=False)  # as timed
             for key, (net, step) in models.items():
-                s = net.light_scale(config, gl.scene) if net.light_scaled else None  # encoding 2
-                if step == 1:
-                    image = run_model(net, f, s)
+                if step == 1:  # encoding 2 and 3: the frame's light scale and camera
+                    image = run_model(net, f, **net.frame_inputs(config, shape[0], shape[1], gl.scene))
                 else:
-                    passes[key].run(light_scale=s)
+                    passes[key].run(**passes[key].inputs_for(gl.scene, config))
                     image = read_final(passes[key].composite())
                 rows[key].append(score_frame(image, f["pt"], exposure, mask))
             for key, images in vx_images.items():

@@ -152,6 +152,12 @@ class Dataset:
     def path(self, index: int, suffix: str = ".npy") -> Path:
         return self.root / "frames" / (frame_name(index) + suffix)
 
+    def entry(self, index: int) -> dict:
+        """A frame's record in the manifest's frame list (index, split, seed, config, ...)."""
+        if not hasattr(self, "_entries"):
+            self._entries = {f["index"]: f for f in self.frames}
+        return self._entries[index]
+
     def indices(self, split: str | None = None, present_only: bool = True) -> list[int]:
         out = [f["index"] for f in self.frames if split is None or f["split"] == split]
         if present_only:

@@ -170,21 +170,25 @@ class NeuralPass:
         self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
         self.ssbos[slot].read_into(self._packed[slot])
 
-    def _infer(self, slot: int, light_scale: float | None = None) -> tuple[np.ndarray, float]:
+    def _infer(self, slot: int, light_scale: float | None = None, camera=None) -> tuple[np.ndarray, float]:
         """Run the model on a slot's inputs (on the worker thread when pipelined); its own timer, its wall ms."""
         t0 = time.perf_counter()
-        y = self.model.run(self._packed[slot], timer=StageTimer(), light_scale=light_scale)
+        extra = {} if camera is None else {"camera": camera}  # encoding 3 (runtimes of other models take no camera)
+        y = self.model.run(self._packed[slot], timer=StageTimer(), light_scale=light_scale, **extra)
         return y, (time.perf_counter() - t0) * 1e3
 
-    def light_scale_for(self, scene, config) -> float | None:
-        """The frame's light scale for this pass's model: what ``run`` needs for encoding 2, else None."""
-        return self.model.light_scale(config, scene) if getattr(self.model, "light_scaled", False) else None
+    def inputs_for(self, scene, config) -> dict:
+        """What ``run`` needs for a frame of ``config`` at this pass's GI size (`NeuralGI.frame_inputs`): the light
+        scale for encoding 2 and later, the camera for encoding 3; nothing for other models."""
+        inputs = getattr(self.model, "frame_inputs", None)
+        return inputs(config, *self.gi_size, scene) if inputs is not None else {}
 
-    def run(self, light_scale: float | None = None) -> moderngl.Texture:
+    def run(self, light_scale: float | None = None, camera=None) -> moderngl.Texture:
         """Infer the GI image from the renderer's current textures (call after renderer.render).
 
-        ``light_scale``: the frame's (``model.light_scale(config)``), for models of encoding version 2.
-        Pipelined, the returned texture holds the previous frame's prediction (this frame's, on the first).
+        ``light_scale`` and ``camera``: the frame's (``inputs_for(scene, config)``), for models of encoding
+        version 2 and 3. Pipelined, the returned texture holds the previous frame's prediction (this frame's, on
+        the first).
         """
         self._defines = self._direct_defines()  # may run the direct pass: before this pass's stages
         before = {k: self.timer.times.get(k, 0.0) for k in STAGES}
@@ -193,14 +197,14 @@ class NeuralPass:
             self._pack(slot)
         t_inputs = time.perf_counter()
         if not self.pipelined:
-            y, ms = self._infer(slot, light_scale)
+            y, ms = self._infer(slot, light_scale, camera)
             self.timer.add("inference", ms)
             self._show(y, slot, t_inputs)
         else:
             if self._worker is None:
                 self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="diviewer-gi")
             previous = self._inflight
-            self._inflight = (self._worker.submit(self._infer, slot, light_scale), slot, t_inputs)
+            self._inflight = (self._worker.submit(self._infer, slot, light_scale, camera), slot, t_inputs)
             self._slot = 1 - slot
             if previous is None and self.output is None:
                 # The very first frame waits for its own prediction (there is nothing older to show) ...

@@ -69,8 +69,8 @@ class FrameImages:
         if v.neural is None:
             raise Unavailable(v.state.model_message or "no model loaded")
         if self._neural is None:
-            scale = v.neural.light_scale_for(v.state.scene, v.state.config)  # encoding 2: the frame's lights
-            self._neural = Image(v.neural.run(light_scale=scale), flip=True)  # stages go to the viewer's timer
+            inputs = v.neural.inputs_for(v.state.scene, v.state.config)  # encoding 2 and 3: the frame's lights, camera
+            self._neural = Image(v.neural.run(**inputs), flip=True)  # stages go to the viewer's timer
         return self._neural
 
     def final(self) -> Image:

@@ -70,15 +70,19 @@ def test_shift_cameras_is_camera_params_of_the_crop():
                                    atol=1e-5)
 
 
-def _world_dataset(tmp_path: Path):
-    """test_trainer's synthetic dataset with a loadable scene file and whole cameras in its frames."""
+def _world_dataset(tmp_path: Path, scene: str = "worldscene"):
+    """test_trainer's synthetic dataset with a loadable scene file (its own, or a shipped scene's) and whole
+    cameras in its frames."""
     from train.test_trainer import SCENE_TOML, make_dataset
 
-    ds = make_dataset(tmp_path / "data", scene="worldscene")
-    scene_file = ds.root / "worldscene.toml"
-    scene_file.write_text(SCENE_TOML.replace("NAME", "worldscene"))
+    ds = make_dataset(tmp_path / "data", scene=scene)
+    scene_file = ds.root / f"{scene}.toml"
+    if scene == "worldscene":
+        scene_file.write_text(SCENE_TOML.replace("NAME", "worldscene"))
+    else:
+        scene_file = load_scene(scene).path
     m = json.loads((ds.root / "manifest.json").read_text())
-    m["scene_hash"] = load_scene(scene_file).file_hash
+    m["scene_hash"], m["scene_file"] = load_scene(scene_file).file_hash, str(scene_file)
     for f in m["frame_list"]:
         f["config"]["camera"].update(target=[0, 0, 0], up=[0, 1, 0], fov=45.0)
     (ds.root / "manifest.json").write_text(json.dumps(m))
@@ -170,3 +174,40 @@ def test_world_inputs_need_the_light_scale(tmp_path):
 
     with pytest.raises(DiviewerError, match="world_inputs"):
         tiny(tmp_path, tmp_path / "r", world_inputs=True, light_scale=False)
+
+
+@pytest.fixture(scope="module")
+def cornell_world_model(tmp_path_factory):
+    """A tiny encoding-3 model of the cornell scene file (trained two epochs on synthetic frames)."""
+    from train.test_trainer import quiet, tiny
+
+    from diviewer.train.export import export
+    from diviewer.train.trainer import train
+
+    tmp = tmp_path_factory.mktemp("cw")
+    data, _ = _world_dataset(tmp, scene="cornell")
+    train(tiny(data, tmp / "run", world_inputs=True), log=quiet)
+    export(tmp / "run" / "last.ckpt", tmp / "cw.onnx", log=quiet)
+    return data, tmp / "cw.onnx"
+
+
+def test_eval_scores_a_world_model_on_a_dataset(cornell_world_model, tmp_path):
+    from diviewer.evaluate import evaluate
+
+    data, model = cornell_world_model
+    summary = evaluate(model, data, split="val", out=tmp_path / "e.json", log=lambda *_: None)
+    assert summary["frames"] == 2 and np.isfinite(summary["methods"]["neural"]["psnr_tm"]["mean"])
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("res", ["48x32", "40x56"])
+def test_render_and_the_gl_pass_feed_the_camera(gl_context, cornell_world_model, tmp_path, res):
+    """`render --model` runs the GL pack and NeuralPass: the camera goes in at the GI size, any shape."""
+    from diviewer.cli import main
+    from diviewer.imageio import read_exr
+
+    _, model = cornell_world_model
+    w, h = (int(v) for v in res.split("x"))
+    assert main(["render", "--scene", "cornell", "--model", str(model), "--res", res, "--out", str(tmp_path / "r")]) == 0
+    neural = read_exr(tmp_path / "r" / "neural.exr")
+    assert neural.shape == (h, w, 3) and np.all(np.isfinite(neural))
