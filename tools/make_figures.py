@@ -53,7 +53,7 @@ def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int,
     for seed in seeds:
         config = sample_config(scene, seed, "test")
         frame = renderer.frame(config)
-        neural.run(light_scale=neural.light_scale_for(scene, config))
+        neural.run(**neural.inputs_for(scene, config))
         pt = load_frame(scene, config, w, h).full(spp=spp, seed=0)
         images = [frame["direct"], neural.image(), pt]
         rows.append(row([np.kron(comp.to_ldr(im, scene.exposure + stops), np.ones((2, 2, 1), np.uint8))

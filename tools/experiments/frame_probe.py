@@ -67,7 +67,7 @@ def main() -> int:
                 ctx.finish()
                 t0 = time.perf_counter()
                 r.render(config, direct=direct)
-                npass.run(light_scale=npass.light_scale_for(scene, config))
+                npass.run(**npass.inputs_for(scene, config))
                 npass.composite()
                 ctx.finish()
                 if i >= 3:

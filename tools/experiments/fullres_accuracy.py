@@ -72,7 +72,7 @@ def main() -> None:
                            & 0x7FFFFFFF)
                 config = sample_config(scene, seed, split)
                 full_r.render(config)
-                npass.run(light_scale=npass.light_scale_for(scene, config))
+                npass.run(**npass.inputs_for(scene, config))
                 tex = npass.composite()
                 full = np.flipud(np.frombuffer(tex.read(), dtype="f2").reshape(a.size, a.size, 4)[..., :3])
                 full = np.ascontiguousarray(full, dtype=np.float32)

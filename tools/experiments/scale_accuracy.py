@@ -91,7 +91,7 @@ def measure(scene_name: str, model_path: Path, size: tuple[int, int], scales: li
                 images = {}
                 for s, (r, npass) in passes.items():
                     r.render(config)
-                    npass.run(light_scale=npass.light_scale_for(scene, config))
+                    npass.run(**npass.inputs_for(scene, config))
                     tex = npass.composite()
                     hdr = np.flipud(np.frombuffer(tex.read(), dtype="f2").reshape(r.height, r.width, 4)[..., :3])
                     images[s] = bilinear(np.ascontiguousarray(hdr, dtype=np.float32), W, H)
