@@ -160,9 +160,10 @@ def cornell_frames(gl_context):
 
 def _run_shipped(net, cornell_frames, k, x=None):
     """The shipped model on the frame at light factor k (or ``x``, that frame's buffers altered), with the
-    frame's light scale where the model takes one (encoding 2), as the viewer runs it."""
-    scale = net.light_scale(cornell_frames[2][k]) if net.light_scaled else None
-    return net.run(cornell_frames[1][k] if x is None else x, light_scale=scale)
+    frame's light scale and camera where the model takes them (encodings 2 and 3), as the viewer runs it."""
+    frame = cornell_frames[1][k] if x is None else x
+    h, w = frame.shape[-3:-1]
+    return net.run(frame, **net.frame_inputs(cornell_frames[2][k], w, h))
 
 
 @pytest.fixture(scope="module")
