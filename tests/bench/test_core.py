@@ -265,15 +265,37 @@ def test_two_models_of_one_name_get_precision_twins_of_their_own(tmp_path):
     assert [v["source"] for v in twins] == [str(p) for p in paths]
 
 
+def _encoding_2_model(path: Path) -> Path:
+    """An encoding-2 model like the cornell one shipped before encoding 3 (K=4, 7 levels, 228x128; random weights)."""
+    torch = pytest.importorskip("torch")
+    import onnx
+
+    from onnx_models import base_meta
+
+    from diviewer.bench.onnx_tools import set_meta
+    from diviewer.encoding import Encoding
+    from diviewer.train.export import gi_module, onnx_bytes
+    from diviewer.train.networks import UnetGenerator
+
+    torch.manual_seed(0)
+    enc = Encoding(exposure=1.0, depth_scale=10.0, version=2)
+    module = gi_module(UnetGenerator(K=4, levels=7).eval(), enc, {"target": "indirect", "divide_albedo": True})
+    model = onnx.load_from_string(onnx_bytes(module, torch.rand(1, 128, 256, 10), torch.ones(1)))
+    set_meta(model, {**base_meta(), "encoding": enc.to_dict(), "resolution": [228, 128], "multiple": 128, "K": 4,
+                     "levels": 7, "target": "indirect"})
+    onnx.save(model, str(path))
+    return path
+
+
 def test_int8_quantisation_calibrates_an_encoding_2_model_with_its_light_scales(tmp_path):
-    """The shipped cornell model takes each frame's light scale (encoding 2): calibration feeds it, and the int8
-    model runs (it failed with 'Required inputs (['light_scale']) are missing')."""
+    """An encoding-2 model takes each frame's light scale: calibration feeds it, and the int8 model runs (it failed
+    with 'Required inputs (['light_scale']) are missing')."""
     pytest.importorskip("onnx")
     from diviewer.bench.onnx_tools import get_meta, quantize_int8
     from diviewer.paths import models_dir
     from diviewer.runtime import NeuralGI, read_metadata
 
-    src = models_dir() / "cornell.onnx"
+    src = _encoding_2_model(tmp_path / "v2.onnx")
     assert read_metadata(src)["encoding"]["version"] == 2
     rng = np.random.default_rng(3)
     calib = []
@@ -311,6 +333,11 @@ def test_fp16_twin_of_a_lean_export_halves_the_generator_only():
     rng = np.random.default_rng(7)
     x = random_buffers(rng, 128, 128, batch=1)
     feed = {"buffers": x, "light_scale": np.full(1, 0.7, np.float32)}
+    if int(get_meta(src)["encoding"]["version"]) >= 3:  # encoding 3: the frame's camera too
+        from diviewer.runtime import NeuralGI
+        from diviewer.scene import load_scene
+
+        feed["camera"] = NeuralGI.camera(load_scene("cornell").default.camera, 128, 128)[None]
     ref, got = (r.run(None, feed)[0] for r in runs)
     assert np.abs(got - ref).max() <= 1e-2 * np.abs(ref).max()
     x[0, 3, 3, 2], x[0, 5, 5, 0] = np.nan, np.inf  # a NaN normal and an infinite depth
