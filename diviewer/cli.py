@@ -314,6 +314,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="a few frames at 32x32 (seconds): the test suite's run")
     p.set_defaults(func=_cmd_bench)
 
+    _add_data_parsers(sub)
+    return ap
+
+
+def _add_data_parsers(sub) -> None:
+    """`diviewer data check | merge | refine`."""
     p = sub.add_parser("data", help="inspect datasets")
     data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")
     q = data.add_parser("check", help="verify every frame: present, readable, finite, shapes, checksum")
@@ -331,7 +337,6 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", type=Path, required=True)
     q.add_argument("--shard", default=None, help="k/n: refine every n-th frame starting at the k-th")
     q.set_defaults(func=_cmd_data_refine)
-    return ap
 
 
 def _chosen_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:

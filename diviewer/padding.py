@@ -62,13 +62,19 @@ def crop_nhwc(y: np.ndarray, height: int, width: int, multiple: int) -> np.ndarr
     return np.ascontiguousarray(y[:, crop_slice(height, multiple), crop_slice(width, multiple)])
 
 
-def pad_camera_params(cams, width: int, height: int, multiple: int) -> np.ndarray:
-    """Cameras (`diviewer.scene.camera.camera_params`, (..., 20)) of ``width`` x ``height`` frames -> those of the
-    frames padded to ``multiple``: rays shifted by the padding before the frame, clamped to the frame's pixels (so
-    the padding replicates the edge rays, as it replicates the edge pixels)."""
-    px, py = pad_before(width, multiple), pad_before(height, multiple)
-    out = np.array(cams, np.float32, copy=True)
-    out[..., 13] -= out[..., 12] * px
-    out[..., 15] -= out[..., 14] * py
-    out[..., 16], out[..., 17], out[..., 18], out[..., 19] = px, px + width - 1, py, py + height - 1
+def shift_camera_params(cams, left, pad: tuple[int, int], size: tuple[int, int]):
+    """Cameras (`diviewer.scene.camera.camera_params`, (..., 20), numpy or torch) of whole frames -> those of their
+    ``size`` (width, height) crops at columns ``left`` (a number or one per frame), padded by ``pad`` (left, top):
+    rays shifted by the crop and the padding, clamped to the crop's pixels (so the padding replicates the edge
+    rays, as it replicates the edge pixels)."""
+    out = cams.clone() if hasattr(cams, "clone") else np.array(cams, np.float32, copy=True)
+    (px, py), (w, h) = pad, size
+    out[..., 13] = out[..., 13] + out[..., 12] * (left - px)
+    out[..., 15] = out[..., 15] - out[..., 14] * py
+    out[..., 16], out[..., 17], out[..., 18], out[..., 19] = px, px + w - 1, py, py + h - 1
     return out
+
+
+def pad_camera_params(cams, width: int, height: int, multiple: int) -> np.ndarray:
+    """Cameras of ``width`` x ``height`` frames -> those of the frames padded to ``multiple`` (`shift_camera_params`)."""
+    return shift_camera_params(cams, 0, (pad_before(width, multiple), pad_before(height, multiple)), (width, height))

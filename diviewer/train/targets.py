@@ -206,13 +206,14 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
         direct_in = direct_in * inv
     real_A = encode_inputs(p["depth"], p["normal"], p["albedo"], direct_in, enc, channel_axis=1)
     if enc.world_inputs:
-        from diviewer.padding import pad_before
-        from diviewer.train.world import shift_cameras, world_planes
+        from diviewer.padding import pad_before, shift_camera_params
+        from diviewer.train.world import world_planes
 
         if cams is None:
             raise ValueError("encoding version 3 needs each frame's camera")
-        cams = shift_cameras(cams.to(x.device, torch.float32), left, (pad_before(w, multiple), pad_before(h, multiple)),
-                             (w, h))
+        cams = cams.to(x.device, torch.float32)
+        cams = shift_camera_params(cams, torch.as_tensor(left, dtype=cams.dtype, device=cams.device),
+                                   (pad_before(w, multiple), pad_before(h, multiple)), (w, h))
         real_A = torch.cat([real_A, world_planes(p["depth"], p["normal"], cams, enc.world_center, enc.world_half)], 1)
     target = target_radiance(p["pt"], p["pt_direct"], p["albedo"], cfg.target, cfg.divide_albedo)
     if inv is not None:

@@ -47,16 +47,3 @@ def world_planes(depth: torch.Tensor, normal: torch.Tensor, cams: torch.Tensor, 
                     + c[:, 3 * k + 2:3 * k + 3] * nrm[2] for k in range(3)], 1)
     geo = torch.clamp(depth * _HUGE, 0.0, 1.0)
     return torch.cat([torch.clamp((pos - center) * inv_half, -1.0, 1.0) * geo, torch.clamp(wn, -1.0, 1.0) * geo], 1)
-
-
-def shift_cameras(cams: torch.Tensor, left: Any, pad: tuple[int, int], size: tuple[int, int]) -> torch.Tensor:
-    """Full-frame cameras (x0 = 0, no padding) -> the cameras of crops at columns ``left`` (N,), padded by
-    ``pad`` (left, top), of ``size`` (width, height): what `camera_params` gives for that crop and padding."""
-    out = cams.clone()
-    left = torch.as_tensor(left, dtype=cams.dtype, device=cams.device)
-    px, py = pad
-    w, h = size
-    out[:, 13] = cams[:, 13] + cams[:, 12] * (left - px)
-    out[:, 15] = cams[:, 15] - cams[:, 14] * py
-    out[:, 16], out[:, 17], out[:, 18], out[:, 19] = px, px + w - 1, py, py + h - 1
-    return out

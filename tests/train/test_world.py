@@ -16,7 +16,8 @@ from diviewer.padding import pad_before, pad_index  # noqa: E402
 from diviewer.scene import camera as cam  # noqa: E402
 from diviewer.scene.loader import load_scene  # noqa: E402
 from diviewer.train.checkpoint import load_checkpoint  # noqa: E402
-from diviewer.train.world import shift_cameras, world_planes  # noqa: E402
+from diviewer.padding import shift_camera_params  # noqa: E402
+from diviewer.train.world import world_planes  # noqa: E402
 from tool_modules import load_tool  # noqa: E402
 
 CAMERA = {"position": [-0.4, 1.4, 3.9], "target": [0.2, 1.3, 0.4], "up": [0.0, 1.0, 0.0], "fov": 41.0}
@@ -62,9 +63,9 @@ def test_planes_of_a_padded_frame_are_the_frames_planes_edge_padded():
     np.testing.assert_allclose(got.numpy(), pad(plain).numpy(), atol=1e-5)
 
 
-def test_shift_cameras_is_camera_params_of_the_crop():
+def test_shifted_cameras_are_camera_params_of_the_crop():
     full = torch.from_numpy(np.stack([_params(width=228, height=128)] * 2))
-    got = shift_cameras(full, [17, 80], (14, 0), (100, 128)).numpy()
+    got = shift_camera_params(full, torch.tensor([17.0, 80.0]), (14, 0), (100, 128)).numpy()
     for i, x0 in enumerate((17, 80)):
         np.testing.assert_allclose(got[i], _params(width=100, height=128, x0=x0, source=(228, 128), pad=(14, 0)),
                                    atol=1e-5)
