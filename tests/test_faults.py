@@ -114,7 +114,7 @@ def test_train_on_a_full_disk_leaves_no_half_checkpoint(tmp_path):
     from train.test_trainer import make_dataset
 
     make_dataset(tmp_path / "data")
-    argv = ["train", "--data", str(tmp_path / "data"), "--out", "{disk}/run", "--k", "4", "--ndf", "8", "--epochs", "1",
+    argv = ["train", "--data", str(tmp_path / "data"), "--out", "{disk}/run", "--no-world-inputs", "--k", "4", "--ndf", "8", "--epochs", "1",
             "--batch-size", "4", "--lr-decay", "none", "--device", "cpu"]
     p, disk, kept = on_small_disk(tmp_path, 1024, argv)  # metrics fit, a 1.4 MB checkpoint does not
     assert p.returncode == 2, p.stderr
@@ -211,7 +211,7 @@ def test_train_full_disk_monkeypatched(tmp_path, capsys, monkeypatch):
 
     monkeypatch.setattr(torch, "save", full)
     out = tmp_path / "run"
-    rc = main(["train", "--data", str(tmp_path / "data"), "--out", str(out), "--k", "4", "--ndf", "8", "--epochs", "1",
+    rc = main(["train", "--data", str(tmp_path / "data"), "--out", str(out), "--no-world-inputs", "--k", "4", "--ndf", "8", "--epochs", "1",
                 "--lr-decay", "none",
                "--batch-size", "4", "--device", "cpu", "--max-steps", "1"])
     line = _last_line(capsys)

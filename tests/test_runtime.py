@@ -97,15 +97,26 @@ def test_any_size_is_padded_to_the_stride_and_cropped_back():
 
     model = NeuralGI(SHIPPED[0])  # a shipped model: no onnx package needed
     m = model.multiple
+    from diviewer.padding import pad_camera_params
+
     scale = 1.0 if model.light_scaled else None  # encoding 2 takes each frame's light scale
+    view = {"position": (0.0, 1.0, 3.4), "target": (0.0, 1.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 40.0}
     rng = np.random.default_rng(0)
     for h, w in [(24, 24), (20, 36), (40, 12)]:
         x = random_buffers(rng, h, w)
-        y = model.run(x, light_scale=scale)
+        cam = NeuralGI.camera(view, w, h) if model.world else None  # encoding 3 takes each frame's camera
+        y = model.run(x, light_scale=scale, camera=cam)
         assert y.shape == (h, w, 3) and np.all(np.isfinite(y))
         padded = pad_nhwc(x[None], m)
         assert padded.shape[1] % m == 0 and padded.shape[2] % m == 0
-        np.testing.assert_array_equal(y, crop_nhwc(np.maximum(model.run(padded, light_scale=scale), 0), h, w, m)[0])
+        # the padded frame's camera: the frame's, its rays clamped to the frame (the runtime's pad_camera_params)
+        if cam is None:
+            y_pad = model.run(padded, light_scale=scale)
+        else:  # the graph itself on the padded frame and the padded frame's camera (run() would widen its rays)
+            feeds = {"buffers": padded, "light_scale": np.full(1, scale, np.float32),
+                     "camera": pad_camera_params(cam, w, h, m)[None]}
+            y_pad = model.session.run(["radiance"], feeds)[0]
+        np.testing.assert_array_equal(y, crop_nhwc(np.maximum(y_pad, 0), h, w, m)[0])
 
 
 def test_pack_shader_refuses_a_layout_it_does_not_write(ctx):
@@ -222,7 +233,7 @@ def test_shipped_model_runs_a_frame_of_its_scene(ctx, path):
     try:
         config = sample_config(scene, 0, "test")
         frame = renderer.frame(config)
-        neural.run(light_scale=model.light_scale(config) if model.light_scaled else None)
+        neural.run(**neural.inputs_for(scene, config))
         np.testing.assert_array_equal(neural.packed[0], pack_buffers(frame))
         out = neural.image()
         assert out.shape == (h, w, 3) and out.dtype == np.float32

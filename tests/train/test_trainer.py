@@ -378,7 +378,7 @@ def test_cli_trains_resumes_and_refuses_conflicts(data, tmp_path):
     ap = argparse.ArgumentParser()
     add_train_parser(ap.add_subparsers(dest="command"))
     out = tmp_path / "cli"
-    common = ["train", "--data", str(data), "--out", str(out), "--device", "cpu", "--ndf", "8"]
+    common = ["train", "--data", str(data), "--out", str(out), "--device", "cpu", "--ndf", "8", "--no-world-inputs"]
     args = ap.parse_args([*common, "--k", "4", "--epochs", "1", "--seed", "3"])
     assert args.func is run_train
     assert run_train(args) == 0
@@ -536,7 +536,7 @@ def test_cli_maps_the_options_onto_the_config(data, tmp_path):
     add_train_parser(ap.add_subparsers(dest="command"))
     out = tmp_path / "cli_opts"
     args = ap.parse_args(["train", "--data", str(data), "--out", str(out), "--device", "cpu", "--k", "4", "--ndf", "8",
-                          "--epochs", "1", "--gan-weight", "0", "--recon-loss", "l2", "--recon-space", "linear",
+                          "--no-world-inputs", "--epochs", "1", "--gan-weight", "0", "--recon-loss", "l2", "--recon-space", "linear",
                           "--n-layers-d", "2", "--d-lr", "1e-3", "--upsample", "resize", "--norm", "instance",
                           "--train-frames", "8", "--patience", "3", "--val-every-steps", "1", "--precision", "fp32",
                           "--lr-decay", "none"])  # the default recipe decays from step 20,000
