@@ -35,8 +35,6 @@ from diviewer.locks import run_lock, shard_part
 REFINE_STREAM = 0x4EF1
 """Tag of the new seeds' stream: a frame's extra seed is ``SeedSequence([its seed, REFINE_STREAM, source spp])``."""
 
-FLOAT16_MAX = float(np.finfo(np.float16).max)
-
 
 def refine_seed(frame_seed: int, source_spp: int) -> int:
     """The seed of a frame's extra samples: independent of the capture's own (its seed) and of other refinements."""
@@ -68,7 +66,7 @@ def refined_manifest(src: Dataset, spp: int) -> dict:
 
 def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), log=print) -> dict:
     """Refine the present frames of ``src_dir`` (this shard's) to ``spp`` into ``out``; returns a summary."""
-    from diviewer.data.capture import open_or_create, summarize
+    from diviewer.data.capture import FLOAT16_MAX, open_or_create, summarize
     from diviewer.reference import mitsuba as ref
     from diviewer.scene.loader import config_from_dict, load_scene
 
