@@ -188,9 +188,6 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
         env = report.environment(ctx, mode)
         # int8: each trained model's fp32 variant, quantised with inputs of training frames.
         for v in [v for v in variants if v["kind"] == "neural" and v["precision"] == "fp32"]:
-            if int(v["meta"].get("encoding", {}).get("version", 1)) >= 3:
-                notes.append(f"{v['name']}: no int8 twin (its calibration feeds no camera, which encoding 3 takes)")
-                continue
             w, h = (int(x) for x in v["meta"]["resolution"])
             gb = GlBench(ctx, scene, w, h, mode)
             try:

@@ -21,7 +21,7 @@ import numpy as np
 
 from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, OUTPUT_CHANNELS, input_channel_slices
 from diviewer.errors import DiviewerError, missing_extra
-from diviewer.runtime import INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
+from diviewer.runtime import CAMERA_NAME, INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
 
 OPSET = 17
 UPSAMPLE_MACS = {"transpose": 4, "resize": 9}
@@ -267,17 +267,18 @@ def to_fp16(model):
     return m
 
 
-def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple[np.ndarray, float]]) -> Path:
+def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple]) -> Path:
     """Static int8 quantisation (QDQ, per-channel weights) of the convolutions, calibrated on ``calibration``
     ((1, H, W, 10) buffers, padded to the model's stride as the runtime pads them, each with its frame's light
-    scale, fed where the model takes one: encoding 2); the encoding and decoding stay float."""
+    scale and camera (1, CAMERA_PARAMS), fed where the model takes them: encodings 2 and 3); the encoding and
+    decoding stay float."""
     onnx = _onnx()
     from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
 
-    from diviewer.padding import pad_nhwc
+    from diviewer.padding import pad_camera_params, pad_nhwc
 
     meta = get_meta(onnx.load(str(fp32_path)))
-    scaled = int(meta.get("encoding", {}).get("version", 1)) >= 2
+    version = int(meta.get("encoding", {}).get("version", 1))
     multiple = int(meta.get("multiple", 1))  # padded as the runtime pads (a 228x128 model runs at 256x128)
 
     class Reader(CalibrationDataReader):
@@ -288,8 +289,13 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple[np.nd
             item = next(self.it, None)
             if item is None:
                 return None
-            x, scale = pad_nhwc(item[0], multiple), item[1]
-            return {INPUT_NAME: x, LIGHT_SCALE_NAME: np.full(len(x), scale, np.float32)} if scaled else {INPUT_NAME: x}
+            n, h, w = item[0].shape[:3]
+            feed = {INPUT_NAME: pad_nhwc(item[0], multiple)}
+            if version >= 2:
+                feed[LIGHT_SCALE_NAME] = np.full(n, item[1], np.float32)
+            if version >= 3:
+                feed[CAMERA_NAME] = pad_camera_params(np.asarray(item[2], np.float32), w, h, multiple)
+            return feed
 
     root = logging.getLogger()
     level = root.level

@@ -284,9 +284,10 @@ def temporal_configs(scene, n: int, span: float = 0.25) -> list:
     return out
 
 
-def calibration(settings, scene, gb, width: int, height: int) -> tuple[list[tuple[np.ndarray, float]], str]:
-    """Model inputs of training frames with their light scales (what an encoding-2 model also takes): a capture's
-    train split when given, else GL renders of training configs."""
+def calibration(settings, scene, gb, width: int, height: int) -> tuple[list[tuple], str]:
+    """Model inputs of training frames, each (buffers (1, H, W, 10), light scale, camera (1, CAMERA_PARAMS)): what
+    encoding-2 and -3 models also take. A capture's train split when given, else GL renders of training configs."""
+    from diviewer.runtime import NeuralGI
     from diviewer.scene.lights import light_scale
 
     if settings.calib_data:
@@ -300,10 +301,12 @@ def calibration(settings, scene, gb, width: int, height: int) -> tuple[list[tupl
             raise DiviewerError("no train frames to calibrate int8 on", path=settings.calib_data)
         frames = [pack_buffers(ds.load(i)) for i in idx]
         if frames[0].shape[:2] == (height, width):
-            return ([(f[None], float(s)) for f, s in zip(frames, light_scales(ds, idx))],
+            cams = {f["index"]: f["config"]["camera"] for f in ds.frames}
+            return ([(f[None], float(s), NeuralGI.camera(cams[i], width, height)[None])
+                     for i, f, s in zip(idx, frames, light_scales(ds, idx))],
                     f"{len(idx)} train frames of {settings.calib_data}")
     from diviewer.scene import sample_config
 
     configs = [sample_config(scene, 9000 + i, "train") for i in range(settings.calib_frames)]
-    return ([(gb.buffers(c), light_scale(scene, c)) for c in configs],
+    return ([(gb.buffers(c), light_scale(scene, c), NeuralGI.camera(c.camera, width, height)[None]) for c in configs],
             f"GL inputs of {settings.calib_frames} training configurations")

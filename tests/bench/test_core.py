@@ -309,6 +309,32 @@ def test_int8_quantisation_calibrates_an_encoding_2_model_with_its_light_scales(
     assert y.shape == (128, 228, 3) and np.isfinite(y).all() and y.max() > 0
 
 
+def test_int8_quantisation_calibrates_an_encoding_3_model_with_its_cameras(tmp_path):
+    """The shipped cornell model takes each frame's camera (encoding 3): calibration feeds it, padded as the runtime
+    pads, and the int8 twin runs off the model's own size and stays near the fp32 model on a calibration frame
+    (bench made no int8 twin of encoding-3 models before)."""
+    pytest.importorskip("onnx")
+    import onnx
+
+    from diviewer.bench.onnx_tools import get_meta, quantize_int8
+    from diviewer.paths import models_dir
+    from diviewer.runtime import NeuralGI, read_metadata
+
+    src = models_dir() / "cornell.onnx"
+    if read_metadata(src)["encoding"]["version"] < 3:
+        pytest.skip("the shipped cornell model is not encoding 3")
+    rng = np.random.default_rng(5)
+    camera = {"position": (0.0, 1.0, 3.5), "target": (0.0, 1.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 45.0}
+    calib = [(random_buffers(rng, 96, 160, batch=1), s, NeuralGI.camera(camera, 160, 96)[None]) for s in (0.5, 2.0)]
+    out = quantize_int8(src, tmp_path / "int8.onnx", calib)
+    assert get_meta(onnx.load(str(out)))["precision"] == "int8"
+    x, scale, cam = calib[0]
+    y8 = NeuralGI(out).run(x[0], light_scale=scale, camera=cam)
+    y32 = NeuralGI(src).run(x[0], light_scale=scale, camera=cam)
+    assert y8.shape == (96, 160, 3) and np.isfinite(y8).all() and y8.max() > 0
+    assert np.abs(y8 - y32).mean() < 0.1 * np.abs(y32).mean()
+
+
 def test_fp16_twin_of_a_lean_export_halves_the_generator_only():
     """bench's fp16 twin of the shipped fp32 model: the generator in float16 between one Cast in and one out,
     the encoding and its NaN guard untouched (onnxruntime's converter mistyped the guard's If and the file did
