@@ -92,7 +92,7 @@ def _check_meta_types(meta: dict, path: Path) -> None:
         # sizes are checked modulo this: zero would divide by zero, and the U-Net halves it per level
         "multiple": _is_int(meta["multiple"], 1) and meta["multiple"] & (meta["multiple"] - 1) == 0,
         "K": _is_int(meta["K"]), "levels": _is_int(meta["levels"]),  # 0: a baseline without a network
-        "target": meta["target"] in ("full", "indirect"),
+        "target": meta["target"] in ("full", "indirect", "residual"),
         "encoding": isinstance(meta["encoding"], dict) and _is_int(meta["encoding"].get("version", 0)),
         # int8 only as bench's static quantisation writes it: with the record of how it was quantised
         "precision": meta["precision"] in ("fp32", "fp16")

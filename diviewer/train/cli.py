@@ -40,10 +40,11 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue the run in --out exactly where it stopped")
     p.add_argument("--k", dest="K", type=int, default=None, help=f"generator base width (default {d['K']})")
     p.add_argument("--epochs", type=int, default=None, help=f"default {d['epochs']}")
-    p.add_argument("--target", choices=("full", "indirect"), default=None,
-                   help="predict the full GI image or indirect light only (default full)")
+    p.add_argument("--target", choices=("full", "indirect", "residual"), default=None,
+                   help="predict the full GI image, indirect light only, or the path tracer minus the GL direct "
+                        "light (residual) (default full)")
     p.add_argument("--divide-albedo", action="store_true", default=None,
-                   help="with --target indirect: predict indirect / albedo")
+                   help="with --target indirect or residual: predict it / albedo")
     p.add_argument("--batch-size", type=int, default=None, help=f"default {d['batch_size']}")
     p.add_argument("--lr", type=float, default=None, help=f"Adam learning rate (default {d['lr']})")
     p.add_argument("--lr-decay", choices=CHOICES["lr_decay"], default=None,

@@ -54,11 +54,12 @@ class TrainConfig:
     """Weight of the L1 term against the adversarial term (pix2pix)."""
 
     target: str = "full"
-    """What netG predicts: "full" (the path-traced image) or "indirect" (pt - pt_direct, added to
-    the GL direct light when composed)."""
+    """What netG predicts: "full" (the path-traced image), "indirect" (pt - pt_direct, added to the GL direct light
+    when composed) or "residual" (pt - the GL direct light itself, added back to it: the network also corrects
+    where the rasterizer's shadow map and point-sampled pixels differ from the path tracer's direct light)."""
 
     divide_albedo: bool = False
-    """With target "indirect": predict indirect / max(albedo, ALBEDO_FLOOR) (texture-free, closer
+    """With target "indirect" or "residual": predict it / max(albedo, ALBEDO_FLOOR) (texture-free, closer
     to irradiance) and multiply back when composing."""
 
     seed: int = 0
@@ -194,10 +195,10 @@ class TrainConfig:
             fail("lambda_L1", f"must be a number >= 0, got {self.lambda_L1!r}")
         if not (isinstance(self.dropout, (int, float)) and 0.0 <= self.dropout < 1.0):
             fail("dropout", f"must be in [0, 1), got {self.dropout!r}")
-        if self.target not in ("full", "indirect"):
-            fail("target", f"must be 'full' or 'indirect', got {self.target!r}")
-        if self.divide_albedo and self.target != "indirect":
-            fail("divide_albedo", "only applies to target 'indirect' (use --target indirect)")
+        if self.target not in ("full", "indirect", "residual"):
+            fail("target", f"must be 'full', 'indirect' or 'residual', got {self.target!r}")
+        if self.divide_albedo and self.target == "full":
+            fail("divide_albedo", "only applies to targets 'indirect' and 'residual' (use --target indirect)")
         if self.recipe is not None and not (isinstance(self.recipe, dict)
                                             and all(isinstance(k, str) for k in self.recipe)):
             fail("recipe", f"must be a recipe record (a table of name, file, sha256, overrides), got {self.recipe!r}")

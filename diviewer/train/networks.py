@@ -31,7 +31,8 @@ __all__ = [
 LAMBDA_L1: float = 100.0
 """Weight of the L1 term against the adversarial term (pix2pix's default, used by the paper)."""
 
-TARGETS: tuple[str, ...] = ("full", "indirect")
+TARGETS: tuple[str, ...] = ("full", "indirect", "residual")
+"""What netG may predict (`diviewer.train.config.TrainConfig.target`)."""
 """What the generator predicts: the full GI image, or indirect light only (added to exact direct)."""
 
 
@@ -341,7 +342,7 @@ class NetConfig:
     """Weight of the L1 term against the adversarial term."""
 
     target: str = "full"
-    """What the generator predicts: "full" GI radiance, or "indirect" (added to the exact direct light)."""
+    """What the generator predicts: "full" GI radiance, or "indirect" / "residual" (added to the GL direct light)."""
 
     upsample: str = "transpose"
     """Generator decoder upsampling, one of `UPSAMPLES`: "transpose" (the paper), "resize", "shuffle"."""

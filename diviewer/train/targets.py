@@ -24,11 +24,14 @@ ALBEDO_FLOOR: float = 0.05
 the same: exactly invertible, and dark or background pixels (albedo 0) do not amplify noise."""
 
 
-def target_radiance(pt: Any, pt_direct: Any, albedo: Any, target: str, divide_albedo: bool) -> Any:
-    """Linear radiance netG learns to predict (before encoding), from path-traced ground truth."""
+def target_radiance(pt: Any, pt_direct: Any, albedo: Any, target: str, divide_albedo: bool, direct: Any = None) -> Any:
+    """Linear radiance netG learns to predict (before encoding), from path-traced ground truth: ``pt`` ("full"),
+    ``pt - pt_direct`` ("indirect") or ``pt - direct``, the GL direct light the composite adds ("residual")."""
     if target == "full":
         return pt
-    indirect = pt - pt_direct
+    if target == "residual" and direct is None:
+        raise ValueError("target 'residual' needs the GL direct light")
+    indirect = pt - (direct if target == "residual" else pt_direct)
     if divide_albedo:
         indirect = indirect / _albedo_floor(albedo)
     return indirect
@@ -215,7 +218,7 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
         cams = shift_camera_params(cams, torch.as_tensor(left, dtype=cams.dtype, device=cams.device),
                                    (pad_before(w, multiple), pad_before(h, multiple)), (w, h))
         real_A = torch.cat([real_A, world_planes(p["depth"], p["normal"], cams, enc.world_center, enc.world_half)], 1)
-    target = target_radiance(p["pt"], p["pt_direct"], p["albedo"], cfg.target, cfg.divide_albedo)
+    target = target_radiance(p["pt"], p["pt_direct"], p["albedo"], cfg.target, cfg.divide_albedo, p["direct"])
     if inv is not None:
         target = target * inv
     real_B = encode_radiance(target, enc)

@@ -328,6 +328,18 @@ def test_indirect_target_divided_by_albedo_trains(data, tmp_path):
     assert meta["target"] == "indirect" and meta["divide_albedo"] is True and meta["net_config"]["target"] == "indirect"
 
 
+def test_residual_target_trains_and_exports_a_graph_that_adds_the_gl_direct_light(data, tmp_path):
+    """target "residual": netG learns pt - GL direct; the exported graph composes it exactly as "indirect" (GL direct
+    + prediction, clamped at 0) and export's verification against training's functions passes."""
+    from diviewer.runtime import read_metadata
+    from diviewer.train.export import export
+
+    result = train(tiny(data, tmp_path / "res", epochs=1, target="residual", divide_albedo=True), log=quiet)
+    assert result["step"] == 2 and math.isfinite(result["val"]["ssim_tm"])
+    card = export(tmp_path / "res" / "last.ckpt", tmp_path / "res.onnx", log=quiet)
+    assert card["target"] == "residual" and read_metadata(tmp_path / "res.onnx")["target"] == "residual"
+
+
 def test_target_and_composition_invert_each_other():
     rng = np.random.default_rng(1)
     albedo = rng.uniform(0, 1, (4, 4, 3)) * (rng.uniform(size=(4, 4, 1)) > 0.3)  # some albedo-0 pixels
@@ -339,6 +351,15 @@ def test_target_and_composition_invert_each_other():
         as_torch = (torch.from_numpy(a) for a in (pt, pt_direct, albedo))
         yt = target_radiance(*as_torch, target, divide)
         np.testing.assert_allclose(yt.numpy(), y, rtol=1e-12)
+    # residual: what the path tracer adds to the GL direct light (which differs from its own direct light, here
+    # brighter in places, so the residual is negative there), composed back onto that same GL direct light
+    gl_direct = pt_direct * rng.uniform(0.5, 1.5, (4, 4, 3))
+    for divide in (False, True):
+        y = target_radiance(pt, pt_direct, albedo, "residual", divide, gl_direct)
+        assert (y < 0).any()
+        np.testing.assert_allclose(compose_radiance(y, gl_direct, albedo, "residual", divide), pt, rtol=1e-12)
+    with pytest.raises(ValueError, match="GL direct"):
+        target_radiance(pt, pt_direct, albedo, "residual", True)
     # divided by albedo: where the albedo is tiny the divisor is the floor, so noise is not amplified
     y = target_radiance(pt, pt_direct, albedo, "indirect", True)
     assert np.abs(y).max() <= np.abs(pt - pt_direct).max() / ALBEDO_FLOOR + 1e-12
