@@ -2,6 +2,7 @@
 against pt, on a capture's split; what separates the rasterizer's direct light from the path tracer's.
 
 Usage: python tools/experiments/direct_ceiling.py --data DATA [--split test] [--frames 200] [--out OUT.json]
+       python tools/experiments/direct_ceiling.py --evalset DIR --cache RENDERS.npz [--spp 1024] [--out OUT.json]
 
 A model of target "indirect" composes GL direct + its prediction, so even a perfect prediction leaves the
 difference between the GL direct light (shadow map, one point per pixel) and the path tracer's (exact shadows,
@@ -10,6 +11,11 @@ alone (plus pt_direct's own noise). Tone-mapped as `diviewer eval` (the scene's 
 Reports the per-frame mean, median and the 10th percentile of tone-mapped PSNR for that composite ("oracle
 indirect") and for GL direct against pt_direct over the frames where they differ; frames where they agree exactly
 (no direct light in view: no error to score) and frames whose truth is black (no light) are counted, not scored.
+
+With ``--evalset`` (an evaluation set, which stores no pt_direct): the path tracer's direct light of every frame
+is rendered with Mitsuba at ``--spp`` (kept in ``--cache``, resumable), and the same composite is scored per
+split and shape against the set's truth, whole frame and the "object without direct light" region (mean over
+frames, as `diviewer eval` reports), beside the noise floor (the set's second seed).
 """
 
 from __future__ import annotations
@@ -30,13 +36,85 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
     return float("inf") if m == 0 else float(10 * np.log10(1.0 / m))
 
 
+def _mean(values: list[float]) -> float | None:
+    """Mean over the frames with an error (an exact frame, PSNR inf, is counted apart); None when there are none."""
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else None
+
+
+def evalset_ceiling(root: Path, cache: Path, spp: int) -> dict:
+    """Per split and shape of the evaluation set at ``root``: the oracle composite's scores (see the docstring)."""
+    from diviewer.evalframes import EvalFrames, crop_frame, split_key
+    from diviewer.evalscore import regions
+    from diviewer.metrics import masked_psnr
+    from diviewer.reference.mitsuba import render_direct
+    from diviewer.scene import load_scene
+    from diviewer.scene.loader import config_from_dict
+
+    ev = EvalFrames(root)
+    scene = load_scene(ev.manifest["scene"])  # the shipped scene of that name; its hash must be the set's
+    if scene.file_hash != ev.manifest["scene_hash"]:
+        raise SystemExit(f"the scene file {ev.manifest['scene']} is not the one the evaluation set was made from")
+    w, h = (int(x) for x in ev.manifest["resolution"])
+    done = dict(np.load(cache)) if cache.is_file() else {}
+    for f in ev.frames:
+        key = str(f["index"])
+        if key not in done:
+            config = config_from_dict(scene, f["config"])
+            done[key] = render_direct(scene, config, w, h, spp=spp, seed=7919 + f["index"])
+            tmp = cache.with_name(cache.name + ".tmp.npz")
+            np.savez(tmp, **done)
+            tmp.replace(cache)
+            print(f"rendered frame {key} ({len(done)} of {len(ev.frames)})", flush=True)
+    out = {}
+    for split, shapes in ev.splits().items():
+        for shape in shapes:
+            rows = {"oracle_indirect": [], "noise_floor": []}
+            unlit = {"oracle_indirect": [], "noise_floor": []}
+            for i in ev.present(split, []):
+                f = crop_frame({**ev.load(i), "pt_direct_mi": done[str(i)]}, shape[0])
+                ref = tonemap(f["pt"], ev.exposure)
+                images = {"oracle_indirect": np.maximum(f["direct"] + f["pt"] - f["pt_direct_mi"], 0.0),
+                          "noise_floor": f[ev.info["second_seed_channel"]]}
+                m = (regions(f, ev.exposure) or {}).get("object_unlit")
+                for name, img in images.items():
+                    t = tonemap(img, ev.exposure)
+                    rows[name].append(_psnr(t, ref))
+                    if m is not None and m.any():
+                        unlit[name].append(masked_psnr(t, ref, m))
+            out[split_key(split, shape, shapes)] = {
+                name: {"psnr_tm": _mean(rows[name]), "frames": len(rows[name]), "psnr_tm_object_unlit":
+                       _mean(unlit[name]), "frames_object_unlit": len(unlit[name]),
+                       "frames_exact": sum(1 for v in rows[name] if v == float("inf")),
+                       "frames_object_unlit_exact": sum(1 for v in unlit[name] if v == float("inf"))}
+                for name in rows}
+    return {"evalset": str(root), "spp_direct": spp, "exposure": ev.exposure, "splits": out}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, required=True)
+    ap.add_argument("--data", type=Path)
     ap.add_argument("--split", default="test")
     ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument("--evalset", type=Path)
+    ap.add_argument("--cache", type=Path, help="with --evalset: the rendered direct light (npz, resumable)")
+    ap.add_argument("--spp", type=int, default=1024)
     ap.add_argument("--out", type=Path)
     a = ap.parse_args()
+    if a.evalset:
+        if not a.cache:
+            ap.error("--evalset needs --cache")
+        result = evalset_ceiling(a.evalset, a.cache, a.spp)
+        for key, rows in result["splits"].items():
+            print(key + ": " + "; ".join(
+                f"{n} {r['psnr_tm']:.2f} (unlit object {'-' if r['psnr_tm_object_unlit'] is None else format(r['psnr_tm_object_unlit'], '.2f')}"
+                f" over {r['frames_object_unlit'] - r['frames_object_unlit_exact']} frames, "
+                f"{r['frames_object_unlit_exact']} exact)" for n, r in rows.items()))
+        if a.out:
+            a.out.write_text(json.dumps(result, indent=1))
+        return
+    if not a.data:
+        ap.error("give --data or --evalset")
     ds = Dataset(a.data)
     idx = ds.indices(a.split)[: a.frames]
     exposure, source = scene_exposure(ds.manifest["scene"], ds.manifest["scene_hash"], [])
