@@ -151,6 +151,29 @@ def _check_calib_data(settings, scene) -> None:
                             field="--calib-data")
 
 
+def _int8_twins(settings, scene, ctx, mode, variants: list[dict], tmp: Path, notes: list[str]) -> list[dict]:
+    """int8 twins of each trained model's fp32 variant, quantised with inputs of training frames (what failed to
+    quantise goes to ``notes``)."""
+    from diviewer.bench.onnx_tools import quantize_int8
+    from diviewer.bench.runner import GlBench, calibration
+
+    out = []
+    for v in [v for v in variants if v["kind"] == "neural" and v["precision"] == "fp32"]:
+        w, h = (int(x) for x in v["meta"]["resolution"])
+        gb = GlBench(ctx, scene, w, h, mode)
+        try:
+            calib, calib_note = calibration(settings, scene, gb, w, h)
+        finally:
+            gb.release()
+        dst = tmp / f"{v['n']}_{v['name']}_int8.onnx"
+        try:
+            quantize_int8(Path(v["path"]), dst, calib)
+            out.append({**v, "precision": "int8", "path": dst, "calibration": calib_note, "converted_from": "fp32"})
+        except Exception as exc:
+            notes.append(f"{v['name']}: int8 quantisation failed ({type(exc).__name__}: {exc})")
+    return out
+
+
 def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: Path | None = None,
               log=print) -> dict:
     """Measure every row; print the table; write the JSON and the plot when asked. Returns the result."""
@@ -158,8 +181,8 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
     import onnx
 
     from diviewer.bench import report
-    from diviewer.bench.onnx_tools import generator_flops, quantize_int8, untrained_generator
-    from diviewer.bench.runner import GlBench, calibration, gl_timing_mode, temporal_configs, time_path_tracer
+    from diviewer.bench.onnx_tools import generator_flops, untrained_generator
+    from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_configs, time_path_tracer
     from diviewer.gl.context import headless_context
     from diviewer.runtime import NeuralGI
     from diviewer.scene import load_scene, sample_config
@@ -186,21 +209,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
     with headless_context() as ctx:
         mode = gl_timing_mode(ctx, settings.timing)
         env = report.environment(ctx, mode)
-        # int8: each trained model's fp32 variant, quantised with inputs of training frames.
-        for v in [v for v in variants if v["kind"] == "neural" and v["precision"] == "fp32"]:
-            w, h = (int(x) for x in v["meta"]["resolution"])
-            gb = GlBench(ctx, scene, w, h, mode)
-            try:
-                calib, calib_note = calibration(settings, scene, gb, w, h)
-            finally:
-                gb.release()
-            dst = tmp / f"{v['n']}_{v['name']}_int8.onnx"
-            try:
-                quantize_int8(Path(v["path"]), dst, calib)
-                variants.append({**v, "precision": "int8", "path": dst, "calibration": calib_note,
-                                 "converted_from": "fp32"})
-            except Exception as exc:
-                notes.append(f"{v['name']}: int8 quantisation failed ({type(exc).__name__}: {exc})")
+        variants += _int8_twins(settings, scene, ctx, mode, variants, tmp, notes)
         for res in settings.resolutions:
             log(f"timing at {res}x{res} ({settings.warmup} warm-up + {settings.frames} frames per row, GL: {mode})")
             gb = GlBench(ctx, scene, res, res, mode)
