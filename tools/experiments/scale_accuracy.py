@@ -2,7 +2,7 @@
 
 Usage: python tools/experiments/scale_accuracy.py [--scene cornell] [--model assets/models/cornell.onnx] [--size 768x768]
        [--scales 1,0.875,0.75,0.625,0.5] [--frames 6] [--spp 0] [--gi-res model] [--exposure X]
-       [--out runs/<scene>/scale_accuracy.json]
+       [--out runs/<scene>/scale_accuracy.json] [--truth-cache TRUTH.npz]
 
 The successor of tools/fullres_accuracy.py (which compared the full-resolution frame with the old stretched
 one). For each frame (drawn from the sampler's train and test splits with seeds no capture uses) and each
@@ -52,8 +52,21 @@ def parse_scales(text: str) -> list[float]:
     return scales if scales[0] == 1.0 else [1.0] + scales
 
 
+def _truth(ref, scene, config, size, spp: int, seed: int, cache: Path | None, key: str) -> np.ndarray:
+    """Mitsuba's frame at ``size`` and ``spp``; kept in the ``cache`` npz (written atomically) under ``key``, so
+    that several models are scored against the same renders."""
+    held = dict(np.load(cache)) if cache is not None and cache.is_file() else {}
+    if key not in held:
+        held[key] = ref.load_frame(scene, config, *size).full(spp=spp, seed=seed)
+        if cache is not None:
+            tmp = cache.with_name(cache.name + ".tmp.npz")
+            np.savez(tmp, **held)
+            tmp.replace(cache)
+    return held[key]
+
+
 def measure(scene_name: str, model_path: Path, size: tuple[int, int], scales: list[float], frames: int, spp: int,
-            gi_res: str = "model", exposure: float | None = None, log=print) -> dict:
+            gi_res: str = "model", exposure: float | None = None, log=print, truth_cache: Path | None = None) -> dict:
     """Scores of each scale's frame against the scale-1 frame (and the path tracer with ``spp``), per split."""
     from diviewer.evaluate import score
     from diviewer.gl.context import describe, headless_context
@@ -95,7 +108,8 @@ def measure(scene_name: str, model_path: Path, size: tuple[int, int], scales: li
                     tex = npass.composite()
                     hdr = np.flipud(np.frombuffer(tex.read(), dtype="f2").reshape(r.height, r.width, 4)[..., :3])
                     images[s] = bilinear(np.ascontiguousarray(hdr, dtype=np.float32), W, H)
-                truth = ref.load_frame(scene, config, W, H).full(spp=spp, seed=seed) if ref is not None else None
+                truth = (_truth(ref, scene, config, (W, H), spp, seed, truth_cache, f"{scene_name}_{split}_{i}_{seed}_{W}x{H}_"
+                                f"{spp}") if ref is not None else None)
                 row = {"seed": seed, "scales": {}}
                 for s, img in images.items():
                     row["scales"][str(s)] = {"vs_full": score(img, images[1.0], exposure) if s != 1.0 else None,
@@ -153,11 +167,13 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--exposure", type=float, default=None,
                     help="tone-map exposure of the scores, a multiplier as `diviewer eval`'s (default: the model's)")
     ap.add_argument("--out", type=Path, default=None, help="default: runs/<scene>/scale_accuracy.json")
+    ap.add_argument("--truth-cache", type=Path, default=None,
+                    help="with --spp: keep Mitsuba's frames in this .npz and reuse them (score several models alike)")
     a = ap.parse_args(argv)
     model = a.model or ROOT / "assets" / "models" / f"{a.scene}.onnx"
     out = a.out or ROOT / "runs" / a.scene / "scale_accuracy.json"
     result = measure(a.scene, model, parse_resolution(a.size, "--size"), parse_scales(a.scales), a.frames, a.spp,
-                     a.gi_res, a.exposure)
+                     a.gi_res, a.exposure, truth_cache=a.truth_cache)
     write_text(out, json.dumps(result, indent=1))
     print(table(result))
     print(f"wrote {out}")
