@@ -2,7 +2,8 @@
 against pt, on a capture's split; what separates the rasterizer's direct light from the path tracer's.
 
 Usage: python tools/experiments/direct_ceiling.py --data DATA [--split test] [--frames 200] [--out OUT.json]
-       python tools/experiments/direct_ceiling.py --evalset DIR --cache RENDERS.npz [--spp 1024] [--out OUT.json]
+       python tools/experiments/direct_ceiling.py --evalset DIR --cache RENDERS.npz [--spp 1024] [--supersample 2,4]
+           [--out OUT.json]
 
 A model of target "indirect" composes GL direct + its prediction, so even a perfect prediction leaves the
 difference between the GL direct light (shadow map, one point per pixel) and the path tracer's (exact shadows,
@@ -15,7 +16,9 @@ indirect") and for GL direct against pt_direct over the frames where they differ
 With ``--evalset`` (an evaluation set, which stores no pt_direct): the path tracer's direct light of every frame
 is rendered with Mitsuba at ``--spp`` (kept in ``--cache``, resumable), and the same composite is scored per
 split and shape against the set's truth, whole frame and the "object without direct light" region (mean over
-frames, as `diviewer eval` reports), beside the noise floor (the set's second seed).
+frames, as `diviewer eval` reports), beside the noise floor (the set's second seed). ``--supersample 2,4`` adds
+the same composite with the GL direct light rendered at 2x2 / 4x4 times the size and box-filtered (what a
+G-buffer that sees the pixel's area would give); the region stays defined by the stored, point-sampled buffer.
 """
 
 from __future__ import annotations
@@ -42,8 +45,30 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(finite)) if finite else None
 
 
-def evalset_ceiling(root: Path, cache: Path, spp: int) -> dict:
-    """Per split and shape of the evaluation set at ``root``: the oracle composite's scores (see the docstring)."""
+def supersampled_direct(scene, ev, factors: list[int]) -> dict[int, dict[str, np.ndarray]]:
+    """GL direct light of every evaluation-set frame rendered at f x f times its size and box-filtered back to it
+    (the pixel's area, as the path tracer's box filter sees it), per factor f; f = 1 is the stored buffer's."""
+    from diviewer.gl.context import headless_context
+    from diviewer.gl.renderer import Renderer
+    from diviewer.scene.loader import config_from_dict
+
+    w, h = (int(x) for x in ev.manifest["resolution"])
+    out = {f: {} for f in factors}
+    with headless_context() as ctx:
+        for f in factors:
+            r = Renderer(ctx, scene, w * f, h * f)
+            try:
+                for e in ev.frames:
+                    r.render(config_from_dict(scene, e["config"]))
+                    out[f][str(e["index"])] = r.read("direct").reshape(h, f, w, f, 3).mean(axis=(1, 3))
+            finally:
+                r.release()
+    return out
+
+
+def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | None = None) -> dict:
+    """Per split and shape of the evaluation set at ``root``: the oracle composite's scores (see the docstring),
+    with the stored GL direct light and, per ``supersample`` factor, with it rendered supersampled."""
     from diviewer.evalframes import EvalFrames, crop_frame, split_key
     from diviewer.evalscore import regions
     from diviewer.metrics import masked_psnr
@@ -66,15 +91,20 @@ def evalset_ceiling(root: Path, cache: Path, spp: int) -> dict:
             np.savez(tmp, **done)
             tmp.replace(cache)
             print(f"rendered frame {key} ({len(done)} of {len(ev.frames)})", flush=True)
+    ss = supersampled_direct(scene, ev, supersample or [])
     out = {}
     for split, shapes in ev.splits().items():
         for shape in shapes:
-            rows = {"oracle_indirect": [], "noise_floor": []}
-            unlit = {"oracle_indirect": [], "noise_floor": []}
+            names = ["oracle_indirect", *(f"oracle_indirect_gl_direct_{k}x{k}" for k in ss), "noise_floor"]
+            rows, unlit = {n: [] for n in names}, {n: [] for n in names}
             for i in ev.present(split, []):
-                f = crop_frame({**ev.load(i), "pt_direct_mi": done[str(i)]}, shape[0])
+                f = crop_frame({**ev.load(i), "pt_direct_mi": done[str(i)],
+                                **{f"ss{k}": v[str(i)] for k, v in ss.items()}}, shape[0])
                 ref = tonemap(f["pt"], ev.exposure)
-                images = {"oracle_indirect": np.maximum(f["direct"] + f["pt"] - f["pt_direct_mi"], 0.0),
+                indirect = f["pt"] - f["pt_direct_mi"]
+                # the region stays the stored buffer's (point-sampled direct light), whichever direct light is composed
+                images = {"oracle_indirect": np.maximum(f["direct"] + indirect, 0.0),
+                          **{f"oracle_indirect_gl_direct_{k}x{k}": np.maximum(f[f"ss{k}"] + indirect, 0.0) for k in ss},
                           "noise_floor": f[ev.info["second_seed_channel"]]}
                 m = (regions(f, ev.exposure) or {}).get("object_unlit")
                 for name, img in images.items():
@@ -88,7 +118,7 @@ def evalset_ceiling(root: Path, cache: Path, spp: int) -> dict:
                        "frames_exact": sum(1 for v in rows[name] if v == float("inf")),
                        "frames_object_unlit_exact": sum(1 for v in unlit[name] if v == float("inf"))}
                 for name in rows}
-    return {"evalset": str(root), "spp_direct": spp, "exposure": ev.exposure, "splits": out}
+    return {"evalset": str(root), "spp_direct": spp, "supersample": list(ss), "exposure": ev.exposure, "splits": out}
 
 
 def main() -> None:
@@ -99,12 +129,14 @@ def main() -> None:
     ap.add_argument("--evalset", type=Path)
     ap.add_argument("--cache", type=Path, help="with --evalset: the rendered direct light (npz, resumable)")
     ap.add_argument("--spp", type=int, default=1024)
+    ap.add_argument("--supersample", default="", help="with --evalset: also compose the GL direct light rendered at "
+                    "these factors per axis and box-filtered, e.g. 2,4")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args()
     if a.evalset:
         if not a.cache:
             ap.error("--evalset needs --cache")
-        result = evalset_ceiling(a.evalset, a.cache, a.spp)
+        result = evalset_ceiling(a.evalset, a.cache, a.spp, [int(x) for x in a.supersample.split(",") if x.strip()])
         for key, rows in result["splits"].items():
             print(key + ": " + "; ".join(
                 f"{n} {r['psnr_tm']:.2f} (unlit object {'-' if r['psnr_tm_object_unlit'] is None else format(r['psnr_tm_object_unlit'], '.2f')}"
