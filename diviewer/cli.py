@@ -140,6 +140,13 @@ def _cmd_data_refine(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_data_area_direct(args: argparse.Namespace) -> int:
+    from diviewer.data.area import area_direct
+
+    area_direct(args.dir, args.out, args.samples)
+    return 0
+
+
 def _cmd_baseline(args: argparse.Namespace) -> int:
     from diviewer.baseline import build_baseline
 
@@ -319,7 +326,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_data_parsers(sub) -> None:
-    """`diviewer data check | merge | refine`."""
+    """`diviewer data check | merge | refine | area-direct`."""
     p = sub.add_parser("data", help="inspect datasets")
     data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")
     q = data.add_parser("check", help="verify every frame: present, readable, finite, shapes, checksum")
@@ -337,6 +344,12 @@ def _add_data_parsers(sub) -> None:
     q.add_argument("--out", type=Path, required=True)
     q.add_argument("--shard", default=None, help="k/n: refine every n-th frame starting at the k-th")
     q.set_defaults(func=_cmd_data_refine)
+    q = data.add_parser("area-direct", help="re-render a dataset's GL direct light over each pixel's area into a new "
+                                            "folder (supersampled, box-filtered; minutes; resumable)")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--samples", type=int, default=4, help="samples per axis (default 4: 16 per pixel)")
+    q.add_argument("--out", type=Path, required=True)
+    q.set_defaults(func=_cmd_data_area_direct)
 
 
 def _chosen_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer import imageio
+from diviewer.data.area import direct_samples
 from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
 from diviewer.data.scales import light_scales
@@ -87,6 +88,12 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
     if model.meta["scene_hash"] != ds.manifest["scene_hash"]:
         raise DiviewerError(f"the model was trained for scene '{model.meta['scene']}' (another scene file than "
                             f"the dataset's '{ds.manifest['scene']}')", path=model_path, field="scene_hash")
+    n_data = direct_samples(ds.manifest)
+    if model.direct_samples != n_data:
+        raise DiviewerError(f"the model takes the direct light over {model.direct_samples}x{model.direct_samples} "
+                            f"samples per pixel, the dataset holds it over {n_data}x{n_data}; score it on a dataset "
+                            f"made with `diviewer data area-direct --samples {model.direct_samples}`",
+                            path=Path(data_dir) / "manifest.json", field="direct_area")
     idx = ds.indices(split)
     if not idx:
         raise DiviewerError(f"the dataset has no '{split}' frames", path=data_dir)
@@ -182,6 +189,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
                                 f"evaluation set's '{ev.manifest['scene']}')", path=path, field="scene_hash")
         models[path.stem if path.stem not in models else f"{path.stem}_{len(models)}"] = net
     problems = check_frames(ev, partial, log)
+    area = area_direct_of(ev, {n.direct_samples for n in nets} - {1})
     exposure = ev.exposure
     info = ev.info
     ladder_spp = [int(n) for n in info["ladder_spp"]]
@@ -209,7 +217,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
         for shape in shapes:
             key = split_key(split, shape, shapes)
             result["splits"][key] = _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp,
-                                                 progress, partial)
+                                                 progress, partial, area)
     progress.close()
     for line in format_tables(result):
         log(line)
@@ -218,7 +226,35 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
     return result
 
 
-def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp, progress, partial) -> dict:
+def area_direct_of(ev: EvalFrames, samples: set[int]) -> dict[int, dict[int, np.ndarray]]:
+    """The GL direct light over each pixel's area (`diviewer.gl.area`) of every frame of ``ev``, per sample count
+    asked for: what a model trained on it takes in place of the set's stored (pixel-centre) light. The set's truth,
+    tone map and regions stay as stored."""
+    if not samples:
+        return {}
+    from diviewer.gl.area import AreaDirect
+    from diviewer.gl.context import headless_context
+    from diviewer.scene import load_scene
+    from diviewer.scene.loader import config_from_dict
+
+    scene = load_scene(ev.manifest["scene"])
+    if scene.file_hash != ev.manifest["scene_hash"]:
+        raise DiviewerError(f"the scene file '{ev.manifest['scene']}' is not the one the evaluation set was made from: "
+                            f"its area direct light cannot be rendered", path=ev.root, field="scene_hash")
+    w, h = (int(x) for x in ev.manifest["resolution"])
+    out = {}
+    with headless_context() as ctx:
+        for n in sorted(samples):
+            area = AreaDirect(ctx, scene, w, h, n)
+            try:
+                out[n] = {f["index"]: area(config_from_dict(scene, f["config"])) for f in ev.frames}
+            finally:
+                area.release()
+    return out
+
+
+def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp, progress, partial,
+                 area=None) -> dict:
     rows = {k: [] for k in (*models, *images)}
     if not ev.ladder_images():
         rows.update({m: [] for m in ev.ladder_rows(idx[0], key)})
@@ -226,15 +262,18 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
     # encoding 2: each frame's light scale from its stored configuration
     scales = dict(zip(idx, light_scales(ev, idx))) if any(n.light_scaled for n in models.values()) else {}
     for i in idx:
-        f = crop_frame(ev.load(i), shape[0])
+        frame = ev.load(i)
+        f = crop_frame(frame, shape[0])
         mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # flat and no shadow edge
         flat += int(mask.sum())
         for name, net in models.items():
             if name in refused:
                 continue
+            # a model of the area's direct light takes it as its input (and adds it); it is scored as every other
+            x = f if net.direct_samples == 1 else crop_frame({**frame, "direct": area[net.direct_samples][i]}, shape[0])
             t0 = time.perf_counter()
             try:
-                y = run_model(net, f, scales.get(i), _camera(net, ev.entry(i), f))
+                y = run_model(net, x, scales.get(i), _camera(net, ev.entry(i), x))
             except DiviewerError as exc:  # the runtime refuses this shape: say so, score the rest
                 refused[name] = str(exc)
                 continue

@@ -99,6 +99,8 @@ def _check_meta_types(meta: dict, path: Path) -> None:
         or (meta["precision"] == "int8" and isinstance(meta.get("quantization"), dict)),
         "scene": isinstance(meta["scene"], str), "scene_hash": isinstance(meta["scene_hash"], str),
         "dataset_hash": isinstance(meta["dataset_hash"], str),
+        # optional (cards before it hold the pixel centre's light): samples per axis of the direct light it takes
+        "direct_samples": _is_int(meta.get("direct_samples", 1), 1) and meta.get("direct_samples", 1) <= 8,
     }
     bad = [k for k, ok in checks.items() if not ok]
     if bad:
@@ -179,6 +181,9 @@ class NeuralGI:
         """Encoding version 2: ``run`` needs each frame's light scale."""
         self.world = int(self.meta["encoding"].get("version", 1)) >= 3
         """Encoding version 3: ``run`` also needs each frame's camera (`camera`)."""
+        self.direct_samples = int(self.meta.get("direct_samples", 1))
+        """Samples per axis of the direct light the model was trained on (`diviewer.gl.area`): 1 is the light at
+        each pixel's centre; above 1, callers feed the light over the pixel's area (``buffers``' direct channel)."""
         wanted = [INPUT_NAME] + ([LIGHT_SCALE_NAME] if self.light_scaled else []) + ([CAMERA_NAME] if self.world else [])
         if [i.name for i in inputs] != wanted or OUTPUT_NAME not in [o.name for o in outputs]:
             raise DiviewerError(f"the graph's inputs {[i.name for i in inputs]} / outputs {[o.name for o in outputs]} "

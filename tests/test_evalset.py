@@ -212,6 +212,33 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
         assert methods["direct"]["bias_indirect"] == pytest.approx(-1.0)
 
 
+@pytest.mark.slow
+def test_a_model_of_the_area_direct_light_is_fed_it_and_scored_against_the_same_truth(evalset, tmp_path, gl_context):
+    """direct_samples 2 on the card: eval renders each frame's direct light over 2x2 samples (`diviewer.gl.area`)
+    and feeds it in place of the stored buffer; the truth and the regions stay the set's."""
+    from diviewer.gl.area import AreaDirect
+    from diviewer.scene.loader import config_from_dict
+
+    out, _ = evalset
+    scene = load_scene("cornell")
+    meta = {**base_meta(scene.file_hash, "cornell"), "multiple": 2}
+    point = direct_times(tmp_path / "point.onnx", 1.5, meta=meta)
+    area = direct_times(tmp_path / "area.onnx", 1.5, meta={**meta, "direct_samples": 2})
+    r = evaluate_evalset([point, area], out, log=quiet)
+    ev = EvalFrames(out)
+    with gl_context:  # current again: eval made and released its own context
+        light = AreaDirect(gl_context, scene, ev.manifest["resolution"][0], ev.manifest["resolution"][1], 2)
+        lit = {f["index"]: light(config_from_dict(scene, f["config"])) for f in ev.frames}
+        light.release()
+    for key, split in r["splits"].items():
+        frames = ev.present(split["split"], [])
+        w = split["shape"][0]
+        a = sum(float(np.sum(crop(lit[i], w), dtype=np.float64)) for i in frames)
+        pt = sum(float(np.sum(crop(ev.load(i)["pt"], w), dtype=np.float64)) for i in frames)
+        assert split["methods"]["area"]["bias"] == pytest.approx(1.5 * a / pt - 1, rel=1e-4), key
+        assert split["methods"]["area"]["psnr"] != split["methods"]["point"]["psnr"]
+
+
 def test_eval_refuses_corrupt_and_incomplete_sets_unless_partial(evalset, tmp_path, capsys):
     out, _ = evalset
     model, _ = _models(tmp_path)

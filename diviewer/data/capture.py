@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer import imageio
-from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
+from diviewer.data.dataset import CHANNELS, DERIVED, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
 from diviewer.errors import DiviewerError
 from diviewer.locks import run_lock, shard_part
 from diviewer.console import progress_bar
@@ -124,7 +124,7 @@ def build_manifest(scene: Scene, settings: CaptureSettings) -> dict:
 
 
 def _same_identity(a: dict, b: dict) -> list[str]:
-    return [k for k in (*IDENTITY, "refined") if json.loads(json.dumps(a.get(k))) != json.loads(json.dumps(b.get(k)))]
+    return [k for k in (*IDENTITY, *DERIVED) if json.loads(json.dumps(a.get(k))) != json.loads(json.dumps(b.get(k)))]
 
 
 def open_or_create(out: Path, manifest: dict) -> Dataset:

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from diviewer import imageio
+from diviewer.data.area import direct_samples
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.train.config import LEGACY_DEFAULTS, RESUME_FIXED, TrainConfig
 from diviewer.train.targets import ALBEDO_FLOOR
@@ -102,6 +103,8 @@ def build_generator_from_checkpoint(ckpt: Mapping[str, Any] | str | Path):
         "scene": ckpt["dataset"]["scene"],
         "scene_hash": ckpt["dataset"]["scene_hash"],
         "dataset_hash": ckpt["dataset"]["hash"],
+        # samples per axis of the direct light the model was trained on (`diviewer data area-direct`); 1 before it existed
+        "direct_samples": int(ckpt["dataset"].get("direct_samples", 1)),
         "epoch": ckpt["epoch"],
         "step": ckpt["step"],
         "val": ckpt.get("val"),
@@ -184,7 +187,8 @@ def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Datase
         "dataset": {"path": str(ds.root), "hash": ds.hash, "scene": ds.manifest.get("scene"),
                     "scene_hash": ds.manifest.get("scene_hash"), "resolution": [ds.width, ds.height],
                     "train_frames": len(train_idx), "train_indices": list(train_idx), "val_frames": n_val,
-                    "capture": {k: ds.manifest.get(k) for k in CAPTURE_KEYS}},
+                    "capture": {k: ds.manifest.get(k) for k in CAPTURE_KEYS},
+                    "direct_samples": direct_samples(ds.manifest)},
         "versions": versions(),
         "trained_on": trained_on(nets, (resumed or {}).get("trained_on")),
     }

@@ -313,6 +313,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "scene": meta["scene"],
         "scene_hash": meta["scene_hash"],
         "dataset_hash": meta["dataset_hash"],
+        "direct_samples": int(meta.get("direct_samples", 1)),
         "epochs": int(meta["epoch"]),
         "steps": int(meta["step"]),
         "validation": meta["val"],

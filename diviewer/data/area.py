@@ -1,0 +1,96 @@
+"""A capture whose direct light covers each pixel's area: ``diviewer data area-direct``.
+
+Renders only the GL direct light of every frame again, at ``samples`` x ``samples`` times the frame's size,
+box-filtered back to it (`diviewer.gl.area`), into a new folder; every other channel (the path tracer's truth, the
+G-buffer) is copied as stored. Minutes on a CPU where the capture took hours, so a capture made with the
+point-sampled direct light becomes one a model of the area's direct light trains on.
+
+- The manifest is the source's with a ``direct_area`` record (samples per axis, the source's hash), part of the
+  dataset's identity (as `diviewer.data.refine`'s ``refined``), and ``direct_area_from`` (the source's folder).
+- A model trained on it records ``direct_samples`` on its card (`diviewer export`), and eval, bench, render and
+  the viewer feed it the same light.
+- Resumable: frames already written (and sound) are kept; the source is never changed.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from diviewer.console import progress_bar
+from diviewer.data.dataset import Dataset, write_frame
+from diviewer.errors import DiviewerError
+from diviewer.locks import run_lock
+
+
+def direct_samples(manifest: dict) -> int:
+    """Samples per axis the dataset's direct light was computed over (1: the pixel's centre)."""
+    return int((manifest.get("direct_area") or {}).get("samples", 1))
+
+
+def area_manifest(src: Dataset, samples: int) -> dict:
+    """The source's manifest with the ``direct_area`` record."""
+    from diviewer.gl.area import check_samples
+
+    check_samples(samples, "--samples")
+    if samples < 2:
+        raise DiviewerError("--samples must be at least 2 (1 is the capture's own direct light)", field="--samples")
+    m = json.loads(json.dumps(src.manifest))
+    if "direct" not in src.slices:
+        raise DiviewerError("the dataset has no direct channel", path=src.root / "manifest.json", field="channels")
+    if direct_samples(m) != 1:
+        raise DiviewerError(f"its direct light already covers {direct_samples(m)}x{direct_samples(m)} samples; "
+                            f"derive from the capture it came from ({m.get('direct_area_from')})",
+                            path=src.root / "manifest.json", field="direct_area")
+    m["direct_area"] = {"samples": samples, "from_hash": src.hash,
+                        "how": "GL direct light at samples x the size, each pixel the mean of its block"}
+    m["direct_area_from"] = str(src.root)
+    return m
+
+
+def area_direct(src_dir: Path, out: Path, samples: int, log=print) -> dict:
+    """Write ``src_dir``'s present frames with the area's direct light into ``out``; returns a summary."""
+    from diviewer.data.capture import open_or_create, summarize
+    from diviewer.gl.area import AreaDirect
+    from diviewer.gl.context import headless_context
+    from diviewer.scene.loader import config_from_dict, load_scene
+
+    src = Dataset(src_dir)
+    if out.exists() and Path(src_dir).resolve() == out.resolve():
+        raise DiviewerError(f"{src_dir} is both the source and the output", field="--out")
+    manifest = area_manifest(src, samples)
+    scene = load_scene(manifest["scene"])
+    if scene.file_hash != manifest["scene_hash"]:
+        raise DiviewerError(f"the scene file of '{scene.name}' has changed since the capture; derive with the scene "
+                            f"it was captured with", path=src.root / "manifest.json", field="scene_hash")
+    s = src.slices["direct"]
+    with run_lock(out, "data area-direct"):
+        ds = open_or_create(out, manifest)
+        present = [f for f in src.frames if src.check_frame(f["index"], False) is None]
+        todo = [f for f in present if ds.check_frame(f["index"]) is not None]
+        log(f"area-direct {src.root} -> {out}: {len(present) - len(todo)} of {len(present)} present frames already "
+            f"written, {len(todo)} to render ({samples}x{samples} samples per pixel)")
+        t_all = time.perf_counter()
+        progress = progress_bar(len(todo), "area-direct", "frame")
+        with headless_context() as ctx:
+            area = AreaDirect(ctx, scene, src.width, src.height, samples)
+            try:
+                for f in todo:
+                    i = f["index"]
+                    arr = np.load(src.path(i))
+                    arr[..., s] = area(config_from_dict(scene, f["config"])).astype(arr.dtype)
+                    info = json.loads(src.path(i, ".json").read_text())
+                    info.pop("sha256", None)
+                    info["direct_area"] = {"samples": samples}
+                    write_frame(ds, i, arr, info)
+                    progress.update()
+            finally:
+                area.release()
+                progress.close()
+        summary = summarize(ds)
+        summary["rendered"], summary["seconds"] = len(todo), round(time.perf_counter() - t_all, 2)
+        log(f"done: {summary['present']}/{summary['planned']} frames present, {summary['seconds']:.0f} s")
+    return summary
