@@ -70,7 +70,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
         check_render_size(ctx, width, height, "--res")
         renderer = Renderer(ctx, scene, width, height, settings)
         compositor = DisplayPass(ctx, renderer.shaders)
-        neural = vx = None
+        neural = vx = area = None
         vxgi_info = None
         try:
             frame = renderer.frame(config)
@@ -86,7 +86,15 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
             if net is not None:
                 from diviewer.gl.neural import NeuralPass
 
-                neural = NeuralPass(ctx, renderer, net)  # at the frame's own size: the model pads it to its stride
+                source = renderer
+                if net.direct_samples > 1:  # a model of the direct light over each pixel's area (diviewer.gl.area):
+                    # its inputs packed from a render at s x s times the frame's size, the direct light averaged
+                    s = net.direct_samples
+                    check_render_size(ctx, width * s, height * s, "--res")
+                    source = area = Renderer(ctx, scene, width * s, height * s, settings)
+                    area.render(config)
+                # at the frame's own size: the model pads it to its stride
+                neural = NeuralPass(ctx, source, net, gi_size=(width, height))
                 neural.run(**neural.inputs_for(scene, config))
                 frame["neural"] = neural.image()
                 neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
@@ -120,6 +128,8 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 vx.release()
             if neural is not None:
                 neural.release()
+            if area is not None:
+                area.release()
             compositor.release()
             renderer.release()
     return record

@@ -3,7 +3,8 @@
 // (u_src_size), the model's input at the GI resolution (u_size): each GI texel takes the full-resolution
 // pixel nearest its centre (what a render at the GI resolution samples, as the training captures did),
 // or with AREA defined the mean of the pixels whose centres fall in its footprint for normal, albedo and
-// direct light (depth stays the nearest pixel's: a mean of two surfaces' depths is no surface's). The channel layout is not written here:
+// direct light (depth stays the nearest pixel's: a mean of two surfaces' depths is no surface's); with
+// AREA_DIRECT that mean for the direct light alone (models with direct_samples > 1 on their card). The channel layout is not written here:
 // gl/neural.py injects it from diviewer.encoding.INPUT_CHANNELS as defines (IN_CHANNELS, the total,
 // IN_<NAME>, where each buffer starts, and IN_<NAME>_N, its component count, checked below). The direct
 // light is read from the direct pass's target or, with INLINE_DIRECT, computed (direct_inline.glsl).
@@ -39,7 +40,7 @@ void main() {
     vec3 n = texelFetch(u_normal, q, 0).xyz;
     vec3 a = texelFetch(u_albedo, q, 0).rgb;
     vec3 d = direct_at(q, src, z, n, a);
-#if defined AREA
+#if defined AREA || defined AREA_DIRECT
     // Pixels whose centres lie in [p, p + 1) * scale; none when the GI is finer than the G-buffer.
     ivec2 lo = ivec2(ceil(vec2(p) * scale - 0.5));
     ivec2 hi = min(ivec2(ceil((vec2(p) + 1.0) * scale - 0.5)), u_src_size);
@@ -54,8 +55,12 @@ void main() {
                 sd += direct_at(o, src, texelFetch(u_depth, o, 0).r, no, ao);
             }
         float count = float((hi.x - lo.x) * (hi.y - lo.y));
+#if defined AREA
         n = dot(sn, sn) > 0.0 ? normalize(sn) : vec3(0.0);
         a = sa / count;
+#endif
+        // AREA_DIRECT alone: the direct light over the texel's area (a model of diviewer.gl.area's light, trained
+        // on it), the surface at its centre
         d = sd / count;
     }
 #endif

@@ -207,7 +207,7 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
     """
     from diviewer.evalframes import crop_frame, split_key
     from diviewer.evalscore import aggregate, equivalent, ladder_methods, score_frame
-    from diviewer.evaluate import run_model
+    from diviewer.evaluate import area_direct_of, run_model
     from diviewer.metrics import flat_mask
     from diviewer.scene.loader import config_from_dict
 
@@ -227,16 +227,21 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
     configs = [config_from_dict(gl.scene, ds.entry(i)["config"]) for i in idx] if vxgi else []
     vx_images = {key: gl.vxgi_frames(s, configs) for key, s in vxgi.items()}
     passes = {key: gl.neural_pass(net, step) for key, (net, step) in models.items() if step > 1}
+    # models of the direct light over each pixel's area take it (as diviewer eval feeds them) at the set's size
+    area = area_direct_of(ds, {net.direct_samples for net, step in models.values() if step == 1} - {1})
     try:
         for n, i in enumerate(idx):
-            f = crop_frame(ds.load(i), shape[0])
+            frame = ds.load(i)
+            f = crop_frame(frame, shape[0])
             mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # as diviewer eval
             config = config_from_dict(gl.scene, ds.entry(i)["config"]) if models else None  # models need a GL scene
             if passes:
                 gl.renderer.render(config, direct=False)  # as timed
             for key, (net, step) in models.items():
                 if step == 1:  # encoding 2 and 3: the frame's light scale and camera
-                    image = run_model(net, f, **net.frame_inputs(config, shape[0], shape[1], gl.scene))
+                    x = f if net.direct_samples == 1 else crop_frame({**frame, "direct": area[net.direct_samples][i]},
+                                                                     shape[0])
+                    image = run_model(net, x, **net.frame_inputs(config, shape[0], shape[1], gl.scene))
                 else:
                     passes[key].run(**passes[key].inputs_for(gl.scene, config))
                     image = read_final(passes[key].composite())

@@ -80,6 +80,8 @@ class NeuralPass:
             model.check_size(w, h)
         self.gi_size = (w, h)
         self._pack_defines = dict(PACK_DEFINES, **({"AREA": 1} if settings.downsample == "area" else {}))
+        if int(getattr(model, "direct_samples", 1)) > 1:  # trained on the direct light over each pixel's area
+            self._pack_defines["AREA_DIRECT"] = 1
         self.guide = renderer.shaders.compute("gi_guide.glsl", PACK_DEFINES)
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._defines: dict[str, int] = {}

@@ -114,3 +114,26 @@ def test_derived_dataset_has_the_area_light_and_every_other_channel_as_captured(
             evaluate(model, data, split="train", log=lambda *_: None)
         assert "direct_area" in str(err.value)
     assert evaluate(area, out, split="train", log=lambda *_: None)["frames"] >= 1
+
+
+@pytest.mark.gl
+def test_render_feeds_a_model_of_the_area_light_its_footprints_mean(gl_context, tmp_path):
+    """`diviewer render --model` with direct_samples 2 on the card: the network's input is the direct light of a
+    render at 2x2 times the size, averaged (a model returning 1.5 x its direct input shows it)."""
+    from onnx_models import base_meta, direct_times
+
+    from diviewer import imageio
+    from diviewer.render import render_to_dir
+
+    scene = load_scene("cornell")
+    meta = {**base_meta(scene.file_hash, "cornell"), "multiple": 2, "resolution": [24, 16]}
+    model = direct_times(tmp_path / "area.onnx", 1.5, meta={**meta, "direct_samples": 2})
+    render_to_dir("cornell", tmp_path / "out", res="24x16", seed=5, model=model)
+    got = imageio.read_exr(tmp_path / "out" / "neural.exr")
+    config = sample_config(scene, 5, "train")
+    with gl_context:
+        area = AreaDirect(gl_context, scene, 24, 16, 2)
+        expect = 1.5 * area(config)
+        area.release()
+    assert got.shape == (16, 24, 3)
+    np.testing.assert_allclose(got, expect, rtol=1e-3, atol=1e-5)

@@ -17,7 +17,7 @@ SUN = {"name": "sun", "type": "directional", "direction": [0.6, -0.3, -0.75], "i
 BULB = {"name": "bulb", "type": "point", "position": [0.8, 0.3, -0.5], "intensity": 5.0}
 
 
-def _pass(ctx, tmp_path, gi=(W // F, H // F), scene=None, **settings):
+def _pass(ctx, tmp_path, gi=(W // F, H // F), scene=None, direct_samples: int = 1, **settings):
     """A renderer at W x H with a NeuralPass at ``gi`` of a model that returns twice its direct input, so that
     its indirect light (output - direct) is the direct light it was given."""
     from onnx_models import base_meta, direct_times
@@ -26,7 +26,7 @@ def _pass(ctx, tmp_path, gi=(W // F, H // F), scene=None, **settings):
     from diviewer.gl.renderer import Renderer
 
     scene = scene or facing_plane()
-    meta = dict(base_meta(scene_hash=scene.file_hash), multiple=4, resolution=[W, H])
+    meta = dict(base_meta(scene_hash=scene.file_hash), multiple=4, resolution=[W, H], direct_samples=direct_samples)
     model = NeuralGI(direct_times(tmp_path / "m.onnx", factor=2.0, meta=meta), scene=scene)
     renderer = Renderer(ctx, scene, W, H)
     return renderer, NeuralPass(ctx, renderer, model, gi, GISettings(**settings))
@@ -130,6 +130,24 @@ def test_area_downsample_averages_the_footprint(ctx, tmp_path):
         neural.run()
         mean = frame["direct"].reshape(H // F, F, W // F, F, 3).mean(axis=(1, 3))
         np.testing.assert_allclose(neural.packed[0, ..., 7:], mean, rtol=1e-5)
+    finally:
+        neural.release()
+        renderer.release()
+
+
+def test_a_model_of_the_area_light_gets_the_footprints_mean_direct_light_and_the_centres_surface(ctx, tmp_path):
+    """direct_samples > 1 on the card (`diviewer.gl.area`): the packed direct light is the mean over the texel's
+    footprint, depth, normal and albedo stay the centre pixel's (as the capture the model trained on holds them)."""
+    renderer, neural = _pass(ctx, tmp_path, scene=_lit_scene([SUN]), direct_samples=4)
+    try:
+        frame = renderer.frame()
+        neural.run()
+        mean = frame["direct"].reshape(H // F, F, W // F, F, 3).mean(axis=(1, 3))
+        np.testing.assert_allclose(neural.packed[0, ..., 7:], mean, rtol=1e-5, atol=1e-7)
+        rows, cols = _nearest(H // F, W // F)
+        np.testing.assert_array_equal(neural.packed[0, ..., 1:7],
+                                      np.concatenate([frame["normal"], frame["albedo"]], -1)[rows][:, cols])
+        assert not np.allclose(mean, frame["direct"][rows][:, cols])  # the shadow's edge: the two differ
     finally:
         neural.release()
         renderer.release()
