@@ -44,17 +44,18 @@ def test_area_light_agrees_with_the_point_light_inside_and_differs_only_at_edges
 
     scene = load_scene("cornell")
     config = sample_config(scene, 3, "train")
-    r = Renderer(gl_context, scene, 48, 32)
-    r.render(config)
-    point = r.read("direct")
-    r.release()
-    one, four = AreaDirect(gl_context, scene, 48, 32, 1), AreaDirect(gl_context, scene, 48, 32, 4)
-    try:
-        np.testing.assert_allclose(one(config), point, rtol=1e-6, atol=1e-7)
-        area = four(config)
-    finally:
-        one.release()
-        four.release()
+    with gl_context:  # current even if an earlier test made and released a context of its own
+        r = Renderer(gl_context, scene, 48, 32)
+        r.render(config)
+        point = r.read("direct")
+        r.release()
+        one, four = AreaDirect(gl_context, scene, 48, 32, 1), AreaDirect(gl_context, scene, 48, 32, 4)
+        try:
+            np.testing.assert_allclose(one(config), point, rtol=1e-6, atol=1e-7)
+            area = four(config)
+        finally:
+            one.release()
+            four.release()
     assert area.shape == (32, 48, 3) and np.isfinite(area).all() and area.min() >= 0
     assert abs(area.sum() / point.sum() - 1.0) < 0.02
     lum = point.mean(-1)
