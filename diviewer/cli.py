@@ -73,7 +73,7 @@ def _cmd_capture(args: argparse.Namespace) -> int:
     fractions = parse_splits(args.splits)
     settings = CaptureSettings(frames=args.frames, width=width, height=height, gt=args.gt, spp=args.spp,
                                max_depth=args.max_depth, seed=args.seed, split_fractions=fractions, dtype=args.dtype,
-                               thumbs=args.thumbs, vxgi_resolution=args.vxgi_res)
+                               thumbs=args.thumbs, vxgi_resolution=args.vxgi_res, direct_samples=args.direct_samples)
     capture(args.scene, args.out, settings, parse_shard(args.shard))
     return 0
 
@@ -257,6 +257,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--splits", default="0.8,0.1,0.1", help="fractions train,val,test")
     p.add_argument("--dtype", default="float16", choices=("float16", "float32"), help="frame storage type")
     p.add_argument("--thumbs", type=int, default=2, help="PNG thumbnails per split")
+    p.add_argument("--direct-samples", type=int, default=1, help="samples per axis of the stored direct light: 1 "
+                   "each pixel's centre (default), 4 the mean over its area (diviewer.gl.area)")
     p.add_argument("--shard", default=None, help="k/n: render every n-th frame starting at the k-th")
     _add_variant_arg(p)
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")

@@ -55,6 +55,9 @@ class CaptureSettings:
     """PNG thumbnails for the first frames of each split."""
     vxgi_resolution: int = 64
     """VXGI grid resolution (voxels per side) with gt = 'vxgi'."""
+    direct_samples: int = 1
+    """Samples per axis of the stored GL direct light (`diviewer.gl.area`): 1, each pixel's centre; above, the mean
+    over the pixel's area (4: 16 samples), as the path tracer's box filter sees a pixel (docs/generalisation.md)."""
 
 
 def parse_shard(text: str | None) -> tuple[int, int]:
@@ -116,6 +119,9 @@ def build_manifest(scene: Scene, settings: CaptureSettings) -> dict:
         "frames": settings.frames,
         "split_fractions": list(settings.split_fractions),
         "render_settings": asdict(RenderSettings()),
+        # part of the identity only when not the pixel's centre: every capture before it keeps its hash
+        **({"direct_area": {"samples": settings.direct_samples, "how": "captured: GL direct light at samples x the "
+                            "size, each pixel the mean of its block"}} if settings.direct_samples > 1 else {}),
         **({"vxgi": asdict(vxgi_settings(settings))} if settings.gt == "vxgi" else {}),
         "settings": asdict(settings),
         "versions": versions(),
@@ -213,6 +219,9 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
                             ("--seed", settings.seed, 0)):
         if value < lo:
             raise DiviewerError(f"must be at least {lo}, got {value}", field=name)
+    from diviewer.gl.area import check_samples
+
+    check_samples(settings.direct_samples, "--direct-samples")
     scene = load_scene(scene_name)
     manifest = build_manifest(scene, settings)
     _check_size(settings)  # before the folder is created: a size the GL context cannot hold leaves nothing
@@ -265,6 +274,11 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
 
     renderer = Renderer(ctx, scene, settings.width, settings.height)
     compositor = DisplayPass(ctx, renderer.shaders)
+    area = None
+    if getattr(settings, "direct_samples", 1) > 1:  # the direct light over each pixel's area (diviewer.gl.area)
+        from diviewer.gl.area import AreaDirect
+
+        area = AreaDirect(ctx, scene, settings.width, settings.height, settings.direct_samples)
     if hasattr(gt, "attach"):
         gt.attach(ctx, renderer)
     splits = dict.fromkeys(f["split"] for f in ds.frames)  # in order of first appearance
@@ -275,6 +289,8 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
             config = config_from_dict(scene, f["config"])
             t0 = time.perf_counter()
             buffers = renderer.frame(config)
+            if area is not None:
+                buffers["direct"] = area(config)
             t1 = time.perf_counter()
             truth = gt(config, f)
             t2 = time.perf_counter()
@@ -302,6 +318,8 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
         progress.close()
         if hasattr(gt, "release"):
             gt.release()
+        if area is not None:
+            area.release()
         compositor.release()
         renderer.release()
 

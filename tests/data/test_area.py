@@ -138,3 +138,21 @@ def test_render_feeds_a_model_of_the_area_light_its_footprints_mean(gl_context, 
         area.release()
     assert got.shape == (16, 24, 3)
     np.testing.assert_allclose(got, expect, rtol=1e-3, atol=1e-5)
+
+
+@pytest.mark.mitsuba
+def test_a_capture_with_direct_samples_stores_the_area_light_as_area_direct_derives_it(gl_context, tmp_path):
+    """`diviewer capture --direct-samples 2` writes what `data area-direct --samples 2` makes of a plain capture,
+    frame for frame; its identity carries the record (a plain capture's does not)."""
+    plain, captured, derived = tmp_path / "plain", tmp_path / "captured", tmp_path / "derived"
+    settings = CaptureSettings(frames=2, seed=4, **TINY)
+    capture("cornell", plain, settings, **QUIET)
+    capture("cornell", captured, CaptureSettings(frames=2, seed=4, direct_samples=2, **TINY), **QUIET)
+    area_direct(plain, derived, 2, **QUIET)
+    a, b, c = Dataset(plain), Dataset(captured), Dataset(derived)
+    assert direct_samples(b.manifest) == 2 and "direct_area" not in a.manifest and b.hash != a.hash
+    for i in a.indices():
+        np.testing.assert_array_equal(b.load(i)["direct"], c.load(i)["direct"])
+        np.testing.assert_array_equal(b.load(i)["pt"], a.load(i)["pt"])
+    with pytest.raises(DiviewerError, match="samples per axis"):
+        capture("cornell", tmp_path / "bad", CaptureSettings(frames=2, direct_samples=0, **TINY), **QUIET)
