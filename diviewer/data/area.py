@@ -56,16 +56,14 @@ def area_direct(src_dir: Path, out: Path, samples: int, log=print) -> dict:
     from diviewer.data.capture import open_or_create, summarize
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
-    from diviewer.scene.loader import config_from_dict, load_scene
+    from diviewer.data.refine import source_scene
+    from diviewer.scene.loader import config_from_dict
 
     src = Dataset(src_dir)
-    if out.exists() and Path(src_dir).resolve() == out.resolve():
+    if out.exists() and src.root.resolve() == out.resolve():  # before the manifest: a derived source says why not
         raise DiviewerError(f"{src_dir} is both the source and the output", field="--out")
     manifest = area_manifest(src, samples)
-    scene = load_scene(manifest["scene"])
-    if scene.file_hash != manifest["scene_hash"]:
-        raise DiviewerError(f"the scene file of '{scene.name}' has changed since the capture; derive with the scene "
-                            f"it was captured with", path=src.root / "manifest.json", field="scene_hash")
+    scene = source_scene(src, out, manifest, "derive")
     s = src.slices["direct"]
     with run_lock(out, "data area-direct"):
         ds = open_or_create(out, manifest)

@@ -64,20 +64,29 @@ def refined_manifest(src: Dataset, spp: int) -> dict:
     return m
 
 
+def source_scene(src: Dataset, out: Path, manifest: dict, verb: str):
+    """The scene of a dataset being derived into ``out`` (refined, its direct light re-rendered), refusing an
+    output that is the source and a scene file changed since the capture."""
+    from diviewer.scene.loader import load_scene
+
+    if out.exists() and src.root.resolve() == out.resolve():
+        raise DiviewerError(f"{src.root} is both the source and the output", field="--out")
+    scene = load_scene(manifest["scene"])
+    if scene.file_hash != manifest["scene_hash"]:
+        raise DiviewerError(f"the scene file of '{scene.name}' has changed since the capture; {verb} it with the "
+                            f"scene it was captured with", path=src.root / "manifest.json", field="scene_hash")
+    return scene
+
+
 def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), log=print) -> dict:
     """Refine the present frames of ``src_dir`` (this shard's) to ``spp`` into ``out``; returns a summary."""
     from diviewer.data.capture import FLOAT16_MAX, open_or_create, summarize
     from diviewer.reference import mitsuba as ref
-    from diviewer.scene.loader import config_from_dict, load_scene
+    from diviewer.scene.loader import config_from_dict
 
     src = Dataset(src_dir)
-    if out.exists() and Path(src_dir).resolve() == out.resolve():
-        raise DiviewerError(f"{src_dir} is both the source and the output", field="--out")
     manifest = refined_manifest(src, spp)
-    scene = load_scene(manifest["scene"])
-    if scene.file_hash != manifest["scene_hash"]:
-        raise DiviewerError(f"the scene file of '{scene.name}' has changed since the capture; refine it with the "
-                            f"scene it was captured with", path=src.root / "manifest.json", field="scene_hash")
+    scene = source_scene(src, out, manifest, "refine")
     k, n = shard
     old = manifest["refined"]["from_spp"]
     variant = ref.select_variant()

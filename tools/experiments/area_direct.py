@@ -2,7 +2,6 @@
 the network's direct-light input and the light the composite adds, instead of the light at the pixel's centre.
 
 Usage:
-  python tools/experiments/area_direct.py derive SRC OUT [--factor 2]
   python tools/experiments/area_direct.py score --model M [--model M ...] [--area-model NAME ...] [--factor 2]
          [--evalset DIR] [--out JSON]
 
@@ -10,15 +9,12 @@ Why: `direct_ceiling.py --supersample` measured that a perfect indirect-light ne
 point-sampled GL direct light is capped at 37.5 dB with the camera moved and 24-26 dB on the unlit object's
 pixels, and over the same light box-filtered from 2x2 samples at 45.7 and 36-38 dB (docs/generalisation.md).
 
-derive: a copy of a capture whose ``direct`` channel is the GL direct light of each frame's stored configuration
-rendered at ``--factor`` x its size and averaged over each pixel's factor x factor samples; every other channel as
-stored (the path tracer's truth is already box-filtered over the pixel). Resumable: frames already written
-(checked) are kept. The manifest records the derivation (``derived_area_direct``); a model trained on it is then
-scored on the capture's test split with `diviewer eval --data OUT --split test` (its composite adds the area light).
+The capture side is `diviewer data area-direct` now (it began here as ``derive``); a model trained on it carries
+``direct_samples`` on its card and `diviewer eval` feeds it the light itself.
 
 score: models on the evaluation set as `diviewer eval` scores them (per split and shape, whole frame, the object and
 its unlit pixels), except that models named by ``--area-model`` (a file stem) are fed each frame's area direct light
-(rendered as derive does, at the set's stored size) in place of the stored buffer; the truth, the tone map and the
+(`diviewer.gl.area` at the set's stored size) in place of the stored buffer; the truth, the tone map and the
 regions (defined by the stored, point-sampled direct light) are the evaluation set's for every model.
 """
 
@@ -30,60 +26,6 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer import imageio
-from diviewer.data.dataset import Dataset, write_frame
-
-
-class AreaDirect:
-    """The GL direct light of a configuration at ``factor`` x (width, height), box-filtered to (width, height)."""
-
-    def __init__(self, ctx, scene, width: int, height: int, factor: int):
-        from diviewer.gl.renderer import Renderer
-
-        self.w, self.h, self.f = width, height, factor
-        self.r = Renderer(ctx, scene, width * factor, height * factor)
-
-    def __call__(self, config) -> np.ndarray:
-        self.r.render(config)
-        return self.r.read("direct").reshape(self.h, self.f, self.w, self.f, 3).mean(axis=(1, 3))
-
-    def release(self) -> None:
-        self.r.release()
-
-
-def derive(src_dir: Path, out: Path, factor: int, log=print) -> int:
-    from diviewer.data.scales import dataset_scene
-    from diviewer.gl.context import headless_context
-    from diviewer.scene.loader import config_from_dict
-
-    src = Dataset(src_dir)
-    names = [c[0] for c in src.manifest["channels"]]
-    at = sum(n for _, n in src.manifest["channels"][:names.index("direct")])
-    manifest = json.loads(json.dumps(src.manifest))
-    manifest["derived_area_direct"] = {"from": str(src_dir), "from_hash": src.hash, "factor": factor,
-                                       "tool": "tools/experiments/area_direct.py"}
-    (out / "frames").mkdir(parents=True, exist_ok=True)
-    imageio.write_text(out / "manifest.json", json.dumps(manifest, indent=1))
-    dst = Dataset(out)
-    scene = dataset_scene(src)
-    done = 0
-    with headless_context() as ctx:
-        area = AreaDirect(ctx, scene, src.width, src.height, factor)
-        try:
-            for f in src.frames:
-                i = f["index"]
-                if src.check_frame(i, False) is not None or dst.check_frame(i, False) is None:
-                    continue
-                arr = np.load(src.path(i)).copy()
-                arr[..., at:at + 3] = area(config_from_dict(scene, f["config"])).astype(arr.dtype)
-                write_frame(dst, i, arr, {"index": i, "split": f["split"]})
-                done += 1
-                if done % 500 == 0:
-                    log(f"derive: {done} frames written")
-        finally:
-            area.release()
-    log(f"derive: {done} frames written, {len(dst.indices())} of {len(dst.frames)} present")
-    return done
 
 
 def score(models: list[Path], area_models: set[str], factor: int, evalset: Path | None) -> dict:
@@ -92,6 +34,7 @@ def score(models: list[Path], area_models: set[str], factor: int, evalset: Path 
     from diviewer.evalscore import aggregate, score_frame_regions
     from diviewer.metrics import flat_mask
     from diviewer.evaluate import _camera, run_model
+    from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
     from diviewer.runtime import NeuralGI
     from diviewer.scene import load_scene
@@ -132,10 +75,6 @@ def score(models: list[Path], area_models: set[str], factor: int, evalset: Path 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
-    d = sub.add_parser("derive")
-    d.add_argument("src", type=Path)
-    d.add_argument("out", type=Path)
-    d.add_argument("--factor", type=int, default=2)
     s = sub.add_parser("score")
     s.add_argument("--model", type=Path, action="append", required=True)
     s.add_argument("--area-model", action="append", default=[], help="a --model's file stem fed the area light")
@@ -143,9 +82,6 @@ def main() -> None:
     s.add_argument("--evalset", type=Path)
     s.add_argument("--out", type=Path)
     a = ap.parse_args()
-    if a.cmd == "derive":
-        derive(a.src, a.out, a.factor)
-        return
     result = score(a.model, set(a.area_model), a.factor, a.evalset)
     for key, rows in result["splits"].items():
         for name, m in rows.items():
