@@ -73,7 +73,7 @@ def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, cap
     out = capsys.readouterr().out
     for stage in ("capture", "check", "evalset", "train_k8", "export_k8", "train_k16", "evaluate", "pick", "ship"):
         assert f" {stage} " in out, stage
-    assert "recipe cornell" in out and "estimated total:" in out and "capture 4600 frames at 128x128, 64 spp" in out
+    assert "recipe cornell" in out and "estimated total:" in out and "capture 6000 frames at 228x128, 64 spp" in out
     assert "dry run: nothing was done" in out
     assert not work.exists()
     assert main(["build", "--recipe", "sponza", "--dry-run", "--work", str(work)]) == 0  # the recipe's scene
@@ -87,11 +87,13 @@ def test_the_estimate_follows_the_measured_costs():
     plan = make_plan("cornell", load_recipe("cornell"), Path("w"), machine=CPU)
     steps = planned_steps(plan.capture, {**plan.train, "K": 8})
     est = {s.name: s.seconds for s in plan.stages}
-    assert est["train_k8"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 8)])
-    assert est["train_k16"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 16)])
-    # cornell's 4,002 train frames at batch 4, 50 epochs: the 50,050 steps the shipped model took
-    assert steps == 50050
-    assert est["evalset"] == pytest.approx(costs.EVALSET_MEASURED["seconds"])
+    # costs are measured at 128x128 and scale with the pixels: the recipe's frames are 228x128
+    px = 228 * 128 / (128 * 128)
+    assert est["train_k8"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 8)] * px)
+    assert est["train_k16"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 16)] * px)
+    # cornell's 4,800 train frames at batch 4, 40 epochs: the 48,000 steps the shipped model took
+    assert steps == 48000
+    assert est["evalset"] == pytest.approx(costs.EVALSET_MEASURED["seconds"] * px)
     on_gpu = make_plan("cornell", load_recipe("cornell"), Path("w"), machine=CUDA)
     assert on_gpu.seconds < plan.seconds / 4
 
@@ -104,7 +106,7 @@ def test_a_budget_scales_frames_and_steps_together_and_keeps_the_schedule():
     assert plan.capture.frames < full.capture.frames and plan.steps < full.steps
     assert plan.capture.frames / full.capture.frames == pytest.approx(plan.scale, rel=0.02)
     # the anneal starts at the same fraction of the run; validations in proportion
-    assert plan.train["lr_decay_start"] / plan.steps == pytest.approx(20000 / 50050, rel=0.05)
+    assert plan.train["lr_decay_start"] / plan.steps == pytest.approx(20000 / 48000, rel=0.05)
     assert plan.overrides["lr_decay_start"] == plan.train["lr_decay_start"]
     assert plan.train["patience"] == rec.train["patience"]
     generous = make_plan("cornell", rec, Path("w"), budget_hours=1000, machine=CPU)
@@ -188,7 +190,9 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
     assert rec["overrides"] == ({"K": 4} if card["K"] == 4 else {})
     assert (ship / "tiny_curves.png").is_file() and (ship / "tiny_metrics.csv").is_file()
     for r in ladder["rows"]:
-        assert set(r["evalset"]) == {"unseen_configs", "unseen_objects"} and r["steps"] == 2
+        # the scene camera's splits and, as every evaluation set has them now, 4:3 and 16:9 at the model's rows
+        assert set(r["evalset"]) == {"unseen_configs", "unseen_objects", "window_shapes_42x32", "window_shapes_56x32"}
+        assert r["steps"] == 2
 
     assert main(argv) == 0  # nothing left to do: every stage skipped after its outputs are checked
     out = capsys.readouterr().out
