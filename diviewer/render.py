@@ -84,18 +84,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 vxgi_info = {"settings": settings_dict(vxgi), "fragments": vx.fragment_counts,
                              "ms": {k: round(v, 3) for k, v in vx.timings.items()}}
             if net is not None:
-                from diviewer.gl.neural import NeuralPass
-
-                source = renderer
-                if net.direct_samples > 1:  # a model of the direct light over each pixel's area (diviewer.gl.area):
-                    # its inputs packed from a render at s x s times the frame's size, the direct light averaged
-                    s = net.direct_samples
-                    check_render_size(ctx, width * s, height * s, "--res")
-                    source = area = Renderer(ctx, scene, width * s, height * s, settings)
-                    area.render(config)
-                # at the frame's own size: the model pads it to its stride
-                neural = NeuralPass(ctx, source, net, gi_size=(width, height))
-                neural.run(**neural.inputs_for(scene, config))
+                neural, area = _neural_pass(ctx, scene, renderer, net, config, settings)
                 frame["neural"] = neural.image()
                 neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
                                "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}
@@ -133,6 +122,26 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
             compositor.release()
             renderer.release()
     return record
+
+
+def _neural_pass(ctx, scene: Scene, renderer, net, config: FrameConfig, settings):
+    """The model run on ``renderer``'s frame at its own size (the model pads it to its stride); returns the pass and
+    the supersampled renderer it packed from, or None. A model of the direct light over each pixel's area
+    (``direct_samples`` s > 1, `diviewer.gl.area`) takes its inputs from a render at s x s times the size, the
+    direct light averaged over each pixel's block (`pack.glsl`'s AREA_DIRECT); the caller releases both."""
+    from diviewer.gl.context import check_render_size
+    from diviewer.gl.neural import NeuralPass
+    from diviewer.gl.renderer import Renderer
+
+    width, height, source, area = renderer.width, renderer.height, renderer, None
+    if net.direct_samples > 1:
+        s = net.direct_samples
+        check_render_size(ctx, width * s, height * s, "--res")
+        source = area = Renderer(ctx, scene, width * s, height * s, settings)
+        area.render(config)
+    neural = NeuralPass(ctx, source, net, gi_size=(width, height))
+    neural.run(**neural.inputs_for(scene, config))
+    return neural, area
 
 
 def _check_finite(scene: Scene, config: FrameConfig, frame: dict, names) -> None:
