@@ -112,7 +112,7 @@ def build_generator_from_checkpoint(ckpt: Mapping[str, Any] | str | Path):
         "net_config": dict(ckpt["net_config"]),
         "config": dict(config),
         "versions": dict(ckpt.get("versions", {})),
-        "capture": ckpt["dataset"].get("capture"),
+        "capture": capture_record(ckpt["dataset"]),
         "loss_config": ckpt.get("loss_config"),
         "init": ckpt.get("init"),
         "trained_on": trained_on_from_config(ckpt),
@@ -171,6 +171,15 @@ def check_resume(cfg: TrainConfig, ckpt: Mapping[str, Any], ds: Dataset, train_i
 
 CAPTURE_KEYS: tuple[str, ...] = ("frames", "spp", "max_depth", "seed", "split_fractions", "gt", "dtype")
 """Dataset manifest fields a checkpoint (and so a model card's recipe) records: how to capture it again."""
+
+
+def capture_record(dataset: Mapping[str, Any]) -> dict[str, Any] | None:
+    """A checkpoint's dataset record as `diviewer capture` settings (a card's ``recipe.capture``): the manifest's
+    CAPTURE_KEYS, and ``direct_samples`` where the direct light covers each pixel's area (captured so, or derived by
+    `diviewer data area-direct`: the same frames, tested), so that a recipe's [capture] table reads back alike."""
+    cap = dataset.get("capture")
+    n = int(dataset.get("direct_samples", 1))
+    return cap if cap is None or n == 1 else {**cap, "direct_samples": n}
 
 
 def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Dataset, train_idx: list[int],
@@ -324,7 +333,7 @@ def init_record(parent: Mapping[str, Any]) -> dict[str, Any]:
 
     return {"path": parent["path"], "checkpoint_sha256": sha256_file(Path(parent["path"])), "step": parent["step"],
             "dataset_hash": parent["dataset"]["hash"], "train_frames": parent["dataset"]["train_frames"],
-            "meta": {"config": parent["config"], "capture": parent["dataset"].get("capture"),
+            "meta": {"config": parent["config"], "capture": capture_record(parent["dataset"]),
                      "net_config": parent["net_config"], "loss_config": parent.get("loss_config"),
                      **({"init": parent["init"]} if parent.get("init") else {})}}
 

@@ -156,3 +156,16 @@ def test_a_capture_with_direct_samples_stores_the_area_light_as_area_direct_deri
         np.testing.assert_array_equal(b.load(i)["pt"], a.load(i)["pt"])
     with pytest.raises(DiviewerError, match="samples per axis"):
         capture("cornell", tmp_path / "bad", CaptureSettings(frames=2, direct_samples=0, **TINY), **QUIET)
+
+
+def test_a_models_recipe_records_the_area_light_as_the_capture_setting_that_makes_it():
+    """A checkpoint's (and so a card's) ``recipe.capture`` holds ``direct_samples`` where its dataset's direct light
+    covers each pixel's area, so a recipe's [capture] table with that field reads back as the model's recipe."""
+    from diviewer.train.checkpoint import CAPTURE_KEYS, capture_record
+
+    cap = {k: getattr(CaptureSettings(), k) for k in CAPTURE_KEYS}
+    assert capture_record({"capture": cap, "direct_samples": 1}) == cap
+    assert capture_record({"capture": cap}) == cap  # checkpoints from before the area light
+    area = capture_record({"capture": cap, "direct_samples": 4})
+    assert area == {**cap, "direct_samples": 4} and CaptureSettings(**area).direct_samples == 4
+    assert capture_record({}) is None
