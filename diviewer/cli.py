@@ -217,11 +217,30 @@ def _scene_help(default: str | None = None) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from diviewer.gl.display import DEFAULT_TONEMAP, TONEMAPS
-
     ap = argparse.ArgumentParser(prog="diviewer", description="Real-time OpenGL viewer with a neural GI pass.")
     ap.add_argument("--version", action="version", version=f"diviewer {__version__}")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    from diviewer.build.command import add_build_parser
+    from diviewer.evalcommand import add_eval_parsers
+    from diviewer.train.cli import add_train_parser
+    from diviewer.viewer.command import add_view_parser
+
+    _add_render_parser(sub)
+    _add_capture_parser(sub)
+    _add_export_parser(sub)
+    add_train_parser(sub)
+    add_view_parser(sub)
+    add_build_parser(sub)
+    add_eval_parsers(sub, _add_variant_arg)
+    _add_baseline_parser(sub)
+    _add_bench_parser(sub)
+    _add_data_parsers(sub)
+    return ap
+
+
+def _add_render_parser(sub) -> None:
+    """`diviewer render`: one configuration to image files (GL, reference, model, VXGI)."""
+    from diviewer.gl.display import DEFAULT_TONEMAP, TONEMAPS
 
     p = sub.add_parser("render", help="render one configuration of a scene to image files")
     p.add_argument("--scene", default="cornell", help=_scene_help())
@@ -244,6 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--vxgi-bounces", type=int, default=1, choices=(1, 2), help="bounces of indirect light (default 1)")
     p.set_defaults(func=_cmd_render)
 
+
+def _add_capture_parser(sub) -> None:
+    """`diviewer capture`: a dataset of GL inputs and ground truth."""
     p = sub.add_parser("capture", help="render a dataset: GL inputs and path-traced ground truth (resumable)")
     p.add_argument("--scene", default="cornell", help=_scene_help())
     p.add_argument("--frames", type=int, default=100, help="frames over all splits")
@@ -264,6 +286,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.set_defaults(func=_cmd_capture)
 
+
+def _add_export_parser(sub) -> None:
+    """`diviewer export`: a checkpoint to a verified ONNX model and its card."""
     p = sub.add_parser("export", help="checkpoint to ONNX (encoding inside the graph), verified against PyTorch")
     p.add_argument("checkpoint", type=Path, nargs="?", help="RUN/best.ckpt")
     p.add_argument("--out", type=Path, help="model.onnx (a model card model.json is written beside it)")
@@ -274,17 +299,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--info", type=Path, metavar="MODEL", help="print a model's metadata and exit")
     p.set_defaults(func=_cmd_export)
 
-    from diviewer.build.command import add_build_parser
-    from diviewer.train.cli import add_train_parser
-    from diviewer.evalcommand import add_eval_parsers
-    from diviewer.viewer.command import add_view_parser
 
-    add_train_parser(sub)
-    add_view_parser(sub)
-    add_build_parser(sub)
-
-    add_eval_parsers(sub, _add_variant_arg)
-
+def _add_baseline_parser(sub) -> None:
+    """`diviewer baseline`: the linear-regression baseline as an ONNX model."""
     p = sub.add_parser("baseline", help="fit the per-pixel linear-regression baseline on a dataset; write it as "
                                         "an ONNX model that eval, bench and view run like any model")
     p.add_argument("--data", type=Path, required=True, help="a dataset (diviewer capture)")
@@ -293,6 +310,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-frames", type=int, default=None, help="fit on the first N present frames only")
     p.set_defaults(func=_cmd_baseline)
 
+
+def _add_bench_parser(sub) -> None:
+    """`diviewer bench`: the headless timing and speed/accuracy table."""
     p = sub.add_parser("bench", help="headless frame timing per stage and the speed/accuracy table: direct light, "
                                      "the baseline, models (fp32/fp16/int8, GI resolutions), untrained K, VXGI, path tracer")
     p.add_argument("--scene", default=None, help=_scene_help("cornell"))
@@ -322,9 +342,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", type=Path, default=None, help="write the speed/accuracy plot (PNG)")
     p.add_argument("--quick", action="store_true", help="a few frames at 32x32 (seconds): the test suite's run")
     p.set_defaults(func=_cmd_bench)
-
-    _add_data_parsers(sub)
-    return ap
 
 
 def _add_data_parsers(sub) -> None:
