@@ -178,10 +178,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
               log=print) -> dict:
     """Measure every row; print the table; write the JSON and the plot when asked. Returns the result."""
     _check_extras(plot_out)
-    import onnx
-
     from diviewer.bench import report
-    from diviewer.bench.onnx_tools import generator_flops, untrained_generator
     from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_configs, time_path_tracer
     from diviewer.gl.context import headless_context
     from diviewer.runtime import NeuralGI
@@ -214,43 +211,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
             log(f"timing at {res}x{res} ({settings.warmup} warm-up + {settings.frames} frames per row, GL: {mode})")
             gb = GlBench(ctx, scene, res, res, mode)
             try:
-                rows.append(_row("direct", "direct light only", res, res, gb.time_direct(configs, settings.warmup)))
-                for g in settings.vxgi_grids:
-                    vs = settings.vxgi(g)
-                    row = _row("vxgi", _vxgi_label(vs), res, -(-res // vs.trace_scale),
-                               gb.time_vxgi(vs, configs, settings.warmup))
-                    row.update(grid=g, vxgi=dataclasses.asdict(vs), accuracy_key=f"vxgi{g}")
-                    rows.append(row)
-                for v in variants:
-                    net = net_of(v)
-                    steps = [1] + ([s for s in settings.gi_steps if v["precision"] == v["meta"]["precision"]]
-                                   if v["kind"] == "neural" else [])
-                    for step in steps:
-                        if res % step:  # the runtime pads any GI size to the model's stride
-                            continue
-                        row = _row(v["kind"], _label(v, step), res, res // step,
-                                   gb.time_model(net, configs, settings.warmup, step))
-                        row.update(model=v["source"], precision=v["precision"], provider=net.provider,
-                                   K=v["meta"].get("K"), levels=v["meta"].get("levels"), step=step,
-                                   accuracy_key=f"{v['path']}|{step}", converted_from=v.get("converted_from"),
-                                   calibration=v.get("calibration"))
-                        if v["kind"] == "neural":
-                            lv = int(v["meta"]["levels"])
-                            side = -(-(res // step) // 2 ** lv) * 2 ** lv  # as the runtime pads it
-                            row["flops"] = generator_flops(int(v["meta"]["K"]), lv, side, side,
-                                                           upsample=v["meta"].get("upsample", "transpose"))["flops"]
-                        rows.append(row)
-                levels = _levels(res)
-                for K in settings.untrained_k:
-                    path = tmp / f"untrained_K{K}_{res}.onnx"
-                    onnx.save(untrained_generator(K, levels, scene, res), str(path))
-                    net = NeuralGI(path, scene=scene, provider=settings.provider)
-                    row = _row("untrained", f"untrained K={K} fp32", res, res, gb.time_model(net, configs, settings.warmup))
-                    row.update(K=K, levels=levels, precision="fp32", provider=net.provider, untrained=True, step=1,
-                               flops=generator_flops(K, levels, res, res)["flops"])
-                    rows.append(row)
-                    del net
-                    path.unlink()
+                rows += _rows_at(res, gb, settings, scene, configs, variants, net_of, tmp)
             finally:
                 gb.release()
         accuracy = _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log)
@@ -270,6 +231,55 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
         report.plot(result, plot_out)
     tmp_dir.cleanup()
     return result
+
+
+def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, variants: list[dict], net_of,
+             tmp: Path) -> list[dict]:
+    """The timed rows at one square resolution: direct light, VXGI per grid, each model variant at each GI step
+    it allows, and the untrained generators of the cost curve."""
+    import onnx
+
+    from diviewer.bench.onnx_tools import generator_flops, untrained_generator
+    from diviewer.runtime import NeuralGI
+
+    rows = [_row("direct", "direct light only", res, res, gb.time_direct(configs, settings.warmup))]
+    for g in settings.vxgi_grids:
+        vs = settings.vxgi(g)
+        row = _row("vxgi", _vxgi_label(vs), res, -(-res // vs.trace_scale),
+                   gb.time_vxgi(vs, configs, settings.warmup))
+        row.update(grid=g, vxgi=dataclasses.asdict(vs), accuracy_key=f"vxgi{g}")
+        rows.append(row)
+    for v in variants:
+        net = net_of(v)
+        steps = [1] + ([s for s in settings.gi_steps if v["precision"] == v["meta"]["precision"]]
+                       if v["kind"] == "neural" else [])
+        for step in steps:
+            if res % step:  # the runtime pads any GI size to the model's stride
+                continue
+            row = _row(v["kind"], _label(v, step), res, res // step,
+                       gb.time_model(net, configs, settings.warmup, step))
+            row.update(model=v["source"], precision=v["precision"], provider=net.provider,
+                       K=v["meta"].get("K"), levels=v["meta"].get("levels"), step=step,
+                       accuracy_key=f"{v['path']}|{step}", converted_from=v.get("converted_from"),
+                       calibration=v.get("calibration"))
+            if v["kind"] == "neural":
+                lv = int(v["meta"]["levels"])
+                side = -(-(res // step) // 2 ** lv) * 2 ** lv  # as the runtime pads it
+                row["flops"] = generator_flops(int(v["meta"]["K"]), lv, side, side,
+                                               upsample=v["meta"].get("upsample", "transpose"))["flops"]
+            rows.append(row)
+    levels = _levels(res)
+    for K in settings.untrained_k:
+        path = tmp / f"untrained_K{K}_{res}.onnx"
+        onnx.save(untrained_generator(K, levels, scene, res), str(path))
+        net = NeuralGI(path, scene=scene, provider=settings.provider)
+        row = _row("untrained", f"untrained K={K} fp32", res, res, gb.time_model(net, configs, settings.warmup))
+        row.update(K=K, levels=levels, precision="fp32", provider=net.provider, untrained=True, step=1,
+                   flops=generator_flops(K, levels, res, res)["flops"])
+        rows.append(row)
+        del net
+        path.unlink()
+    return rows
 
 
 def bare_ratio_lines(rows: list[dict]) -> list[str]:
