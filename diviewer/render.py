@@ -75,14 +75,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
         try:
             frame = renderer.frame(config)
             if vxgi is not None:
-                from diviewer.gl.context import stage_timer
-                from diviewer.gl.vxgi import VXGIPass
-
-                vx = VXGIPass(ctx, renderer, vxgi, timer=stage_timer(ctx, sync=True))
-                vx.run(config)
-                frame["vxgi"], frame["vxgi_indirect"] = vx.read("vxgi"), vx.read("vxgi_indirect")
-                vxgi_info = {"settings": settings_dict(vxgi), "fragments": vx.fragment_counts,
-                             "ms": {k: round(v, 3) for k, v in vx.timings.items()}}
+                vx, vxgi_info = _vxgi_pass(ctx, renderer, vxgi, config, frame)
             if net is not None:
                 neural, area = _neural_pass(ctx, scene, renderer, net, config, settings)
                 frame["neural"] = neural.image()
@@ -95,23 +88,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
                                   display={"exposure": ev, "tonemap": tonemap}, neural=neural_info,
                                   user_meshes=user_meshes, **({"vxgi": vxgi_info} if vxgi_info else {}))
-            # All files under temporary names first, then renamed together: a failure part-way
-            # (a full disk) leaves the folder as it was.
-            with staged() as stage:
-                for name in BUFFERS:
-                    imageio.write_exr(stage(out / f"{name}.exr"), frame[name])
-                imageio.write_png(stage(out / "depth.png"), imageio.depth_preview(frame["depth"]))
-                imageio.write_png(stage(out / "normal.png"), imageio.normal_preview(frame["normal"]))
-                imageio.write_png(stage(out / "albedo.png"), srgb8(frame["albedo"]))
-                imageio.write_png(stage(out / "direct.png"), compositor.to_ldr(frame["direct"], ev, tonemap))
-                if "neural" in frame:
-                    imageio.write_exr(stage(out / "neural.exr"), frame["neural"])
-                    imageio.write_png(stage(out / "neural.png"), compositor.to_ldr(frame["neural"], ev, tonemap))
-                if "vxgi" in frame:
-                    for name in ("vxgi", "vxgi_indirect"):
-                        imageio.write_exr(stage(out / f"{name}.exr"), frame[name])
-                        imageio.write_png(stage(out / f"{name}.png"), compositor.to_ldr(frame[name], ev, tonemap))
-                imageio.write_text(stage(out / "frame.json"), dumps(record, indent=2))
+            _write_render(out, frame, record, compositor, ev, tonemap)
         finally:
             if vx is not None:
                 vx.release()
@@ -123,6 +100,36 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
             renderer.release()
     return record
 
+
+def _vxgi_pass(ctx, renderer, vxgi, config, frame: dict):
+    """Voxel cone tracing of ``config`` into ``frame`` (vxgi, vxgi_indirect); returns the pass and its record."""
+    from diviewer.gl.context import stage_timer
+    from diviewer.gl.vxgi import VXGIPass
+
+    vx = VXGIPass(ctx, renderer, vxgi, timer=stage_timer(ctx, sync=True))
+    vx.run(config)
+    frame["vxgi"], frame["vxgi_indirect"] = vx.read("vxgi"), vx.read("vxgi_indirect")
+    return vx, {"settings": settings_dict(vxgi), "fragments": vx.fragment_counts,
+                "ms": {k: round(v, 3) for k, v in vx.timings.items()}}
+
+
+def _write_render(out: Path, frame: dict, record: dict, compositor, ev: float, tonemap: str) -> None:
+    """A render's buffers (EXR), previews (PNG) and frame.json, all under temporary names first and then renamed
+    together: a failure part-way (a full disk) leaves the folder as it was."""
+    from diviewer.gl.renderer import BUFFERS
+
+    with staged() as stage:
+        for name in BUFFERS:
+            imageio.write_exr(stage(out / f"{name}.exr"), frame[name])
+        imageio.write_png(stage(out / "depth.png"), imageio.depth_preview(frame["depth"]))
+        imageio.write_png(stage(out / "normal.png"), imageio.normal_preview(frame["normal"]))
+        imageio.write_png(stage(out / "albedo.png"), srgb8(frame["albedo"]))
+        imageio.write_png(stage(out / "direct.png"), compositor.to_ldr(frame["direct"], ev, tonemap))
+        for name in ("neural", "vxgi", "vxgi_indirect"):
+            if name in frame:
+                imageio.write_exr(stage(out / f"{name}.exr"), frame[name])
+                imageio.write_png(stage(out / f"{name}.png"), compositor.to_ldr(frame[name], ev, tonemap))
+        imageio.write_text(stage(out / "frame.json"), dumps(record, indent=2))
 
 def _neural_pass(ctx, scene: Scene, renderer, net, config: FrameConfig, settings):
     """The model run on ``renderer``'s frame at its own size (the model pads it to its stride); returns the pass and
@@ -190,7 +197,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     import time
 
     from diviewer.gl.context import headless_context
-    from diviewer.gl.display import DEFAULT_TONEMAP, DisplayPass
+    from diviewer.gl.display import DisplayPass
     from diviewer.gl.shaders import ShaderCache
     from diviewer.reference import mitsuba as ref
 
@@ -202,13 +209,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         raise DiviewerError(f"must be at least 2 (2 = direct light only), got {depth}", field="--max-depth")
     scene = load_scene(scene_name)
     frame_json = out / "frame.json"
-    data = read_frame_json(scene, frame_json)
-    config = config_from_dict(scene, data["config"], path=frame_json)
-    record = data
-    res = record.get("resolution")
-    if not (isinstance(res, list) and len(res) == 2 and all(isinstance(x, int) and x >= 1 for x in res)):
-        raise DiviewerError(f"expected [width, height], got {res!r}", path=frame_json, field="resolution")
-    width, height = res
+    record, config, (width, height), (ev, tonemap) = _stored_frame(scene, frame_json)
 
     ref.select_variant()
     t0 = time.perf_counter()
@@ -239,12 +240,6 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         table["seconds"]["noise_floor"] = round(time.perf_counter() - t0, 4)
         table["noise_floor"] = ref.compare_renders(full, second, spp=table["spp"], seeds=(pt_seed, pt_seed + 1))
 
-    display = record.get("display") if isinstance(record.get("display"), dict) else {}
-    ev, tonemap = display.get("exposure", scene.exposure), display.get("tonemap", DEFAULT_TONEMAP)
-    if isinstance(ev, bool) or not isinstance(ev, (int, float)) or not np.isfinite(ev):
-        raise DiviewerError(f"expected a finite number, got {ev!r}", path=frame_json, field="display.exposure")
-    if tonemap not in ("clamp", "reinhard", "aces"):
-        raise DiviewerError(f"expected clamp, reinhard or aces, got {tonemap!r}", path=frame_json, field="display.tonemap")
     record["reference"] = table
     with headless_context() as ctx, staged() as stage:
         compositor = DisplayPass(ctx, ShaderCache(ctx))
@@ -257,3 +252,22 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
             compositor.release()
         imageio.write_text(stage(frame_json), dumps(record, indent=2))
     return table
+
+
+def _stored_frame(scene: Scene, frame_json: Path) -> tuple[dict, FrameConfig, tuple[int, int], tuple[float, str]]:
+    """What `render` stored in frame.json, checked before any path tracing: the record, its configuration, its
+    [width, height] and its display (exposure, tone map)."""
+    from diviewer.gl.display import DEFAULT_TONEMAP
+
+    record = read_frame_json(scene, frame_json)
+    config = config_from_dict(scene, record["config"], path=frame_json)
+    res = record.get("resolution")
+    if not (isinstance(res, list) and len(res) == 2 and all(isinstance(x, int) and x >= 1 for x in res)):
+        raise DiviewerError(f"expected [width, height], got {res!r}", path=frame_json, field="resolution")
+    display = record.get("display") if isinstance(record.get("display"), dict) else {}
+    ev, tonemap = display.get("exposure", scene.exposure), display.get("tonemap", DEFAULT_TONEMAP)
+    if isinstance(ev, bool) or not isinstance(ev, (int, float)) or not np.isfinite(ev):
+        raise DiviewerError(f"expected a finite number, got {ev!r}", path=frame_json, field="display.exposure")
+    if tonemap not in ("clamp", "reinhard", "aces"):
+        raise DiviewerError(f"expected clamp, reinhard or aces, got {tonemap!r}", path=frame_json, field="display.tonemap")
+    return record, config, (res[0], res[1]), (float(ev), tonemap)
