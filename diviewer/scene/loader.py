@@ -74,22 +74,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
         g.finish()
 
     for key, t in _entries(root.table("materials"), _not_in_gltf(materials, "material")):
-        texture, alpha, tex_src = None, None, ""
-        if t.has("texture"):
-            tex_path = base / t.str("texture")
-            texture, alpha = gltf.load_texture(tex_path, path=path, field=t._field("texture"))
-            tex_src = str(tex_path)
-        cutoff = 0.5
-        if t.has("alpha_cutoff"):
-            # Alpha-tested: the texture's alpha channel is the cut-out mask (as glTF's alphaMode MASK).
-            cutoff = t.num("alpha_cutoff", lo=0.0, hi=1.0)
-            if alpha is None:
-                raise t.err("alpha_cutoff", "needs a 'texture' with an alpha channel (the cut-out mask)")
-        else:
-            alpha = None
-        materials[key] = Material(key, albedo=t.vec("albedo", 3, (0.8, 0.8, 0.8), lo=0.0, hi=1.0),
-                                  emission=t.vec("emission", 3, (0.0, 0.0, 0.0), lo=0.0),
-                                  texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff)
+        materials[key] = _material(key, t, base, path)
 
     for key, t in _entries(root.table("meshes"), _not_in_gltf(meshes, "mesh")):
         if t.has("file") == t.has("shape"):
@@ -106,10 +91,52 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                 materials[f"mesh:{key}"] = Material(f"mesh:{key}", albedo=color or (1.0, 1.0, 1.0), texture=texture,
                                                     texture_source=str(base / t.data["file"]))
 
+    objects += _objects(root, path, meshes, materials, {o.name for o in objects})
+    if not objects:
+        raise DiviewerError("a scene needs at least one object ([[objects]] or [gltf])", path=path, field="objects")
+
+    lights = []
+    raw_lights = root.raw("lights", [])
+    if not isinstance(raw_lights, list):
+        raise root.err("lights", "expected an array of tables ([[lights]])")
+    for i, l in enumerate(raw_lights):
+        lights.append(_light(_Table(l, path, f"lights[{i}]"), i))
+    if len({l.name for l in lights}) != len(lights):
+        raise DiviewerError("light names must be unique", path=path, field="lights")
+
+    default = FrameConfig(camera=camera, lights=tuple(lights), objects=tuple(objects))
+    ranges = _ranges(root.table("ranges"), default, meshes)
+    root.finish()
+    return Scene(name=name, path=path, file_hash=file_hash, meshes=meshes, materials=materials, default=default,
+                 ranges=ranges, exposure=exposure, ambient=ambient)
+
+
+def _material(key: str, t: _Table, base: Path, path: Path | None) -> Material:
+    """One [materials.KEY] table: albedo, emission, an optional texture and its alpha cut-out."""
+    texture, alpha, tex_src = None, None, ""
+    if t.has("texture"):
+        tex_path = base / t.str("texture")
+        texture, alpha = gltf.load_texture(tex_path, path=path, field=t._field("texture"))
+        tex_src = str(tex_path)
+    cutoff = 0.5
+    if t.has("alpha_cutoff"):
+        # Alpha-tested: the texture's alpha channel is the cut-out mask (as glTF's alphaMode MASK).
+        cutoff = t.num("alpha_cutoff", lo=0.0, hi=1.0)
+        if alpha is None:
+            raise t.err("alpha_cutoff", "needs a 'texture' with an alpha channel (the cut-out mask)")
+    else:
+        alpha = None
+    return Material(key, albedo=t.vec("albedo", 3, (0.8, 0.8, 0.8), lo=0.0, hi=1.0),
+                    emission=t.vec("emission", 3, (0.0, 0.0, 0.0), lo=0.0),
+                    texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff)
+
+
+def _objects(root: _Table, path: Path | None, meshes: dict, materials: dict, names: set[str]) -> list[Object]:
+    """The [[objects]] array: each a mesh and a material by name, placed; names unique (``names``: those taken)."""
+    objects = []
     raw_objects = root.raw("objects", [])
     if not isinstance(raw_objects, list):
         raise root.err("objects", "expected an array of tables ([[objects]])")
-    names = {o.name for o in objects}
     for i, o in enumerate(raw_objects):
         t = _Table(o, path, f"objects[{i}]")
         oname = t.str("name", f"object{i}")
@@ -129,23 +156,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
         objects.append(Object(oname, mesh, mat, position=t.vec("position", 3, (0.0, 0.0, 0.0)),
                               rotation=t.vec("rotation", 3, (0.0, 0.0, 0.0)), scale=scale))
         t.finish()
-    if not objects:
-        raise DiviewerError("a scene needs at least one object ([[objects]] or [gltf])", path=path, field="objects")
-
-    lights = []
-    raw_lights = root.raw("lights", [])
-    if not isinstance(raw_lights, list):
-        raise root.err("lights", "expected an array of tables ([[lights]])")
-    for i, l in enumerate(raw_lights):
-        lights.append(_light(_Table(l, path, f"lights[{i}]"), i))
-    if len({l.name for l in lights}) != len(lights):
-        raise DiviewerError("light names must be unique", path=path, field="lights")
-
-    default = FrameConfig(camera=camera, lights=tuple(lights), objects=tuple(objects))
-    ranges = _ranges(root.table("ranges"), default, meshes)
-    root.finish()
-    return Scene(name=name, path=path, file_hash=file_hash, meshes=meshes, materials=materials, default=default,
-                 ranges=ranges, exposure=exposure, ambient=ambient)
+    return objects
 
 
 def _not_in_gltf(defined: dict, what: str):
