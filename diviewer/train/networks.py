@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 from torch import nn
@@ -21,6 +21,10 @@ from torch import nn
 from diviewer.encoding import INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
 from diviewer.provenance import check_known_keys
+
+if TYPE_CHECKING:
+    from diviewer.data.dataset import Dataset
+    from diviewer.train.config import TrainConfig
 from diviewer.train.losses import GANLoss
 
 __all__ = [
@@ -404,3 +408,17 @@ class NetConfig:
         checkpoint from before upsample/norm existed rebuilds as transpose/batch, which it was)."""
         check_known_keys(cls, data, "net")
         return cls(**dict(data))
+
+
+def net_config(cfg: TrainConfig, ds: Dataset) -> NetConfig:
+    """The networks for a run's settings and its dataset's resolution (`diviewer.train.trainer`)."""
+    try:
+        # Cropped (or any wider) frames are padded to the stride: the network's depth follows the height.
+        levels = (levels_for_resolution(min(ds.width, ds.height)) if cfg.aspect_crops else
+                  min(levels_for_resolution(ds.width), levels_for_resolution(ds.height)))
+    except ValueError:
+        raise DiviewerError(f"resolution {ds.width}x{ds.height} must be even on both sides to train a U-Net",
+                            path=ds.root) from None
+    return NetConfig(K=cfg.K, levels=levels, resolution=min(ds.width, ds.height), dropout=cfg.dropout,
+                     ndf=cfg.ndf, n_layers_D=cfg.n_layers_D, lambda_L1=cfg.lambda_L1, target=cfg.target,
+                     upsample=cfg.upsample, norm=cfg.norm, norm_D=cfg.norm_D)

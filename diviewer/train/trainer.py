@@ -158,127 +158,143 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
         {"epoch", "step", "val" (last validation metrics or None), "best" (best tone-mapped SSIM),
         "losses" (per step run here: dicts with step and `step.STEP_KEYS`), "out", "stopped_early"}.
     """
-    torch = require_torch()
+    require_torch()
     import torch.distributed as dist
-
-    from diviewer.encoding import Encoding
-    from diviewer.console import progress_bar
-    from diviewer.train.step import build_nets, set_learning_rate, train_step
 
     dev = distributed.setup(cfg)
     say = log if dev.main else (lambda *_: None)
     try:
-        ds, train_idx, train_arr, val_arr = _load_splits(cfg, dev, say)
-        note = cfg.check_schedule(len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world)))
-        if note:
-            say(note)
-        ckpt = _open_run(cfg, ds, train_idx, resume, say)
-        parent = open_parent(cfg, ds) if ckpt is None and cfg.init_from else None
-        train_scales, val_scales = run_light_scales(cfg, ds, train_idx, val_arr is not None)
-        if ckpt:
-            enc = Encoding.from_dict(ckpt["encoding"])
-        elif parent:  # the parent's weights were trained on its encoding: keep it
-            enc = parent_encoding(parent, cfg)
-        else:
-            enc = fit_encoding(ds, train_idx, train_arr, train_scales, world=cfg.world_inputs)
-        train_cams, val_cams = run_cameras(enc, ds, train_idx, val_arr is not None)
-        net_cfg = _net_config(cfg, ds)
-        _check_trainable(net_cfg, cfg, ds, len(train_idx))
-        nets = build_nets(cfg, net_cfg, enc, dev, say)
-        st = TrainState()
-        if parent:
-            warm_start(nets, parent, cfg, say)
-        if ckpt:
-            restore_run(nets, ckpt, cfg, dev, say)
-            st = TrainState.from_checkpoint(ckpt, dev.world)
-            if dev.main:  # drop rows written after the checkpoint (a crash between the two)
-                write_metrics(cfg.out / "metrics.csv", [r for r in read_metrics(cfg.out / "metrics.csv")
-                                                        if r["step"] <= st.step])
-            say(f"resuming {cfg.out} at epoch {st.epoch} (+{st.batch_in_epoch} steps), step {st.step}")
-        elif dev.main:
-            cfg.out.mkdir(parents=True, exist_ok=True)
-            write_metrics(cfg.out / "metrics.csv", [])
-        if dev.world > 1:  # DDP wrappers all-reduce the gradients; the bare modules stay in nets.*_m
-            ids = [dev.device.index] if dev.device.type == "cuda" else None
-            nets.netG = torch.nn.parallel.DistributedDataParallel(nets.netG_m, device_ids=ids)
-            nets.netD = torch.nn.parallel.DistributedDataParallel(nets.netD_m, device_ids=ids)
-        steps_per_epoch = len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world))
-        meta = run_metadata(cfg, nets, net_cfg, enc, ds, train_idx, 0 if val_arr is None else len(val_arr), ckpt)
-        if parent or (ckpt and ckpt.get("init")):
-            meta["init"] = init_record(parent) if parent else ckpt["init"]
-        run = Run(cfg=cfg, dev=dev, ds=ds, train_arr=train_arr, val_arr=val_arr, enc=enc, say=say,
-                  meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed, multiple=2 ** net_cfg.levels,
-                  train_scales=train_scales, val_scales=val_scales, train_cams=train_cams, val_cams=val_cams,
-                  tonemap_exposure=None if enc.version < 2 else _raw_exposure(ds, train_arr))
-
-        total = horizon = cfg.epochs * steps_per_epoch  # the lr schedule's horizon ignores max_steps
+        run, nets, st = _prepare(cfg, dev, say, resume)
+        total = horizon = cfg.epochs * run.steps_per_epoch  # the lr schedule's horizon ignores max_steps
         if cfg.max_steps is not None:
             total = min(total, cfg.max_steps)
         if st.step >= total or st.epoch >= cfg.epochs or _patience_spent(cfg, st):
             say(f"{cfg.out}: already trained to step {st.step} (epoch {st.epoch}); nothing to do")
             return _result(cfg, st)
+        ds, enc = run.ds, run.enc
         say(f"train {ds.manifest.get('scene')} K={cfg.K} target={cfg.target}{' /albedo' if cfg.divide_albedo else ''}: "
-            f"{len(train_idx)} train frames at {ds.width}x{ds.height}, {steps_per_epoch} steps/epoch, "
-            f"{dev.world} process(es) on {dev.device}{f' with {nets.dtype} autocast' if nets.dtype else ''}, "
+            f"{run.meta['dataset']['train_frames']} train frames at {ds.width}x{ds.height}, {run.steps_per_epoch} "
+            f"steps/epoch, {dev.world} process(es) on {dev.device}{f' with {nets.dtype} autocast' if nets.dtype else ''}, "
             f"exposure {enc.exposure:.4g}, depth_scale {enc.depth_scale:.4g}, encoding {enc.version}"
             + (f", aspect crops {cfg.aspect_crops[0]:.3g}-{cfg.aspect_crops[1]:.3g}" if cfg.aspect_crops else ""))
-
-        progress = progress_bar(total - st.step, "train", "step") if dev.main else None
-        stop = {"stop": False}
-        restore_handlers = distributed.install_stop_handlers(stop, say)
-        nets.netG.train()
-        nets.netD.train()
-        try:
-            while st.epoch < cfg.epochs and st.step < total and not _patience_spent(cfg, st):
-                t_epoch = time.perf_counter()
-                batches = epoch_batches(len(train_arr), st.epoch, cfg.seed, cfg.batch_size, dev.rank, dev.world)
-                todo = batches[st.batch_in_epoch:]
-                for k, x16 in enumerate(distributed.loader(train_arr, todo, cfg, dev)):
-                    set_learning_rate(nets, cfg, st.step, horizon)
-                    numbers = train_step(nets, _batch(run, x16.to(dev.device, non_blocking=True), todo[k],
-                                                      st.epoch, st.batch_in_epoch))
-                    if not nets.scaler.is_enabled() and not all(map(math.isfinite, numbers.values())):
-                        raise DiviewerError(f"training diverged at step {st.step + 1} ({_fmt(numbers)}); "
-                                            "--resume continues from last.ckpt; try a lower --lr", path=cfg.out)
-                    st.add(numbers)
-                    if progress:
-                        progress.set_postfix_str(f"epoch {st.epoch + 1} {_fmt(numbers)}", refresh=False)
-                        progress.update()
-                    if distributed.stop_requested(stop, dev):
-                        save_run(run, nets, st, None, False)
-                        say(f"stopped at epoch {st.epoch} + {st.batch_in_epoch} steps, step {st.step}; "
-                            f"continue with: diviewer train --data {cfg.data} --out {cfg.out} --resume")
-                        raise KeyboardInterrupt
-                    if st.step >= total or st.batch_in_epoch >= len(batches):
-                        break
-                    if cfg.val_every_steps and st.step % cfg.val_every_steps == 0:
-                        _end_of_stretch(run, nets, st, True)
-                        if _patience_spent(cfg, st):
-                            break
-                    elif cfg.save_every and st.step % cfg.save_every == 0:
-                        save_run(run, nets, st, None, False)
-                if st.batch_in_epoch >= len(batches):
-                    st.new_epoch()
-                    due = st.epoch % cfg.val_every == 0 or st.epoch == cfg.epochs or st.step >= total
-                    line = f"epoch {st.epoch}/{cfg.epochs} step {st.step} | {_fmt(st.means())}"
-                    val = _end_of_stretch(run, nets, st, due)
-                    say(f"{line}{_fmt_val(val)} | {time.perf_counter() - t_epoch:.1f} s")
-                elif not _patience_spent(cfg, st):  # stopped inside an epoch by max_steps: validate, record, save
-                    val = _end_of_stretch(run, nets, st, True)
-                    say(f"stopped at max_steps {cfg.max_steps}: epoch {st.epoch} + {st.batch_in_epoch} steps"
-                        + _fmt_val(val))
-                    break
-            if _patience_spent(cfg, st):
-                say(f"early stop at step {st.step}: no better validation SSIM (tone-mapped) in {cfg.patience} "
-                    f"validations; best {st.best['ssim_tm']:.4f} at step {st.best['step']} (best.ckpt)")
-        finally:
-            restore_handlers()
-            if progress:
-                progress.close()
+        _epochs(run, nets, st, total, horizon)
         return _result(cfg, st)
     finally:
         if dev.initialized_here and dist.is_initialized():
             dist.destroy_process_group()
+
+
+def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets, TrainState]:
+    """The run's data, encoding, networks and state: fresh, warm-started from a parent, or resumed."""
+    import torch
+
+    from diviewer.encoding import Encoding
+    from diviewer.train.networks import net_config
+    from diviewer.train.step import build_nets
+
+    ds, train_idx, train_arr, val_arr = _load_splits(cfg, dev, say)
+    note = cfg.check_schedule(len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world)))
+    if note:
+        say(note)
+    ckpt = _open_run(cfg, ds, train_idx, resume, say)
+    parent = open_parent(cfg, ds) if ckpt is None and cfg.init_from else None
+    train_scales, val_scales = run_light_scales(cfg, ds, train_idx, val_arr is not None)
+    if ckpt:
+        enc = Encoding.from_dict(ckpt["encoding"])
+    elif parent:  # the parent's weights were trained on its encoding: keep it
+        enc = parent_encoding(parent, cfg)
+    else:
+        enc = fit_encoding(ds, train_idx, train_arr, train_scales, world=cfg.world_inputs)
+    train_cams, val_cams = run_cameras(enc, ds, train_idx, val_arr is not None)
+    net_cfg = net_config(cfg, ds)
+    _check_trainable(net_cfg, cfg, ds, len(train_idx))
+    nets = build_nets(cfg, net_cfg, enc, dev, say)
+    st = TrainState()
+    if parent:
+        warm_start(nets, parent, cfg, say)
+    if ckpt:
+        restore_run(nets, ckpt, cfg, dev, say)
+        st = TrainState.from_checkpoint(ckpt, dev.world)
+        if dev.main:  # drop rows written after the checkpoint (a crash between the two)
+            write_metrics(cfg.out / "metrics.csv", [r for r in read_metrics(cfg.out / "metrics.csv")
+                                                    if r["step"] <= st.step])
+        say(f"resuming {cfg.out} at epoch {st.epoch} (+{st.batch_in_epoch} steps), step {st.step}")
+    elif dev.main:
+        cfg.out.mkdir(parents=True, exist_ok=True)
+        write_metrics(cfg.out / "metrics.csv", [])
+    if dev.world > 1:  # DDP wrappers all-reduce the gradients; the bare modules stay in nets.*_m
+        ids = [dev.device.index] if dev.device.type == "cuda" else None
+        nets.netG = torch.nn.parallel.DistributedDataParallel(nets.netG_m, device_ids=ids)
+        nets.netD = torch.nn.parallel.DistributedDataParallel(nets.netD_m, device_ids=ids)
+    steps_per_epoch = len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world))
+    meta = run_metadata(cfg, nets, net_cfg, enc, ds, train_idx, 0 if val_arr is None else len(val_arr), ckpt)
+    if parent or (ckpt and ckpt.get("init")):
+        meta["init"] = init_record(parent) if parent else ckpt["init"]
+    return Run(cfg=cfg, dev=dev, ds=ds, train_arr=train_arr, val_arr=val_arr, enc=enc, say=say,
+               meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed, multiple=2 ** net_cfg.levels,
+               train_scales=train_scales, val_scales=val_scales, train_cams=train_cams, val_cams=val_cams,
+               tonemap_exposure=None if enc.version < 2 else _raw_exposure(ds, train_arr)), nets, st
+
+
+def _epochs(run: Run, nets: Nets, st: TrainState, total: int, horizon: int) -> None:
+    """The loop: steps to ``total`` (the learning rate's schedule runs to ``horizon``), validating, saving and
+    stopping early as the settings say; a stop request saves last.ckpt and raises KeyboardInterrupt."""
+    from diviewer.console import progress_bar
+    from diviewer.train.step import set_learning_rate, train_step
+
+    cfg, dev, train_arr, say = run.cfg, run.dev, run.train_arr, run.say
+    progress = progress_bar(total - st.step, "train", "step") if dev.main else None
+    stop = {"stop": False}
+    restore_handlers = distributed.install_stop_handlers(stop, say)
+    nets.netG.train()
+    nets.netD.train()
+    try:
+        while st.epoch < cfg.epochs and st.step < total and not _patience_spent(cfg, st):
+            t_epoch = time.perf_counter()
+            batches = epoch_batches(len(train_arr), st.epoch, cfg.seed, cfg.batch_size, dev.rank, dev.world)
+            todo = batches[st.batch_in_epoch:]
+            for k, x16 in enumerate(distributed.loader(train_arr, todo, cfg, dev)):
+                set_learning_rate(nets, cfg, st.step, horizon)
+                numbers = train_step(nets, _batch(run, x16.to(dev.device, non_blocking=True), todo[k],
+                                                  st.epoch, st.batch_in_epoch))
+                if not nets.scaler.is_enabled() and not all(map(math.isfinite, numbers.values())):
+                    raise DiviewerError(f"training diverged at step {st.step + 1} ({_fmt(numbers)}); "
+                                        "--resume continues from last.ckpt; try a lower --lr", path=cfg.out)
+                st.add(numbers)
+                if progress:
+                    progress.set_postfix_str(f"epoch {st.epoch + 1} {_fmt(numbers)}", refresh=False)
+                    progress.update()
+                if distributed.stop_requested(stop, dev):
+                    save_run(run, nets, st, None, False)
+                    say(f"stopped at epoch {st.epoch} + {st.batch_in_epoch} steps, step {st.step}; "
+                        f"continue with: diviewer train --data {cfg.data} --out {cfg.out} --resume")
+                    raise KeyboardInterrupt
+                if st.step >= total or st.batch_in_epoch >= len(batches):
+                    break
+                if cfg.val_every_steps and st.step % cfg.val_every_steps == 0:
+                    _end_of_stretch(run, nets, st, True)
+                    if _patience_spent(cfg, st):
+                        break
+                elif cfg.save_every and st.step % cfg.save_every == 0:
+                    save_run(run, nets, st, None, False)
+            if st.batch_in_epoch >= len(batches):
+                st.new_epoch()
+                due = st.epoch % cfg.val_every == 0 or st.epoch == cfg.epochs or st.step >= total
+                line = f"epoch {st.epoch}/{cfg.epochs} step {st.step} | {_fmt(st.means())}"
+                val = _end_of_stretch(run, nets, st, due)
+                say(f"{line}{_fmt_val(val)} | {time.perf_counter() - t_epoch:.1f} s")
+            elif not _patience_spent(cfg, st):  # stopped inside an epoch by max_steps: validate, record, save
+                val = _end_of_stretch(run, nets, st, True)
+                say(f"stopped at max_steps {cfg.max_steps}: epoch {st.epoch} + {st.batch_in_epoch} steps"
+                    + _fmt_val(val))
+                break
+        if _patience_spent(cfg, st):
+            say(f"early stop at step {st.step}: no better validation SSIM (tone-mapped) in {cfg.patience} "
+                f"validations; best {st.best['ssim_tm']:.4f} at step {st.best['step']} (best.ckpt)")
+    finally:
+        restore_handlers()
+        if progress:
+            progress.close()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -341,22 +357,6 @@ def _open_run(cfg: TrainConfig, ds: Dataset, train_idx: list[int], resume: bool,
     if resume:
         say(f"no {last} yet: starting a new run")
     return None
-
-
-def _net_config(cfg: TrainConfig, ds: Dataset) -> NetConfig:
-    """The networks for this dataset's resolution and the run's settings."""
-    from diviewer.train.networks import NetConfig, levels_for_resolution
-
-    try:
-        # Cropped (or any wider) frames are padded to the stride: the network's depth follows the height.
-        levels = (levels_for_resolution(min(ds.width, ds.height)) if cfg.aspect_crops else
-                  min(levels_for_resolution(ds.width), levels_for_resolution(ds.height)))
-    except ValueError:
-        raise DiviewerError(f"resolution {ds.width}x{ds.height} must be even on both sides to train a U-Net",
-                            path=ds.root) from None
-    return NetConfig(K=cfg.K, levels=levels, resolution=min(ds.width, ds.height), dropout=cfg.dropout,
-                     ndf=cfg.ndf, n_layers_D=cfg.n_layers_D, lambda_L1=cfg.lambda_L1, target=cfg.target,
-                     upsample=cfg.upsample, norm=cfg.norm, norm_D=cfg.norm_D)
 
 
 def _check_trainable(net_cfg: NetConfig, cfg: TrainConfig, ds: Dataset, n_train: int) -> None:
