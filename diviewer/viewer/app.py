@@ -180,7 +180,8 @@ class Viewer:
         self.drawn_scale = self.scaler.scale
 
     def set_render_scale(self, scale: float) -> float:
-        """Fix the render scale (0 < scale <= 1; dynamic resolution turns off); applied at the next frame."""
+        """Fix the render scale (0 < scale <= 2, above 1 supersampled; dynamic resolution turns off); applied at
+        the next frame."""
         return self.scaler.fix(check_render_scale(scale))
 
     def set_target_fps(self, fps: float) -> float:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from diviewer.errors import DiviewerError
 from diviewer.paths import shipped_scenes
-from diviewer.viewer.scale import DEFAULT_FLOOR
+from diviewer.viewer.scale import DEFAULT_FLOOR, MAX_SCALE
 
 
 def add_view_parser(subparsers) -> argparse.ArgumentParser:
@@ -40,10 +40,13 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
                    help="hold this frame rate by scaling the shading resolution between --scale-floor and the "
                         "window's size, then upscaling (default 30; 0 turns it off)")
     p.add_argument("--render-scale", type=float, default=None,
-                   help="shade at this fixed fraction of the window's size per side (0 < S <= 1; turns "
-                        "--target-fps off)")
+                   help=f"shade at this fixed multiple of the window's size per side (0 < S <= {MAX_SCALE:g}; above 1 "
+                        "supersampled, 2: each pixel the mean of 2x2; turns --target-fps off)")
     p.add_argument("--scale-floor", type=float, default=DEFAULT_FLOOR,
                    help=f"lowest render scale --target-fps goes to (default {DEFAULT_FLOOR})")
+    p.add_argument("--scale-ceiling", type=float, default=1.0,
+                   help=f"highest render scale --target-fps goes to (1 to {MAX_SCALE:g}; default 1; above 1 it "
+                        "supersamples where the frame rate allows)")
     p.add_argument("--auto-exposure", action="store_true",
                    help="start with the exposure metered from the frame (the panel toggles it)")
     p.add_argument("--light-moving", action="store_true", help="start with the light animated")
@@ -72,6 +75,9 @@ def run_view(args: argparse.Namespace) -> int:
         raise DiviewerError(f"--target-fps must be 0 (off) or more, got {args.target_fps}", field="--target-fps")
     if not 0.0 < args.scale_floor <= 1.0:
         raise DiviewerError(f"--scale-floor must be in (0, 1], got {args.scale_floor}", field="--scale-floor")
+    if not 1.0 <= args.scale_ceiling <= MAX_SCALE:
+        raise DiviewerError(f"--scale-ceiling must be in [1, {MAX_SCALE:g}], got {args.scale_ceiling}",
+                            field="--scale-ceiling")
     if args.render_scale is not None:
         from diviewer.viewer.settings import check_render_scale
 
@@ -88,6 +94,7 @@ def run_view(args: argparse.Namespace) -> int:
     settings = ViewerSettings(size=size, vsync=not args.no_vsync, model=args.model, provider=args.provider,
                               controller=args.camera, gi_res=args.gi_res, target_fps=args.target_fps,
                               render_scale=args.render_scale, scale_floor=args.scale_floor,
+                              scale_ceiling=args.scale_ceiling,
                               auto_exposure=args.auto_exposure,
                               gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
     script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else []

@@ -17,6 +17,7 @@ from diviewer.gl.display import TONEMAPS
 from diviewer.scene.model import DirectionalLight
 from diviewer.viewer.input import SHORTCUTS
 from diviewer.viewer.models import GI_FRACTIONS
+from diviewer.viewer.scale import MAX_SCALE
 from diviewer.viewer.state import ViewerState
 from diviewer.viewer.stats import STAGES
 from diviewer.viewer.view_modes import VIEW_MODES, single_modes, view_mode
@@ -203,7 +204,7 @@ class Panel:
         changed, fps = imgui.slider_int("target fps (0 off)", int(round(fps)), 0, 120)
         if changed:
             self.actions.set_target_fps(fps)
-        changed, scale = imgui.slider_float("render scale", self.actions.render_scale, 0.25, 1.0, "%.2f")
+        changed, scale = imgui.slider_float("render scale", self.actions.render_scale, 0.25, MAX_SCALE, "%.2f")
         if changed:
             self.actions.set_render_scale(scale)
         chosen = self._combo("tone map", st.tonemap, [(t, t) for t in TONEMAPS])

@@ -2,7 +2,7 @@
 
 The viewer shades (G-buffer, shadow lookup, direct light, upsample) at ``scale`` times the window's size and
 upscales the image to the window. The controller measures frame times at the current scale and moves it
-between ``floor`` and 1 under a cost model ``t(s) = a + b s^2`` (a: what does not depend on the pixels, such
+between ``floor`` and ``ceiling`` (1 by default; up to 2, supersampling) under a cost model ``t(s) = a + b s^2`` (a: what does not depend on the pixels, such
 as the network at its own resolution; b: per-pixel work):
 
 - It waits ``settle`` frames after a change (the first frames at a new size allocate targets), then decides
@@ -25,6 +25,11 @@ import math
 import statistics
 from dataclasses import dataclass
 
+MAX_SCALE = 2.0
+"""The highest render scale: above 1 the viewer supersamples (it shades more pixels than the window has and
+the display filters them down; at 2 each window pixel is the mean of a 2x2 block: its direct light and shadows
+anti-aliased). A fixed scale may be set up to it, and dynamic resolution goes up to ``ceiling``."""
+
 DEFAULT_FLOOR = 0.4
 """The default lowest scale: at 768x768 Sponza's still worst-case view holds 15 fps only there on the 2-core
 development machine (0.5: 14.0 fps), at 37.3 dB tone-mapped from its full-resolution frame (0.5: 38.4;
@@ -41,6 +46,8 @@ class ScaleSettings:
     """Lowest scale (fraction of the window's size per side)."""
     start: float = 1.0
     """Scale of the first frame."""
+    ceiling: float = 1.0
+    """Highest scale the controller goes to (up to ``MAX_SCALE``: supersampling where the frame rate allows)."""
     low: float = 0.8
     """Lower edge of the dead band, as a fraction of the target frame time: faster frames raise the scale."""
     aim: float = 0.9
@@ -66,8 +73,10 @@ class ScaleController:
     def __init__(self, settings: ScaleSettings = ScaleSettings()):
         if not 0.0 < settings.floor <= 1.0:
             raise ValueError(f"scale floor must be in (0, 1], got {settings.floor}")
+        if not 1.0 <= settings.ceiling <= MAX_SCALE:
+            raise ValueError(f"scale ceiling must be in [1, {MAX_SCALE:g}], got {settings.ceiling}")
         self.settings = settings
-        self.scale = min(max(settings.start, settings.floor), 1.0)
+        self.scale = min(max(settings.start, settings.floor), settings.ceiling)
         self._samples: list[float] = []
         """Frame times at the current scale, newest last (at most ``pool``)."""
         self._count = 0
@@ -81,9 +90,10 @@ class ScaleController:
         self.__init__(settings)
 
     def fix(self, scale: float) -> float:
-        """Hold ``scale`` (the controller turns off; the floor follows a scale below it)."""
+        """Hold ``scale`` (the controller turns off; the floor and the ceiling follow a scale beyond them)."""
         s = self.settings
-        self._restart(dataclasses.replace(s, target_fps=0.0, start=scale, floor=min(s.floor, scale)))
+        self._restart(dataclasses.replace(s, target_fps=0.0, start=scale, floor=min(s.floor, scale),
+                                          ceiling=min(max(s.ceiling, scale), MAX_SCALE)))
         return self.scale
 
     def hold(self, fps: float) -> float:
@@ -146,7 +156,7 @@ class ScaleController:
             return s
         if t > target and s <= cfg.floor:
             return s
-        if t < cfg.low * target and s >= 1.0:
+        if t < cfg.low * target and s >= cfg.ceiling:
             return s
         a = self._fixed_cost(t)
         goal = cfg.aim * target
@@ -157,4 +167,4 @@ class ScaleController:
             q = min(math.ceil(wanted * n - 1e-9) / n, s - 1.0 / n)
         else:  # fast: round down (towards s), so the step cannot overshoot
             q = max(math.floor(wanted * n + 1e-9) / n, s)
-        return min(max(q, cfg.floor), 1.0)
+        return min(max(q, cfg.floor), cfg.ceiling)

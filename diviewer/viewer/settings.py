@@ -8,17 +8,17 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.neural import GISettings
 from diviewer.gl.renderer import RenderSettings
 from diviewer.reference.progressive import ReferenceSettings
-from diviewer.viewer.scale import DEFAULT_FLOOR
+from diviewer.viewer.scale import DEFAULT_FLOOR, MAX_SCALE
 
 BACKGROUND = (0.08, 0.08, 0.09)
 """Colour of the bars around the GI image when the window's aspect ratio differs."""
 
 
 def check_render_scale(scale: float) -> float:
-    """A render scale the viewer can draw at: in (0, 1]; else the user's error."""
-    if not 0.0 < float(scale) <= 1.0:
-        raise DiviewerError(f"render scale must be in (0, 1] (a fraction of the window per side), got {scale}",
-                            field="--render-scale")
+    """A render scale the viewer can draw at: in (0, 2] (above 1: supersampled); else the user's error."""
+    if not 0.0 < float(scale) <= MAX_SCALE:
+        raise DiviewerError(f"render scale must be in (0, {MAX_SCALE:g}] (shaded pixels per window pixel per side; "
+                            f"above 1 supersamples), got {scale}", field="--render-scale")
     return float(scale)
 
 
@@ -28,8 +28,10 @@ def scale_settings(settings: "ViewerSettings"):
 
     if settings.render_scale is not None:
         scale = check_render_scale(settings.render_scale)
-        return ScaleSettings(target_fps=0.0, start=scale, floor=min(settings.scale_floor, scale))
-    return ScaleSettings(target_fps=max(float(settings.target_fps), 0.0), floor=settings.scale_floor)
+        return ScaleSettings(target_fps=0.0, start=scale, floor=min(settings.scale_floor, scale),
+                             ceiling=min(max(settings.scale_ceiling, scale), MAX_SCALE))
+    return ScaleSettings(target_fps=max(float(settings.target_fps), 0.0), floor=settings.scale_floor,
+                         ceiling=settings.scale_ceiling)
 
 
 @dataclass(frozen=True)
@@ -55,10 +57,12 @@ class ViewerSettings:
     target_fps: float = 30.0
     """Frame rate the render scale is moved to hold (dynamic resolution); 0 keeps ``render_scale``."""
     render_scale: float | None = None
-    """A fixed render scale (shading resolution / window, per side), which turns ``target_fps`` off; None: 1
-    at the start, then whatever holds the frame rate."""
+    """A fixed render scale (shading resolution / window, per side; above 1 supersampled, 2 at most), which turns
+    ``target_fps`` off; None: 1 at the start, then whatever holds the frame rate."""
     scale_floor: float = DEFAULT_FLOOR
     """The lowest render scale dynamic resolution goes to."""
+    scale_ceiling: float = 1.0
+    """The highest render scale dynamic resolution goes to (up to 2: supersampling where the frame rate allows)."""
     auto_exposure: bool = False
     """Start with the exposure metered from the frame (the panel toggles it)."""
     gi: GISettings = field(default_factory=GISettings)

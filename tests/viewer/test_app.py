@@ -985,6 +985,33 @@ def test_fixed_render_scale_window_is_the_offscreen_render_upscaled(display, tmp
     _check_image(expected, (128, 96))
 
 
+def _supersampled_session(tmp_path: Path) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained 64x48, stride 16
+    script = [(0, lambda v: setattr(v.state, "show_panel", False)),
+              (3, "screenshot", {"path": tmp_path / "ssaa.png"}),
+              (3, "window_screenshot", {"path": tmp_path / "window.png"})]
+    summary = run_viewer("cornell", model=model, frames=4, script=script, stats=tmp_path / "stats.json",
+                         settings=_settings(size=(64, 48), render_scale=2.0))
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    assert summary["render_size"] == (128, 96) and summary["view_size"] == (64, 48) and summary["gi_size"] == (64, 48)
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["render_scale"] == 2.0 and stats["scale_ceiling"] == 2.0 and stats["render_size"] == [128, 96]
+
+
+def test_render_scale_two_shows_each_window_pixel_as_the_mean_of_its_2x2_block(display, tmp_path, ctx):
+    """Supersampled (--render-scale 2): a 64x48 window shades 128x96, and both the view screenshot and the window's
+    back buffer are the offscreen render at 128x96 with each 2x2 block averaged (GL's linear filter halfway
+    between four texels), tone-mapped."""
+    pytest.importorskip("onnx")
+    _in_window_process(_supersampled_session, tmp_path)
+    expected = _upscaled_offscreen(ctx, tmp_path / "ssaa.png")
+    _same(_png(tmp_path / "ssaa.png"), expected, "the screenshot at scale 2")
+    _same(_png(tmp_path / "window.png"), expected, "the window at scale 2")
+    _check_image(expected, (64, 48))
+
+
 def _dynamic_session(tmp_path: Path) -> None:
     from diviewer.viewer.app import run_viewer
 
@@ -1065,8 +1092,9 @@ def test_scale_accuracy_tool_scores_each_scale_against_full_resolution(tmp_path)
 
     tool = load_tool("experiments/scale_accuracy")
     assert tool.parse_scales("0.5,0.75") == [1.0, 0.75, 0.5]
+    assert tool.parse_scales("2,1,0.5") == [1.0, 2.0, 0.5]
     with pytest.raises(DiviewerError, match="render scale"):
-        tool.parse_scales("1,1.5")
+        tool.parse_scales("1,2.5")
     model = _cornell_model(tmp_path / "cornell_k8.onnx")
     out = tmp_path / "acc.json"
     result = tool.main(["--model", str(model), "--size", "96x72", "--scales", "1,0.5", "--frames", "1",

@@ -79,6 +79,7 @@ def test_fix_and_hold():
         c.update(1000.0)
     assert c.scale == 0.3
     assert c.hold(60.0) == 60.0 and c.enabled and c.scale == 0.3
+    assert c.fix(2.0) == 2.0 and c.settings.ceiling == 2.0  # a fixed supersampled scale
     with pytest.raises(ValueError):
         ScaleController(ScaleSettings(floor=0.0))
 
@@ -98,9 +99,12 @@ def test_render_scale_setting_and_command_line():
     assert scale_settings(ViewerSettings()).target_fps == 30.0
     fixed = scale_settings(ViewerSettings(render_scale=0.4))
     assert fixed.target_fps == 0.0 and fixed.start == 0.4 and fixed.floor == 0.4
-    for bad in (0.0, -1.0, 1.5):
+    for bad in (0.0, -1.0, 2.5, float("nan")):
         with pytest.raises(DiviewerError, match="render scale"):
             check_render_scale(bad)
+    supersampled = scale_settings(ViewerSettings(render_scale=2.0))
+    assert check_render_scale(2.0) == 2.0 and supersampled.start == supersampled.ceiling == 2.0
+    assert ScaleController(supersampled).scale == 2.0
     ap = argparse.ArgumentParser()
     add_view_parser(ap.add_subparsers(dest="command"))
     args = ap.parse_args(["view"])
@@ -108,6 +112,26 @@ def test_render_scale_setting_and_command_line():
     assert args.scale_floor == DEFAULT_FLOOR == ScaleSettings().floor == 0.4
     args = ap.parse_args(["view", "--target-fps", "0", "--render-scale", "0.5", "--auto-exposure"])
     assert args.target_fps == 0.0 and args.render_scale == 0.5 and args.auto_exposure
+    assert args.scale_ceiling == 1.0 == ScaleSettings().ceiling
+
+
+@pytest.mark.parametrize("flag,value", [("--scale-ceiling", "0.9"), ("--scale-ceiling", "2.5"),
+                                        ("--render-scale", "3")])
+def test_scales_outside_their_ranges_are_refused_by_flag(flag, value, capsys):
+    from diviewer.cli import main
+
+    assert main(["view", "--frames", "1", flag, value]) == 2
+    assert flag in capsys.readouterr().err
+
+
+def test_scale_rises_above_one_up_to_the_ceiling_when_the_frame_is_cheap():
+    """With a ceiling of 2 a cheap frame is supersampled: the scale climbs past 1 and stops at the ceiling."""
+    c, scales = _run(2.0, 4.0, 0, settings=ScaleSettings(start=1.0, ceiling=2.0))
+    assert scales[-1] == 2.0 and np.all(np.diff(scales) >= 0)
+    _, plain = _run(2.0, 4.0, 0, settings=ScaleSettings(start=1.0))
+    assert max(plain) == 1.0
+    with pytest.raises(ValueError, match="ceiling"):
+        ScaleController(ScaleSettings(ceiling=0.5))
 
 
 # --- auto exposure -------------------------------------------------------------------------------------
@@ -215,3 +239,13 @@ def test_runtime_pads_asks_the_runtime(ctx):
     assert gi.sizes(Padding(), "1/3") == ((25, 16), (25, 16))
     assert gi._size_for(Strict(), "model", (75, 48)) == (80, 48) and "instead of 75x48" in gi.note
     assert gi._size_for(Padding(), "model", (75, 48)) == (75, 48) and gi.note == ""
+
+
+def test_the_linear_filter_at_half_size_is_each_2x2_blocks_mean():
+    """What --render-scale 2 shows: GL's linear filter sampling a texture at half its size lands halfway between
+    four texels, so each window pixel is the mean of its 2x2 block (the numpy model the viewer tests use)."""
+    from tool_modules import load_tool
+
+    img = np.random.default_rng(3).random((12, 10, 3)).astype(np.float32)
+    half = load_tool("experiments/scale_accuracy").bilinear(img, 5, 6)
+    np.testing.assert_allclose(half, img.reshape(6, 2, 5, 2, 3).mean(axis=(1, 3)), rtol=1e-6, atol=1e-7)

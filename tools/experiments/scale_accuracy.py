@@ -1,7 +1,7 @@
 """What dynamic resolution costs in accuracy: the viewer's frame at each render scale against full resolution.
 
 Usage: python tools/experiments/scale_accuracy.py [--scene cornell] [--model assets/models/cornell.onnx] [--size 768x768]
-       [--scales 1,0.875,0.75,0.625,0.5] [--frames 6] [--spp 0] [--gi-res model] [--exposure X]
+       [--scales 1,0.875,0.75,0.625,0.5] (2: supersampled) [--frames 6] [--spp 0] [--gi-res model] [--exposure X]
        [--out runs/<scene>/scale_accuracy.json] [--truth-cache TRUTH.npz]
 
 The successor of tools/fullres_accuracy.py (which compared the full-resolution frame with the old stretched
@@ -49,7 +49,7 @@ def parse_scales(text: str) -> list[float]:
     from diviewer.viewer.settings import check_render_scale
 
     scales = sorted({check_render_scale(float(x)) for x in text.split(",") if x.strip()}, reverse=True)
-    return scales if scales[0] == 1.0 else [1.0] + scales
+    return [1.0] + [s for s in scales if s != 1.0]  # the full-resolution frame first: the others are scored on it
 
 
 def _truth(ref, scene, config, size, spp: int, seed: int, cache: Path | None, key: str) -> np.ndarray:
