@@ -1,0 +1,65 @@
+"""tools/ship_model.py: an exported model becomes the scene's shipped one, its card and ONNX metadata alike."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from onnx_models import base_meta, direct_times
+from tool_modules import load_tool
+
+
+def _model(path: Path, factor: float) -> Path:
+    meta = {**base_meta(), "K": 8}
+    direct_times(path, factor=factor, meta=meta)
+    path.with_suffix(".json").write_text(json.dumps(meta))
+    return path
+
+
+def _eval(path: Path, scores: dict[str, float]) -> Path:
+    stat = lambda v: {"mean": v, "std": 0.0}
+    row = lambda v: {"psnr_tm": stat(v), "ssim_tm": stat(0.9), "psnr_tm_object_unlit": stat(v - 10),
+                     "ssim_tm_object_unlit": stat(None)}
+    ev = {"splits": {s: {"methods": {m: row(v) for m, v in scores.items()}} for s in ("moved_camera", "window_shapes")}}
+    path.write_text(json.dumps(ev))
+    return path
+
+
+def test_ship_writes_card_fields_and_files_and_replaces_the_shipped_model(tmp_path):
+    from diviewer.runtime import read_metadata
+
+    tool = load_tool("ship_model")
+    ship, run = tmp_path / "ship", tmp_path / "run"
+    ship.mkdir()
+    run.mkdir()
+    (run / "metrics.csv").write_text("epoch,step\n1,10\n")
+    scene = base_meta()["scene"]
+    _model(ship / f"{scene}.onnx", 1.0)
+    new = _model(tmp_path / "new_k8.onnx", 2.0)
+    ev = _eval(tmp_path / "ev.json", {"new_k8": 35.0, scene: 33.0})
+    card = tool.main(["--model", str(new), "--run", str(run), "--eval", str(ev), "--command", "diviewer train ...",
+                      "--note", "a test model", "--ladder-why", "K=16 within 0.2 dB", "--ship", str(ship)])
+    shipped = ship / f"{scene}.onnx"
+    assert json.loads(shipped.with_suffix(".json").read_text()) == card == read_metadata(shipped)
+    assert card["rebuild"] == f"diviewer build --scene {scene}" and card["commands"] == ["diviewer train ..."]
+    assert card["ladder"] == {"chosen_K": 8, "why": "K=16 within 0.2 dB", "file": f"{scene}_ladder.json"}
+    compact = card["evalset_compact"]
+    assert compact["this_model"]["moved_camera"] == {"psnr_tm": 35.0, "ssim_tm": 0.9, "psnr_tm_object_unlit": 25.0}
+    assert compact["previous_shipped"]["window_shapes"]["psnr_tm"] == 33.0
+    assert (ship / f"{scene}_metrics.csv").read_text() == "epoch,step\n1,10\n"
+    assert not (ship / f"{scene}_curves.png").exists()  # the run had none: nothing copied
+    assert shipped.read_bytes() != (tmp_path / "new_k8.onnx").read_bytes()  # the card is in its metadata
+
+
+def test_a_model_missing_from_the_eval_json_is_refused_by_name(tmp_path):
+    from diviewer.errors import DiviewerError
+
+    tool = load_tool("ship_model")
+    scene = base_meta()["scene"]
+    new = _model(tmp_path / "new_k8.onnx", 2.0)
+    ev = _eval(tmp_path / "ev.json", {scene: 33.0})
+    with pytest.raises(DiviewerError, match="no method 'new_k8'"):
+        tool.main(["--model", str(new), "--run", str(tmp_path), "--eval", str(ev), "--command", "c", "--note", "n",
+                   "--ladder-why", "w", "--ship", str(tmp_path)])

@@ -1,0 +1,80 @@
+"""Ship an exported model as its scene's model (assets/models/SCENE.onnx), with what a shipped card carries beyond
+`diviewer export`'s: how it was made, its compact-set scores beside the model it replaces, the ladder's verdict and
+the rebuild command. `diviewer build` does the same at the end of a full build; this is for a model trained by hand.
+
+Usage: python tools/ship_model.py --model runs/cornell/fly_eval/fly_area4_k8_fp32.onnx --run runs/cornell/fly_area4_k8
+           --eval docs/data/compact/EVAL.json --command "diviewer capture ..." [--command ...] --note TEXT
+           --ladder-why TEXT [--ladder-file cornell_ladder.json] [--ship assets/models]
+
+EVAL.json: `diviewer eval --model MODEL --model assets/models/SCENE.onnx --out EVAL.json` on the compact evaluation
+set (the card records the tone-mapped region scores of both, per split: ``evalset_compact``). The card and the ONNX
+metadata are written together (`diviewer.build.pipeline.write_model_card`); the run's curves.png and metrics.csv
+are copied beside them. The shipped card's recipe must be the scene's recipe file (tests/train/test_recipe.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from diviewer import imageio  # noqa: E402
+from diviewer.build.pipeline import write_model_card  # noqa: E402
+from diviewer.errors import DiviewerError  # noqa: E402
+
+SCORES = ("psnr_tm", "ssim_tm", "psnr_tm_object", "psnr_tm_object_unlit", "ssim_tm_object_unlit")
+"""The per-split means a card keeps of each model."""
+
+
+def split_scores(ev: dict, method: str, path: Path) -> dict:
+    """``method``'s mean scores per split of an eval JSON, rounded as cards keep them."""
+    out = {}
+    for name, split in ev["splits"].items():
+        if method not in split["methods"]:
+            raise DiviewerError(f"no method '{method}' in split {name}", path=path, field="splits")
+        row = split["methods"][method]
+        out[name] = {q: round(row[q]["mean"], 3) for q in SCORES if q in row and row[q]["mean"] is not None}
+    return out
+
+
+def ship(model: Path, run: Path, eval_json: Path, commands: list[str], note: str, ladder_why: str,
+         ladder_file: str | None, dest: Path) -> dict:
+    card = json.loads(model.with_suffix(".json").read_text())
+    scene = card["scene"]
+    shipped = dest / f"{scene}.onnx"
+    ev = json.loads(eval_json.read_text())
+    card.update(commands=commands, note=note, rebuild=f"diviewer build --scene {scene}",
+                ladder={"chosen_K": card["K"], "why": ladder_why, "file": ladder_file or f"{scene}_ladder.json"},
+                evalset_compact={"json": str(eval_json), "this_model": split_scores(ev, model.stem, eval_json),
+                                 "previous_shipped": split_scores(ev, shipped.stem, eval_json)})
+    write_model_card(model, shipped, card)
+    for name, suffix in (("curves.png", "_curves.png"), ("metrics.csv", "_metrics.csv")):
+        if (run / name).is_file():
+            with imageio.atomic_path(dest / f"{scene}{suffix}") as tmp:
+                shutil.copyfile(run / name, tmp)
+    return card
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", type=Path, required=True, help="an exported model (its card beside it)")
+    ap.add_argument("--run", type=Path, required=True, help="its training run (curves.png, metrics.csv)")
+    ap.add_argument("--eval", type=Path, required=True, help="diviewer eval JSON of it and the shipped model")
+    ap.add_argument("--command", action="append", required=True, help="how it was made, one command each")
+    ap.add_argument("--note", required=True, help="what it is, in a sentence or two")
+    ap.add_argument("--ladder-why", required=True, help="why this K (the ladder's verdict)")
+    ap.add_argument("--ladder-file", default=None, help="the ladder record beside it (default SCENE_ladder.json)")
+    ap.add_argument("--ship", type=Path, default=ROOT / "assets" / "models")
+    a = ap.parse_args(argv)
+    card = ship(a.model, a.run, a.eval, a.command, a.note, a.ladder_why, a.ladder_file, a.ship)
+    print(f"shipped {a.model} as {a.ship / (card['scene'] + '.onnx')} (K={card['K']})")
+    return card
+
+
+if __name__ == "__main__":
+    main()
