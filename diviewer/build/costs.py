@@ -87,11 +87,14 @@ def pt_seconds_per_sample(kind: str, scene: str) -> tuple[float, str]:
     return PT_SECONDS_PER_SAMPLE[key], f"{key[1]} on {kind}"
 
 
-def capture_seconds(kind: str, scene: str, frames: int, width: int, height: int, spp: int) -> float:
-    """A capture of ``frames`` frames: path tracing (full and direct-only, counted in the measurements) + GL."""
+def capture_seconds(kind: str, scene: str, frames: int, width: int, height: int, spp: int,
+                    direct_samples: int = 1) -> float:
+    """A capture of ``frames`` frames: path tracing (full and direct-only, counted in the measurements) + GL, and
+    with ``direct_samples`` s > 1 the direct light rendered again at s x s the pixels (`diviewer.gl.area`)."""
     per_sample, _ = pt_seconds_per_sample(kind, scene)
     scale = width * height / PIXELS_REF
-    return frames * (per_sample * width * height * spp + GL_SECONDS_PER_FRAME[kind] * scale)
+    gl = GL_SECONDS_PER_FRAME[kind] * scale * (1 + (direct_samples ** 2 if direct_samples > 1 else 0))
+    return frames * (per_sample * width * height * spp + gl)
 
 
 def _evalset_predicted(kind: str, scene: str, frames: int, width: int, height: int, spp: int,

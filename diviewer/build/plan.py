@@ -174,8 +174,10 @@ def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tu
     gan = train.get("gan_weight", 1.0) > 0
     batch = train.get("batch_size", 4)
     frames = 2 * ev.frames_per_split
-    out = [Stage("capture", f"capture {cap.frames} frames at {cap.width}x{cap.height}, {cap.spp} spp",
-                 costs.capture_seconds(m.kind, scene, cap.frames, cap.width, cap.height, cap.spp)),
+    area = f", direct light over {cap.direct_samples}x{cap.direct_samples}" if cap.direct_samples > 1 else ""
+    out = [Stage("capture", f"capture {cap.frames} frames at {cap.width}x{cap.height}, {cap.spp} spp{area}",
+                 costs.capture_seconds(m.kind, scene, cap.frames, cap.width, cap.height, cap.spp,
+                                       cap.direct_samples)),
            Stage("check", "check every frame of the capture", 0.0),
            Stage("evalset", f"evaluation set: {frames} frames, {ev.spp} spp twice, ladder "
                             f"{'/'.join(map(str, ev.ladder))}",
