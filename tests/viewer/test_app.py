@@ -953,7 +953,7 @@ def _upscaled_offscreen(ctx, shot: Path) -> np.ndarray:
         renderer.release()
 
 
-def _scaled_session(tmp_path: Path) -> None:
+def _scaled_session(tmp_path: Path, size: tuple[int, int], scale: float) -> None:
     from diviewer.viewer.app import run_viewer
 
     model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained 64x48, stride 16
@@ -961,55 +961,33 @@ def _scaled_session(tmp_path: Path) -> None:
               (3, "screenshot", {"path": tmp_path / "scaled.png"}),
               (3, "window_screenshot", {"path": tmp_path / "window.png"})]
     summary = run_viewer("cornell", model=model, frames=4, script=script, stats=tmp_path / "stats.json",
-                         settings=_settings(size=(128, 96), render_scale=0.5))
+                         settings=_settings(size=size, render_scale=scale))
+    shaded = [round(n * scale) for n in size]
     assert summary["gl_error"] == "GL_NO_ERROR"
-    assert summary["render_size"] == (64, 48) and summary["view_size"] == (128, 96)
-    assert summary["render_scale"] == 0.5 and summary["gi_size"] == (64, 48)
+    assert summary["render_size"] == tuple(shaded) and summary["view_size"] == size
+    assert summary["render_scale"] == scale and summary["gi_size"] == (64, 48)  # the model's rows, the window's shape
     record = json.loads((tmp_path / "scaled.json").read_text())
-    assert record["resolution"] == [128, 96] and record["render_size"] == [64, 48] and record["render_scale"] == 0.5
+    assert record["resolution"] == list(size) and record["render_size"] == shaded and record["render_scale"] == scale
     stats = json.loads((tmp_path / "stats.json").read_text())
-    assert stats["render_scale"] == 0.5 and stats["render_size"] == [64, 48] and stats["window_size"] == [128, 96]
-    assert stats["render_scales"] == {"min": 0.5, "median": 0.5, "max": 0.5, "changes": 0}
+    assert stats["render_scale"] == scale and stats["render_size"] == shaded and stats["window_size"] == list(size)
+    assert stats["render_scales"] == {"min": scale, "median": scale, "max": scale, "changes": 0}
+    assert stats["scale_ceiling"] == max(scale, 1.0) and stats["scale_floor"] == min(scale, 0.4)
     assert stats["target_fps"] is None and stats["out_of_range"] == [] and stats["frames_out_of_range"] == 0
     assert stats["culling"] is True and stats["drawn_last_frame"]["gbuffer"]["triangles"] > 0
 
 
-def test_fixed_render_scale_window_is_the_offscreen_render_upscaled(display, tmp_path, ctx):
-    """At --render-scale 0.5 a 128x96 window shades 64x48 and shows it upscaled: both the view screenshot and
-    the window's own back buffer equal the offscreen render at 64x48, upscaled bilinearly, tone-mapped."""
+@pytest.mark.parametrize("size,scale", [((128, 96), 0.5), ((64, 48), 2.0)])
+def test_fixed_render_scale_window_is_the_offscreen_render_resampled(display, tmp_path, ctx, size, scale):
+    """At --render-scale 0.5 a 128x96 window shades 64x48 and shows it upscaled; at 2 (supersampled) a 64x48 window
+    shades 128x96 and shows each 2x2 block's mean (GL's linear filter halfway between four texels). Both the view
+    screenshot and the window's own back buffer equal the offscreen render at the shading size, resampled
+    bilinearly to the window, tone-mapped."""
     pytest.importorskip("onnx")
-    _in_window_process(_scaled_session, tmp_path)
+    _in_window_process(_scaled_session, tmp_path, size, scale)
     expected = _upscaled_offscreen(ctx, tmp_path / "scaled.png")
-    _same(_png(tmp_path / "scaled.png"), expected, "the screenshot at scale 0.5")
-    _same(_png(tmp_path / "window.png"), expected, "the window at scale 0.5")
-    _check_image(expected, (128, 96))
-
-
-def _supersampled_session(tmp_path: Path) -> None:
-    from diviewer.viewer.app import run_viewer
-
-    model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained 64x48, stride 16
-    script = [(0, lambda v: setattr(v.state, "show_panel", False)),
-              (3, "screenshot", {"path": tmp_path / "ssaa.png"}),
-              (3, "window_screenshot", {"path": tmp_path / "window.png"})]
-    summary = run_viewer("cornell", model=model, frames=4, script=script, stats=tmp_path / "stats.json",
-                         settings=_settings(size=(64, 48), render_scale=2.0))
-    assert summary["gl_error"] == "GL_NO_ERROR"
-    assert summary["render_size"] == (128, 96) and summary["view_size"] == (64, 48) and summary["gi_size"] == (64, 48)
-    stats = json.loads((tmp_path / "stats.json").read_text())
-    assert stats["render_scale"] == 2.0 and stats["scale_ceiling"] == 2.0 and stats["render_size"] == [128, 96]
-
-
-def test_render_scale_two_shows_each_window_pixel_as_the_mean_of_its_2x2_block(display, tmp_path, ctx):
-    """Supersampled (--render-scale 2): a 64x48 window shades 128x96, and both the view screenshot and the window's
-    back buffer are the offscreen render at 128x96 with each 2x2 block averaged (GL's linear filter halfway
-    between four texels), tone-mapped."""
-    pytest.importorskip("onnx")
-    _in_window_process(_supersampled_session, tmp_path)
-    expected = _upscaled_offscreen(ctx, tmp_path / "ssaa.png")
-    _same(_png(tmp_path / "ssaa.png"), expected, "the screenshot at scale 2")
-    _same(_png(tmp_path / "window.png"), expected, "the window at scale 2")
-    _check_image(expected, (64, 48))
+    _same(_png(tmp_path / "scaled.png"), expected, f"the screenshot at scale {scale}")
+    _same(_png(tmp_path / "window.png"), expected, f"the window at scale {scale}")
+    _check_image(expected, size)
 
 
 def _dynamic_session(tmp_path: Path) -> None:
