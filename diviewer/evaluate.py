@@ -226,12 +226,15 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
     return result
 
 
-def area_direct_of(ev: EvalFrames, samples: set[int]) -> dict[int, dict[int, np.ndarray]]:
+def area_direct_of(ev: EvalFrames, samples: set[int], ctx=None) -> dict[int, dict[int, np.ndarray]]:
     """The GL direct light over each pixel's area (`diviewer.gl.area`) of every frame of ``ev``, per sample count
     asked for: what a model trained on it takes in place of the set's stored (pixel-centre) light. The set's truth,
-    tone map and regions stay as stored."""
+    tone map and regions stay as stored. ``ctx``: the caller's current GL context, rendered in (a context of its
+    own would be current after this returns, its creation having replaced the caller's); None: a headless one."""
     if not samples:
         return {}
+    from contextlib import nullcontext
+
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
     from diviewer.scene import load_scene
@@ -243,9 +246,9 @@ def area_direct_of(ev: EvalFrames, samples: set[int]) -> dict[int, dict[int, np.
                             f"its area direct light cannot be rendered", path=ev.root, field="scene_hash")
     w, h = (int(x) for x in ev.manifest["resolution"])
     out = {}
-    with headless_context() as ctx:
+    with nullcontext(ctx) if ctx is not None else headless_context() as gl:
         for n in sorted(samples):
-            area = AreaDirect(ctx, scene, w, h, n)
+            area = AreaDirect(gl, scene, w, h, n)
             try:
                 out[n] = {f["index"]: area(config_from_dict(scene, f["config"])) for f in ev.frames}
             finally:

@@ -228,7 +228,8 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
     vx_images = {key: gl.vxgi_frames(s, configs) for key, s in vxgi.items()}
     passes = {key: gl.neural_pass(net, step) for key, (net, step) in models.items() if step > 1}
     # models of the direct light over each pixel's area take it (as diviewer eval feeds them) at the set's size
-    area = area_direct_of(ds, {net.direct_samples for net, step in models.values() if step == 1} - {1})
+    area = area_direct_of(ds, {net.direct_samples for net, step in models.values() if step == 1} - {1},
+                          ctx=gl.ctx if gl is not None else None)
     try:
         for n, i in enumerate(idx):
             frame = ds.load(i)

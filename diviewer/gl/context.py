@@ -41,8 +41,10 @@ def create_context(backend: str = "egl") -> moderngl.Context:
 def headless_context() -> Iterator[moderngl.Context]:
     """A standalone EGL context, current inside the block and released after it.
 
-    The context that was current before (a caller's own) is current again afterwards: releasing a
-    context while it is current would leave a dead one current for the caller's later GL calls.
+    Creating it makes it current, replacing whatever context was current on this thread, and that one is not
+    current again afterwards (the block restores what was current when it began: the new context itself). So a
+    caller that holds a context of its own renders in it rather than opening another (``area_direct_of``'s
+    ``ctx``), or makes it current again (``with ctx:``).
     """
     ctx = create_context("egl")
     try:
