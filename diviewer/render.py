@@ -77,7 +77,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
             if vxgi is not None:
                 vx, vxgi_info = _vxgi_pass(ctx, renderer, vxgi, config, frame)
             if net is not None:
-                neural, area = _neural_pass(ctx, scene, renderer, net, config, settings)
+                neural, area = model_pass(ctx, scene, renderer, net, config, settings)
                 frame["neural"] = neural.image()
                 neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
                                "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}
@@ -131,7 +131,7 @@ def _write_render(out: Path, frame: dict, record: dict, compositor, ev: float, t
                 imageio.write_png(stage(out / f"{name}.png"), compositor.to_ldr(frame[name], ev, tonemap))
         imageio.write_text(stage(out / "frame.json"), dumps(record, indent=2))
 
-def _neural_pass(ctx, scene: Scene, renderer, net, config: FrameConfig, settings):
+def model_pass(ctx, scene: Scene, renderer, net, config: FrameConfig, settings):
     """The model run on ``renderer``'s frame at its own size (the model pads it to its stride); returns the pass and
     the supersampled renderer it packed from, or None. A model of the direct light over each pixel's area
     (``direct_samples`` s > 1, `diviewer.gl.area`) takes its inputs from a render at s x s times the size, the

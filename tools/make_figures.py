@@ -33,8 +33,8 @@ def row(tiles: list[np.ndarray]) -> np.ndarray:
 
 
 def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int, ...] | None, stops: float) -> None:
-    from diviewer.gl.neural import NeuralPass
     from diviewer.reference.mitsuba import load_frame
+    from diviewer.render import model_pass
     from diviewer.runtime import NeuralGI
 
     model_path = models_dir() / f"{name}.onnx"
@@ -45,7 +45,6 @@ def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int,
     model = NeuralGI(model_path, scene=scene)
     w, h = model.resolution
     renderer = Renderer(ctx, scene, w, h)
-    neural = NeuralPass(ctx, renderer, model)
     rows = []
     if seeds is None:  # the two of the first 40 test configurations with the most direct light (GL only: cheap)
         lit = {s: float(renderer.frame(sample_config(scene, s, "test"))["direct"].mean()) for s in range(40)}
@@ -53,15 +52,19 @@ def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int,
     for seed in seeds:
         config = sample_config(scene, seed, "test")
         frame = renderer.frame(config)
-        neural.run(**neural.inputs_for(scene, config))
+        # as `diviewer render --model` runs it (a model of the area's direct light packs from a supersampled render)
+        neural, area = model_pass(ctx, scene, renderer, model, config, renderer.settings)
+        out = neural.image()
+        neural.release()
+        if area is not None:
+            area.release()
         pt = load_frame(scene, config, w, h).full(spp=spp, seed=0)
-        images = [frame["direct"], neural.image(), pt]
+        images = [frame["direct"], out, pt]
         rows.append(row([np.kron(comp.to_ldr(im, scene.exposure + stops), np.ones((2, 2, 1), np.uint8))
                          for im in images]))
     gap = np.full((GAP, rows[0].shape[1], 3), 255, np.uint8)
     imageio.write_png(OUT / f"{name}_neural.png", np.concatenate([rows[0], gap, rows[1]], axis=0))
     print(f"wrote {OUT / f'{name}_neural.png'} (test seeds {list(seeds)}, exposure {scene.exposure + stops:+g} stops)")
-    neural.release()
     renderer.release()
 
 
