@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer.data.scales import light_scales
-from diviewer.evaluate import _camera, run_model
+from diviewer.evaluate import _camera, area_direct_of, run_model
 from diviewer.evalframes import EvalFrames, crop_frame, default_evalset
 from diviewer.evalscore import regions
 from diviewer.metrics import tonemap
@@ -42,13 +42,19 @@ def _psnr(se: float, n: int) -> float | None:
     return None if n == 0 else (float("inf") if se == 0 else float(10 * np.log10(n / se)))
 
 
+def _mesh(entry: dict) -> str:
+    """The mesh the frame's centre object wears (the one object whose mesh the sampler draws)."""
+    objects = entry["config"].get("objects", [])
+    return next((o.get("mesh", "?") for o in objects if o.get("name") == "center"), "?")
+
+
 def score(ev: EvalFrames, images) -> dict:
     """Per split: for each method (name -> function of (index, frame) giving linear radiance) the region's
     per-frame mean PSNR and pooled PSNR on all / interior / edge pixels."""
     out = {}
     for split, shapes in ev.splits().items():
         idx = ev.present(split, [])
-        acc = {name: {"frames": [], "se": dict.fromkeys(("all", "interior", "edge"), 0.0),
+        acc = {name: {"frames": [], "meshes": [], "se": dict.fromkeys(("all", "interior", "edge"), 0.0),
                       "n": dict.fromkeys(("all", "interior", "edge"), 0)} for name in images}
         for i in idx:
             f = crop_frame(ev.load(i), shapes[0][0])
@@ -61,13 +67,16 @@ def score(ev: EvalFrames, images) -> dict:
                 d2 = np.sum((tonemap(image(i, f), ev.exposure) - ref) ** 2, axis=-1) / 3.0
                 a = acc[name]
                 a["frames"].append(_psnr(float(d2[m].sum()), int(m.sum())))
+                a["meshes"].append(_mesh(ev.entry(i)))
                 for part, pm in parts.items():
                     a["se"][part] += float(d2[pm].sum())
                     a["n"][part] += int(pm.sum())
         out[split] = {name: {"frames": len(a["frames"]),
                              "per_frame_mean": float(np.mean(a["frames"])) if a["frames"] else None,
                              **{f"pooled_{p}": _psnr(a["se"][p], a["n"][p]) for p in a["se"]},
-                             **{f"pixels_{p}": a["n"][p] for p in a["n"]}}
+                             **{f"pixels_{p}": a["n"][p] for p in a["n"]},
+                             "by_mesh": {mesh: float(np.mean([v for v, k in zip(a["frames"], a["meshes"]) if k == mesh]))
+                                         for mesh in sorted(set(a["meshes"]))}}
                       for name, a in acc.items()}
     return out
 
@@ -83,8 +92,14 @@ def main() -> None:
     every = [f["index"] for f in ev.frames]
     scales = dict(zip(every, light_scales(ev, every)))
 
+    area = area_direct_of(ev, {net.direct_samples for net in nets.values()} - {1})
+
     def model_image(net):
-        return lambda i, f: run_model(net, f, scales[i] if net.light_scaled else None, _camera(net, ev.entry(i), f))
+        def image(i, f):
+            if net.direct_samples > 1:  # fed and composed over the area's light, as diviewer eval does
+                f = crop_frame({**ev.load(i), "direct": area[net.direct_samples][i]}, f["pt"].shape[1])
+            return run_model(net, f, scales[i] if net.light_scaled else None, _camera(net, ev.entry(i), f))
+        return image
 
     images = {**{name: model_image(net) for name, net in nets.items()},
               "noise_floor": lambda i, f: f[ev.info["second_seed_channel"]]}
@@ -97,6 +112,7 @@ def main() -> None:
                              for k in ("pooled_all", "pooled_interior", "pooled_edge"))
             mean = f"{r['per_frame_mean']:.2f}" if r["per_frame_mean"] is not None else "-"
             print(f"  {name:40s} eval's mean {mean:>6} over {r['frames']} frames | pooled: {cells}")
+            print(f"  {'':40s} by mesh: " + ", ".join(f"{k} {v:.2f}" for k, v in r["by_mesh"].items()))
     if a.out:
         a.out.write_text(json.dumps(result, indent=1))
 
