@@ -60,6 +60,40 @@ def _capsule_cluster(count: int = 3, radius: float = 0.12, height: float = 0.5) 
     return trimesh.util.concatenate(parts)
 
 
+def _pipe(radius: float, inner_radius: float, height: float, sections: int) -> trimesh.Trimesh:
+    """A hollow cylinder, open at both ends: a hole through it and a concave inside (genus 1, not a torus)."""
+    return trimesh.creation.annulus(r_min=inner_radius, r_max=radius, height=height, sections=int(sections))
+
+
+def _frame(size: float, thickness: float, depth: float) -> trimesh.Trimesh:
+    """A square picture frame: four bars around a square hole (genus 1, flat sides and sharp inner corners)."""
+    half, bar = size / 2.0, min(thickness, size / 2.0)
+    parts = []
+    for axis in (0, 1):
+        for sign in (-1.0, 1.0):
+            extents = [size, size, depth]
+            extents[axis] = bar
+            b = trimesh.creation.box(extents=extents)
+            offset = [0.0, 0.0, 0.0]
+            offset[axis] = sign * (half - bar / 2.0)
+            b.apply_translation(offset)
+            parts.append(b)
+    return trimesh.util.concatenate(parts)
+
+
+def _box_cluster(count: int, size: float) -> trimesh.Trimesh:
+    """Boxes tilted in different directions around a common centre, fused into one mesh: several parts that
+    shade each other, with concave crevices between them (a training shape; capsule_cluster is held out)."""
+    parts = []
+    for k in range(count):
+        b = trimesh.creation.box(extents=[size, 2.0 * size, size])
+        a = 2.0 * math.pi * k / count
+        b.apply_translation([0.0, size, 0.0])
+        b.apply_transform(trimesh.transformations.rotation_matrix(math.radians(50), [math.cos(a), 0.0, math.sin(a)]))
+        parts.append(b)
+    return trimesh.util.concatenate(parts)
+
+
 # shape name -> (builder, {parameter: default}); parameters come from the scene file's mesh table.
 SHAPES = {
     "box": (lambda size: trimesh.creation.box(extents=np.broadcast_to(np.asarray(size, dtype=np.float64), 3)), {"size": (1.0, 1.0, 1.0)}),
@@ -79,6 +113,9 @@ SHAPES = {
                    {"p": 2, "q": 3, "radius": 0.5, "tube": 0.12}),
     "capsule_cluster": (lambda count, radius, height: _capsule_cluster(int(count), radius, height),
                         {"count": 3, "radius": 0.12, "height": 0.5}),
+    "pipe": (_pipe, {"radius": 0.35, "inner_radius": 0.25, "height": 0.6, "sections": 48}),
+    "frame": (_frame, {"size": 0.7, "thickness": 0.15, "depth": 0.2}),
+    "box_cluster": (lambda count, size: _box_cluster(int(count), size), {"count": 3, "size": 0.2}),
 }
 
 
@@ -91,6 +128,8 @@ INTEGER_PARAMS = {
     ("torus_knot", "p"): (1, 64),
     ("torus_knot", "q"): (1, 64),
     ("capsule_cluster", "count"): (1, 64),
+    ("pipe", "sections"): (3, 4096),
+    ("box_cluster", "count"): (1, 64),
 }
 MAX_EXTENT = 1e6
 """Largest size or radius of a procedural shape (scene units); float32 vertices keep 0.06 units of
@@ -132,6 +171,9 @@ def procedural(name: str, shape: str, params: dict, *, path=None, field: str = "
         raise DiviewerError(f"expected 3 numbers, got {args['size']}", path=path, field=f"{field}.size")
     if shape == "plane" and np.ndim(args["size"]) and len(args["size"]) != 2:
         raise DiviewerError(f"expected 2 numbers, got {args['size']}", path=path, field=f"{field}.size")
+    if shape == "pipe" and args["inner_radius"] >= args["radius"]:
+        raise DiviewerError(f"inner_radius ({args['inner_radius']}) must be less than radius ({args['radius']})",
+                            path=path, field=f"{field}.inner_radius")
     if shape == "torus" and args["minor_radius"] >= args["major_radius"]:
         raise DiviewerError(f"minor_radius ({args['minor_radius']}) must be less than major_radius "
                             f"({args['major_radius']})", path=path, field=f"{field}.minor_radius")

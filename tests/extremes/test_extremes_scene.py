@@ -123,6 +123,10 @@ def test_degenerate_camera_is_refused(camera, field):
     ({"shape": "box", "size": []}, "meshes.b.size"),
     ({"shape": "plane", "size": [1, 2, 3]}, "meshes.b.size"),
     ({"shape": "torus", "major_radius": 0.2, "minor_radius": 0.3}, "meshes.b.minor_radius"),
+    ({"shape": "pipe", "radius": 0.2, "inner_radius": 0.2}, "meshes.b.inner_radius"),
+    ({"shape": "pipe", "sections": 2}, "meshes.b.sections"),
+    ({"shape": "box_cluster", "count": 0}, "meshes.b.count"),
+    ({"shape": "frame", "depth": 0}, "meshes.b.depth"),
 ])
 def test_bad_procedural_parameters_are_refused(mesh, field):
     refused(scene_dict(meshes={"b": mesh}), field)
@@ -134,11 +138,32 @@ def test_bad_procedural_parameters_are_refused(mesh, field):
     {"shape": "capsule_cluster", "count": 1}, {"shape": "box", "size": 2.0},
     {"shape": "sphere", "radius": 1e-3}, {"shape": "box", "size": [1e4, 1e-3, 1.0]},
     {"shape": "torus_knot", "p": 1, "q": 1},
+    {"shape": "pipe", "sections": 3}, {"shape": "frame", "thickness": 10.0}, {"shape": "box_cluster", "count": 1},
 ])
 def test_extreme_but_valid_procedural_parameters_build(mesh):
     m = parse_scene(scene_dict(meshes={"b": mesh})).meshes["b"]
     assert len(m.faces) > 0 and np.all(np.isfinite(m.vertices)) and np.all(np.isfinite(m.normals))
     assert np.allclose(np.linalg.norm(m.normals, axis=1), 1.0, atol=1e-5)
+
+
+def test_the_holed_concave_and_several_part_shapes_are_what_they_say():
+    """pipe: a watertight tube with a hole through it (Euler number 0); frame: four bars around an empty square;
+    box_cluster: as many separate boxes as asked (the training shapes unlike the five convex ones)."""
+    import trimesh
+
+    from diviewer.scene.shapes import SHAPES
+
+    pipe = SHAPES["pipe"][0](radius=0.35, inner_radius=0.25, height=0.6, sections=48)
+    assert pipe.is_watertight and pipe.euler_number == 0
+    frame = SHAPES["frame"][0](size=0.7, thickness=0.15, depth=0.2)
+    inner = 0.35 - 0.15
+    assert not np.any((np.abs(frame.vertices[:, 0]) < inner - 1e-9) & (np.abs(frame.vertices[:, 1]) < inner - 1e-9))
+    assert np.allclose(frame.bounds, [[-0.35, -0.35, -0.1], [0.35, 0.35, 0.1]])
+    cluster = SHAPES["box_cluster"][0](count=4, size=0.2)
+    assert len(trimesh.graph.connected_components(cluster.face_adjacency, min_len=1)) == 4 and len(cluster.faces) == 4 * 12
+    for mesh in ({"shape": "pipe"}, {"shape": "frame"}, {"shape": "box_cluster"}):
+        m = parse_scene(scene_dict(meshes={"b": mesh})).meshes["b"]
+        assert len(m.faces) > 0 and np.allclose(np.linalg.norm(m.normals, axis=1), 1.0, atol=1e-5)
 
 
 @pytest.mark.parametrize("scale", [[1e-3] * 3, [1e4] * 3, [1e-3, 1e4, 1.0], [-1.0, 1.0, 1.0]])
