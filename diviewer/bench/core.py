@@ -366,7 +366,7 @@ def _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log) -> d
             models[f"{v['path']}|{step}"] = (net, step)
     vxgi = {f"vxgi{g}": settings.vxgi(g) for g in settings.vxgi_grids}
     log(f"scoring {len(models)} model variants and {len(vxgi)} VXGI grids on {ds.root} ({E}x{H})")
-    gl = GlBench(ctx, scene, E, H, mode) if vxgi or any(step > 1 for _, step in models.values()) else None
+    gl = GlBench(ctx, scene, E, H, mode) if vxgi or models else None  # models take the frame's GL scene, camera
     try:
         scored = score_evalset(ds, idx, (E, H), models, settings.eval_frames, gl, log, vxgi=vxgi)
     finally:

@@ -368,3 +368,18 @@ def test_fp16_twin_of_a_lean_export_halves_the_generator_only():
     assert np.abs(got - ref).max() <= 1e-2 * np.abs(ref).max()
     x[0, 3, 3, 2], x[0, 5, 5, 0] = np.nan, np.inf  # a NaN normal and an infinite depth
     assert np.isfinite(runs[1].run(None, feed)[0]).all()
+
+
+@pytest.mark.slow
+def test_bench_scores_the_shipped_model_with_no_gi_steps_and_no_vxgi(tmp_path):
+    """The shipped cornell model (encoding 3, the area's direct light) takes each frame's GL scene and camera even
+    where no GI step or VXGI grid asks for GL rendering: its accuracy is scored, not a crash."""
+    out = tmp_path / "b.json"
+    r = subprocess.run([sys.executable, "-m", "diviewer", "bench", "--quick", "--gi-steps", "--vxgi-grids",
+                        "--untrained-k", "--eval-frames", "1", "--pt-frames", "1", "--json", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-3000:]
+    rows = json.loads(out.read_text())["rows"]
+    fp32 = next(row for row in rows if row["kind"] == "neural" and row.get("precision") == "fp32"
+                and row.get("step", 1) == 1 and "cornell_linear" not in str(row.get("model")))
+    assert fp32["accuracy"] is not None and fp32["accuracy"]["psnr_tm"] > 25
