@@ -1,9 +1,10 @@
 """Dynamic resolution: the shading scale that holds a target frame rate. Pure Python, no GL.
 
 The viewer shades (G-buffer, shadow lookup, direct light, upsample) at ``scale`` times the window's size and
-upscales the image to the window. The controller measures frame times at the current scale and moves it
-between ``floor`` and ``ceiling`` (1 by default; up to 2, supersampling) under a cost model ``t(s) = a + b s^2`` (a: what does not depend on the pixels, such
-as the network at its own resolution; b: per-pixel work):
+resamples the image to the window. The controller measures frame times at the current scale and moves it
+between ``floor`` and ``ceiling`` (1 by default; up to 2, supersampling) under a cost model
+``t(s) = a + b s^2`` (a: what does not depend on the pixels, such as the network at its own resolution; b:
+per-pixel work):
 
 - It waits ``settle`` frames after a change (the first frames at a new size allocate targets), then decides
   every ``window`` frames on the median of the frames at this scale (the last ``pool`` of them): one slow
