@@ -256,6 +256,14 @@ def area_direct_of(ev: EvalFrames, samples: set[int], ctx=None) -> dict[int, dic
     return out
 
 
+def model_input(net, f: dict, frame: dict, area: dict, index: int, width: int) -> dict:
+    """What ``net`` takes of a stored frame: ``f`` (``frame`` cropped to ``width``) as stored, or, for a model of the
+    area's direct light, ``frame`` with that light (``area``: `area_direct_of`'s) in place, cropped alike."""
+    if net.direct_samples == 1:
+        return f
+    return crop_frame({**frame, "direct": area[net.direct_samples][index]}, width)
+
+
 def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp, progress, partial,
                  area=None) -> dict:
     rows = {k: [] for k in (*models, *images)}
@@ -272,8 +280,7 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
         for name, net in models.items():
             if name in refused:
                 continue
-            # a model of the area's direct light takes it as its input (and adds it); it is scored as every other
-            x = f if net.direct_samples == 1 else crop_frame({**frame, "direct": area[net.direct_samples][i]}, shape[0])
+            x = model_input(net, f, frame, area, i, shape[0])  # the area's direct light for a model of it
             t0 = time.perf_counter()
             try:
                 y = run_model(net, x, scales.get(i), _camera(net, ev.entry(i), x))

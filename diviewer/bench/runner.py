@@ -207,7 +207,7 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
     """
     from diviewer.evalframes import crop_frame, split_key
     from diviewer.evalscore import aggregate, equivalent, ladder_methods, score_frame
-    from diviewer.evaluate import area_direct_of, run_model
+    from diviewer.evaluate import area_direct_of, model_input, run_model
     from diviewer.metrics import flat_mask
     from diviewer.scene.loader import config_from_dict
 
@@ -240,8 +240,7 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
                 gl.renderer.render(config, direct=False)  # as timed
             for key, (net, step) in models.items():
                 if step == 1:  # encoding 2 and 3: the frame's light scale and camera
-                    x = f if net.direct_samples == 1 else crop_frame({**frame, "direct": area[net.direct_samples][i]},
-                                                                     shape[0])
+                    x = model_input(net, f, frame, area, i, shape[0])
                     image = run_model(net, x, **net.frame_inputs(config, shape[0], shape[1], gl.scene))
                 else:
                     passes[key].run(**passes[key].inputs_for(gl.scene, config))

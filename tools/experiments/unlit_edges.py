@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer.data.scales import light_scales
-from diviewer.evaluate import _camera, area_direct_of, run_model
+from diviewer.evaluate import _camera, area_direct_of, model_input, run_model
 from diviewer.evalframes import EvalFrames, crop_frame, default_evalset
 from diviewer.evalscore import regions
 from diviewer.metrics import tonemap
@@ -97,7 +97,7 @@ def main() -> None:
     def model_image(net):
         def image(i, f):
             if net.direct_samples > 1:  # fed and composed over the area's light, as diviewer eval does
-                f = crop_frame({**ev.load(i), "direct": area[net.direct_samples][i]}, f["pt"].shape[1])
+                f = model_input(net, f, ev.load(i), area, i, f["pt"].shape[1])
             return run_model(net, f, scales[i] if net.light_scaled else None, _camera(net, ev.entry(i), f))
         return image
 
