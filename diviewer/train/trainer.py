@@ -193,7 +193,8 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
     from diviewer.train.step import build_nets
 
     ds, train_idx, train_arr, val_arr = _load_splits(cfg, dev, say)
-    note = cfg.check_schedule(len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world)))
+    steps_per_epoch = len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world))
+    note = cfg.check_schedule(steps_per_epoch)
     if note:
         say(note)
     ckpt = _open_run(cfg, ds, train_idx, resume, say)
@@ -226,7 +227,6 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
         ids = [dev.device.index] if dev.device.type == "cuda" else None
         nets.netG = torch.nn.parallel.DistributedDataParallel(nets.netG_m, device_ids=ids)
         nets.netD = torch.nn.parallel.DistributedDataParallel(nets.netD_m, device_ids=ids)
-    steps_per_epoch = len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world))
     meta = run_metadata(cfg, nets, net_cfg, enc, ds, train_idx, 0 if val_arr is None else len(val_arr), ckpt)
     if parent or (ckpt and ckpt.get("init")):
         meta["init"] = init_record(parent) if parent else ckpt["init"]
