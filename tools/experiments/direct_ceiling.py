@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer.data.dataset import Dataset
-from diviewer.evaluate import scene_exposure
+from diviewer.evaluate import area_direct_of, scene_exposure
 from diviewer.metrics import tonemap
 
 
@@ -43,27 +43,6 @@ def _mean(values: list[float]) -> float | None:
     """Mean over the frames with an error (an exact frame, PSNR inf, is counted apart); None when there are none."""
     finite = [v for v in values if np.isfinite(v)]
     return float(np.mean(finite)) if finite else None
-
-
-def supersampled_direct(scene, ev, factors: list[int]) -> dict[int, dict[str, np.ndarray]]:
-    """GL direct light of every evaluation-set frame rendered at f x f times its size and box-filtered back to it
-    (the pixel's area, as the path tracer's box filter sees it), per factor f; f = 1 is the stored buffer's."""
-    from diviewer.gl.context import headless_context
-    from diviewer.gl.renderer import Renderer
-    from diviewer.scene.loader import config_from_dict
-
-    w, h = (int(x) for x in ev.manifest["resolution"])
-    out = {f: {} for f in factors}
-    with headless_context() as ctx:
-        for f in factors:
-            r = Renderer(ctx, scene, w * f, h * f)
-            try:
-                for e in ev.frames:
-                    r.render(config_from_dict(scene, e["config"]))
-                    out[f][str(e["index"])] = r.read("direct").reshape(h, f, w, f, 3).mean(axis=(1, 3))
-            finally:
-                r.release()
-    return out
 
 
 def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | None = None) -> dict:
@@ -91,7 +70,7 @@ def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | 
             np.savez(tmp, **done)
             tmp.replace(cache)
             print(f"rendered frame {key} ({len(done)} of {len(ev.frames)})", flush=True)
-    ss = supersampled_direct(scene, ev, supersample or [])
+    ss = area_direct_of(ev, set(supersample or []))  # the GL direct light over each pixel's area, per factor
     out = {}
     for split, shapes in ev.splits().items():
         for shape in shapes:
@@ -99,7 +78,7 @@ def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | 
             rows, unlit = {n: [] for n in names}, {n: [] for n in names}
             for i in ev.present(split, []):
                 f = crop_frame({**ev.load(i), "pt_direct_mi": done[str(i)],
-                                **{f"ss{k}": v[str(i)] for k, v in ss.items()}}, shape[0])
+                                **{f"ss{k}": v[i] for k, v in ss.items()}}, shape[0])
                 ref = tonemap(f["pt"], ev.exposure)
                 indirect = f["pt"] - f["pt_direct_mi"]
                 # the region stays the stored buffer's (point-sampled direct light), whichever direct light is composed
