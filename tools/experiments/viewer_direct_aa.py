@@ -28,6 +28,7 @@ from scale_accuracy import STREAM  # noqa: E402
 
 
 def measure(models: list[Path], cache: Path, size: int, frames: int, samples: int, exposure: float) -> dict:
+    from diviewer.bench.runner import read_final
     from diviewer.evaluate import score
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
@@ -40,9 +41,6 @@ def measure(models: list[Path], cache: Path, size: int, frames: int, samples: in
     scene = load_scene("cornell")
     truths = dict(np.load(cache))
     out = {}
-
-    def read(tex) -> np.ndarray:
-        return np.flipud(np.frombuffer(tex.read(), dtype="f2").reshape(size, size, 4)[..., :3]).astype(np.float32)
 
     for path in models:
         model = NeuralGI(path, scene=scene)
@@ -61,7 +59,7 @@ def measure(models: list[Path], cache: Path, size: int, frames: int, samples: in
                         truth = truths[f"cornell_{split}_{i}_{seed}_{size}x{size}_256"]
                         r.render(config)
                         npass.run(**npass.inputs_for(scene, config))
-                        full, indirect = read(npass.composite()), read(npass.composite(indirect_only=True))
+                        full, indirect = read_final(npass.composite()), read_final(npass.composite(indirect_only=True))
                         rows["viewer"].append(score(full, truth, exposure)["psnr_tm"])
                         rows[f"viewer_direct_aa{samples}"].append(score(indirect + aa(config), truth, exposure)["psnr_tm"])
             finally:
