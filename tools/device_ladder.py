@@ -13,6 +13,10 @@ Usage on the device:  python3 tools/device_ladder.py --recipe assets/recipes/spo
 5. `diviewer eval` of the models on the capture's test split (WORK/test_split.json: the data stays there) and on
    the compact evaluation set (WORK/eval_compact.json); tools/device_pack.sh brings back the rest.
 
+Measured on an H100 (2026-11-24, docs/sponza.md): Sponza at 228x128, 128 spp, area direct light, 8 shards: 1.2-1.4 s
+a frame each, the GPU 5 % busy (host-bound): give --shards the core count. The machine goes back 30 s after a call
+ends, and the data with it: keep the calls back to back, or size the run (--minutes) to one 10-minute call.
+
 Everything logs to stdout; WORK/ladder.json records the plan, the rates, the times and what finished. A run the
 deadline cuts is killed and exported from its best checkpoint, and ladder.json says so.
 """
@@ -93,7 +97,8 @@ def main() -> int:
     ap.add_argument("--recipe", type=Path, required=True)
     ap.add_argument("--minutes", type=float, required=True, help="from now until every model is exported")
     ap.add_argument("--work", type=Path, default=Path("/tmp/dv"))
-    ap.add_argument("--shards", type=int, default=8)
+    ap.add_argument("--shards", type=int, default=os.cpu_count() or 8,
+                    help="capture processes (default: one per core; the capture is host-bound)")
     args = ap.parse_args()
     t0 = time.time()
     deadline = t0 + args.minutes * 60
