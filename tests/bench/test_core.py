@@ -301,10 +301,11 @@ def test_int8_quantisation_calibrates_an_encoding_2_model_with_its_light_scales(
     calib = []
     for scale in (0.5, 2.0):  # at the model's 228x128 (16:9), which the graph runs padded to 256x128
         calib.append((random_buffers(rng, 128, 228, batch=1), scale))
-    out = quantize_int8(src, tmp_path / "int8.onnx", calib)
+    out = quantize_int8(src, tmp_path / "int8.onnx", calib, percentile=None)
     import onnx
 
-    assert get_meta(onnx.load(str(out)))["precision"] == "int8"
+    meta = get_meta(onnx.load(str(out)))
+    assert meta["precision"] == "int8" and meta["quantization"]["calibration"] == "min-max"
     y = NeuralGI(out).run(calib[0][0][0], light_scale=0.5)
     assert y.shape == (128, 228, 3) and np.isfinite(y).all() and y.max() > 0
 
@@ -316,7 +317,7 @@ def test_int8_quantisation_calibrates_an_encoding_3_model_with_its_cameras(tmp_p
     pytest.importorskip("onnx")
     import onnx
 
-    from diviewer.bench.onnx_tools import get_meta, quantize_int8
+    from diviewer.bench.onnx_tools import CALIB_PERCENTILE, get_meta, quantize_int8
     from diviewer.paths import models_dir
     from diviewer.runtime import NeuralGI, read_metadata
 
@@ -327,7 +328,8 @@ def test_int8_quantisation_calibrates_an_encoding_3_model_with_its_cameras(tmp_p
     camera = {"position": (0.0, 1.0, 3.5), "target": (0.0, 1.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 45.0}
     calib = [(random_buffers(rng, 96, 160, batch=1), s, NeuralGI.camera(camera, 160, 96)[None]) for s in (0.5, 2.0)]
     out = quantize_int8(src, tmp_path / "int8.onnx", calib)
-    assert get_meta(onnx.load(str(out)))["precision"] == "int8"
+    meta = get_meta(onnx.load(str(out)))  # the default activation ranges: a percentile, recorded in the model
+    assert meta["precision"] == "int8" and meta["quantization"]["calibration"] == f"percentile {CALIB_PERCENTILE:g}"
     x, scale, cam = calib[0]
     y8 = NeuralGI(out).run(x[0], light_scale=scale, camera=cam)
     y32 = NeuralGI(src).run(x[0], light_scale=scale, camera=cam)
