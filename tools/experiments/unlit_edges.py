@@ -55,7 +55,7 @@ def score(ev: EvalFrames, images) -> dict:
     for split, shapes in ev.splits().items():
         idx = ev.present(split, [])
         acc = {name: {"frames": [], "meshes": [], "se": dict.fromkeys(("all", "interior", "edge"), 0.0),
-                      "n": dict.fromkeys(("all", "interior", "edge"), 0)} for name in images}
+                      "n": dict.fromkeys(("all", "interior", "edge"), 0), "sums": {}} for name in images}
         for i in idx:
             f = crop_frame(ev.load(i), shapes[0][0])
             m = (regions(f, ev.exposure) or {}).get("object_unlit")
@@ -68,6 +68,9 @@ def score(ev: EvalFrames, images) -> dict:
                 a = acc[name]
                 a["frames"].append(_psnr(float(d2[m].sum()), int(m.sum())))
                 a["meshes"].append(_mesh(ev.entry(i)))
+                got = a["sums"].setdefault(a["meshes"][-1], [0.0, 0.0])
+                got[0] += float(image(i, f)[m].sum())
+                got[1] += float(f["pt"][m].sum())
                 for part, pm in parts.items():
                     a["se"][part] += float(d2[pm].sum())
                     a["n"][part] += int(pm.sum())
@@ -76,7 +79,9 @@ def score(ev: EvalFrames, images) -> dict:
                              **{f"pooled_{p}": _psnr(a["se"][p], a["n"][p]) for p in a["se"]},
                              **{f"pixels_{p}": a["n"][p] for p in a["n"]},
                              "by_mesh": {mesh: float(np.mean([v for v, k in zip(a["frames"], a["meshes"]) if k == mesh]))
-                                         for mesh in sorted(set(a["meshes"]))}}
+                                         for mesh in sorted(set(a["meshes"]))},
+                             "bias_by_mesh": {mesh: float(t[0] / t[1] - 1.0) if t[1] > 0 else None
+                                              for mesh, t in sorted(a["sums"].items())}}
                       for name, a in acc.items()}
     return out
 
@@ -113,6 +118,8 @@ def main() -> None:
             mean = f"{r['per_frame_mean']:.2f}" if r["per_frame_mean"] is not None else "-"
             print(f"  {name:40s} eval's mean {mean:>6} over {r['frames']} frames | pooled: {cells}")
             print(f"  {'':40s} by mesh: " + ", ".join(f"{k} {v:.2f}" for k, v in r["by_mesh"].items()))
+            print(f"  {'':40s} radiance bias by mesh (linear, summed over the region): "
+                  + ", ".join(f"{k} {v:+.1%}" for k, v in r["bias_by_mesh"].items() if v is not None))
     if a.out:
         a.out.write_text(json.dumps(result, indent=1))
 
