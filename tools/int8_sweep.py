@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from diviewer.bench import onnx_tools  # noqa: E402
-from diviewer.bench.runner import GlBench, calibration  # noqa: E402
+from diviewer.bench.runner import calibration  # noqa: E402
 from diviewer.gl.context import headless_context  # noqa: E402
 from diviewer.runtime import read_metadata  # noqa: E402
 from diviewer.scene import load_scene  # noqa: E402
@@ -34,12 +34,7 @@ def _calibration(model: Path, frames: int) -> list[tuple]:
     w, h = (int(x) for x in meta["resolution"])
     scene = load_scene(meta["scene"])
     with headless_context() as ctx:
-        gb = GlBench(ctx, scene, w, h, "query")
-        try:
-            calib, _ = calibration(types.SimpleNamespace(calib_data=None, calib_frames=frames), scene, gb, w, h)
-        finally:
-            gb.release()
-    return calib
+        return calibration(types.SimpleNamespace(calib_data=None, calib_frames=frames), scene, ctx, w, h, "query")[0]
 
 
 def main(argv=None) -> int:

@@ -155,16 +155,12 @@ def _int8_twins(settings, scene, ctx, mode, variants: list[dict], tmp: Path, not
     """int8 twins of each trained model's fp32 variant, quantised with inputs of training frames (what failed to
     quantise goes to ``notes``)."""
     from diviewer.bench.onnx_tools import quantize_int8
-    from diviewer.bench.runner import GlBench, calibration
+    from diviewer.bench.runner import calibration
 
     out = []
     for v in [v for v in variants if v["kind"] == "neural" and v["precision"] == "fp32"]:
         w, h = (int(x) for x in v["meta"]["resolution"])
-        gb = GlBench(ctx, scene, w, h, mode)
-        try:
-            calib, calib_note = calibration(settings, scene, gb, w, h)
-        finally:
-            gb.release()
+        calib, calib_note = calibration(settings, scene, ctx, w, h, mode)
         dst = tmp / f"{v['n']}_{v['name']}_int8.onnx"
         try:
             quantize_int8(Path(v["path"]), dst, calib)

@@ -289,9 +289,10 @@ def temporal_configs(scene, n: int, span: float = 0.25) -> list:
     return out
 
 
-def calibration(settings, scene, gb, width: int, height: int) -> tuple[list[tuple], str]:
+def calibration(settings, scene, ctx, width: int, height: int, mode: str) -> tuple[list[tuple], str]:
     """Model inputs of training frames, each (buffers (1, H, W, 10), light scale, camera (1, CAMERA_PARAMS)): what
-    encoding-2 and -3 models also take. A capture's train split when given, else GL renders of training configs."""
+    encoding-2 and -3 models also take. A capture's train split when given, else GL renders (in ``ctx``, timed by
+    ``mode`` as GlBench times) of training configs."""
     from diviewer.runtime import NeuralGI
     from diviewer.scene.lights import light_scale
 
@@ -313,5 +314,10 @@ def calibration(settings, scene, gb, width: int, height: int) -> tuple[list[tupl
     from diviewer.scene import sample_config
 
     configs = [sample_config(scene, 9000 + i, "train") for i in range(settings.calib_frames)]
-    return ([(gb.buffers(c), light_scale(scene, c), NeuralGI.camera(c.camera, width, height)[None]) for c in configs],
-            f"GL inputs of {settings.calib_frames} training configurations")
+    gb = GlBench(ctx, scene, width, height, mode)
+    try:
+        inputs = [(gb.buffers(c), light_scale(scene, c), NeuralGI.camera(c.camera, width, height)[None])
+                  for c in configs]
+    finally:
+        gb.release()
+    return inputs, f"GL inputs of {settings.calib_frames} training configurations"

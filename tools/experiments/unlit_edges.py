@@ -64,12 +64,13 @@ def score(ev: EvalFrames, images) -> dict:
             parts = {"all": m, "interior": interior(m), "edge": m & ~interior(m)}
             ref = tonemap(f["pt"], ev.exposure)
             for name, image in images.items():
-                d2 = np.sum((tonemap(image(i, f), ev.exposure) - ref) ** 2, axis=-1) / 3.0
+                out_i = image(i, f)
+                d2 = np.sum((tonemap(out_i, ev.exposure) - ref) ** 2, axis=-1) / 3.0
                 a = acc[name]
                 a["frames"].append(_psnr(float(d2[m].sum()), int(m.sum())))
                 a["meshes"].append(_mesh(ev.entry(i)))
                 got = a["sums"].setdefault(a["meshes"][-1], [0.0, 0.0])
-                got[0] += float(image(i, f)[m].sum())
+                got[0] += float(out_i[m].sum())
                 got[1] += float(f["pt"][m].sum())
                 for part, pm in parts.items():
                     a["se"][part] += float(d2[pm].sum())
