@@ -112,14 +112,15 @@ def restamp_evalset(evalset: Path, old_toml: Path, new_toml: Path) -> str:
         return "already current"
     if manifest.get("scene_hash") != old.file_hash:
         raise DiviewerError(f"the set was not made from {old_toml}", path=mpath, field="scene_hash")
-    old_data, new_data = (tomllib.loads(p.read_text()) for p in (old_toml, new_toml))
+    old_text, new_text = old_toml.read_text(), new_toml.read_text()
+    old_data, new_data = tomllib.loads(old_text), tomllib.loads(new_text)
     for toml, data in ((old_toml, old_data), (new_toml, new_data)):
         loads = [n for n, m in data.get("meshes", {}).items() if "file" in m or "gltf" in m] + (
             ["gltf"] if "gltf" in data else [])
         if loads:
             raise DiviewerError(f"loads other files ({', '.join(loads)}): only self-contained scene files are carried "
                                 f"over", path=toml, field="meshes")
-    if _looks(old_toml.read_text()) != _looks(new_toml.read_text()):
+    if _looks(old_text) != _looks(new_text):
         raise DiviewerError(f"the scene itself changed (beyond its ranges, camera and meshes): render the set again "
                             f"with `diviewer evalset --scene {new_toml}`", path=new_toml)
     old_meshes, new_meshes = old_data.get("meshes", {}), new_data.get("meshes", {})
@@ -133,7 +134,7 @@ def restamp_evalset(evalset: Path, old_toml: Path, new_toml: Path) -> str:
                              "meshes_added": added, "meshes_edited": edited, "meshes_removed":
                              sorted(set(old_meshes) - set(new_meshes))}
     manifest["scene_hash"] = new.file_hash
-    manifest["scene_toml"] = new_toml.read_text()
+    manifest["scene_toml"] = new_text
     manifest["scene_file"] = str(new_toml.resolve())
     imageio.write_text(mpath, json.dumps(manifest, indent=1))
     return f"restamped (meshes added: {', '.join(added) or 'none'}; edited: {', '.join(edited) or 'none'})"
