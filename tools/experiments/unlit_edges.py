@@ -42,7 +42,7 @@ def _psnr(se: float, n: int) -> float | None:
     return None if n == 0 else (float("inf") if se == 0 else float(10 * np.log10(n / se)))
 
 
-def _mesh(entry: dict) -> str:
+def centre_mesh(entry: dict) -> str:
     """The mesh the frame's centre object wears (the one object whose mesh the sampler draws)."""
     objects = entry["config"].get("objects", [])
     return next((o.get("mesh", "?") for o in objects if o.get("name") == "center"), "?")
@@ -68,7 +68,7 @@ def score(ev: EvalFrames, images) -> dict:
                 d2 = np.sum((tonemap(out_i, ev.exposure) - ref) ** 2, axis=-1) / 3.0
                 a = acc[name]
                 a["frames"].append(_psnr(float(d2[m].sum()), int(m.sum())))
-                a["meshes"].append(_mesh(ev.entry(i)))
+                a["meshes"].append(centre_mesh(ev.entry(i)))
                 got = a["sums"].setdefault(a["meshes"][-1], [0.0, 0.0])
                 got[0] += float(out_i[m].sum())
                 got[1] += float(f["pt"][m].sum())
