@@ -27,6 +27,10 @@ def add_build_parser(subparsers) -> argparse.ArgumentParser:
                         "shipped scene, else the work folder)")
     p.add_argument("--budget", type=float, default=None, metavar="HOURS",
                    help="scale the recipe's frames and steps (never up) so the estimate fits in HOURS on this machine")
+    p.add_argument("--evalset", type=Path, default=None, metavar="DIR",
+                   help="score on this evaluation set of the scene (e.g. the shipped compact one, "
+                        "assets/evalsets/SCENE) instead of rendering the recipe's: the evaluation-set stage then "
+                        "only checks it")
     p.add_argument("--ks", type=int, nargs="+", default=None, metavar="K",
                    help="the widths to train instead of the recipe's ladder")
     p.add_argument("--device", default=None, help="training device: auto (default: CUDA where present), cpu, cuda:N")
@@ -51,6 +55,8 @@ def rebuild_command(args: argparse.Namespace) -> str:
         words += ["--budget", f"{args.budget:g}"]
     if args.ks:
         words += ["--ks", *map(str, args.ks)]
+    if getattr(args, "evalset", None) is not None:
+        words += ["--evalset", str(args.evalset)]
     return shlex.join(words)
 
 
@@ -75,7 +81,8 @@ def run_build_command(args: argparse.Namespace) -> int:
     if args.ks and any(k < 1 for k in args.ks):
         raise DiviewerError(f"widths must be positive, got {args.ks}", field="--ks")
     plan = make_plan(scene, recipe, work, ship=ship, budget_hours=args.budget,
-                     ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides)
+                     ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
+                     evalset_dir=args.evalset)
     if args.dry_run:
         from diviewer.build.pipeline import finished_stages
 

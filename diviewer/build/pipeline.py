@@ -35,6 +35,7 @@ def plan_key(plan: Plan) -> dict[str, Any]:
         "scene": str(resolve_scene_path(plan.scene).resolve()),
         "recipe": {"name": plan.recipe.name, "sha256": plan.recipe.sha256},
         "capture": dataclasses.asdict(plan.capture), "evalset": dataclasses.asdict(plan.evalset),
+        **({"given_evalset": str(plan.given_evalset.resolve())} if plan.given_evalset is not None else {}),
         "train": {k: v for k, v in plan.train.items() if k not in RUN_ONLY}, "ks": list(plan.ks)}, default=str))
 
 
@@ -112,10 +113,28 @@ def _check(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
 def _evalset(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     from diviewer.evalset import build_evalset
 
+    if plan.given_evalset is not None:
+        return _given_evalset(plan, log)
     summary = build_evalset(plan.scene, plan.evalset_dir, plan.evalset, log=log)
     if summary["present"] != summary["planned"]:
         raise BuildInterrupted(f"evaluation set: {summary['present']} of {summary['planned']} frames")
     return [plan.evalset_dir / "manifest.json", plan.evalset_dir / "summary.json"], {"frames": summary["present"]}
+
+
+def _given_evalset(plan: Plan, log) -> tuple[list[Path], dict]:
+    """An evaluation set made before (``--evalset``): of this scene file, and every frame present and sound."""
+    from diviewer.build.plan import check_evalset_scene
+    from diviewer.evalframes import EvalFrames
+    from diviewer.evaluate import check_frames
+    from diviewer.scene.loader import load_scene
+
+    ev = EvalFrames(plan.given_evalset)
+    scene = load_scene(plan.scene)
+    check_evalset_scene(ev, scene, plan.scene)  # again: the scene file may have changed since the plan was made
+    check_frames(ev, partial=False, log=log)
+    log(f"{plan.given_evalset}: {len(ev.frames)} frames of scene '{scene.name}', "
+        f"{'compact, ' if ev.compact else ''}{ev.manifest['spp']} spp; not rendered again")
+    return [plan.given_evalset / "manifest.json"], {"frames": len(ev.frames), "given": str(plan.given_evalset)}
 
 
 def _train(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path], dict]:

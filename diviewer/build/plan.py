@@ -72,6 +72,8 @@ class Plan:
     """The stages in order, with their estimates."""
     overrides: dict[str, Any]
     """The recipe's training fields changed (by --budget or the command line), for the recipe record."""
+    given_evalset: Path | None = None
+    """An evaluation set made before (``--evalset``), scored instead of rendering the recipe's; None: render it."""
 
     @property
     def seconds(self) -> float:
@@ -83,7 +85,7 @@ class Plan:
 
     @property
     def evalset_dir(self) -> Path:
-        return self.work / "evalset"
+        return self.given_evalset if self.given_evalset is not None else self.work / "evalset"
 
     def run_dir(self, k: int) -> Path:
         return self.work / f"train_k{k}"
@@ -138,8 +140,9 @@ def scaled(capture, train: dict[str, Any], s: float) -> tuple[Any, dict[str, Any
 
 def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_hours: float | None = None,
               ks: tuple[int, ...] | None = None, train_overrides: dict[str, Any] | None = None,
-              machine: costs.Machine | None = None) -> Plan:
-    """The build's plan: the recipe's stages, sized to ``budget_hours`` if given."""
+              machine: costs.Machine | None = None, evalset_dir: Path | None = None) -> Plan:
+    """The build's plan: the recipe's stages, sized to ``budget_hours`` if given; ``evalset_dir``: score on that
+    evaluation set instead of rendering the recipe's (its settings then come from its manifest)."""
     from diviewer.scene.loader import resolve_scene_path
     from diviewer.train.recipe import capture_settings, evalset_settings
 
@@ -154,22 +157,56 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
     ks = tuple(ks) if ks else recipe.ks()
     train = {**recipe.train, **(train_overrides or {})}
     capture, evalset = capture_settings(recipe), evalset_settings(recipe)
+    if evalset_dir is not None:
+        evalset = given_evalset_settings(Path(evalset_dir), evalset, scene)
     s = 1.0
     if budget_hours is not None:
         if not (math.isfinite(budget_hours) and budget_hours > 0):
             raise DiviewerError(f"must be a positive number of hours, got {budget_hours}", field="--budget")
         budget = budget_hours * 3600
-        evalset = _fit_evalset(evalset, scene_name, machine, budget * EVALSET_SHARE)
-        s = _fit_scale(capture, train, evalset, ks, scene_name, machine, budget)
+        if evalset_dir is None:
+            evalset = _fit_evalset(evalset, scene_name, machine, budget * EVALSET_SHARE)
+        s = _fit_scale(capture, train, evalset, ks, scene_name, machine, budget, evalset_dir)
         capture, train = scaled(capture, train, s)
     overrides = {k: v for k, v in train.items() if recipe.train.get(k) != v and k not in ("K", *RUN_ONLY)}
-    stages = _stages(scene_name, machine, capture, train, evalset, ks)
+    stages = _stages(scene_name, machine, capture, train, evalset, ks, evalset_dir)
     return Plan(scene=str(scene), scene_name=scene_name, recipe=recipe, capture=capture, evalset=evalset,
                 train={k: v for k, v in train.items() if k != "K"}, ks=ks, steps=planned_steps(capture, train),
-                scale=s, machine=machine, work=Path(work), ship=ship, stages=stages, overrides=overrides)
+                scale=s, machine=machine, work=Path(work), ship=ship, stages=stages, overrides=overrides,
+                given_evalset=None if evalset_dir is None else Path(evalset_dir))
 
 
-def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tuple[int, ...]) -> tuple[Stage, ...]:
+def given_evalset_settings(path: Path, recipe_settings, scene: str):
+    """The settings an evaluation set made before was rendered with (its manifest's), in the recipe's
+    EvalSetSettings; a folder that is no evaluation set of ``scene`` (a name or a .toml path) is refused, before
+    any stage runs."""
+    from diviewer.evalframes import EvalFrames
+    from diviewer.scene.loader import load_scene
+
+    if not (path / "manifest.json").is_file():
+        raise DiviewerError("no evaluation set here (no manifest.json); make one with `diviewer evalset`, or leave "
+                            "--evalset out to render the recipe's", path=path, field="--evalset")
+    ev = EvalFrames(path)
+    if ev.manifest.get("kind") != "evalset":
+        raise DiviewerError("not an evaluation set (a training capture?)", path=path / "manifest.json", field="kind")
+    check_evalset_scene(ev, load_scene(scene), scene)
+    given = dict(ev.manifest["settings"])
+    if ev.compact:  # the first frames of each split of a full set (`diviewer evalset --compact`)
+        given["frames_per_split"] = ev.manifest["compact"]["frames_per_split"]
+    fields = {f.name for f in dataclasses.fields(recipe_settings)}
+    return dataclasses.replace(recipe_settings, **{k: v for k, v in given.items() if k in fields})
+
+
+def check_evalset_scene(ev, scene, given_as: str) -> None:
+    """Refuse an evaluation set (an EvalFrames) made for another scene file than ``scene`` (a loaded Scene)."""
+    if ev.manifest.get("scene_hash") != scene.file_hash:
+        raise DiviewerError(f"this evaluation set was made for another scene file than {given_as} (scene "
+                            f"'{ev.manifest.get('scene')}'); make one of this scene with `diviewer evalset`, or leave "
+                            f"--evalset out", path=ev.root / "manifest.json", field="scene_hash")
+
+
+def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tuple[int, ...],
+            given_evalset: Path | None = None) -> tuple[Stage, ...]:
     steps = planned_steps(cap, train)
     gan = train.get("gan_weight", 1.0) > 0
     batch = train.get("batch_size", 4)
@@ -178,10 +215,14 @@ def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tu
     out = [Stage("capture", f"capture {cap.frames} frames at {cap.width}x{cap.height}, {cap.spp} spp{area}",
                  costs.capture_seconds(m.kind, scene, cap.frames, cap.width, cap.height, cap.spp,
                                        cap.direct_samples)),
-           Stage("check", "check every frame of the capture", 0.0),
-           Stage("evalset", f"evaluation set: {frames} frames, {ev.spp} spp twice, ladder "
-                            f"{'/'.join(map(str, ev.ladder))}",
-                 costs.evalset_seconds(m.kind, scene, frames, ev.width, ev.height, ev.spp, tuple(ev.ladder)))]
+           Stage("check", "check every frame of the capture", 0.0)]
+    if given_evalset is not None:
+        out.append(Stage("evalset", f"evaluation set made before: {given_evalset} ({ev.frames_per_split} frames per "
+                                    f"split, {ev.spp} spp; checked, not rendered)", 0.0))
+    else:
+        out.append(Stage("evalset", f"evaluation set: {frames} frames, {ev.spp} spp twice, ladder "
+                                    f"{'/'.join(map(str, ev.ladder))}",
+                         costs.evalset_seconds(m.kind, scene, frames, ev.width, ev.height, ev.spp, tuple(ev.ladder))))
     for k in ks:
         out.append(Stage(f"train_k{k}", f"train K={k}: {steps} steps of batch {batch}",
                          steps * costs.train_step_seconds(m.kind, k, batch, cap.width, cap.height, gan)))
@@ -193,8 +234,8 @@ def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tu
     return tuple(out)
 
 
-def _total(cap, train, ev, ks, scene, m) -> float:
-    return sum(s.seconds for s in _stages(scene, m, cap, train, ev, ks))
+def _total(cap, train, ev, ks, scene, m, given_evalset=None) -> float:
+    return sum(s.seconds for s in _stages(scene, m, cap, train, ev, ks, given_evalset))
 
 
 def _fit_evalset(ev, scene: str, m: costs.Machine, seconds: float):
@@ -205,13 +246,13 @@ def _fit_evalset(ev, scene: str, m: costs.Machine, seconds: float):
     return dataclasses.replace(ev, frames_per_split=fit)
 
 
-def _fit_scale(cap, train, ev, ks, scene, m, budget: float) -> float:
+def _fit_scale(cap, train, ev, ks, scene, m, budget: float, given_evalset: Path | None = None) -> float:
     """The largest s <= 1 whose plan fits ``budget`` seconds; an error where even the smallest plan does not."""
     steps = planned_steps(cap, train)
     s_min = min(1.0, max(MIN_FRAMES / cap.frames, MIN_STEPS / max(steps, 1)))
-    if _total(cap, train, ev, ks, scene, m) <= budget:
+    if _total(cap, train, ev, ks, scene, m, given_evalset) <= budget:
         return 1.0
-    smallest = _total(*scaled(cap, train, s_min), ev, ks, scene, m)
+    smallest = _total(*scaled(cap, train, s_min), ev, ks, scene, m, given_evalset)
     if smallest > budget:
         raise DiviewerError(f"{budget / 3600:.2f} h is below the smallest plan this recipe allows on this machine "
                             f"({smallest / 3600:.2f} h at {MIN_FRAMES} frames and {MIN_STEPS} steps per K); give "
@@ -219,7 +260,7 @@ def _fit_scale(cap, train, ev, ks, scene, m, budget: float) -> float:
     lo, hi = s_min, 1.0
     for _ in range(40):
         mid = (lo + hi) / 2
-        lo, hi = (mid, hi) if _total(*scaled(cap, train, mid), ev, ks, scene, m) <= budget else (lo, mid)
+        lo, hi = (mid, hi) if _total(*scaled(cap, train, mid), ev, ks, scene, m, given_evalset) <= budget else (lo, mid)
     return lo
 
 

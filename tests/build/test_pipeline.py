@@ -202,6 +202,25 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
     out = capsys.readouterr().out
     assert out.count("done before, outputs checked; skipped") == 10
 
+    # A second build scored on the first's evaluation set (--evalset): checked, never rendered into its own folder;
+    # the card's rebuild command names it. One of another scene file is refused before any stage runs.
+    work2, ship2 = tmp_path / "work2", tmp_path / "ship2"
+    argv2 = ["build", "--scene", str(scene), "--recipe", str(recipe), "--work", str(work2), "--ship", str(ship2),
+             "--ks", "2", "--evalset", str(work / "evalset")]
+    assert main(argv2) == 0
+    out = capsys.readouterr().out
+    assert "evaluation set made before" in out and "not rendered again" in out
+    assert not (work2 / "evalset").exists()
+    ladder2 = json.loads((ship2 / "tiny_ladder.json").read_text())
+    assert set(ladder2["rows"][0]["evalset"]) == set(ladder["rows"][0]["evalset"])
+    assert json.loads((ship2 / "tiny.json").read_text())["rebuild"].endswith(f"--evalset {work / 'evalset'}")
+    cornell_set = Path(__file__).resolve().parents[2] / "assets" / "evalsets" / "cornell"
+    assert main([*argv2[:-1], str(cornell_set), "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert "cornell/manifest.json: scene_hash: this evaluation set was made for another scene file" in err
+    assert main([*argv2[:-1], str(tmp_path / "nothing"), "--dry-run"]) == 2
+    assert "nothing: --evalset: no evaluation set here" in capsys.readouterr().err
+
     # `diviewer train --recipe` on the build's data records the recipe in the checkpoint
     from diviewer.train.checkpoint import load_checkpoint
 
