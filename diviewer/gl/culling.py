@@ -18,17 +18,14 @@ CHUNK_TRIANGLES = 8192
 """Most triangles in one static chunk: small enough to cull by, large enough to keep draws few (Sponza: ~60)."""
 
 
-def split_mesh(mesh: Mesh, max_triangles: int = CHUNK_TRIANGLES) -> list[Mesh]:
-    """``mesh`` cut into spatially compact pieces of at most ``max_triangles`` triangles (vertices re-indexed
-    per piece); the pieces' triangles, in their original order within each piece, are exactly the mesh's."""
-    faces = np.asarray(mesh.faces)
-    if len(faces) <= max_triangles:
-        return [mesh]
-    centroids = mesh.vertices[faces].mean(axis=1)
-    groups, todo = [], [np.arange(len(faces))]
+def spatial_groups(centroids: np.ndarray, max_items: int) -> list[np.ndarray]:
+    """Indices into ``centroids`` (N, 3) cut into compact groups of at most ``max_items``: a group too large is
+    halved along the longest side of its centroids' box (stable, so equal keys keep their order). In order of each
+    group's smallest index, the indices within a group ascending."""
+    groups, todo = [], [np.arange(len(centroids))]
     while todo:
         idx = todo.pop()
-        if len(idx) <= max_triangles:
+        if len(idx) <= max_items:
             groups.append(np.sort(idx))
             continue
         c = centroids[idx]
@@ -36,8 +33,17 @@ def split_mesh(mesh: Mesh, max_triangles: int = CHUNK_TRIANGLES) -> list[Mesh]:
         order = np.argsort(c[:, axis], kind="stable")
         half = len(idx) // 2
         todo += [idx[order[half:]], idx[order[:half]]]
+    return sorted(groups, key=lambda g: int(g[0]))
+
+
+def split_mesh(mesh: Mesh, max_triangles: int = CHUNK_TRIANGLES) -> list[Mesh]:
+    """``mesh`` cut into spatially compact pieces of at most ``max_triangles`` triangles (vertices re-indexed
+    per piece); the pieces' triangles, in their original order within each piece, are exactly the mesh's."""
+    faces = np.asarray(mesh.faces)
+    if len(faces) <= max_triangles:
+        return [mesh]
     out = []
-    for i, idx in enumerate(sorted(groups, key=lambda g: int(g[0]))):
+    for i, idx in enumerate(spatial_groups(mesh.vertices[faces].mean(axis=1), max_triangles)):
         f = faces[idx]
         used, inverse = np.unique(f.ravel(), return_inverse=True)
         out.append(Mesh(f"{mesh.name}#{i}", mesh.vertices[used], mesh.normals[used],

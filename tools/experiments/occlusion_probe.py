@@ -7,7 +7,7 @@ Usage: python tools/experiments/occlusion_probe.py [--size 384] [--path-steps 20
 
 Cameras: the scene file's default and ``--path-steps`` points along its camera walk. Each static chunk
 (`diviewer.gl.culling.split_mesh`) is cut into clusters of at most 128 triangles by the same halving along the
-longest side; a cluster counts as hidden when its box's nearest point lies behind the farthest final depth over
+longest side (`spatial_groups`); a cluster counts as hidden when its box's nearest point lies behind the farthest final depth over
 every pixel its box can cover (a max-depth pyramid, one pixel of slack). ``--time`` draws the default view's
 G-buffer of each camera three ways: as the renderer does (the chunks in the frustum), the clusters in the frustum
 only, and the oracle's clusters only, the last two from an index buffer per chunk made for the camera (a best
@@ -34,23 +34,11 @@ CLUSTER = 128
 _CORNERS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], np.float64)
 
 
-def halve(centroids: np.ndarray, most: int) -> list[np.ndarray]:
-    """Index groups of at most ``most`` centroids, halving along the longest side (as culling.split_mesh)."""
-    groups, todo = [], [np.arange(len(centroids))]
-    while todo:
-        idx = todo.pop()
-        if len(idx) <= most:
-            groups.append(np.sort(idx))
-            continue
-        c = centroids[idx]
-        order = np.argsort(c[:, int(np.argmax(c.max(axis=0) - c.min(axis=0)))], kind="stable")
-        todo += [idx[order[len(idx) // 2:]], idx[order[:len(idx) // 2]]]
-    return groups
-
-
 def clusters_of(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Boxes (C, 2, 3), triangle counts (C,) and face groups of a chunk's clusters."""
-    groups = halve(vertices[faces].mean(axis=1), CLUSTER)
+    from diviewer.gl.culling import spatial_groups
+
+    groups = spatial_groups(vertices[faces].mean(axis=1), CLUSTER)
     boxes = np.array([[vertices[faces[g]].reshape(-1, 3).min(0), vertices[faces[g]].reshape(-1, 3).max(0)]
                       for g in groups])
     return boxes, np.array([len(g) for g in groups]), groups
