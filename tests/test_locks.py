@@ -20,9 +20,12 @@ from diviewer.locks import lock_path, run_lock, shard_part, shards_overlap
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# A process that takes the lock of a folder, says so on stdout, and holds it until killed.
+# A process that takes the lock of a folder, says so on stdout, and holds it until killed. Ctrl-C (SIGINT) stops it
+# as it stops a run in a terminal, even where the suite itself runs as a background job (which ignores SIGINT,
+# and a child inherits that).
 HOLDER = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from diviewer.locks import run_lock, shard_part
     folder, command, k, n = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
     with run_lock(folder, command, shard_part(k, n)):
