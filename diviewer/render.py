@@ -83,10 +83,11 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                                "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}
             # Known good before anything is written: an earlier render in --out stays as it was otherwise.
             _check_finite(scene, config, frame, (*BUFFERS, "neural", "vxgi", "vxgi_indirect"))
-            ev = scene.exposure if exposure is None else exposure
+            ev, metered = display_exposure(scene, frame, exposure)
             record = frame_record(scene, config, (width, height), seed=seed, split=split if seed is not None else None,
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
-                                  display={"exposure": ev, "tonemap": tonemap}, neural=neural_info,
+                                  display={"exposure": ev, "tonemap": tonemap, **({"metered": metered} if metered else {})},
+                                  neural=neural_info,
                                   user_meshes=user_meshes, **({"vxgi": vxgi_info} if vxgi_info else {}))
             _write_render(out, frame, record, compositor, ev, tonemap)
         finally:
@@ -99,6 +100,19 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
             compositor.release()
             renderer.release()
     return record
+
+
+def display_exposure(scene: Scene, frame: dict[str, np.ndarray], exposure: float | None) -> tuple[float, str | None]:
+    """The PNGs' exposure (stops) and, where it was metered, the image it was metered on: ``exposure`` if given,
+    else the scene file's, or for a scene that asks for auto exposure the viewer's meter
+    (`diviewer.exposure.metered_ev`) on the frame shown (the neural composite, else the direct light)."""
+    if exposure is not None or not scene.auto_exposure:
+        return (scene.exposure if exposure is None else exposure), None
+    from diviewer.exposure import metered_ev
+
+    shown = "neural" if "neural" in frame else "direct"
+    ev = metered_ev(frame[shown])
+    return (scene.exposure, None) if ev is None else (round(ev, 4), shown)
 
 
 def _vxgi_pass(ctx, renderer, vxgi, config, frame: dict):

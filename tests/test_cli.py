@@ -53,6 +53,37 @@ def test_render_again_from_frame_json_gives_same_buffers(gl_context, tmp_path):
     assert not np.array_equal(read_exr(a / "direct.exr"), read_exr(c / "direct.exr"))
 
 
+def test_render_meters_the_exposure_of_a_scene_that_asks_for_it_and_records_it(gl_context, tmp_path):
+    """A scene file with ``auto_exposure = true``: render's PNGs are shown at the viewer's meter of the frame, the
+    same for the same frame, recorded in frame.json (and a reference render from it takes it over); --exposure
+    still wins; the scene's identity does not change."""
+    from diviewer.scene import load_scene
+    from diviewer.exposure import metered_ev
+
+    text = (ROOT / "assets" / "scenes" / "cornell.toml").read_text()
+    auto = tmp_path / "auto.toml"
+    auto.write_text(text.replace('exposure = 0.0\n', 'exposure = 0.0\nauto_exposure = true\n', 1))
+    plain = tmp_path / "plain.toml"
+    plain.write_text(text)
+    assert load_scene(auto).auto_exposure and not load_scene(plain).auto_exposure
+    assert load_scene(auto).file_hash == load_scene(plain).file_hash  # display only
+    records = []
+    for name in ("a", "b"):
+        assert main(["render", "--scene", str(auto), "--res", "48x32", "--seed", "3", "--out", str(tmp_path / name)]) == 0
+        records.append(json.loads((tmp_path / name / "frame.json").read_text())["display"])
+    direct = read_exr(tmp_path / "a" / "direct.exr")
+    assert records[0] == records[1] == {"exposure": round(metered_ev(direct), 4), "tonemap": "aces", "metered": "direct"}
+    assert records[0]["exposure"] != 0.0  # metered, not the file's 0 EV
+    assert main(["render", "--scene", str(auto), "--res", "48x32", "--seed", "3", "--exposure", "-1",
+                 "--out", str(tmp_path / "c")]) == 0
+    assert json.loads((tmp_path / "c" / "frame.json").read_text())["display"] == {"exposure": -1.0, "tonemap": "aces"}
+    assert main(["render", "--scene", str(plain), "--res", "48x32", "--seed", "3", "--out", str(tmp_path / "d")]) == 0
+    assert json.loads((tmp_path / "d" / "frame.json").read_text())["display"]["exposure"] == 0.0
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace('exposure = 0.0\n', 'exposure = 0.0\nauto_exposure = "yes"\n', 1))
+    assert main(["render", "--scene", str(bad), "--out", str(tmp_path / "e")]) == 2
+
+
 @pytest.mark.slow
 def test_bad_scene_exits_2_with_one_line(tmp_path):
     bad = tmp_path / "bad.toml"

@@ -17,13 +17,16 @@ NOT_IDENTITY = ("camera", "ranges")
 """Top-level tables of a scene file that do not change what the scene looks like: where the camera
 starts and what the sampler varies (a model records the ranges it was trained on separately)."""
 
+DISPLAY_ONLY = ("exposure", "auto_exposure")
+"""Fields of [scene] that say how frames are shown, not what they hold."""
+
 
 def scene_identity(data: dict, files: list[Path], base: Path) -> str:
-    """sha256 of what a scene looks like: its parsed TOML (less `NOT_IDENTITY` and the display exposure)
+    """sha256 of what a scene looks like: its parsed TOML (less `NOT_IDENTITY` and [scene]'s `DISPLAY_ONLY`)
     and the bytes of every file it loads (glTF, buffers, textures, mesh files), by path from the TOML."""
     content = {k: v for k, v in data.items() if k not in NOT_IDENTITY}
     if isinstance(content.get("scene"), dict):
-        content["scene"] = {k: v for k, v in content["scene"].items() if k != "exposure"}
+        content["scene"] = {k: v for k, v in content["scene"].items() if k not in DISPLAY_ONLY}
     deps = {}
     for f in files:
         try:

@@ -59,6 +59,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
     head = root.table("scene")
     name = head.str("name", path.stem if path else "scene")
     exposure = head.num("exposure", 0.0, lo=-40, hi=40)
+    auto_exposure = head.bool("auto_exposure", False)
     ambient = head.vec("ambient", 3, (0.0, 0.0, 0.0), lo=0.0)
     head.finish()
 
@@ -108,7 +109,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
     ranges = _ranges(root.table("ranges"), default, meshes)
     root.finish()
     return Scene(name=name, path=path, file_hash=file_hash, meshes=meshes, materials=materials, default=default,
-                 ranges=ranges, exposure=exposure, ambient=ambient)
+                 ranges=ranges, exposure=exposure, auto_exposure=auto_exposure, ambient=ambient)
 
 
 def _material(key: str, t: _Table, base: Path, path: Path | None) -> Material:

@@ -286,6 +286,10 @@ class Scene:
     ranges: Ranges = field(default_factory=Ranges)
     exposure: float = 0.0
     """Display exposure in stops (EV) used by the composite pass."""
+    auto_exposure: bool = False
+    """Display: meter the exposure from each frame instead (the viewer starts with its auto exposure on; `render`
+    meters its PNGs' exposure from the frame it writes and records it), for a scene whose sunlit and shaded
+    frames lie more stops apart than one exposure shows (Sponza)."""
     ambient: Vec3 = (0.0, 0.0, 0.0)
     """Constant background radiance seen where no geometry is (the sky); black by default."""
 

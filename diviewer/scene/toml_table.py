@@ -46,6 +46,14 @@ class _Table:
             raise self.err(key, f"'{v}' is not one of {', '.join(choices)}")
         return v
 
+    def bool(self, key: str, default=None) -> bool:
+        v = self.raw(key, default)
+        if v is None:
+            raise self.err(key, "missing required field")
+        if not isinstance(v, bool):
+            raise self.err(key, f"expected true or false, got {v!r}")
+        return v
+
     def num(self, key: str, default=None, lo=None, hi=None, lo_open=False, hi_open=False) -> float:
         v = self.raw(key, default)
         if v is None:

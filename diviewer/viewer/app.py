@@ -96,7 +96,7 @@ class Viewer:
         self.upscale = self.ctx.sampler(filter=(moderngl.LINEAR, moderngl.LINEAR), repeat_x=False, repeat_y=False)
         """Bound over the display's texture units where the image is upscaled to the window: bilinear."""
         self.meter = Meter(self.ctx, self.shaders)
-        self.state.set_auto_exposure(settings.auto_exposure)
+        self.state.set_auto_exposure(scene.auto_exposure if settings.auto_exposure is None else settings.auto_exposure)
         self.display = DisplayPass(self.ctx, self.shaders)
         self.black = black_texture(self.ctx)
         self.reference_texture = ReferenceTexture(self.ctx, self.reference, settings.reference_max_size)

@@ -47,8 +47,9 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--scale-ceiling", type=float, default=1.0,
                    help=f"highest render scale --target-fps goes to (1 to {MAX_SCALE:g}; default 1; above 1 it "
                         "supersamples where the frame rate allows)")
-    p.add_argument("--auto-exposure", action="store_true",
-                   help="start with the exposure metered from the frame (the panel toggles it)")
+    p.add_argument("--auto-exposure", action=argparse.BooleanOptionalAction, default=None,
+                   help="start with the exposure metered from the frame, or not (the panel toggles it; default: as "
+                        "the scene file's [scene] auto_exposure says, on for sponza)")
     p.add_argument("--light-moving", action="store_true", help="start with the light animated")
     p.add_argument("--camera-moving", action="store_true",
                    help="start playing the scene's camera path (sponza's walk; as the P key), to time a moving "

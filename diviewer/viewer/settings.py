@@ -63,8 +63,9 @@ class ViewerSettings:
     """The lowest render scale dynamic resolution goes to."""
     scale_ceiling: float = 1.0
     """The highest render scale dynamic resolution goes to (up to 2: supersampling where the frame rate allows)."""
-    auto_exposure: bool = False
-    """Start with the exposure metered from the frame (the panel toggles it)."""
+    auto_exposure: bool | None = None
+    """Start with the exposure metered from the frame (the panel toggles it); None: as the scene file says
+    (``[scene] auto_exposure``)."""
     gi: GISettings = field(default_factory=GISettings)
     """How the GI inputs are reduced, the output upsampled, and whether inference runs one frame behind."""
     panel: bool = True

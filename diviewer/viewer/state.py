@@ -21,7 +21,7 @@ from diviewer.scene.picking import pick_object, pixel_ray
 from diviewer.scene.sampler import camera_on_path
 from diviewer.scene.ranges_check import out_of_range
 from diviewer.viewer.controls import Controller, make_controller
-from diviewer.viewer.exposure import AutoExposure
+from diviewer.exposure import AutoExposure
 from diviewer.viewer.stats import Stats
 from diviewer.viewer.view_modes import ViewMode, view_mode
 

@@ -1062,6 +1062,30 @@ def test_auto_exposure_follows_the_frame_and_is_deterministic(display, tmp_path)
     assert stats["auto_exposure"] is True and stats["exposure"] < a[3]
 
 
+def _scene_exposure_session(tmp_path: Path, out: str, choice) -> None:
+    from diviewer.viewer.app import run_viewer
+
+    text = (Path(__file__).resolve().parents[2] / "assets" / "scenes" / "cornell.toml").read_text()
+    scene = tmp_path / "auto.toml"
+    scene.write_text(text.replace("exposure = 0.0\n", "exposure = 0.0\nauto_exposure = true\n", 1))
+    seen = []
+    summary = run_viewer(str(scene), frames=2, script=[(1, lambda v: seen.append(v.state.auto_exposure))],
+                         stats=tmp_path / f"{out}.json", settings=_settings(auto_exposure=choice))
+    assert summary["gl_error"] == "GL_NO_ERROR"
+    (tmp_path / f"{out}_on.json").write_text(json.dumps(seen))
+
+
+def test_a_scene_file_that_asks_for_auto_exposure_starts_with_it(display, tmp_path):
+    """``[scene] auto_exposure = true`` (sponza's): the viewer starts metering without --auto-exposure, and
+    --no-auto-exposure (settings False) keeps the file's fixed exposure."""
+    for out, choice in (("scene", None), ("off", False)):
+        _in_window_process(_scene_exposure_session, tmp_path, out, choice)
+    assert json.loads((tmp_path / "scene_on.json").read_text()) == [True]
+    assert json.loads((tmp_path / "scene.json").read_text())["auto_exposure"] is True
+    assert json.loads((tmp_path / "off_on.json").read_text()) == [False]
+    assert json.loads((tmp_path / "off.json").read_text())["exposure"] == 0.0
+
+
 def test_scale_accuracy_tool_scores_each_scale_against_full_resolution(tmp_path):
     """tools/experiments/scale_accuracy.py renders the viewer's frame at each scale, upscales it to the window and scores
     it against the scale-1 frame (a tiny window and model: the figures themselves are the lead's to measure)."""

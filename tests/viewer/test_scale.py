@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from diviewer.errors import DiviewerError
-from diviewer.viewer.exposure import AutoExposure, ExposureSettings, metered_ev
+from diviewer.exposure import AutoExposure, ExposureSettings, metered_ev
 from diviewer.viewer.models import gi_resolution, runtime_pads
 from diviewer.viewer.scale import DEFAULT_FLOOR, ScaleController, ScaleSettings, render_size
 
@@ -112,6 +112,8 @@ def test_render_scale_setting_and_command_line():
     assert args.scale_floor == DEFAULT_FLOOR == ScaleSettings().floor == 0.4
     args = ap.parse_args(["view", "--target-fps", "0", "--render-scale", "0.5", "--auto-exposure"])
     assert args.target_fps == 0.0 and args.render_scale == 0.5 and args.auto_exposure
+    assert ap.parse_args(["view", "--no-auto-exposure"]).auto_exposure is False
+    assert ap.parse_args(["view"]).auto_exposure is None  # as the scene file says
     assert args.scale_ceiling == 1.0 == ScaleSettings().ceiling
 
 

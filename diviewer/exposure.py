@@ -1,4 +1,5 @@
-"""Auto exposure: an exposure (EV) measured from the shown frame's luminance and smoothed over frames. No GL.
+"""Auto exposure: an exposure (EV) measured from the shown frame's luminance and smoothed over frames. No GL: the
+viewer meters its frames with it, and `diviewer render` the PNGs of a scene that asks for auto exposure.
 
 The meter (shaders/meter.glsl) samples the frame's linear radiance on a fixed grid; ``AutoExposure`` takes
 the log-average luminance of the lit samples (the darkest and brightest ``trim`` left out, so a patch of sky
