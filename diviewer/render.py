@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +82,10 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 frame["neural"] = neural.image()
                 neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
                                "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}
+                note = net.shape_note(width, height)
+                if note:
+                    neural_info["shape_note"] = note
+                    print(f"diviewer render: note: {note}", file=sys.stderr)
             # Known good before anything is written: an earlier render in --out stays as it was otherwise.
             _check_finite(scene, config, frame, (*BUFFERS, "neural", "vxgi", "vxgi_indirect"))
             ev, metered = display_exposure(scene, frame, exposure)

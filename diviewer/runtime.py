@@ -218,6 +218,27 @@ class NeuralGI:
                 and width >= 1 and height >= 1):
             raise DiviewerError(f"the model needs a frame of at least 1x1 pixels, got {width}x{height}", path=self.path)
 
+    @property
+    def trained_aspects(self) -> tuple[float, float]:
+        """The frame shapes it was trained on, as width / height: its recipe's aspect crops (crops of every width
+        in the range at full height), else its training resolution's one shape."""
+        crops = ((self.meta.get("recipe") or {}).get("train") or {}).get("aspect_crops")
+        if crops:
+            return float(crops[0]), float(crops[1])
+        w, h = self.resolution
+        return w / h, w / h
+
+    def shape_note(self, width: int, height: int) -> str:
+        """Why a ``width`` x ``height`` frame is outside what it was trained on (empty: it is not). Every shape
+        runs; one it never saw is extrapolated, and whoever shows the frame says so."""
+        lo, hi = self.trained_aspects
+        slack = 1.0 / height  # a shape rounded to whole pixels
+        if lo - slack <= width / height <= hi + slack:
+            return ""
+        seen = f"{lo:.3g}" if lo == hi else f"{lo:.3g} to {hi:.3g}"
+        return (f"the model was trained on frames of width/height {seen} only; at {width}x{height} "
+                f"({width / height:.3g}) its GI is extrapolated and may be wrong")
+
     def light_scale(self, config, scene=None) -> float:
         """The light scale of a frame (`diviewer.scene.lights.light_scale`) of ``scene`` (default: the
         scene the model was loaded for), to pass to ``run``."""

@@ -4,7 +4,8 @@ The GI resolution policy lives here: ``gi_res`` is ``model`` (the training row c
 fraction of the shading resolution (it follows the window and the dynamic scale) or ``WxH``; a size the
 model cannot run at is refused and changes nothing. The pass is rebuilt when the resolution, the pipelining
 or the sizes it follows change. The sizes themselves are computed by ``models.gi_resolution``; where the
-runtime cannot pad a shape to its stride, ``note`` says what was run instead.
+runtime cannot pad a shape to its stride, ``note`` says what was run instead, and where the shape is one the model
+was not trained on, that its GI is extrapolated.
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ class GIControl:
         self.view_size: tuple[int, int] | None = None
         """The window's framebuffer size (the shape ``model`` follows); None: the render size."""
         self.note = ""
-        """Why the GI runs at another shape than the window's (a runtime that pads no shape), or empty."""
+        """Why the GI runs at another shape than the window's (a runtime that pads no shape), and whether that
+        shape is one the model never saw (`runtime.NeuralGI.shape_note`), or empty."""
 
     @property
     def render_size(self) -> tuple[int, int]:
@@ -58,9 +60,11 @@ class GIControl:
 
     def _size_for(self, model, gi_res: str, render_size: tuple[int, int]) -> tuple[int, int]:
         size, wanted = self.sizes(model, gi_res, render_size)
-        self.note = "" if size == wanted else (
+        notes = [] if size == wanted else [
             f"the runtime runs this model only at multiples of {model.multiple}: GI {size[0]}x{size[1]} instead "
-            f"of {wanted[0]}x{wanted[1]} (the window's shape is squashed)")
+            f"of {wanted[0]}x{wanted[1]} (the window's shape is squashed)"]
+        shape = model.shape_note(*size)
+        self.note = "; ".join(notes + ([shape] if shape else []))
         if size not in self._fits:  # a size beyond the GL limits is refused cleanly, before a pass allocates
             from diviewer.gl.context import check_render_size
 

@@ -38,7 +38,7 @@ def test_view_refuses_a_gi_resolution_beyond_the_gl_limits(ctx):
 
     renderer = SimpleNamespace(width=64, height=64)
     gi = GIControl(ctx, renderer, SimpleNamespace(), "model", GISettings())
-    model = SimpleNamespace(resolution=(64, 64), multiple=16)
+    model = SimpleNamespace(resolution=(64, 64), multiple=16, shape_note=lambda w, h: "")
     mw, _ = max_render_size(ctx)
     # beyond the context's limits (a fraction of the window can ask for any size), and within them but too large
     # to allocate (llvmpipe: no float RGBA target of 2 GiB or more)

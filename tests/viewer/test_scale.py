@@ -220,9 +220,16 @@ def test_runtime_pads_asks_the_runtime(ctx):
             if w % 16 or h % 16:
                 raise DiviewerError("multiples of 16")
 
+        def shape_note(self, w, h):
+            return ""
+
     class Padding(Strict):
         def check_size(self, w, h):
             return None
+
+    class SquareOnly(Padding):  # trained on square frames only (runtime.NeuralGI.shape_note)
+        def shape_note(self, w, h):
+            return "" if w == h else f"never trained at {w}x{h}"
 
     assert not runtime_pads(Strict()) and runtime_pads(Padding())
     # The viewer's GI control: the shape it asks for, and what a runtime without padding runs instead.
@@ -241,6 +248,8 @@ def test_runtime_pads_asks_the_runtime(ctx):
     assert gi.sizes(Padding(), "1/3") == ((25, 16), (25, 16))
     assert gi._size_for(Strict(), "model", (75, 48)) == (80, 48) and "instead of 75x48" in gi.note
     assert gi._size_for(Padding(), "model", (75, 48)) == (75, 48) and gi.note == ""
+    # A shape the model never saw still runs, and the note (panel, --stats) says so.
+    assert gi._size_for(SquareOnly(), "model", (75, 48)) == (75, 48) and gi.note == "never trained at 75x48"
 
 
 def test_the_linear_filter_at_half_size_is_each_2x2_blocks_mean():
