@@ -49,6 +49,14 @@ def metered_ev(rgb: np.ndarray, settings: ExposureSettings = ExposureSettings())
     return min(max(math.log2(settings.key) - mean_log2, lo), hi)
 
 
+def still_ev(fixed: float, auto: bool, rgb: np.ndarray) -> tuple[float, bool]:
+    """The exposure (stops) to show one still image at, and whether it was metered: a scene file's ``exposure``
+    (``fixed``), or where it asks for ``auto_exposure`` the meter's reading of ``rgb`` (rounded to 1e-4 stops, as
+    recorded), falling back to ``fixed`` where nothing in the image is lit."""
+    ev = metered_ev(rgb) if auto else None
+    return (fixed, False) if ev is None else (round(ev, 4), True)
+
+
 class AutoExposure:
     """The smoothed exposure: ``update(samples)`` once per shown frame, ``ev`` is what to show it at."""
 

@@ -111,13 +111,13 @@ def display_exposure(scene: Scene, frame: dict[str, np.ndarray], exposure: float
     """The PNGs' exposure (stops) and, where it was metered, the image it was metered on: ``exposure`` if given,
     else the scene file's, or for a scene that asks for auto exposure the viewer's meter
     (`diviewer.exposure.metered_ev`) on the frame shown (the neural composite, else the direct light)."""
-    if exposure is not None or not scene.auto_exposure:
-        return (scene.exposure if exposure is None else exposure), None
-    from diviewer.exposure import metered_ev
+    if exposure is not None:
+        return exposure, None
+    from diviewer.exposure import still_ev
 
     shown = "neural" if "neural" in frame else "direct"
-    ev = metered_ev(frame[shown])
-    return (scene.exposure, None) if ev is None else (round(ev, 4), shown)
+    ev, metered = still_ev(scene.exposure, scene.auto_exposure, frame[shown])
+    return ev, (shown if metered else None)
 
 
 def _vxgi_pass(ctx, renderer, vxgi, config, frame: dict):

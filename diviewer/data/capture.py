@@ -21,6 +21,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.dataset import CHANNELS, DERIVED, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
 from diviewer.errors import DiviewerError
+from diviewer.exposure import still_ev
 from diviewer.locks import run_lock, shard_part
 from diviewer.console import progress_bar
 from diviewer.provenance import versions
@@ -308,8 +309,9 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
                          {"index": f["index"], "split": f["split"], "variant": gt.variant, "gl_renderer": gl_name,
                           "seconds": {"gl": round(t1 - t0, 4), "gt": round(t2 - t1, 3)}})
             if f["index"] in thumbs:
-                row = [compositor.to_ldr(planes["direct"], scene.exposure), compositor.to_ldr(planes["pt"], scene.exposure),
-                       compositor.to_ldr(planes["pt"] - planes["pt_direct"], scene.exposure)]
+                ev, _ = still_ev(scene.exposure, scene.auto_exposure, planes["pt"])  # one exposure for the row
+                row = [compositor.to_ldr(planes["direct"], ev), compositor.to_ldr(planes["pt"], ev),
+                       compositor.to_ldr(planes["pt"] - planes["pt_direct"], ev)]
                 imageio.write_png(ds.root / "thumbs" / f"{frame_name(f['index'])}_{f['split']}.png",
                                   np.concatenate(row, axis=1))
             progress.set_postfix_str(f"gt {t2 - t1:.1f}s/frame ({gt.variant})", refresh=False)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from diviewer.errors import DiviewerError
-from diviewer.exposure import AutoExposure, ExposureSettings, metered_ev
+from diviewer.exposure import AutoExposure, ExposureSettings, metered_ev, still_ev
 from diviewer.viewer.models import gi_resolution, runtime_pads
 from diviewer.viewer.scale import DEFAULT_FLOOR, ScaleController, ScaleSettings, render_size
 
@@ -175,6 +175,15 @@ def test_auto_exposure_is_smoothed_and_deterministic():
     auto.update(frames[5])
     auto.reset()
     assert auto.ev is None and auto.update(frames[0]) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_still_is_shown_at_the_fixed_exposure_or_its_own_metered_one():
+    """`still_ev` (render's PNGs, capture thumbnails): the scene file's exposure unless it asks for auto exposure;
+    then the meter's reading of that image, rounded as recorded; an image with nothing lit keeps the fixed one."""
+    rgb = np.full((8, 8, 3), 0.18 / 4, np.float32)  # two stops under middle grey
+    assert still_ev(-1.5, False, rgb) == (-1.5, False)
+    assert still_ev(-1.5, True, rgb) == (2.0, True) == still_ev(-1.5, True, rgb.copy())
+    assert still_ev(-1.5, True, np.zeros((8, 8, 3), np.float32)) == (-1.5, False)
 
 
 def test_state_auto_exposure_follows_the_meter_only_when_on():
