@@ -121,6 +121,24 @@ def test_a_budget_scales_frames_and_steps_together_and_keeps_the_schedule():
         make_plan("cornell", rec, Path("w"), budget_hours=-1, machine=CPU)
 
 
+def test_an_evaluation_set_made_before_costs_nothing_and_brings_its_own_settings():
+    """--evalset (here the compact set cornell ships): the stage is a check, its settings are the set's (5 or 6
+    frames a split of the full set's 1024 spp, not the recipe's 24), and a budget goes to capture and training."""
+    rec = load_recipe("cornell")
+    shipped = Path(__file__).resolve().parents[2] / "assets" / "evalsets" / "cornell"
+    own = make_plan("cornell", rec, Path("w"), machine=CPU)
+    given = make_plan("cornell", rec, Path("w"), machine=CPU, evalset_dir=shipped)
+    est = {s.name: s.seconds for s in given.stages}
+    assert est["evalset"] == 0.0 and given.seconds == pytest.approx(own.seconds - own.stages[2].seconds)
+    manifest = json.loads((shipped / "manifest.json").read_text())
+    assert given.evalset.frames_per_split == manifest["compact"]["frames_per_split"] < rec.evalset["frames_per_split"]
+    assert given.evalset.spp == manifest["spp"] and given.evalset_dir == shipped
+    budgeted = make_plan("cornell", rec, Path("w"), budget_hours=1.0, machine=CPU, evalset_dir=shipped)
+    smaller = make_plan("cornell", rec, Path("w"), budget_hours=1.0, machine=CPU)
+    assert budgeted.seconds <= 3600 and budgeted.scale > smaller.scale  # the evaluation set's share goes to the rest
+    assert budgeted.evalset == given.evalset
+
+
 def test_the_state_skips_only_unchanged_outputs_and_refuses_another_plan(tmp_path):
     out = tmp_path / "a.txt"
     out.write_text("one")
