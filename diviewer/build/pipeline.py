@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from diviewer import imageio
-from diviewer.build.plan import RUN_ONLY, Plan, describe
+from diviewer.build.plan import RUN_ONLY, Plan, describe, hms
 from diviewer.build.state import BuildState
 from diviewer.console import progress_bar
 from diviewer.errors import DiviewerError
@@ -51,10 +51,37 @@ def finished_stages(plan: Plan) -> set[str]:
     return {s.name for s in plan.stages if state.done(s.name, plan.work) is not None}
 
 
+def capture_pace(plan: Plan) -> str | None:
+    """What the frames already captured in the work folder say of this machine's pace (each frame's sidecar records
+    its GL and path-tracing seconds), and the capture's time left at that pace, beside the plan's estimate from the
+    measured costs (another machine's); None where no frame is there or the capture is complete."""
+    import statistics
+
+    frames = sorted((plan.data / "frames").glob("*.json")) if (plan.data / "manifest.json").is_file() else []
+    seconds = []
+    for f in frames:
+        try:
+            s = json.loads(f.read_text()).get("seconds") or {}
+            seconds.append(float(s["gl"]) + float(s["gt"]))
+        except (ValueError, KeyError, TypeError, OSError):
+            continue  # a frame being written, or one of an older format: the others tell the pace
+    left = plan.capture.frames - len(frames)
+    if not seconds or left <= 0:
+        return None
+    per = statistics.median(seconds)
+    planned = plan.stages[0].seconds / plan.capture.frames
+    return (f"capture so far: {len(frames)} of {plan.capture.frames} frames in {plan.data}, {per:.1f} s a frame here "
+            f"(median of GL + path tracing); the {left} left take ~{hms(left * per)} at that pace (the plan assumes "
+            f"{planned:.1f} s, from the costs measured in diviewer/build/costs.py)")
+
+
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> dict[str, Any]:
     """Run (or resume) every stage of ``plan``; returns the ladder record with the chosen K."""
     for line in describe(plan):
         log(line)
+    pace = capture_pace(plan)
+    if pace:
+        log(pace)
     plan.work.mkdir(parents=True, exist_ok=True)
     state = BuildState(plan.work / STATE_FILE, plan_key(plan))
     bar = progress_bar(max(1, round(plan.seconds)), "build (estimated seconds of work)", "s")

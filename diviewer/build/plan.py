@@ -281,14 +281,15 @@ def describe(plan: Plan, done: set[str] = frozenset()) -> list[str]:
     lines.append(f"K ladder {', '.join(map(str, plan.ks))}; the smallest K within {r.tolerance_db} dB of the best "
                  f"(tone-mapped PSNR, the capture's test split) is shipped")
     for i, s in enumerate(plan.stages, 1):
-        lines.append(f"  {i:2d}. {s.name:<12} {'done' if s.name in done else _hms(s.seconds):>9}  {s.title}")
+        lines.append(f"  {i:2d}. {s.name:<12} {'done' if s.name in done else hms(s.seconds):>9}  {s.title}")
     left = sum(s.seconds for s in plan.stages if s.name not in done)
-    lines.append(f"estimated total: {_hms(plan.seconds)}" + (f", {_hms(left)} left (stages done in {plan.work} are "
+    lines.append(f"estimated total: {hms(plan.seconds)}" + (f", {hms(left)} left (stages done in {plan.work} are "
                                                              f"skipped)" if done else "")
                  + " (from the costs in diviewer/build/costs.py)")
     return lines
 
 
-def _hms(seconds: float) -> str:
+def hms(seconds: float) -> str:
+    """A duration for people: '1 h 05 min', '12 min' or '40 s'."""
     m = round(seconds / 60)
     return f"{m // 60} h {m % 60:02d} min" if m >= 60 else (f"{m} min" if m else f"{seconds:.0f} s")

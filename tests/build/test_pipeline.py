@@ -139,6 +139,29 @@ def test_an_evaluation_set_made_before_costs_nothing_and_brings_its_own_settings
     assert budgeted.evalset == given.evalset
 
 
+def test_a_capture_under_way_tells_this_machines_pace(tmp_path):
+    """The frames captured so far (their sidecars' GL and path-tracing seconds) give this machine's pace and the
+    capture's time left at it; nothing is said before the first frame or once every frame is there."""
+    from diviewer.build.pipeline import capture_pace
+
+    plan = make_plan("cornell", load_recipe("cornell"), tmp_path, machine=CPU)
+    assert capture_pace(plan) is None  # no capture yet
+    frames = plan.data / "frames"
+    frames.mkdir(parents=True)
+    (plan.data / "manifest.json").write_text("{}")
+    for i, (gl, gt) in enumerate([(0.5, 9.5), (0.5, 11.5), (0.5, 99.5)]):
+        (frames / f"{i:06d}.json").write_text(json.dumps({"index": i, "seconds": {"gl": gl, "gt": gt}}))
+    (frames / "000003.json").write_text("{")  # a sidecar being written: left out
+    line = capture_pace(plan)
+    left = plan.capture.frames - 4
+    assert line.startswith(f"capture so far: 4 of {plan.capture.frames} frames") and "12.0 s a frame here" in line
+    from diviewer.build.plan import hms
+    assert f"the {left} left take ~{hms(left * 12.0)} at that pace" in line
+    import dataclasses
+    done = dataclasses.replace(plan, capture=dataclasses.replace(plan.capture, frames=4))
+    assert capture_pace(done) is None  # every frame there: nothing left to pace
+
+
 def test_the_state_skips_only_unchanged_outputs_and_refuses_another_plan(tmp_path):
     out = tmp_path / "a.txt"
     out.write_text("one")
