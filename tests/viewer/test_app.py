@@ -1114,7 +1114,9 @@ def test_scale_accuracy_tool_scores_each_scale_against_full_resolution(tmp_path)
 def _shape_session(tmp_path: Path) -> None:
     from diviewer.viewer.app import run_viewer
 
-    model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained 64x48, stride 16; the runtime pads any shape
+    # trained 64x48 with crops from 9:16 to 16:9 (a model trained on 64x48 alone would add a note that its GI is
+    # extrapolated at 80x48: tests/viewer/test_scale.py), stride 16; the runtime pads any shape
+    model = _cornell_model(tmp_path / "cornell_k8.onnx", recipe={"train": {"aspect_crops": [0.5625, 1.7778]}})
     seen = {}
     script = [(1, lambda v: seen.setdefault("wide", (v.gi_size, v.gi.note))),
               (1, "resize", {"width": 96, "height": 160}),
