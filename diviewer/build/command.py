@@ -84,14 +84,11 @@ def run_build_command(args: argparse.Namespace) -> int:
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
                      evalset_dir=args.evalset)
     if args.dry_run:
-        from diviewer.build.pipeline import capture_pace, finished_stages
+        from diviewer.build.pipeline import finished_stages, measured_pace
 
         done = finished_stages(plan)
-        for line in describe(plan, done):
+        for line in [*describe(plan, done), *measured_pace(plan)]:
             print(line)
-        pace = capture_pace(plan)
-        if pace:
-            print(pace)
         print(f"dry run: nothing was done; run it without --dry-run ({rebuild_command(args)})")
         return 0
     from diviewer.build.pipeline import BuildInterrupted, run_build

@@ -51,6 +51,36 @@ def finished_stages(plan: Plan) -> set[str]:
     return {s.name for s in plan.stages if state.done(s.name, plan.work) is not None}
 
 
+def measured_pace(plan: Plan) -> list[str]:
+    """What the work folder's capture and trainings under way say of this machine's pace, and their time left at
+    it, beside the plan's estimates from the costs measured elsewhere: a line each (none before they start or
+    once they are done)."""
+    lines = [capture_pace(plan)]
+    stages = {s.name: s for s in plan.stages}
+    for k in plan.ks:
+        lines.append(training_pace(plan.run_dir(k) / "metrics.csv", k, plan.steps, stages[f"train_k{k}"].seconds))
+    return [line for line in lines if line]
+
+
+def training_pace(metrics: Path, k: int, planned_steps: int, planned_seconds: float) -> str | None:
+    """A training run's pace so far from its metrics.csv (the last row's step and its cumulative seconds, resumes
+    included), and its time left at that pace; None before its first row or once it is done."""
+    import csv
+
+    try:
+        with open(metrics, newline="") as f:
+            rows = [r for r in csv.DictReader(f) if r.get("step") and r.get("seconds")]
+        step, seconds = int(rows[-1]["step"]), float(rows[-1]["seconds"])
+    except (OSError, IndexError, ValueError, KeyError):
+        return None
+    if step <= 0 or step >= planned_steps:
+        return None
+    per = seconds / step
+    return (f"train K={k} so far: step {step} of {planned_steps}, {per:.2f} s a step here (validations included); "
+            f"the rest take ~{hms((planned_steps - step) * per)} at that pace (the plan assumes "
+            f"{planned_seconds / planned_steps:.2f} s)")
+
+
 def capture_pace(plan: Plan) -> str | None:
     """What the frames already captured in the work folder say of this machine's pace (each frame's sidecar records
     its GL and path-tracing seconds), and the capture's time left at that pace, beside the plan's estimate from the
@@ -77,11 +107,8 @@ def capture_pace(plan: Plan) -> str | None:
 
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> dict[str, Any]:
     """Run (or resume) every stage of ``plan``; returns the ladder record with the chosen K."""
-    for line in describe(plan):
+    for line in [*describe(plan), *measured_pace(plan)]:
         log(line)
-    pace = capture_pace(plan)
-    if pace:
-        log(pace)
     plan.work.mkdir(parents=True, exist_ok=True)
     state = BuildState(plan.work / STATE_FILE, plan_key(plan))
     bar = progress_bar(max(1, round(plan.seconds)), "build (estimated seconds of work)", "s")

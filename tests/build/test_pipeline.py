@@ -162,6 +162,26 @@ def test_a_capture_under_way_tells_this_machines_pace(tmp_path):
     assert capture_pace(done) is None  # every frame there: nothing left to pace
 
 
+def test_a_training_under_way_tells_this_machines_pace(tmp_path):
+    """A run's metrics.csv (cumulative seconds, resumes included) gives the pace of a build's training and its time
+    left; the plan lists it after the capture's."""
+    from diviewer.build.pipeline import measured_pace, training_pace
+    from diviewer.build.plan import hms
+
+    plan = make_plan("cornell", load_recipe("cornell"), tmp_path, machine=CPU)
+    metrics = plan.run_dir(8) / "metrics.csv"
+    assert training_pace(metrics, 8, plan.steps, 1.0) is None and measured_pace(plan) == []  # nothing started
+    metrics.parent.mkdir(parents=True)
+    metrics.write_text("epoch,step,val_psnr,seconds\n0.1,500,30.1,150.0\n0.2,1000,31.0,300.0\n")
+    line = training_pace(metrics, 8, plan.steps, 2.0 * plan.steps)
+    assert line == (f"train K=8 so far: step 1000 of {plan.steps}, 0.30 s a step here (validations included); the rest "
+                    f"take ~{hms((plan.steps - 1000) * 0.3)} at that pace (the plan assumes 2.00 s)")
+    assert measured_pace(plan) == [training_pace(metrics, 8, plan.steps, plan.stages[3].seconds)]
+    assert training_pace(metrics, 8, 1000, 1.0) is None  # done
+    metrics.write_text("epoch,step,val_psnr,seconds\n")
+    assert training_pace(metrics, 8, plan.steps, 1.0) is None  # a header alone
+
+
 def test_the_state_skips_only_unchanged_outputs_and_refuses_another_plan(tmp_path):
     out = tmp_path / "a.txt"
     out.write_text("one")
