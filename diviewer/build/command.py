@@ -55,7 +55,7 @@ def rebuild_command(args: argparse.Namespace) -> str:
         words += ["--budget", f"{args.budget:g}"]
     if args.ks:
         words += ["--ks", *map(str, args.ks)]
-    if getattr(args, "evalset", None) is not None:
+    if args.evalset is not None:
         words += ["--evalset", str(args.evalset)]
     return shlex.join(words)
 

@@ -99,8 +99,11 @@ def timed(ctx, fn) -> float:
 
 
 def subset_draws(ctx, r, scene, static, per_chunk, owner, keep) -> list[tuple]:
-    """Per static chunk with kept clusters: a vertex array over the chunk's vertices and an index buffer of just
-    those clusters' triangles (a best case: no multi-draw), its program and material."""
+    """Per static chunk with kept clusters: a GPU mesh of the chunk's vertices and just those clusters' triangles (a
+    best case: no multi-draw), its program and material."""
+    from diviewer.gl.resources import GpuMesh
+    from diviewer.scene.model import Mesh
+
     draws = []
     for j, (_, (gmesh, material, _, _)) in enumerate(static):
         mine = np.flatnonzero(keep[owner == j])
@@ -108,14 +111,13 @@ def subset_draws(ctx, r, scene, static, per_chunk, owner, keep) -> list[tuple]:
             continue
         groups = per_chunk[j][2]
         faces = np.frombuffer(gmesh.ibo.read(), "u4").reshape(-1, 3)
-        ibo = ctx.buffer(np.ascontiguousarray(np.concatenate([faces[groups[k]] for k in mine]), "u4").tobytes())
+        v = np.frombuffer(gmesh.vbo.read(), "f4").reshape(-1, 8)  # GpuMesh.STRIDE_FORMAT: position, normal, uv
+        sub = GpuMesh(ctx, Mesh("subset", v[:, :3], v[:, 3:6], np.concatenate([faces[groups[k]] for k in mine]),
+                                v[:, 6:8]))
         mat = scene.materials[material]
         prog = r.shaders.program("gbuffer.glsl", {"ALPHA_TEST": 1} if mat.is_masked else {})
-        names = [n for n in ("in_position", "in_normal", "in_uv") if n in prog]
-        fmt = " ".join(f if n in names else f"{f[0]}x4" for f, n in zip(("3f", "3f", "2f"), ("in_position", "in_normal", "in_uv")))
-        vao = ctx.vertex_array(prog, [(gmesh.vbo, fmt, *names)], ibo, index_element_size=4)
-        draws.append((vao, ibo, prog, mat, material))
-    draws.sort(key=lambda d: d[3].is_masked)  # opaque first, as the renderer
+        draws.append((sub, prog, mat, material))
+    draws.sort(key=lambda d: d[2].is_masked)  # opaque first, as the renderer
     return draws
 
 
@@ -130,7 +132,7 @@ def draw_subset(ctx, r, scene, draws, view, proj) -> None:
     fbo.use()
     fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
     ctx.enable_only(moderngl.DEPTH_TEST)
-    for vao, _, prog, mat, material in draws:
+    for sub, prog, mat, material in draws:
         set_uniform(prog, "m_proj", proj)
         set_uniform(prog, "m_view", view)
         set_uniform(prog, "m_model", np.eye(4))
@@ -144,7 +146,7 @@ def draw_subset(ctx, r, scene, draws, view, proj) -> None:
             set_uniform(prog, "u_albedo_map", 0)
         if mat.is_masked:
             set_uniform(prog, "u_alpha_cutoff", float(mat.alpha_cutoff))
-        vao.render(moderngl.TRIANGLES)
+        sub.vao(prog).render(moderngl.TRIANGLES)
 
 
 def main() -> None:
@@ -216,9 +218,8 @@ def main() -> None:
             for way, keep in (("clusters", in_frustum), ("oracle", seen)):
                 draws = subset_draws(ctx, r, scene, static, per_chunk, owner, keep)
                 times[way] = timed(ctx, lambda: draw_subset(ctx, r, scene, draws, view, proj))
-                for vao, ibo, *_ in draws:
-                    vao.release()
-                    ibo.release()
+                for sub, *_ in draws:
+                    sub.release()
             times.update(pyramid=(t1 - t0) * 1e3, box_test=(t2 - t1) * 1e3)
             result["time_ms"].append({"camera": name, **times})
             print(f"{name:>10}: G-buffer {times['chunks']:.1f} ms as today ({row['chunk_frustum']} triangles), "
