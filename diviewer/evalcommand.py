@@ -34,7 +34,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 def _cmd_evalset(args: argparse.Namespace) -> int:
     from diviewer.evalset import EvalSetSettings, build_evalset
     from diviewer.frames import parse_resolution
-    from diviewer.locks import run_lock
+    from diviewer.data.capture import parse_shard
+    from diviewer.locks import run_lock, shard_part
 
     if args.compact is not None:
         from diviewer.evalframes import write_compact
@@ -59,8 +60,9 @@ def _cmd_evalset(args: argparse.Namespace) -> int:
     settings = EvalSetSettings(frames_per_split=n, width=width, height=height,
                                window_widths=windows, spp=args.spp, ladder=ladder, max_depth=args.max_depth,
                                seed=args.seed)
-    with run_lock(args.out, "evalset"):  # a second run into this folder refuses at once
-        build_evalset(args.scene, args.out, settings)
+    k, n = parse_shard(args.shard)
+    with run_lock(args.out, "evalset", shard_part(k, n)):  # a second run of the same frames refuses at once
+        build_evalset(args.scene, args.out, settings, shard=(k, n))
     return 0
 
 
@@ -99,5 +101,7 @@ def add_eval_parsers(sub, add_variant_arg) -> None:
                    help="lower sample counts for the equivalent spp (default 1,4,16,64,256)")
     p.add_argument("--max-depth", type=int, default=16, help="path length limit of the full renders")
     p.add_argument("--seed", type=int, default=0, help="which evaluation set of its own seed stream (default 0)")
+    p.add_argument("--shard", default=None,
+                   help="k/n: render every n-th frame starting at the k-th, beside the other shards in one folder")
     add_variant_arg(p)
     p.set_defaults(func=_cmd_evalset)

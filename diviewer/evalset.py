@@ -339,12 +339,15 @@ def _stored_shape(settings: EvalSetSettings) -> SimpleNamespace:
 
 
 def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings = EvalSetSettings(),
-                  log=print) -> dict:
+                  log=print, shard: tuple[int, int] = (1, 1)) -> dict:
     """Render the frames of the evaluation set that are not complete yet (resumable); returns a summary.
 
     Frames are rendered split-interleaved (``render_order``). When every frame is present, the noise
     floor and Mitsuba's own error at each ladder count are scored per split (diviewer.evaluate) and
-    written to ``summary.json``.
+    written to ``summary.json``. ``shard`` (k, n) renders only the frames whose index is k - 1 modulo n,
+    as ``diviewer capture --shard`` does: shards run side by side into one folder (start one first, so
+    that the manifest and its fitted exposure are written once), and whichever finds every frame present
+    scores the set.
     """
     from diviewer.data.capture import _clean_stale, _render_frames_gl, open_or_create
     from diviewer.gl.context import describe, headless_context
@@ -370,11 +373,14 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
             exposure = _fit_exposure(ctx, scene, plan, settings)
         ds = open_or_create(out, build_manifest(scene, settings, plan, exposure, ladder_spp))
         _clean_stale(ds, {f["index"] for f in plan})
-        todo = [f for f in render_order(ds.frames) if ds.check_frame(f["index"]) is not None]
+        k, n = shard
+        todo = [f for f in render_order(ds.frames)
+                if f["index"] % n == k - 1 and ds.check_frame(f["index"]) is not None]
         per_frame = settings.spp * 2 + sum(settings.ladder)
         for split, why in left_out.items():
             log(f"split {split} left out: {why}")
-        log(f"evalset {scene.name}: {len(plan) - len(todo)} of {len(plan)} frames done, {len(todo)} to render at "
+        log(f"evalset {scene.name}{'' if n == 1 else f' shard {k}/{n}'}: {len(ds.indices())} of {len(plan)} frames "
+            f"done, {len(todo)} to render at "
             f"{settings.render_width}x{settings.height} (cropped to {settings.width} and {list(settings.windows)}; "
             f"{settings.spp} spp twice + direct + ladder {'/'.join(map(str, settings.ladder))}: {per_frame} full "
             f"samples per pixel per frame, {truth.variant})")

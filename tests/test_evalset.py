@@ -169,6 +169,25 @@ def test_build_resumes_a_lost_frame_to_the_same_bytes(evalset, tmp_path):
         build_evalset("cornell", copy, EvalSetSettings(**{**TINY.__dict__, "spp": 64}), log=quiet)
 
 
+@pytest.mark.slow
+def test_shards_render_their_own_frames_into_one_set_and_the_last_scores_it(evalset, tmp_path):
+    out, _ = evalset
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    (copy / "summary.json").unlink()
+    for i in (2, 3, 5):  # shard 1/2 owns the even indices, shard 2/2 the odd ones
+        (copy / "frames" / f"{i:06d}.json").unlink()
+    first = build_evalset("cornell", copy, TINY, log=quiet, shard=(1, 2))
+    assert first["present"] == 6 and (copy / "frames" / "000002.json").is_file()
+    assert not (copy / "frames" / "000003.json").is_file() and not (copy / "summary.json").exists()
+    last = build_evalset("cornell", copy, TINY, log=quiet, shard=(2, 2))
+    assert last["present"] == 8 and (copy / "summary.json").is_file()
+    for i in (2, 3, 5):  # each frame's seeds come from its index, not from the shard that rendered it
+        assert (copy / "frames" / f"{i:06d}.npy").read_bytes() == (out / "frames" / f"{i:06d}.npy").read_bytes()
+    a, b = (json.loads((d / "summary.json").read_text()) for d in (copy, out))
+    assert (a.pop("evalset"), b.pop("evalset")) == (str(copy), str(out))  # each names its own folder
+    assert a == b
+
 def _models(tmp_path):
     scene = load_scene("cornell")
     any_shape = direct_times(tmp_path / "twice.onnx", 1.5, meta={**base_meta(scene.file_hash, "cornell"),

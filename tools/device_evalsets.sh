@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Render scenes' full evaluation sets on a lent CUDA machine, in shards side by side, and bring each back as a
+# compact set that keeps every frame (diviewer evalset --compact --frames-per-split N: float16, LZMA zip, the
+# ladder's scores without its images), which is what fits the device tool's 64 MiB of files back.
+#
+# Usage on the device (one call; tools/device_setup.sh is sourced here):
+#   bash tools/device_evalsets.sh [--bench] SCENE:SHARDS ...      e.g.  sponza:10 cornell:6
+# Each scene renders `diviewer evalset --scene SCENE --out /tmp/ev/SCENE` (the defaults: 24 frames a split,
+# 1024 spp twice, ladder 1..256) with --shard k/SHARDS; shard 1 starts first and writes the manifest (and its
+# fitted exposure) before the others start. Then a plain run of the same command scores the set (summary.json),
+# and the compact copy goes into $OUT as SCENE_evalset.tar (in 15 MB parts SCENE_evalset.tar.partNN where
+# larger: cat them together), with logs.tar.gz (logs, summaries, nvidia-smi). --bench adds `diviewer bench` of
+# each scene at 768x768 (30 frames, one eval frame a split) on the device's GL and onnxruntime (bench_SCENE.json
+# in logs.tar.gz).
+# Here, afterwards: cat the parts, tar xf into runs/evalsets/, and `diviewer eval --evalset runs/evalsets/SCENE`.
+set -uo pipefail
+bench=0
+if [ "${1:-}" = "--bench" ]; then bench=1; shift; fi
+. tools/device_setup.sh
+set +e
+mkdir -p /tmp/ev /tmp/evc /tmp/evlog
+t0=$(date +%s)
+pids=()
+for spec in "$@"; do
+  scene=${spec%%:*}; n=${spec##*:}
+  python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" --shard "1/$n" > "/tmp/evlog/${scene}_1.log" 2>&1 &
+  pids+=($!)
+  for _ in $(seq 240); do [ -f "/tmp/ev/$scene/manifest.json" ] && break; sleep 0.5; done
+  for k in $(seq 2 "$n"); do
+    python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" --shard "$k/$n" > "/tmp/evlog/${scene}_$k.log" 2>&1 &
+    pids+=($!)
+  done
+  echo "$scene: $n shards started at +$(( $(date +%s) - t0 )) s"
+done
+nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv > /tmp/evlog/nvidia_smi.csv
+for p in "${pids[@]}"; do wait "$p"; done
+echo "all shards ended at +$(( $(date +%s) - t0 )) s"
+for spec in "$@"; do
+  scene=${spec%%:*}
+  python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" > "/tmp/evlog/${scene}_summary.log" 2>&1
+  tail -3 "/tmp/evlog/${scene}_summary.log"
+  frames=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['settings']['frames_per_split'])" \
+           "/tmp/ev/$scene/manifest.json")
+  python3 -m diviewer evalset --compact "/tmp/ev/$scene" --out "/tmp/evc/$scene" --frames-per-split "$frames" \
+    > "/tmp/evlog/${scene}_compact.log" 2>&1 || { tail -5 "/tmp/evlog/${scene}_compact.log"; continue; }
+  cp "/tmp/ev/$scene/summary.json" "/tmp/evlog/${scene}_summary.json"
+  tar cf "/tmp/${scene}_evalset.tar" -C /tmp/evc "$scene"
+  if [ "$(stat -c %s "/tmp/${scene}_evalset.tar")" -le 15000000 ]; then cp "/tmp/${scene}_evalset.tar" "$OUT/"
+  else split -b 15000000 -d "/tmp/${scene}_evalset.tar" "$OUT/${scene}_evalset.tar.part"; fi
+  echo "$scene packed at +$(( $(date +%s) - t0 )) s"
+done
+tar czf "$OUT/logs.tar.gz" -C /tmp evlog  # again below with the bench: what a timeout cuts still comes back
+if [ $bench = 1 ]; then
+  for spec in "$@"; do
+    scene=${spec%%:*}
+    timeout 150 python3 -m diviewer bench --scene "$scene" --res 768 --frames 30 --untrained-k 16 --vxgi-grids 64 \
+      --pt-frames 1 --eval-frames 1 --json "/tmp/evlog/bench_$scene.json" > "/tmp/evlog/bench_$scene.log" 2>&1
+    echo "bench $scene: rc $? at +$(( $(date +%s) - t0 )) s"
+  done
+fi
+tar czf "$OUT/logs.tar.gz" -C /tmp evlog
+ls -la "$OUT"
