@@ -7,7 +7,8 @@
 #   bash tools/device_evalsets.sh [--bench] SCENE:SHARDS ...      e.g.  sponza:10 cornell:6
 # Each scene renders `diviewer evalset --scene SCENE --out /tmp/ev/SCENE` (the defaults: 24 frames a split,
 # 1024 spp twice, ladder 1..256) with --shard k/SHARDS; shard 1 starts first and writes the manifest (and its
-# fitted exposure) before the others start. Then a plain run of the same command scores the set (summary.json),
+# fitted exposure) before the others start; shards still running DEADLINE seconds (420) after the start are
+# stopped, and the scene is not packed. Then a plain run of the same command scores the set (summary.json),
 # and the compact copy goes into $OUT as SCENE_evalset.tar (in 15 MB parts SCENE_evalset.tar.partNN where
 # larger: cat them together), with logs.tar.gz (logs, summaries, nvidia-smi). --bench adds `diviewer bench` of
 # each scene at 768x768 (30 frames, one eval frame a split) on the device's GL and onnxruntime (bench_SCENE.json
@@ -20,25 +21,28 @@ if [ "${1:-}" = "--bench" ]; then bench=1; shift; fi
 set +e
 mkdir -p /tmp/ev /tmp/evc /tmp/evlog
 t0=$(date +%s)
-pids=()
+deadline=${DEADLINE:-420}  # seconds after the start when shards still running are stopped (the logs come back)
+declare -A pids
 for spec in "$@"; do
   scene=${spec%%:*}; n=${spec##*:}
   python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" --shard "1/$n" > "/tmp/evlog/${scene}_1.log" 2>&1 &
-  pids+=($!)
+  pids[$scene]="$!"
   for _ in $(seq 240); do [ -f "/tmp/ev/$scene/manifest.json" ] && break; sleep 0.5; done
   for k in $(seq 2 "$n"); do
     python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" --shard "$k/$n" > "/tmp/evlog/${scene}_$k.log" 2>&1 &
-    pids+=($!)
+    pids[$scene]="${pids[$scene]} $!"
   done
   echo "$scene: $n shards started at +$(( $(date +%s) - t0 )) s"
 done
-nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv > /tmp/evlog/nvidia_smi.csv
-for p in "${pids[@]}"; do wait "$p"; done
-echo "all shards ended at +$(( $(date +%s) - t0 )) s"
-for spec in "$@"; do
+( sleep 60; nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv > /tmp/evlog/nvidia_smi.csv ) &
+( sleep "$deadline"; for p in ${pids[@]}; do kill "$p" 2>/dev/null; done ) &
+for spec in "$@"; do  # each scene is packed as soon as its own shards end
   scene=${spec%%:*}
+  for p in ${pids[$scene]}; do wait "$p"; done
+  echo "$scene: shards ended at +$(( $(date +%s) - t0 )) s"
+  if [ $(( $(date +%s) - t0 )) -ge "$deadline" ]; then echo "$scene: cut by the deadline, not packed"; continue; fi
   python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" > "/tmp/evlog/${scene}_summary.log" 2>&1
-  tail -3 "/tmp/evlog/${scene}_summary.log"
+  tail -2 "/tmp/evlog/${scene}_summary.log"
   frames=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['settings']['frames_per_split'])" \
            "/tmp/ev/$scene/manifest.json")
   python3 -m diviewer evalset --compact "/tmp/ev/$scene" --out "/tmp/evc/$scene" --frames-per-split "$frames" \
@@ -50,7 +54,7 @@ for spec in "$@"; do
   echo "$scene packed at +$(( $(date +%s) - t0 )) s"
 done
 tar czf "$OUT/logs.tar.gz" -C /tmp evlog  # again below with the bench: what a timeout cuts still comes back
-if [ $bench = 1 ]; then
+if [ $bench = 1 ] && [ $(( $(date +%s) - t0 )) -lt "$deadline" ]; then
   for spec in "$@"; do
     scene=${spec%%:*}
     timeout 150 python3 -m diviewer bench --scene "$scene" --res 768 --frames 30 --untrained-k 16 --vxgi-grids 64 \
