@@ -16,7 +16,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         raise DiviewerError("give an evaluation set (--evalset DIR) or a dataset split (--data DIR), not both",
                             field="--evalset")
     if args.data is None:  # no --evalset: the scene's compact set shipped in assets/evalsets/
-        evaluate_evalset(args.model, args.evalset, provider=args.provider, out=args.out, partial=args.partial)
+        evaluate_evalset(args.model, args.evalset, provider=args.provider, out=args.out, partial=args.partial,
+                         jobs=_jobs(args))
         return 0
     if args.partial:
         raise DiviewerError("--partial applies to evaluation sets, not to --data", field="--partial")
@@ -31,6 +32,22 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _jobs(args: argparse.Namespace) -> int:
+    from diviewer.evalscore import default_jobs
+
+    if args.jobs is None:
+        return default_jobs()
+    if args.jobs < 1:
+        raise DiviewerError(f"must be at least 1, got {args.jobs}", field="--jobs")
+    return args.jobs
+
+
+def _add_jobs_arg(p) -> None:
+    p.add_argument("--jobs", type=int, default=None,
+                   help="processes the images are scored in (default: this machine's cores); scoring, HDR-FLIP "
+                        "above all, is most of an evaluation's time")
+
+
 def _cmd_evalset(args: argparse.Namespace) -> int:
     from diviewer.evalset import EvalSetSettings, build_evalset
     from diviewer.frames import parse_resolution
@@ -41,7 +58,7 @@ def _cmd_evalset(args: argparse.Namespace) -> int:
         from diviewer.evalframes import write_compact
 
         n = 6 if args.frames_per_split is None else args.frames_per_split
-        write_compact(args.compact, args.out, frames_per_split=n)
+        write_compact(args.compact, args.out, frames_per_split=n, jobs=_jobs(args))
         return 0
     width, height = parse_resolution(args.res)
     try:
@@ -62,7 +79,7 @@ def _cmd_evalset(args: argparse.Namespace) -> int:
                                seed=args.seed)
     k, n = parse_shard(args.shard)
     with run_lock(args.out, "evalset", shard_part(k, n)):  # a second run of the same frames refuses at once
-        build_evalset(args.scene, args.out, settings, shard=(k, n))
+        build_evalset(args.scene, args.out, settings, shard=(k, n), jobs=_jobs(args))
     return 0
 
 
@@ -81,6 +98,7 @@ def add_eval_parsers(sub, add_variant_arg) -> None:
     p.add_argument("--split", default="test", choices=("train", "val", "test"), help="with --data")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
     p.add_argument("--out", type=Path, default=None, help="write the results as JSON (strict: no NaN/Infinity)")
+    _add_jobs_arg(p)
     p.set_defaults(func=_cmd_eval)
 
 
@@ -103,5 +121,6 @@ def add_eval_parsers(sub, add_variant_arg) -> None:
     p.add_argument("--seed", type=int, default=0, help="which evaluation set of its own seed stream (default 0)")
     p.add_argument("--shard", default=None,
                    help="k/n: render every n-th frame starting at the k-th, beside the other shards in one folder")
+    _add_jobs_arg(p)
     add_variant_arg(p)
     p.set_defaults(func=_cmd_evalset)

@@ -204,13 +204,14 @@ def _bytes_npy(a: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=print) -> dict:
+def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=print, jobs: int = 1) -> dict:
     """Write the compact set of a full evaluation set: the first ``frames_per_split`` frames of each split.
 
     The chosen frames must be present and sound in the full set (they are rendered first: evalset's
-    ``render_order``); the rest of the full set need not be complete.
+    ``render_order``); the rest of the full set need not be complete. ``jobs``: processes the ladder's images are
+    scored in (``evalscore.Scorer``).
     """
-    from diviewer.evalscore import ladder_methods, score_frame_regions
+    from diviewer.evalscore import Scorer, ladder_methods
     from diviewer.metrics import flat_mask
 
     src = EvalFrames(full_dir)
@@ -229,34 +230,37 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=prin
     names = [n for n, _ in src.manifest["channels"] if n in COMPACT_CHANNELS]
     ladder = ladder_methods(src)
     chosen, blobs = [], {}
-    for split, shapes in splits.items():
-        idx = [f["index"] for f in src.frames if f["split"] == split][:frames_per_split]
-        missing = [i for i in idx if i in problems]
-        if missing:
-            raise DiviewerError(f"split {split}: frame(s) {', '.join(map(str, missing))} of the first "
-                                f"{frames_per_split} "
-                                f"are not ready ({problems[missing[0]]}); let `diviewer evalset` finish them, or ask "
-                                f"for fewer with --frames-per-split", path=full_dir)
-        stored = max(w for w, _ in shapes)
-        for i in idx:
-            f = crop_frame(src.load(i), stored)
-            arr = np.concatenate([f[n][..., None] if f[n].ndim == 2 else f[n] for n in names], axis=-1)
-            arr16 = arr.astype(COMPACT_DTYPE)
-            if not np.all(np.isfinite(arr16)):
-                raise DiviewerError(f"frame {i}: values beyond float16's range; the compact set cannot hold it",
-                                    path=full_dir)
-            u = arr16.view(np.uint16)
-            blobs[f"{i:06d}.hi.npy"] = _bytes_npy((u >> 8).astype(np.uint8))
-            blobs[f"{i:06d}.lo.npy"] = _bytes_npy((u & 0xFF).astype(np.uint8))
-            scores = {}
-            for shape in shapes:
-                g = crop_frame(f, shape[0])
-                mask = flat_mask(g["depth"], g["normal"], g["albedo"], g["direct"])
-                scores[split_key(split, shape, shapes)] = {
-                    m: score_frame_regions(g[ch], g, src.exposure, mask) for m, ch in ladder.items()}
-            entry = {k: v for k, v in src.entry(i).items()}
-            entry.update(stored_width=stored, sha256=array_sha256(arr16), ladder_scores=scores)
-            chosen.append(entry)
+    with Scorer(jobs) as scorer:
+        for split, shapes in splits.items():
+            idx = [f["index"] for f in src.frames if f["split"] == split][:frames_per_split]
+            missing = [i for i in idx if i in problems]
+            if missing:
+                raise DiviewerError(f"split {split}: frame(s) {', '.join(map(str, missing))} of the first "
+                                    f"{frames_per_split} are not ready ({problems[missing[0]]}); let `diviewer "
+                                    f"evalset` finish them, or ask for fewer with --frames-per-split", path=full_dir)
+            stored = max(w for w, _ in shapes)
+            for i in idx:
+                f = crop_frame(src.load(i), stored)
+                arr = np.concatenate([f[n][..., None] if f[n].ndim == 2 else f[n] for n in names], axis=-1)
+                arr16 = arr.astype(COMPACT_DTYPE)
+                if not np.all(np.isfinite(arr16)):
+                    raise DiviewerError(f"frame {i}: values beyond float16's range; the compact set cannot hold it",
+                                        path=full_dir)
+                u = arr16.view(np.uint16)
+                blobs[f"{i:06d}.hi.npy"] = _bytes_npy((u >> 8).astype(np.uint8))
+                blobs[f"{i:06d}.lo.npy"] = _bytes_npy((u & 0xFF).astype(np.uint8))
+                scores = {}
+                for shape in shapes:
+                    g = crop_frame(f, shape[0])
+                    mask = flat_mask(g["depth"], g["normal"], g["albedo"], g["direct"])
+                    scores[split_key(split, shape, shapes)] = {  # futures, resolved below
+                        m: scorer.submit(g[ch], g, src.exposure, mask) for m, ch in ladder.items()}
+                entry = {k: v for k, v in src.entry(i).items()}
+                entry.update(stored_width=stored, sha256=array_sha256(arr16), ladder_scores=scores)
+                chosen.append(entry)
+        for entry in chosen:
+            entry["ladder_scores"] = {k: {m: f.result() for m, f in row.items()}
+                                      for k, row in entry["ladder_scores"].items()}
     manifest = {k: v for k, v in src.manifest.items() if k not in ("frame_list",)}
     manifest.update(resolution=[max(e["stored_width"] for e in chosen), src.height], dtype="float16",
                     channels=[[n, c] for n, c in src.manifest["channels"] if n in names], frames=len(chosen),

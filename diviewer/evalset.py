@@ -339,7 +339,7 @@ def _stored_shape(settings: EvalSetSettings) -> SimpleNamespace:
 
 
 def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings = EvalSetSettings(),
-                  log=print, shard: tuple[int, int] = (1, 1)) -> dict:
+                  log=print, shard: tuple[int, int] = (1, 1), jobs: int = 1) -> dict:
     """Render the frames of the evaluation set that are not complete yet (resumable); returns a summary.
 
     Frames are rendered split-interleaved (``render_order``). When every frame is present, the noise
@@ -347,7 +347,7 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
     written to ``summary.json``. ``shard`` (k, n) renders only the frames whose index is k - 1 modulo n,
     as ``diviewer capture --shard`` does: shards run side by side into one folder (start one first, so
     that the manifest and its fitted exposure are written once), and whichever finds every frame present
-    scores the set.
+    scores the set (``jobs``: processes the scoring runs in).
     """
     from diviewer.data.capture import _clean_stale, _render_frames_gl, open_or_create
     from diviewer.gl.context import describe, headless_context
@@ -391,7 +391,7 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
     if summary["present"] == len(plan):
         from diviewer.evaluate import evaluate_evalset
 
-        result = evaluate_evalset([], out, log=log, out=out / "summary.json")
+        result = evaluate_evalset([], out, log=log, out=out / "summary.json", jobs=jobs)
         summary["noise_floor"] = {s: r["methods"]["noise_floor"] for s, r in result["splits"].items()}
     log(f"done: {summary['present']}/{summary['planned']} frames in {out}, {summary['seconds']:.0f} s")
     return summary

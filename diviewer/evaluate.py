@@ -29,8 +29,8 @@ from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
 from diviewer.data.scales import light_scales
 from diviewer.evalframes import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
-from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, aggregate, below_direct, equivalent,
-                                ladder_methods, pooled_bias, score, score_frame, score_frame_regions, strict_json)
+from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer, aggregate, below_direct, done,
+                                equivalent, ladder_methods, pooled_bias, score, score_frame, score_frame_regions, strict_json)
 from diviewer.metrics import flat_mask
 from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
@@ -168,9 +168,10 @@ def check_frames(ev: EvalFrames, partial: bool, log=print) -> list:
 
 
 def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, provider: str | None = None,
-                     out: Path | None = None, log=print, partial: bool = False) -> dict:
+                     out: Path | None = None, log=print, partial: bool = False, jobs: int = 1) -> dict:
     """Score models, direct light, the noise floor and the path-tracer ladder on an evaluation set, per split
-    and shape, with region metrics; ``evalset_dir`` None: the shipped compact set of the models' scene."""
+    and shape, with region metrics; ``evalset_dir`` None: the shipped compact set of the models' scene.
+    ``jobs``: processes the images are scored in (``evalscore.Scorer``); the models run here."""
     from diviewer.console import progress_bar
 
     nets = [NeuralGI(p, provider=provider) for p in model_paths]
@@ -208,6 +209,19 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
     splits = ev.splits()
     present = {s: ev.present(s, problems) for s in splits}
     progress = progress_bar(sum(len(present[s]) * len(sh) for s, sh in splits.items()), "eval", "frame")
+    with Scorer(jobs) as scorer:
+        _score_splits(ev, splits, present, result, models, images, exposure, ladder_spp, progress, partial, area,
+                      scorer, log)
+    progress.close()
+    for line in format_tables(result):
+        log(line)
+    if out is not None:
+        imageio.write_text(out, strict_json(result))
+    return result
+
+
+def _score_splits(ev, splits, present, result, models, images, exposure, ladder_spp, progress, partial, area, scorer,
+                  log) -> None:
     for split, shapes in splits.items():
         idx = present[split]
         if not idx:
@@ -217,13 +231,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
         for shape in shapes:
             key = split_key(split, shape, shapes)
             result["splits"][key] = _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp,
-                                                 progress, partial, area)
-    progress.close()
-    for line in format_tables(result):
-        log(line)
-    if out is not None:
-        imageio.write_text(out, strict_json(result))
-    return result
+                                                 progress, partial, area, scorer)
 
 
 def area_direct_of(ev: EvalFrames, samples: set[int], ctx=None) -> dict[int, dict[int, np.ndarray]]:
@@ -265,18 +273,21 @@ def model_input(net, f: dict, frame: dict, area: dict, index: int, width: int) -
 
 
 def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp, progress, partial,
-                 area=None) -> dict:
+                 area=None, scorer: Scorer | None = None) -> dict:
+    scorer = scorer or Scorer()
     rows = {k: [] for k in (*models, *images)}
     if not ev.ladder_images():
         rows.update({m: [] for m in ev.ladder_rows(idx[0], key)})
     times, refused, flat = {k: [] for k in models}, {}, 0
     # encoding 2: each frame's light scale from its stored configuration
     scales = dict(zip(idx, light_scales(ev, idx))) if any(n.light_scaled for n in models.values()) else {}
+    pending = []  # per frame, the futures of its rows (scored in ``scorer``'s workers while the models run)
     for i in idx:
         frame = ev.load(i)
         f = crop_frame(frame, shape[0])
         mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # flat and no shadow edge
         flat += int(mask.sum())
+        mine = []
         for name, net in models.items():
             if name in refused:
                 continue
@@ -288,12 +299,15 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
                 refused[name] = str(exc)
                 continue
             times[name].append((time.perf_counter() - t0) * 1e3)
-            rows[name].append(score_frame_regions(y, f, exposure, mask))
+            mine.append((name, scorer.submit(y, f, exposure, mask)))
         for name, ch in images.items():
-            rows[name].append(score_frame_regions(f[ch], f, exposure, mask))
+            mine.append((name, scorer.submit(f[ch], f, exposure, mask)))
         if not ev.ladder_images():
-            for name, row in ev.ladder_rows(i, key).items():
-                rows[name].append(row)
+            mine.extend((name, done(row)) for name, row in ev.ladder_rows(i, key).items())
+        pending.append(mine)
+    for mine in pending:
+        for name, future in mine:
+            rows[name].append(future.result())
         progress.update()
     methods = {k: aggregate(r) for k, r in rows.items() if r}
     ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]

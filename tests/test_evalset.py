@@ -16,6 +16,7 @@ from diviewer.data.capture import CaptureSettings, plan_frames
 from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
 from diviewer.evalframes import EvalFrames, crop, default_evalset, write_compact
+from diviewer.evalscore import Scorer
 from diviewer.evaluate import evaluate_evalset
 from diviewer.evalset import (EVAL_SPLITS, EvalSetSettings, build_evalset, configs_apart, plan_evalset,
                               plan_splits)
@@ -229,6 +230,27 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
         d, pt = (sum(float(np.sum(f[c], dtype=np.float64)) for f in frames) for c in ("direct", "pt"))
         assert methods["twice"]["bias"] == pytest.approx(1.5 * d / pt - 1, rel=1e-4)
         assert methods["direct"]["bias_indirect"] == pytest.approx(-1.0)
+
+
+@pytest.mark.slow
+def test_scoring_in_worker_processes_gives_the_same_numbers_in_the_same_order(evalset, tmp_path):
+    out, _ = evalset
+    model, _ = _models(tmp_path)
+
+    def untimed(r):  # the models' inference times are the one thing that differs between runs
+        for split in r["splits"].values():
+            split["methods"]["twice"].pop("inference_ms")
+        return r
+
+    one, two = (untimed(evaluate_evalset([model], out, log=quiet, jobs=j)) for j in (1, 2))
+    assert json.dumps(one, sort_keys=True) == json.dumps(two, sort_keys=True)
+    for j in (1, 2):
+        write_compact(out, tmp_path / f"compact{j}", frames_per_split=2, log=quiet, jobs=j)
+    a, b = (json.loads((tmp_path / f"compact{j}" / "manifest.json").read_text()) for j in (1, 2))
+    assert a["frame_list"] == b["frame_list"] and a["frame_list"][0]["ladder_scores"]
+    with pytest.raises(ValueError, match="at least 1"):
+        Scorer(0)
+    assert main(["eval", "--model", str(model), "--evalset", str(out), "--jobs", "0"]) == 2
 
 
 @pytest.mark.slow

@@ -8,7 +8,9 @@
 # Each scene renders `diviewer evalset --scene SCENE --out /tmp/ev/SCENE` (the defaults: 24 frames a split,
 # 1024 spp twice, ladder 1..256) with --shard k/SHARDS; shard 1 starts first and writes the manifest (and its
 # fitted exposure) before the others start; shards still running DEADLINE seconds (420) after the start are
-# stopped, and the scene is not packed. Then a plain run of the same command scores the set (summary.json),
+# stopped, and the scene is not packed. The shard that finds every frame present scores the set (summary.json; a
+# plain run of the command does it where none did), over every core (--jobs: one process a core, which matters:
+# scoring in one process took over 5 minutes a set on the H100 machine of 2026-11-27, its rendering 1-3),
 # and the compact copy goes into $OUT as SCENE_evalset.tar (in 15 MB parts SCENE_evalset.tar.partNN where
 # larger: cat them together), with logs.tar.gz (logs, summaries, nvidia-smi). --bench adds `diviewer bench` of
 # each scene at 768x768 (30 frames, one eval frame a split) on the device's GL and onnxruntime (bench_SCENE.json
@@ -41,8 +43,10 @@ for spec in "$@"; do  # each scene is packed as soon as its own shards end
   for p in ${pids[$scene]}; do wait "$p"; done
   echo "$scene: shards ended at +$(( $(date +%s) - t0 )) s"
   if [ $(( $(date +%s) - t0 )) -ge "$deadline" ]; then echo "$scene: cut by the deadline, not packed"; continue; fi
-  python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" > "/tmp/evlog/${scene}_summary.log" 2>&1
-  tail -2 "/tmp/evlog/${scene}_summary.log"
+  if [ ! -f "/tmp/ev/$scene/summary.json" ]; then  # the shard that found every frame present scored the set
+    python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" > "/tmp/evlog/${scene}_summary.log" 2>&1
+    tail -2 "/tmp/evlog/${scene}_summary.log"
+  fi
   frames=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['settings']['frames_per_split'])" \
            "/tmp/ev/$scene/manifest.json")
   python3 -m diviewer evalset --compact "/tmp/ev/$scene" --out "/tmp/evc/$scene" --frames-per-split "$frames" \

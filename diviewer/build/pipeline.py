@@ -165,11 +165,12 @@ def _check(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
 
 
 def _evalset(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    from diviewer.evalscore import default_jobs
     from diviewer.evalset import build_evalset
 
     if plan.given_evalset is not None:
         return _given_evalset(plan, log)
-    summary = build_evalset(plan.scene, plan.evalset_dir, plan.evalset, log=log)
+    summary = build_evalset(plan.scene, plan.evalset_dir, plan.evalset, log=log, jobs=default_jobs())
     if summary["present"] != summary["planned"]:
         raise BuildInterrupted(f"evaluation set: {summary['present']} of {summary['planned']} frames")
     return [plan.evalset_dir / "manifest.json", plan.evalset_dir / "summary.json"], {"frames": summary["present"]}
@@ -223,10 +224,11 @@ def _export(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path]
 
 
 def _evaluate(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    from diviewer.evalscore import default_jobs
     from diviewer.evaluate import evaluate_evalset
 
     out = plan.work / "evalset_eval.json"
-    evaluate_evalset([plan.model(k) for k in plan.ks], plan.evalset_dir, out=out, log=log)
+    evaluate_evalset([plan.model(k) for k in plan.ks], plan.evalset_dir, out=out, log=log, jobs=default_jobs())
     return [out], {}
 
 
