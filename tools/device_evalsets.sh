@@ -19,19 +19,20 @@
 set -uo pipefail
 bench=0
 if [ "${1:-}" = "--bench" ]; then bench=1; shift; fi
-. tools/device_setup.sh
+if [ "${SETUP:-1}" = 1 ]; then . tools/device_setup.sh; fi  # SETUP=0: a machine set up already (a local dry run)
 set +e
+read -r -a extra <<< "${EVALSET_ARGS:-}"  # e.g. "--res 16 --frames-per-split 1 --spp 4 --ladder 1" for a dry run
 mkdir -p /tmp/ev /tmp/evc /tmp/evlog
 t0=$(date +%s)
 deadline=${DEADLINE:-420}  # seconds after the start when shards still running are stopped (the logs come back)
 declare -A pids
 for spec in "$@"; do
   scene=${spec%%:*}; n=${spec##*:}
-  python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" --shard "1/$n" > "/tmp/evlog/${scene}_1.log" 2>&1 &
+  python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" "${extra[@]}" --shard "1/$n" > "/tmp/evlog/${scene}_1.log" 2>&1 &
   pids[$scene]="$!"
   for _ in $(seq 240); do [ -f "/tmp/ev/$scene/manifest.json" ] && break; sleep 0.5; done
   for k in $(seq 2 "$n"); do
-    python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" --shard "$k/$n" > "/tmp/evlog/${scene}_$k.log" 2>&1 &
+    python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" "${extra[@]}" --shard "$k/$n" > "/tmp/evlog/${scene}_$k.log" 2>&1 &
     pids[$scene]="${pids[$scene]} $!"
   done
   echo "$scene: $n shards started at +$(( $(date +%s) - t0 )) s"
@@ -44,7 +45,8 @@ for spec in "$@"; do  # each scene is packed as soon as its own shards end
   echo "$scene: shards ended at +$(( $(date +%s) - t0 )) s"
   if [ $(( $(date +%s) - t0 )) -ge "$deadline" ]; then echo "$scene: cut by the deadline, not packed"; continue; fi
   if [ ! -f "/tmp/ev/$scene/summary.json" ]; then  # the shard that found every frame present scored the set
-    python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" > "/tmp/evlog/${scene}_summary.log" 2>&1
+    python3 -m diviewer evalset --scene "$scene" --out "/tmp/ev/$scene" "${extra[@]}" \
+      > "/tmp/evlog/${scene}_summary.log" 2>&1
     tail -2 "/tmp/evlog/${scene}_summary.log"
   fi
   frames=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['settings']['frames_per_split'])" \
