@@ -2,11 +2,12 @@
 # repository root; it leaves PYTHONPATH and the NVIDIA EGL vendor exported and a copy of the tree in /tmp/repo
 # (later calls' tree updates cannot touch a job started there), and cds into it.
 #
-# What travels with the call (ignored folders named in `carry`; see docs/build.md, "Accelerators"):
+# What travels with the call (ignored folders named in `carry`; see docs/build.md, "Accelerators"; `bash
+# tools/device_carry.sh` makes all three here):
 #   .gl/     the GL loader .debs (libglvnd, libEGL, libGL, ...): apt-get download, as the device README says
 #   .whl/    cp312 wheels the machine lacks: drjit moderngl glcontext trimesh OpenEXR flip-evaluator pyrr glfw
-#   .carry/mi.tar.xz  Mitsuba 3.9.1's wheel unpacked without its spectral/mono/llvm variants, headers and four
-#            unused shape plugins, re-packed with xz (the wheel is 60 MiB: with the tree it would not fit one
+#   .carry/mi.tar.xz  Mitsuba 3.9.1's wheel unpacked without its spectral/mono variants, headers and the
+#            plugins diviewer never loads, re-packed with xz (the wheel is 60 MiB: with the tree it would not fit one
 #            call's 64 MiB)
 set -euo pipefail
 for f in .gl/*.deb; do dpkg -x "$f" /; done
