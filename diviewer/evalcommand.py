@@ -49,9 +49,9 @@ def _add_jobs_arg(p) -> None:
 
 
 def _cmd_evalset(args: argparse.Namespace) -> int:
+    from diviewer.data.capture import parse_shard
     from diviewer.evalset import EvalSetSettings, build_evalset
     from diviewer.frames import parse_resolution
-    from diviewer.data.capture import parse_shard
     from diviewer.locks import run_lock, shard_part
 
     if args.compact is not None:
