@@ -30,7 +30,7 @@ from diviewer.errors import DiviewerError
 from diviewer.data.scales import light_scales
 from diviewer.evalframes import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
 from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer, aggregate, below_direct, done,
-                                equivalent, ladder_methods, pooled_bias, score, score_frame, score_frame_regions, strict_json)
+                                equivalent, ladder_methods, pooled_bias, score, score_frame, strict_json)
 from diviewer.metrics import flat_mask
 from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
@@ -272,9 +272,8 @@ def model_input(net, f: dict, frame: dict, area: dict, index: int, width: int) -
     return crop_frame({**frame, "direct": area[net.direct_samples][index]}, width)
 
 
-def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp, progress, partial,
-                 area=None, scorer: Scorer | None = None) -> dict:
-    scorer = scorer or Scorer()
+def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp, progress, partial, area,
+                 scorer: Scorer) -> dict:
     rows = {k: [] for k in (*models, *images)}
     if not ev.ladder_images():
         rows.update({m: [] for m in ev.ladder_rows(idx[0], key)})
