@@ -107,7 +107,7 @@ def add_eval_parsers(sub, add_variant_arg) -> None:
     p.add_argument("--scene", default="cornell", help=scene_help())
     p.add_argument("--out", type=Path, required=True, help="evaluation set folder (created, or resumed)")
     p.add_argument("--frames-per-split", type=int, default=None,
-                   help="frames in each split (default 24; with --compact the first 6 of each split)")
+                   help="frames in each split (default 24; with --compact 6 of each split, spread over its meshes)")
     p.add_argument("--res", default="128", help="the model's frame, N or WxH (square splits); default 128")
     p.add_argument("--window-widths", default=None,
                    help="widths of the window_shapes split at the same rows (default 4:3 and 16:9: 170,228 at 128)")

@@ -1,7 +1,8 @@
 """An evaluation set's frames for scoring, from a full set (diviewer.evalset) or a compact one, checked first.
 
 The compact set is what the repository ships (``assets/evalsets/<scene>/``, the default of ``eval`` and
-``bench``): the first frames of every split of a full set, written by ``diviewer evalset --compact``:
+``bench``): a few frames of every split of a full set, written by ``diviewer evalset --compact`` (``compact_choice``:
+spread over the split's meshes, so a split of several unseen objects keeps each of them):
 
 - ``manifest.json``: the full set's manifest fields (scene, hash, splits, left-out splits, the scene's
   tone-map exposure, ladder sample counts) with its frame list cut to the chosen frames; each frame records
@@ -204,12 +205,35 @@ def _bytes_npy(a: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=print, jobs: int = 1) -> dict:
-    """Write the compact set of a full evaluation set: the first ``frames_per_split`` frames of each split.
+def frame_meshes(entry: dict) -> tuple[str, ...]:
+    """The meshes a frame shows (its configuration's objects), sorted: what tells one scene content from another."""
+    return tuple(sorted(str(o.get("mesh")) for o in entry.get("config", {}).get("objects", [])))
 
-    The chosen frames must be present and sound in the full set (they are rendered first: evalset's
-    ``render_order``); the rest of the full set need not be complete. ``jobs``: processes the ladder's images are
-    scored in (``evalscore.Scorer``).
+
+def compact_choice(entries: list[dict], n: int) -> list[int]:
+    """The indices of ``n`` of one split's frames (``entries`` in the full set's order), in that order: the first
+    frame of each distinct set of meshes in turn, then the second of each, and so on. A split whose frames all
+    show the same meshes (Sponza's) keeps its first ``n``; cornell's unseen objects keep every test mesh even where
+    the first frames happen to show only some of them."""
+    groups: dict[tuple, list[int]] = {}
+    for e in entries:
+        groups.setdefault(frame_meshes(e), []).append(e["index"])
+    chosen, rank = [], 0
+    while len(chosen) < min(n, len(entries)):
+        for members in groups.values():
+            if rank < len(members) and len(chosen) < n:
+                chosen.append(members[rank])
+        rank += 1
+    order = {e["index"]: k for k, e in enumerate(entries)}
+    return sorted(chosen, key=order.__getitem__)
+
+
+def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=print, jobs: int = 1) -> dict:
+    """Write the compact set of a full evaluation set: ``frames_per_split`` frames of each split, spread over
+    its meshes (``compact_choice``).
+
+    The chosen frames must be present and sound in the full set; the rest of it need not be complete.
+    ``jobs``: processes the ladder's images are scored in (``evalscore.Scorer``).
     """
     from diviewer.evalscore import Scorer, ladder_methods
     from diviewer.metrics import flat_mask
@@ -232,12 +256,13 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=prin
     chosen, blobs = [], {}
     with Scorer(jobs) as scorer:
         for split, shapes in splits.items():
-            idx = [f["index"] for f in src.frames if f["split"] == split][:frames_per_split]
+            idx = compact_choice([f for f in src.frames if f["split"] == split], frames_per_split)
             missing = [i for i in idx if i in problems]
             if missing:
-                raise DiviewerError(f"split {split}: frame(s) {', '.join(map(str, missing))} of the first "
-                                    f"{frames_per_split} are not ready ({problems[missing[0]]}); let `diviewer "
-                                    f"evalset` finish them, or ask for fewer with --frames-per-split", path=full_dir)
+                raise DiviewerError(f"split {split}: frame(s) {', '.join(map(str, missing))} of the "
+                                    f"{frames_per_split} chosen are not ready ({problems[missing[0]]}); let "
+                                    f"`diviewer evalset` finish them, or ask for fewer with --frames-per-split",
+                                    path=full_dir)
             stored = max(w for w, _ in shapes)
             for i in idx:
                 f = crop_frame(src.load(i), stored)
@@ -267,6 +292,7 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=prin
                     frame_list=chosen)
     manifest["compact"] = {
         "from": str(src.root), "frames_per_split": frames_per_split, "file": COMPACT_FILE,
+        "choice": "per split, the first frame of each distinct set of meshes in turn (compact_choice)",
         "storage": "per frame and channel group: float16 split into high and low bytes (uint8 .npy), LZMA zip",
         "ladder": "scores per frame and shape (diviewer.evaluate.score_frame on the full set's float32 frames); "
                   "its images are not stored", "full_frames": len(src.frames)}

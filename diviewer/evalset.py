@@ -231,7 +231,7 @@ def plan_evalset(scene: Scene, settings: EvalSetSettings) -> list[dict]:
 
 def render_order(plan: list[dict]) -> list[dict]:
     """Frames interleaved across splits (each split's first frames first), so an interrupted render already
-    holds the first frames of every split (what ``evalset --compact`` ships)."""
+    holds the first frames of every split."""
     pos = {}
     order = []
     for f in plan:

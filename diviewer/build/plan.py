@@ -191,7 +191,7 @@ def given_evalset_settings(path: Path, recipe_settings, scene: str):
         raise DiviewerError("not an evaluation set (a training capture?)", path=path / "manifest.json", field="kind")
     check_evalset_scene(ev, load_scene(scene), scene)
     given = dict(ev.manifest["settings"])
-    if ev.compact:  # the first frames of each split of a full set (`diviewer evalset --compact`)
+    if ev.compact:  # a few frames of each split of a full set (`diviewer evalset --compact`)
         given["frames_per_split"] = ev.manifest["compact"]["frames_per_split"]
     fields = {f.name for f in dataclasses.fields(recipe_settings)}
     return dataclasses.replace(recipe_settings, **{k: v for k, v in given.items() if k in fields})
