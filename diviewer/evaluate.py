@@ -245,16 +245,9 @@ def area_direct_of(ev: EvalFrames, samples: set[int], ctx=None) -> dict[int, dic
 
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
-    from diviewer.scene import load_scene
-    from diviewer.scene.loader import config_from_dict
+    from diviewer.scene.loader import config_from_dict, load_recorded_scene
 
-    # The set's own scene file where it still exists (a set made from, or restamped to, a file outside assets/),
-    # else the shipped scene of its name; either must be the file the set was made from.
-    path = ev.manifest.get("scene_file")
-    scene = load_scene(path if path and Path(path).is_file() else ev.manifest["scene"])
-    if scene.file_hash != ev.manifest["scene_hash"]:
-        raise DiviewerError(f"the scene file '{path or ev.manifest['scene']}' is not the one the evaluation set was "
-                            f"made from: its area direct light cannot be rendered", path=ev.root, field="scene_hash")
+    scene = load_recorded_scene(ev.manifest, ev.root, "the evaluation set's area direct light cannot be rendered")
     w, h = (int(x) for x in ev.manifest["resolution"])
     out = {}
     with nullcontext(ctx) if ctx is not None else headless_context() as gl:

@@ -52,6 +52,19 @@ def load_scene(scene: str | Path) -> Scene:
     return dataclasses.replace(parsed, file_hash=scene_identity(data, files, path.parent))
 
 
+def load_recorded_scene(manifest: dict, where: Path, refusal: str) -> Scene:
+    """The scene a capture or an evaluation set (its ``manifest``) was made from: the manifest's ``scene_file``
+    where it still exists (a file outside assets/, or one a set was restamped to), else the shipped scene of its
+    name. Refused unless that file is the one the manifest records (``scene_hash``): ``refusal`` says what it
+    stops, ``where`` is the file the error names."""
+    path = manifest.get("scene_file")
+    scene = load_scene(path if path and Path(path).is_file() else manifest["scene"])
+    if scene.file_hash != manifest["scene_hash"]:
+        raise DiviewerError(f"the scene file {scene.path} is not the one it was made from: {refusal}", path=where,
+                            field="scene_hash")
+    return scene
+
+
 def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") -> Scene:
     root = _Table(data, path, "")
     base = path.parent if path is not None else Path.cwd()

@@ -123,17 +123,9 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: n
 
 def _scene_of(ds: Dataset):
     """The scene a dataset was captured from (refused if its file changed since: other geometry)."""
-    from diviewer.errors import DiviewerError
-    from diviewer.scene.loader import load_scene
+    from diviewer.scene.loader import load_recorded_scene
 
-    from pathlib import Path
-
-    file = ds.manifest.get("scene_file")
-    scene = load_scene(file if file and Path(file).is_file() else ds.manifest["scene"])
-    if scene.file_hash != ds.manifest["scene_hash"]:
-        raise DiviewerError(f"the scene file {scene.path} changed since the capture", path=ds.root / "manifest.json",
-                            field="scene_hash")
-    return scene
+    return load_recorded_scene(ds.manifest, ds.root / "manifest.json", "it changed since the capture")
 
 
 def run_cameras(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool) -> tuple[Any, Any]:

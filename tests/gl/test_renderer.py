@@ -421,7 +421,6 @@ def test_gathered_pcf_equals_the_mean_of_bilinear_comparison_taps(ctx, radius):
 
 def test_split_mesh_keeps_every_triangle_in_compact_chunks():
     from diviewer.gl.culling import split_mesh
-    from diviewer.scene.model import Mesh
 
     rng = np.random.default_rng(0)
     v = rng.uniform(-10, 10, (3000, 3)).astype(np.float32)
