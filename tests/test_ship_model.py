@@ -63,3 +63,20 @@ def test_a_model_missing_from_the_eval_json_is_refused_by_name(tmp_path):
     with pytest.raises(DiviewerError, match="no method 'new_k8'"):
         tool.main(["--model", str(new), "--run", str(tmp_path), "--eval", str(ev), "--command", "c", "--note", "n",
                    "--ladder-why", "w", "--ship", str(tmp_path)])
+
+
+def test_a_scene_file_edited_with_the_model_takes_the_previous_models_scores_from_their_own_json(tmp_path):
+    """--previous-eval: the new model scored on the restamped set, the shipped one on the set before it."""
+    tool = load_tool("ship_model")
+    ship = tmp_path / "ship"
+    ship.mkdir()
+    scene = base_meta()["scene"]
+    _model(ship / f"{scene}.onnx", 1.0)
+    new = _model(tmp_path / "new_k8.onnx", 2.0)
+    ev_new, ev_old = _eval(tmp_path / "new.json", {"new_k8": 36.0}), _eval(tmp_path / "old.json", {scene: 31.0})
+    card = tool.main(["--model", str(new), "--run", str(tmp_path), "--eval", str(ev_new), "--previous-eval",
+                      str(ev_old), "--command", "c", "--note", "n", "--ladder-why", "w", "--ship", str(ship)])
+    compact = card["evalset_compact"]
+    assert compact["this_model"]["moved_camera"]["psnr_tm"] == 36.0
+    assert compact["previous_shipped"]["moved_camera"]["psnr_tm"] == 31.0
+    assert (compact["json"], compact["previous_json"]) == (str(ev_new), str(ev_old))

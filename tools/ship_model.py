@@ -4,10 +4,13 @@ the rebuild command. `diviewer build` does the same at the end of a full build; 
 
 Usage: python tools/ship_model.py --model runs/cornell/fly_eval/fly_area4_k8_fp32.onnx --run runs/cornell/fly_area4_k8
            --eval docs/data/compact/EVAL.json --command "diviewer capture ..." [--command ...] --note TEXT
-           --ladder-why TEXT [--ladder-file cornell_ladder.json] [--ship assets/models]
+           --ladder-why TEXT [--ladder-file cornell_ladder.json] [--ship assets/models] [--previous-eval OLD.json]
 
 EVAL.json: `diviewer eval --model MODEL --model assets/models/SCENE.onnx --out EVAL.json` on the compact evaluation
-set (the card records the tone-mapped region scores of both, per split: ``evalset_compact``). The card and the ONNX
+set (the card records the tone-mapped region scores of both, per split: ``evalset_compact``). A model that ships
+with an edited scene file (a new ``scene_hash``) cannot be scored on the old model's set, nor the old model on the
+new: ``--previous-eval`` then names the old model's JSON on the same frames (the set before
+`tools/restamp_scene_hash.py`), and ``--eval`` holds the new model's. The card and the ONNX
 metadata are written together (`diviewer.build.pipeline.write_model_card`); the run's curves.png and metrics.csv
 are copied beside them. The shipped card's recipe must be the scene's recipe file (tests/train/test_recipe.py).
 """
@@ -43,15 +46,19 @@ def split_scores(ev: dict, method: str, path: Path) -> dict:
 
 
 def ship(model: Path, run: Path, eval_json: Path, commands: list[str], note: str, ladder_why: str,
-         ladder_file: str | None, dest: Path) -> dict:
+         ladder_file: str | None, dest: Path, previous_eval: Path | None = None) -> dict:
     card = json.loads(model.with_suffix(".json").read_text())
     scene = card["scene"]
     shipped = dest / f"{scene}.onnx"
     ev = json.loads(eval_json.read_text())
+    before = previous_eval or eval_json
+    compact = {"json": str(eval_json), "this_model": split_scores(ev, model.stem, eval_json),
+               "previous_shipped": split_scores(json.loads(before.read_text()), shipped.stem, before)}
+    if previous_eval is not None:
+        compact["previous_json"] = str(previous_eval)
     card.update(commands=commands, note=note, rebuild=f"diviewer build --scene {scene}",
                 ladder={"chosen_K": card["K"], "why": ladder_why, "file": ladder_file or f"{scene}_ladder.json"},
-                evalset_compact={"json": str(eval_json), "this_model": split_scores(ev, model.stem, eval_json),
-                                 "previous_shipped": split_scores(ev, shipped.stem, eval_json)})
+                evalset_compact=compact)
     write_model_card(model, shipped, card)
     for name, suffix in (("curves.png", "_curves.png"), ("metrics.csv", "_metrics.csv")):
         if (run / name).is_file():
@@ -65,13 +72,16 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--model", type=Path, required=True, help="an exported model (its card beside it)")
     ap.add_argument("--run", type=Path, required=True, help="its training run (curves.png, metrics.csv)")
     ap.add_argument("--eval", type=Path, required=True, help="diviewer eval JSON of it and the shipped model")
+    ap.add_argument("--previous-eval", type=Path, default=None,
+                    help="the shipped model's eval JSON on the same frames, where the scene file changes with this "
+                         "model (default: --eval holds both)")
     ap.add_argument("--command", action="append", required=True, help="how it was made, one command each")
     ap.add_argument("--note", required=True, help="what it is, in a sentence or two")
     ap.add_argument("--ladder-why", required=True, help="why this K (the ladder's verdict)")
     ap.add_argument("--ladder-file", default=None, help="the ladder record beside it (default SCENE_ladder.json)")
     ap.add_argument("--ship", type=Path, default=ROOT / "assets" / "models")
     a = ap.parse_args(argv)
-    card = ship(a.model, a.run, a.eval, a.command, a.note, a.ladder_why, a.ladder_file, a.ship)
+    card = ship(a.model, a.run, a.eval, a.command, a.note, a.ladder_why, a.ladder_file, a.ship, a.previous_eval)
     print(f"shipped {a.model} as {a.ship / (card['scene'] + '.onnx')} (K={card['K']})")
     return card
 
