@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer import imageio
+from diviewer.data.area import direct_samples
 from diviewer.data.dataset import Dataset
 from diviewer.encoding import INPUT_CHANNELS, Encoding, fit_exposure
 from diviewer.errors import DiviewerError, missing_extra
@@ -165,6 +166,8 @@ def build_baseline(data_dir: Path, out: Path, split: str = "train", max_frames: 
         "format": MODEL_FORMAT, "kind": KIND, "input": INPUT_NAME, "output": OUTPUT_NAME, "layout": "NHWC",
         "channels": [list(c) for c in INPUT_CHANNELS], "resolution": [w, h], "multiple": 1, "K": 0, "levels": 0,
         "target": "indirect", "precision": "fp32",
+        # the direct light it was fitted on (a capture's direct_area): the runtime feeds it the same light
+        "direct_samples": direct_samples(ds.manifest),
         "encoding": Encoding(exposure=r["exposure"], depth_scale=r["depth_scale"]).to_dict(),
         "scene": ds.manifest["scene"], "scene_hash": ds.manifest["scene_hash"], "dataset_hash": ds.hash,
         "description": "per-pixel linear regression (a baseline, not a network): radiance = direct + f.A + "

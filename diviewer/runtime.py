@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -221,7 +222,10 @@ class NeuralGI:
     @property
     def trained_aspects(self) -> tuple[float, float]:
         """The frame shapes it was trained on, as width / height: its recipe's aspect crops (crops of every width
-        in the range at full height), else its training resolution's one shape."""
+        in the range at full height), else its training resolution's one shape; every shape for a per-pixel model
+        (the linear baseline: no pixel sees another, so the frame's shape changes nothing)."""
+        if self.meta.get("kind") == "linear_baseline":
+            return 0.0, math.inf
         crops = ((self.meta.get("recipe") or {}).get("train") or {}).get("aspect_crops")
         if crops:
             return float(crops[0]), float(crops[1])

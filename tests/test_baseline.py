@@ -34,8 +34,10 @@ def _frame(rng, h: int, w: int) -> dict[str, np.ndarray]:
             "direct": rng.uniform(0.0, 2.0, (h, w, 3))}
 
 
-def synthetic_dataset(root, A, B, frames: int = 5, h: int = 16, w: int = 16, noise: float = 0.0) -> Dataset:
-    """A dataset whose ground truth is the baseline's own form (plus optional noise): the fit must find A, B."""
+def synthetic_dataset(root, A, B, frames: int = 5, h: int = 16, w: int = 16, noise: float = 0.0,
+                      direct_area: dict | None = None) -> Dataset:
+    """A dataset whose ground truth is the baseline's own form (plus optional noise): the fit must find A, B.
+    ``direct_area``: the manifest's record of a direct light over each pixel's area (`diviewer data area-direct`)."""
     scene = load_scene("cornell")
     manifest = {"format": FORMAT, "format_version": FORMAT_VERSION, "scene": "cornell", "scene_hash": scene.file_hash,
                 "resolution": [w, h], "channels": [list(c) for c in CHANNELS], "dtype": "float32", "gt": "pt",
@@ -43,6 +45,8 @@ def synthetic_dataset(root, A, B, frames: int = 5, h: int = 16, w: int = 16, noi
                 "render_settings": {}, "frame_list": [{"index": i, "split": "train" if i < frames - 1 else "val",
                                                        "seed": i, "config": {"camera": {"far": 10.0}}}
                                                       for i in range(frames)]}
+    if direct_area is not None:
+        manifest["direct_area"] = direct_area
     ds = open_or_create(root, manifest)
     rng = np.random.default_rng(7)
     for i in range(frames):
@@ -98,6 +102,7 @@ def test_onnx_model_matches_numpy_and_follows_the_runtime_contract(tmp_path):
     np.testing.assert_allclose(y, np.maximum(expected, 0.0), rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(y, np.maximum(f["pt"], 0.0), atol=1e-3)  # and the truth, which this data lets it represent
     assert json.loads(out.with_suffix(".json").read_text())["fit"]["frames"] == 4
+    assert card["direct_samples"] == net.direct_samples == 1  # fitted on the pixel centre's light
     batch = net.run(np.stack([pack_buffers(f)] * 2))  # any batch and size (multiple 1)
     assert batch.shape == (2, 16, 16, 3)
 
@@ -110,3 +115,13 @@ def test_cli_baseline_then_eval_on_a_dataset_split(tmp_path, capsys):
     assert main(["eval", "--model", str(out), "--data", str(ds.root), "--split", "val"]) == 0
     assert "direct light only" in capsys.readouterr().out
     assert main(["baseline", "--data", str(tmp_path / "nowhere"), "--out", str(out)]) == 2
+
+
+def test_a_baseline_fitted_on_the_areas_direct_light_asks_the_runtime_for_that_light(tmp_path):
+    """A capture of the direct light over each pixel's area (4x4): the card says so, so eval, bench and the viewer
+    feed it the light it was fitted on, not the pixel centre's."""
+    A, B = _weights(4)
+    ds = synthetic_dataset(tmp_path / "ds", A, B, direct_area={"samples": 4, "how": "test"})
+    out = tmp_path / "lin.onnx"
+    card = build_baseline(ds.root, out, log=quiet)
+    assert card["direct_samples"] == 4 == NeuralGI(out).direct_samples

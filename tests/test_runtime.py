@@ -263,22 +263,27 @@ def test_render_with_model_writes_neural_exr(gl_context, tmp_path):
     assert main(["render", "--scene", "atrium", "--model", str(path), "--out", str(tmp_path / "a")]) == 2
 
 
+@needs_onnx
 def test_a_shape_the_model_never_saw_is_said_not_silent(gl_context, tmp_path, capsys):
     """A model knows the frame shapes it was trained on (its recipe's aspect crops, else its resolution's shape):
     `render --model` at another shape still runs, says so and records it; at a trained shape nothing is said. The
-    shipped cornell model trained on 9:16 to 16:9, the older cornell_linear on squares only."""
+    shipped cornell model trained on 9:16 to 16:9; a model of square frames (a toy of cornell's scene file) on
+    squares only; the per-pixel linear baseline on every shape."""
     from diviewer.cli import main
     from diviewer.paths import models_dir
+    from diviewer.scene import load_scene
 
-    crops, square = NeuralGI(models_dir() / "cornell.onnx"), NeuralGI(models_dir() / "cornell_linear.onnx")
+    toy = direct_times(tmp_path / "square.onnx", meta=base_meta(load_scene("cornell").file_hash, "cornell"))
+    crops, square = NeuralGI(models_dir() / "cornell.onnx"), NeuralGI(toy)
+    linear = NeuralGI(models_dir() / "cornell_linear.onnx")
     assert crops.trained_aspects == pytest.approx((9 / 16, 16 / 9)) and square.trained_aspects == (1.0, 1.0)
-    assert crops.shape_note(228, 128) == crops.shape_note(72, 128) == "" and square.shape_note(129, 128) == ""
+    assert crops.shape_note(228, 128) == crops.shape_note(72, 128) == "" and square.shape_note(33, 32) == ""
     assert crops.shape_note(300, 128).startswith("the model was trained on frames of width/height 0.562 to 1.78 only")
     assert "at 228x128 (1.78) its GI is extrapolated" in square.shape_note(228, 128)
+    assert linear.shape_note(300, 128) == linear.shape_note(32, 300) == ""
     for res, said in (("48x32", True), ("32x32", False)):
         out = tmp_path / res
-        assert main(["render", "--scene", "cornell", "--model", str(models_dir() / "cornell_linear.onnx"), "--res",
-                     res, "--out", str(out)]) == 0
+        assert main(["render", "--scene", "cornell", "--model", str(toy), "--res", res, "--out", str(out)]) == 0
         record = json.loads((out / "frame.json").read_text())["neural"]
         err = capsys.readouterr().err
         assert ("shape_note" in record) == said and ("its GI is extrapolated" in err) == said
