@@ -390,3 +390,48 @@ def test_the_shipped_compact_sets_fit_the_repository_budget():
     """cornell and sponza together <= 10 MB (the device carries the whole tracked tree)."""
     total = sum(p.stat().st_size for d in SHIPPED.values() if d.is_dir() for p in d.iterdir())
     assert (SHIPPED["cornell"] / "manifest.json").is_file() and total <= 10 * 2**20, total
+
+
+@pytest.mark.slow
+def test_a_shaped_copy_scores_other_splits_at_window_shapes_from_the_same_frames(evalset, tmp_path):
+    """tools/experiments/evalset_shapes.py: the held-out cameras at 22x16 and 28x16 from the stored 28-column frames,
+    hard-linked; a split at a shape the set scores already scores the same; bad widths, splits and compact sets are
+    refused by name."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/evalset_shapes")
+    out, _ = evalset
+    model, _ = _models(tmp_path)
+    copy = tmp_path / "wide"
+    tool.main(["--evalset", str(out), "--out", str(copy), "--split", "moved_camera", "--split", "window_shapes",
+               "--widths", "16,28"])
+    frame = next((copy / "frames").glob("*.npy"))
+    assert frame.stat().st_nlink >= 2  # linked, not copied
+    shaped = evaluate_evalset([model], copy, log=quiet)
+    assert set(shaped["splits"]) == {"moved_camera_16x16", "moved_camera_28x16", "window_shapes_16x16",
+                                     "window_shapes_28x16"}
+    full = evaluate_evalset([model], out, log=quiet)
+    for mine, theirs in (("moved_camera_16x16", "moved_camera"), ("window_shapes_28x16", "window_shapes_28x16")):
+        for m in ("twice", "direct", "noise_floor"):
+            assert shaped["splits"][mine]["methods"][m]["psnr_tm"] == full["splits"][theirs]["methods"][m]["psnr_tm"]
+    wide = shaped["splits"]["moved_camera_28x16"]
+    assert wide["shape"] == [28, 16] and wide["frames"] == full["splits"]["moved_camera"]["frames"]
+    # geometry: the whole frame as eval scores it, and the pixels that show geometry (cornell's box: every pixel
+    # of the scene camera's square crop)
+    geo = tool.geometry_scores(copy, model)["splits"]
+    for key, g in geo.items():
+        m = shaped["splits"][key]["methods"]
+        assert g["model_psnr_tm"] == pytest.approx(m["twice"]["psnr_tm"]["mean"], abs=1e-3), key
+        assert g["direct_psnr_tm"] == pytest.approx(m["direct"]["psnr_tm"]["mean"], abs=1e-3), key
+        assert 0.0 <= g["void_mean"] <= g["void_max"] <= 1.0
+    assert geo["window_shapes_16x16"]["void_max"] == 0.0
+    assert geo["window_shapes_16x16"]["model_psnr_tm_geometry"] == geo["window_shapes_16x16"]["model_psnr_tm"]
+    with pytest.raises(DiviewerError, match="--widths"):
+        tool.main(["--evalset", str(out), "--out", str(tmp_path / "w2"), "--split", "moved_camera", "--widths", "21"])
+    with pytest.raises(DiviewerError, match="no split 'nowhere'"):
+        tool.main(["--evalset", str(out), "--out", str(tmp_path / "w3"), "--split", "nowhere", "--widths", "28"])
+    compact = tmp_path / "compact"
+    write_compact(out, compact, frames_per_split=1, log=quiet)
+    with pytest.raises(DiviewerError, match="compact"):
+        tool.main(["--evalset", str(compact), "--out", str(tmp_path / "w4"), "--split", "moved_camera",
+                   "--widths", "28"])
