@@ -32,7 +32,7 @@ from diviewer.data.scales import light_scales
 from diviewer.errors import DiviewerError
 from diviewer.evalframes import EvalFrames, crop_frame, split_key
 from diviewer.evaluate import _camera, area_direct_of, model_input, run_model
-from diviewer.metrics import tonemap
+from diviewer.metrics import psnr, tonemap
 from diviewer.runtime import NeuralGI
 
 
@@ -68,9 +68,9 @@ def shaped_copy(src: Path, out: Path, splits: list[str], widths: list[int]) -> d
 
 
 def _psnr_tm(image: np.ndarray, truth: np.ndarray, exposure: float, mask: np.ndarray | None = None) -> float:
-    d2 = np.mean((tonemap(image, exposure) - tonemap(truth, exposure)) ** 2, axis=-1)
-    se = float(d2[mask].mean() if mask is not None else d2.mean())
-    return float("inf") if se == 0 else float(10 * np.log10(1.0 / se))
+    """`diviewer eval`'s tone-mapped PSNR, over ``mask``'s pixels only where one is given."""
+    a, b = tonemap(image, exposure), tonemap(truth, exposure)
+    return psnr(a, b) if mask is None else psnr(a[mask], b[mask])
 
 
 def geometry_scores(evalset: Path, model: Path) -> dict:
