@@ -30,7 +30,7 @@ import numpy as np
 
 from diviewer.data.scales import light_scales
 from diviewer.errors import DiviewerError
-from diviewer.evalframes import EvalFrames, crop_frame, split_key
+from diviewer.evalframes import EvalFrames, crop, crop_frame, split_key
 from diviewer.evaluate import _camera, area_direct_of, model_input, run_model
 from diviewer.metrics import psnr, tonemap
 from diviewer.runtime import NeuralGI
@@ -50,10 +50,13 @@ def shaped_copy(src: Path, out: Path, splits: list[str], widths: list[int]) -> d
         if name not in have:
             raise DiviewerError(f"no split '{name}' (the set has {', '.join(have)})", path=src / "manifest.json",
                                 field="evalset.splits")
-    for width in widths:
-        if not 0 < width <= w or (w - width) % 2:
-            raise DiviewerError(f"a centred crop of the set's {w} columns to {width} is not possible (at most {w}, "
-                                f"and {w} - width even)", field="--widths")
+    for width in widths:  # the evaluation's own crop rule, checked before anything is written
+        try:
+            if width < 1:
+                raise ValueError(f"cannot crop {w} columns centrally to {width}")
+            crop(np.empty((0, w)), width)
+        except ValueError as exc:
+            raise DiviewerError(f"{exc} (the set's frames are {w} wide)", field="--widths") from None
     manifest["evalset"]["splits"] = {name: {**have[name], "shapes": [[width, h] for width in widths]}
                                      for name in splits}
     manifest["evalset"]["shapes_from"] = {"set": str(src), "tool": "tools/experiments/evalset_shapes.py"}
@@ -83,21 +86,22 @@ def geometry_scores(evalset: Path, model: Path) -> dict:
     area = area_direct_of(ev, {net.direct_samples} - {1})
     out = {}
     for split, shapes in ev.splits().items():
-        idx = ev.present(split, [])
-        for shape in shapes:
-            rows = []
-            for i in idx:
-                frame = ev.load(i)
+        rows = {tuple(shape): [] for shape in shapes}
+        for i in ev.present(split, []):
+            frame = ev.load(i)  # once per frame, cropped to each shape
+            for shape in shapes:
                 f = crop_frame(frame, shape[0])
                 geo = f["depth"] > 0
                 y = run_model(net, model_input(net, f, frame, area, i, shape[0]), scales.get(i),
                               _camera(net, ev.entry(i), f))
-                rows.append((1.0 - float(geo.mean()), _psnr_tm(y, f["pt"], ev.exposure),
-                             _psnr_tm(y, f["pt"], ev.exposure, geo), _psnr_tm(f["direct"], f["pt"], ev.exposure),
-                             _psnr_tm(f["direct"], f["pt"], ev.exposure, geo)))
-            a = np.array(rows)
+                rows[tuple(shape)].append((1.0 - float(geo.mean()), _psnr_tm(y, f["pt"], ev.exposure),
+                                           _psnr_tm(y, f["pt"], ev.exposure, geo),
+                                           _psnr_tm(f["direct"], f["pt"], ev.exposure),
+                                           _psnr_tm(f["direct"], f["pt"], ev.exposure, geo)))
+        for shape in shapes:
+            a = np.array(rows[tuple(shape)])
             out[split_key(split, shape, shapes)] = {
-                "frames": len(rows), "void_mean": float(a[:, 0].mean()), "void_max": float(a[:, 0].max()),
+                "frames": len(a), "void_mean": float(a[:, 0].mean()), "void_max": float(a[:, 0].max()),
                 "model_psnr_tm": float(a[:, 1].mean()), "model_psnr_tm_geometry": float(a[:, 2].mean()),
                 "direct_psnr_tm": float(a[:, 3].mean()), "direct_psnr_tm_geometry": float(a[:, 4].mean())}
     return {"evalset": str(evalset), "model": str(model), "exposure": ev.exposure, "splits": out}
