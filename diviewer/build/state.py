@@ -19,6 +19,8 @@ from diviewer.errors import DiviewerError
 
 FORMAT = "diviewer-build"
 VERSION = 1
+LADDER_STAGES = ("evaluate", "pick", "ship")
+"""The stages that read every K of the ladder: run again when the ladder changes (the others keep)."""
 
 
 class BuildState:
@@ -27,6 +29,8 @@ class BuildState:
     def __init__(self, path: Path, plan_key: dict[str, Any]):
         self.path = Path(path)
         self.data: dict[str, Any] = {"format": FORMAT, "version": VERSION, "plan": plan_key, "stages": {}}
+        self.ladder_change: tuple[list[int], list[int]] | None = None
+        """(old Ks, new Ks) where this build's ladder differs from the one the work folder was built with."""
         if self.path.is_file():
             try:
                 old = json.loads(self.path.read_text())
@@ -35,12 +39,19 @@ class BuildState:
                                     path=self.path) from exc
             if old.get("format") != FORMAT:
                 raise DiviewerError("not a build state file; use another --work", path=self.path, field="format")
-            if old.get("plan") != plan_key:
-                changed = sorted(k for k in set(plan_key) | set(old.get("plan", {}))
-                                 if plan_key.get(k) != old.get("plan", {}).get(k))
+            old_plan = old.get("plan", {})
+            changed = sorted(k for k in set(plan_key) | set(old_plan)
+                             if not _same(k, old_plan.get(k), plan_key.get(k)))
+            if changed == ["ks"]:
+                # the same capture, evaluation set and training settings with more (or fewer) widths: every
+                # finished K keeps its training and export, and the stages over the whole ladder run again
+                self.ladder_change = (list(old_plan["ks"]), list(plan_key["ks"]))
+                old["stages"] = {name: rec for name, rec in old.get("stages", {}).items() if name not in LADDER_STAGES}
+            elif changed:
                 raise DiviewerError(f"this work folder holds a build of another plan (differs in {', '.join(changed)});"
                                     f" run the same command as before to resume it, or give another --work",
                                     path=self.path, field="plan")
+            old["plan"] = plan_key  # the same plan; its key as this version writes it (the recipe's bytes may differ)
             self.data = old
 
     def done(self, stage: str, root: Path) -> dict[str, Any] | None:
@@ -67,6 +78,17 @@ class BuildState:
 
     def save(self) -> None:
         imageio.write_text(self.path, json.dumps(self.data, indent=1, sort_keys=True, default=str) + "\n")
+
+
+def _same(field: str, old: Any, new: Any) -> bool:
+    """Whether a field of the plan key is the same plan. The recipe is the same when what it asks for is (its
+    content's sha256: an edited comment is the same recipe); a key written before the content hash was recorded
+    matches on the file's bytes, as it did then."""
+    if field == "recipe" and isinstance(old, dict) and isinstance(new, dict):
+        if "content_sha256" in old:
+            return (old.get("name"), old["content_sha256"]) == (new.get("name"), new.get("content_sha256"))
+        return (old.get("name"), old.get("sha256")) == (new.get("name"), new.get("sha256"))
+    return old == new
 
 
 def _inside(path: Path, root: Path) -> bool:

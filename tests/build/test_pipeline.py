@@ -199,6 +199,42 @@ def test_the_state_skips_only_unchanged_outputs_and_refuses_another_plan(tmp_pat
         BuildState(tmp_path / "bad.json", {})
 
 
+
+def test_a_longer_ladder_keeps_every_k_trained_before_and_redoes_the_stages_over_the_ladder(tmp_path):
+    out = tmp_path / "a.txt"
+    out.write_text("one")
+    state = BuildState(tmp_path / "build.json", {"scene": "x", "ks": [8]})
+    for stage in ("capture", "train_k8", "export_k8", "evaluate", "pick", "ship"):
+        state.finish(stage, tmp_path, [out])
+    grown = BuildState(tmp_path / "build.json", {"scene": "x", "ks": [8, 16]})
+    assert grown.ladder_change == ([8], [8, 16])
+    assert {s for s in ("capture", "train_k8", "export_k8") if grown.done(s, tmp_path)} == {"capture", "train_k8",
+                                                                                              "export_k8"}
+    assert [s for s in ("evaluate", "pick", "ship", "train_k16") if grown.done(s, tmp_path)] == []
+    grown.finish("train_k16", tmp_path, [out])
+    again = BuildState(tmp_path / "build.json", {"scene": "x", "ks": [8, 16]})
+    assert again.ladder_change is None and again.done("train_k16", tmp_path) is not None
+    with pytest.raises(DiviewerError, match="another plan .*ks, scene"):
+        BuildState(tmp_path / "build.json", {"scene": "y", "ks": [8]})
+
+
+def test_the_recipe_is_the_same_plan_when_only_its_comments_changed(tmp_path):
+    out = tmp_path / "a.txt"
+    out.write_text("one")
+    recipe = {"name": "cornell", "sha256": "bytes-1", "content_sha256": "values-1"}
+    BuildState(tmp_path / "build.json", {"recipe": recipe}).finish("capture", tmp_path, [out])
+    comment = BuildState(tmp_path / "build.json", {"recipe": {**recipe, "sha256": "bytes-2"}})
+    assert comment.done("capture", tmp_path) is not None
+    with pytest.raises(DiviewerError, match="another plan .*recipe"):
+        BuildState(tmp_path / "build.json", {"recipe": {**recipe, "content_sha256": "values-2"}})
+    # a state file written before the content was hashed: the same bytes are the same recipe, and it is upgraded
+    old = tmp_path / "old" / "build.json"
+    BuildState(old, {"recipe": {"name": "cornell", "sha256": "bytes-1"}}).finish("capture", tmp_path, [out])
+    with pytest.raises(DiviewerError, match="another plan .*recipe"):
+        BuildState(old, {"recipe": {**recipe, "sha256": "bytes-2"}})
+    upgraded = BuildState(old, {"recipe": recipe})
+    assert upgraded.done("capture", tmp_path) is not None and upgraded.data["plan"]["recipe"] == recipe
+
 needs_pipeline = pytest.mark.skipif(any(importlib.util.find_spec(m) is None for m in ("torch", "mitsuba", "onnx")),
                                     reason="the pipeline needs the train extra: pip install 'diviewer[train]'")
 

@@ -66,6 +66,15 @@ def test_the_default_is_the_best_measured_recipe_not_the_papers():
     assert cfg.recipe["sha256"] == load_recipe("cornell").sha256 and cfg.recipe["overrides"] == {}
 
 
+def test_the_content_hash_ignores_comments_and_the_description_and_follows_every_value(tmp_path):
+    text = (Path(load_recipe("cornell").path)).read_text()
+    shipped = load_recipe("cornell")
+    (tmp_path / "cornell.toml").write_text("# a new comment\n" + text.replace('description = "', 'description = "x'))
+    edited = load_recipe(tmp_path / "cornell.toml")
+    assert edited.sha256 != shipped.sha256 and edited.content_sha256() == shipped.content_sha256()
+    (tmp_path / "cornell.toml").write_text(text.replace("lr = 2e-4", "lr = 3e-4"))
+    assert load_recipe(tmp_path / "cornell.toml").content_sha256() != shipped.content_sha256()
+
 def test_options_override_single_fields_and_are_recorded(tmp_path):
     cfg = resolve_config(_parse(["--data", "d", "--out", "o", "--recipe", "paper", "--k", "64", "--lr", "1e-4",
                                  "--device", "cpu"]))
