@@ -84,12 +84,13 @@ class Recipe:
     """The ladder rule's tolerance in dB (tone-mapped PSNR on the capture's test split)."""
 
     def content_sha256(self) -> str:
-        """sha256 of what the recipe asks for (every table's values, the ladder and its tolerance), not of its
-        bytes: comments, layout and the description leave it as it is."""
+        """sha256 of what the recipe asks for (every table's values and the ladder's tolerance), not of its bytes:
+        comments, layout and the description leave it as it is, and so do the ladder's widths (a build keys them
+        on their own, `diviewer.build.state`: another ladder resumes a build)."""
         import json
 
         body = {"scene": self.scene, "capture": self.capture, "evalset": self.evalset, "train": self.train,
-                "export": self.export, "ladder": list(self.ladder), "tolerance_db": self.tolerance_db}
+                "export": self.export, "tolerance_db": self.tolerance_db}
         return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()
 
     def ks(self) -> tuple[int, ...]:

@@ -74,6 +74,12 @@ def test_the_content_hash_ignores_comments_and_the_description_and_follows_every
     assert edited.sha256 != shipped.sha256 and edited.content_sha256() == shipped.content_sha256()
     (tmp_path / "cornell.toml").write_text(text.replace("lr = 2e-4", "lr = 3e-4"))
     assert load_recipe(tmp_path / "cornell.toml").content_sha256() != shipped.content_sha256()
+    # the ladder's widths are the build's own key ("ks"): a longer ladder resumes a build, another tolerance does not
+    assert "K = [8, 16]" in text and "tolerance_db = 0.5" in text
+    (tmp_path / "cornell.toml").write_text(text.replace("K = [8, 16]", "K = [8, 16, 32]"))
+    assert load_recipe(tmp_path / "cornell.toml").content_sha256() == shipped.content_sha256()
+    (tmp_path / "cornell.toml").write_text(text.replace("tolerance_db = 0.5", "tolerance_db = 0.25"))
+    assert load_recipe(tmp_path / "cornell.toml").content_sha256() != shipped.content_sha256()
 
 def test_options_override_single_fields_and_are_recorded(tmp_path):
     cfg = resolve_config(_parse(["--data", "d", "--out", "o", "--recipe", "paper", "--k", "64", "--lr", "1e-4",
