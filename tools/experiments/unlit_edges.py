@@ -9,7 +9,8 @@ region too, else *edge*: there the path tracer's box-filtered pixel mixes lit an
 wall, where the G-buffer point-samples one of them. For each model, the evaluation set's second-seed image
 (``noise_floor``) and each split: the region's PSNR as `diviewer eval` reports it (the mean over frames of each
 frame's PSNR), and the PSNR pooled over all frames' pixels for the whole region, its interior and its edge, with
-the pixel counts. Measures only; `diviewer eval`'s region metrics are unchanged.
+the pixel counts, and each frame's PSNR, pixel count and radiance bias (``per_frame``). Measures only;
+`diviewer eval`'s region metrics are unchanged.
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ def score(ev: EvalFrames, images) -> dict:
     for split, shapes in ev.splits().items():
         idx = ev.present(split, [])
         acc = {name: {"frames": [], "meshes": [], "se": dict.fromkeys(("all", "interior", "edge"), 0.0),
-                      "n": dict.fromkeys(("all", "interior", "edge"), 0), "sums": {}} for name in images}
+                      "n": dict.fromkeys(("all", "interior", "edge"), 0), "sums": {}, "rows": []} for name in images}
         for i in idx:
             f = crop_frame(ev.load(i), shapes[0][0])
             m = (regions(f, ev.exposure) or {}).get("object_unlit")
@@ -72,6 +73,10 @@ def score(ev: EvalFrames, images) -> dict:
                 got = a["sums"].setdefault(a["meshes"][-1], [0.0, 0.0])
                 got[0] += float(out_i[m].sum())
                 got[1] += float(f["pt"][m].sum())
+                truth = float(f["pt"][m].sum())
+                a["rows"].append({"index": int(i), "mesh": a["meshes"][-1], "pixels": int(m.sum()),
+                                  "psnr": a["frames"][-1],
+                                  "bias": float(out_i[m].sum()) / truth - 1.0 if truth > 0 else None})
                 for part, pm in parts.items():
                     a["se"][part] += float(d2[pm].sum())
                     a["n"][part] += int(pm.sum())
@@ -82,7 +87,8 @@ def score(ev: EvalFrames, images) -> dict:
                              "by_mesh": {mesh: float(np.mean([v for v, k in zip(a["frames"], a["meshes"]) if k == mesh]))
                                          for mesh in sorted(set(a["meshes"]))},
                              "bias_by_mesh": {mesh: float(t[0] / t[1] - 1.0) if t[1] > 0 else None
-                                              for mesh, t in sorted(a["sums"].items())}}
+                                              for mesh, t in sorted(a["sums"].items())},
+                             "per_frame": a["rows"]}
                       for name, a in acc.items()}
     return out
 
