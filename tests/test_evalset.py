@@ -393,6 +393,36 @@ def test_the_shipped_compact_sets_fit_the_repository_budget():
 
 
 @pytest.mark.slow
+def test_the_unlit_regions_frames_score_as_eval_scores_the_region(evalset, tmp_path):
+    """tools/experiments/unlit_edges.py: the per-frame PSNRs of the object's unlit pixels average to eval's region
+    figure, interior and edge split the region's pixels, and a model of 1.5 x the direct light is black there
+    (bias -1 where the truth has light and the direct light none)."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/unlit_edges")
+    out, _ = evalset
+    model, _ = _models(tmp_path)
+    res = tool.main(["--model", str(model), "--evalset", str(out), "--out", str(tmp_path / "edges.json")])
+    assert json.loads((tmp_path / "edges.json").read_text()) == json.loads(json.dumps(res))
+    full = evaluate_evalset([model], out, log=quiet)
+    scored = 0
+    for split, rows in res["splits"].items():
+        r = rows[str(model)]
+        if not r["frames"]:
+            continue
+        scored += 1
+        frames = r["per_frame"]
+        assert len(frames) == r["frames"] and sum(f["pixels"] for f in frames) == r["pixels_all"]
+        assert r["pixels_interior"] + r["pixels_edge"] == r["pixels_all"]
+        assert np.mean([f["psnr"] for f in frames]) == pytest.approx(r["per_frame_mean"])
+        (w, h), *more = EvalFrames(out).splits()[split]  # the tool scores a split at its first shape
+        key = f"{split}_{w}x{h}" if more else split
+        region = full["splits"][key]["methods"]["twice"]["psnr_tm_object_unlit"]["mean"]
+        assert r["per_frame_mean"] == pytest.approx(region, abs=1e-3), split
+        assert all(f["bias"] is None or -1.0 <= f["bias"] < -0.5 for f in frames), frames
+    assert scored, "the tiny set has unlit object pixels in some split"
+
+@pytest.mark.slow
 def test_a_shaped_copy_scores_other_splits_at_window_shapes_from_the_same_frames(evalset, tmp_path):
     """tools/experiments/evalset_shapes.py: the held-out cameras at 22x16 and 28x16 from the stored 28-column frames,
     hard-linked; a split at a shape the set scores already scores the same; bad widths, splits and compact sets are

@@ -93,12 +93,12 @@ def score(ev: EvalFrames, images) -> dict:
     return out
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", type=Path, action="append", required=True)
     ap.add_argument("--evalset", type=Path, help="default: the shipped compact set of the first model's scene")
     ap.add_argument("--out", type=Path)
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     nets = {str(p): NeuralGI(p) for p in a.model}
     ev = EvalFrames(a.evalset or default_evalset(next(iter(nets.values())).meta["scene"]))
     every = [f["index"] for f in ev.frames]
@@ -129,6 +129,7 @@ def main() -> None:
                   + ", ".join(f"{k} {v:+.1%}" for k, v in r["bias_by_mesh"].items() if v is not None))
     if a.out:
         a.out.write_text(json.dumps(result, indent=1))
+    return result
 
 
 if __name__ == "__main__":
