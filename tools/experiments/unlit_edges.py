@@ -70,13 +70,12 @@ def score(ev: EvalFrames, images) -> dict:
                 a = acc[name]
                 a["frames"].append(_psnr(float(d2[m].sum()), int(m.sum())))
                 a["meshes"].append(centre_mesh(ev.entry(i)))
+                made, truth = float(out_i[m].sum()), float(f["pt"][m].sum())
                 got = a["sums"].setdefault(a["meshes"][-1], [0.0, 0.0])
-                got[0] += float(out_i[m].sum())
-                got[1] += float(f["pt"][m].sum())
-                truth = float(f["pt"][m].sum())
+                got[0] += made
+                got[1] += truth
                 a["rows"].append({"index": int(i), "mesh": a["meshes"][-1], "pixels": int(m.sum()),
-                                  "psnr": a["frames"][-1],
-                                  "bias": float(out_i[m].sum()) / truth - 1.0 if truth > 0 else None})
+                                  "psnr": a["frames"][-1], "bias": made / truth - 1.0 if truth > 0 else None})
                 for part, pm in parts.items():
                     a["se"][part] += float(d2[pm].sum())
                     a["n"][part] += int(pm.sum())
