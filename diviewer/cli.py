@@ -205,8 +205,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         return 0
     if args.checkpoint is None or args.out is None:
         raise DiviewerError("give a checkpoint and --out (or --info MODEL)", field="export")
-    export(args.checkpoint, args.out, ExportSettings(fp16=args.fp16, verify_frames=args.verify_frames,
-                                                     layout=args.layout))
+    export(args.checkpoint, args.out, ExportSettings(fp16=args.fp16, half_weights=args.half_weights,
+                                                     verify_frames=args.verify_frames, layout=args.layout))
     return 0
 
 
@@ -293,6 +293,8 @@ def _add_export_parser(sub) -> None:
     p.add_argument("checkpoint", type=Path, nargs="?", help="RUN/best.ckpt")
     p.add_argument("--out", type=Path, help="model.onnx (a model card model.json is written beside it)")
     p.add_argument("--fp16", action="store_true", help="float16 weights and generator (encoding stays float32)")
+    p.add_argument("--half-weights", action="store_true",
+                   help="float32 generator with its weights stored as float16: half the file, cast back on load")
     p.add_argument("--layout", choices=("NHWC", "NCHW"), default="NHWC",
                    help="the graph's input layout: NHWC as the GL pack writes it (default), or NCHW")
     p.add_argument("--verify-frames", type=int, default=4, help="frames compared with PyTorch before writing")

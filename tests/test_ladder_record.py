@@ -26,13 +26,19 @@ def _stat(v: float) -> dict:
     return {"mean": v, "std": 0.0}
 
 
-def _files(tmp: Path, psnr: dict[int, float]) -> tuple[Path, Path, dict[int, Path]]:
+def _files(tmp: Path, psnr: dict[int, float], test_psnr: dict[int, float] | None = None
+           ) -> tuple[Path, Path, dict[int, Path]]:
+    """Eval JSONs: the evaluation set's two splits at ``psnr`` + 1 and + 2 dB (2 and 6 frames), the test split at
+    ``test_psnr`` (default ``psnr``)."""
     models = {k: _model(tmp / f"k{k}.onnx", k) for k in psnr}
+    test_psnr = test_psnr or psnr
     q = lambda v: {"psnr": _stat(v + 5), "ssim": _stat(0.9), "psnr_tm": _stat(v), "ssim_tm": _stat(0.8)}
     test = {"results": [{"model": str(p), "frames": 10, "reference_spp": 64, "inference_ms": {"median": 1.0},
-                         "methods": {"neural": q(psnr[k]), "direct": q(15.0)}} for k, p in models.items()]}
-    ev = {"splits": {s: {"methods": {p.stem: {**q(psnr[k] + 1), "psnr_tm_object_unlit": _stat(20.0)}
-                                     for k, p in models.items()}} for s in ("moved_camera", "window_shapes")}}
+                         "methods": {"neural": q(test_psnr[k]), "direct": q(15.0)}} for k, p in models.items()]}
+    ev = {"reference_spp": 1024,
+          "splits": {s: {"frames": n, "methods": {p.stem: {**q(psnr[k] + d), "psnr_tm_object_unlit": _stat(20.0)}
+                                                  for k, p in models.items()}}
+                     for s, n, d in (("moved_camera", 2, 1.0), ("window_shapes", 6, 2.0))}}
     (tmp / "test.json").write_text(json.dumps(test))
     (tmp / "ev.json").write_text(json.dumps(ev))
     return tmp / "test.json", tmp / "ev.json", models
@@ -47,6 +53,16 @@ def test_the_rule_picks_the_smallest_sufficient_k(tmp_path, psnr, chosen):
     row = record["rows"][0]
     assert row["test_split"]["neural"]["psnr_tm"] == psnr[min(psnr)] and row["steps"] == 100 * min(psnr)
     assert row["evalset"]["moved_camera"]["psnr_tm_object_unlit"] == 20.0
+    assert row["evalset_psnr_tm"] == pytest.approx(psnr[min(psnr)] + (1 * 2 + 2 * 6) / 8)
+    assert record["measure"] == "evalset_psnr_tm" and "(8 frames scored, 1024 spp)" in record["rule"]
+
+
+def test_the_rule_reads_the_evaluation_set_where_a_noisy_test_split_reads_the_models_alike(tmp_path):
+    # cornell v3's ladder: 35.58 / 36.05 dB on the 64-spp test split (K = 8 within 0.5 dB), 0.74 dB apart at 1024 spp
+    tool = load_tool("ladder_record")
+    test, ev, models = _files(tmp_path, {8: 35.6, 16: 36.34}, test_psnr={8: 35.58, 16: 36.05})
+    record = tool.ladder("plane", json.loads(test.read_text()), json.loads(ev.read_text()), models, 0.5)
+    assert record["chosen_K"] == 16
 
 
 def test_ship_writes_the_record_and_the_card_in_both_places(tmp_path):

@@ -4,10 +4,11 @@ Usage: python tools/ladder_record.py --scene cornell --test-split TEST.json --ev
            --model K8=assets/models/cornell.onnx --model K16=runs/cornell/fly_eval/fly_k16_fp32.onnx
            [--tolerance 0.5] [--ship assets/models] [--note TEXT]
 
-TEST.json: `diviewer eval --data CAPTURE --split test --model ...` (the rule's figure: tone-mapped PSNR on the
-capture's test split); EVAL.json: `diviewer eval --model ...` on the evaluation set (recorded beside it). The rule
-is the bench's and `diviewer build`'s (`diviewer.bench.frontier.smallest_sufficient_k`): the smallest K within the
-tolerance of the best. With --ship, SCENE_ladder.json is written there and the shipped SCENE.onnx's card (its
+EVAL.json: `diviewer eval --model ...` on the evaluation set (the rule's figure: tone-mapped PSNR over every
+frame of the set, >= 1024 spp); TEST.json: `diviewer eval --data CAPTURE --split test --model ...` (the capture's
+test split, recorded beside it: its truth has the capture's spp, too noisy to part models near its floor; see
+docs/build.md). The rule is the bench's and `diviewer build`'s (`diviewer.bench.frontier.smallest_sufficient_k`
+on `diviewer.build.pipeline.evalset_psnr_tm`): the smallest K within the tolerance of the best. With --ship, SCENE_ladder.json is written there and the shipped SCENE.onnx's card (its
 JSON and its ONNX metadata alike, `diviewer.build.pipeline.write_model_card`) gets the verdict; the chosen K must
 be the one shipped (this tool records a ladder, it does not swap models).
 """
@@ -24,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 from diviewer import imageio  # noqa: E402
 from diviewer.bench.frontier import smallest_sufficient_k  # noqa: E402
-from diviewer.build.pipeline import QUALITY, write_model_card  # noqa: E402
+from diviewer.build.pipeline import PICK_MEASURE, QUALITY, evalset_psnr_tm, write_model_card  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 
 
@@ -48,11 +49,15 @@ def ladder(scene: str, test: dict, ev: dict, models: dict[int, Path], tol: float
                      "test_split": {"frames": t["frames"], "reference_spp": t.get("reference_spp"),
                                     "inference_ms": t.get("inference_ms"),
                                     **{m: {q: t["methods"][m][q]["mean"] for q in QUALITY} for m in ("neural", "direct")}},
-                     "evalset": {s: {q: r["methods"][key][q]["mean"] for q in (*QUALITY, "psnr_tm_object_unlit")
-                                     if q in r["methods"][key]} for s, r in ev["splits"].items()}})
-    pick = smallest_sufficient_k({r["K"]: r["test_split"]["neural"]["psnr_tm"] for r in rows}, tol)
-    return {"scene": scene, "chosen_K": pick["K"],
-            "rule": f"smallest K whose tone-mapped test-split PSNR is within {tol} dB of the best K's "
+                     "evalset": {s: {**{q: r["methods"][key][q]["mean"] for q in (*QUALITY, "psnr_tm_object_unlit")
+                                        if q in r["methods"][key]}, "frames": r["frames"]}
+                                 for s, r in ev["splits"].items()}})
+        rows[-1]["evalset_psnr_tm"] = evalset_psnr_tm(rows[-1]["evalset"])
+    pick = smallest_sufficient_k({r["K"]: r["evalset_psnr_tm"] for r in rows}, tol)
+    frames = sum(s["frames"] for s in rows[0]["evalset"].values())
+    return {"scene": scene, "chosen_K": pick["K"], "measure": PICK_MEASURE,
+            "rule": f"smallest K whose tone-mapped PSNR over the evaluation set ({frames} frames scored, "
+                    f"{ev.get('reference_spp', '?')} spp) is within {tol} dB of the best K's "
                     f"({pick['best_psnr']:.2f} dB)", "rows": rows}
 
 

@@ -8,9 +8,10 @@ that a field added to a dataclass works in recipes without this module changing:
 - ``[evalset]``: `diviewer.evalset.EvalSetSettings` (frames_per_split, spp, ladder, ...; width and height
   default to the capture's);
 - ``[train]``: `diviewer.train.config.TrainConfig`, every field but ``data``, ``out`` and ``recipe``;
-- ``[export]``: `diviewer.train.export.ExportSettings` (fp16, verify_frames);
+- ``[export]``: `diviewer.train.export.ExportSettings` (fp16, half_weights, verify_frames);
 - ``[ladder]``: ``K`` (the widths `diviewer build` trains) and ``tolerance_db`` (the smallest K within this
-  many dB of the best K's tone-mapped test PSNR is shipped; `diviewer.bench.frontier.smallest_sufficient_k`).
+  many dB of the best K's tone-mapped PSNR on the evaluation set is shipped;
+  `diviewer.bench.frontier.smallest_sufficient_k`, `diviewer.build.pipeline.PICK_MEASURE`).
 
 `diviewer train --recipe R` trains ``[train]``; `diviewer build` runs every table. A run records where its
 recipe came from (`record`): name, file, sha256 and the fields the command line changed; the checkpoint's
@@ -41,7 +42,7 @@ NOT_TRAIN = ("data", "out", "recipe")
 """TrainConfig fields a recipe cannot set: where this run reads and writes, and the recipe record itself."""
 
 LADDER_KEYS = {"K": "widths netG is trained at, one run each", "tolerance_db": "dB below the best K's tone-mapped "
-               "test PSNR that the shipped (smallest) K may be"}
+               "PSNR on the evaluation set that the shipped (smallest) K may be"}
 HEAD_KEYS = {"name": "the recipe's name (default: the file's stem)", "description": "one line: what it is",
              "scene": "the scene it was made for (diviewer build's default --scene)"}
 

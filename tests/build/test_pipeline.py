@@ -218,6 +218,37 @@ def test_a_longer_ladder_keeps_every_k_trained_before_and_redoes_the_stages_over
         BuildState(tmp_path / "build.json", {"scene": "y", "ks": [8]})
 
 
+def test_the_pick_weighs_each_split_of_the_evaluation_set_by_its_frames():
+    from diviewer.build.pipeline import evalset_psnr_tm
+
+    splits = {"a": {"psnr_tm": 40.0, "frames": 6}, "b": {"psnr_tm": 30.0, "frames": 2},
+              "refused": {"psnr_tm": None, "frames": 6}}
+    assert evalset_psnr_tm(splits) == pytest.approx((40 * 6 + 30 * 2) / 8)
+    with pytest.raises(DiviewerError, match="scored no frames"):
+        evalset_psnr_tm({"refused": {"psnr_tm": None, "frames": 6}})
+
+
+def test_a_pick_by_another_rule_or_a_ship_of_another_ladder_runs_again(tmp_path):
+    from types import SimpleNamespace
+
+    from diviewer.build.pipeline import PICK_MEASURE, _stale
+
+    (tmp_path / "ladder.json").write_text('{"chosen_K": 8}')
+    plan = SimpleNamespace(work=tmp_path, ship=tmp_path / "ship")
+    # a build made while the pick read the capture's 64-spp test split: picked again on the evaluation set
+    assert _stale("pick", {"result": {"chosen_K": 8}}, plan)
+    assert not _stale("pick", {"result": {"chosen_K": 8, "measure": PICK_MEASURE}}, plan)
+    from diviewer.data.dataset import sha256_file
+
+    shipped = {"result": {"to": str(plan.ship), "ladder_sha256": sha256_file(tmp_path / "ladder.json")}}
+    assert not _stale("ship", shipped, plan)
+    (tmp_path / "ladder.json").write_text('{"chosen_K": 16}')
+    assert _stale("ship", shipped, plan), "the pick changed: the ship follows it"
+    assert _stale("ship", {"result": {"to": str(plan.ship)}}, plan), "a ship recorded before its ladder was"
+    assert _stale("ship", shipped, SimpleNamespace(work=tmp_path, ship=tmp_path / "elsewhere"))
+    assert not _stale("capture", {"result": {}}, plan)
+
+
 def test_the_recipe_is_the_same_plan_when_only_its_comments_changed(tmp_path):
     out = tmp_path / "a.txt"
     out.write_text("one")
@@ -294,6 +325,10 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
         # the scene camera's splits and, as every evaluation set has them now, 4:3 and 16:9 at the model's rows
         assert set(r["evalset"]) == {"unseen_configs", "unseen_objects", "window_shapes_42x32", "window_shapes_56x32"}
         assert r["steps"] == 2
+    # the pick reads the evaluation set's truth, every frame of it, as the bench does
+    by_k = {r["K"]: r["evalset_psnr_tm"] for r in ladder["rows"]}
+    assert ladder["measure"] == "evalset_psnr_tm" and "over the evaluation set" in ladder["rule"]
+    assert ladder["chosen_K"] == min(k for k, v in by_k.items() if v >= max(by_k.values()) - 0.5)
 
     assert main(argv) == 0  # nothing left to do: every stage skipped after its outputs are checked
     out = capsys.readouterr().out

@@ -113,6 +113,38 @@ def test_fp16_export_is_finite_and_close(checkpoints, tmp_path):
 
 
 @pytest.mark.slow
+def test_half_weights_store_float16_and_run_float32_as_close_as_the_float32_file(checkpoints, tmp_path):
+    """--half-weights: the file holds float16 weight tensors (half the bytes), every one cast back to float32 as
+    onnxruntime loads it, so the graph's arithmetic is float32 and the output is the float32 file's to within
+    the weights' rounding; an fp16 export with half weights is refused."""
+    import onnx
+    from onnx import TensorProto
+
+    fp32, half = tmp_path / "f.onnx", tmp_path / "h.onnx"
+    export(checkpoints["indirect"], fp32, log=quiet)
+    card = export(checkpoints["indirect"], half, ExportSettings(half_weights=True), log=quiet)
+    assert card["precision"] == "fp32" and card["weights"] == "fp16"
+    assert json.loads(fp32.with_suffix(".json").read_text())["weights"] == "fp32"
+    assert half.stat().st_size < 0.6 * fp32.stat().st_size, "the weights are most of the file: about half"
+    graph = onnx.load(str(half)).graph
+    big = [i for i in graph.initializer if np.prod(i.dims) >= 64]
+    assert big and all(i.data_type == TensorProto.FLOAT16 for i in big)
+    casts = {n.input[0] for n in graph.node if n.op_type == "Cast"}
+    assert {i.name for i in big} <= casts, "each float16 weight is cast back to float32 in the graph"
+    v = card["verification"]
+    assert v["max_rel_to_peak"] <= v["tolerance_rel_to_peak"] and v["psnr_db"] > 70.0, v
+    assert v["zero_light_max"] == 0.0, "linear in the light as the float32 file is"
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.uniform(1, 5, (1, 32, 48, 1)), rng.uniform(-1, 1, (1, 32, 48, 3)),
+                        rng.uniform(0, 1, (1, 32, 48, 3)), rng.uniform(0, 3, (1, 32, 48, 3))], -1).astype(np.float32)
+    a, b = NeuralGI(fp32).run(x, light_scale=1.3), NeuralGI(half).run(x, light_scale=1.3)
+    assert b.dtype == np.float32 and np.abs(b - a).max() <= 1e-2 * np.abs(a).max()
+    assert not np.array_equal(a, b), "the weights were rounded: not the float32 file by another name"
+    with pytest.raises(DiviewerError, match="half_weights"):
+        export(checkpoints["indirect"], tmp_path / "x.onnx", ExportSettings(fp16=True, half_weights=True), log=quiet)
+
+
+@pytest.mark.slow
 def test_export_twice_is_byte_identical(checkpoints, tmp_path):
     a, b = tmp_path / "a.onnx", tmp_path / "b.onnx"
     export(checkpoints["full"], a, log=quiet)
