@@ -32,6 +32,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.errors import DiviewerError
 from diviewer.outputs import dumps, staged
+from diviewer.runtime import weights_to_float32
 
 REBUILD_TOLERANCE = 1e-5
 """The rebuilt generator must reproduce the old float32 graph to this fraction of the peak radiance."""
@@ -59,6 +60,7 @@ def rebuild_generator(model, meta: dict):
     netG = UnetGenerator(in_channels=INPUT_CHANNEL_COUNT + (sum(n for _, n in WORLD_CHANNELS) if world else 0),
                          K=int(meta["K"]), levels=int(meta["levels"]), upsample=meta.get("upsample", "transpose"),
                          norm="batch").eval()
+    model = weights_to_float32(model)  # weights stored as float16 (export --half-weights): as initializers again
     inits = _initializers(model)
     nodes = list(model.graph.node)
     consumers = {}

@@ -24,12 +24,12 @@ import numpy as np
 from diviewer import imageio
 from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
-from diviewer.bench.onnx_tools import store_weights_half
 from diviewer.metrics import psnr
 from diviewer.outputs import check_output_file, dumps, staged
 from diviewer.padding import pad_camera_params, pad_nhwc
 from diviewer.provenance import versions
-from diviewer.runtime import CAMERA_NAME, INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
+from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME,
+                              store_weights_half)
 from diviewer.train.checks import FP16_TOLERANCE, refuse_broken
 
 OPSET = 17

@@ -337,40 +337,6 @@ def test_int8_quantisation_calibrates_an_encoding_3_model_with_its_cameras(tmp_p
     assert np.abs(y8 - y32).mean() < 0.1 * np.abs(y32).mean()
 
 
-def test_weights_stored_half_fold_back_to_the_float32_graph_with_the_rounded_weights():
-    """export --half-weights stores each large float32 weight as float16 behind a Cast; weights_to_float32 makes
-    the graph a float32 export writes again (each weight an initializer, no Cast left), with the rounded values,
-    and onnxruntime runs both to the same output."""
-    onnx = pytest.importorskip("onnx")
-    import onnxruntime as ort
-    from onnx import TensorProto, numpy_helper
-
-    from diviewer.bench.onnx_tools import HALF_WEIGHTS_MIN_SIZE, store_weights_half, untrained_generator, weights_to_float32
-    from diviewer.scene import load_scene
-
-    src = untrained_generator(16, 2, load_scene("cornell"), 32)
-    before = {i.name: numpy_helper.to_array(i) for i in src.graph.initializer}
-    half = onnx.ModelProto()
-    half.CopyFrom(src)
-    n = store_weights_half(half)
-    big = [k for k, a in before.items() if a.dtype == np.float32 and a.size >= HALF_WEIGHTS_MIN_SIZE]
-    assert n == len(big) > 0
-    assert half.ByteSize() < 0.6 * src.ByteSize()
-    onnx.checker.check_model(half)
-    plain = weights_to_float32(half)
-    assert len(plain.graph.node) == len(src.graph.node) and not any(
-        i.data_type == TensorProto.FLOAT16 for i in plain.graph.initializer)
-    after = {i.name: numpy_helper.to_array(i) for i in plain.graph.initializer}
-    assert set(after) == set(before)
-    for k in big:
-        np.testing.assert_array_equal(after[k], before[k].astype(np.float16).astype(np.float32))
-    assert weights_to_float32(src).SerializeToString() == src.SerializeToString(), "nothing to fold: the same graph"
-    feed = {src.graph.input[0].name: random_buffers(np.random.default_rng(2), 32, 32, batch=1)}
-    a, b = (ort.InferenceSession(m.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, feed)[0]
-            for m in (half, plain))
-    np.testing.assert_array_equal(a, b)
-
-
 def test_fp16_twin_of_a_lean_export_halves_the_generator_only():
     """bench's fp16 twin of the shipped fp32 model: the generator in float16 between one Cast in and one out,
     the encoding and its NaN guard untouched (onnxruntime's converter mistyped the guard's If and the file did
