@@ -13,7 +13,10 @@ The model contract (written by ``diviewer export``, read here; torch-free):
 - one output ``radiance``: float32 (N, H, W, 3) linear radiance of the final image (for a model of
   the ``indirect`` target the exact direct light is already added inside the graph);
 - the encoding and decoding live inside the graph; the metadata key ``diviewer`` holds a JSON
-  object describing the model (see REQUIRED_META).
+  object describing the model (see REQUIRED_META);
+- the weights may be stored as float16 in a float32 graph (metadata ``weights`` "fp16", ``export
+  --half-weights``): each behind a Cast to float32 that onnxruntime folds at load (`store_weights_half`;
+  `weights_to_float32` undoes it for tools that read weights as initializers).
 """
 
 from __future__ import annotations
@@ -365,10 +368,6 @@ def pack_buffers(frame: dict[str, np.ndarray]) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate(parts, axis=-1), dtype=np.float32)
 
 
-__all__ = ["NeuralGI", "pack_buffers", "read_metadata", "check_compatible", "choose_providers", "INPUT_NAME",
-           "LIGHT_SCALE_NAME", "OUTPUT_NAME", "META_KEY", "OUTPUT_CHANNELS", "store_weights_half", "weights_to_float32"]
-
-
 HALF_WEIGHTS_MIN_SIZE = 64
 """Weight tensors of fewer elements stay float32 in ``store_weights_half`` (biases, scales: nothing to save)."""
 
@@ -431,3 +430,7 @@ def weights_to_float32(model):
     del g.initializer[:]
     g.initializer.extend(keep_inits)
     return m
+
+
+__all__ = ["NeuralGI", "pack_buffers", "read_metadata", "check_compatible", "choose_providers", "INPUT_NAME",
+           "LIGHT_SCALE_NAME", "OUTPUT_NAME", "META_KEY", "OUTPUT_CHANNELS", "store_weights_half", "weights_to_float32"]

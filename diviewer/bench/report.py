@@ -22,15 +22,9 @@ def environment(ctx, gl_timing: str) -> dict:
     """CPU, GPU (GL renderer), onnxruntime providers, versions, and the load while it ran."""
     import onnxruntime as ort
 
-    from diviewer.provenance import versions
+    from diviewer.provenance import cpu_model, versions
 
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
-    except OSError:
-        pass
-    return {"cpu": cpu, "cpu_count": os.cpu_count(), "platform": platform.platform(),
+    return {"cpu": cpu_model(), "cpu_count": os.cpu_count(), "platform": platform.platform(),
             "load_average_at_start": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
             "gl_renderer": ctx.info["GL_RENDERER"], "gl_vendor": ctx.info["GL_VENDOR"],
             "gl_version": ctx.info["GL_VERSION"],

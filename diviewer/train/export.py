@@ -36,7 +36,7 @@ OPSET = 17
 FP32_TOLERANCE = 1e-4
 """fp32 export fails if max |onnx - torch| exceeds this fraction of the reference's peak radiance."""
 HALF_WEIGHTS_TOLERANCE = FP16_TOLERANCE
-"""The same for fp32 with ``half_weights``: float16's rounding of every weight (2**-12 of it at most) through
+"""The same for fp32 with ``half_weights``: float16's rounding of every weight (2**-11 of it at most) through
 the network. Measured on cornell v3 K=16 (4 capture frames): 2.0e-3 of peak at the worst pixel, a mean
 |difference| of 6e-6 (PSNR 108 dB against PyTorch); its scores on the compact evaluation set are the float32
 file's to 0.01 dB. No tighter than a float16 graph's, whose every product is rounded so."""

@@ -56,17 +56,10 @@ def time_models(paths: list[Path], sizes: list[int], rounds: int, runs: int) -> 
 def machine() -> dict:
     """The CPU, its cores, the load as the timing starts, and the versions (onnxruntime's above all)."""
     import os
-    import platform
 
-    from diviewer.provenance import versions
+    from diviewer.provenance import cpu_model, versions
 
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
-    except OSError:
-        pass
-    return {"cpu": cpu, "cpu_count": os.cpu_count(), "load_average_at_start": list(os.getloadavg()),
+    return {"cpu": cpu_model(), "cpu_count": os.cpu_count(), "load_average_at_start": list(os.getloadavg()),
             "versions": versions()}
 
 
