@@ -31,11 +31,13 @@ def plan_key(plan: Plan) -> dict[str, Any]:
     import dataclasses
 
     from diviewer.scene.loader import resolve_scene_path
+    from diviewer.train.recipe import export_settings
 
     return json.loads(json.dumps({
         "scene": str(resolve_scene_path(plan.scene).resolve()),
         "recipe": {"name": plan.recipe.name, "sha256": plan.recipe.sha256,
-                   "content_sha256": plan.recipe.content_sha256()},
+                   "content_sha256": plan.recipe.content_sha256(), "model_sha256": plan.recipe.model_sha256()},
+        "export": dataclasses.asdict(export_settings(plan.recipe)),
         "capture": dataclasses.asdict(plan.capture), "evalset": dataclasses.asdict(plan.evalset),
         **({"given_evalset": str(plan.given_evalset.resolve())} if plan.given_evalset is not None else {}),
         "train": {k: v for k, v in plan.train.items() if k not in RUN_ONLY}, "ks": list(plan.ks)}, default=str))
@@ -113,11 +115,15 @@ def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> d
     for line in [*describe(plan), *measured_pace(plan)]:
         log(line)
     plan.work.mkdir(parents=True, exist_ok=True)
-    state = BuildState(plan.work / STATE_FILE, plan_key(plan))
+    state = BuildState(plan.work / STATE_FILE, plan_key(plan), save_upgrade=True)
     if state.ladder_change is not None:
         was, now = state.ladder_change
         log(f"the K ladder changed from {', '.join(map(str, was))} to {', '.join(map(str, now))}: every K trained "
             f"before keeps its run; the evaluation, the pick and the ship run again over the new ladder")
+    if state.export_change is not None:
+        was, now = state.export_change
+        log(f"the recipe's [export] changed ({', '.join(f'{k} {was.get(k)} -> {now.get(k)}' for k in sorted(now) if was.get(k) != now.get(k))}): "
+            f"every K trained keeps its run; the export, the evaluation, the pick and the ship run again")
     bar = progress_bar(max(1, round(plan.seconds)), "build (estimated seconds of work)", "s")
     try:
         for i, stage in enumerate(plan.stages, 1):

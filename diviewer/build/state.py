@@ -21,16 +21,23 @@ FORMAT = "diviewer-build"
 VERSION = 1
 LADDER_STAGES = ("evaluate", "pick", "ship")
 """The stages that read every K of the ladder: run again when the ladder changes (the others keep)."""
+REPLANNABLE = ("ks", "export")
+"""Plan fields a finished build may change: the K ladder (`LADDER_STAGES` run again) and the export settings (every
+``export_kK`` and `LADDER_STAGES` run again); anything else is another build."""
 
 
 class BuildState:
     """The stages a build in one work folder has finished, keyed by the plan they belong to."""
 
-    def __init__(self, path: Path, plan_key: dict[str, Any]):
+    def __init__(self, path: Path, plan_key: dict[str, Any], save_upgrade: bool = False):
+        """Open (or start) the state of ``path`` for ``plan_key``. ``save_upgrade``: where the file's key is of
+        the same plan written by an older version, write this version's key at once (a dry run leaves it)."""
         self.path = Path(path)
         self.data: dict[str, Any] = {"format": FORMAT, "version": VERSION, "plan": plan_key, "stages": {}}
         self.ladder_change: tuple[list[int], list[int]] | None = None
         """(old Ks, new Ks) where this build's ladder differs from the one the work folder was built with."""
+        self.export_change: tuple[dict, dict] | None = None
+        """(old, new) export settings where the recipe's ``[export]`` differs from the one the folder was built with."""
         if self.path.is_file():
             try:
                 old = json.loads(self.path.read_text())
@@ -42,17 +49,24 @@ class BuildState:
             old_plan = old.get("plan", {})
             changed = sorted(k for k in set(plan_key) | set(old_plan)
                              if not _same(k, old_plan.get(k), plan_key.get(k)))
-            if changed == ["ks"]:
-                # the same capture, evaluation set and training settings with more (or fewer) widths: every
-                # finished K keeps its training and export, and the stages over the whole ladder run again
-                self.ladder_change = (list(old_plan["ks"]), list(plan_key["ks"]))
-                old["stages"] = {name: rec for name, rec in old.get("stages", {}).items() if name not in LADDER_STAGES}
+            if changed and set(changed) <= set(REPLANNABLE):
+                # the same capture, evaluation set and training settings with more (or fewer) widths, or exported
+                # otherwise: every finished K keeps its training, and what reads the exports runs again
+                if "ks" in changed:
+                    self.ladder_change = (list(old_plan["ks"]), list(plan_key["ks"]))
+                if "export" in changed:
+                    self.export_change = (old_plan["export"], plan_key["export"])
+                old["stages"] = {name: rec for name, rec in old.get("stages", {}).items()
+                                 if name not in LADDER_STAGES and not ("export" in changed and name.startswith("export_k"))}
             elif changed:
                 raise DiviewerError(f"this work folder holds a build of another plan (differs in {', '.join(changed)});"
                                     f" run the same command as before to resume it, or give another --work",
                                     path=self.path, field="plan")
+            upgraded = old["plan"] != plan_key
             old["plan"] = plan_key  # the same plan; its key as this version writes it (the recipe's bytes may differ)
             self.data = old
+            if upgraded and save_upgrade:  # this version's key lets the next run change what REPLANNABLE allows
+                self.save()
 
     def done(self, stage: str, root: Path) -> dict[str, Any] | None:
         """The stage's record if it finished and its outputs are still what it wrote, else None."""
@@ -81,13 +95,18 @@ class BuildState:
 
 
 def _same(field: str, old: Any, new: Any) -> bool:
-    """Whether a field of the plan key is the same plan. The recipe is the same when what it asks for is (its
-    content's sha256: an edited comment is the same recipe); a key written before the content hash was recorded
-    matches on the file's bytes, as it did then."""
+    """Whether a field of the plan key is the same plan. The recipe is the same when what it asks for is: the
+    sha256 of its values without ``[export]`` (an edited comment is the same recipe, and the export settings are
+    the field ``export``). A key written before that compares the values with ``[export]``, and one older still
+    the file's bytes, as each did then."""
     if field == "recipe" and isinstance(old, dict) and isinstance(new, dict):
+        if "model_sha256" in old:  # the export settings are a field of their own
+            return (old.get("name"), old["model_sha256"]) == (new.get("name"), new.get("model_sha256"))
         if "content_sha256" in old:
             return (old.get("name"), old["content_sha256"]) == (new.get("name"), new.get("content_sha256"))
         return (old.get("name"), old.get("sha256")) == (new.get("name"), new.get("sha256"))
+    if field == "export" and old is None:
+        return True  # a key written before the export settings were keyed apart: its recipe hash covered them
     return old == new
 
 

@@ -88,10 +88,19 @@ class Recipe:
         """sha256 of what the recipe asks for (every table's values and the ladder's tolerance), not of its bytes:
         comments, layout and the description leave it as it is, and so do the ladder's widths (a build keys them
         on their own, `diviewer.build.state`: another ladder resumes a build)."""
+        return self._values_sha256(export=True)
+
+    def model_sha256(self) -> str:
+        """`content_sha256` without the ``[export]`` table: what the capture, the evaluation set, the training and
+        the pick ask for. A build keys on it, and on the export settings apart (`diviewer.build.state`): an edited
+        ``[export]`` exports the trained Ks again and trains nothing."""
+        return self._values_sha256(export=False)
+
+    def _values_sha256(self, export: bool) -> str:
         import json
 
         body = {"scene": self.scene, "capture": self.capture, "evalset": self.evalset, "train": self.train,
-                "export": self.export, "tolerance_db": self.tolerance_db}
+                **({"export": self.export} if export else {}), "tolerance_db": self.tolerance_db}
         return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()
 
     def ks(self) -> tuple[int, ...]:

@@ -249,6 +249,48 @@ def test_a_pick_by_another_rule_or_a_ship_of_another_ladder_runs_again(tmp_path)
     assert not _stale("capture", {"result": {}}, plan)
 
 
+def test_an_edited_export_table_exports_again_and_keeps_every_training(tmp_path):
+    out = tmp_path / "a.txt"
+    out.write_text("one")
+    recipe = {"name": "sponza", "sha256": "bytes-1", "content_sha256": "with-export-1", "model_sha256": "model-1"}
+    key = {"recipe": recipe, "export": {"fp16": False, "half_weights": False}, "ks": [8, 16]}
+    state = BuildState(tmp_path / "build.json", key)
+    for stage in ("capture", "train_k8", "export_k8", "train_k16", "export_k16", "evaluate", "pick", "ship"):
+        state.finish(stage, tmp_path, [out])
+    edited = {**key, "recipe": {**recipe, "sha256": "bytes-2", "content_sha256": "with-export-2"},
+              "export": {"fp16": False, "half_weights": True}}
+    again = BuildState(tmp_path / "build.json", edited)
+    assert again.export_change == (key["export"], edited["export"]) and again.ladder_change is None
+    kept = ("capture", "train_k8", "train_k16", "export_k8", "export_k16", "evaluate", "pick", "ship")
+    assert [s for s in kept if again.done(s, tmp_path)] == ["capture", "train_k8", "train_k16"]
+    with pytest.raises(DiviewerError, match="another plan .*recipe"):  # what the model is trained on is another build
+        BuildState(tmp_path / "build.json", {**edited, "recipe": {**edited["recipe"], "model_sha256": "model-2"}})
+
+
+def test_a_key_of_the_version_before_is_the_same_plan_and_is_upgraded_when_a_build_runs(tmp_path):
+    """A state file written before the export settings were keyed apart (its recipe hash covers [export]): the same
+    recipe is the same plan; a running build writes this version's key at once (a dry run does not), so that the
+    next run may edit [export]. While the old key stands, an edited [export] is another plan, as it was."""
+    out = tmp_path / "a.txt"
+    out.write_text("one")
+    old_key = {"recipe": {"name": "sponza", "sha256": "bytes-1", "content_sha256": "with-export-1"}, "ks": [8]}
+    BuildState(tmp_path / "build.json", old_key).finish("capture", tmp_path, [out])
+    new_key = {"recipe": {**old_key["recipe"], "model_sha256": "model-1"}, "export": {"half_weights": False},
+               "ks": [8]}
+    edited = {"recipe": {**new_key["recipe"], "content_sha256": "with-export-2"}, "export": {"half_weights": True},
+              "ks": [8]}
+    with pytest.raises(DiviewerError, match="another plan .*recipe"):
+        BuildState(tmp_path / "build.json", edited)
+    dry = BuildState(tmp_path / "build.json", new_key)
+    assert dry.done("capture", tmp_path) is not None
+    assert json.loads((tmp_path / "build.json").read_text())["plan"] == old_key, "a dry run writes nothing"
+    BuildState(tmp_path / "build.json", new_key, save_upgrade=True)
+    assert json.loads((tmp_path / "build.json").read_text())["plan"] == new_key
+    again = BuildState(tmp_path / "build.json", edited)
+    assert again.export_change == ({"half_weights": False}, {"half_weights": True})
+    assert again.done("capture", tmp_path) is not None
+
+
 def test_the_recipe_is_the_same_plan_when_only_its_comments_changed(tmp_path):
     out = tmp_path / "a.txt"
     out.write_text("one")
@@ -333,6 +375,16 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
     assert main(argv) == 0  # nothing left to do: every stage skipped after its outputs are checked
     out = capsys.readouterr().out
     assert out.count("done before, outputs checked; skipped") == 10
+
+    # the recipe's [export] edited: each K exported again with its weights stored as float16, nothing trained
+    ckpts = {p: p.stat().st_mtime_ns for p in work.glob("train_k*/best.ckpt")}
+    recipe.write_text(TINY_RECIPE.replace("fp16 = false\n", "fp16 = false\nhalf_weights = true\n"))
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "the recipe's [export] changed (half_weights False -> True)" in out
+    assert "train_k2: done before" in out and "train_k4: done before" in out
+    assert {p: p.stat().st_mtime_ns for p in work.glob("train_k*/best.ckpt")} == ckpts
+    assert json.loads((ship / "tiny.json").read_text())["weights"] == "fp16"
 
     # A second build scored on the first's evaluation set (--evalset): checked, never rendered into its own folder;
     # the card's rebuild command names it. One of another scene file is refused before any stage runs.
