@@ -122,8 +122,9 @@ def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> d
             f"before keeps its run; the evaluation, the pick and the ship run again over the new ladder")
     if state.export_change is not None:
         was, now = state.export_change
-        log(f"the recipe's [export] changed ({', '.join(f'{k} {was.get(k)} -> {now.get(k)}' for k in sorted(now) if was.get(k) != now.get(k))}): "
-            f"every K trained keeps its run; the export, the evaluation, the pick and the ship run again")
+        edits = ", ".join(f"{k} {was.get(k)} -> {now.get(k)}" for k in sorted(now) if was.get(k) != now.get(k))
+        log(f"the recipe's [export] changed ({edits}): every K trained keeps its run; the export, the evaluation, "
+            f"the pick and the ship run again")
     bar = progress_bar(max(1, round(plan.seconds)), "build (estimated seconds of work)", "s")
     try:
         for i, stage in enumerate(plan.stages, 1):
@@ -302,8 +303,8 @@ def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     out = plan.work / "ladder.json"
     imageio.write_text(out, json.dumps(record, indent=1) + "\n")
     for r in rows:
-        log(f"  K={r['K']:<4} evaluation set PSNR tm {r['evalset_psnr_tm']:.2f} dB (test split, "
-            f"{plan.capture.spp} spp: {r['test_split']['neural']['psnr_tm']:.2f}){'  <- chosen' if r['K'] == pick['K'] else ''}")
+        log(f"  K={r['K']:<4} evaluation set PSNR tm {r['evalset_psnr_tm']:.2f} dB (test split, {plan.capture.spp} "
+            f"spp: {r['test_split']['neural']['psnr_tm']:.2f}){'  <- chosen' if r['K'] == pick['K'] else ''}")
     return [out], record
 
 

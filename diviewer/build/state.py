@@ -56,8 +56,8 @@ class BuildState:
                     self.ladder_change = (list(old_plan["ks"]), list(plan_key["ks"]))
                 if "export" in changed:
                     self.export_change = (old_plan["export"], plan_key["export"])
-                old["stages"] = {name: rec for name, rec in old.get("stages", {}).items()
-                                 if name not in LADDER_STAGES and not ("export" in changed and name.startswith("export_k"))}
+                redo = lambda name: name in LADDER_STAGES or ("export" in changed and name.startswith("export_k"))
+                old["stages"] = {name: rec for name, rec in old.get("stages", {}).items() if not redo(name)}
             elif changed:
                 raise DiviewerError(f"this work folder holds a build of another plan (differs in {', '.join(changed)});"
                                     f" run the same command as before to resume it, or give another --work",
