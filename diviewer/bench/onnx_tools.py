@@ -289,14 +289,9 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
 
     from diviewer.padding import pad_camera_params, pad_nhwc
 
-    source = onnx.load(str(fp32_path))
-    meta = get_meta(source)
-    plain = weights_to_float32(source)
-    unfolded = None
-    if len(plain.graph.node) != len(source.graph.node):
-        # float16-stored weights (export --half-weights): the quantiser reads each weight as an initializer
-        fp32_path = unfolded = out_path.with_name(f"{out_path.stem}.fp32_weights.onnx")
-        onnx.save(plain, str(unfolded))
+    # float16-stored weights (export --half-weights) folded back: the quantiser reads each weight as an initializer
+    plain = weights_to_float32(onnx.load(str(fp32_path)))
+    meta = get_meta(plain)
     version = int(meta.get("encoding", {}).get("version", 1))
     multiple = int(meta.get("multiple", 1))  # padded as the runtime pads (a 228x128 model runs at 256x128)
 
@@ -320,15 +315,13 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
     level = root.level
     root.setLevel(logging.ERROR)  # quantize_static's advice to pre-process, at every call
     try:
-        quantize_static(str(fp32_path), str(out_path), Reader(), quant_format=QuantFormat.QDQ,
+        quantize_static(plain, str(out_path), Reader(), quant_format=QuantFormat.QDQ,
                         op_types_to_quantize=["Conv", "ConvTranspose"], per_channel=True,
                         activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
                         **({} if percentile is None else {"calibrate_method": CalibrationMethod.Percentile,
                                                           "extra_options": {"CalibPercentile": float(percentile)}}))
     finally:
         root.setLevel(level)
-        if unfolded is not None:
-            unfolded.unlink(missing_ok=True)
     m = onnx.load(str(out_path))
     set_meta(m, {**meta, "precision": "int8", "quantization": {"format": "QDQ", "ops": ["Conv", "ConvTranspose"],
                                                                "calibration_frames": len(calibration),

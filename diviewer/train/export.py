@@ -60,6 +60,11 @@ class ExportSettings:
     the ten input channels inside the graph: measured within noise of "NCHW" on the 2-core machine, K=8 at
     128x128), or "NCHW" for a caller that packs channel-first (the runtime transposes NHWC buffers for it)."""
 
+    def __post_init__(self):
+        if self.fp16 and self.half_weights:
+            raise DiviewerError("half_weights stores float32 weights as float16; an fp16 export's are float16 "
+                                "already: give one of the two", field="half_weights")
+
 
 def _torch():
     try:
@@ -208,9 +213,6 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     netG = make_netG()
     ref_module = gi_module(netG, encoding, meta, lean=False)
     # broken weights, or an output that is constant or non-finite: refused, naming the checkpoint
-    if settings.fp16 and settings.half_weights:
-        raise DiviewerError("half_weights stores float32 weights as float16; an fp16 export's are float16 already: "
-                            "give one of the two", field="half_weights")
     reference = refuse_broken(netG, ref_module, frames, settings.fp16 or settings.half_weights,
                               weights_from or out, scales, cams)
     ext = extreme_frame(frames[0])[None]
