@@ -82,7 +82,7 @@ class Recipe:
     ladder: tuple[int, ...] = ()
     """Widths K `diviewer build` trains (empty: the [train] K alone)."""
     tolerance_db: float = 0.5
-    """The ladder rule's tolerance in dB (tone-mapped PSNR on the capture's test split)."""
+    """The ladder rule's tolerance in dB (tone-mapped PSNR on the evaluation set's truth, as `diviewer bench`)."""
 
     def content_sha256(self) -> str:
         """sha256 of what the recipe asks for (every table's values and the ladder's tolerance), not of its bytes:
