@@ -803,3 +803,20 @@ def test_encoding_2_training_needs_light(tmp_path):
     with pytest.raises(DiviewerError, match="no-light-scale"):
         train(tiny(tmp_path / "dark", tmp_path / "run"), log=quiet)
     assert ds is not None
+
+
+def test_train_speed_times_each_variant_on_the_trainers_batches(data, tmp_path):
+    """tools/experiments/train_speed.py: the trainer's own steps timed per variant, warm-up apart; an unknown
+    variant is refused."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/train_speed")
+    cfg = tiny(data, tmp_path / "run")
+    out = tool.measure(cfg, steps=1, variants=["eager", "channels_last", "eager"], warmup=1, log=quiet)
+    assert [v["variant"] for v in out] == ["eager", "channels_last", "eager"]  # rounds, in turn
+    for v in out:
+        assert v["steps_timed"] == 1 and len(v["warmup_s"]) == 1 and v["median_ms"] > 0
+        assert [(s[0], *s[2:]) for s in v["shapes"]] == [(4, RES, RES)]  # the tiny run's batch, whole frames
+    assert not (tmp_path / "run" / "last.ckpt").exists()  # measured in memory: no checkpoint written
+    with pytest.raises(ValueError, match="unknown variant"):
+        tool.measure(cfg, steps=1, variants=["eager", "fast"], log=quiet)
