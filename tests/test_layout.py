@@ -6,6 +6,7 @@ are deliberately lazy."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -238,3 +239,45 @@ def test_tests_mirror_the_package():
         if not ((folder / f"{module}.py").is_file() or tool):
             strays.append(f"tests/{rel.as_posix()}: no {folder.relative_to(root).as_posix()}/{module}.py")
     assert not strays, "move each test file beside the module it tests:\n" + "\n".join(strays)
+
+
+ROOT = PACKAGE.parent
+LINK = re.compile(r"\]\(([^)\s#]*)(#[^)\s]*)?\)")
+
+
+def _slugs(markdown: str) -> set[str]:
+    """The anchors GitHub gives a page's headings: lower case, punctuation dropped, spaces to hyphens; a heading
+    seen before gets -1, -2, ..."""
+    seen: dict[str, int] = {}
+    out = set()
+    for heading in re.findall(r"^#{1,6} (.*?)\s*#*$", re.sub(r"```.*?```", "", markdown, flags=re.S), re.M):
+        slug = re.sub(r"[^\w\- ]", "", heading.lower()).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        out.add(slug if n == 0 else f"{slug}-{n}")
+    return out
+
+
+def test_relative_links_in_the_docs_reach_a_file_and_a_heading():
+    """Every relative link in README.md, docs/, tools/ and assets/ names a file of the tree, and every #anchor into
+    a Markdown page one of its headings (sections get renamed; their links must follow)."""
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "tools").rglob("*.md")),
+             *sorted((ROOT / "assets").rglob("*.md"))]
+    broken = []
+    for page in pages:
+        text = page.read_text(encoding="utf-8")
+        for m in LINK.finditer(re.sub(r"```.*?```", "", text, flags=re.S)):
+            target, anchor = m.group(1), m.group(2)
+            if re.match(r"[a-z]+:", target):  # http(s), mailto: not this tree's
+                continue
+            path = (page.parent / target).resolve() if target else page
+            if not path.exists():
+                broken.append(f"{page.relative_to(ROOT)}: {target} does not exist")
+            elif anchor and path.suffix == ".md" and anchor[1:] not in _slugs(path.read_text(encoding="utf-8")):
+                broken.append(f"{page.relative_to(ROOT)}: {target}{anchor} names no heading")
+    assert not broken, "\n".join(broken)
+
+
+def test_heading_slugs_follow_githubs_rule():
+    assert _slugs("# The viewer's frame time (2026-11-23)\n## A `code` heading: two, words\n# Notes\n# Notes\n") == {
+        "the-viewers-frame-time-2026-11-23", "a-code-heading-two-words", "notes", "notes-1"}
