@@ -51,6 +51,9 @@ class BenchSettings:
     temporal_frames: int = 8
     temporal_spp: int = 64
     """Samples per pixel of the temporal sequence's reference."""
+    temporal_max_spp: int | None = None
+    """The path tracer's ladder rungs above this get no temporal row (None: every rung). --quick sets its
+    reference's 4: the ladder's 16 to 256 spp at the evaluation set's size would be most of its time."""
     provider: str | None = None
     """onnxruntime provider (cpu, cuda, tensorrt); default the best available."""
     timing: str = "auto"
@@ -64,6 +67,8 @@ class BenchSettings:
             raise DiviewerError(f"resolutions must be even and >= 16, got {self.resolutions}", field="--res")
         if self.vxgi_trace_scale < 1:
             raise DiviewerError(f"must be >= 1, got {self.vxgi_trace_scale}", field="--vxgi-trace-scale")
+        if self.temporal_max_spp is not None and self.temporal_max_spp < 1:
+            raise DiviewerError(f"must be >= 1 samples per pixel, got {self.temporal_max_spp}", field="temporal_max_spp")
         for g in self.vxgi_grids:
             self.vxgi(g).validate()
         if self.timing not in ("auto", "query", "sync"):
@@ -77,7 +82,7 @@ class BenchSettings:
 
 
 QUICK = {"resolutions": (32,), "frames": 3, "warmup": 1, "untrained_k": (8, 16), "pt_frames": 1, "eval_frames": 1,
-         "calib_frames": 2, "temporal_frames": 3, "temporal_spp": 4, "vxgi_grids": (16,)}
+         "calib_frames": 2, "temporal_frames": 3, "temporal_spp": 4, "temporal_max_spp": 4, "vxgi_grids": (16,)}
 """--quick: a few frames at a small size, seconds; every kind of row, stage and metric is still there."""
 
 
@@ -410,6 +415,7 @@ def _temporal(ctx, settings, scene, ds, variants, net_of, mode, notes, log) -> d
             seqs[f"{v['path']}|1"] = [net.run(pack_buffers(b), **net.frame_inputs(c, res, res, scene))
                                       for b, c in zip(buffers, seq)]
     ladder = [int(n) for n in ds.manifest["evalset"]["ladder_spp"]] if ds is not None else list(settings.pt_spp)
+    ladder = [n for n in ladder if settings.temporal_max_spp is None or n <= settings.temporal_max_spp]
     for n in ladder:  # a real-time path tracer draws new samples every frame
         seqs[f"pt_spp{n}"] = [f.full(n, 1 + k) for k, f in enumerate(frames)]
     ref_tm = [tonemap(x, exposure) for x in ref]

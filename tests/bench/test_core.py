@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import subprocess
@@ -198,6 +199,28 @@ def test_quick_bench_without_torch_writes_every_row_stage_and_metric(gl_context,
     env = result["environment"]
     assert env["gl_renderer"] and "CPUExecutionProvider" in env["onnxruntime_available_providers"]
     assert "timer queries" in env["gl_timing"] or "glFinish" in env["gl_timing"]
+
+
+@pytest.mark.mitsuba
+def test_temporal_rows_stop_at_temporal_max_spp(ctx, tiny_bench_inputs):
+    """The temporal sequence renders the path tracer's ladder up to ``temporal_max_spp`` only (--quick: its
+    reference's 4 spp, so the 16-256 spp rungs at the set's size no longer take most of a quick bench); None
+    keeps every rung."""
+    from diviewer.bench.core import QUICK, BenchSettings, _open_evalset, _temporal
+    from diviewer.bench.runner import gl_timing_mode
+    from diviewer.scene import load_scene
+
+    scene = load_scene("cornell")
+    ds = _open_evalset(BenchSettings(evalset=str(tiny_bench_inputs / "es")), scene, [])
+    base = BenchSettings(temporal_frames=2, temporal_spp=2, vxgi_grids=())
+    mode = gl_timing_mode(ctx, "sync")
+    got = {}
+    for cap in (None, 1):
+        t = _temporal(ctx, dataclasses.replace(base, temporal_max_spp=cap), scene, ds, [], None, mode, [],
+                      lambda *_: None)
+        got[cap] = sorted(k for k in t["methods"] if k.startswith("pt_spp"))
+    assert got == {None: ["pt_spp1", "pt_spp4"], 1: ["pt_spp1"]}  # the set's ladder is 1, 4
+    assert QUICK["temporal_max_spp"] == QUICK["temporal_spp"]
 
 
 def test_bench_accuracy_from_a_compact_set_matches_the_full_set(tiny_bench_inputs, tmp_path, monkeypatch):
