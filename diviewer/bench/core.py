@@ -68,7 +68,8 @@ class BenchSettings:
         if self.vxgi_trace_scale < 1:
             raise DiviewerError(f"must be >= 1, got {self.vxgi_trace_scale}", field="--vxgi-trace-scale")
         if self.temporal_max_spp is not None and self.temporal_max_spp < 1:
-            raise DiviewerError(f"must be >= 1 samples per pixel, got {self.temporal_max_spp}", field="temporal_max_spp")
+            raise DiviewerError(f"must be >= 1 samples per pixel, got {self.temporal_max_spp}",
+                                field="temporal_max_spp")
         for g in self.vxgi_grids:
             self.vxgi(g).validate()
         if self.timing not in ("auto", "query", "sync"):
