@@ -86,9 +86,15 @@ def run_build_command(args: argparse.Namespace) -> int:
     if args.dry_run:
         from diviewer.build.pipeline import finished_stages, measured_pace
 
-        done = finished_stages(plan)
+        try:
+            done, refusal = finished_stages(plan), None
+        except DiviewerError as exc:  # the work folder holds another plan's build: the run would stop there
+            done, refusal = set(), exc
         for line in [*describe(plan, done), *measured_pace(plan)]:
             print(line)
+        if refusal is not None:
+            print("dry run: nothing was done; a run of this command would refuse the work folder (below)")
+            raise refusal
         print(f"dry run: nothing was done; run it without --dry-run ({rebuild_command(args)})")
         return 0
     from diviewer.build.pipeline import BuildInterrupted, run_build

@@ -45,13 +45,11 @@ def plan_key(plan: Plan) -> dict[str, Any]:
 
 def finished_stages(plan: Plan) -> set[str]:
     """Stages a build of this plan in its work folder has finished, with outputs unchanged (none where there is no
-    build, or one of another plan)."""
+    build). Raises the run's own DiviewerError where the folder holds a build of another plan, which a run would
+    refuse to touch."""
     if not (plan.work / STATE_FILE).is_file():
         return set()
-    try:
-        state = BuildState(plan.work / STATE_FILE, plan_key(plan))
-    except DiviewerError:
-        return set()
+    state = BuildState(plan.work / STATE_FILE, plan_key(plan))
     return {s.name for s in plan.stages
             if (rec := state.done(s.name, plan.work)) is not None and not _stale(s.name, rec, plan)}
 

@@ -83,6 +83,22 @@ def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, cap
     assert "recipe.scene" in capsys.readouterr().err
 
 
+def test_a_dry_run_on_a_folder_of_another_plan_says_the_run_would_refuse_it(tmp_path, capsys):
+    """The dry run prints the plan, then the refusal the run would stop with (one line naming the state file and
+    the field), not a plan with nothing done as if the folder were empty."""
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "a.txt").write_text("one")
+    BuildState(work / "build.json", {"recipe": {"name": "cornell", "model_sha256": "another"}}).finish(
+        "capture", work, [work / "a.txt"])
+    assert main(["build", "--scene", "cornell", "--dry-run", "--work", str(work)]) == 2
+    out, err = capsys.readouterr()
+    assert " train_k8 " in out and "a run of this command would refuse the work folder" in out
+    line = err.strip().splitlines()[-1]
+    assert "another plan" in line and str(work / "build.json") in line and "plan" in line, err
+    assert json.loads((work / "build.json").read_text())["plan"]["recipe"]["model_sha256"] == "another"
+
+
 def test_the_estimate_follows_the_measured_costs():
     plan = make_plan("cornell", load_recipe("cornell"), Path("w"), machine=CPU)
     steps = planned_steps(plan.capture, {**plan.train, "K": 8})
