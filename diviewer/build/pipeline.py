@@ -151,7 +151,7 @@ def _stale(stage: str, rec: dict[str, Any], plan: Plan) -> bool:
         return rec["result"].get("measure") != PICK_MEASURE
     if stage == "ship":
         ladder = plan.work / "ladder.json"
-        return rec["result"].get("to") != str(plan.ship) or (
+        return rec["result"].get("to") != (None if plan.ship is None else str(plan.ship)) or (
             plan.ship is not None and (not ladder.is_file()
                                        or rec["result"].get("ladder_sha256") != sha256_file(ladder)))
     return False

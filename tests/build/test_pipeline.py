@@ -262,6 +262,9 @@ def test_a_pick_by_another_rule_or_a_ship_of_another_ladder_runs_again(tmp_path)
     assert _stale("ship", shipped, plan), "the pick changed: the ship follows it"
     assert _stale("ship", {"result": {"to": str(plan.ship)}}, plan), "a ship recorded before its ladder was"
     assert _stale("ship", shipped, SimpleNamespace(work=tmp_path, ship=tmp_path / "elsewhere"))
+    nowhere = SimpleNamespace(work=tmp_path, ship=None)  # a plan that ships nowhere: its ship stage is done once
+    assert not _stale("ship", {"result": {"to": None}}, nowhere)
+    assert _stale("ship", shipped, nowhere)
     assert not _stale("capture", {"result": {}}, plan)
 
 
