@@ -215,3 +215,22 @@ def test_regions_and_below_direct_share_on_a_synthetic_frame():
     assert share["frame"] == {"share": 0.0, "frames": 2}
     assert share["object_unlit"] == {"share": 0.5, "frames": 2}
     assert "object" not in below_direct([dict(row, psnr_tm_object=None)], [row_direct])  # a frame without the region
+
+
+def test_sun_dependence_scores_the_best_light_blind_output():
+    """tools/experiments/sun_dependence.py: angles spread over the range; a light-blind network's best output is
+    exact where the indirect light does not move with the light, and worse the more it moves."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/sun_dependence")
+    assert tool.angles(-40.0, 40.0, 5) == [-40.0, -20.0, 0.0, 20.0, 40.0] and tool.angles(-40.0, 40.0, 1) == [0.0]
+    rng = np.random.default_rng(0)
+    direct = rng.uniform(0.0, 1.0, (3, 8, 8, 3)).astype(np.float32)
+    indirect = rng.uniform(0.0, 0.5, (8, 8, 3)).astype(np.float32)
+    assert min(tool.blind_scores(direct + indirect, direct, 1.0)) > 100  # the direct light moves, not the rest: exact
+    moved = indirect * np.array([0.5, 1.0, 1.5], np.float32)[:, None, None, None]
+    little = tool.blind_scores(direct + indirect * np.array([0.9, 1.0, 1.1], np.float32)[:, None, None, None],
+                               direct, 1.0)
+    much = tool.blind_scores(direct + moved, direct, 1.0)
+    assert all(math.isfinite(s) for s in much) and little[0] > much[0] and little[2] > much[2]
+    assert much[1] > much[0] and much[1] > much[2]  # the middle angle is the mean's own
