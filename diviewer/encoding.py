@@ -61,7 +61,7 @@ INPUT_CHANNEL_COUNT: int = sum(n for _, n in INPUT_CHANNELS)
 OUTPUT_CHANNELS: int = 3
 """Network output channels: linear RGB radiance (full GI or indirect only), encoded."""
 
-ENCODING_VERSION: int = 3
+ENCODING_VERSION: int = 4
 """The newest encoding version this diviewer reads and writes; bump it whenever a curve or the layout changes.
 
 1: radiance (the direct-light input and the output) as is, times the dataset exposure.
@@ -71,7 +71,11 @@ in the light by construction (no light gives exactly 0, twice the light exactly 
 3: as 2, plus each pixel's world-space position and normal as six more network inputs, computed inside the graph
 from the depth and normal buffers and the frame's camera (its third input ``camera``,
 `diviewer.scene.camera.camera_params`), the position normalised by ``world_center`` and ``world_half``
-(`diviewer.train.world`)."""
+(`diviewer.train.world`).
+4: as 3, plus where each of the scene's ``lights`` lights is: three numbers a light (a sun's direction, a point
+light's normalised position: `diviewer.scene.lights.light_params`) from the graph's fourth input ``light``,
+spread over the frame as constant planes. A network blind to them cannot tell which side of a scene the sun
+lights when the frame shows only shade (docs/sponza.md)."""
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
@@ -117,13 +121,17 @@ class Encoding:
 
     version: int = 1
     """Version of the encoding (see `ENCODING_VERSION`): 1 radiance as is, 2 divided by the frame's light
-    scale (training chooses with ``TrainConfig.light_scale``), 3 also world-space inputs (``world_inputs``)."""
+    scale (training chooses with ``TrainConfig.light_scale``), 3 also world-space inputs (``world_inputs``), 4 also
+    the lights' directions or positions (``light_inputs``)."""
 
     world_center: tuple[float, float, float] | None = None
     """Version 3: the world point that encodes to 0 (the centre of the scene's bounds)."""
 
     world_half: tuple[float, float, float] | None = None
     """Version 3: per axis, the distance from ``world_center`` that encodes to +-1 (half the bounds' size)."""
+
+    lights: int | None = None
+    """Version 4: how many lights the ``light`` input describes (the scene's, in the order of its file)."""
 
     def __post_init__(self) -> None:
         for name in ("exposure", "depth_scale", "radiance_max"):
@@ -162,6 +170,12 @@ class Encoding:
             object.__setattr__(self, name, tuple(float(x) for x in v))
         if self.world_half is not None and min(self.world_half) <= 0:
             raise DiviewerError(f"must be > 0, got {self.world_half!r}", field="encoding.world_half")
+        if (self.lights is not None) != (self.version >= 4):
+            raise DiviewerError(f"version {self.version} {'needs' if self.version >= 4 else 'has no'} lights",
+                                field="encoding.lights")
+        if self.lights is not None and (isinstance(self.lights, bool) or not isinstance(self.lights, int)
+                                        or self.lights < 1):
+            raise DiviewerError(f"must be an integer >= 1, got {self.lights!r}", field="encoding.lights")
 
     @property
     def world_inputs(self) -> bool:
@@ -169,15 +183,21 @@ class Encoding:
         return self.version >= 3
 
     @property
+    def light_inputs(self) -> bool:
+        """Whether the network also takes where each light is (version 4)."""
+        return self.version >= 4
+
+    @property
     def light_scaled(self) -> bool:
         """Whether radiance is divided by the frame's light scale (version 2 and later)."""
         return self.version >= 2
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict for JSON manifests, checkpoints and ONNX metadata (the world fields only for version 3)."""
+        """Plain dict for JSON manifests, checkpoints and ONNX metadata (the world fields only from version 3, the
+        lights only from version 4)."""
         d = dataclasses.asdict(self)
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()
-                if not (k.startswith("world_") and v is None)}
+                if not ((k.startswith("world_") or k == "lights") and v is None)}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Encoding:

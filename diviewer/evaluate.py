@@ -42,11 +42,17 @@ __all__ = ["EQUIVALENT_BY", "EVAL_KEYS", "KEYS", "aggregate", "equivalent", "eva
 
 
 def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | None = None,
-              camera=None) -> np.ndarray:
+              camera=None, light=None) -> np.ndarray:
     """A model's linear radiance for one frame's buffers: the one place eval and bench call the runtime.
     ``light_scale``: the frame's (diviewer.scene.lights.light_scale), which encoding-2 models need; ``camera``: the
-    frame's camera at its size (`NeuralGI.camera`), which encoding-3 models need."""
-    return net.run(pack_buffers(frame), light_scale=light_scale, camera=camera)
+    frame's camera at its size (`NeuralGI.camera`), which encoding-3 models need; ``light``: its lights
+    (`NeuralGI.lights`), which encoding-4 models need."""
+    return net.run(pack_buffers(frame), light_scale=light_scale, camera=camera, light=light)
+
+
+def _lights(net: NeuralGI, entry: dict):
+    """An encoding-4 model's light input for a stored frame (its configuration's lights); None for older models."""
+    return net.lights(entry["config"]) if getattr(net, "lit", False) else None
 
 
 def _camera(net: NeuralGI, entry: dict, frame: dict[str, np.ndarray]):
@@ -108,7 +114,7 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
         if not np.any(f["pt"] > 0):
             black.append(i)
         t0 = time.perf_counter()
-        y = run_model(model, f, s, _camera(model, ds.entry(i), f))
+        y = run_model(model, f, s, _camera(model, ds.entry(i), f), _lights(model, ds.entry(i)))
         times.append((time.perf_counter() - t0) * 1e3)
         rows["neural"].append(score(y, f["pt"], exposure))
         rows["direct"].append(score(f["direct"], f["pt"], exposure))
@@ -289,7 +295,7 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
             x = model_input(net, f, frame, area, i, shape[0])  # the area's direct light for a model of it
             t0 = time.perf_counter()
             try:
-                y = run_model(net, x, scales.get(i), _camera(net, ev.entry(i), x))
+                y = run_model(net, x, scales.get(i), _camera(net, ev.entry(i), x), _lights(net, ev.entry(i)))
             except DiviewerError as exc:  # the runtime refuses this shape: say so, score the rest
                 refused[name] = str(exc)
                 continue

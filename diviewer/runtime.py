@@ -10,13 +10,14 @@ The model contract (written by ``diviewer export``, read here; torch-free):
 - for encoding version 2 a second input ``light_scale``: float32 (N,), each frame's light scale
   (`diviewer.scene.lights.light_scale`): the graph divides the direct light by it and multiplies its
   output by it, so the model is linear in the light (0 gives exactly 0);
+- for encoding version 3 a third input ``camera`` (N, CAMERA_PARAMS), each frame's camera; for version 4 a fourth,
+  ``light`` (N, 3 L), where each of the scene's L lights is (`diviewer.scene.lights.light_params`);
 - one output ``radiance``: float32 (N, H, W, 3) linear radiance of the final image (for a model of
   the ``indirect`` target the exact direct light is already added inside the graph);
 - the encoding and decoding live inside the graph; the metadata key ``diviewer`` holds a JSON
   object describing the model (see REQUIRED_META);
 - the weights may be stored as float16 in a float32 graph (metadata ``weights`` "fp16", ``export
-  --half-weights``): each behind a Cast to float32 that onnxruntime folds at load (`store_weights_half`;
-  `weights_to_float32` undoes it for tools that read weights as initializers).
+  --half-weights``): each behind a Cast to float32 that onnxruntime folds at load (`diviewer.weights`).
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ INPUT_NAME = "buffers"
 LIGHT_SCALE_NAME = "light_scale"
 CAMERA_NAME = "camera"
 """Encoding version 3's third input: each frame's camera, (N, CAMERA_PARAMS) (`diviewer.scene.camera.camera_params`)."""
+LIGHT_NAME = "light"
+"""Encoding version 4's fourth input: where each light of the frame is, (N, 3 L) (`diviewer.scene.lights.light_params`)."""
 LAYOUTS = ("NHWC", "NCHW")
 """Input layouts a model may take (its metadata's ``layout``); the output is NHWC radiance either way."""
 OUTPUT_NAME = "radiance"
@@ -185,10 +188,13 @@ class NeuralGI:
         """Encoding version 2: ``run`` needs each frame's light scale."""
         self.world = int(self.meta["encoding"].get("version", 1)) >= 3
         """Encoding version 3: ``run`` also needs each frame's camera (`camera`)."""
+        self.lit = int(self.meta["encoding"].get("version", 1)) >= 4
+        """Encoding version 4: ``run`` also needs each frame's lights (`lights`)."""
         self.direct_samples = int(self.meta.get("direct_samples", 1))
         """Samples per axis of the direct light the model was trained on (`diviewer.gl.area`): 1 is the light at
         each pixel's centre; above 1, callers feed the light over the pixel's area (``buffers``' direct channel)."""
-        wanted = [INPUT_NAME] + ([LIGHT_SCALE_NAME] if self.light_scaled else []) + ([CAMERA_NAME] if self.world else [])
+        wanted = [INPUT_NAME] + ([LIGHT_SCALE_NAME] if self.light_scaled else []) + \
+            ([CAMERA_NAME] if self.world else []) + ([LIGHT_NAME] if self.lit else [])
         if [i.name for i in inputs] != wanted or OUTPUT_NAME not in [o.name for o in outputs]:
             raise DiviewerError(f"the graph's inputs {[i.name for i in inputs]} / outputs {[o.name for o in outputs]} "
                                 f"are not diviewer's for encoding version {self.meta['encoding'].get('version')} "
@@ -264,7 +270,20 @@ class NeuralGI:
             out["light_scale"] = self.light_scale(config, scene)
         if self.world:
             out["camera"] = self.camera(config.camera, width, height)
+        if self.lit:
+            out["light"] = self.lights(config)
         return out
+
+    def lights(self, config) -> np.ndarray:
+        """The ``light`` input of a frame of ``config`` (encoding 4; a FrameConfig, or the dict a dataset stores):
+        where each of its lights is, in the world box the model was trained in (`diviewer.scene.lights.light_params`)."""
+        from diviewer.scene.lights import light_params
+
+        enc = self.meta["encoding"]
+        lights = config["lights"] if isinstance(config, dict) else config.lights
+        if len(lights) != int(enc["lights"]):
+            raise ValueError(f"{self.path.name} takes {enc['lights']} light(s); the frame has {len(lights)}")
+        return light_params(lights, enc["world_center"], enc["world_half"])
 
     @staticmethod
     def camera(camera, width: int, height: int) -> np.ndarray:
@@ -276,14 +295,15 @@ class NeuralGI:
         return camera_params(get("position"), get("target"), get("up"), get("fov"), width, height)
 
     def run(self, buffers: np.ndarray, timer: StageTimer | None = None, light_scale=None,
-            camera=None) -> np.ndarray:
+            camera=None, light=None) -> np.ndarray:
         """(N, H, W, 10) or (H, W, 10) float32 raw buffers to radiance of the same leading shape.
 
         Any H x W: frames that are not multiples of the model's stride are edge-padded to it and the
         output cropped back (`diviewer.padding`, exactly as training pads). ``light_scale``: each frame's
         light scale, a number or (N,) (`light_scale`); needed by encoding-2 models, ignored by older ones.
         ``camera``: each frame's camera over its own H x W pixels, (CAMERA_PARAMS,) or (N, CAMERA_PARAMS)
-        (`camera`); needed by encoding-3 models, ignored by older ones.
+        (`camera`); needed by encoding-3 models, ignored by older ones. ``light``: each frame's lights, (3 L,) or
+        (N, 3 L) (`lights`); needed by encoding-4 models, ignored by older ones.
         """
         single = buffers.ndim == 3
         x = buffers[None] if single else buffers
@@ -315,6 +335,15 @@ class NeuralGI:
             if c.shape[0] not in (1, n):
                 raise ValueError(f"camera: expected one or {n}, got {c.shape[0]}")
             feeds[CAMERA_NAME] = pad_camera_params(np.broadcast_to(c, (n, CAMERA_PARAMS)), width, height, self.multiple)
+        if self.lit:
+            if light is None:
+                raise ValueError(f"{self.path.name} uses encoding version 4: run() needs each frame's lights "
+                                 "(NeuralGI.lights(config))")
+            lights = 3 * int(self.meta["encoding"]["lights"])
+            g = np.asarray(light, np.float32).reshape(-1, lights)
+            if g.shape[0] not in (1, n):
+                raise ValueError(f"light: expected one or {n}, got {g.shape[0]}")
+            feeds[LIGHT_NAME] = np.ascontiguousarray(np.broadcast_to(g, (n, lights)))
         with (timer or self.timer).stage("inference"):
             (y,) = self.session.run([OUTPUT_NAME], feeds)
         y = crop_nhwc(y, height, width, self.multiple)
@@ -344,8 +373,10 @@ def probe(model: "NeuralGI") -> None:
     w, h = (min(int(d), 64) for d in model.resolution)
     camera = {"position": (0.0, 0.0, 4.0), "target": (0.0, 0.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 45.0}
     try:
+        sun = np.tile(np.array([0.0, -1.0, 0.0], np.float32), int(model.meta["encoding"]["lights"])) \
+            if model.lit else None  # encoding 4: suns straight down
         model.run(probe_frame(h, w)[0], light_scale=1.0 if model.light_scaled else None,
-                  camera=NeuralGI.camera(camera, w, h) if model.world else None)
+                  camera=NeuralGI.camera(camera, w, h) if model.world else None, light=sun)
     except Exception as exc:  # onnxruntime raises its own types for a graph that cannot run
         raise DiviewerError(f"the model cannot run on a {w}x{h} probe frame: {exc}", path=model.path) from exc
     bad = model.nonfinite_outputs  # counted before the clamp at 0, which would hide a -Inf
@@ -368,69 +399,5 @@ def pack_buffers(frame: dict[str, np.ndarray]) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate(parts, axis=-1), dtype=np.float32)
 
 
-HALF_WEIGHTS_MIN_SIZE = 64
-"""Weight tensors of fewer elements stay float32 in ``store_weights_half`` (biases, scales: nothing to save)."""
-
-
-def store_weights_half(model) -> int:
-    """Rewrite ``model`` (an onnx ModelProto) in place so that every float32 initializer of at least
-    `HALF_WEIGHTS_MIN_SIZE` elements is stored as float16 and cast back to float32 by a Cast node ahead of the
-    graph, under its old name (the nodes that read it are unchanged): ``export --half-weights``. onnxruntime
-    folds the casts as it loads the model, so it runs the float32 graph. Returns how many were rewritten."""
-    from onnx import TensorProto, helper, numpy_helper
-
-    graph = model.graph
-    kept, casts = [], []
-    for init in graph.initializer:
-        if init.data_type != TensorProto.FLOAT or int(np.prod(init.dims)) < HALF_WEIGHTS_MIN_SIZE:
-            kept.append(init)
-            continue
-        half = numpy_helper.from_array(numpy_helper.to_array(init).astype(np.float16), f"{init.name}.fp16")
-        kept.append(half)
-        casts.append(helper.make_node("Cast", [half.name], [init.name], to=TensorProto.FLOAT,
-                                      name=f"{init.name}.to_fp32"))
-    nodes = list(graph.node)
-    del graph.initializer[:]
-    graph.initializer.extend(kept)
-    del graph.node[:]
-    graph.node.extend(casts + nodes)
-    return len(casts)
-
-
-def weights_to_float32(model):
-    """A copy of ``model`` with every float16-stored weight (``store_weights_half``: a float16 initializer that
-    only a Cast to float32 reads) as the float32 initializer the Cast made, and the Cast gone: the graph a
-    float32 export writes, for tools that read weights as initializers (fp16 conversion, int8 quantisation).
-    A model without such weights comes back as an unchanged copy."""
-    import onnx
-    from onnx import TensorProto, numpy_helper
-
-    m = onnx.ModelProto()
-    m.CopyFrom(model)
-    g = m.graph
-    inits = {i.name: i for i in g.initializer}
-    readers: dict[str, int] = {}
-    for n in g.node:
-        for i in n.input:
-            readers[i] = readers.get(i, 0) + 1
-    folded, drop = {}, set()
-    for n in g.node:
-        if (n.op_type == "Cast" and len(n.input) == 1 and n.input[0] in inits and readers[n.input[0]] == 1
-                and inits[n.input[0]].data_type == TensorProto.FLOAT16
-                and any(a.name == "to" and a.i == TensorProto.FLOAT for a in n.attribute)):
-            a = numpy_helper.to_array(inits[n.input[0]]).astype(np.float32)
-            folded[n.output[0]] = numpy_helper.from_array(a, n.output[0])
-            drop.add(n.input[0])
-    if not folded:
-        return m
-    keep_nodes = [n for n in g.node if not (n.op_type == "Cast" and n.output[0] in folded)]
-    keep_inits = [i for i in g.initializer if i.name not in drop] + list(folded.values())
-    del g.node[:]
-    g.node.extend(keep_nodes)
-    del g.initializer[:]
-    g.initializer.extend(keep_inits)
-    return m
-
-
 __all__ = ["NeuralGI", "pack_buffers", "read_metadata", "check_compatible", "choose_providers", "INPUT_NAME",
-           "LIGHT_SCALE_NAME", "OUTPUT_NAME", "META_KEY", "OUTPUT_CHANNELS", "store_weights_half", "weights_to_float32"]
+           "LIGHT_SCALE_NAME", "OUTPUT_NAME", "META_KEY", "OUTPUT_CHANNELS"]

@@ -184,10 +184,20 @@ def test_module_does_not_import_torch() -> None:
 def test_encoding_dict_round_trip_and_rejections() -> None:
     assert Encoding.from_dict(ENC.to_dict()) == ENC
     assert ENC.to_dict()["version"] == 1 and Encoding(version=2).light_scaled  # 1 unless asked
-    world = Encoding(version=ENCODING_VERSION, world_center=[0, 1, 0], world_half=(1.1, 1.2, 1.3))
+    world = Encoding(version=3, world_center=[0, 1, 0], world_half=(1.1, 1.2, 1.3))
     assert world.light_scaled and world.world_inputs and not Encoding(version=2).world_inputs
     assert Encoding.from_dict(world.to_dict()) == world and world.world_center == (0.0, 1.0, 0.0)
     assert "world_center" not in Encoding(version=2).to_dict()  # the dicts of versions 1 and 2 are as they were
+    assert "lights" not in world.to_dict() and not world.light_inputs  # nor version 3's
+    lit = Encoding(version=ENCODING_VERSION, world_center=[0, 1, 0], world_half=(1.1, 1.2, 1.3), lights=2)
+    assert ENCODING_VERSION == 4 and lit.light_inputs and lit.world_inputs and lit.to_dict()["lights"] == 2
+    assert Encoding.from_dict(lit.to_dict()) == lit
+    for bad in (dict(version=4, world_center=(0, 0, 0), world_half=(1, 1, 1)),
+                dict(version=3, world_center=(0, 0, 0), world_half=(1, 1, 1), lights=1),
+                dict(version=4, world_center=(0, 0, 0), world_half=(1, 1, 1), lights=0),
+                dict(version=4, world_center=(0, 0, 0), world_half=(1, 1, 1), lights=True)):
+        with pytest.raises(DiviewerError, match="lights"):
+            Encoding(**bad)
     for bad in (dict(version=3), dict(version=2, world_center=(0, 0, 0), world_half=(1, 1, 1)),
                 dict(version=3, world_center=(0, 0, 0), world_half=(1, 0, 1)),
                 dict(version=3, world_center=(0, 0), world_half=(1, 1, 1))):

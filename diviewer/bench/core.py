@@ -181,7 +181,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
     """Measure every row; print the table; write the JSON and the plot when asked. Returns the result."""
     _check_extras(plot_out)
     from diviewer.bench import report
-    from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_configs, time_path_tracer
+    from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_rows, time_path_tracer
     from diviewer.gl.context import headless_context
     from diviewer.runtime import NeuralGI
     from diviewer.scene import load_scene, sample_config
@@ -217,7 +217,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
             finally:
                 gb.release()
         accuracy = _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log)
-        temporal = _temporal(ctx, settings, scene, ds, variants, net_of, mode, notes, log)
+        temporal = temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log)
     pt = _path_tracer_timing(settings, scene, ds, configs, notes, log, time_path_tracer)
     rows.extend(pt["rows"])
     result = report.assemble(settings, scene, rows, accuracy, temporal, pt, env, notes,
@@ -379,52 +379,6 @@ def _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log) -> d
     scored["compact"] = ds.compact
     scored["reference_spp"] = ds.manifest["spp"]
     return scored
-
-
-def _temporal(ctx, settings, scene, ds, variants, net_of, mode, notes, log) -> dict | None:
-    """Frame-to-frame change of each method along a smooth sequence against the path tracer's (Mitsuba needed)."""
-    from diviewer.bench.frontier import temporal_stability
-    from diviewer.bench.runner import GlBench, temporal_configs
-    from diviewer.encoding import fit_exposure
-    from diviewer.metrics import tonemap
-    from diviewer.runtime import pack_buffers
-
-    try:
-        from diviewer.reference.mitsuba import MitsubaFrame, _import_mitsuba
-
-        _import_mitsuba()
-    except DiviewerError as exc:
-        notes.append(f"no temporal stability: {exc}")
-        return None
-    res = ds.bench_frames()[1][0] if ds is not None else settings.resolutions[0]
-    seq = temporal_configs(scene, settings.temporal_frames)
-    log(f"temporal stability: {len(seq)} frames at {res}x{res}, reference {settings.temporal_spp} spp")
-    gb = GlBench(ctx, scene, res, res, mode)
-    try:
-        buffers = [gb.renderer.frame(c) for c in seq]
-        vx = {f"vxgi{g}": gb.vxgi_frames(settings.vxgi(g), seq) for g in settings.vxgi_grids}
-    finally:
-        gb.release()
-    exposure = float(ds.manifest["evalset"]["tonemap"]["exposure"]) if ds is not None else \
-        fit_exposure([b["direct"] for b in buffers])
-    frames = [MitsubaFrame(scene, c, res, res) for c in seq]
-    ref = [f.full(settings.temporal_spp, 0) for f in frames]  # one seed: the reference's noise holds still
-    seqs = {"direct": [b["direct"] for b in buffers], **vx}
-    for v in variants:
-        net = net_of(v)
-        if res % net.multiple == 0:
-            seqs[f"{v['path']}|1"] = [net.run(pack_buffers(b), **net.frame_inputs(c, res, res, scene))
-                                      for b, c in zip(buffers, seq)]
-    ladder = [int(n) for n in ds.manifest["evalset"]["ladder_spp"]] if ds is not None else list(settings.pt_spp)
-    ladder = [n for n in ladder if settings.temporal_max_spp is None or n <= settings.temporal_max_spp]
-    for n in ladder:  # a real-time path tracer draws new samples every frame
-        seqs[f"pt_spp{n}"] = [f.full(n, 1 + k) for k, f in enumerate(frames)]
-    ref_tm = [tonemap(x, exposure) for x in ref]
-    out = {k: temporal_stability([tonemap(x, exposure) for x in s], ref_tm) for k, s in seqs.items()}
-    return {"resolution": [res, res], "frames": len(seq), "reference_spp": settings.temporal_spp,
-            "tonemap_exposure": exposure, "methods": out,
-            "measure": "mean |frame t+1 - frame t| of tone-mapped images; ratio = method / reference; excess = "
-                       "mean |delta method - delta reference|"}
 
 
 def _path_tracer_timing(settings, scene, ds, configs, notes, log, time_path_tracer) -> dict:

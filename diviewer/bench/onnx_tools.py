@@ -21,8 +21,9 @@ import numpy as np
 
 from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, OUTPUT_CHANNELS, input_channel_slices
 from diviewer.errors import DiviewerError, missing_extra
-from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME,
-                              weights_to_float32)
+from diviewer.runtime import CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
+from diviewer.weights import weights_to_float32
+from diviewer.scene.lights import light_params
 
 OPSET = 17
 UPSAMPLE_MACS = {"transpose": 4, "resize": 9}
@@ -280,7 +281,8 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
                   percentile: float | None = CALIB_PERCENTILE) -> Path:
     """Static int8 quantisation (QDQ, per-channel weights) of the convolutions, calibrated on ``calibration``
     ((1, H, W, 10) buffers, padded to the model's stride as the runtime pads them, each with its frame's light
-    scale and camera (1, CAMERA_PARAMS), fed where the model takes them: encodings 2 and 3); the encoding and
+    scale, camera (1, CAMERA_PARAMS) and lights (the configuration's), fed where the model takes them: encodings 2,
+    3 and 4); the encoding and
     decoding stay float. Each activation's range is its ``percentile`` over the calibration frames (None: its
     extremes) (CALIB_PERCENTILE)."""
     onnx = _onnx()
@@ -309,6 +311,9 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
                 feed[LIGHT_SCALE_NAME] = np.full(n, item[1], np.float32)
             if version >= 3:
                 feed[CAMERA_NAME] = pad_camera_params(np.asarray(item[2], np.float32), w, h, multiple)
+            if version >= 4:  # the frame's lights in the model's world box (encoding 4)
+                enc = meta["encoding"]
+                feed[LIGHT_NAME] = np.tile(light_params(item[3], enc["world_center"], enc["world_half"]), (n, 1))
             return feed
 
     root = logging.getLogger()

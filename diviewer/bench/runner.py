@@ -308,7 +308,8 @@ def calibration(settings, scene, ctx, width: int, height: int, mode: str) -> tup
         frames = [pack_buffers(ds.load(i)) for i in idx]
         if frames[0].shape[:2] == (height, width):
             cams = {f["index"]: f["config"]["camera"] for f in ds.frames}
-            return ([(f[None], float(s), NeuralGI.camera(cams[i], width, height)[None])
+            lights = {f["index"]: f["config"].get("lights", []) for f in ds.frames}
+            return ([(f[None], float(s), NeuralGI.camera(cams[i], width, height)[None], lights[i])
                      for i, f, s in zip(idx, frames, light_scales(ds, idx))],
                     f"{len(idx)} train frames of {settings.calib_data}")
     from diviewer.scene import sample_config
@@ -316,8 +317,53 @@ def calibration(settings, scene, ctx, width: int, height: int, mode: str) -> tup
     configs = [sample_config(scene, 9000 + i, "train") for i in range(settings.calib_frames)]
     gb = GlBench(ctx, scene, width, height, mode)
     try:
-        inputs = [(gb.buffers(c), light_scale(scene, c), NeuralGI.camera(c.camera, width, height)[None])
+        inputs = [(gb.buffers(c), light_scale(scene, c), NeuralGI.camera(c.camera, width, height)[None], c.lights)
                   for c in configs]
     finally:
         gb.release()
     return inputs, f"GL inputs of {settings.calib_frames} training configurations"
+
+
+def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log) -> dict | None:
+    """Frame-to-frame change of each method along a smooth sequence against the path tracer's (Mitsuba needed)."""
+    from diviewer.bench.frontier import temporal_stability
+    from diviewer.encoding import fit_exposure
+    from diviewer.metrics import tonemap
+    from diviewer.runtime import pack_buffers
+
+    try:
+        from diviewer.reference.mitsuba import MitsubaFrame, _import_mitsuba
+
+        _import_mitsuba()
+    except DiviewerError as exc:
+        notes.append(f"no temporal stability: {exc}")
+        return None
+    res = ds.bench_frames()[1][0] if ds is not None else settings.resolutions[0]
+    seq = temporal_configs(scene, settings.temporal_frames)
+    log(f"temporal stability: {len(seq)} frames at {res}x{res}, reference {settings.temporal_spp} spp")
+    gb = GlBench(ctx, scene, res, res, mode)
+    try:
+        buffers = [gb.renderer.frame(c) for c in seq]
+        vx = {f"vxgi{g}": gb.vxgi_frames(settings.vxgi(g), seq) for g in settings.vxgi_grids}
+    finally:
+        gb.release()
+    exposure = float(ds.manifest["evalset"]["tonemap"]["exposure"]) if ds is not None else \
+        fit_exposure([b["direct"] for b in buffers])
+    frames = [MitsubaFrame(scene, c, res, res) for c in seq]
+    ref = [f.full(settings.temporal_spp, 0) for f in frames]  # one seed: the reference's noise holds still
+    seqs = {"direct": [b["direct"] for b in buffers], **vx}
+    for v in variants:
+        net = net_of(v)
+        if res % net.multiple == 0:
+            seqs[f"{v['path']}|1"] = [net.run(pack_buffers(b), **net.frame_inputs(c, res, res, scene))
+                                      for b, c in zip(buffers, seq)]
+    ladder = [int(n) for n in ds.manifest["evalset"]["ladder_spp"]] if ds is not None else list(settings.pt_spp)
+    ladder = [n for n in ladder if settings.temporal_max_spp is None or n <= settings.temporal_max_spp]
+    for n in ladder:  # a real-time path tracer draws new samples every frame
+        seqs[f"pt_spp{n}"] = [f.full(n, 1 + k) for k, f in enumerate(frames)]
+    ref_tm = [tonemap(x, exposure) for x in ref]
+    out = {k: temporal_stability([tonemap(x, exposure) for x in s], ref_tm) for k, s in seqs.items()}
+    return {"resolution": [res, res], "frames": len(seq), "reference_spp": settings.temporal_spp,
+            "tonemap_exposure": exposure, "methods": out,
+            "measure": "mean |frame t+1 - frame t| of tone-mapped images; ratio = method / reference; excess = "
+                       "mean |delta method - delta reference|"}

@@ -176,10 +176,11 @@ class NeuralPass:
         self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
         self.ssbos[slot].read_into(self._packed[slot])
 
-    def _infer(self, slot: int, light_scale: float | None = None, camera=None) -> tuple[np.ndarray, float]:
+    def _infer(self, slot: int, light_scale: float | None = None, camera=None, light=None) -> tuple[np.ndarray, float]:
         """Run the model on a slot's inputs (on the worker thread when pipelined); its own timer, its wall ms."""
         t0 = time.perf_counter()
-        extra = {} if camera is None else {"camera": camera}  # encoding 3 (runtimes of other models take no camera)
+        # encoding 3's camera and 4's lights (runtimes of other models take neither)
+        extra = {k: v for k, v in (("camera", camera), ("light", light)) if v is not None}
         y = self.model.run(self._packed[slot], timer=StageTimer(), light_scale=light_scale, **extra)
         return y, (time.perf_counter() - t0) * 1e3
 
@@ -189,7 +190,7 @@ class NeuralPass:
         inputs = getattr(self.model, "frame_inputs", None)
         return inputs(config, *self.gi_size, scene) if inputs is not None else {}
 
-    def run(self, light_scale: float | None = None, camera=None) -> moderngl.Texture:
+    def run(self, light_scale: float | None = None, camera=None, light=None) -> moderngl.Texture:
         """Infer the GI image from the renderer's current textures (call after renderer.render).
 
         ``light_scale`` and ``camera``: the frame's (``inputs_for(scene, config)``), for models of encoding
@@ -203,14 +204,14 @@ class NeuralPass:
             self._pack(slot)
         t_inputs = time.perf_counter()
         if not self.pipelined:
-            y, ms = self._infer(slot, light_scale, camera)
+            y, ms = self._infer(slot, light_scale, camera, light)
             self.timer.add("inference", ms)
             self._show(y, slot, t_inputs)
         else:
             if self._worker is None:
                 self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="diviewer-gi")
             previous = self._inflight
-            self._inflight = (self._worker.submit(self._infer, slot, light_scale, camera), slot, t_inputs)
+            self._inflight = (self._worker.submit(self._infer, slot, light_scale, camera, light), slot, t_inputs)
             self._slot = 1 - slot
             if previous is None and self.output is None:
                 # The very first frame waits for its own prediction (there is nothing older to show) ...

@@ -71,3 +71,27 @@ def light_scale(scene, config) -> float:
             s += luminance(m.emission)
     s += luminance(scene.ambient)
     return s
+
+
+LIGHT_PARAMS = 3
+"""Numbers per light in `light_params`."""
+
+
+def light_params(lights, center, half) -> np.ndarray:
+    """Where each light is, as encoding version 4 gives it to the network: (3 L,) float32, L = len(lights), in
+    their order. A sun: the unit direction its light travels. A point light: its position normalised as the world
+    planes are, ``clip((p - center) / half, -1, 1)`` (``center``, ``half``: the encoding's world box). What a
+    light's strength is stays out: the light scale carries it (encoding 2). ``lights``: the scene's light objects or
+    the dicts a dataset's frame configurations store (``type``, ``direction`` or ``position``)."""
+    out = []
+    c, h = np.asarray(center, np.float64), np.asarray(half, np.float64)
+    for light in lights:
+        get = (lambda k, x=light: x[k]) if isinstance(light, dict) else (lambda k, x=light: getattr(x, k))
+        sun = light.get("type") == "directional" if isinstance(light, dict) else isinstance(light, DirectionalLight)
+        if sun:
+            d = np.asarray(get("direction"), np.float64)
+            n = float(np.linalg.norm(d))
+            out.append(d / n if n > 0 and math.isfinite(n) else np.zeros(3))
+        else:
+            out.append(np.clip((np.asarray(get("position"), np.float64) - c) / h, -1.0, 1.0))
+    return np.concatenate(out).astype(np.float32) if out else np.zeros(0, np.float32)

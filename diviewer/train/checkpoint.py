@@ -301,10 +301,13 @@ def parent_encoding(parent: Mapping[str, Any], cfg: TrainConfig):
     from diviewer.encoding import Encoding
 
     enc = Encoding.from_dict(parent["encoding"])
-    if enc.light_scaled != cfg.light_scale or enc.world_inputs != cfg.world_inputs:
-        raise DiviewerError(f"--init-from's model was trained with encoding {enc.version}; pass "
-                            f"--{'' if enc.light_scaled else 'no-'}light-scale --{'' if enc.world_inputs else 'no-'}"
-                            "world-inputs to warm-start from it", path=cfg.init_from)
+    if (enc.light_scaled, enc.world_inputs, enc.light_inputs) != (cfg.light_scale, cfg.world_inputs,
+                                                                     cfg.light_inputs):
+        flags = " ".join(f"--{'' if on else 'no-'}{name}" for on, name in ((enc.light_scaled, "light-scale"),
+                                                                          (enc.world_inputs, "world-inputs"),
+                                                                          (enc.light_inputs, "light-inputs")))
+        raise DiviewerError(f"--init-from's model was trained with encoding {enc.version}; pass {flags} to "
+                            "warm-start from it", path=cfg.init_from)
     return enc
 
 

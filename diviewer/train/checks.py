@@ -1,4 +1,5 @@
-"""What `diviewer export` refuses before it writes a model: broken weights and outputs that verify nothing.
+"""What `diviewer export` refuses before it writes a model: broken weights and outputs that verify nothing; and the
+frame of broken values (`extreme_frame`) it checks the graph on.
 
 A checkpoint with NaN/Inf weights or a negative BatchNorm running variance is broken however it was
 made (a diverged run, a hand edit, a truncated copy); a generator whose output is constant or
@@ -30,7 +31,7 @@ frame) is at most this fraction of its magnitude (or this absolute value for an 
 
 
 def refuse_broken(netG, ref_module, frames: np.ndarray, fp16: bool, ckpt_path: Path, scales=None,
-                  cams=None) -> np.ndarray:
+                  cams=None, lights=None) -> np.ndarray:
     """Check the generator's weights, run the float32 reference on ``frames`` and check its outputs.
 
     Returns:
@@ -47,8 +48,8 @@ def refuse_broken(netG, ref_module, frames: np.ndarray, fp16: bool, ckpt_path: P
     hook = netG.register_forward_hook(lambda _m, _i, out: captured.append(out.detach().float().numpy()))
     try:
         with torch.no_grad():
-            extra = [torch.from_numpy(a.astype(np.float32)) for a in (scales, cams) if a is not None]
-            reference = ref_module(torch.from_numpy(frames), *extra).numpy()  # encoding 2's light, 3's camera
+            extra = [torch.from_numpy(a.astype(np.float32)) for a in (scales, cams, lights) if a is not None]
+            reference = ref_module(torch.from_numpy(frames), *extra).numpy()  # encodings 2, 3, 4's inputs
     finally:
         hook.remove()
     check_outputs(np.concatenate(captured), reference, len(frames), ckpt_path)
@@ -86,3 +87,15 @@ def check_outputs(net_out: np.ndarray, reference: np.ndarray, frames: int, ckpt_
         raise DiviewerError(f"the generator's output is constant ({float(net_out.flat[0]) if net_out.size else 0:.4g}) "
                             f"on the {frames} verification frames: a dead or diverged network, which no comparison "
                             f"with PyTorch can verify; not exported", path=ckpt_path)
+
+
+def extreme_frame(frame: np.ndarray) -> np.ndarray:
+    """A copy of one (H, W, 10) frame with NaN, +-Inf, +-1e30, 0 and 1e-30 written into every channel at a
+    few pixels each: the export's check that the graph treats broken buffers as training's functions do."""
+    x = frame.copy()
+    values = (np.nan, np.inf, -np.inf, 1e30, -1e30, 0.0, 1e-30)
+    h, w = x.shape[:2]
+    for c in range(x.shape[-1]):
+        for k, v in enumerate(values):
+            x[(3 * c + k) % h, (5 * k + c) % w, c] = v
+    return x

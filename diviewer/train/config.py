@@ -151,6 +151,10 @@ class TrainConfig:
     """Encoding version 3 (needs ``light_scale``): the network also takes each pixel's world-space position and
     normal, computed from its depth, normal and the frame's camera (`diviewer.train.world`)."""
 
+    light_inputs: bool = False
+    """Encoding version 4 (needs ``world_inputs``): the network also takes where each of the scene's lights is (a
+    sun's direction, a point light's position: `diviewer.scene.lights.light_params`), as constant planes."""
+
     aspect_crops: tuple[float, float] | None = None
     """Random-width crops of the (wider) dataset frames, one width per batch, width / height drawn in this
     range at full height (e.g. (0.5625, 1.7778): 9:16 to 16:9), edge-padded to the network's stride as the
@@ -202,11 +206,13 @@ class TrainConfig:
         if self.recipe is not None and not (isinstance(self.recipe, dict)
                                             and all(isinstance(k, str) for k in self.recipe)):
             fail("recipe", f"must be a recipe record (a table of name, file, sha256, overrides), got {self.recipe!r}")
-        for name in ("light_scale", "world_inputs"):
+        for name in ("light_scale", "world_inputs", "light_inputs"):
             if not isinstance(getattr(self, name), bool):
                 fail(name, f"must be true or false, got {getattr(self, name)!r}")
         if self.world_inputs and not self.light_scale:
             fail("world_inputs", "needs light_scale (encoding 3 extends encoding 2)")
+        if self.light_inputs and not self.world_inputs:
+            fail("light_inputs", "needs world_inputs (encoding 4 extends encoding 3)")
         if self.aspect_crops is not None:
             a = self.aspect_crops
             ok = (isinstance(a, (tuple, list)) and len(a) == 2
@@ -263,7 +269,7 @@ RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "lr_decay_
                                  "lambda_L1", "target", "divide_albedo", "seed", "dropout", "ndf", "gan_weight",
                                  "gan_mode", "recon_loss", "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample",
                                  "norm", "train_frames", "init_from", "light_scale", "aspect_crops",
-                                 "world_inputs")
+                                 "world_inputs", "light_inputs")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change); the schedule
 (lr_decay, lr_decay_start) may change while both the old and the new one are constant up to the
 checkpoint's step (train.checkpoint.check_resume)."""
@@ -272,6 +278,7 @@ RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save
 """Settings `diviewer train --resume` takes from the checkpoint unless given again (max_steps, precision,
 device and num_workers describe this invocation and this machine, so they are not inherited)."""
 
-LEGACY_DEFAULTS: dict[str, Any] = {"light_scale": False, "aspect_crops": None, "world_inputs": False}
+LEGACY_DEFAULTS: dict[str, Any] = {"light_scale": False, "aspect_crops": None, "world_inputs": False,
+                                   "light_inputs": False}
 """What a checkpoint from before these settings existed trained with (radiance as is, whole frames), where
 it does not record them; a new run's defaults differ."""

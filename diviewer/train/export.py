@@ -28,9 +28,10 @@ from diviewer.metrics import psnr
 from diviewer.outputs import check_output_file, dumps, staged
 from diviewer.padding import pad_camera_params, pad_nhwc
 from diviewer.provenance import versions
-from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME,
-                              store_weights_half)
-from diviewer.train.checks import FP16_TOLERANCE, refuse_broken
+from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT,
+                              OUTPUT_NAME)
+from diviewer.weights import store_weights_half
+from diviewer.train.checks import FP16_TOLERANCE, extreme_frame, refuse_broken
 
 OPSET = 17
 FP32_TOLERANCE = 1e-4
@@ -84,10 +85,10 @@ def gi_module(netG, encoding, meta: dict, fp16: bool = False, layout: str = "NHW
     return module.eval()
 
 
-def onnx_bytes(module, example, light_scale=None, camera=None) -> bytes:
-    """`module` (buffers [, light_scale [, camera]] -> NHWC radiance) as ONNX bytes: the legacy TorchScript
-    exporter at `OPSET`, dynamic batch, height and width. `example` is a (1, H, W, 10) or (1, 10, H, W) float32
-    tensor; ``camera`` (encoding 3) a (1, CAMERA_PARAMS) one."""
+def onnx_bytes(module, example, light_scale=None, camera=None, light=None) -> bytes:
+    """`module` (buffers [, light_scale [, camera [, light]]] -> NHWC radiance) as ONNX bytes: the legacy
+    TorchScript exporter at `OPSET`, dynamic batch, height and width. `example` is a (1, H, W, 10) or (1, 10, H, W)
+    float32 tensor; ``camera`` (encoding 3) a (1, CAMERA_PARAMS) one; ``light`` (encoding 4) a (1, 3 L) one."""
     torch = _torch()
     buf = io.BytesIO()
     layout = getattr(module, "layout", "NHWC")
@@ -99,6 +100,9 @@ def onnx_bytes(module, example, light_scale=None, camera=None) -> bytes:
     if camera is not None:
         names, args = names + [CAMERA_NAME], (*args, camera)
         axes[CAMERA_NAME] = {0: "N"}
+    if light is not None:
+        names, args = names + [LIGHT_NAME], (*args, light)
+        axes[LIGHT_NAME] = {0: "N"}
     with torch.no_grad(), warnings.catch_warnings():
         # InstanceNorm without running statistics normalises with each image's own statistics in
         # eval mode too, which is what it should export; the exporter warns about exactly that.
@@ -106,18 +110,6 @@ def onnx_bytes(module, example, light_scale=None, camera=None) -> bytes:
         torch.onnx.export(module, args, buf, input_names=names, output_names=[OUTPUT_NAME],
                           opset_version=OPSET, dynamo=False, dynamic_axes=axes)
     return buf.getvalue()
-
-
-def extreme_frame(frame: np.ndarray) -> np.ndarray:
-    """A copy of one (H, W, 10) frame with NaN, +-Inf, +-1e30, 0 and 1e-30 written into every channel at a
-    few pixels each: the export's check that the graph treats broken buffers as training's functions do."""
-    x = frame.copy()
-    values = (np.nan, np.inf, -np.inf, 1e30, -1e30, 0.0, 1e-30)
-    h, w = x.shape[:2]
-    for c in range(x.shape[-1]):
-        for k, v in enumerate(values):
-            x[(3 * c + k) % h, (5 * k + c) % w, c] = v
-    return x
 
 
 def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[int, int], light_scaled: bool = False,
@@ -135,6 +127,26 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
     cams = np.stack([camera_params(c["position"], c["target"], c["up"], c["fov"], w, h)
                      for c in (configs or [default] * len(frames))])
     return frames, scales, source, cams
+
+
+def _verification_lights(encoding, data_dir: str | None, n: int) -> np.ndarray | None:
+    """Encoding 4's light input for the verification frames (`_frames_and_scales`' frames, in its order): each
+    frame's lights from the dataset, or for procedural frames suns at a few directions; None for older encodings."""
+    if not encoding.light_inputs:
+        return None
+    from diviewer.data.dataset import Dataset
+    from diviewer.scene.lights import light_params
+
+    if data_dir and (Path(data_dir) / "manifest.json").is_file():
+        ds = Dataset(data_dir)
+        idx = (ds.indices("val") or ds.indices())[:n]
+        if idx:
+            configs = {f["index"]: (f.get("config") or {}).get("lights") for f in ds.frames}
+            if all(configs[i] and len(configs[i]) == encoding.lights for i in idx):
+                return np.stack([light_params(configs[i], encoding.world_center, encoding.world_half) for i in idx])
+    suns = [[{"type": "directional", "direction": [np.sin(a), -1.0, np.cos(a)]}] * encoding.lights
+            for a in np.linspace(0.0, 2.0, n)]
+    return np.stack([light_params(s, encoding.world_center, encoding.world_half) for s in suns])
 
 
 def _frames_and_scales(data_dir: str | None, n: int, res: tuple[int, int], light_scaled: bool):
@@ -184,7 +196,7 @@ def check_export_paths(ckpt_path: Path, out: Path) -> None:
 
 
 def run_session(session, frames: np.ndarray, scales: np.ndarray | None, layout: str,
-                cams: np.ndarray | None = None) -> np.ndarray:
+                cams: np.ndarray | None = None, lights: np.ndarray | None = None) -> np.ndarray:
     """An export's onnxruntime session on NHWC frames (one at a time), as the runtime feeds it."""
     out = []
     for k, f in enumerate(frames):
@@ -193,13 +205,15 @@ def run_session(session, frames: np.ndarray, scales: np.ndarray | None, layout: 
             feed[LIGHT_SCALE_NAME] = scales[k:k + 1].astype(np.float32)
         if cams is not None:
             feed[CAMERA_NAME] = cams[k:k + 1].astype(np.float32)
+        if lights is not None:
+            feed[LIGHT_NAME] = lights[k:k + 1].astype(np.float32)
         out.append(session.run([OUTPUT_NAME], feed)[0])
     return np.concatenate(out)
 
 
 def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, frames: np.ndarray,
                   scales: np.ndarray | None, source: str, out: Path, log=print, weights_from: Path | None = None,
-                  cams: np.ndarray | None = None):
+                  cams: np.ndarray | None = None, lights: np.ndarray | None = None):
     """The lean graph of ``make_netG()`` as an ONNX model, checked in onnxruntime against training's own
     functions in PyTorch (`diviewer.train.graph.ReferenceGI`, fp32) before anything is written: on the
     frames, on a copy with NaN/Inf/extreme values in every channel, and, for encoding 2, at zero light
@@ -214,25 +228,27 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     ref_module = gi_module(netG, encoding, meta, lean=False)
     # broken weights, or an output that is constant or non-finite: refused, naming the checkpoint
     reference = refuse_broken(netG, ref_module, frames, settings.fp16 or settings.half_weights,
-                              weights_from or out, scales, cams)
+                              weights_from or out, scales, cams, lights)
     ext = extreme_frame(frames[0])[None]
     s_t = None if scales is None else torch.from_numpy(scales.astype(np.float32))
     c_t = None if cams is None else torch.from_numpy(cams.astype(np.float32))
+    l_t = None if lights is None else torch.from_numpy(lights.astype(np.float32))
     with torch.no_grad():
         ref_ext = ref_module(torch.from_numpy(ext), None if s_t is None else s_t[:1],
-                             None if c_t is None else c_t[:1]).numpy()
+                             None if c_t is None else c_t[:1], None if l_t is None else l_t[:1]).numpy()
         module = gi_module(make_netG(), encoding, meta, fp16=settings.fp16, layout=settings.layout)
     example = torch.from_numpy(frames[:1])
     example = example.permute(0, 3, 1, 2).contiguous() if settings.layout == "NCHW" else example
-    data = onnx_bytes(module, example, None if s_t is None else s_t[:1], None if c_t is None else c_t[:1])
+    data = onnx_bytes(module, example, None if s_t is None else s_t[:1], None if c_t is None else c_t[:1],
+                      None if l_t is None else l_t[:1])
     model = onnx.load_from_string(data)
     if settings.half_weights:  # verified as written: the float16-stored weights, cast back in the session
         store_weights_half(model)
         data = model.SerializeToString()
     session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
-    got = run_session(session, frames, scales, settings.layout, cams)
+    got = run_session(session, frames, scales, settings.layout, cams, lights)
     got_ext = run_session(session, ext, None if scales is None else scales[:1], settings.layout,
-                          None if cams is None else cams[:1])
+                          None if cams is None else cams[:1], None if lights is None else lights[:1])
     diff = np.abs(got.astype(np.float64) - reference)
     peak = float(np.abs(reference).max()) or 1.0
     same_nonfinite = bool(np.array_equal(np.isfinite(got_ext), np.isfinite(ref_ext)))
@@ -253,7 +269,8 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     }
     precision = "fp16" if settings.fp16 else "fp32"
     if scales is not None:
-        check.update(_light_checks(session, frames, scales, got, peak, settings.layout, precision, out, log, cams))
+        check.update(_light_checks(session, frames, scales, got, peak, settings.layout, precision, out, log, cams,
+                                   lights))
     log(f"verify {precision} against torch on {source}: max |diff| {check['max_abs_diff']:.3g} "
         f"({check['max_rel_to_peak']:.2g} of peak {peak:.3g}), mean {check['mean_abs_diff']:.3g}, "
         f"PSNR {check['psnr_db']:.1f} dB; extremes {check['extremes_max_rel_to_peak']:.2g} of peak")
@@ -275,15 +292,16 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
 
 
 def _light_checks(session, frames: np.ndarray, scales: np.ndarray, got: np.ndarray, peak: float, layout: str,
-                  precision: str, out: Path, log, cams: np.ndarray | None = None) -> dict:
+                  precision: str, out: Path, log, cams: np.ndarray | None = None,
+                  lights: np.ndarray | None = None) -> dict:
     """Encoding 2 on the exported graph: zero light gives exactly 0 (refused otherwise), twice the light
     twice the output (recorded)."""
     dark = frames.copy()
     dark[..., channel_slices()["direct"]] = 0.0
-    zero = run_session(session, dark, np.zeros_like(scales), layout, cams)
+    zero = run_session(session, dark, np.zeros_like(scales), layout, cams, lights)
     bright = frames.copy()
     bright[..., channel_slices()["direct"]] *= 2.0
-    twice = run_session(session, bright, 2.0 * scales, layout, cams)
+    twice = run_session(session, bright, 2.0 * scales, layout, cams, lights)
     check = {"zero_light_max": float(np.abs(zero).max()),
              "twice_light_max_rel_to_peak": float(np.abs(twice - 2.0 * got).max() / (2.0 * peak))}
     log(f"light: zero light max {check['zero_light_max']:.3g}, twice the light off by "
@@ -311,9 +329,10 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
                                                         res, encoding.light_scaled, encoding.world_inputs)
     if cams is not None:  # the cameras of the padded frames, as the runtime shifts them
         cams = pad_camera_params(cams, frames.shape[2], frames.shape[1], 2 ** levels)
+    lights = _verification_lights(encoding, meta["config"].get("data"), len(frames))
     frames = pad_nhwc(frames, 2 ** levels)  # a capture of another shape (e.g. 228x128): padded as the runtime pads
     model, check = verified_onnx(lambda: build_generator_from_checkpoint(ckpt)[0], encoding, meta, settings, frames,
-                                 scales, source, out, log, weights_from=ckpt_path, cams=cams)
+                                 scales, source, out, log, weights_from=ckpt_path, cams=cams, lights=lights)
     precision = "fp16" if settings.fp16 else "fp32"
     card = {
         "format": MODEL_FORMAT,

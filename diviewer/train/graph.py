@@ -31,7 +31,7 @@ import torch
 
 from diviewer.encoding import INPUT_CHANNELS, Encoding, channel_slices
 from diviewer.train.targets import ALBEDO_FLOOR, compose_radiance
-from diviewer.train.world import world_planes
+from diviewer.train.world import light_planes, world_planes
 
 LAYOUTS = ("NHWC", "NCHW")
 """Input layouts an export can take: the GL pack's interleaved NHWC, or channel-first NCHW."""
@@ -97,7 +97,7 @@ def fold_batchnorm(netG: torch.nn.Module) -> torch.nn.Module:
 
 class LeanGI(torch.nn.Module):
     """Raw buffers (and, for encoding version 2, the light scale (N,); for version 3 also the camera (N,
-    CAMERA_PARAMS)) -> linear radiance (N, H, W, 3)."""
+    CAMERA_PARAMS); for version 4 also the lights (N, 3 L)) -> linear radiance (N, H, W, 3)."""
 
     def __init__(self, netG, encoding: Encoding, meta: dict, fp16: bool = False, layout: str = "NHWC"):
         super().__init__()
@@ -119,7 +119,7 @@ class LeanGI(torch.nn.Module):
         self.floor_lo = 2.0 * ALBEDO_FLOOR - 1.0  # the albedo floor, in encoded albedo (2a - 1)
 
     def forward(self, buffers: torch.Tensor, light_scale: torch.Tensor | None = None,
-                camera: torch.Tensor | None = None) -> torch.Tensor:
+                camera: torch.Tensor | None = None, light: torch.Tensor | None = None) -> torch.Tensor:
         raw = buffers if self.layout == "NCHW" else buffers.permute(0, 3, 1, 2)
         # The raw direct light, sliced before the If (the tracer would alias raw with its unchanged output): a
         # NaN there stays visible where it arose (the runtime counts it) instead of being hidden.
@@ -145,6 +145,8 @@ class LeanGI(torch.nn.Module):
         parts = [e_depth, e_geo, e_direct]
         if enc.world_inputs:  # encoding 3: world position and normal from the (finite) depth, normal and camera
             parts.append(world_planes(depth, geo[:, :3], camera, enc.world_center, enc.world_half))
+        if enc.light_inputs:  # encoding 4: where each light is, over the frame's surfaces
+            parts.append(light_planes(light, depth))
         encoded = torch.cat(parts, 1)
         y = self.netG(encoded.half() if self.fp16 else encoded)
         y = y.float() if self.fp16 else y
@@ -168,7 +170,7 @@ class ReferenceGI(torch.nn.Module):
         self.fp16, self.enc, self.meta = fp16, encoding, meta
 
     def forward(self, buffers: torch.Tensor, light_scale: torch.Tensor | None = None,
-                camera: torch.Tensor | None = None) -> torch.Tensor:
+                camera: torch.Tensor | None = None, light: torch.Tensor | None = None) -> torch.Tensor:
         from diviewer.train.encoding_torch import TORCH_OPS, decode_radiance, encode_inputs
         from diviewer.encoding import inverse_light_scale
 
@@ -183,6 +185,8 @@ class ReferenceGI(torch.nn.Module):
             geometry = torch.where(torch.isfinite(depth), depth, torch.zeros_like(depth))
             normal = torch.where(torch.isnan(normal), torch.zeros_like(normal), normal)
             inp = torch.cat([inp, world_planes(geometry, normal, camera, self.enc.world_center, self.enc.world_half)], 1)
+            if self.enc.light_inputs:
+                inp = torch.cat([inp, light_planes(light, geometry)], 1)
         y = self.netG(inp.half() if self.fp16 else inp)
         radiance = decode_radiance(y.float() if self.fp16 else y, self.enc)
         if s is not None:

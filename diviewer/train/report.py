@@ -33,7 +33,8 @@ not validated) and wall-clock seconds since the run began (summed over resumed p
 
 def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, cfg: TrainConfig, device,
              dtype=None, scales: np.ndarray | None = None, multiple: int = 1,
-             tonemap_exposure: float | None = None, cams: np.ndarray | None = None) -> dict[str, float]:
+             tonemap_exposure: float | None = None, cams: np.ndarray | None = None,
+             lights: np.ndarray | None = None) -> dict[str, float]:
     """Mean per-frame metrics of the composed image against the path-traced `pt`, netG in eval mode.
 
     Linear: MSE, PSNR (peak 1) and SSIM (data_range 1) on radiance as stored, as `diviewer.metrics`
@@ -43,7 +44,8 @@ def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, 
     2: the decoded output is multiplied by it). Frames are padded to ``multiple`` as the runtime pads them,
     and the metrics taken on the frame's own pixels. tonemap_exposure: the tone map's (default
     ``enc.exposure``; with encoding 2 the trainer passes the one fitted on the raw direct light, as eval fits it).
-    cams: each val frame's camera (encoding version 3, `diviewer.train.targets.run_cameras`).
+    cams: each val frame's camera (encoding version 3, `diviewer.train.targets.run_cameras`); lights: its lights
+    (encoding version 4, `diviewer.train.targets.run_lights`).
     """
     import torch
 
@@ -58,7 +60,8 @@ def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, 
             x16 = torch.from_numpy(val[start:start + cfg.batch_size]).to(device)
             scale = None if scales is None else torch.from_numpy(scales[start:start + cfg.batch_size])
             cam = None if cams is None else torch.from_numpy(cams[start:start + cfg.batch_size])
-            b = split_batch(x16, slices, enc, cfg, scale=scale, multiple=multiple, cams=cam)
+            lit = None if lights is None else torch.from_numpy(lights[start:start + cfg.batch_size])
+            b = split_batch(x16, slices, enc, cfg, scale=scale, multiple=multiple, cams=cam, lights=lit)
             with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
                 fake_B = netG(b["real_A"])
             radiance = decode_radiance(fake_B.float(), enc)

@@ -84,14 +84,15 @@ def run_light_scales(cfg: TrainConfig, ds: Dataset, train_idx: list[int],
 
 
 def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: np.ndarray | None = None,
-                 world: bool = False) -> Encoding:
+                 world: bool = False, lights: bool = False) -> Encoding:
     """The dataset's encoding, fixed from the train split.
 
     exposure: `fit_exposure` over the train frames' GL direct light (divided by each frame's light scale
     when ``scales`` is given: encoding version 2); depth_scale: the camera's far plane from the frame
     configurations (all visible geometry then maps into [0, 1]), else the largest train depth;
     radiance_max: the default. ``world`` (encoding version 3, with ``scales``): world_center and world_half
-    from the bounds of the scene's objects (`Scene.bounds`), the scene the dataset was captured from.
+    from the bounds of the scene's objects (`Scene.bounds`), the scene the dataset was captured from. ``lights``
+    (encoding version 4, with ``world``): the number of the scene's lights, which every frame configuration has.
     """
     from diviewer.encoding import Encoding, fit_exposure, inverse_light_scale
 
@@ -115,10 +116,24 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: n
         depth_scale = float(finite.max()) if finite.size else 1.0
     if not world:
         return Encoding(exposure=float(exposure), depth_scale=float(depth_scale), version=1 if scales is None else 2)
-    lo, hi = _scene_of(ds).bounds()
-    return Encoding(exposure=float(exposure), depth_scale=float(depth_scale), version=3,
+    scene = _scene_of(ds)
+    lo, hi = scene.bounds()
+    count = None
+    if lights:
+        from diviewer.errors import DiviewerError
+
+        count = len(scene.default.lights)
+        if count == 0:
+            raise DiviewerError("the scene has no lights to feed the network (light_inputs); train without them",
+                                path=ds.root)
+        wrong = next((f["index"] for f in ds.frames if len((f.get("config") or {}).get("lights") or []) != count),
+                     None)
+        if wrong is not None:
+            raise DiviewerError(f"frame {wrong}'s configuration has not the scene's {count} light(s) (light_inputs)",
+                                path=ds.root / "manifest.json")
+    return Encoding(exposure=float(exposure), depth_scale=float(depth_scale), version=4 if lights else 3,
                     world_center=tuple(float(v) for v in (lo + hi) / 2),
-                    world_half=tuple(float(v) for v in np.maximum((hi - lo) / 2, 1e-3)))
+                    world_half=tuple(float(v) for v in np.maximum((hi - lo) / 2, 1e-3)), lights=count)
 
 
 def _scene_of(ds: Dataset):
@@ -126,6 +141,14 @@ def _scene_of(ds: Dataset):
     from diviewer.scene.loader import load_recorded_scene
 
     return load_recorded_scene(ds.manifest, ds.root / "manifest.json", "it changed since the capture")
+
+
+def raw_exposure(ds: Dataset, train_arr: np.ndarray) -> float:
+    """`fit_exposure` on the train frames' GL direct light as stored (not divided by the light scale): the
+    tone map `diviewer eval --data` fits, so validation and eval score alike."""
+    from diviewer.encoding import fit_exposure
+
+    return float(fit_exposure([frame[..., ds.slices["direct"]] for frame in train_arr]))
 
 
 def run_cameras(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool) -> tuple[Any, Any]:
@@ -144,6 +167,21 @@ def run_cameras(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool
     return cams(train_idx), cams(sorted(ds.indices("val"))) if with_val else None
 
 
+def run_lights(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool) -> tuple[Any, Any]:
+    """Each train (and val) frame's lights (`diviewer.scene.lights.light_params` of its configuration), (N, 3 L)
+    float32 in the order of the frames' arrays; (None, None) unless encoding version 4."""
+    if not enc.light_inputs:
+        return None, None
+    from diviewer.scene.lights import light_params
+
+    config = {f["index"]: f["config"]["lights"] for f in ds.frames}
+
+    def lights(idx: list[int]) -> np.ndarray:
+        return np.stack([light_params(config[i], enc.world_center, enc.world_half) for i in idx])
+
+    return lights(train_idx), lights(sorted(ds.indices("val"))) if with_val else None
+
+
 def crop_plan(cfg: TrainConfig, epoch: int, batch: int, n: int, height: int, width: int) -> tuple[int, list[int]] | None:
     """This batch's random aspect crop, or None: one width for the whole batch (within
     ``cfg.aspect_crops`` x height, at most the frame's width) and each frame's left edge. A pure function of
@@ -160,7 +198,8 @@ def crop_plan(cfg: TrainConfig, epoch: int, batch: int, n: int, height: int, wid
 
 def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, cfg: TrainConfig,
                 scale: torch.Tensor | None = None, multiple: int = 1,
-                crop: tuple[int, list[int]] | None = None, cams: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+                crop: tuple[int, list[int]] | None = None, cams: torch.Tensor | None = None,
+                lights: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
     """A stored (N, H, W, C) batch on the device -> real_A (encoded inputs), real_B (encoded target),
     and the raw NCHW planes the composition, the losses and the metrics need (direct, albedo, pt,
     target: the linear target radiance, divided by the light scale for encoding version 2).
@@ -173,6 +212,7 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
         crop: (width, left edges): each frame cut to that width first (`crop_plan`).
         cams: (N, CAMERA_PARAMS) each frame's camera over its whole stored frame (encoding version 3: the world
             planes are computed on the padded crop, as the graph computes them on the runtime's padded frame).
+        lights: (N, 3 L) each frame's lights (encoding version 4, `run_lights`).
     """
     import torch
 
@@ -210,6 +250,12 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
         cams = shift_camera_params(cams, torch.as_tensor(left, dtype=cams.dtype, device=cams.device),
                                    (pad_before(w, multiple), pad_before(h, multiple)), (w, h))
         real_A = torch.cat([real_A, world_planes(p["depth"], p["normal"], cams, enc.world_center, enc.world_half)], 1)
+    if enc.light_inputs:
+        from diviewer.train.world import light_planes
+
+        if lights is None:
+            raise ValueError("encoding version 4 needs each frame's lights")
+        real_A = torch.cat([real_A, light_planes(lights.to(x.device, torch.float32), p["depth"])], 1)
     target = target_radiance(p["pt"], p["pt_direct"], p["albedo"], cfg.target, cfg.divide_albedo, p["direct"])
     if inv is not None:
         target = target * inv

@@ -44,7 +44,8 @@ from diviewer.train.checkpoint import (check_resume, init_record, load_checkpoin
 from diviewer.train.config import TrainConfig
 from diviewer.train.distributed import Dist, epoch_batches
 from diviewer.train.report import METRIC_KEYS, draw_curves, read_metrics, validate, write_metrics
-from diviewer.train.targets import crop_plan, fit_encoding, run_cameras, run_light_scales, split_batch
+from diviewer.train.targets import (crop_plan, fit_encoding, raw_exposure, run_cameras, run_light_scales, run_lights,
+                                    split_batch)
 
 if TYPE_CHECKING:
     from diviewer.data.dataset import Dataset
@@ -131,6 +132,9 @@ class Run:
     train_cams: np.ndarray | None = None
     val_cams: np.ndarray | None = None
     """Each train / val frame's camera (encoding version 3, `targets.run_cameras`), in the arrays' order."""
+    train_lights: np.ndarray | None = None
+    val_lights: np.ndarray | None = None
+    """Each train / val frame's lights (encoding version 4, `targets.run_lights`), in the arrays' order."""
     tonemap_exposure: float | None = None
     """Validation's tone map: `fit_exposure` on the train frames' raw GL direct light, as `diviewer eval --data`
     fits it (with encoding 2 the encoding's exposure is the light-normalised data's); None: the encoding's."""
@@ -205,8 +209,9 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
     elif parent:  # the parent's weights were trained on its encoding: keep it
         enc = parent_encoding(parent, cfg)
     else:
-        enc = fit_encoding(ds, train_idx, train_arr, train_scales, world=cfg.world_inputs)
+        enc = fit_encoding(ds, train_idx, train_arr, train_scales, world=cfg.world_inputs, lights=cfg.light_inputs)
     train_cams, val_cams = run_cameras(enc, ds, train_idx, val_arr is not None)
+    train_lights, val_lights = run_lights(enc, ds, train_idx, val_arr is not None)
     net_cfg = net_config(cfg, ds)
     _check_trainable(net_cfg, cfg, ds, len(train_idx))
     nets = build_nets(cfg, net_cfg, enc, dev, say)
@@ -233,7 +238,8 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
     return Run(cfg=cfg, dev=dev, ds=ds, train_arr=train_arr, val_arr=val_arr, enc=enc, say=say,
                meta=meta, steps_per_epoch=steps_per_epoch, elapsed0=st.elapsed, multiple=2 ** net_cfg.levels,
                train_scales=train_scales, val_scales=val_scales, train_cams=train_cams, val_cams=val_cams,
-               tonemap_exposure=None if enc.version < 2 else _raw_exposure(ds, train_arr)), nets, st
+               train_lights=train_lights, val_lights=val_lights,
+               tonemap_exposure=None if enc.version < 2 else raw_exposure(ds, train_arr)), nets, st
 
 
 def _epochs(run: Run, nets: Nets, st: TrainState, total: int, horizon: int) -> None:
@@ -335,7 +341,9 @@ def _batch(run: Run, x16, indices: list[int], epoch: int, batch: int) -> dict[st
     plan = crop_plan(cfg, epoch, batch, x16.shape[0], ds.height, ds.width)
     scale = None if run.train_scales is None else torch.from_numpy(run.train_scales[indices])
     cams = None if run.train_cams is None else torch.from_numpy(run.train_cams[indices])
-    return split_batch(x16, ds.slices, run.enc, cfg, scale=scale, multiple=run.multiple, crop=plan, cams=cams)
+    lights = None if run.train_lights is None else torch.from_numpy(run.train_lights[indices])
+    return split_batch(x16, ds.slices, run.enc, cfg, scale=scale, multiple=run.multiple, crop=plan, cams=cams,
+                       lights=lights)
 
 
 def _open_run(cfg: TrainConfig, ds: Dataset, train_idx: list[int], resume: bool, say) -> dict[str, Any] | None:
@@ -398,7 +406,7 @@ def _end_of_stretch(run: Run, nets: Nets, st: TrainState, do_val: bool) -> dict[
         if do_val and run.val_arr is not None:
             val = validate(nets.netG_m, run.val_arr, run.ds.slices, run.enc, run.cfg, run.dev.device, nets.dtype,
                            scales=run.val_scales, multiple=run.multiple, tonemap_exposure=run.tonemap_exposure,
-                           cams=run.val_cams)
+                           cams=run.val_cams, lights=run.val_lights)
             st.last_val = val
             st.since_best += 1
             if val["ssim_tm"] > st.best["ssim_tm"]:
@@ -439,11 +447,3 @@ def _result(cfg: TrainConfig, st: TrainState) -> dict[str, Any]:
     return {"epoch": st.epoch, "step": st.step, "val": st.last_val,
             "best": None if st.best["ssim_tm"] == -math.inf else st.best["ssim_tm"], "losses": st.history,
             "out": cfg.out, "stopped_early": _patience_spent(cfg, st)}
-
-
-def _raw_exposure(ds: Dataset, train_arr: np.ndarray) -> float:
-    """`fit_exposure` on the train frames' GL direct light as stored (not divided by the light scale): the
-    tone map `diviewer eval --data` fits, so validation and eval score alike."""
-    from diviewer.encoding import fit_exposure
-
-    return float(fit_exposure([frame[..., ds.slices["direct"]] for frame in train_arr]))

@@ -13,6 +13,9 @@ puts in the graph (so the runtime feeds the camera, not two more buffers).
 
 Both are 0 where there is no surface (depth <= 0), with the mask ``clip(depth HUGE, 0, 1)`` (1 for any depth
 >= 1e-38, a Where without onnxruntime's slow Where). Inputs must be finite (the graph's NaN guard runs first).
+
+Encoding version 4 adds `light_planes`: where each light is (three numbers a light, the graph's ``light`` input)
+spread over the frame's surfaces, so a network can tell which side of the scene a sun lights in a frame of shade.
 """
 
 from __future__ import annotations
@@ -25,6 +28,16 @@ WORLD_CHANNELS: tuple[tuple[str, int], ...] = (("world_position", 3), ("world_no
 """The planes appended to the network's input (encoding version 3), in this order."""
 
 _HUGE = 1e38
+
+
+def input_channels(enc) -> int:
+    """The network's input planes under encoding ``enc``: the buffers, then the world planes (version 3), then
+    three a light (version 4)."""
+    from diviewer.encoding import INPUT_CHANNEL_COUNT
+    from diviewer.scene.lights import LIGHT_PARAMS
+
+    world = sum(n for _, n in WORLD_CHANNELS) if enc.world_inputs else 0
+    return INPUT_CHANNEL_COUNT + world + (LIGHT_PARAMS * enc.lights if enc.light_inputs else 0)
 
 
 def world_planes(depth: torch.Tensor, normal: torch.Tensor, cams: torch.Tensor, center: Any, half: Any) -> torch.Tensor:
@@ -47,3 +60,11 @@ def world_planes(depth: torch.Tensor, normal: torch.Tensor, cams: torch.Tensor, 
                     + c[:, 3 * k + 2:3 * k + 3] * nrm[2] for k in range(3)], 1)
     geo = torch.clamp(depth * _HUGE, 0.0, 1.0)
     return torch.cat([torch.clamp((pos - center) * inv_half, -1.0, 1.0) * geo, torch.clamp(wn, -1.0, 1.0) * geo], 1)
+
+
+def light_planes(lights: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
+    """(N, 3 L) light parameters (`diviewer.scene.lights.light_params`) and (N, 1, H, W) depth -> (N, 3 L, H, W)
+    planes: each parameter constant over the frame's surfaces, 0 where there is none (encoding version 4)."""
+    n = depth.shape[0]
+    geo = torch.clamp(depth * _HUGE, 0.0, 1.0)
+    return lights.to(depth.dtype).reshape(n, -1, 1, 1) * geo

@@ -206,8 +206,8 @@ def test_temporal_rows_stop_at_temporal_max_spp(ctx, tiny_bench_inputs):
     """The temporal sequence renders the path tracer's ladder up to ``temporal_max_spp`` only (--quick: its
     reference's 4 spp, so the 16-256 spp rungs at the set's size no longer take most of a quick bench); None
     keeps every rung."""
-    from diviewer.bench.core import QUICK, BenchSettings, _open_evalset, _temporal
-    from diviewer.bench.runner import gl_timing_mode
+    from diviewer.bench.core import QUICK, BenchSettings, _open_evalset
+    from diviewer.bench.runner import gl_timing_mode, temporal_rows
     from diviewer.scene import load_scene
 
     scene = load_scene("cornell")
@@ -216,7 +216,7 @@ def test_temporal_rows_stop_at_temporal_max_spp(ctx, tiny_bench_inputs):
     mode = gl_timing_mode(ctx, "sync")
     got = {}
     for cap in (None, 1):
-        t = _temporal(ctx, dataclasses.replace(base, temporal_max_spp=cap), scene, ds, [], None, mode, [],
+        t = temporal_rows(ctx, dataclasses.replace(base, temporal_max_spp=cap), scene, ds, [], None, mode, [],
                       lambda *_: None)
         got[cap] = sorted(k for k in t["methods"] if k.startswith("pt_spp"))
     assert got == {None: ["pt_spp1", "pt_spp4"], 1: ["pt_spp1"]}  # the set's ladder is 1, 4

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from diviewer.scene.colour import luminance
@@ -42,3 +43,20 @@ def test_emitters_and_the_sky_count():
             "objects": [{"name": "lamp", "mesh": "box", "material": "lamp", "position": [0, 0, -3]}], "lights": []}
     scene = parse_scene(data)
     assert light_scale(scene, scene.default) == pytest.approx(2.0 + 0.1)  # only the emitters in the frame
+
+
+def test_light_params_give_suns_directions_and_point_lights_positions_in_the_world_box():
+    """Encoding 4's light input: a sun's unit direction, a point light's position normalised (and clipped) to the
+    world box, from the scene's light objects or a dataset's dicts alike; strength plays no part."""
+    from diviewer.scene.lights import LIGHT_PARAMS, light_params
+    from diviewer.scene.model import DirectionalLight, PointLight
+
+    sun = DirectionalLight(name="sun", direction=(0.0, -2.0, 0.0), color=(1.0, 1.0, 1.0), irradiance=5.0)
+    lamp = PointLight(name="lamp", position=(1.0, 3.0, -9.0), color=(1.0, 1.0, 1.0), intensity=7.0)
+    got = light_params([sun, lamp], center=(0.0, 1.0, 0.0), half=(2.0, 4.0, 2.0))
+    assert got.dtype == np.float32 and got.shape == (2 * LIGHT_PARAMS,)
+    np.testing.assert_allclose(got, [0.0, -1.0, 0.0, 0.5, 0.5, -1.0])  # z clipped at the box's face
+    as_dicts = [{"type": "directional", "direction": [0.0, -2.0, 0.0], "irradiance": 0.1},
+                {"type": "point", "position": [1.0, 3.0, -9.0], "intensity": 70.0}]
+    np.testing.assert_array_equal(light_params(as_dicts, (0.0, 1.0, 0.0), (2.0, 4.0, 2.0)), got)
+    assert light_params([], (0, 0, 0), (1, 1, 1)).shape == (0,)

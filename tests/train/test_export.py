@@ -344,7 +344,8 @@ def test_lean_graph_equals_training_functions_on_broken_buffers(checkpoints):
     or per-pixel transpose in the common path) gives what training's encode/decode/compose give."""
     import onnxruntime as ort
 
-    from diviewer.train.export import extreme_frame, onnx_bytes
+    from diviewer.train.checks import extreme_frame
+    from diviewer.train.export import onnx_bytes
 
     netG, enc, meta = build_generator_from_checkpoint(checkpoints["indirect"])
     lean, ref = gi_module(netG, enc, meta), gi_module(netG, enc, meta, lean=False)

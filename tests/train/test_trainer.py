@@ -28,7 +28,7 @@ from diviewer.train.cli import add_train_parser, run_train  # noqa: E402
 from diviewer.train.config import TrainConfig  # noqa: E402
 from diviewer.train.distributed import epoch_batches  # noqa: E402
 from diviewer.train.report import CSV_COLUMNS, validate  # noqa: E402
-from diviewer.train.targets import ALBEDO_FLOOR, compose_radiance, target_radiance  # noqa: E402
+from diviewer.train.targets import ALBEDO_FLOOR, compose_radiance, raw_exposure, target_radiance  # noqa: E402
 from diviewer.train.trainer import train  # noqa: E402
 
 RES = 32
@@ -201,7 +201,7 @@ def test_rebuilt_generator_reproduces_the_recorded_validation(run, data):
     from diviewer.data.scales import light_scales
 
     _, train_arr = ds.array("train")
-    tm = None if enc.version < 2 else trainer._raw_exposure(ds, train_arr)  # validation's tone map, as eval fits it
+    tm = None if enc.version < 2 else raw_exposure(ds, train_arr)  # validation's tone map, as eval fits it
     again = validate(netG, val, ds.slices, enc, cfg, torch.device("cpu"), scales=light_scales(ds, ds.indices("val")),
                      tonemap_exposure=tm)
     assert again == pytest.approx(ckpt["val"], rel=1e-6)  # the weights that produced the recorded metrics

@@ -3,6 +3,7 @@ crops and padding as the runtime will pad, in training batches, and a run that t
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -17,7 +18,7 @@ from diviewer.scene import camera as cam  # noqa: E402
 from diviewer.scene.loader import load_scene  # noqa: E402
 from diviewer.train.checkpoint import load_checkpoint  # noqa: E402
 from diviewer.padding import shift_camera_params  # noqa: E402
-from diviewer.train.world import world_planes  # noqa: E402
+from diviewer.train.world import light_planes, world_planes  # noqa: E402
 from tool_modules import load_tool  # noqa: E402
 
 CAMERA = {"position": [-0.4, 1.4, 3.9], "target": [0.2, 1.3, 0.4], "up": [0.0, 1.0, 0.0], "fov": 41.0}
@@ -128,9 +129,10 @@ def test_a_run_trains_on_world_inputs_and_records_them(tmp_path):
         model.run(frame, light_scale=2.0)
 
 
-def test_the_graph_matches_training_on_a_padded_crop(tmp_path):
+@pytest.mark.parametrize("lit", [False, True])
+def test_the_graph_matches_training_on_a_padded_crop(tmp_path, lit):
     """The exported graph on a crop the runtime pads gives what training's own functions give on the same crop
-    padded by split_batch: the world planes line up with the pixels on both paths."""
+    padded by split_batch: the world planes (and encoding 4's light planes) line up with the pixels on both paths."""
     from diviewer.encoding import Encoding
     from diviewer.train.config import TrainConfig
     from diviewer.train.graph import ReferenceGI
@@ -138,8 +140,10 @@ def test_the_graph_matches_training_on_a_padded_crop(tmp_path):
     from diviewer.train.targets import split_batch
 
     torch.manual_seed(0)
-    netG = UnetGenerator(16, 3, K=4, levels=4).eval()
-    enc = Encoding(exposure=1.0, depth_scale=10.0, version=3, world_center=(0, 1, 0), world_half=(1.5, 1.5, 1.5))
+    netG = UnetGenerator(19 if lit else 16, 3, K=4, levels=4).eval()
+    enc = Encoding(exposure=1.0, depth_scale=10.0, version=4 if lit else 3, world_center=(0, 1, 0),
+                   world_half=(1.5, 1.5, 1.5), lights=1 if lit else None)
+    sun = torch.tensor([[0.6, -0.8, 0.0]]) if lit else None
     rng = np.random.default_rng(0)
     h, w, x0 = 32, 24, 5
     depth, normal = _buffers(rng, h, 40)
@@ -149,9 +153,9 @@ def test_the_graph_matches_training_on_a_padded_crop(tmp_path):
     full_cam = _params(width=40, height=h)[None]
     slices = {"depth": slice(0, 1), "normal": slice(1, 4), "albedo": slice(4, 7), "direct": slice(7, 10),
               "pt": slice(10, 13), "pt_direct": slice(13, 16)}
-    cfg = TrainConfig(data=tmp_path, out=tmp_path / "r", world_inputs=True)
+    cfg = TrainConfig(data=tmp_path, out=tmp_path / "r", world_inputs=True, light_inputs=lit)
     b = split_batch(torch.from_numpy(stored), slices, enc, cfg, scale=torch.ones(1), multiple=16, crop=(w, [x0]),
-                    cams=torch.from_numpy(full_cam))
+                    cams=torch.from_numpy(full_cam), lights=sun)
     with torch.no_grad():
         want = netG(b["real_A"])[:, :, b["crop"][0], b["crop"][1]]
     # The runtime's way: the crop as a frame of its own, its camera over its own pixels (x0 in the source).
@@ -164,7 +168,7 @@ def test_the_graph_matches_training_on_a_padded_crop(tmp_path):
     captured = {}
     netG.register_forward_hook(lambda m, i, o: captured.update(x=i[0]))  # returns None: the output stays
     with torch.no_grad():
-        ref(torch.from_numpy(frame), torch.ones(1), torch.from_numpy(cam_p))
+        ref(torch.from_numpy(frame), torch.ones(1), torch.from_numpy(cam_p), sun)
         got = netG(captured["x"])[:, :, b["crop"][0], b["crop"][1]]
     np.testing.assert_allclose(captured["x"].numpy(), b["real_A"].numpy(), atol=1e-5)
     np.testing.assert_allclose(got.numpy(), want.numpy(), atol=1e-5)
@@ -175,6 +179,76 @@ def test_world_inputs_need_the_light_scale(tmp_path):
 
     with pytest.raises(DiviewerError, match="world_inputs"):
         tiny(tmp_path, tmp_path / "r", world_inputs=True, light_scale=False)
+
+
+def test_light_inputs_need_world_inputs(tmp_path):
+    from train.test_trainer import tiny
+
+    with pytest.raises(DiviewerError, match="light_inputs"):
+        tiny(tmp_path, tmp_path / "r", light_inputs=True)
+
+
+def test_light_planes_hold_each_parameter_over_the_surfaces():
+    depth = torch.tensor([[[[0.0, 2.0], [5.0, 0.0]]], [[[1.0, 1.0], [1.0, 1.0]]]])
+    lights = torch.tensor([[0.0, -1.0, 0.5], [1.0, 0.0, 0.0]])
+    planes = light_planes(lights, depth)
+    assert planes.shape == (2, 3, 2, 2)
+    np.testing.assert_array_equal(planes[0, :, 0, 1].numpy(), [0.0, -1.0, 0.5])
+    assert not planes[0, :, 0, 0].any() and not planes[0, :, 1, 1].any()  # no surface: 0, as the world planes
+    assert torch.equal(planes[1], lights[1].reshape(3, 1, 1).expand(3, 2, 2))
+
+
+def _lit_dataset(tmp_path: Path):
+    """_world_dataset with the sun turned differently in every frame (encoding 4 has something to read)."""
+    data, scene = _world_dataset(tmp_path)
+    m = json.loads((data / "manifest.json").read_text())
+    for k, f in enumerate(m["frame_list"]):
+        a = 0.3 * k - 1.2
+        f["config"]["lights"][0]["direction"] = [float(np.sin(a)), -1.0, float(np.cos(a))]
+    (data / "manifest.json").write_text(json.dumps(m))
+    return data, scene
+
+
+def test_a_run_trains_on_light_inputs_and_the_runtime_feeds_them(tmp_path):
+    """Encoding 4 end to end: training records the lights' count and three more input planes, export verifies the
+    graph with the frames' lights as its fourth input, and the runtime needs them and reads them."""
+    from train.test_trainer import quiet, tiny
+
+    from diviewer.evaluate import evaluate
+    from diviewer.runtime import NeuralGI
+    from diviewer.scene.lights import light_params
+    from diviewer.train.export import export
+    from diviewer.train.trainer import train
+
+    data, scene = _lit_dataset(tmp_path)
+    out = tmp_path / "run"
+    r = train(tiny(data, out, world_inputs=True, light_inputs=True), log=quiet)
+    assert r["val"] is not None and np.isfinite(r["val"]["psnr_tm"])
+    ck = load_checkpoint(out / "last.ckpt")
+    assert ck["model_args"]["in_channels"] == 19 and ck["config"]["light_inputs"] is True
+    assert ck["encoding"]["version"] == 4 and ck["encoding"]["lights"] == len(scene.default.lights) == 1
+    assert train(tiny(data, out, world_inputs=True, light_inputs=True, epochs=3), resume=True,
+                 log=quiet)["step"] == 6
+    card = export(out / "last.ckpt", tmp_path / "m.onnx", log=quiet)
+    assert card["encoding"]["version"] == 4 and card["verification"]["max_rel_to_peak"] < 1e-4
+    assert card["verification"]["zero_light_max"] == 0.0
+    model = NeuralGI(tmp_path / "m.onnx")
+    assert model.lit and [i.name for i in model.session.get_inputs()] == ["buffers", "light_scale", "camera", "light"]
+    frame = np.load(data / "frames" / "000008.npy").astype(np.float32)[..., :10]
+    config = json.loads((data / "manifest.json").read_text())["frame_list"][8]["config"]
+    camera = NeuralGI.camera(config["camera"], 32, 32)
+    lights = model.lights(config)
+    enc = ck["encoding"]
+    np.testing.assert_array_equal(lights, light_params(config["lights"], enc["world_center"], enc["world_half"]))
+    y = model.run(frame, light_scale=2.0, camera=camera, light=lights)
+    turned = model.run(frame, light_scale=2.0, camera=camera, light=-lights)
+    assert np.isfinite(y).all() and not np.allclose(y, turned)  # the network reads where the light is
+    with pytest.raises(ValueError, match="lights"):
+        model.run(frame, light_scale=2.0, camera=camera)
+    with pytest.raises(ValueError, match="light"):
+        model.lights({"lights": []})
+    summary = evaluate(tmp_path / "m.onnx", data, split="val", out=tmp_path / "e.json", log=lambda *_: None)
+    assert summary["frames"] == 2 and np.isfinite(summary["methods"]["neural"]["psnr_tm"]["mean"])
 
 
 @pytest.fixture(scope="module")
@@ -212,3 +286,30 @@ def test_render_and_the_gl_pass_feed_the_camera(gl_context, cornell_world_model,
     assert main(["render", "--scene", "cornell", "--model", str(model), "--res", res, "--out", str(tmp_path / "r")]) == 0
     neural = read_exr(tmp_path / "r" / "neural.exr")
     assert neural.shape == (h, w, 3) and np.all(np.isfinite(neural))
+
+
+@pytest.mark.gl
+def test_render_feeds_an_encoding_4_model_the_frames_lights(gl_context, tmp_path):
+    """`render --model` with a model that takes the lights: the GL pass gives it the scene's lights (cornell's sun)
+    with the camera."""
+    from train.test_trainer import quiet, tiny
+
+    from diviewer.cli import main
+    from diviewer.imageio import read_exr
+    from diviewer.train.export import export
+    from diviewer.train.trainer import train
+
+    data, scene = _world_dataset(tmp_path, scene="cornell")
+    m = json.loads((data / "manifest.json").read_text())
+    sun = dataclasses.asdict(scene.default.lights[0])
+    for k, f in enumerate(m["frame_list"]):  # the scene's own light, turned a little each frame
+        f["config"]["lights"] = [{"name": sun["name"], "type": "directional", "color": list(sun["color"]),
+                                  "irradiance": sun["irradiance"],
+                                  "direction": [0.1 * k - 0.4, *sun["direction"][1:]]}]
+    (data / "manifest.json").write_text(json.dumps(m))
+    train(tiny(data, tmp_path / "run", world_inputs=True, light_inputs=True), log=quiet)
+    export(tmp_path / "run" / "last.ckpt", tmp_path / "lit.onnx", log=quiet)
+    assert main(["render", "--scene", "cornell", "--model", str(tmp_path / "lit.onnx"), "--res", "48x32",
+                 "--out", str(tmp_path / "r")]) == 0
+    neural = read_exr(tmp_path / "r" / "neural.exr")
+    assert neural.shape == (32, 48, 3) and np.all(np.isfinite(neural))
