@@ -32,7 +32,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.errors import DiviewerError
 from diviewer.outputs import dumps, staged
-from diviewer.runtime import weights_to_float32
+from diviewer.weights import weights_to_float32
 
 REBUILD_TOLERANCE = 1e-5
 """The rebuilt generator must reproduce the old float32 graph to this fraction of the peak radiance."""
