@@ -26,7 +26,7 @@ from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
 from diviewer.outputs import check_output_file, dumps, staged
-from diviewer.padding import pad_camera_params, pad_nhwc
+from diviewer.padding import crop_nhwc, pad_camera_params, pad_nhwc
 from diviewer.provenance import versions
 from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT,
                               OUTPUT_NAME)
@@ -213,12 +213,14 @@ def run_session(session, frames: np.ndarray, scales: np.ndarray | None, layout: 
 
 def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, frames: np.ndarray,
                   scales: np.ndarray | None, source: str, out: Path, log=print, weights_from: Path | None = None,
-                  cams: np.ndarray | None = None, lights: np.ndarray | None = None):
+                  cams: np.ndarray | None = None, lights: np.ndarray | None = None,
+                  crop: tuple[int, int, int] | None = None):
     """The lean graph of ``make_netG()`` as an ONNX model, checked in onnxruntime against training's own
     functions in PyTorch (`diviewer.train.graph.ReferenceGI`, fp32) before anything is written: on the
     frames, on a copy with NaN/Inf/extreme values in every channel, and, for encoding 2, at zero light
     (exactly 0) and twice the light (twice the output). Broken weights or a constant/non-finite output are
-    refused first (`diviewer.train.checks`), naming ``weights_from`` (the checkpoint; default ``out``).
+    refused first (`diviewer.train.checks`), naming ``weights_from`` (the checkpoint; default ``out``). ``crop``:
+    (height, width, multiple) of frames padded to the model's stride: scored on their own pixels only.
     Returns (model, the card's verification record); raises DiviewerError where a check fails."""
     torch = _torch()
     import onnx
@@ -249,8 +251,10 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     got = run_session(session, frames, scales, settings.layout, cams, lights)
     got_ext = run_session(session, ext, None if scales is None else scales[:1], settings.layout,
                           None if cams is None else cams[:1], None if lights is None else lights[:1])
-    diff = np.abs(got.astype(np.float64) - reference)
-    peak = float(np.abs(reference).max()) or 1.0
+    # compared on the frames' own pixels, as the runtime crops them, not on the stride's padding
+    shown, ref_shown = (got, reference) if crop is None else (crop_nhwc(a, *crop) for a in (got, reference))
+    diff = np.abs(shown.astype(np.float64) - ref_shown)
+    peak = float(np.abs(ref_shown).max()) or 1.0
     same_nonfinite = bool(np.array_equal(np.isfinite(got_ext), np.isfinite(ref_ext)))
     both = np.isfinite(got_ext) & np.isfinite(ref_ext)
     ext_diff = float(np.abs(got_ext[both].astype(np.float64) - ref_ext[both]).max()) if both.any() else 0.0
@@ -261,7 +265,7 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
         "max_abs_diff": float(diff.max()),
         "mean_abs_diff": float(diff.mean()),
         "max_rel_to_peak": float(diff.max() / peak),
-        "psnr_db": float(np.mean([psnr(g, r, peak=peak) for g, r in zip(got, reference)])),
+        "psnr_db": float(np.mean([psnr(g, r, peak=peak) for g, r in zip(shown, ref_shown)])),
         "onnx_finite": bool(np.isfinite(got).all()),
         "extremes_same_nonfinite": same_nonfinite,
         "extremes_max_rel_to_peak": ext_diff / peak,
@@ -330,9 +334,11 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     if cams is not None:  # the cameras of the padded frames, as the runtime shifts them
         cams = pad_camera_params(cams, frames.shape[2], frames.shape[1], 2 ** levels)
     lights = _verification_lights(encoding, meta["config"].get("data"), len(frames))
+    shown = (frames.shape[1], frames.shape[2], 2 ** levels)
     frames = pad_nhwc(frames, 2 ** levels)  # a capture of another shape (e.g. 228x128): padded as the runtime pads
     model, check = verified_onnx(lambda: build_generator_from_checkpoint(ckpt)[0], encoding, meta, settings, frames,
-                                 scales, source, out, log, weights_from=ckpt_path, cams=cams, lights=lights)
+                                 scales, source, out, log, weights_from=ckpt_path, cams=cams, lights=lights,
+                                 crop=shown)
     precision = "fp16" if settings.fp16 else "fp32"
     card = {
         "format": MODEL_FORMAT,

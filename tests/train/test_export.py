@@ -430,3 +430,47 @@ def test_batch_norm_is_folded_into_the_convolutions(upsample):
     graph = onnx.load_from_string(onnx_bytes(module, torch.from_numpy(_buffers(np.random.default_rng(0), 1, 32, 32))))
     ops = {n.op_type for n in graph.graph.node}
     assert "BatchNormalization" not in ops and ("ConvTranspose" in ops) == (upsample == "transpose")
+
+
+def test_the_verification_scores_the_frames_own_pixels_not_the_stride_padding(checkpoints, tmp_path, monkeypatch):
+    """Frames of a width off the model's stride (Sponza's 228 at a stride of 256) are padded for the graph; the
+    runtime crops the padding off, so the export's tolerance is checked on the frame's own pixels. A graph that
+    departs from PyTorch only in the padding columns is written; one that departs inside the frame is refused."""
+    import diviewer.train.export as ex
+    from diviewer.padding import crop_slice, pad_nhwc
+
+    ck = checkpoints["indirect"]
+    netG, enc, meta = build_generator_from_checkpoint(ck)
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.uniform(1, 5, (2, 32, 24, 1)), rng.uniform(-1, 1, (2, 32, 24, 3)),
+                        rng.uniform(0, 1, (2, 32, 24, 3)), rng.uniform(0, 3, (2, 32, 24, 3))], -1).astype(np.float32)
+    multiple = 2 ** int(meta["model_args"]["levels"])
+    frames = pad_nhwc(x, multiple)
+    assert frames.shape[2] > 24, "the frames must be padded for this test"
+    inside = crop_slice(24, multiple)
+    real = ex.run_session
+
+    def skewed(where):
+        def run(session, f, *args):
+            y = real(session, f, *args).copy()
+            if f.shape[0] == len(frames):  # the verification frames (not the extreme-buffer one)
+                cols = np.zeros(y.shape[2], bool)
+                cols[where] = True
+                y[:, :, cols] += 0.5 * float(np.abs(y).max())
+            return y
+        return run
+
+    padding = np.ones(frames.shape[2], bool)
+    padding[inside] = False
+    settings = ExportSettings(verify_frames=2)
+    scales = np.ones(2, np.float32) if enc.light_scaled else None
+    args = (lambda: build_generator_from_checkpoint(ck)[0], enc, meta, settings, frames, scales, "test frames",
+            tmp_path / "m.onnx", quiet)
+    monkeypatch.setattr(ex, "run_session", skewed(padding))
+    _, check = ex.verified_onnx(*args, crop=(32, 24, multiple))
+    assert check["max_rel_to_peak"] < 1e-4  # the error lies in the padding alone
+    with pytest.raises(DiviewerError, match="differs from PyTorch"):
+        ex.verified_onnx(*args)  # scored with the padding, as before
+    monkeypatch.setattr(ex, "run_session", skewed(np.arange(frames.shape[2]) == inside.start))
+    with pytest.raises(DiviewerError, match="differs from PyTorch"):
+        ex.verified_onnx(*args, crop=(32, 24, multiple))
