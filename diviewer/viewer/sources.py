@@ -69,7 +69,8 @@ class FrameImages:
         if v.neural is None:
             raise Unavailable(v.state.model_message or "no model loaded")
         if self._neural is None:
-            inputs = v.neural.inputs_for(v.state.scene, v.state.config)  # encoding 2 and 3: the frame's lights, camera
+            # encodings 2-4: the frame's light scale, camera and lights
+            inputs = v.neural.inputs_for(v.state.scene, v.state.config)
             self._neural = Image(v.neural.run(**inputs), flip=True)  # stages go to the viewer's timer
         return self._neural
 

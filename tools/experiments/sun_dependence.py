@@ -118,8 +118,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{a.split}: a light-blind network at best {record['blind_mean_over_frames']:.2f} dB tone-mapped "
           f"(mean over {len(rows)} frames and {a.angles} angles)")
     if a.out:
+        from diviewer.outputs import write_json
+
         a.out.parent.mkdir(parents=True, exist_ok=True)
-        a.out.write_text(json.dumps(record, indent=2))
+        write_json(a.out, record, indent=2)  # strict JSON (a frame's inf PSNR as null), written atomically
     return 0
 
 

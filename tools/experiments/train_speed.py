@@ -18,7 +18,6 @@ rounds, taken in turn, show how much of a difference is this machine's noise. No
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import tempfile
@@ -96,8 +95,10 @@ def main(argv: list[str] | None = None) -> int:
               "train_frames": a.frames, "torch": torch.__version__, "threads": torch.get_num_threads(),
               "cpu": provenance.cpu_model(), "rounds": result}
     if a.out:
+        from diviewer.outputs import write_json
+
         a.out.parent.mkdir(parents=True, exist_ok=True)
-        a.out.write_text(json.dumps(record, indent=2))
+        write_json(a.out, record, indent=2)  # atomic
     return 0
 
 
