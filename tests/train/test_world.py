@@ -313,3 +313,17 @@ def test_render_feeds_an_encoding_4_model_the_frames_lights(gl_context, tmp_path
                  "--out", str(tmp_path / "r")]) == 0
     neural = read_exr(tmp_path / "r" / "neural.exr")
     assert neural.shape == (32, 48, 3) and np.all(np.isfinite(neural))
+
+
+def test_light_inputs_refuse_a_frame_without_the_scenes_lights(tmp_path):
+    """Every frame must describe the scene's lights for encoding 4: one that does not is named, one line."""
+    from train.test_trainer import quiet, tiny
+
+    from diviewer.train.trainer import train
+
+    data, _ = _lit_dataset(tmp_path)
+    m = json.loads((data / "manifest.json").read_text())
+    m["frame_list"][3]["config"]["lights"] = []
+    (data / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(DiviewerError, match="frame 3's configuration has not the scene's 1 light"):
+        train(tiny(data, tmp_path / "run", world_inputs=True, light_inputs=True), log=quiet)
