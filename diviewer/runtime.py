@@ -124,6 +124,14 @@ def check_compatible(meta: dict, path: Path, scene=None) -> None:
     if enc_version > ENCODING_VERSION:
         raise DiviewerError(f"the model uses encoding version {enc_version}, newer than this diviewer's "
                             f"({ENCODING_VERSION}); upgrade diviewer", path=path, field="encoding.version")
+    if enc_version >= 3:  # the world box (3) and the light count (4) that the graph's extra inputs are made with
+        from diviewer.encoding import Encoding
+
+        try:
+            Encoding.from_dict(meta["encoding"])
+        except DiviewerError as exc:
+            raise DiviewerError(f"the model's metadata holds a broken encoding ({exc})", path=path,
+                                field=f"{META_KEY}.encoding") from None
     expected = [list(c) for c in INPUT_CHANNELS]
     if [list(c) for c in meta["channels"]] != expected:
         raise DiviewerError(f"the model expects input channels {meta['channels']}, the renderer provides {expected}",

@@ -59,6 +59,7 @@ def test_worker_threads_sleep_between_runs_unless_asked_to_spin(tmp_path):
     ("newer_encoding", "newer"),
     ("missing_field", "lacks"),
     ("truncated", "truncated"),
+    ("lights_missing", "broken encoding"),
 ])
 def test_bad_models_are_refused_with_the_reason(tmp_path, case, words):
     path = tmp_path / "m.onnx"
@@ -71,6 +72,9 @@ def test_bad_models_are_refused_with_the_reason(tmp_path, case, words):
         direct_times(path, channels=7)
     elif case == "newer_encoding":
         direct_times(path, meta={**meta, "encoding": {"version": 999}})
+    elif case == "lights_missing":  # encoding 4 without its light count: the graph's light input has no size
+        direct_times(path, meta={**meta, "encoding": {"version": 4, "world_center": [0, 0, 0],
+                                                      "world_half": [1, 1, 1]}})
     elif case == "missing_field":
         direct_times(path, meta={k: v for k, v in meta.items() if k != "scene_hash"})
     elif case == "truncated":
