@@ -99,3 +99,24 @@ def extreme_frame(frame: np.ndarray) -> np.ndarray:
         for k, v in enumerate(values):
             x[(3 * c + k) % h, (5 * k + c) % w, c] = v
     return x
+
+
+def refuse_departures(check: dict, reference: np.ndarray, fp16: bool, half_weights: bool, precision: str,
+                      out: Path) -> None:
+    """Refuse, naming ``out``, a graph whose verification record ``check`` departs from PyTorch's ``reference``:
+    non-finite where PyTorch is finite, non-finite elsewhere on extreme buffers, or beyond its tolerance."""
+    tolerance, same_nonfinite = check["tolerance_rel_to_peak"], check["extremes_same_nonfinite"]
+    if np.isfinite(reference).all() and not check["onnx_finite"]:
+        raise DiviewerError(f"the {precision} ONNX model produced NaN/Inf where PyTorch did not "
+                            f"(overflow?); not written", path=out)
+    if not same_nonfinite:
+        raise DiviewerError(f"on NaN/Inf/extreme buffers the {precision} ONNX model is non-finite at other pixels "
+                            "than PyTorch; not written", path=out)
+    if fp16 and not check["max_rel_to_peak"] <= FP16_TOLERANCE:
+        raise DiviewerError(f"the fp16 ONNX model differs from PyTorch by {check['max_rel_to_peak']:.2g} of peak "
+                            f"(tolerance {FP16_TOLERANCE}); export without --fp16; not written", path=out)
+    if not fp16 and max(check["max_rel_to_peak"], check["extremes_max_rel_to_peak"]) > tolerance:
+        raise DiviewerError(f"the ONNX model{' with float16-stored weights' if half_weights else ''} "
+                            f"differs from PyTorch by {check['max_rel_to_peak']:.2g} of peak "
+                            f"({check['extremes_max_rel_to_peak']:.2g} on extreme buffers; tolerance "
+                            f"{tolerance}); not written", path=out)

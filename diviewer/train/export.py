@@ -31,7 +31,7 @@ from diviewer.provenance import versions
 from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT,
                               OUTPUT_NAME)
 from diviewer.weights import store_weights_half
-from diviewer.train.checks import FP16_TOLERANCE, extreme_frame, refuse_broken
+from diviewer.train.checks import FP16_TOLERANCE, extreme_frame, refuse_broken, refuse_departures
 
 OPSET = 17
 FP32_TOLERANCE = 1e-4
@@ -232,44 +232,39 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     reference = refuse_broken(netG, ref_module, frames, settings.fp16 or settings.half_weights,
                               weights_from or out, scales, cams, lights)
     ext = extreme_frame(frames[0])[None]
-    s_t = None if scales is None else torch.from_numpy(scales.astype(np.float32))
-    c_t = None if cams is None else torch.from_numpy(cams.astype(np.float32))
-    l_t = None if lights is None else torch.from_numpy(lights.astype(np.float32))
+    def head(a):  # a per-frame input's first row (encoding 2's light scale, 3's camera, 4's lights), or None
+        return None if a is None else a[:1]
+
+    first = [None if a is None else torch.from_numpy(head(a).astype(np.float32)) for a in (scales, cams, lights)]
     with torch.no_grad():
-        ref_ext = ref_module(torch.from_numpy(ext), None if s_t is None else s_t[:1],
-                             None if c_t is None else c_t[:1], None if l_t is None else l_t[:1]).numpy()
+        ref_ext = ref_module(torch.from_numpy(ext), *first).numpy()
         module = gi_module(make_netG(), encoding, meta, fp16=settings.fp16, layout=settings.layout)
     example = torch.from_numpy(frames[:1])
     example = example.permute(0, 3, 1, 2).contiguous() if settings.layout == "NCHW" else example
-    data = onnx_bytes(module, example, None if s_t is None else s_t[:1], None if c_t is None else c_t[:1],
-                      None if l_t is None else l_t[:1])
+    data = onnx_bytes(module, example, *first)
     model = onnx.load_from_string(data)
     if settings.half_weights:  # verified as written: the float16-stored weights, cast back in the session
         store_weights_half(model)
         data = model.SerializeToString()
     session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
     got = run_session(session, frames, scales, settings.layout, cams, lights)
-    got_ext = run_session(session, ext, None if scales is None else scales[:1], settings.layout,
-                          None if cams is None else cams[:1], None if lights is None else lights[:1])
+    got_ext = run_session(session, ext, head(scales), settings.layout, head(cams), head(lights))
     # compared on the frames' own pixels, as the runtime crops them, not on the stride's padding
     shown, ref_shown = (got, reference) if crop is None else (crop_nhwc(a, *crop) for a in (got, reference))
     diff = np.abs(shown.astype(np.float64) - ref_shown)
     peak = float(np.abs(ref_shown).max()) or 1.0
-    same_nonfinite = bool(np.array_equal(np.isfinite(got_ext), np.isfinite(ref_ext)))
     both = np.isfinite(got_ext) & np.isfinite(ref_ext)
     ext_diff = float(np.abs(got_ext[both].astype(np.float64) - ref_ext[both]).max()) if both.any() else 0.0
-    tolerance = FP16_TOLERANCE if settings.fp16 else HALF_WEIGHTS_TOLERANCE if settings.half_weights else FP32_TOLERANCE
     check = {
-        "frames": source,
-        "layout": settings.layout,
-        "max_abs_diff": float(diff.max()),
-        "mean_abs_diff": float(diff.mean()),
+        "frames": source, "layout": settings.layout,
+        "max_abs_diff": float(diff.max()), "mean_abs_diff": float(diff.mean()),
         "max_rel_to_peak": float(diff.max() / peak),
         "psnr_db": float(np.mean([psnr(g, r, peak=peak) for g, r in zip(shown, ref_shown)])),
         "onnx_finite": bool(np.isfinite(got).all()),
-        "extremes_same_nonfinite": same_nonfinite,
+        "extremes_same_nonfinite": bool(np.array_equal(np.isfinite(got_ext), np.isfinite(ref_ext))),
         "extremes_max_rel_to_peak": ext_diff / peak,
-        "tolerance_rel_to_peak": tolerance,
+        "tolerance_rel_to_peak": FP16_TOLERANCE if settings.fp16 else
+        HALF_WEIGHTS_TOLERANCE if settings.half_weights else FP32_TOLERANCE,
     }
     precision = "fp16" if settings.fp16 else "fp32"
     if scales is not None:
@@ -278,20 +273,7 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     log(f"verify {precision} against torch on {source}: max |diff| {check['max_abs_diff']:.3g} "
         f"({check['max_rel_to_peak']:.2g} of peak {peak:.3g}), mean {check['mean_abs_diff']:.3g}, "
         f"PSNR {check['psnr_db']:.1f} dB; extremes {check['extremes_max_rel_to_peak']:.2g} of peak")
-    if np.isfinite(reference).all() and not check["onnx_finite"]:
-        raise DiviewerError(f"the {precision} ONNX model produced NaN/Inf where PyTorch did not "
-                            f"(overflow?); not written", path=out)
-    if not same_nonfinite:
-        raise DiviewerError(f"on NaN/Inf/extreme buffers the {precision} ONNX model is non-finite at other pixels "
-                            "than PyTorch; not written", path=out)
-    if settings.fp16 and not check["max_rel_to_peak"] <= FP16_TOLERANCE:
-        raise DiviewerError(f"the fp16 ONNX model differs from PyTorch by {check['max_rel_to_peak']:.2g} of peak "
-                            f"(tolerance {FP16_TOLERANCE}); export without --fp16; not written", path=out)
-    if not settings.fp16 and max(check["max_rel_to_peak"], check["extremes_max_rel_to_peak"]) > tolerance:
-        raise DiviewerError(f"the ONNX model{' with float16-stored weights' if settings.half_weights else ''} "
-                            f"differs from PyTorch by {check['max_rel_to_peak']:.2g} of peak "
-                            f"({check['extremes_max_rel_to_peak']:.2g} on extreme buffers; tolerance "
-                            f"{tolerance}); not written", path=out)
+    refuse_departures(check, reference, settings.fp16, settings.half_weights, precision, out)
     return model, check
 
 
