@@ -33,6 +33,7 @@ from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNELS, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
 from diviewer.padding import crop_nhwc, pad_camera_params, pad_nhwc
 from diviewer.scene.camera import CAMERA_PARAMS
+from diviewer.scene.lights import LIGHT_PARAMS
 from diviewer.timing import StageTimer
 
 INPUT_NAME = "buffers"
@@ -198,6 +199,8 @@ class NeuralGI:
         """Encoding version 3: ``run`` also needs each frame's camera (`camera`)."""
         self.lit = int(self.meta["encoding"].get("version", 1)) >= 4
         """Encoding version 4: ``run`` also needs each frame's lights (`lights`)."""
+        self.light_count = int(self.meta["encoding"]["lights"]) if self.lit else 0
+        """Encoding version 4: how many lights the ``light`` input describes (three numbers each)."""
         self.direct_samples = int(self.meta.get("direct_samples", 1))
         """Samples per axis of the direct light the model was trained on (`diviewer.gl.area`): 1 is the light at
         each pixel's centre; above 1, callers feed the light over the pixel's area (``buffers``' direct channel)."""
@@ -289,8 +292,8 @@ class NeuralGI:
 
         enc = self.meta["encoding"]
         lights = config["lights"] if isinstance(config, dict) else config.lights
-        if len(lights) != int(enc["lights"]):
-            raise ValueError(f"{self.path.name} takes {enc['lights']} light(s); the frame has {len(lights)}")
+        if len(lights) != self.light_count:
+            raise ValueError(f"{self.path.name} takes {self.light_count} light(s); the frame has {len(lights)}")
         return light_params(lights, enc["world_center"], enc["world_half"])
 
     @staticmethod
@@ -347,7 +350,7 @@ class NeuralGI:
             if light is None:
                 raise ValueError(f"{self.path.name} uses encoding version 4: run() needs each frame's lights "
                                  "(NeuralGI.lights(config))")
-            lights = 3 * int(self.meta["encoding"]["lights"])
+            lights = LIGHT_PARAMS * self.light_count
             g = np.asarray(light, np.float32).reshape(-1, lights)
             if g.shape[0] not in (1, n):
                 raise ValueError(f"light: expected one or {n}, got {g.shape[0]}")
@@ -381,7 +384,7 @@ def probe(model: "NeuralGI") -> None:
     w, h = (min(int(d), 64) for d in model.resolution)
     camera = {"position": (0.0, 0.0, 4.0), "target": (0.0, 0.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 45.0}
     try:
-        sun = np.tile(np.array([0.0, -1.0, 0.0], np.float32), int(model.meta["encoding"]["lights"])) \
+        sun = np.tile(np.array([0.0, -1.0, 0.0], np.float32), model.light_count) \
             if model.lit else None  # encoding 4: suns straight down
         model.run(probe_frame(h, w)[0], light_scale=1.0 if model.light_scaled else None,
                   camera=NeuralGI.camera(camera, w, h) if model.world else None, light=sun)
