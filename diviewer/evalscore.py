@@ -169,6 +169,19 @@ def aggregate(rows: list[dict]) -> dict:
     return out
 
 
+PER_FRAME_KEYS = ("psnr_tm", "ssim_tm", "flip_ldr", "sum", "sum_ref", "sum_indirect", "sum_indirect_ref")
+"""What `per_frame` keeps of each frame's scores: enough to read a split frame by frame (which frames fall below
+direct light, which carry a pooled bias)."""
+
+
+def per_frame(indices: list[int], rows: list[dict]) -> list[dict] | None:
+    """One method's scores frame by frame (``PER_FRAME_KEYS`` with the frame's index), or None when the rows do
+    not pair with the frames one to one (a model refused part-way)."""
+    if len(indices) != len(rows):
+        return None
+    return [{"index": int(i), **{k: r[k] for k in PER_FRAME_KEYS if k in r}} for i, r in zip(indices, rows)]
+
+
 def below_direct(rows: list[dict], direct: list[dict]) -> dict:
     """Share of frames in which a method's tone-mapped PSNR is below direct light alone's, over the whole
     frame and over each region (frames that have it); ``frames`` counts the frames compared."""

@@ -30,7 +30,8 @@ from diviewer.errors import DiviewerError
 from diviewer.data.scales import light_scales
 from diviewer.evalframes import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
 from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer, aggregate, below_direct, done,
-                                equivalent, ladder_methods, pooled_bias, score, score_frame, strict_json)
+                                equivalent, ladder_methods, per_frame, pooled_bias, score, score_frame,
+                                strict_json)
 from diviewer.metrics import flat_mask
 from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
@@ -314,6 +315,8 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
     ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
     for name, m in methods.items():
         m["equivalent_spp"] = equivalent(m, ladder_spp, ladder)
+        if name in models or name == "direct":
+            m["per_frame"] = per_frame(list(idx), rows[name])
         if name in models:
             net = models[name]
             m.update(kind=net.meta.get("kind", "neural"), label=_model_label(net.meta, net.path),

@@ -230,6 +230,12 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
         d, pt = (sum(float(np.sum(f[c], dtype=np.float64)) for f in frames) for c in ("direct", "pt"))
         assert methods["twice"]["bias"] == pytest.approx(1.5 * d / pt - 1, rel=1e-4)
         assert methods["direct"]["bias_indirect"] == pytest.approx(-1.0)
+        # frame by frame, in the split's order: the pooled figures and the below-direct share can be read per frame
+        rows = methods["twice"]["per_frame"]
+        assert [r["index"] for r in rows] == list(ev.present(split["split"], []))
+        assert sum(r["sum"] for r in rows) / sum(r["sum_ref"] for r in rows) - 1 == pytest.approx(methods["twice"]["bias"])
+        assert np.mean([r["psnr_tm"] for r in rows]) == pytest.approx(methods["twice"]["psnr_tm"]["mean"])
+        assert len(methods["direct"]["per_frame"]) == len(rows) and "per_frame" not in methods["pt_spp1"]
 
 
 @pytest.mark.slow

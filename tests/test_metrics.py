@@ -217,6 +217,16 @@ def test_regions_and_below_direct_share_on_a_synthetic_frame():
     assert "object" not in below_direct([dict(row, psnr_tm_object=None)], [row_direct])  # a frame without the region
 
 
+def test_per_frame_keeps_each_frame_with_its_index_or_nothing_when_rows_are_missing():
+    from diviewer.evalscore import PER_FRAME_KEYS, per_frame
+
+    rows = [{k: float(i) for k in (*PER_FRAME_KEYS, "mse")} for i in range(3)]
+    kept = per_frame([4, 7, 9], rows)
+    assert [r["index"] for r in kept] == [4, 7, 9] and kept[1]["psnr_tm"] == 1.0
+    assert "mse" not in kept[0] and set(kept[0]) == {"index", *PER_FRAME_KEYS}
+    assert per_frame([4, 7, 9], rows[:2]) is None  # a model refused part-way: no pairing to guess
+
+
 def test_sun_dependence_scores_the_best_light_blind_output():
     """tools/experiments/sun_dependence.py: angles spread over the range; a light-blind network's best output is
     exact where the indirect light does not move with the light, and worse the more it moves."""
@@ -234,3 +244,23 @@ def test_sun_dependence_scores_the_best_light_blind_output():
     much = tool.blind_scores(direct + moved, direct, 1.0)
     assert all(math.isfinite(s) for s in much) and little[0] > much[0] and little[2] > much[2]
     assert much[1] > much[0] and much[1] > much[2]  # the middle angle is the mean's own
+
+
+def test_median_bias_puts_the_l1_optimum_below_the_mean_of_a_skewed_truth():
+    """tools/experiments/median_bias.py: on renders whose noise is right-skewed (rare bright samples) the median,
+    where L1 converges, is darker than the mean; the encoded mean is the mean where the encoding is linear and
+    darker where it is logarithmic; with no noise every optimum is the truth."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/median_bias")
+    rng = np.random.default_rng(1)
+    direct = np.full((32, 8, 8, 3), 0.2, np.float32)
+    indirect = rng.exponential(0.1, (32, 8, 8, 3)).astype(np.float32) ** 2  # heavy right tail
+    rec = tool.frame_record(direct + indirect, direct, 1.0, 1e-3)  # exposure 1e-3: the encoding's linear part
+    assert rec["median_ratio"] < 0.6 and rec["encoded_mean_ratio"] == pytest.approx(1.0, abs=1e-3)
+    assert rec["psnr_tm_encoded_mean"] > 60 > rec["psnr_tm_median"]
+    bright = tool.frame_record(direct + indirect, direct, 1.0, 1e4)  # deep in the log part: a geometric-like mean
+    assert bright["encoded_mean_ratio"] < 0.5  # a log-like mean of a heavy tail: as dark as the median here
+    flat = np.broadcast_to(indirect[:1], indirect.shape)
+    exact = tool.frame_record(direct + flat, direct, 1.0, 1e4)
+    assert exact["median_ratio"] == pytest.approx(1.0) and exact["encoded_mean_ratio"] == pytest.approx(1.0, rel=1e-5)

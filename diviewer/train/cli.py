@@ -71,7 +71,8 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--gan-mode", choices=CHOICES["gan_mode"], default=None, help="adversarial objective (default vanilla)")
     g.add_argument("--recon-loss", choices=CHOICES["recon_loss"], default=None, help="reconstruction norm (default l1)")
     g.add_argument("--recon-space", choices=CHOICES["recon_space"], default=None,
-                   help="reconstruction on encoded values (default) or linear radiance x exposure (l2 there: unbiased)")
+                   help="reconstruction on encoded values (default), linear radiance x exposure, its log, or relative to the "
+                        "prediction's brightness (l2 on linear or relative: unbiased, the mean of a noisy target)")
     g.add_argument("--n-layers-d", dest="n_layers_D", type=int, default=None,
                    help=f"discriminator stride layers (default {d['n_layers_D']}: 70x70 patches)")
     g.add_argument("--norm-d", dest="norm_D", choices=CHOICES["norm_D"], default=None,

@@ -259,7 +259,7 @@ class TrainConfig:
 
 CHOICES: dict[str, tuple[str, ...]] = {
     "precision": ("auto", "fp32", "bf16", "fp16"), "gan_mode": ("vanilla", "lsgan"), "recon_loss": ("l1", "l2"),
-    "recon_space": ("encoded", "linear", "log"), "norm_D": ("batch", "instance", "none"),
+    "recon_space": ("encoded", "linear", "log", "relative"), "norm_D": ("batch", "instance", "none"),
     "upsample": ("transpose", "resize", "shuffle"), "norm": ("batch", "instance", "none"),
     "lr_decay": ("none", "cosine"),
 }

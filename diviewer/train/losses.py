@@ -16,6 +16,12 @@ Monte-Carlo estimate whose noise is heavy-tailed (rare, very bright "firefly" sa
   decoded result is a generalised (for bright pixels, geometric-like) mean, below the arithmetic
   mean by Jensen's inequality: biased dark too, less than L1 for mild noise.
 - L1 on linear radiance: the median again, with linear-radiance weighting across pixels.
+- L2 on "relative" errors, (prediction - target) / (|prediction| + REL_EPSILON) with the denominator taken
+  from the prediction and not differentiated (Noise2Noise's relative MSE, Lehtinen et al. 2018): the weight
+  depends on the prediction only, never on the noisy target, so the minimiser is still the **mean**, while an
+  error counts relative to the pixel's brightness, so shade weighs as much as sunlit walls. Measured on
+  Sponza's 64-spp truth (tools/experiments/median_bias.py): the median, where L1 goes, is 40 % below the mean
+  in frames of deep shade.
 
 The trainer calls `reconstruction_loss(fake_B, real_B, mode, space, encoding)` and nothing else;
 `LossConfig` is the settings dataclass recorded with checkpoints.
@@ -39,15 +45,21 @@ from diviewer.provenance import check_known_keys
 RECONSTRUCTION_MODES: tuple[str, ...] = ("l1", "l2")
 """Reconstruction norms: mean absolute error (pix2pix, the paper) or mean squared error."""
 
-RECONSTRUCTION_SPACES: tuple[str, ...] = ("encoded", "linear", "log")
+RECONSTRUCTION_SPACES: tuple[str, ...] = ("encoded", "linear", "log", "relative")
 """Where the reconstruction loss is taken: on the network's encoded values (the paper's choice, as
 the network sees them), on linear radiance times the dataset's exposure (so ~1 is a typical value), or
 on log(LOG_EPSILON + exposed radiance), where an error counts relative to the pixel's own brightness:
-dark regions (an object lit only by bounced light) weigh as much as bright ones."""
+dark regions (an object lit only by bounced light) weigh as much as bright ones; or "relative": linear errors
+divided by the prediction's own brightness (+ REL_EPSILON), not differentiated, so that with "l2" the loss still
+converges to the mean of a noisy target while weighing dark regions as the log space does."""
 
 LOG_EPSILON: float = 0.01
 """Offset of the "log" space, in exposed radiance (~1 typical): below it errors count absolutely, so
 the black background and Monte-Carlo noise around zero do not dominate."""
+
+REL_EPSILON: float = 0.01
+"""Offset of the "relative" space's denominator, in exposed radiance (Noise2Noise's 0.01): below it errors count
+absolutely, so a black pixel does not weigh without bound."""
 
 GAN_MODES: tuple[str, ...] = ("vanilla", "lsgan")
 """Adversarial objectives (pix2pix's names): BCE on logits (the paper), or least squares (Mao et al.)."""
@@ -96,7 +108,8 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
         fake_B: netG's output (encoded, any float dtype; the loss is computed in float32).
         real_B: the encoded target, same shape.
         mode: "l1" or "l2" (`RECONSTRUCTION_MODES`).
-        space: "encoded", "linear" or "log" (`RECONSTRUCTION_SPACES`); the last two need `encoding`.
+        space: "encoded", "linear", "log" or "relative" (`RECONSTRUCTION_SPACES`); all but "encoded" need
+            `encoding`.
         encoding: the dataset's encoding, to decode to linear radiance (times its exposure).
         mask: (1 or N, 1, H, W), 1 on the frame's pixels and 0 on the stride padding (`diviewer.padding`):
             the mean is then over the frame's pixels only. None: every pixel.
@@ -109,12 +122,15 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
     if space not in RECONSTRUCTION_SPACES:
         raise ValueError(f"space must be one of {list(RECONSTRUCTION_SPACES)}, got {space!r}")
     fake, real = fake_B.float(), real_B.float()
-    if space in ("linear", "log"):
+    if space in ("linear", "log", "relative"):
         if encoding is None:
             raise ValueError(f"space '{space}' needs the encoding to decode radiance")
         fake, real = exposed_radiance(fake, encoding), exposed_radiance(real, encoding)
     if space == "log":
         fake, real = torch.log(fake.clamp_min(0.0) + LOG_EPSILON), torch.log(real.clamp_min(0.0) + LOG_EPSILON)
+    if space == "relative":  # the weight from the prediction alone: the minimiser stays the target's mean (l2)
+        weight = 1.0 / (fake.detach().abs() + REL_EPSILON)
+        fake, real = fake * weight, real * weight
     if mask is not None:
         err = (fake - real).abs() if mode == "l1" else (fake - real).square()
         m = mask.to(err.dtype).expand_as(err)

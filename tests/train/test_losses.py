@@ -153,3 +153,23 @@ def test_log_space_counts_errors_relative_to_the_pixel() -> None:
     assert np.isfinite(reconstruction_loss(_encoded([-0.3]), _encoded([0.2]), "l1", "log", ENC).item())
     with pytest.raises(ValueError, match="needs the encoding"):
         reconstruction_loss(_encoded([1.0]), _encoded([1.0]), "l1", "log")
+
+
+def test_relative_l2_converges_to_the_mean_while_weighing_dark_pixels_like_bright_ones() -> None:
+    """Noise2Noise's relative MSE: the weight comes from the prediction alone (not differentiated), so gradient
+    descent stops at the noisy target's mean, unlike L1 (the median) or the log space; a 10 % error costs the same
+    in a dark pixel as in a bright one."""
+    from diviewer.train.losses import REL_EPSILON
+
+    assert abs(_gradient_at(MEAN, "l2", "relative")) < 1e-4  # stationary at the mean: unbiased
+    assert _gradient_at(0.9 * MEAN, "l2", "relative") < 0 < _gradient_at(1.1 * MEAN, "l2", "relative")
+    assert _gradient_at(MEDIAN, "l2", "relative") < 0  # the median is not a fixed point: it is pushed up
+    e = ENC.exposure
+    dark, bright = 0.5 / e, 50.0 / e
+    costs = [reconstruction_loss(_encoded([x * 1.1]), _encoded([x]), "l2", "relative", ENC).item() for x in (dark, bright)]
+    expected = [(0.1 * x * e / (1.1 * x * e + REL_EPSILON)) ** 2 for x in (dark, bright)]
+    np.testing.assert_allclose(costs, expected, rtol=1e-3)
+    assert costs[0] == pytest.approx(costs[1], rel=0.05)
+    assert np.isfinite(reconstruction_loss(_encoded([0.0]), _encoded([0.2]), "l2", "relative", ENC).item())
+    with pytest.raises(ValueError, match="needs the encoding"):
+        reconstruction_loss(_encoded([1.0]), _encoded([1.0]), "l2", "relative")
