@@ -133,8 +133,13 @@ class Encoding:
     lights: int | None = None
     """Version 4: how many lights the ``light`` input describes (the scene's, in the order of its file)."""
 
+    output_gain: float = 1.0
+    """The network's output (the target) is encoded at ``exposure * output_gain`` (`output`), its inputs at
+    ``exposure``: a sunlit scene's indirect light is a few % of its direct light and would otherwise use 1e-3 of
+    the encoded range (`diviewer.train.targets.fit_output_gain`). Any version; 1: as before it existed."""
+
     def __post_init__(self) -> None:
-        for name in ("exposure", "depth_scale", "radiance_max"):
+        for name in ("exposure", "depth_scale", "radiance_max", "output_gain"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise DiviewerError(f"must be a number, got {value!r}", field=f"encoding.{name}")
@@ -194,10 +199,16 @@ class Encoding:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict for JSON manifests, checkpoints and ONNX metadata (the world fields only from version 3, the
-        lights only from version 4)."""
+        lights only from version 4, the output gain only where it is not 1)."""
         d = dataclasses.asdict(self)
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()
-                if not ((k.startswith("world_") or k == "lights") and v is None)}
+                if not ((k.startswith("world_") or k == "lights") and v is None) and not (k == "output_gain" and v == 1)}
+
+    def output(self) -> Encoding:
+        """The encoding of the network's output: the exposure times ``output_gain`` (``encode_radiance`` of the
+        target, ``decode_radiance`` of the prediction)."""
+        return self if self.output_gain == 1 else dataclasses.replace(self, exposure=self.exposure * self.output_gain,
+                                                                      output_gain=1.0)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Encoding:

@@ -203,6 +203,12 @@ def test_encoding_dict_round_trip_and_rejections() -> None:
                 dict(version=3, world_center=(0, 0), world_half=(1, 1, 1))):
         with pytest.raises(DiviewerError, match="world"):
             Encoding(**bad)
+    gained = Encoding(exposure=2.0, output_gain=8.0)
+    assert "output_gain" not in ENC.to_dict() and Encoding.from_dict(gained.to_dict()) == gained  # 1: not written
+    assert gained.output() == Encoding(exposure=16.0) and ENC.output() is ENC  # the output's exposure
+    for bad in (0.0, -1.0, float("nan"), True):
+        with pytest.raises(DiviewerError, match="output_gain"):
+            Encoding(output_gain=bad)
     with pytest.raises(DiviewerError, match="unknown key.*gamma"):
         Encoding.from_dict({**ENC.to_dict(), "gamma": 2.2})
     with pytest.raises(DiviewerError, match="newer"):

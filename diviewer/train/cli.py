@@ -94,6 +94,9 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--light-inputs", action=argparse.BooleanOptionalAction, default=None,
                    help="also feed where each light is: a sun's direction, a point light's position (encoding 4; "
                         "needs --world-inputs; default off)")
+    g.add_argument("--output-gain", action=argparse.BooleanOptionalAction, default=None,
+                   help="encode the target at its own exposure (its 99th percentile at 1), not the direct light's: "
+                        "a sunlit scene's indirect light is a few %% of its direct light (default off)")
     g.add_argument("--aspect-crops", type=_aspect_range, default=None, metavar="LO:HI",
                    help="random-width crops per batch, width/height in LO..HI at full height, e.g. 0.5625:1.7778 "
                         "(9:16 to 16:9), or 'off' (default off)")

@@ -155,6 +155,11 @@ class TrainConfig:
     """Encoding version 4 (needs ``world_inputs``): the network also takes where each of the scene's lights is (a
     sun's direction, a point light's position: `diviewer.scene.lights.light_params`), as constant planes."""
 
+    output_gain: bool = False
+    """Encode the target at its own exposure: the dataset's exposure times a gain that maps the 99th percentile of
+    the train split's exposed target to 1 (`diviewer.train.targets.fit_output_gain`; recorded as the encoding's
+    ``output_gain``). False: the direct light's exposure for both, as before."""
+
     aspect_crops: tuple[float, float] | None = None
     """Random-width crops of the (wider) dataset frames, one width per batch, width / height drawn in this
     range at full height (e.g. (0.5625, 1.7778): 9:16 to 16:9), edge-padded to the network's stride as the
@@ -206,7 +211,7 @@ class TrainConfig:
         if self.recipe is not None and not (isinstance(self.recipe, dict)
                                             and all(isinstance(k, str) for k in self.recipe)):
             fail("recipe", f"must be a recipe record (a table of name, file, sha256, overrides), got {self.recipe!r}")
-        for name in ("light_scale", "world_inputs", "light_inputs"):
+        for name in ("light_scale", "world_inputs", "light_inputs", "output_gain"):
             if not isinstance(getattr(self, name), bool):
                 fail(name, f"must be true or false, got {getattr(self, name)!r}")
         if self.world_inputs and not self.light_scale:
@@ -269,7 +274,7 @@ RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "lr_decay_
                                  "lambda_L1", "target", "divide_albedo", "seed", "dropout", "ndf", "gan_weight",
                                  "gan_mode", "recon_loss", "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample",
                                  "norm", "train_frames", "init_from", "light_scale", "aspect_crops",
-                                 "world_inputs", "light_inputs")
+                                 "world_inputs", "light_inputs", "output_gain")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change); the schedule
 (lr_decay, lr_decay_start) may change while both the old and the new one are constant up to the
 checkpoint's step (train.checkpoint.check_resume)."""
@@ -279,6 +284,6 @@ RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save
 device and num_workers describe this invocation and this machine, so they are not inherited)."""
 
 LEGACY_DEFAULTS: dict[str, Any] = {"light_scale": False, "aspect_crops": None, "world_inputs": False,
-                                   "light_inputs": False}
+                                   "light_inputs": False, "output_gain": False}
 """What a checkpoint from before these settings existed trained with (radiance as is, whole frames), where
 it does not record them; a new run's defaults differ."""

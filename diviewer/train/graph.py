@@ -127,7 +127,7 @@ class LeanGI(torch.nn.Module):
         x = finite_inputs(raw)
         enc = self.enc
         # half: the albedo floor below is (e + 1) / 2 of the encoded albedo e
-        out_k = (0.5 if self.target != "full" and self.divide_albedo else 1.0) / enc.exposure
+        out_k = (0.5 if self.target != "full" and self.divide_albedo else 1.0) / enc.output().exposure
         if enc.light_scaled:
             # 1/s where s > 0 (1/inf = 0), else 0: no light gives exactly 0 in and out (0 * finite)
             inv = torch.where(light_scale > 0, 1.0 / light_scale, 0.0)
@@ -188,7 +188,7 @@ class ReferenceGI(torch.nn.Module):
             if self.enc.light_inputs:
                 inp = torch.cat([inp, light_planes(light, geometry)], 1)
         y = self.netG(inp.half() if self.fp16 else inp)
-        radiance = decode_radiance(y.float() if self.fp16 else y, self.enc)
+        radiance = decode_radiance(y.float() if self.fp16 else y, self.enc.output())
         if s is not None:
             radiance = radiance * s
         out = compose_radiance(radiance, direct, albedo, self.meta["target"], self.meta["divide_albedo"])

@@ -64,7 +64,7 @@ def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, 
             b = split_batch(x16, slices, enc, cfg, scale=scale, multiple=multiple, cams=cam, lights=lit)
             with torch.autocast(device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
                 fake_B = netG(b["real_A"])
-            radiance = decode_radiance(fake_B.float(), enc)
+            radiance = decode_radiance(fake_B.float(), enc.output())
             if "scale" in b:
                 radiance = radiance * b["scale"]
             pred = compose_radiance(radiance, b["direct"], b["albedo"], cfg.target, cfg.divide_albedo)

@@ -84,7 +84,7 @@ def run_light_scales(cfg: TrainConfig, ds: Dataset, train_idx: list[int],
 
 
 def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: np.ndarray | None = None,
-                 world: bool = False, lights: bool = False) -> Encoding:
+                 world: bool = False, lights: bool = False, output_of: TrainConfig | None = None) -> Encoding:
     """The dataset's encoding, fixed from the train split.
 
     exposure: `fit_exposure` over the train frames' GL direct light (divided by each frame's light scale
@@ -93,7 +93,36 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: n
     radiance_max: the default. ``world`` (encoding version 3, with ``scales``): world_center and world_half
     from the bounds of the scene's objects (`Scene.bounds`), the scene the dataset was captured from. ``lights``
     (encoding version 4, with ``world``): the number of the scene's lights, which every frame configuration has.
+    ``output_of``: a run whose ``output_gain`` is set gets `fit_output_gain`'s gain on its targets.
     """
+    enc = _fit_encoding(ds, train_idx, train, scales, world, lights)
+    if output_of is None or not output_of.output_gain:
+        return enc
+    import dataclasses
+
+    return dataclasses.replace(enc, output_gain=fit_output_gain(ds, train, scales, enc, output_of))
+
+
+def fit_output_gain(ds: Dataset, train: np.ndarray, scales: np.ndarray | None, enc: Encoding,
+                    cfg: TrainConfig) -> float:
+    """The gain that puts the 99th percentile of the train frames' exposed target luminance at 1 (`fit_exposure` on
+    the targets as the trainer makes them: divided by the albedo and the light scale, times the exposure). Sponza's
+    indirect light is ~1 % of its direct light: its target's 99th percentile is 0.13 at the direct light's
+    exposure, its median 0.003, i.e. 3e-4 of the encoded range (docs/sponza.md)."""
+    from diviewer.encoding import fit_exposure, inverse_light_scale
+
+    s = ds.slices
+    inv = np.ones(len(train)) if scales is None else inverse_light_scale(scales.astype(np.float64))
+    targets = []
+    for frame, k in zip(train, inv):
+        f = {name: frame[..., s[name]].astype(np.float32) for name in ("pt", "pt_direct", "albedo", "direct")}
+        t = target_radiance(f["pt"], f["pt_direct"], f["albedo"], cfg.target, cfg.divide_albedo, f["direct"])
+        targets.append(t[::4, ::4] * np.float32(k * enc.exposure))  # every 16th pixel: bounded memory
+    return float(fit_exposure(targets))
+
+
+def _fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: np.ndarray | None, world: bool,
+                  lights: bool) -> Encoding:
     from diviewer.encoding import Encoding, fit_exposure, inverse_light_scale
 
     direct = ds.slices["direct"]
@@ -259,7 +288,7 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
     target = target_radiance(p["pt"], p["pt_direct"], p["albedo"], cfg.target, cfg.divide_albedo, p["direct"])
     if inv is not None:
         target = target * inv
-    real_B = encode_radiance(target, enc)
+    real_B = encode_radiance(target, enc.output())
     out = {"real_A": real_A, "real_B": real_B, "direct": p["direct"], "albedo": p["albedo"], "pt": p["pt"],
            "target": target, "mask": mask, "crop": (crop_slice(h, multiple), crop_slice(w, multiple))}
     if inv is not None:

@@ -179,7 +179,7 @@ def train(cfg: TrainConfig, resume: bool = False, log: Callable[[str], None] = p
         say(f"train {ds.manifest.get('scene')} K={cfg.K} target={cfg.target}{' /albedo' if cfg.divide_albedo else ''}: "
             f"{run.meta['dataset']['train_frames']} train frames at {ds.width}x{ds.height}, {run.steps_per_epoch} "
             f"steps/epoch, {dev.world} process(es) on {dev.device}{f' with {nets.dtype} autocast' if nets.dtype else ''}, "
-            f"exposure {enc.exposure:.4g}, depth_scale {enc.depth_scale:.4g}, encoding {enc.version}"
+            f"exposure {enc.exposure:.4g}{f' (output x {enc.output_gain:.4g})' if enc.output_gain != 1 else ''}, depth_scale {enc.depth_scale:.4g}, encoding {enc.version}"
             + (f", aspect crops {cfg.aspect_crops[0]:.3g}-{cfg.aspect_crops[1]:.3g}" if cfg.aspect_crops else ""))
         _epochs(run, nets, st, total, horizon)
         return _result(cfg, st)
@@ -198,8 +198,7 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
 
     ds, train_idx, train_arr, val_arr = _load_splits(cfg, dev, say)
     steps_per_epoch = len(epoch_batches(len(train_arr), 0, cfg.seed, cfg.batch_size, dev.rank, dev.world))
-    note = cfg.check_schedule(steps_per_epoch)
-    if note:
+    if note := cfg.check_schedule(steps_per_epoch):
         say(note)
     ckpt = _open_run(cfg, ds, train_idx, resume, say)
     parent = open_parent(cfg, ds) if ckpt is None and cfg.init_from else None
@@ -209,7 +208,8 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
     elif parent:  # the parent's weights were trained on its encoding: keep it
         enc = parent_encoding(parent, cfg)
     else:
-        enc = fit_encoding(ds, train_idx, train_arr, train_scales, world=cfg.world_inputs, lights=cfg.light_inputs)
+        enc = fit_encoding(ds, train_idx, train_arr, train_scales, world=cfg.world_inputs, lights=cfg.light_inputs,
+                           output_of=cfg)
     train_cams, val_cams = run_cameras(enc, ds, train_idx, val_arr is not None)
     train_lights, val_lights = run_lights(enc, ds, train_idx, val_arr is not None)
     net_cfg = net_config(cfg, ds)

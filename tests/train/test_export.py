@@ -474,3 +474,22 @@ def test_the_verification_scores_the_frames_own_pixels_not_the_stride_padding(ch
     monkeypatch.setattr(ex, "run_session", skewed(np.arange(frames.shape[2]) == inside.start))
     with pytest.raises(DiviewerError, match="differs from PyTorch"):
         ex.verified_onnx(*args, crop=(32, 24, multiple))
+
+
+def test_both_graphs_decode_the_output_at_the_output_gains_exposure(checkpoints):
+    """An encoding's output_gain divides what the network's output decodes to, in the lean graph and in training's
+    functions alike (the inputs keep the exposure): the same network at gain 4 adds a quarter of the indirect light."""
+    import dataclasses
+
+    netG, enc, meta = build_generator_from_checkpoint(checkpoints["indirect"])
+    x = torch.from_numpy(np.random.default_rng(5).uniform(0.1, 2, (1, 64, 32, 10)).astype(np.float32))
+    s = torch.tensor([0.8])
+    direct = x[..., 7:10].numpy()
+    gained = dataclasses.replace(enc, output_gain=4.0)
+    with torch.no_grad():
+        for lean in (True, False):
+            base = gi_module(netG, enc, meta, lean=lean)(x, s).numpy() - direct
+            quarter = gi_module(netG, gained, meta, lean=lean)(x, s).numpy() - direct
+            live = base > 1e-3  # where ReLU of the composite does not clip
+            assert live.mean() > 0.5
+            np.testing.assert_allclose(quarter[live], base[live] / 4, rtol=1e-4, atol=1e-6)

@@ -820,3 +820,32 @@ def test_train_speed_times_each_variant_on_the_trainers_batches(data, tmp_path):
     assert not (tmp_path / "run" / "last.ckpt").exists()  # measured in memory: no checkpoint written
     with pytest.raises(ValueError, match="unknown variant"):
         tool.measure(cfg, steps=1, variants=["eager", "fast"], log=quiet)
+
+
+def test_output_gain_fits_the_targets_exposure_and_trains_exports_and_resumes(data, tmp_path):
+    """--output-gain: the gain puts the 99th percentile of the train split's exposed target (indirect / albedo /
+    light scale x exposure) at 1; the batches' encoded targets use it, export verifies the graph that decodes with
+    it, and a resumed run keeps it."""
+    from diviewer.encoding import Encoding, encode_radiance
+    from diviewer.train.export import export
+
+    out = tmp_path / "gain"
+    kw = {"output_gain": True, "target": "indirect", "divide_albedo": True}
+    train(tiny(data, out, **kw), log=quiet)
+    ck = load_checkpoint(out / "last.ckpt")
+    enc = Encoding.from_dict(ck["encoding"])
+    ds = Dataset(data)
+    targets = []
+    for i in ds.indices("train"):
+        f = ds.load(i)
+        targets.append((f["pt"] - f["pt_direct"]) / np.clip(f["albedo"], ALBEDO_FLOOR, 1) / 2.0 * enc.exposure)
+    # the frames' indirect light is ~1/5 of their direct light: the gain lifts it to the direct light's range
+    assert enc.output_gain == pytest.approx(fit_exposure(targets), rel=0.05) and enc.output_gain > 2
+    assert ck["config"]["output_gain"] is True
+    t = targets[0] / enc.exposure
+    assert np.abs(encode_radiance(t, enc.output())).max() > 2 * np.abs(encode_radiance(t, enc)).max()
+    assert train(tiny(data, out, **kw, epochs=3), resume=True, log=quiet)["step"] == 6
+    card = export(out / "last.ckpt", tmp_path / "gain.onnx", log=quiet)
+    assert card["encoding"]["output_gain"] == enc.output_gain and card["verification"]["max_rel_to_peak"] < 1e-4
+    with pytest.raises(DiviewerError, match="output_gain"):
+        train(tiny(data, out, **{**kw, "output_gain": False}, epochs=4), resume=True, log=quiet)
