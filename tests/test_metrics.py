@@ -264,3 +264,14 @@ def test_median_bias_puts_the_l1_optimum_below_the_mean_of_a_skewed_truth():
     flat = np.broadcast_to(indirect[:1], indirect.shape)
     exact = tool.frame_record(direct + flat, direct, 1.0, 1e4)
     assert exact["median_ratio"] == pytest.approx(1.0) and exact["encoded_mean_ratio"] == pytest.approx(1.0, rel=1e-5)
+
+
+def test_train_fit_pools_the_indirect_light_and_ranks_frames_by_the_truths():
+    """tools/experiments/train_fit.py: the pooled ratio weighs frames by their light; the brightest come first."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/train_fit")
+    rows = [(0.5 * b, b) for b in range(1, 13)] + [(3.0, 0.0)]  # half the light everywhere, one black truth
+    r = tool.ratios(rows)
+    assert r["pooled"] == pytest.approx((sum(0.5 * b for b in range(1, 13)) + 3.0) / sum(range(1, 13)))
+    assert r["brightest_10"][0] == 0.5 and len(r["brightest_10"]) == 10 and r["dimmest_10"][0] is None
