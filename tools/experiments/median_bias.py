@@ -25,7 +25,6 @@ encoded mean uses ``--exposure`` (the encoding's, from a model card) over the fr
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -70,13 +69,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
     from diviewer.reference.mitsuba import MitsubaFrame
-    from diviewer.scene import load_scene
     from diviewer.scene.lights import light_scale
     from diviewer.scene.loader import config_from_dict
+    from sun_dependence import evalset_scene  # this folder
 
-    manifest = json.loads((a.evalset / "manifest.json").read_text())
-    scene = load_scene(manifest["scene_file"] if Path(manifest["scene_file"]).is_file() else manifest["scene"])
-    exposure = float(manifest["evalset"]["tonemap"]["exposure"])
+    manifest, scene, exposure = evalset_scene(a.evalset)
     height = manifest["resolution"][1]
     cache = dict(np.load(a.cache)) if a.cache and a.cache.is_file() else {}
     rows = []

@@ -37,6 +37,16 @@ def angles(lo: float, hi: float, n: int) -> list[float]:
     return [0.5 * (lo + hi)] if n == 1 else [float(a) for a in np.linspace(lo, hi, n)]
 
 
+def evalset_scene(evalset: Path):
+    """An evaluation set's manifest, its scene (the file it names where present, else the shipped one by name) and
+    its tone map's exposure."""
+    from diviewer.scene import load_scene
+
+    manifest = json.loads((evalset / "manifest.json").read_text())
+    scene = load_scene(manifest["scene_file"] if Path(manifest["scene_file"]).is_file() else manifest["scene"])
+    return manifest, scene, float(manifest["evalset"]["tonemap"]["exposure"])
+
+
 def blind_scores(full: np.ndarray, direct: np.ndarray, exposure: float) -> list[float]:
     """Per angle (axis 0 of ``full`` and ``direct``, (A, H, W, 3) radiance): tone-mapped PSNR of that angle's direct
     light plus the mean indirect light over every angle, against its full image."""
@@ -60,13 +70,10 @@ def main(argv: list[str] | None = None) -> int:
 
     from diviewer.metrics import psnr, tonemap
     from diviewer.reference.mitsuba import MitsubaFrame
-    from diviewer.scene import load_scene
     from diviewer.scene.lights import power_field, rotate_light
     from diviewer.scene.loader import config_from_dict
 
-    manifest = json.loads((a.evalset / "manifest.json").read_text())
-    scene = load_scene(manifest["scene_file"] if Path(manifest["scene_file"]).is_file() else manifest["scene"])
-    exposure = float(manifest["evalset"]["tonemap"]["exposure"])
+    manifest, scene, exposure = evalset_scene(a.evalset)
     w, h = (int(v) for v in a.res.lower().split("x"))
     frames = [f for f in manifest["frame_list"] if f["split"] == a.split]
     if not frames:
