@@ -19,9 +19,10 @@ Monte-Carlo estimate whose noise is heavy-tailed (rare, very bright "firefly" sa
 - L2 on "relative" errors, (prediction - target) / (|prediction| + REL_EPSILON) with the denominator taken
   from the prediction and not differentiated (Noise2Noise's relative MSE, Lehtinen et al. 2018): the weight
   depends on the prediction only, never on the noisy target, so the minimiser is still the **mean**, while an
-  error counts relative to the pixel's brightness, so shade weighs as much as sunlit walls. Measured on
-  Sponza's 64-spp truth (tools/experiments/median_bias.py): the median, where L1 goes, is 40 % below the mean
-  in frames of deep shade.
+  error counts relative to the pixel's brightness, so shade weighs as much as sunlit walls. Its weakness: an
+  overshoot costs at most ~1 a pixel however large, and in shade single bright samples dominate its gradient.
+  On Sponza (docs/sponza.md, "Where the dark bias comes from") the median, where L1 goes, is 27-53 % below the
+  mean in deep shade at 64 spp, yet a relative-L2 model overshot dim frames 7-44x and L1 stayed the better loss.
 
 The trainer calls `reconstruction_loss(fake_B, real_B, mode, space, encoding)` and nothing else;
 `LossConfig` is the settings dataclass recorded with checkpoints.
