@@ -107,8 +107,8 @@ def fit_output_gain(ds: Dataset, train: np.ndarray, scales: np.ndarray | None, e
                     cfg: TrainConfig) -> float:
     """The gain that puts the 99th percentile of the train frames' exposed target luminance at 1 (`fit_exposure` on
     the targets as the trainer makes them: divided by the albedo and the light scale, times the exposure). Sponza's
-    indirect light is ~1 % of its direct light: its target's 99th percentile is 0.13 at the direct light's
-    exposure, its median 0.003, i.e. 3e-4 of the encoded range (docs/sponza.md)."""
+    indirect light is ~1 % of its direct light: its target's 99th percentile is 0.14 at the direct light's
+    exposure, its median 0.0057, i.e. 5e-4 of the encoded range (docs/sponza.md; cornell's median: 0.107)."""
     from diviewer.encoding import fit_exposure, inverse_light_scale
 
     s = ds.slices

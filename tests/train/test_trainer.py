@@ -849,3 +849,25 @@ def test_output_gain_fits_the_targets_exposure_and_trains_exports_and_resumes(da
     assert card["encoding"]["output_gain"] == enc.output_gain and card["verification"]["max_rel_to_peak"] < 1e-4
     with pytest.raises(DiviewerError, match="output_gain"):
         train(tiny(data, out, **{**kw, "output_gain": False}, epochs=4), resume=True, log=quiet)
+
+
+def test_target_range_reports_the_trainers_target_and_the_gain_it_would_fit(data):
+    """tools/experiments/target_range.py: the gain is the trainer's (fit_encoding with --output-gain on the same
+    frames), the percentiles rise, and the encoded values are the encoding's curve of them."""
+    from tool_modules import load_tool
+
+    from diviewer.data.scales import light_scales
+    from diviewer.encoding import Encoding, encode_radiance
+    from diviewer.train.targets import fit_encoding
+
+    tool = load_tool("experiments/target_range")
+    ds = Dataset(data)
+    idx = ds.indices("train")
+    r = tool.target_range(ds, idx)
+    _, arr = ds.array("train", idx)
+    cfg = tiny(data, data, target="indirect", divide_albedo=True, output_gain=True)
+    enc = fit_encoding(ds, idx, arr, light_scales(ds, idx), output_of=cfg)
+    assert r["output_gain"] == pytest.approx(enc.output_gain) and r["exposure"] == pytest.approx(enc.exposure)
+    p = list(r["exposed"].values())
+    assert 0 < p[0] < p[1] < p[2]
+    np.testing.assert_allclose(list(r["encoded"].values()), encode_radiance(np.array(p), Encoding()), rtol=1e-5)
