@@ -2,7 +2,7 @@
 the encoded values) and the mean (L2 on linear radiance, and the relative L2 of Noise2Noise), against the mean.
 
 Usage: python tools/experiments/median_bias.py [--evalset assets/evalsets/sponza] [--spp 64] [--renders 16]
-           [--scale 0.5] [--exposure 7.287] [--cache C.npz] [--out OUT.json]
+           [--scale 0.5] [--card CARD.json] [--cache C.npz] [--out OUT.json]
 
 A network trained on path-traced targets learns, for each pixel's inputs, the statistic its loss is minimised by
 over the targets' noise: the median for L1 (on any monotonic encoding of the radiance, so also on the encoded,
@@ -18,13 +18,14 @@ indirect = pt - pt_direct), at ``--scale`` of the frame's stored size, and repor
   would reach under that loss, from the bias alone (no network error).
 
 A median ratio well below 1 means an L1 loss on this truth teaches a network too little indirect light. The
-encoded mean uses ``--exposure`` (the encoding's, from a model card) over the frame's light scale, as encoding
+encoded mean uses the exposure of ``--card``'s encoding (a model of the scene) over the frame's light scale, as encoding
 2-4 do. Measures only; the renders are kept in ``--cache`` (resumable, one frame at a time).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from pathlib import Path
@@ -64,7 +65,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--renders", type=int, default=16)
     ap.add_argument("--scale", type=float, default=0.5)
-    ap.add_argument("--exposure", type=float, default=7.287, help="the encoding's exposure (a model card's)")
+    ap.add_argument("--card", type=Path, default=Path("docs/data/sponza_light_ablation/k8_lit_card.json"),
+                    help="a model card of the scene: its encoding's exposure is the one the encoded mean uses")
     ap.add_argument("--cache", type=Path)
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
@@ -74,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     from sun_dependence import evalset_scene  # this folder
 
     manifest, scene, exposure = evalset_scene(a.evalset)
+    a.exposure = float(json.loads(a.card.read_text())["encoding"]["exposure"])
     height = manifest["resolution"][1]
     cache = dict(np.load(a.cache)) if a.cache and a.cache.is_file() else {}
     rows = []
@@ -108,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
 
         a.out.parent.mkdir(parents=True, exist_ok=True)
         write_json(a.out, {"evalset": str(a.evalset), "spp": a.spp, "renders": a.renders, "scale": a.scale,
-                           "encoding_exposure": a.exposure, "tonemap_exposure": exposure, "splits": splits,
+                           "card": str(a.card), "encoding_exposure": a.exposure, "tonemap_exposure": exposure, "splits": splits,
                            "frames": rows}, indent=2)
     return 0
 
