@@ -6,7 +6,7 @@ input and target. Export imports the composition from here, so the ONNX graph co
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 
@@ -83,8 +83,14 @@ def run_light_scales(cfg: TrainConfig, ds: Dataset, train_idx: list[int],
     return train_scales, light_scales(ds, sorted(ds.indices("val"))) if with_val else None
 
 
+GAIN_NOTE: float = 4.0
+"""A run without ``output_gain`` whose fitted gain would be at least this is told so (`fit_encoding`): its target's
+99th percentile lies below 1/4 of the direct light's exposure (Sponza: 1/6.2; cornell: 1/2.5)."""
+
+
 def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: np.ndarray | None = None,
-                 world: bool = False, lights: bool = False, output_of: TrainConfig | None = None) -> Encoding:
+                 world: bool = False, lights: bool = False, output_of: TrainConfig | None = None,
+                 say: Callable[[str], None] | None = None) -> Encoding:
     """The dataset's encoding, fixed from the train split.
 
     exposure: `fit_exposure` over the train frames' GL direct light (divided by each frame's light scale
@@ -93,14 +99,22 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: n
     radiance_max: the default. ``world`` (encoding version 3, with ``scales``): world_center and world_half
     from the bounds of the scene's objects (`Scene.bounds`), the scene the dataset was captured from. ``lights``
     (encoding version 4, with ``world``): the number of the scene's lights, which every frame configuration has.
-    ``output_of``: a run whose ``output_gain`` is set gets `fit_output_gain`'s gain on its targets.
+    ``output_of``: a run whose ``output_gain`` is set gets `fit_output_gain`'s gain on its targets; one without it
+    whose gain would be ``GAIN_NOTE`` or more is told so through ``say``.
     """
     enc = _fit_encoding(ds, train_idx, train, scales, world, lights)
-    if output_of is None or not output_of.output_gain:
+    if output_of is None:
         return enc
-    import dataclasses
+    gain = fit_output_gain(ds, train, scales, enc, output_of)
+    if output_of.output_gain:
+        import dataclasses
 
-    return dataclasses.replace(enc, output_gain=fit_output_gain(ds, train, scales, enc, output_of))
+        return dataclasses.replace(enc, output_gain=gain)
+    if gain >= GAIN_NOTE and say is not None:
+        say(f"note: the target's 99th percentile is {1 / gain:.2g} at the direct light's exposure, "
+            f"{math.log1p(1 / gain) / math.log1p(enc.radiance_max):.1e} of the network's range; --output-gain "
+            f"would encode it at its own exposure (x {gain:.3g}; docs/sponza.md, where the dark bias comes from)")
+    return enc
 
 
 def fit_output_gain(ds: Dataset, train: np.ndarray, scales: np.ndarray | None, enc: Encoding,

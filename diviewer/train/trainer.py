@@ -209,7 +209,7 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
         enc = parent_encoding(parent, cfg)
     else:
         enc = fit_encoding(ds, train_idx, train_arr, train_scales, world=cfg.world_inputs, lights=cfg.light_inputs,
-                           output_of=cfg)
+                           output_of=cfg, say=say)
     train_cams, val_cams = run_cameras(enc, ds, train_idx, val_arr is not None)
     train_lights, val_lights = run_lights(enc, ds, train_idx, val_arr is not None)
     net_cfg = net_config(cfg, ds)

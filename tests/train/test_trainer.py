@@ -871,3 +871,29 @@ def test_target_range_reports_the_trainers_target_and_the_gain_it_would_fit(data
     p = list(r["exposed"].values())
     assert 0 < p[0] < p[1] < p[2]
     np.testing.assert_allclose(list(r["encoded"].values()), encode_radiance(np.array(p), Encoding()), rtol=1e-5)
+
+
+def test_a_run_whose_target_lies_low_is_told_of_output_gain(data):
+    """fit_encoding with a run's settings: indirect light at a tenth of the frames' own gives a gain above GAIN_NOTE,
+    and a run without --output-gain is told so, once; the frames as they are (gain < 4) and a run with the gain are
+    not."""
+    from diviewer.data.scales import light_scales
+    from diviewer.train.targets import GAIN_NOTE, fit_encoding
+
+    ds = Dataset(data)
+    idx = ds.indices("train")
+    _, arr = ds.array("train", idx)
+    scales = light_scales(ds, idx)
+    pt, pt_direct = ds.slices["pt"], ds.slices["pt_direct"]
+    dim = arr.astype(np.float32)
+    dim[..., pt] = dim[..., pt_direct] + 0.1 * (dim[..., pt] - dim[..., pt_direct])
+    dim = dim.astype(arr.dtype)
+    run = tiny(data, data, target="indirect", divide_albedo=True)
+    told = []
+    enc = fit_encoding(ds, idx, dim, scales, output_of=run, say=told.append)
+    assert len(told) == 1 and "--output-gain" in told[0] and enc.output_gain == 1
+    gained = fit_encoding(ds, idx, dim, scales, output_of=dataclasses.replace(run, output_gain=True), say=told.append)
+    assert len(told) == 1 and gained.output_gain >= GAIN_NOTE
+    assert f"x {gained.output_gain:.3g}" in told[0]
+    fit_encoding(ds, idx, arr, scales, output_of=run, say=told.append)
+    assert len(told) == 1  # the frames as made: a gain near 3.7, below the note's threshold
