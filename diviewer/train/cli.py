@@ -65,6 +65,16 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--precision", choices=CHOICES["precision"], default=None,
                    help="autocast: auto (bf16 on CUDA, fp32 on the CPU; default), fp32, bf16, fp16 (CUDA only)")
     p.add_argument("--amp", action="store_true", help="the same as --precision fp16")
+    _model_options(p, d)
+    _data_options(p)
+    p.add_argument("--num-workers", type=int, default=None, help="DataLoader workers (default 0)")
+    p.add_argument("--device", default=None, help="auto, cpu, cuda or cuda:N (default auto)")
+    p.set_defaults(func=run_train)
+    return p
+
+
+def _model_options(p: argparse.ArgumentParser, d: dict) -> None:
+    """`train`'s ablation options: the losses, the discriminator and the generator (``d``: TrainConfig's defaults)."""
     g = p.add_argument_group("losses and discriminator (ablations; the defaults are the paper's)")
     g.add_argument("--gan-weight", type=float, default=None,
                    help=f"weight of the adversarial term (default {d['gan_weight']}; 0: reconstruction only)")
@@ -81,6 +91,10 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     g = p.add_argument_group("generator (ablations; the defaults are the paper's)")
     g.add_argument("--upsample", choices=CHOICES["upsample"], default=None, help="decoder upsampling (default transpose)")
     g.add_argument("--norm", choices=CHOICES["norm"], default=None, help="normalisation (default batch)")
+
+
+def _data_options(p: argparse.ArgumentParser) -> None:
+    """`train`'s options of the data, the encoding and stopping."""
     g = p.add_argument_group("data and stopping")
     g.add_argument("--train-frames", type=int, default=None,
                    help="use only the first N train frames by index (default: all present)")
@@ -102,10 +116,6 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
                         "(9:16 to 16:9), or 'off' (default off)")
     g.add_argument("--val-every-steps", type=int, default=None,
                    help="also validate (and save) every N steps (default 0: epoch ends only)")
-    p.add_argument("--num-workers", type=int, default=None, help="DataLoader workers (default 0)")
-    p.add_argument("--device", default=None, help="auto, cpu, cuda or cuda:N (default auto)")
-    p.set_defaults(func=run_train)
-    return p
 
 
 def _aspect_range(text: str):
