@@ -123,16 +123,24 @@ def fit_output_gain(ds: Dataset, train: np.ndarray, scales: np.ndarray | None, e
     the targets as the trainer makes them: divided by the albedo and the light scale, times the exposure). Sponza's
     indirect light is ~1 % of its direct light: its target's 99th percentile is 0.14 at the direct light's
     exposure, its median 0.0057, i.e. 5e-4 of the encoded range (docs/sponza.md; cornell's median: 0.107)."""
-    from diviewer.encoding import fit_exposure, inverse_light_scale
+    from diviewer.encoding import fit_exposure
+
+    return float(fit_exposure(list(exposed_targets(ds, train, scales, enc, cfg, stride=4))))  # 1/16: bounded memory
+
+
+def exposed_targets(ds: Dataset, train: np.ndarray, scales: np.ndarray | None, enc: Encoding, cfg: TrainConfig,
+                    stride: int = 1):
+    """Each frame's target as the trainer makes it (`target_radiance`, divided by the frame's light scale), times
+    the encoding's (input) exposure, at every ``stride``-th row and column: float32 (H', W', 3) arrays, one a frame."""
+    from diviewer.encoding import inverse_light_scale
 
     s = ds.slices
     inv = np.ones(len(train)) if scales is None else inverse_light_scale(scales.astype(np.float64))
-    targets = []
     for frame, k in zip(train, inv):
-        f = {name: frame[..., s[name]].astype(np.float32) for name in ("pt", "pt_direct", "albedo", "direct")}
+        f = {name: frame[::stride, ::stride, s[name]].astype(np.float32)
+             for name in ("pt", "pt_direct", "albedo", "direct")}
         t = target_radiance(f["pt"], f["pt_direct"], f["albedo"], cfg.target, cfg.divide_albedo, f["direct"])
-        targets.append(t[::4, ::4] * np.float32(k * enc.exposure))  # every 16th pixel: bounded memory
-    return float(fit_exposure(targets))
+        yield t * np.float32(k * enc.exposure)
 
 
 def _fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: np.ndarray | None, world: bool,

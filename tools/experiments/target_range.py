@@ -27,7 +27,7 @@ def target_range(ds, indices: list[int]) -> dict:
     from diviewer.encoding import Encoding
     from diviewer.evalscore import LUMINANCE
     from diviewer.train.config import TrainConfig
-    from diviewer.train.targets import fit_encoding, fit_output_gain, target_radiance
+    from diviewer.train.targets import exposed_targets, fit_encoding, fit_output_gain
     from diviewer.data.scales import light_scales
 
     _, train = ds.array("train", indices)
@@ -35,12 +35,7 @@ def target_range(ds, indices: list[int]) -> dict:
     enc = fit_encoding(ds, indices, train, scales)
     cfg = TrainConfig(data=ds.root, out=ds.root, target="indirect", divide_albedo=True, output_gain=True)
     gain = fit_output_gain(ds, train, scales, enc, cfg)
-    s = ds.slices
-    lum = []
-    for frame, scale in zip(train, scales):
-        f = {k: frame[..., s[k]].astype(np.float32) for k in ("pt", "pt_direct", "albedo", "direct")}
-        t = target_radiance(f["pt"], f["pt_direct"], f["albedo"], "indirect", True, f["direct"]) * (enc.exposure / scale)
-        lum.append((t @ LUMINANCE.astype(np.float32)).ravel())
+    lum = [(t @ LUMINANCE.astype(np.float32)).ravel() for t in exposed_targets(ds, train, scales, enc, cfg)]
     p = np.percentile(np.concatenate(lum), PERCENTILES)
     c = math.log1p(Encoding().radiance_max)
     return {"exposure": enc.exposure, "output_gain": gain, "frames": len(indices),
