@@ -40,7 +40,6 @@ def main(argv: list[str] | None = None) -> int:
     from diviewer.data.dataset import Dataset
     from diviewer.data.scales import dataset_scene
     from diviewer.runtime import NeuralGI, pack_buffers
-    from diviewer.scene.lights import light_scale
     from diviewer.scene.loader import config_from_dict
 
     ds = Dataset(a.data)
@@ -54,9 +53,7 @@ def main(argv: list[str] | None = None) -> int:
         for i in pick:
             f, entry = ds.load(i), ds.entry(i)
             h, w = f["depth"].shape
-            y = net.run(pack_buffers(f), light_scale=light_scale(scene, config_from_dict(scene, entry["config"])),
-                        camera=net.camera(entry["config"]["camera"], w, h) if getattr(net, "world", False) else None,
-                        light=net.lights(entry["config"]) if getattr(net, "lit", False) else None)
+            y = net.run(pack_buffers(f), **net.frame_inputs(config_from_dict(scene, entry["config"]), w, h, scene))
             rows.append((float(y.sum(dtype=np.float64) - f["direct"].sum(dtype=np.float64)),
                          float(f["pt"].sum(dtype=np.float64) - f["pt_direct"].sum(dtype=np.float64))))
         r = record["models"][str(path)] = ratios(rows)
