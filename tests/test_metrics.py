@@ -275,3 +275,25 @@ def test_train_fit_pools_the_indirect_light_and_ranks_frames_by_the_truths():
     r = tool.ratios(rows)
     assert r["pooled"] == pytest.approx((sum(0.5 * b for b in range(1, 13)) + 3.0) / sum(range(1, 13)))
     assert r["brightest_10"][0] == 0.5 and len(r["brightest_10"]) == 10 and r["dimmest_10"][0] is None
+
+
+def test_ssim_budget_separates_the_level_from_the_shape():
+    """tools/experiments/ssim_budget.py: the box filter is a window mean; smoothing keeps a texture over a smooth
+    irradiance; a model right but for its level scores 1 once the level is fixed, and its ratio is the level."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/ssim_budget")
+    rng = np.random.default_rng(0)
+    x = rng.random((20, 24, 3))
+    f = tool.box_filter(x, 2)
+    assert f.shape == x.shape and f[10, 12] == pytest.approx(x[8:13, 10:15].mean(axis=(0, 1)))
+    albedo = 0.2 + 0.8 * rng.random((20, 24, 3))
+    irradiance = np.linspace(0.5, 1.5, 24)[None, :, None] * np.ones((20, 1, 3))
+    assert np.allclose(tool.smooth_indirect(irradiance * albedo, albedo, 0), irradiance * albedo)
+    direct = np.where(np.arange(24)[None, :, None] < 12, 0.0, 1.0) * albedo
+    truth = direct + irradiance * albedo + 0.05 * rng.random((20, 24, 3))
+    half = direct + 0.5 * (truth - direct)
+    b = tool.budget(half, direct, truth, albedo, exposure=1.0, radius=2)
+    assert b["indirect_ratio"] == pytest.approx(0.5) and b["ssim"] < 0.99
+    assert b["level_fixed"] == pytest.approx(1.0) and b["truth_smooth"] < b["level_fixed"]
+    assert b["level_fixed_smooth"] == pytest.approx(b["truth_smooth"])
