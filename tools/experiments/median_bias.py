@@ -109,7 +109,6 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         from diviewer.outputs import write_json
 
-        a.out.parent.mkdir(parents=True, exist_ok=True)
         write_json(a.out, {"evalset": str(a.evalset), "spp": a.spp, "renders": a.renders, "scale": a.scale,
                            "card": str(a.card), "encoding_exposure": a.exposure, "tonemap_exposure": exposure, "splits": splits,
                            "frames": rows}, indent=2)

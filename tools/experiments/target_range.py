@@ -63,7 +63,6 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         from diviewer.outputs import write_json
 
-        a.out.parent.mkdir(parents=True, exist_ok=True)
         write_json(a.out, {"data": str(a.data), "seed": a.seed, **r}, indent=2)
     return 0
 

@@ -63,7 +63,6 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         from diviewer.outputs import write_json
 
-        a.out.parent.mkdir(parents=True, exist_ok=True)
         write_json(a.out, record, indent=2)
     return 0
 
