@@ -146,9 +146,11 @@ def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> d
 
 def _stale(stage: str, rec: dict[str, Any], plan: Plan) -> bool:
     """Whether a finished stage must run again although its outputs are intact: a pick made by another rule
-    (`PICK_MEASURE`), a ship to another folder or of another ladder record than the pick's."""
+    (`PICK_MEASURE`) or under another size cap (the recipe's ``max_mb``), a ship to another folder or of another
+    ladder record than the pick's."""
     if stage == "pick":
-        return rec["result"].get("measure") != PICK_MEASURE
+        return (rec["result"].get("measure") != PICK_MEASURE
+                or rec["result"].get("max_mb") != plan.recipe.max_mb)
     if stage == "ship":
         ladder = plan.work / "ladder.json"
         return rec["result"].get("to") != (None if plan.ship is None else str(plan.ship)) or (
@@ -271,11 +273,24 @@ def evalset_psnr_tm(splits: dict[str, dict]) -> float:
     return sum(p * n for p, n in scored) / sum(n for _, n in scored)
 
 
-def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
-    """The bench's rule: the smallest K whose tone-mapped PSNR on the evaluation set is within the recipe's
-    tolerance of the best K's (`PICK_MEASURE`)."""
+def pick_within(rows: list[dict], tolerance_db: float, max_mb: float | None, recipe: Path | None = None):
+    """The bench's rule over the Ks whose model file is at most ``max_mb`` MB (all where None): ``rows`` hold each
+    K's ``K``, ``bytes`` and ``evalset_psnr_tm``. Returns `smallest_sufficient_k`'s pick and the Ks over the cap; an
+    error naming the recipe's field where no K fits."""
     from diviewer.bench.frontier import smallest_sufficient_k
 
+    over = sorted(r["K"] for r in rows if max_mb is not None and r["bytes"] > max_mb * 1e6)
+    fits = {r["K"]: r["evalset_psnr_tm"] for r in rows if r["K"] not in over}
+    if not fits:
+        small = min(rows, key=lambda r: r["bytes"])
+        raise DiviewerError(f"no K's model fits in {max_mb:g} MB: the smallest, K = {small['K']}, is "
+                            f"{small['bytes'] / 1e6:.2f} MB", path=recipe, field="ladder.max_mb")
+    return smallest_sufficient_k(fits, tolerance_db), over
+
+
+def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    """The bench's rule: the smallest K whose tone-mapped PSNR on the evaluation set is within the recipe's
+    tolerance of the best K's (`PICK_MEASURE`), of the Ks within the recipe's ``max_mb`` (`pick_within`)."""
     stages = state.data["stages"]
     ev = json.loads((plan.work / "evalset_eval.json").read_text())
     rows = []
@@ -288,12 +303,15 @@ def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
                      "bytes": plan.model(k).stat().st_size,
                      "test_split": stages[f"export_k{k}"]["result"]["test_split"],
                      "evalset_psnr_tm": evalset_psnr_tm(splits), "evalset": splits})
-    tol = plan.recipe.tolerance_db
-    pick = smallest_sufficient_k({r["K"]: r["evalset_psnr_tm"] for r in rows}, tol)
+    tol, cap = plan.recipe.tolerance_db, plan.recipe.max_mb
+    pick, over = pick_within(rows, tol, cap, plan.recipe.path)
     frames = sum(s["frames"] for s in rows[0]["evalset"].values())
-    record = {"scene": plan.scene_name, "chosen_K": pick["K"], "measure": PICK_MEASURE,
+    capped = "" if cap is None else (f", of the Ks whose model is at most {cap:g} MB (the recipe's max_mb; over it: "
+                                     f"{', '.join(f'K = {k}' for k in over) or 'none'})")
+    record = {"scene": plan.scene_name, "chosen_K": pick["K"], "measure": PICK_MEASURE, "max_mb": cap,
               "rule": f"smallest K whose tone-mapped PSNR over the evaluation set ({frames} frames scored, "
-                      f"{ev['reference_spp']} spp) is within {tol} dB of the best K's ({pick['best_psnr']:.2f} dB)",
+                      f"{ev['reference_spp']} spp) is within {tol} dB of the best K's ({pick['best_psnr']:.2f} dB)"
+                      + capped,
               "recipe": plan.recipe.record(plan.overrides), "scale": plan.scale, "machine": vars(plan.machine),
               "frames": stages["check"]["result"]["frames"],
               "evalset": {"frames_per_split": plan.evalset.frames_per_split, "spp": ev["reference_spp"]},
@@ -301,8 +319,10 @@ def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     out = plan.work / "ladder.json"
     imageio.write_text(out, json.dumps(record, indent=1) + "\n")
     for r in rows:
+        mark = "  <- chosen" if r["K"] == pick["K"] else (
+            f"  (over max_mb: {r['bytes'] / 1e6:.1f} MB)" if r["K"] in over else "")
         log(f"  K={r['K']:<4} evaluation set PSNR tm {r['evalset_psnr_tm']:.2f} dB (test split, {plan.capture.spp} "
-            f"spp: {r['test_split']['neural']['psnr_tm']:.2f}){'  <- chosen' if r['K'] == pick['K'] else ''}")
+            f"spp: {r['test_split']['neural']['psnr_tm']:.2f}){mark}")
     return [out], record
 
 

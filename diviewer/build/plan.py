@@ -279,7 +279,8 @@ def describe(plan: Plan, done: set[str] = frozenset()) -> list[str]:
     if changed:
         lines.append(f"training fields changed from the recipe: {changed}")
     lines.append(f"K ladder {', '.join(map(str, plan.ks))}; the smallest K within {r.tolerance_db} dB of the best "
-                 f"(tone-mapped PSNR on the evaluation set's truth) is shipped")
+                 f"(tone-mapped PSNR on the evaluation set's truth) is shipped"
+                 + (f", of those whose model is at most {r.max_mb:g} MB" if r.max_mb is not None else ""))
     for i, s in enumerate(plan.stages, 1):
         lines.append(f"  {i:2d}. {s.name:<12} {'done' if s.name in done else hms(s.seconds):>9}  {s.title}")
     left = sum(s.seconds for s in plan.stages if s.name not in done)

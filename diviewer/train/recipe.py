@@ -9,9 +9,10 @@ that a field added to a dataclass works in recipes without this module changing:
   default to the capture's);
 - ``[train]``: `diviewer.train.config.TrainConfig`, every field but ``data``, ``out`` and ``recipe``;
 - ``[export]``: `diviewer.train.export.ExportSettings` (fp16, half_weights, verify_frames);
-- ``[ladder]``: ``K`` (the widths `diviewer build` trains) and ``tolerance_db`` (the smallest K within this
+- ``[ladder]``: ``K`` (the widths `diviewer build` trains), ``tolerance_db`` (the smallest K within this
   many dB of the best K's tone-mapped PSNR on the evaluation set is shipped;
-  `diviewer.bench.frontier.smallest_sufficient_k`, `diviewer.build.pipeline.PICK_MEASURE`).
+  `diviewer.bench.frontier.smallest_sufficient_k`, `diviewer.build.pipeline.PICK_MEASURE`) and ``max_mb``
+  (optional: the largest model file the pick may ship; a larger K is trained, scored and recorded, not shipped).
 
 `diviewer train --recipe R` trains ``[train]``; `diviewer build` runs every table. A run records where its
 recipe came from (`record`): name, file, sha256 and the fields the command line changed; the checkpoint's
@@ -42,7 +43,8 @@ NOT_TRAIN = ("data", "out", "recipe")
 """TrainConfig fields a recipe cannot set: where this run reads and writes, and the recipe record itself."""
 
 LADDER_KEYS = {"K": "widths netG is trained at, one run each", "tolerance_db": "dB below the best K's tone-mapped "
-               "PSNR on the evaluation set that the shipped (smallest) K may be"}
+               "PSNR on the evaluation set that the shipped (smallest) K may be",
+               "max_mb": "the largest exported model (MB, 10^6 bytes) the pick may ship"}
 HEAD_KEYS = {"name": "the recipe's name (default: the file's stem)", "description": "one line: what it is",
              "scene": "the scene it was made for (diviewer build's default --scene)"}
 
@@ -83,6 +85,10 @@ class Recipe:
     """Widths K `diviewer build` trains (empty: the [train] K alone)."""
     tolerance_db: float = 0.5
     """The ladder rule's tolerance in dB (tone-mapped PSNR on the evaluation set's truth, as `diviewer bench`)."""
+    max_mb: float | None = None
+    """The largest exported model file (MB) the pick may ship (a repository's budget, a download's); None: any.
+    Not in `content_sha256`: a build keys the pick's record on it (`diviewer.build.pipeline`), and trains nothing
+    again where it changes."""
 
     def content_sha256(self) -> str:
         """sha256 of what the recipe asks for (every table's values and the ladder's tolerance), not of its bytes:
@@ -168,13 +174,18 @@ def load_recipe(recipe: str | Path) -> Recipe:
     tol = ladder.get("tolerance_db", 0.5)
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or tol < 0:
         raise DiviewerError(f"must be a number of dB >= 0, got {tol!r}", path=path, field="ladder.tolerance_db")
+    max_mb = ladder.get("max_mb")
+    if max_mb is not None and (isinstance(max_mb, bool) or not isinstance(max_mb, (int, float)) or not max_mb > 0):
+        raise DiviewerError(f"must be a positive number of megabytes, got {max_mb!r}", path=path,
+                            field="ladder.max_mb")
     rec = Recipe(name=head.get("name", path.stem), path=path, sha256=hashlib.sha256(blob).hexdigest(),
                  description=head.get("description", ""), scene=head.get("scene"),
                  capture=_fields(path, "capture", data.get("capture", {}), _capture_cls()),
                  evalset=_fields(path, "evalset", data.get("evalset", {}), _evalset_cls()),
                  train=_fields(path, "train", data.get("train", {}), _train_cls(), NOT_TRAIN),
                  export=_fields(path, "export", data.get("export", {}), _export_cls()),
-                 ladder=tuple(ks), tolerance_db=float(tol))
+                 ladder=tuple(ks), tolerance_db=float(tol),
+                 max_mb=None if max_mb is None else float(max_mb))
     _check_values(rec)
     return rec
 

@@ -244,16 +244,34 @@ def test_the_pick_weighs_each_split_of_the_evaluation_set_by_its_frames():
         evalset_psnr_tm({"refused": {"psnr_tm": None, "frames": 6}})
 
 
+def test_the_pick_ships_the_smallest_sufficient_k_among_those_within_the_size_cap(tmp_path):
+    from diviewer.build.pipeline import pick_within
+
+    rows = [{"K": 8, "bytes": 1.4e6, "evalset_psnr_tm": 35.0}, {"K": 16, "bytes": 5.3e6, "evalset_psnr_tm": 36.0},
+            {"K": 32, "bytes": 21e6, "evalset_psnr_tm": 37.5}]
+    pick, over = pick_within(rows, 0.5, None)
+    assert (pick["K"], pick["best_K"], over) == (32, 32, [])
+    pick, over = pick_within(rows, 0.5, 8)
+    assert (pick["K"], pick["best_K"], pick["best_psnr"], over) == (16, 16, 36.0, [32])
+    pick, over = pick_within(rows, 1.0, 8)
+    assert (pick["K"], over) == (8, [32]), "within the tolerance of the best K that fits"
+    with pytest.raises(DiviewerError, match=r"bad.toml.*ladder.max_mb.*K = 8, is 1.40 MB"):
+        pick_within(rows, 0.5, 1.0, tmp_path / "bad.toml")
+
+
 def test_a_pick_by_another_rule_or_a_ship_of_another_ladder_runs_again(tmp_path):
     from types import SimpleNamespace
 
     from diviewer.build.pipeline import PICK_MEASURE, _stale
 
     (tmp_path / "ladder.json").write_text('{"chosen_K": 8}')
-    plan = SimpleNamespace(work=tmp_path, ship=tmp_path / "ship")
+    plan = SimpleNamespace(work=tmp_path, ship=tmp_path / "ship", recipe=SimpleNamespace(max_mb=None))
     # a build made while the pick read the capture's 64-spp test split: picked again on the evaluation set
     assert _stale("pick", {"result": {"chosen_K": 8}}, plan)
     assert not _stale("pick", {"result": {"chosen_K": 8, "measure": PICK_MEASURE}}, plan)
+    capped = SimpleNamespace(work=tmp_path, ship=tmp_path / "ship", recipe=SimpleNamespace(max_mb=8.0))
+    assert _stale("pick", {"result": {"chosen_K": 8, "measure": PICK_MEASURE}}, capped), "a new size cap: re-picked"
+    assert not _stale("pick", {"result": {"chosen_K": 8, "measure": PICK_MEASURE, "max_mb": 8.0}}, capped)
     from diviewer.data.dataset import sha256_file
 
     shipped = {"result": {"to": str(plan.ship), "ladder_sha256": sha256_file(tmp_path / "ladder.json")}}

@@ -86,6 +86,11 @@ def test_the_content_hash_ignores_comments_and_the_description_and_follows_every
     assert load_recipe(tmp_path / "cornell.toml").content_sha256() == shipped.content_sha256()
     (tmp_path / "cornell.toml").write_text(text.replace("tolerance_db = 0.5", "tolerance_db = 0.25"))
     assert load_recipe(tmp_path / "cornell.toml").content_sha256() != shipped.content_sha256()
+    # a size cap re-picks a finished build's ladder and trains nothing again (diviewer.build.pipeline._stale)
+    (tmp_path / "cornell.toml").write_text(text.replace("tolerance_db = 0.5", "tolerance_db = 0.5\nmax_mb = 8"))
+    capped = load_recipe(tmp_path / "cornell.toml")
+    assert capped.max_mb == 8.0 and shipped.max_mb is None
+    assert capped.content_sha256() == shipped.content_sha256() and capped.model_sha256() == shipped.model_sha256()
 
 def test_options_override_single_fields_and_are_recorded(tmp_path):
     cfg = resolve_config(_parse(["--data", "d", "--out", "o", "--recipe", "paper", "--k", "64", "--lr", "1e-4",
@@ -115,6 +120,9 @@ def test_a_resume_keeps_the_checkpoints_settings_and_recipe_unless_one_is_given(
     ("[capture]\nfps = 4\n", "capture.fps"),
     ("[ladder]\nK = [16, 8]\n", "ladder.K"),
     ("[ladder]\nwidths = [8]\n", "ladder.widths"),
+    ("[ladder]\nmax_mb = 0\n", "ladder.max_mb"),
+    ("[ladder]\nmax_mb = '8'\n", "ladder.max_mb"),
+    ("[ladder]\nmax_mb = nan\n", "ladder.max_mb"),
     ("[recipe]\nauthor = 'me'\n", "recipe.author"),
     ("[training]\nK = 4\n", "training"),
     ("[train]\nK = -1\n", "train.K"),
