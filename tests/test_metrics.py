@@ -296,4 +296,5 @@ def test_ssim_budget_separates_the_level_from_the_shape():
     b = tool.budget(half, direct, truth, albedo, exposure=1.0, radius=2)
     assert b["indirect_ratio"] == pytest.approx(0.5) and b["ssim"] < 0.99
     assert b["level_fixed"] == pytest.approx(1.0) and b["truth_smooth"] < b["level_fixed"]
+    assert b["psnr_tm_level_fixed"] > 100 > 40 > b["psnr_tm"]
     assert b["level_fixed_smooth"] == pytest.approx(b["truth_smooth"])

@@ -14,6 +14,7 @@ light (the image minus the model's direct-light input):
 - ``truth_smooth``: the truth's indirect light filtered alike: what a model right at every scale above the filter's,
   and smooth below it, would score.
 
+Beside them, the tone-mapped PSNR as scored and with the level fixed (``psnr_tm``, ``psnr_tm_level_fixed``).
 If ``level_fixed`` is far above ``ssim``, the level is wrong; if ``level_fixed_smooth`` is, the model's fine detail
 (noise, blotches) costs it; what is left between ``level_fixed_smooth`` and ``truth_smooth`` is the indirect light's
 shape at scales above the filter's. Measures only.
@@ -48,19 +49,21 @@ def smooth_indirect(indirect: np.ndarray, albedo: np.ndarray, radius: int, floor
 def budget(image: np.ndarray, direct: np.ndarray, truth: np.ndarray, albedo: np.ndarray, exposure: float,
            radius: int) -> dict[str, float]:
     """The four SSIMs of one frame (module doc), and the model's indirect light's sum over the truth's."""
-    from diviewer.metrics import ssim, tonemap
+    from diviewer.metrics import psnr, ssim, tonemap
 
     ind, ref = image - direct, truth - direct
     total, ref_total = float(ind.sum(dtype=np.float64)), float(ref.sum(dtype=np.float64))
     k = ref_total / total if total > 0 else 1.0
     score = lambda x: float(ssim(tonemap(x, exposure), tonemap(truth, exposure)))  # noqa: E731
+    db = lambda x: float(psnr(tonemap(x, exposure), tonemap(truth, exposure)))  # noqa: E731
     return {"ssim": score(image), "level_fixed": score(direct + k * ind),
+            "psnr_tm": db(image), "psnr_tm_level_fixed": db(direct + k * ind),
             "level_fixed_smooth": score(direct + smooth_indirect(k * ind, albedo, radius)),
             "truth_smooth": score(direct + smooth_indirect(ref, albedo, radius)),
             "indirect_ratio": total / ref_total if ref_total > 0 else None}
 
 
-KEYS = ("ssim", "level_fixed", "level_fixed_smooth", "truth_smooth")
+KEYS = ("ssim", "level_fixed", "level_fixed_smooth", "truth_smooth", "psnr_tm", "psnr_tm_level_fixed")
 
 
 def main(argv: list[str] | None = None) -> int:
