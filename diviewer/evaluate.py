@@ -39,7 +39,7 @@ from diviewer.runtime import NeuralGI, pack_buffers
 SSIM_MIN = 11
 """SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
 __all__ = ["EQUIVALENT_BY", "EVAL_KEYS", "KEYS", "aggregate", "equivalent", "evaluate", "evaluate_evalset",
-           "pooled_bias", "run_model", "score", "score_frame", "strict_json"]
+           "pooled_bias", "run_model", "score", "score_frame", "stored_inputs", "strict_json"]
 
 
 def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | None = None,
@@ -66,6 +66,12 @@ def _camera(net: NeuralGI, entry: dict, frame: dict[str, np.ndarray]):
                             "to give a model with world-space inputs", field="--data")
     h, w = frame["depth"].shape[:2]
     return net.camera(entry["config"]["camera"], w, h)
+
+
+def stored_inputs(net: NeuralGI, entry: dict, frame: dict[str, np.ndarray]) -> dict:
+    """A model's camera and light inputs for a stored frame (an evaluation set's or a dataset's ``entry``, its
+    buffers ``frame`` at the size it is run at), as `run_model`'s keyword arguments; None for what it does not take."""
+    return {"camera": _camera(net, entry, frame), "light": _lights(net, entry)}
 
 
 def scene_exposure(scene_name: str, scene_hash: str, direct_frames) -> tuple[float, str]:
@@ -115,7 +121,7 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
         if not np.any(f["pt"] > 0):
             black.append(i)
         t0 = time.perf_counter()
-        y = run_model(model, f, s, _camera(model, ds.entry(i), f), _lights(model, ds.entry(i)))
+        y = run_model(model, f, s, **stored_inputs(model, ds.entry(i), f))
         times.append((time.perf_counter() - t0) * 1e3)
         rows["neural"].append(score(y, f["pt"], exposure))
         rows["direct"].append(score(f["direct"], f["pt"], exposure))
@@ -296,7 +302,7 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
             x = model_input(net, f, frame, area, i, shape[0])  # the area's direct light for a model of it
             t0 = time.perf_counter()
             try:
-                y = run_model(net, x, scales.get(i), _camera(net, ev.entry(i), x), _lights(net, ev.entry(i)))
+                y = run_model(net, x, scales.get(i), **stored_inputs(net, ev.entry(i), x))
             except DiviewerError as exc:  # the runtime refuses this shape: say so, score the rest
                 refused[name] = str(exc)
                 continue

@@ -103,16 +103,18 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: n
     whose gain would be ``GAIN_NOTE`` or more is told so through ``say``.
     """
     enc = _fit_encoding(ds, train_idx, train, scales, world, lights)
-    if output_of is None:
+    if output_of is None or not (output_of.output_gain or say is not None):
         return enc
     gain = fit_output_gain(ds, train, scales, enc, output_of)
     if output_of.output_gain:
         import dataclasses
 
         return dataclasses.replace(enc, output_gain=gain)
-    if gain >= GAIN_NOTE and say is not None:
+    if gain >= GAIN_NOTE:
+        from diviewer.encoding import encode_radiance
+
         say(f"note: the target's 99th percentile is {1 / gain:.2g} at the direct light's exposure, "
-            f"{math.log1p(1 / gain) / math.log1p(enc.radiance_max):.1e} of the network's range; --output-gain "
+            f"{float(encode_radiance(1 / gain / enc.exposure, enc)):.1e} of the network's range; --output-gain "
             f"would encode it at its own exposure (x {gain:.3g}; docs/sponza.md, where the dark bias comes from)")
     return enc
 

@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     from diviewer.data.scales import light_scales
     from diviewer.evalframes import EvalFrames, crop_frame, split_key
-    from diviewer.evaluate import area_direct_of, model_input, run_model
+    from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
     from diviewer.runtime import NeuralGI
 
     ev = EvalFrames(a.evalset)
@@ -94,9 +94,7 @@ def main(argv: list[str] | None = None) -> int:
                     frame = ev.load(i)
                     f = crop_frame(frame, shape[0])
                     x = model_input(net, f, frame, area, i, shape[0])
-                    cfg = ev.entry(i)["config"]
-                    y = run_model(net, x, scales.get(i), net.camera(cfg["camera"], *shape) if net.world else None,
-                                  net.lights(cfg) if net.lit else None)
+                    y = run_model(net, x, scales.get(i), **stored_inputs(net, ev.entry(i), x))
                     rows.append({"index": i, **budget(y, x["direct"], f["pt"], x["albedo"], ev.exposure, a.radius)})
                 key = split_key(split, shape, shapes)
                 splits[key] = {"mean": {k: float(np.mean([r[k] for r in rows])) for k in KEYS}, "frames": rows}

@@ -12,7 +12,6 @@ percentiles: a target whose median encodes to 1e-4 leaves the network almost not
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -24,7 +23,7 @@ PERCENTILES = (50, 90, 99)
 def target_range(ds, indices: list[int]) -> dict:
     """The exposed target's luminance percentiles over ``indices`` (a light-scaled, albedo-divided indirect target,
     encoding 2 and later), their encoded values, the exposure and the output gain fitted on the same frames."""
-    from diviewer.encoding import Encoding
+    from diviewer.encoding import Encoding, encode_radiance
     from diviewer.evalscore import LUMINANCE
     from diviewer.train.config import TrainConfig
     from diviewer.train.targets import exposed_targets, fit_encoding, fit_output_gain
@@ -37,10 +36,10 @@ def target_range(ds, indices: list[int]) -> dict:
     gain = fit_output_gain(ds, train, scales, enc, cfg)
     lum = [(t @ LUMINANCE.astype(np.float32)).ravel() for t in exposed_targets(ds, train, scales, enc, cfg)]
     p = np.percentile(np.concatenate(lum), PERCENTILES)
-    c = math.log1p(Encoding().radiance_max)
+    encoded = encode_radiance(p, Encoding())  # p is exposed already: the curve at exposure 1
     return {"exposure": enc.exposure, "output_gain": gain, "frames": len(indices),
             "exposed": {str(q): float(v) for q, v in zip(PERCENTILES, p)},
-            "encoded": {str(q): float(np.sign(v) * math.log1p(abs(v)) / c) for q, v in zip(PERCENTILES, p)}}
+            "encoded": {str(q): float(v) for q, v in zip(PERCENTILES, encoded)}}
 
 
 def main(argv: list[str] | None = None) -> int:
