@@ -33,7 +33,7 @@ def score(models: list[Path], area_models: set[str], factor: int, evalset: Path 
     from diviewer.evalframes import EvalFrames, crop_frame, default_evalset, split_key
     from diviewer.evalscore import aggregate, score_frame_regions
     from diviewer.metrics import flat_mask
-    from diviewer.evaluate import _camera, run_model
+    from diviewer.evaluate import run_model, stored_inputs
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
     from diviewer.runtime import NeuralGI
@@ -66,7 +66,7 @@ def score(models: list[Path], area_models: set[str], factor: int, evalset: Path 
                 mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])
                 for name, net in nets.items():
                     x = fa if name in area_models else f
-                    y = run_model(net, x, scales[i] if net.light_scaled else None, _camera(net, ev.entry(i), x))
+                    y = run_model(net, x, scales[i] if net.light_scaled else None, **stored_inputs(net, ev.entry(i), x))
                     rows[name].append(score_frame_regions(y, f, ev.exposure, mask))
             out["splits"][split_key(split, shape, shapes)] = {name: aggregate(r) for name, r in rows.items()}
     return out

@@ -31,7 +31,7 @@ import numpy as np
 from diviewer.data.scales import light_scales
 from diviewer.errors import DiviewerError
 from diviewer.evalframes import EvalFrames, crop, crop_frame, split_key
-from diviewer.evaluate import _camera, area_direct_of, model_input, run_model
+from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
 from diviewer.metrics import psnr, tonemap
 from diviewer.runtime import NeuralGI
 
@@ -93,7 +93,7 @@ def geometry_scores(evalset: Path, model: Path) -> dict:
                 f = crop_frame(frame, shape[0])
                 geo = f["depth"] > 0
                 y = run_model(net, model_input(net, f, frame, area, i, shape[0]), scales.get(i),
-                              _camera(net, ev.entry(i), f))
+                              **stored_inputs(net, ev.entry(i), f))
                 rows[tuple(shape)].append((1.0 - float(geo.mean()), _psnr_tm(y, f["pt"], ev.exposure),
                                            _psnr_tm(y, f["pt"], ev.exposure, geo),
                                            _psnr_tm(f["direct"], f["pt"], ev.exposure),

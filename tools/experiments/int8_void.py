@@ -35,7 +35,7 @@ def main() -> None:
     from diviewer.bench.runner import calibration
     from diviewer.data.scales import light_scales
     from diviewer.evalframes import EvalFrames, crop_frame, default_evalset
-    from diviewer.evaluate import _camera, area_direct_of, model_input, run_model
+    from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
     from diviewer.gl.context import headless_context
     from diviewer.metrics import tonemap
     from diviewer.runtime import NeuralGI, read_metadata
@@ -59,7 +59,7 @@ def main() -> None:
         for width in sorted({s[0] for s in ev.splits()["window_shapes"]}):
             f = crop_frame(frame, width)
             x = model_input(fp32, f, frame, area, i, width)
-            a, b = (run_model(n, x, scales[i], _camera(n, ev.entry(i), x)) for n in (fp32, int8))
+            a, b = (run_model(n, x, scales[i], **stored_inputs(n, ev.entry(i), x)) for n in (fp32, int8))
             d = np.abs(tonemap(a, ev.exposure) - tonemap(b, ev.exposure)).mean(axis=(0, 2))
             void = f["depth"] <= 0
             row = {"index": i, "width": width, "edges_16": float(np.r_[d[:16], d[-16:]].mean()),

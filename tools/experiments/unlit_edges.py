@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer.data.scales import light_scales
-from diviewer.evaluate import _camera, area_direct_of, model_input, run_model
+from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
 from diviewer.evalframes import EvalFrames, crop_frame, default_evalset
 from diviewer.evalscore import regions
 from diviewer.metrics import tonemap
@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> dict:
         def image(i, f):
             if net.direct_samples > 1:  # fed and composed over the area's light, as diviewer eval does
                 f = model_input(net, f, ev.load(i), area, i, f["pt"].shape[1])
-            return run_model(net, f, scales[i] if net.light_scaled else None, _camera(net, ev.entry(i), f))
+            return run_model(net, f, scales[i] if net.light_scaled else None, **stored_inputs(net, ev.entry(i), f))
         return image
 
     images = {**{name: model_image(net) for name, net in nets.items()},

@@ -25,7 +25,7 @@ from diviewer.data.scales import dataset_scene, light_scales
 from diviewer.evalframes import EvalFrames, default_evalset
 from diviewer.evalscore import LUMINANCE, UNLIT, regions
 from diviewer.evalset import movable_objects, object_mask
-from diviewer.evaluate import _camera, run_model
+from diviewer.evaluate import run_model, stored_inputs
 from diviewer.gl.context import headless_context
 from diviewer.gl.renderer import Renderer
 from diviewer.runtime import NeuralGI
@@ -78,7 +78,8 @@ def measure(ds: Dataset, nets: dict[str, NeuralGI], frames: int, exposure: float
                 f["object"] = object_mask(renderer, config, depth, names)
                 masks = frame_regions(f, exposure)
                 for name, net in nets.items():
-                    image = run_model(net, f, scales[i] if net.light_scaled else None, _camera(net, ds.entry(i), f))
+                    image = run_model(net, f, scales[i] if net.light_scaled else None,
+                                      **stored_inputs(net, ds.entry(i), f))
                     for r, m in masks.items():
                         s = sums[name][r]
                         s[0] += float(image[m].sum(dtype=np.float64))
