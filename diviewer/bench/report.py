@@ -114,8 +114,9 @@ def _int8(rows, max_drop, notes):
             continue
         drop = src["accuracy"][EQUIVALENT_BY[0]] - r["accuracy"][EQUIVALENT_BY[0]]
         r["int8"] = {"drop_db": drop, "kept": drop <= max_drop, "max_drop_db": max_drop}
-        if drop > max_drop:
-            notes.append(f"{r['label']}: int8 loses {drop:.2f} dB (PSNR tm) > {max_drop} dB: not kept")
+        note = f"{r['label']}: int8 loses {drop:.2f} dB (PSNR tm) > {max_drop} dB: not kept"
+        if drop > max_drop and note not in notes:  # once a model: every resolution's row carries the same accuracy
+            notes.append(note)
 
 
 def _f(v, fmt):

@@ -408,3 +408,19 @@ def test_bench_scores_the_shipped_model_with_no_gi_steps_and_no_vxgi(tmp_path):
     fp32 = next(row for row in rows if row["kind"] == "neural" and row.get("precision") == "fp32"
                 and row.get("step", 1) == 1 and "cornell_linear" not in str(row.get("model")))
     assert fp32["accuracy"] is not None and fp32["accuracy"]["psnr_tm"] > 25
+
+
+def test_an_int8_variant_not_kept_is_noted_once_whatever_the_resolutions():
+    """The bench's rows at 128 and 256 carry one accuracy per model: the int8 verdict is noted once, and each row
+    keeps its own drop and verdict."""
+    from diviewer.bench.report import _int8
+
+    def row(res, precision, psnr):
+        return {"model": "m.onnx", "label": "m K=8 " + precision, "precision": precision, "resolution": [res, res],
+                "step": 1, "accuracy": {"psnr_tm": psnr}}
+
+    rows = [row(res, p, v) for res in (128, 256) for p, v in (("fp32", 30.0), ("int8", 28.0))]
+    notes: list[str] = []
+    _int8(rows, 0.5, notes)
+    assert notes == ["m K=8 int8: int8 loses 2.00 dB (PSNR tm) > 0.5 dB: not kept"]
+    assert [r["int8"]["kept"] for r in rows if r["precision"] == "int8"] == [False, False]
