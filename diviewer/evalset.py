@@ -255,7 +255,7 @@ def build_manifest(scene: Scene, settings: EvalSetSettings, plan: list[dict], ex
         "channels": [list(c) for c in channels(settings, mask=bool(objects))],
         "dtype": settings.dtype, "gt": "pt", "spp": settings.spp, "max_depth": settings.max_depth,
         "seed": settings.seed, "frames": len(plan), "split_fractions": [1.0 / len(splits)] * len(splits),
-        "render_settings": asdict(RenderSettings()),
+        "render_settings": asdict(RenderSettings().for_scene(scene)),
         "settings": {**asdict(settings), "window_widths": list(settings.windows)},
         "evalset": {
             "splits": splits, "left_out": left_out, "seed_stream": EVAL_STREAM, "second_seed_channel": SECOND_SEED,

@@ -247,11 +247,12 @@ def _score_splits(ev, splits, present, result, models, images, exposure, ladder_
                                                  progress, partial, area, scorer)
 
 
-def area_direct_of(ev: EvalFrames, samples: set[int], ctx=None) -> dict[int, dict[int, np.ndarray]]:
+def area_direct_of(ev: EvalFrames, samples: set[int], ctx=None, settings=None) -> dict[int, dict[int, np.ndarray]]:
     """The GL direct light over each pixel's area (`diviewer.gl.area`) of every frame of ``ev``, per sample count
     asked for: what a model trained on it takes in place of the set's stored (pixel-centre) light. The set's truth,
     tone map and regions stay as stored. ``ctx``: the caller's current GL context, rendered in (a context of its
-    own would be current after this returns, its creation having replaced the caller's); None: a headless one."""
+    own would be current after this returns, its creation having replaced the caller's); None: a headless one.
+    ``settings``: the renderer's (`RenderSettings`; None: the defaults, with the scene's shadow map size)."""
     if not samples:
         return {}
     from contextlib import nullcontext
@@ -265,7 +266,7 @@ def area_direct_of(ev: EvalFrames, samples: set[int], ctx=None) -> dict[int, dic
     out = {}
     with nullcontext(ctx) if ctx is not None else headless_context() as gl:
         for n in sorted(samples):
-            area = AreaDirect(gl, scene, w, h, n)
+            area = AreaDirect(gl, scene, w, h, n, settings)
             try:
                 out[n] = {f["index"]: area(config_from_dict(scene, f["config"])) for f in ev.frames}
             finally:

@@ -65,7 +65,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
         net.check_size(width, height)
     scene, config, stored = choose_config(scene, seed, split, config_file)
     user_meshes = stored.get("user_meshes")
-    settings = RenderSettings()
+    settings = RenderSettings().for_scene(scene)
     neural_info = None
     with headless_context() as ctx:
         check_render_size(ctx, width, height, "--res")

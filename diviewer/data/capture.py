@@ -119,7 +119,7 @@ def build_manifest(scene: Scene, settings: CaptureSettings) -> dict:
         "seed": settings.seed,
         "frames": settings.frames,
         "split_fractions": list(settings.split_fractions),
-        "render_settings": asdict(RenderSettings()),
+        "render_settings": asdict(RenderSettings().for_scene(scene)),
         # part of the identity only when not the pixel's centre: every capture before it keeps its hash
         **({"direct_area": {"samples": settings.direct_samples, "how": "captured: GL direct light at samples x the "
                             "size, each pixel the mean of its block"}} if settings.direct_samples > 1 else {}),

@@ -17,7 +17,7 @@ from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes
 from diviewer.gl.resources import GpuScene, set_uniform
-from diviewer.gl.shadow_fit import fit_directional, point_faces
+from diviewer.gl.shadow_fit import RenderSettings, fit_directional, point_faces
 from diviewer.gl.shaders import ShaderCache
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
@@ -25,25 +25,6 @@ from diviewer.timing import StageTimer
 
 BUFFERS = INPUT_NAMES
 """The buffers a frame returns, in the network's input order (diviewer.encoding.INPUT_CHANNELS)."""
-
-
-
-@dataclass(frozen=True)
-class RenderSettings:
-    """Settings of the GL renderer (recorded with every capture and benchmark)."""
-
-    shadows: bool = True
-    """Shadow-map the lights; off gives unshadowed Lambert."""
-    shadow_size: int = 2048
-    """Directional shadow map resolution (texels per side); point lights use this per cube face / 2."""
-    pcf_radius: int = 1
-    """PCF kernel radius: (2r+1)^2 taps."""
-    bias: float = 0.5
-    """Constant depth bias, in shadow-map texels."""
-    slope_bias: float = 1.0
-    """Slope-scaled bias, in texels per unit tan(theta) (theta: angle of incidence)."""
-    normal_offset: float = 1.5
-    """Offset of the lookup point along the surface normal, in shadow-map texels."""
 
 
 @dataclass(frozen=True)
@@ -65,7 +46,8 @@ class Renderer:
     def __init__(self, ctx: moderngl.Context, scene: Scene, width: int, height: int,
                  settings: RenderSettings = RenderSettings(), shaders: ShaderCache | None = None,
                  timer: StageTimer | None = None, culling: bool = True):
-        self.ctx, self.scene, self.settings = ctx, scene, settings
+        self.ctx, self.scene = ctx, scene
+        self.settings = settings
         self.culling = culling
         """Leave out what lies outside each pass's frustum (gl/culling.py); the image is the same either way."""
         self.drawn: dict[str, tuple[int, int]] = {}
@@ -78,7 +60,7 @@ class Renderer:
         self._draw_cache: tuple = (None, None, [])
         self._bounds: tuple = (None, None, None)
         self._emissive: tuple = (None, False)
-        self._face_size = max(settings.shadow_size // 2, 16)
+        self._face_size = max(self.settings.shadow_size // 2, 16)
         self._shadow_targets: dict[str, tuple] = {}
         """Per light name: (kind, texture, framebuffer, depth renderbuffer or None)."""
         self._shadows: dict[str, dict] = {}
@@ -87,6 +69,9 @@ class Renderer:
         """Per light name: what its cached map was rendered from (``_shadow_key``)."""
         self.shadow_renders = 0
         """Shadow maps rendered so far (a cached map is not counted): the shadow cache's witness."""
+        self.moving_shadow_size: int | None = None
+        """A sun's map size while it moves (the viewer's: a map of 8192 takes ~325 ms here), the full one again at
+        the first frame it rests; None: always the full size (captures, evaluation, the bench)."""
         self.passes = (("shadows", self._shadow_pass), ("gbuffer", self._gbuffer_pass), ("direct", self._direct_pass))
         """The frame, in order: (stage name, pass(frame view)); each pass is one timed stage."""
         self.frame_view: FrameView | None = None
@@ -97,6 +82,15 @@ class Renderer:
         self.resize(width, height)
 
     # --- resources ------------------------------------------------------------------------------
+    @property
+    def settings(self) -> RenderSettings:
+        """The renderer's settings, the scene's shadow map size in place of none (`RenderSettings.for_scene`)."""
+        return self._settings
+
+    @settings.setter
+    def settings(self, value: RenderSettings) -> None:
+        self._settings = value.for_scene(self.scene)
+
     def resize(self, width: int, height: int) -> None:
         """(Re)allocate the screen-sized targets."""
         if (width, height) == (self.width, self.height):
@@ -138,18 +132,17 @@ class Renderer:
         self._emission_fbo.release()
         self._direct_fbo.release()
 
-    def _shadow_target(self, light) -> tuple:
-        """The light's shadow map and framebuffer, made at its first use: a depth texture compared in
-        hardware (sun), or a 3x2 atlas of cube faces holding distances (point light)."""
+    def _shadow_target(self, light, size: int) -> tuple:
+        """The light's shadow map and framebuffer, made at its first use (again at another ``size``): a depth texture
+        compared in hardware (sun, ``size`` texels a side), or a 3x2 atlas of cube faces holding distances (point)."""
         kind = "dir" if isinstance(light, DirectionalLight) else "point"
         target = self._shadow_targets.get(light.name)
-        if target is not None and target[0] == kind:
+        if target is not None and target[0] == kind and (kind == "point" or target[1].size == (size, size)):
             return target
         if target is not None:
             self._release_shadow_target(light.name)
         ctx = self.ctx
         if kind == "dir":
-            size = self.settings.shadow_size
             tex = ctx.depth_texture((size, size))
             tex.compare_func = "<="
             tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
@@ -319,26 +312,30 @@ class Renderer:
                 continue
             key = self._shadow_key(frame.config, light, frame.bounds)
             cached = self._shadows.get(light.name)
-            if cached is not None and self._shadow_keys.get(light.name) == key:
+            rests = cached is not None and self._shadow_keys.get(light.name) == key
+            if rests and cached.get("size") in (None, self.settings.shadow_size):
                 shadows[light.name] = cached
                 continue
-            shadows[light.name] = self._render_shadow(frame.config, light, frame.bounds)
+            # a light that moved since the last frame: at the moving size (if smaller); at rest: the full map again
+            moving = self.moving_shadow_size if cached is not None and not rests else None
+            shadows[light.name] = self._render_shadow(frame.config, light, frame.bounds,
+                                                      min(moving or math.inf, self.settings.shadow_size))
             self._shadow_keys[light.name] = key
             self.shadow_renders += 1
         self._shadows = shadows
 
-    def _render_shadow(self, config: FrameConfig, light, bounds: np.ndarray) -> dict:
+    def _render_shadow(self, config: FrameConfig, light, bounds: np.ndarray, size: int) -> dict:
         ctx = self.ctx
         ctx.enable_only(moderngl.DEPTH_TEST)
-        kind, tex, fbo, _ = self._shadow_target(light)
+        kind, tex, fbo, _ = self._shadow_target(light, size)
         if kind == "dir":
             m_light, extent, depth_range = fit_directional(bounds, light.direction)
             fbo.use()
             fbo.clear(depth=1.0)
             self._draw_objects(config, "shadow.glsl", {}, lambda prog: set_uniform(prog, "m_light", m_light), None,
                                m_light, "shadows")
-            return {"map": tex, "m_light": m_light, "texel_world": extent / self.settings.shadow_size,
-                    "depth_range": depth_range}
+            return {"map": tex, "m_light": m_light, "texel_world": extent / size, "depth_range": depth_range,
+                    "size": size}
         faces = point_faces(light.position, bounds)
         fbo.use()
         fbo.clear(1e30, 1e30, 1e30, 1e30, depth=1.0)

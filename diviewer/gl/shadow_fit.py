@@ -1,24 +1,62 @@
-"""The light-space projections of the shadow maps: a directional light's orthographic fit to the scene's
+"""The shadow maps' settings and light-space projections: a directional light's orthographic fit to the scene's
 bounds, a point light's six cube faces. The shadow pass renders with them and direct.glsl looks up with
 the same matrices."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from diviewer.scene import camera as cam
 
 
+@dataclass(frozen=True)
+class RenderSettings:
+    """Settings of the GL renderer (recorded with every capture and benchmark)."""
+
+    shadows: bool = True
+    """Shadow-map the lights; off gives unshadowed Lambert."""
+    shadow_size: int | None = None
+    """Directional shadow map resolution (texels per side; None: the scene's ``[scene] shadow_size``, 2048 unless
+    it says otherwise); point lights use this per cube face / 2."""
+    pcf_radius: int = 1
+    """PCF kernel radius: (2r+1)^2 taps."""
+    bias: float = 0.5
+    """Constant depth bias, in shadow-map texels."""
+    slope_bias: float = 1.0
+    """Slope-scaled bias, in texels per unit tan(theta) (theta: angle of incidence)."""
+    normal_offset: float = 1.5
+    """Offset of the lookup point along the surface normal, in shadow-map texels."""
+
+    def for_scene(self, scene) -> "RenderSettings":
+        """These settings as ``scene`` renders with them: its shadow map size where they name none."""
+        return self if self.shadow_size is not None else replace(self, shadow_size=int(scene.shadow_size))
+
+
 def fit_directional(bounds: np.ndarray, direction) -> tuple[np.ndarray, float, float]:
-    """Light view-projection covering the scene's bounding sphere; also the texel-free extents."""
-    centre = bounds.mean(axis=0)
-    radius = max(float(np.linalg.norm(bounds[1] - bounds[0])) / 2.0, 1e-6)
+    """Light view-projection of the smallest light-aligned box around the scene's bounds (its eight corners seen
+    along the light), and that box's larger side across the map and its depth range, in world units.
+
+    The map spends its texels on the bounds' own outline, not on their bounding sphere's square: Sponza's
+    51 x 21 x 31 m bounds seen from the noon sun take 55 x 31 m of the map instead of 64 x 64 m, and the
+    sphere's fit cost its oracle composite 5-9 dB against the path tracer on the sunlit frames (docs/sponza.md).
+    The map's texels are then not square; a texel's larger side sets the lookup's biases."""
+    b = np.asarray(bounds, dtype=np.float64)
+    centre = b.mean(axis=0)
+    radius = max(float(np.linalg.norm(b[1] - b[0])) / 2.0, 1e-6)
     d = cam.normalize(direction)
     up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
-    eye = centre - d * 2.0 * radius
-    view = cam.look_at(eye, centre, up)
-    near, far = 0.5 * radius, 3.5 * radius
-    return cam.orthographic(radius, radius, near, far) @ view, 2.0 * radius, far - near
+    view = cam.look_at(centre - d * 2.0 * radius, centre, up)
+    corners = np.array([[b[i, 0], b[j, 1], b[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    p = corners @ view[:3, :3].T + view[:3, 3]
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    pad = 1e-3 * radius  # geometry on the bounds' faces stays inside the map and the depth range
+    half = (hi[:2] - lo[:2]) / 2.0 + pad
+    shift = np.identity(4)
+    shift[:2, 3] = -(lo[:2] + hi[:2]) / 2.0
+    near, far = -hi[2] - pad, -lo[2] + pad  # the eye is 2 radii out: every corner lies 1-3 radii ahead of it
+    return cam.orthographic(half[0], half[1], near, far) @ shift @ view, 2.0 * float(half.max()), far - near
 
 
 # Cube-face (forward, up) pairs for point-light shadows; the lookup uses the same matrices.

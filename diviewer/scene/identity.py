@@ -20,13 +20,17 @@ starts and what the sampler varies (a model records the ranges it was trained on
 DISPLAY_ONLY = ("exposure", "auto_exposure")
 """Fields of [scene] that say how frames are shown, not what they hold."""
 
+RASTER_ONLY = ("shadow_size",)
+"""Fields of [scene] that set how the rasterizer approximates the scene, not what it is: the path tracer's truth
+does not see them, so an evaluation set stays the scene's, and a model trained at another setting still runs."""
+
 
 def scene_identity(data: dict, files: list[Path], base: Path) -> str:
-    """sha256 of what a scene looks like: its parsed TOML (less `NOT_IDENTITY` and [scene]'s `DISPLAY_ONLY`)
-    and the bytes of every file it loads (glTF, buffers, textures, mesh files), by path from the TOML."""
+    """sha256 of what a scene looks like: its parsed TOML (less `NOT_IDENTITY` and [scene]'s `DISPLAY_ONLY` and
+    `RASTER_ONLY`) and the bytes of every file it loads (glTF, buffers, textures, mesh files), by path from the TOML."""
     content = {k: v for k, v in data.items() if k not in NOT_IDENTITY}
     if isinstance(content.get("scene"), dict):
-        content["scene"] = {k: v for k, v in content["scene"].items() if k not in DISPLAY_ONLY}
+        content["scene"] = {k: v for k, v in content["scene"].items() if k not in DISPLAY_ONLY + RASTER_ONLY}
     deps = {}
     for f in files:
         try:

@@ -74,6 +74,9 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
     exposure = head.num("exposure", 0.0, lo=-40, hi=40)
     auto_exposure = head.bool("auto_exposure", False)
     ambient = head.vec("ambient", 3, (0.0, 0.0, 0.0), lo=0.0)
+    shadow_size = head.num("shadow_size", 2048, lo=16, hi=16384)  # 16384: every OpenGL 4.5 driver's texture limit
+    if shadow_size != int(shadow_size):
+        raise head.err("shadow_size", f"expected a whole number of texels, got {shadow_size:g}")
     head.finish()
 
     camera = _camera(root.table("camera"))
@@ -122,7 +125,8 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
     ranges = _ranges(root.table("ranges"), default, meshes)
     root.finish()
     return Scene(name=name, path=path, file_hash=file_hash, meshes=meshes, materials=materials, default=default,
-                 ranges=ranges, exposure=exposure, auto_exposure=auto_exposure, ambient=ambient)
+                 ranges=ranges, exposure=exposure, auto_exposure=auto_exposure, ambient=ambient,
+                 shadow_size=int(shadow_size))
 
 
 def _material(key: str, t: _Table, base: Path, path: Path | None) -> Material:

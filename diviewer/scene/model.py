@@ -292,6 +292,9 @@ class Scene:
     frames lie more stops apart than one exposure shows (Sponza)."""
     ambient: Vec3 = (0.0, 0.0, 0.0)
     """Constant background radiance seen where no geometry is (the sky); black by default."""
+    shadow_size: int = 2048
+    """Texels per side of a directional light's shadow map in the rasterizer (``[scene] shadow_size``): what the
+    GL direct light's shadows are resolved to, and so how close they come to the path tracer's exact ones."""
 
     _bounds_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     """bounds() per objects tuple: the viewer asks every frame, and only a moved object changes it."""

@@ -93,6 +93,7 @@ class Viewer:
         """The render scale of the frame drawn last."""
         self.renderer = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
                                  self.shaders, timer=self.timer)
+        self.renderer.moving_shadow_size = settings.moving_shadow_size
         self.upscale = self.ctx.sampler(filter=(moderngl.LINEAR, moderngl.LINEAR), repeat_x=False, repeat_y=False)
         """Bound over the display's texture units where the image is upscaled to the window: bilinear."""
         self.meter = Meter(self.ctx, self.shaders)

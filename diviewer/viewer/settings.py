@@ -70,6 +70,9 @@ class ViewerSettings:
     """How the GI inputs are reduced, the output upsampled, and whether inference runs one frame behind."""
     panel: bool = True
     render: RenderSettings = field(default_factory=RenderSettings)
+    moving_shadow_size: int | None = 2048
+    """The sun's shadow map while it moves (Sponza's full map, 8192 texels a side, takes ~325 ms to render on a
+    2-core software rasterizer), the scene's full size again at the first frame it rests; None: always full."""
     reference: ReferenceSettings = field(default_factory=ReferenceSettings)
     reference_max_size: int = 512
     """Longest side of the path-traced reference (it is scaled to the view)."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -581,3 +582,90 @@ def test_creases_keep_the_fold_sharp():
     assert np.all(np.abs(kept.normals @ unit.T).max(axis=1) > 0.999)
     assert np.any(np.abs(loose.normals @ unit.T).max(axis=1) < 0.99)
     assert len(kept.faces) >= len(loose.faces)
+
+
+def test_the_renderer_takes_the_scenes_shadow_map_size_where_its_settings_name_none(ctx):
+    """RenderSettings' shadow_size None is the scene's ``[scene] shadow_size``; a size given wins; settings set later
+    resolve the same way; a capture records the size it rendered with."""
+    from diviewer.data.capture import CaptureSettings, build_manifest
+
+    scene = dataclasses.replace(facing_plane(), shadow_size=512)
+    r = Renderer(ctx, scene, 16, 16)
+    try:
+        assert r.settings.shadow_size == 512 and r._face_size == 256
+        r.settings = RenderSettings(shadows=False)
+        assert r.settings == RenderSettings(shadows=False, shadow_size=512)
+    finally:
+        r.release()
+    given = Renderer(ctx, scene, 16, 16, RenderSettings(shadow_size=64))
+    try:
+        assert given.settings.shadow_size == 64
+    finally:
+        given.release()
+    manifest = build_manifest(scene, CaptureSettings(frames=1, width=16, height=16, spp=1))
+    assert manifest["render_settings"]["shadow_size"] == 512
+
+
+def test_a_directional_map_is_fitted_to_the_bounds_outline_not_their_sphere():
+    """Every corner of the bounds lands inside the light's clip box, touching it on each axis (within the fit's
+    padding); the map is never wider than the bounding sphere's square, and the extent returned is its larger side."""
+    from diviewer.gl.shadow_fit import fit_directional
+
+    bounds = np.array([[-26.8, 2.3, -16.5], [24.2, 23.6, 14.9]])  # Sponza's
+    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2], 1.0] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    sphere = float(np.linalg.norm(bounds[1] - bounds[0]))
+    for direction in ([-0.35, -0.94, 0.0], [-0.35, -0.6, 0.72], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]):
+        m, extent, depth_range = fit_directional(bounds, direction)
+        c = corners @ m.T
+        assert np.allclose(c[:, 3], 1.0)
+        assert np.all(np.abs(c[:, :3]) <= 1.0) and np.all(np.abs(c[:, :3]).max(axis=0) > 0.99), direction
+        sides = 2.0 / np.linalg.norm(m[:2, :3], axis=1)
+        assert extent == pytest.approx(sides.max()) and extent <= sphere + 1e-6
+        assert 0.0 < depth_range <= sphere + 1e-6
+        # the light looks along its direction: a point further along it lies deeper in the map
+        centre = bounds.mean(axis=0)
+        d = np.asarray(direction) / np.linalg.norm(direction)
+        assert (m @ np.append(centre + d, 1.0))[2] > (m @ np.append(centre, 1.0))[2]
+    m, _, _ = fit_directional(bounds, [-0.35, -0.94, 0.0])  # the noon sun: 31 x 55 m of the sphere's 64 x 64
+    assert sorted(np.round(2.0 / np.linalg.norm(m[:2, :3], axis=1))) == [31.0, 55.0]
+
+
+def test_shadow_cost_renders_one_map_a_moving_frame_and_none_a_still_one(ctx, tmp_path):
+    """tools/experiments/shadow_cost.py: with the sun turned every frame each frame renders its map; with it still,
+    the cached one serves; each size gets its row and the JSON holds them."""
+    tool = load_tool("experiments/shadow_cost")
+    out = tmp_path / "cost.json"
+    result = tool.main(["--scene", "cornell", "--sizes", "64,128", "--size", "16", "--frames", "2", "--rounds", "1",
+                        "--out", str(out)])
+    assert [r["shadow_size"] for r in result["rows"]] == [64, 128]
+    # 2 warm-up frames, then 2 moving (one map each) and 2 still (the map of the still sun once, then cached)
+    assert [r["maps_rendered"] for r in result["rows"]] == [5, 5]
+    assert all(r["moving_ms"] > 0 and r["still_ms"] > 0 for r in result["rows"])
+    assert json.loads(out.read_text())["rows"][0]["shadow_size"] == 64
+
+
+def test_a_moving_sun_renders_its_map_at_the_moving_size_and_the_full_one_when_it_rests(ctx):
+    """``moving_shadow_size`` (the viewer's): the first frame and every frame of a light at rest draw the full map;
+    each frame the light moved draws the smaller one; the first frame it rests draws the full map again, and that
+    frame is exactly what a renderer without the moving size draws."""
+    scene = facing_plane(lights=[{"name": "sun", "type": "directional", "direction": [0.3, -0.4, -1.0]}],
+                         extra_objects=[{"name": "box", "mesh": "wall", "material": "occ", "position": [0, 0, -1.5],
+                                         "scale": [0.1, 0.1, 0.1]}])
+    r = Renderer(ctx, scene, RES, RES, RenderSettings(shadow_size=256))
+    plain = Renderer(ctx, scene, RES, RES, RenderSettings(shadow_size=256))
+    r.moving_shadow_size = 32
+    try:
+        config = scene.default
+        sizes = []
+        for direction in [None, (0.35, -0.4, -1.0), (0.4, -0.4, -1.0), None, None]:
+            if direction is not None:
+                config = config.replace_light("sun", direction=direction)
+            frame = r.frame(config)["direct"]
+            sizes.append((r.shadow_renders, r._shadows["sun"]["map"].size[0]))
+        assert sizes == [(1, 256), (2, 32), (3, 32), (4, 256), (4, 256)]
+        np.testing.assert_array_equal(frame, plain.frame(config)["direct"])
+        moving = r.frame(config.replace_light("sun", direction=(0.3, -0.4, -1.0)))["direct"]
+        assert not np.array_equal(moving, plain.frame(config.replace_light("sun", direction=(0.3, -0.4, -1.0)))["direct"])
+    finally:
+        plain.release()
+        r.release()

@@ -178,6 +178,9 @@ BAD = {
     "light_type": (BASE.replace('type = "directional"', 'type = "spot"'), "lights[0].type", "not one of"),
     "zero_scale": (BASE.replace('material = "m"', 'material = "m"\nscale = [1, 0, 1]'), "objects[0].scale", "non-zero"),
     "string_for_number": (BASE.replace("fov = 45", 'fov = "wide"'), "camera.fov", "finite number"),
+    "shadow_size_fraction": ("[scene]\nshadow_size = 1000.5\n" + BASE, "scene.shadow_size", "whole number"),
+    "shadow_size_too_big": ("[scene]\nshadow_size = 32768\n" + BASE, "scene.shadow_size", "<= 16384"),
+    "shadow_size_tiny": ("[scene]\nshadow_size = 4\n" + BASE, "scene.shadow_size", ">= 16"),
 }
 
 
@@ -365,3 +368,16 @@ def test_model_matrices_and_bounds_are_memoised_but_never_shared():
     name = scene.default.objects[-1].name
     moved = scene.default.replace_object(name, position=(0.0, 5.0, 0.0))
     assert scene.bounds(moved)[1, 1] >= 5.0 > scene.bounds()[1, 1]
+
+
+def test_the_shadow_map_size_is_the_scenes_and_not_its_identity(tmp_path):
+    """``[scene] shadow_size`` sets the rasterizer's map (2048 unless the file says otherwise); the path tracer does
+    not see it, so the scene's identity, which models and evaluation sets record, stays the same."""
+    head = '[scene]\nname = "s"\n'
+    plain = load_scene(write(tmp_path, head + BASE, "a.toml"))
+    sized = load_scene(write(tmp_path, head + "shadow_size = 4096\n" + BASE, "b.toml"))
+    assert (plain.shadow_size, sized.shadow_size) == (2048, 4096)
+    assert sized.file_hash == plain.file_hash
+    moved = load_scene(write(tmp_path, head + BASE.replace("direction = [0, -1, 0]", "direction = [0, -1, 1]"), "c.toml"))
+    assert moved.file_hash != plain.file_hash
+    assert load_scene("sponza").shadow_size == 8192 and load_scene("cornell").shadow_size == 2048

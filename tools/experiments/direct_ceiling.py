@@ -3,7 +3,7 @@ against pt, on a capture's split; what separates the rasterizer's direct light f
 
 Usage: python tools/experiments/direct_ceiling.py --data DATA [--split test] [--frames 200] [--out OUT.json]
        python tools/experiments/direct_ceiling.py --evalset DIR --cache RENDERS.npz [--spp 1024] [--supersample 2,4]
-           [--out OUT.json]
+           [--shadow-size N] [--out OUT.json]
 
 A model of target "indirect" composes GL direct + its prediction, so even a perfect prediction leaves the
 difference between the GL direct light (shadow map, one point per pixel) and the path tracer's (exact shadows,
@@ -45,9 +45,12 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(finite)) if finite else None
 
 
-def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | None = None) -> dict:
+def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | None = None,
+                    shadow_size: int | None = None) -> dict:
     """Per split and shape of the evaluation set at ``root``: the oracle composite's scores (see the docstring),
-    with the stored GL direct light and, per ``supersample`` factor, with it rendered supersampled."""
+    with the stored GL direct light and, per ``supersample`` factor, with it rendered supersampled (its sun's shadow
+    map ``shadow_size`` texels a side; None: the scene file's)."""
+    from diviewer.gl.renderer import RenderSettings
     from diviewer.evalframes import EvalFrames, crop_frame, split_key
     from diviewer.evalscore import regions
     from diviewer.metrics import masked_psnr
@@ -70,7 +73,8 @@ def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | 
             np.savez(tmp, **done)
             tmp.replace(cache)
             print(f"rendered frame {key} ({len(done)} of {len(ev.frames)})", flush=True)
-    ss = area_direct_of(ev, set(supersample or []))  # the GL direct light over each pixel's area, per factor
+    settings = RenderSettings(shadow_size=shadow_size).for_scene(scene)
+    ss = area_direct_of(ev, set(supersample or []), settings=settings)  # the GL direct light over each pixel's area
     out = {}
     for split, shapes in ev.splits().items():
         for shape in shapes:
@@ -97,7 +101,8 @@ def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | 
                        "frames_exact": sum(1 for v in rows[name] if v == float("inf")),
                        "frames_object_unlit_exact": sum(1 for v in unlit[name] if v == float("inf"))}
                 for name in rows}
-    return {"evalset": str(root), "spp_direct": spp, "supersample": list(ss), "exposure": ev.exposure, "splits": out}
+    return {"evalset": str(root), "spp_direct": spp, "supersample": list(ss), "shadow_size": settings.shadow_size,
+            "exposure": ev.exposure, "splits": out}
 
 
 def main() -> None:
@@ -110,12 +115,15 @@ def main() -> None:
     ap.add_argument("--spp", type=int, default=1024)
     ap.add_argument("--supersample", default="", help="with --evalset: also compose the GL direct light rendered at "
                     "these factors per axis and box-filtered, e.g. 2,4")
+    ap.add_argument("--shadow-size", type=int, default=None, help="with --supersample: the sun's shadow map, texels "
+                    "a side (default the scene file's)")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args()
     if a.evalset:
         if not a.cache:
             ap.error("--evalset needs --cache")
-        result = evalset_ceiling(a.evalset, a.cache, a.spp, [int(x) for x in a.supersample.split(",") if x.strip()])
+        result = evalset_ceiling(a.evalset, a.cache, a.spp, [int(x) for x in a.supersample.split(",") if x.strip()],
+                                 a.shadow_size)
         for key, rows in result["splits"].items():
             print(key + ": " + "; ".join(
                 f"{n} {r['psnr_tm']:.2f} (unlit object {'-' if r['psnr_tm_object_unlit'] is None else format(r['psnr_tm_object_unlit'], '.2f')}"
