@@ -154,6 +154,8 @@ def test_a_capture_with_direct_samples_stores_the_area_light_as_area_direct_deri
     for i in a.indices():
         np.testing.assert_array_equal(b.load(i)["direct"], c.load(i)["direct"])
         np.testing.assert_array_equal(b.load(i)["pt"], a.load(i)["pt"])
+        for name in ("depth", "normal", "albedo"):  # drawn without the shadow maps nothing stores
+            np.testing.assert_array_equal(b.load(i)[name], a.load(i)[name])
     with pytest.raises(DiviewerError, match="samples per axis"):
         capture("cornell", tmp_path / "bad", CaptureSettings(frames=2, direct_samples=0, **TINY), **QUIET)
 
