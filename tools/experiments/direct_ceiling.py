@@ -16,7 +16,8 @@ indirect") and for GL direct against pt_direct over the frames where they differ
 With ``--evalset`` (an evaluation set, which stores no pt_direct): the path tracer's direct light of every frame
 is rendered with Mitsuba at ``--spp`` (kept in ``--cache``, resumable), and the same composite is scored per
 split and shape against the set's truth, whole frame and the "object without direct light" region (mean over
-frames, as `diviewer eval` reports), beside the noise floor (the set's second seed). ``--supersample 2,4`` adds
+frames, as `diviewer eval` reports), beside the noise floor (the set's second seed) and the GL direct light alone
+(``direct_alone``: as stored, and per factor as rendered now). ``--supersample 2,4`` adds
 the same composite with the GL direct light rendered at 2x2 / 4x4 times the size and box-filtered (what a
 G-buffer that sees the pixel's area would give); the region stays defined by the stored, point-sampled buffer.
 """
@@ -78,7 +79,8 @@ def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | 
     out = {}
     for split, shapes in ev.splits().items():
         for shape in shapes:
-            names = ["oracle_indirect", *(f"oracle_indirect_gl_direct_{k}x{k}" for k in ss), "noise_floor"]
+            names = ["oracle_indirect", *(f"oracle_indirect_gl_direct_{k}x{k}" for k in ss), "noise_floor",
+                     "direct_alone", *(f"direct_alone_{k}x{k}" for k in ss)]
             rows, unlit = {n: [] for n in names}, {n: [] for n in names}
             for i in ev.present(split, []):
                 f = crop_frame({**ev.load(i), "pt_direct_mi": done[str(i)],
@@ -88,7 +90,9 @@ def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | 
                 # the region stays the stored buffer's (point-sampled direct light), whichever direct light is composed
                 images = {"oracle_indirect": np.maximum(f["direct"] + indirect, 0.0),
                           **{f"oracle_indirect_gl_direct_{k}x{k}": np.maximum(f[f"ss{k}"] + indirect, 0.0) for k in ss},
-                          "noise_floor": f[ev.info["second_seed_channel"]]}
+                          "noise_floor": f[ev.info["second_seed_channel"]],
+                          # the "direct light alone" row as stored, and as the GL direct light rendered now
+                          "direct_alone": f["direct"], **{f"direct_alone_{k}x{k}": f[f"ss{k}"] for k in ss}}
                 m = (regions(f, ev.exposure) or {}).get("object_unlit")
                 for name, img in images.items():
                     t = tonemap(img, ev.exposure)
