@@ -71,7 +71,18 @@ class GlBench:
 
     def run(self, configs, warmup: int, method, direct: bool = True) -> dict:
         """Time ``method(config) -> (texture, flip_y)`` (called after the renderer's passes) over ``configs``;
-        ``direct=False`` defers the direct pass as the viewer does (Renderer.render)."""
+        ``direct=False`` defers the direct pass as the viewer does (Renderer.render). The sun moves every frame, so
+        its shadow map is drawn at the viewer's size for a moving sun (`MOVING_SHADOW_SIZE`), as the viewer draws
+        it; every image scored for accuracy is drawn with the full map."""
+        from diviewer.gl.shadow_fit import MOVING_SHADOW_SIZE
+
+        self.renderer.moving_shadow_size = MOVING_SHADOW_SIZE
+        try:
+            return self._run(configs, warmup, method, direct)
+        finally:
+            self.renderer.moving_shadow_size = None
+
+    def _run(self, configs, warmup: int, method, direct: bool) -> dict:
         frames, totals = [], []
         for i, config in enumerate([configs[k % len(configs)] for k in range(warmup)] + list(configs)):
             self.timer.reset()

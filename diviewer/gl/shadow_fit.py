@@ -11,6 +11,10 @@ import numpy as np
 from diviewer.scene import camera as cam
 
 
+MOVING_SHADOW_SIZE = 2048
+"""A sun's map size while it moves, in the viewer (and the bench's timed frames, whose sun moves every frame)."""
+
+
 @dataclass(frozen=True)
 class RenderSettings:
     """Settings of the GL renderer (recorded with every capture and benchmark)."""

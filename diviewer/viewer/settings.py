@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from diviewer.errors import DiviewerError
 from diviewer.gl.neural import GISettings
 from diviewer.gl.renderer import RenderSettings
+from diviewer.gl.shadow_fit import MOVING_SHADOW_SIZE
 from diviewer.reference.progressive import ReferenceSettings
 from diviewer.viewer.scale import DEFAULT_FLOOR, MAX_SCALE
 
@@ -70,7 +71,7 @@ class ViewerSettings:
     """How the GI inputs are reduced, the output upsampled, and whether inference runs one frame behind."""
     panel: bool = True
     render: RenderSettings = field(default_factory=RenderSettings)
-    moving_shadow_size: int | None = 2048
+    moving_shadow_size: int | None = MOVING_SHADOW_SIZE
     """The sun's shadow map while it moves (Sponza's full map, 8192 texels a side, takes ~325 ms to render on a
     2-core software rasterizer), the scene's full size again at the first frame it rests; None: always full."""
     reference: ReferenceSettings = field(default_factory=ReferenceSettings)

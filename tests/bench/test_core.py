@@ -424,3 +424,25 @@ def test_an_int8_variant_not_kept_is_noted_once_whatever_the_resolutions():
     _int8(rows, 0.5, notes)
     assert notes == ["m K=8 int8: int8 loses 2.00 dB (PSNR tm) > 0.5 dB: not kept"]
     assert [r["int8"]["kept"] for r in rows if r["precision"] == "int8"] == [False, False]
+
+
+def test_the_bench_times_a_moving_sun_with_the_viewers_map_and_scores_with_the_full_one(ctx, monkeypatch):
+    """Each timed frame moves the sun, so its map is drawn at the viewer's moving size, as the viewer draws it;
+    outside the timing (the accuracy images) the renderer draws the scene's full map again."""
+    import diviewer.gl.shadow_fit as shadow_fit
+    from diviewer.bench.runner import GlBench
+    from scenes import facing_plane
+
+    monkeypatch.setattr(shadow_fit, "MOVING_SHADOW_SIZE", 32)
+    scene = dataclasses.replace(facing_plane(lights=[{"name": "sun", "type": "directional",
+                                                      "direction": [0.3, -0.4, -1.0]}]), shadow_size=256)
+    configs = [scene.default.replace_light("sun", direction=(0.3 + 0.05 * k, -0.4, -1.0)) for k in range(4)]
+    gb = GlBench(ctx, scene, 16, 16, "sync")
+    try:
+        timing = gb.time_direct(configs, warmup=2)
+        assert timing["frame"]["median"] > 0
+        assert gb.renderer._shadows["sun"]["size"] == 32 and gb.renderer.moving_shadow_size is None
+        gb.renderer.render(configs[0])  # the sun moved again, outside the timing: the full map
+        assert gb.renderer._shadows["sun"]["size"] == 256
+    finally:
+        gb.release()
