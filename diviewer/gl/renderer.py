@@ -70,8 +70,8 @@ class Renderer:
         self.shadow_renders = 0
         """Shadow maps rendered so far (a cached map is not counted): the shadow cache's witness."""
         self.moving_shadow_size: int | None = None
-        """A sun's map size while it moves (the viewer's: a map of 8192 takes ~325 ms here), the full one again at
-        the first frame it rests; None: always the full size (captures, evaluation, the bench)."""
+        """A sun's map size while it, or an object, moves (the viewer's: an 8192 map takes ~325 ms here), the full one
+        again at the first frame all rests; None: always the full size (captures, evaluation)."""
         self.passes = (("shadows", self._shadow_pass), ("gbuffer", self._gbuffer_pass), ("direct", self._direct_pass))
         """The frame, in order: (stage name, pass(frame view)); each pass is one timed stage."""
         self.frame_view: FrameView | None = None
@@ -316,7 +316,7 @@ class Renderer:
             if rests and cached.get("size") in (None, self.settings.shadow_size):
                 shadows[light.name] = cached
                 continue
-            # a light that moved since the last frame: at the moving size (if smaller); at rest: the full map again
+            # the light or an object moved since the last frame: the moving size (if smaller); at rest: the full map
             moving = self.moving_shadow_size if cached is not None and not rests else None
             shadows[light.name] = self._render_shadow(frame.config, light, frame.bounds,
                                                       min(moving or math.inf, self.settings.shadow_size))
