@@ -43,11 +43,10 @@ class AreaDirect:
     sub-pixel samples; its own renderer at the supersampled size, so the caller's renderer keeps its buffers."""
 
     def __init__(self, ctx, scene, width: int, height: int, samples: int, settings=None):
-        from diviewer.gl.renderer import Renderer, RenderSettings
+        from diviewer.gl.renderer import Renderer
 
         self.width, self.height, self.samples = int(width), int(height), check_samples(samples)
-        self.renderer = Renderer(ctx, scene, self.width * self.samples, self.height * self.samples,
-                                 settings or RenderSettings())
+        self.renderer = Renderer(ctx, scene, self.width * self.samples, self.height * self.samples, settings)
 
     def __call__(self, config) -> np.ndarray:
         """(H, W, 3) float32 linear direct light (and visible emission) of ``config``, top row first."""

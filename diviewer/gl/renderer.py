@@ -44,10 +44,10 @@ class Renderer:
     """Renders a Scene's frames at a fixed resolution; textures stay on the GPU until read."""
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, width: int, height: int,
-                 settings: RenderSettings = RenderSettings(), shaders: ShaderCache | None = None,
+                 settings: RenderSettings | None = None, shaders: ShaderCache | None = None,
                  timer: StageTimer | None = None, culling: bool = True):
         self.ctx, self.scene = ctx, scene
-        self.settings = settings
+        self.settings = settings or RenderSettings()
         self.culling = culling
         """Leave out what lies outside each pass's frustum (gl/culling.py); the image is the same either way."""
         self.drawn: dict[str, tuple[int, int]] = {}

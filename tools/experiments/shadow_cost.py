@@ -14,7 +14,6 @@ when the times matter.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 import time
@@ -28,15 +27,11 @@ sys.path.insert(0, str(ROOT))
 
 def turned(config, degrees: float):
     """``config`` with its first directional light turned by ``degrees`` about the world's x axis."""
-    from diviewer.scene import camera as cam
+    from diviewer.scene.lights import rotate_light
     from diviewer.scene.model import DirectionalLight
 
-    i = next(i for i, light in enumerate(config.lights) if isinstance(light, DirectionalLight))
-    sun = config.lights[i]
-    d = cam.axis_angle((1.0, 0.0, 0.0), degrees) @ np.asarray(sun.direction, float)
-    lights = list(config.lights)
-    lights[i] = dataclasses.replace(sun, direction=tuple(float(x) for x in d))
-    return dataclasses.replace(config, lights=tuple(lights))
+    sun = next(light for light in config.lights if isinstance(light, DirectionalLight))
+    return config.replace_light(sun.name, direction=rotate_light(sun, (1.0, 0.0, 0.0), degrees, None).direction)
 
 
 def measure(scene, sizes: list[int], size: int, frames: int, rounds: int) -> tuple[list[dict], str]:
