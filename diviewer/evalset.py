@@ -61,6 +61,7 @@ from diviewer.data.evalset_format import EVAL_SPLITS, KIND, is_evalset, load_eva
 from diviewer.errors import DiviewerError
 from diviewer.evalframes import crop
 from diviewer.provenance import versions
+from diviewer.reference.split_path import ONE_PASS
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
 
 STREAM = {"unseen_configs": 0, "unseen_objects": 1, "moved_camera": 2, "window_shapes": 3}
@@ -297,6 +298,8 @@ class EvalTruth:
         self.variant = ref.select_variant()
         self.objects = movable_objects(scene)
         self.renderer = None
+        self.estimator: str | None = None
+        """How the last frame's renders were made (`diviewer.reference.split_path.ESTIMATORS`); its sidecar keeps it."""
 
     def attach(self, ctx, renderer) -> None:
         """The GL renderer that just rendered each frame's buffers (for the object mask)."""
@@ -309,11 +312,16 @@ class EvalTruth:
             # Before the path tracer: the GL renderer still holds this frame's depth.
             out[OBJECT_CHANNEL] = object_mask(self.renderer, config, self.renderer.read("depth"), self.objects)
         frame = self.ref.load_frame(self.scene, config, s.render_width, s.height)
-        out.update({"pt": frame.full(s.spp, seeds["reference"], s.max_depth),
-                    "pt_direct": frame.direct(s.spp, seeds["reference"]),  # same seed as in a capture
-                    SECOND_SEED: frame.full(s.spp, seeds["second"], s.max_depth)})
+        # every render by the truth's estimator (one pass where the frame allows: split_path)
+        out["pt"], out["pt_direct"], self.estimator = frame.full_and_direct(s.spp, seeds["reference"], s.max_depth)
+        one_pass = self.estimator == ONE_PASS
+
+        def full(spp: int, seed: int) -> np.ndarray:
+            return frame.full_and_direct(spp, seed, s.max_depth)[0] if one_pass else frame.full(spp, seed, s.max_depth)
+
+        out[SECOND_SEED] = full(s.spp, seeds["second"])
         for n, seed in zip(s.ladder, seeds["ladder"]):
-            out[ladder_channel(n)] = frame.full(n, seed, s.max_depth)
+            out[ladder_channel(n)] = full(n, seed)
         return out
 
 

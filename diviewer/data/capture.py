@@ -3,7 +3,8 @@
 Resumable: a killed capture, run again, keeps its finished frames and renders the rest from the same per-frame
 seeds, so it ends with the frames an uninterrupted run writes, bit for bit on the same machine and Mitsuba
 variant (llvm_ad_rgb gave the same image at 1 and 2 threads); resumed under another variant, the frames
-rendered after the resume differ within the path tracer's noise. Shardable (``--shard k/n`` renders every
+rendered after the resume differ within the path tracer's noise. So do frames of a capture begun before the
+one-pass truth (`diviewer.reference.split_path`): each frame's sidecar records its ``pt_estimator``. Shardable (``--shard k/n`` renders every
 n-th frame; shards written into one folder, or copied together, form one dataset). One run per folder
 (diviewer.locks): a second capture into it refuses, except another shard with frames of its own.
 """
@@ -157,13 +158,16 @@ class PathTracedGT:
 
         self.ref, self.scene, self.settings = ref, scene, settings
         self.variant = ref.select_variant()
+        self.estimator: str | None = None
+        """How the last frame's truth was rendered (`diviewer.reference.split_path.ESTIMATORS`); its sidecar keeps it."""
 
     def __call__(self, config: FrameConfig, entry: dict) -> dict[str, np.ndarray]:
         s, seed = self.settings, entry["seed"]
-        # One loaded Mitsuba scene for both renders; the same seed correlates their noise, which
-        # lowers the variance of indirect = full - direct.
+        # Both images from the same paths (one pass, or two with one seed): indirect = full - direct carries none
+        # of the direct light's noise.
         frame = self.ref.load_frame(self.scene, config, s.width, s.height)
-        return {"pt": frame.full(spp=s.spp, seed=seed, max_depth=s.max_depth), "pt_direct": frame.direct(spp=s.spp, seed=seed)}
+        full, direct, self.estimator = frame.full_and_direct(s.spp, seed, s.max_depth)
+        return {"pt": full, "pt_direct": direct}
 
 
 def vxgi_settings(settings: CaptureSettings):
@@ -310,6 +314,7 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
                                     f"capture with --dtype float32 (into a new --out)")
             write_frame(ds, f["index"], arr.astype(settings.dtype),
                          {"index": f["index"], "split": f["split"], "variant": gt.variant, "gl_renderer": gl_name,
+                          **({"pt_estimator": gt.estimator} if getattr(gt, "estimator", None) else {}),
                           "seconds": {"gl": round(t1 - t0, 4), "gt": round(t2 - t1, 3)}})
             if f["index"] in thumbs:
                 ev, _ = still_ev(scene.exposure, scene.auto_exposure, planes["pt"])  # one exposure for the row

@@ -12,7 +12,9 @@ becomes, frame by frame and across sessions, one whose truth is clean enough to 
   record (the source's hash and count, how the new seeds derive) and ``refined_from`` (its folder); the record
   is part of the dataset's identity, so a refined dataset never has the hash of a capture made at that count directly.
 - Both ground-truth channels are refined, ``pt`` and ``pt_direct``, with one new seed per frame, so their
-  noise stays correlated as a capture's is (indirect = pt - pt_direct).
+  noise stays correlated as a capture's is (indirect = pt - pt_direct). The extra samples come from one pass
+  where the frame allows it (`diviewer.reference.split_path`; the frame's sidecar records ``pt_estimator``),
+  whatever estimator the source used: both estimate the same images.
 - The GL inputs are copied as they are. Resumable like a capture: frames already refined (and sound) are kept,
   ``--shard k/n`` splits the work over processes or machines (`diviewer data merge` joins them).
 - Sample counts are the sampler's effective ones (`diviewer.reference.mitsuba.effective_spp`): the weights of
@@ -107,7 +109,8 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
                 seed = refine_seed(f["seed"], old)
                 t0 = time.perf_counter()
                 frame = ref.load_frame(scene, config_from_dict(scene, f["config"]), width, height)
-                extra = {"pt": frame.full(spp - old, seed, manifest["max_depth"]), "pt_direct": frame.direct(spp - old, seed)}
+                full, direct, how = frame.full_and_direct(spp - old, seed, manifest["max_depth"])
+                extra = {"pt": full, "pt_direct": direct}
                 seconds = time.perf_counter() - t0
                 for name, new in extra.items():
                     s = src.slices[name]
@@ -121,7 +124,7 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
                 info = json.loads(src.path(i, ".json").read_text())
                 info.pop("sha256", None)
                 info["refined"] = {"from_spp": eff_old, "extra_spp": eff_extra, "seed": seed, "variant": variant,
-                                   "seconds": round(seconds, 3)}
+                                   "pt_estimator": how, "seconds": round(seconds, 3)}
                 write_frame(ds, i, arr.astype(ds.dtype), info)
                 progress.set_postfix_str(f"{seconds:.1f}s/frame", refresh=False)
                 progress.update()

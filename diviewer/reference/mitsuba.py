@@ -311,6 +311,23 @@ class MitsubaFrame:
         """Direct light and visible emission only (path length 2)."""
         return self.full(spp, seed, max_depth=2)
 
+    def full_and_direct(self, spp: int, seed: int, max_depth: int = DEFAULT_MAX_DEPTH,
+                        estimator: str = "one_pass") -> tuple[np.ndarray, np.ndarray, str]:
+        """`full` and `direct`, each (H, W, 3), and how they were made: in one pass (`split_path`) where asked, the
+        frame's lights allow it and the variant is a JIT one (a Python integrator on ``scalar_rgb`` would run per
+        sample), else in two with one seed ("two_passes", as every capture before 2026-11-28)."""
+        from diviewer.reference import split_path
+
+        if (estimator == split_path.ONE_PASS and split_path.supports(self.scene, self.config)
+                and self.variant.startswith(("llvm", "cuda"))):
+            mi = _import_mitsuba()
+            mi.set_variant(self.variant)
+            img = self._render(split_path.integrator_dict(mi, max_depth, DEFAULT_RR_DEPTH), spp, seed)
+            return np.ascontiguousarray(img[..., :3]), np.ascontiguousarray(img[..., 3:6]), split_path.ONE_PASS
+        if estimator not in split_path.ESTIMATORS:
+            raise ValueError(f"estimator must be one of {split_path.ESTIMATORS}, got '{estimator}'")
+        return self.full(spp, seed, max_depth), self.direct(spp, seed), split_path.TWO_PASSES
+
     def aovs(self, spp: int = 16, seed: int = 0) -> dict[str, np.ndarray]:
         """depth (H, W) view-space ``-z``, normal (H, W, 3) view space facing the camera, albedo (H, W, 3).
 

@@ -69,6 +69,8 @@ def test_small_capture_writes_a_sound_dataset(gl_context, tmp_path):
     f = ds.load(ds.indices("train")[0])
     assert f["depth"].shape == (32, 32) and f["pt"].shape == (32, 32, 3)
     assert f["pt"].mean() > f["pt_direct"].mean() * 1.01, "full GI carries more light than direct alone"
+    sidecar = json.loads(ds.path(ds.indices("train")[0], ".json").read_text())
+    assert sidecar["pt_estimator"] == "one_pass", "the truth in one pass (split_path), and the sidecar says so"
     m = json.loads((out / "manifest.json").read_text())
     assert m["scene_hash"] == load_scene("cornell").file_hash and "versions" in m and len(m["frame_list"]) == 16
     assert list((out / "thumbs").glob("*.png"))

@@ -59,11 +59,14 @@ def test_refined_truth_is_the_weighted_mean_of_capture_and_extra_render(gl_conte
         seed = refine_seed(f["seed"], 4)
         frame = ref.load_frame(scene, config_from_dict(scene, f["config"]), 32, 32)
         e_old, e_new = ref.effective_spp(4), ref.effective_spp(12)
-        for name, extra in (("pt", frame.full(12, seed, 4)), ("pt_direct", frame.direct(12, seed))):
+        full, direct, how = frame.full_and_direct(12, seed, 4)  # the one-pass truth (split_path), as refine renders
+        assert how == "one_pass"
+        for name, extra in (("pt", full), ("pt_direct", direct)):
             want = (e_old * fa[name] + e_new * extra) / (e_old + e_new)
             np.testing.assert_allclose(fb[name], want.astype(np.float16).astype(np.float32), rtol=2e-3, atol=1e-6)
         info = json.loads(b.path(i, ".json").read_text())
         assert info["refined"]["seed"] == seed and info["refined"]["extra_spp"] == e_new
+        assert info["refined"]["pt_estimator"] == "one_pass"
     # Resumes: a second run renders nothing; a lost frame is rendered again, the same.
     before = b.path(1).read_bytes()
     assert refine(src, out, 16, **QUIET)["rendered"] == 0
