@@ -59,7 +59,7 @@ def _render_reference(args: argparse.Namespace) -> None:
     ref = render_reference_to_dir(args.scene, args.out, args.reference, spp=args.spp, max_depth=args.max_depth,
                                   noise_floor=args.noise_floor, pt_seed=args.pt_seed)
     line = (f"path-traced reference ({ref['variant']}, {ref['spp']} spp, max depth {ref['max_depth']}) "
-            f"in {ref['seconds']['full'] + ref['seconds']['direct']:.1f} s")
+            f"in {ref['seconds']['full']:.1f} s ({ref['pt_estimator'].replace('_', ' ')})")
     if "noise_floor" in ref:
         line += f"; noise floor PSNR {ref['noise_floor']['psnr']:.2f} dB, SSIM {ref['noise_floor']['ssim']:.4f}"
     print(line)

@@ -206,7 +206,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
                             max_depth: int | None = None, noise_floor: bool = False, pt_seed: int = 0) -> dict:
     """Path-trace the frame that ``render_to_dir`` wrote into ``out`` (its frame.json) beside its buffers.
 
-    Writes pt.exr (full GI), pt_direct.exr (path length 2, same seed), pt_indirect.exr (full - direct)
+    Writes pt.exr (full GI), pt_direct.exr (path length 2, the same paths), pt_indirect.exr (full - direct)
     and their PNG previews, and adds a ``reference`` table to frame.json (variant, spp, seed, seconds,
     and with ``noise_floor`` the PSNR/SSIM against a second render with seed ``pt_seed + 1``).
 
@@ -219,6 +219,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     from diviewer.gl.display import DisplayPass
     from diviewer.gl.shaders import ShaderCache
     from diviewer.reference import mitsuba as ref
+    from diviewer.reference import split_path
 
     check_reference(reference)
     if spp < 1:
@@ -235,11 +236,9 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     frame = ref.load_frame(scene, config, width, height)
     t_load = time.perf_counter() - t0
     t0 = time.perf_counter()
-    full = frame.full(spp, pt_seed, depth)
+    # from the same paths (one pass, or two with one seed): full - direct is the bounces beyond the first
+    full, direct, estimator = frame.full_and_direct(spp, pt_seed, depth)
     t_full = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    direct = frame.direct(spp, pt_seed)  # the same seed: full - direct is the bounces beyond the first
-    t_direct = time.perf_counter() - t0
     indirect = full - direct
     images = {"pt": full, "pt_direct": direct, "pt_indirect": indirect}
     bad = [n for n, im in images.items() if not np.all(np.isfinite(im))]
@@ -247,15 +246,16 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         raise DiviewerError(f"the path tracer produced non-finite values in {', '.join(bad)}")
     info = ref.variant_info()
     table = {
-        "renderer": "mitsuba", "variant": info.variant, "libllvm": info.libllvm, "integrator": "path",
+        "renderer": "mitsuba", "variant": info.variant, "libllvm": info.libllvm, "pt_estimator": estimator,
+        "integrator": split_path.NAME if estimator == split_path.ONE_PASS else "path",
         "spp": ref.effective_spp(spp), "spp_requested": int(spp), "seed": int(pt_seed), "max_depth": depth,
         "rr_depth": ref.path_integrator(depth)["rr_depth"], "sampler": ref.SAMPLER,
-        "seconds": {"load": round(t_load, 4), "full": round(t_full, 4), "direct": round(t_direct, 4)},
+        "seconds": {"load": round(t_load, 4), "full": round(t_full, 4)},  # full: both images
         "files": {n: f"{n}.exr" for n in images},
     }
     if noise_floor:
         t0 = time.perf_counter()
-        second = frame.full(spp, pt_seed + 1, depth)
+        second = frame.full_and_direct(spp, pt_seed + 1, depth, estimator)[0]  # the same estimator
         table["seconds"]["noise_floor"] = round(time.perf_counter() - t0, 4)
         table["noise_floor"] = ref.compare_renders(full, second, spp=table["spp"], seeds=(pt_seed, pt_seed + 1))
 

@@ -435,6 +435,9 @@ def test_cli_reference_writes_pt_buffers(gl_context, tmp_path):
     assert r["variant"] in ref.VARIANTS and r["spp"] == 8 and r["seed"] == 0 and r["max_depth"] == ref.DEFAULT_MAX_DEPTH
     assert r["seconds"]["full"] > 0 and r["noise_floor"]["seeds"] == [0, 1] and r["noise_floor"]["psnr"] > 0
     assert "camera" in record["config"]  # the GL record is kept
+    one_pass = r["variant"].startswith("llvm")  # cornell's sun: one pass on a JIT variant (split_path)
+    assert r["pt_estimator"] == ("one_pass" if one_pass else "two_passes")
+    assert r["integrator"] == ("diviewer_split_path" if one_pass else "path")
 
 
 def test_cli_without_mitsuba_names_the_train_extra(monkeypatch, tmp_path, capsys):
