@@ -3,10 +3,11 @@
 Resumable: a killed capture, run again, keeps its finished frames and renders the rest from the same per-frame
 seeds, so it ends with the frames an uninterrupted run writes, bit for bit on the same machine and Mitsuba
 variant (llvm_ad_rgb gave the same image at 1 and 2 threads); resumed under another variant, the frames
-rendered after the resume differ within the path tracer's noise. So do frames of a capture begun before the
-one-pass truth (`diviewer.reference.split_path`): each frame's sidecar records its ``pt_estimator``. Shardable (``--shard k/n`` renders every
-n-th frame; shards written into one folder, or copied together, form one dataset). One run per folder
-(diviewer.locks): a second capture into it refuses, except another shard with frames of its own.
+rendered after the resume differ within the path tracer's noise. So do the frames of a capture begun before the
+one-pass truth (`diviewer.reference.split_path`) and resumed after: each frame's sidecar records its
+``pt_estimator``. Shardable (``--shard k/n`` renders every n-th frame; shards written into one folder, or copied
+together, form one dataset). One run per folder (diviewer.locks): a second capture into it refuses, except another
+shard with frames of its own.
 """
 
 from __future__ import annotations
@@ -159,7 +160,7 @@ class PathTracedGT:
         self.ref, self.scene, self.settings = ref, scene, settings
         self.variant = ref.select_variant()
         self.estimator: str | None = None
-        """How the last frame's truth was rendered (`diviewer.reference.split_path.ESTIMATORS`); its sidecar keeps it."""
+        """How the last frame's truth was rendered (`split_path.ESTIMATORS`); its sidecar keeps it."""
 
     def __call__(self, config: FrameConfig, entry: dict) -> dict[str, np.ndarray]:
         s, seed = self.settings, entry["seed"]

@@ -318,14 +318,14 @@ class MitsubaFrame:
         sample), else in two with one seed ("two_passes", as every capture before 2026-11-28)."""
         from diviewer.reference import split_path
 
+        if estimator not in split_path.ESTIMATORS:
+            raise ValueError(f"estimator must be one of {split_path.ESTIMATORS}, got '{estimator}'")
         if (estimator == split_path.ONE_PASS and split_path.supports(self.scene, self.config)
                 and self.variant.startswith(("llvm", "cuda"))):
             mi = _import_mitsuba()
             mi.set_variant(self.variant)
             img = self._render(split_path.integrator_dict(mi, max_depth, DEFAULT_RR_DEPTH), spp, seed)
             return np.ascontiguousarray(img[..., :3]), np.ascontiguousarray(img[..., 3:6]), split_path.ONE_PASS
-        if estimator not in split_path.ESTIMATORS:
-            raise ValueError(f"estimator must be one of {split_path.ESTIMATORS}, got '{estimator}'")
         return self.full(spp, seed, max_depth), self.direct(spp, seed), split_path.TWO_PASSES
 
     def aovs(self, spp: int = 16, seed: int = 0) -> dict[str, np.ndarray]:
