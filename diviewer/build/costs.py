@@ -104,6 +104,12 @@ def capture_seconds(kind: str, scene: str, frames: int, width: int, height: int,
     return frames * (per_sample * width * height * spp + gl)
 
 
+def refine_seconds(kind: str, scene: str, frames: int, width: int, height: int, extra_spp: int) -> float:
+    """`diviewer data refine` of ``frames`` frames by ``extra_spp`` samples a pixel: path tracing alone (one pass)."""
+    per_sample, _ = pt_seconds_per_sample(kind, scene)
+    return frames * per_sample * ONE_PASS_SHARE * width * height * extra_spp
+
+
 def _evalset_predicted(kind: str, scene: str, frames: int, width: int, height: int, spp: int,
                        ladder: tuple[int, ...]) -> float:
     return capture_seconds(kind, scene, frames, width, height, 2 * spp + sum(ladder))

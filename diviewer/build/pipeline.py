@@ -39,6 +39,7 @@ def plan_key(plan: Plan) -> dict[str, Any]:
                    "content_sha256": plan.recipe.content_sha256(), "model_sha256": plan.recipe.model_sha256()},
         "export": dataclasses.asdict(export_settings(plan.recipe)),
         "capture": dataclasses.asdict(plan.capture), "evalset": dataclasses.asdict(plan.evalset),
+        **({"refine_spp": plan.refine_spp} if plan.refine_spp is not None else {}),  # absent: every build before it
         **({"given_evalset": str(plan.given_evalset.resolve())} if plan.given_evalset is not None else {}),
         "train": {k: v for k, v in plan.train.items() if k not in RUN_ONLY}, "ks": list(plan.ks)}, default=str))
 
@@ -84,13 +85,18 @@ def training_pace(metrics: Path, k: int, planned_steps: int, planned_seconds: fl
             f"{planned_seconds / planned_steps:.2f} s)")
 
 
+PACE_FRAMES = 200
+"""The capture's pace is the median of its last this many frames (the machine's pace now, not a day's mean)."""
+
+
 def capture_pace(plan: Plan) -> str | None:
     """What the frames already captured in the work folder say of this machine's pace (each frame's sidecar records
     its GL and path-tracing seconds), and the capture's time left at that pace, beside the plan's estimate from the
     measured costs (another machine's); None where no frame is there or the capture is complete."""
     import statistics
 
-    frames = sorted((plan.data / "frames").glob("*.json")) if (plan.data / "manifest.json").is_file() else []
+    where = plan.capture_dir
+    frames = sorted((where / "frames").glob("*.json")) if (where / "manifest.json").is_file() else []
     seconds = []
     for f in frames:
         try:
@@ -101,10 +107,10 @@ def capture_pace(plan: Plan) -> str | None:
     left = plan.capture.frames - len(frames)
     if not seconds or left <= 0:
         return None
-    per = statistics.median(seconds)
+    per = statistics.median(seconds[-PACE_FRAMES:])
     planned = plan.stages[0].seconds / plan.capture.frames
-    return (f"capture so far: {len(frames)} of {plan.capture.frames} frames in {plan.data}, {per:.1f} s a frame here "
-            f"(median of GL + path tracing); the {left} left take ~{hms(left * per)} at that pace (the plan assumes "
+    return (f"capture so far: {len(frames)} of {plan.capture.frames} frames in {where}, {per:.1f} s a frame here "
+            f"(median of GL + path tracing, the last {min(len(seconds), PACE_FRAMES)} frames); the {left} left take ~{hms(left * per)} at that pace (the plan assumes "
             f"{planned:.1f} s, from the costs measured in diviewer/build/costs.py)")
 
 
@@ -162,8 +168,20 @@ def _stale(stage: str, rec: dict[str, Any], plan: Plan) -> bool:
 def _capture(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     from diviewer.data.capture import capture
 
-    summary = capture(plan.scene, plan.data, plan.capture, log=log)
-    return [plan.data / "manifest.json"], {k: summary.get(k) for k in ("present", "planned", "per_split", "seconds")}
+    summary = capture(plan.scene, plan.capture_dir, plan.capture, log=log)
+    return [plan.capture_dir / "manifest.json"], {k: summary.get(k) for k in ("present", "planned", "per_split",
+                                                                              "seconds")}
+
+
+def _refine(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    """The capture refined to the recipe's spp (`diviewer data refine`, resumable) into ``plan.data``."""
+    from diviewer.data.refine import refine
+
+    summary = refine(plan.capture_dir, plan.data, plan.refine_spp, log=log)
+    if summary["present"] != summary["planned"]:
+        raise BuildInterrupted(f"refine: {summary['present']} of {summary['planned']} frames")
+    return [plan.data / "manifest.json"], {"spp": plan.refine_spp, "from_spp": plan.capture.spp,
+                                           **{k: summary.get(k) for k in ("present", "planned", "seconds")}}
 
 
 def _check(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
@@ -350,7 +368,7 @@ def _ship(plan: Plan, state: BuildState, log, command: str, **_) -> tuple[list[P
                      "ladder_sha256": sha256_file(plan.work / "ladder.json")}
 
 
-STAGES = {"capture": _capture, "check": _check, "evalset": _evalset, "train": _train, "export": _export,
+STAGES = {"capture": _capture, "refine": _refine, "check": _check, "evalset": _evalset, "train": _train, "export": _export,
           "evaluate": _evaluate, "pick": _pick, "ship": _ship}
 """Each stage kind's function: (plan, state, log, k=K of a per-K stage, command=the rebuild command) ->
 (outputs whose sha256 the state records, a result record)."""

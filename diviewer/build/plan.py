@@ -33,7 +33,7 @@ class Stage:
     """One resumable step of a build."""
 
     name: str
-    """Its key in the state file (capture, check, evalset, train_k8, export_k8, eval_k8, evaluate, pick, ship)."""
+    """Its key in the state file (capture, refine, check, evalset, train_k8, export_k8, evaluate, pick, ship)."""
     title: str
     """What it does, in words."""
     seconds: float
@@ -51,7 +51,7 @@ class Plan:
     recipe: Any
     """The `diviewer.train.recipe.Recipe` it follows."""
     capture: Any
-    """CaptureSettings of the capture."""
+    """CaptureSettings of the capture as rendered (at the recipe's ``refine_from`` spp where it names one)."""
     evalset: Any
     """EvalSetSettings of the evaluation set."""
     train: dict[str, Any]
@@ -74,14 +74,22 @@ class Plan:
     """The recipe's training fields changed (by --budget or the command line), for the recipe record."""
     given_evalset: Path | None = None
     """An evaluation set made before (``--evalset``), scored instead of rendering the recipe's; None: render it."""
+    refine_spp: int | None = None
+    """The spp the capture is refined to before training (`diviewer data refine`); None: trained as captured."""
 
     @property
     def seconds(self) -> float:
         return sum(s.seconds for s in self.stages)
 
     @property
-    def data(self) -> Path:
+    def capture_dir(self) -> Path:
+        """Where the capture is rendered."""
         return self.work / "data"
+
+    @property
+    def data(self) -> Path:
+        """The dataset the trainings read: the capture, or its refinement."""
+        return self.capture_dir if self.refine_spp is None else self.work / f"data_{self.refine_spp}spp"
 
     @property
     def evalset_dir(self) -> Path:
@@ -144,7 +152,7 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
     """The build's plan: the recipe's stages, sized to ``budget_hours`` if given; ``evalset_dir``: score on that
     evaluation set instead of rendering the recipe's (its settings then come from its manifest)."""
     from diviewer.scene.loader import resolve_scene_path
-    from diviewer.train.recipe import capture_settings, evalset_settings
+    from diviewer.train.recipe import capture_settings, evalset_settings, refine_from
 
     import tomllib
 
@@ -157,6 +165,10 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
     ks = tuple(ks) if ks else recipe.ks()
     train = {**recipe.train, **(train_overrides or {})}
     capture, evalset = capture_settings(recipe), evalset_settings(recipe)
+    low = refine_from(recipe)
+    refine_spp = None if low is None else capture.spp
+    if low is not None:  # captured at the lower count, refined to the recipe's
+        capture = dataclasses.replace(capture, spp=low)
     if evalset_dir is not None:
         evalset = given_evalset_settings(Path(evalset_dir), evalset, scene)
     s = 1.0
@@ -166,14 +178,14 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
         budget = budget_hours * 3600
         if evalset_dir is None:
             evalset = _fit_evalset(evalset, scene_name, machine, budget * EVALSET_SHARE)
-        s = _fit_scale(capture, train, evalset, ks, scene_name, machine, budget, evalset_dir)
+        s = _fit_scale(capture, train, evalset, ks, scene_name, machine, budget, evalset_dir, refine_spp)
         capture, train = scaled(capture, train, s)
     overrides = {k: v for k, v in train.items() if recipe.train.get(k) != v and k not in ("K", *RUN_ONLY)}
-    stages = _stages(scene_name, machine, capture, train, evalset, ks, evalset_dir)
+    stages = _stages(scene_name, machine, capture, train, evalset, ks, evalset_dir, refine_spp)
     return Plan(scene=str(scene), scene_name=scene_name, recipe=recipe, capture=capture, evalset=evalset,
                 train={k: v for k, v in train.items() if k != "K"}, ks=ks, steps=planned_steps(capture, train),
                 scale=s, machine=machine, work=Path(work), ship=ship, stages=stages, overrides=overrides,
-                given_evalset=None if evalset_dir is None else Path(evalset_dir))
+                given_evalset=None if evalset_dir is None else Path(evalset_dir), refine_spp=refine_spp)
 
 
 def given_evalset_settings(path: Path, recipe_settings, scene: str):
@@ -206,7 +218,7 @@ def check_evalset_scene(ev, scene, given_as: str) -> None:
 
 
 def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tuple[int, ...],
-            given_evalset: Path | None = None) -> tuple[Stage, ...]:
+            given_evalset: Path | None = None, refine_spp: int | None = None) -> tuple[Stage, ...]:
     steps = planned_steps(cap, train)
     gan = train.get("gan_weight", 1.0) > 0
     batch = train.get("batch_size", 4)
@@ -214,8 +226,11 @@ def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tu
     area = f", direct light over {cap.direct_samples}x{cap.direct_samples}" if cap.direct_samples > 1 else ""
     out = [Stage("capture", f"capture {cap.frames} frames at {cap.width}x{cap.height}, {cap.spp} spp{area}",
                  costs.capture_seconds(m.kind, scene, cap.frames, cap.width, cap.height, cap.spp,
-                                       cap.direct_samples)),
-           Stage("check", "check every frame of the capture", 0.0)]
+                                       cap.direct_samples))]
+    if refine_spp is not None:
+        out.append(Stage("refine", f"refine the capture to {refine_spp} spp ({refine_spp - cap.spp} more a frame)",
+                         costs.refine_seconds(m.kind, scene, cap.frames, cap.width, cap.height, refine_spp - cap.spp)))
+    out.append(Stage("check", "check every frame of the " + ("refined capture" if refine_spp else "capture"), 0.0))
     if given_evalset is not None:
         out.append(Stage("evalset", f"evaluation set made before: {given_evalset} ({ev.frames_per_split} frames per "
                                     f"split, {ev.spp} spp; checked, not rendered)", 0.0))
@@ -234,8 +249,8 @@ def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tu
     return tuple(out)
 
 
-def _total(cap, train, ev, ks, scene, m, given_evalset=None) -> float:
-    return sum(s.seconds for s in _stages(scene, m, cap, train, ev, ks, given_evalset))
+def _total(cap, train, ev, ks, scene, m, given_evalset=None, refine_spp=None) -> float:
+    return sum(s.seconds for s in _stages(scene, m, cap, train, ev, ks, given_evalset, refine_spp))
 
 
 def _fit_evalset(ev, scene: str, m: costs.Machine, seconds: float):
@@ -246,13 +261,14 @@ def _fit_evalset(ev, scene: str, m: costs.Machine, seconds: float):
     return dataclasses.replace(ev, frames_per_split=fit)
 
 
-def _fit_scale(cap, train, ev, ks, scene, m, budget: float, given_evalset: Path | None = None) -> float:
+def _fit_scale(cap, train, ev, ks, scene, m, budget: float, given_evalset: Path | None = None,
+               refine_spp: int | None = None) -> float:
     """The largest s <= 1 whose plan fits ``budget`` seconds; an error where even the smallest plan does not."""
     steps = planned_steps(cap, train)
     s_min = min(1.0, max(MIN_FRAMES / cap.frames, MIN_STEPS / max(steps, 1)))
-    if _total(cap, train, ev, ks, scene, m, given_evalset) <= budget:
+    if _total(cap, train, ev, ks, scene, m, given_evalset, refine_spp) <= budget:
         return 1.0
-    smallest = _total(*scaled(cap, train, s_min), ev, ks, scene, m, given_evalset)
+    smallest = _total(*scaled(cap, train, s_min), ev, ks, scene, m, given_evalset, refine_spp)
     if smallest > budget:
         raise DiviewerError(f"{budget / 3600:.2f} h is below the smallest plan this recipe allows on this machine "
                             f"({smallest / 3600:.2f} h at {MIN_FRAMES} frames and {MIN_STEPS} steps per K); give "
@@ -260,7 +276,8 @@ def _fit_scale(cap, train, ev, ks, scene, m, budget: float, given_evalset: Path 
     lo, hi = s_min, 1.0
     for _ in range(40):
         mid = (lo + hi) / 2
-        lo, hi = (mid, hi) if _total(*scaled(cap, train, mid), ev, ks, scene, m, given_evalset) <= budget else (lo, mid)
+        fits = _total(*scaled(cap, train, mid), ev, ks, scene, m, given_evalset, refine_spp) <= budget
+        lo, hi = (mid, hi) if fits else (lo, mid)
     return lo
 
 

@@ -73,7 +73,8 @@ def source_scene(src: Dataset, out: Path, manifest: dict, verb: str):
 
     if out.exists() and src.root.resolve() == out.resolve():
         raise DiviewerError(f"{src.root} is both the source and the output", field="--out")
-    scene = load_scene(manifest["scene"])
+    recorded = manifest.get("scene_file")  # a scene outside assets/ is found by its file, a shipped one by name
+    scene = load_scene(recorded if recorded and Path(recorded).is_file() else manifest["scene"])
     if scene.file_hash != manifest["scene_hash"]:
         raise DiviewerError(f"the scene file of '{scene.name}' has changed since the capture; {verb} it with the "
                             f"scene it was captured with", path=src.root / "manifest.json", field="scene_hash")

@@ -175,11 +175,23 @@ CAPTURE_KEYS: tuple[str, ...] = ("frames", "spp", "max_depth", "seed", "split_fr
 
 def capture_record(dataset: Mapping[str, Any]) -> dict[str, Any] | None:
     """A checkpoint's dataset record as `diviewer capture` settings (a card's ``recipe.capture``): the manifest's
-    CAPTURE_KEYS, and ``direct_samples`` where the direct light covers each pixel's area (captured so, or derived by
-    `diviewer data area-direct`: the same frames, tested), so that a recipe's [capture] table reads back alike."""
+    CAPTURE_KEYS, ``direct_samples`` where the direct light covers each pixel's area (captured so, or derived by
+    `diviewer data area-direct`: the same frames, tested), and ``refine_from`` where the truth was refined from a
+    capture at fewer samples (`diviewer data refine`), so that a recipe's [capture] table reads back alike."""
     cap = dataset.get("capture")
+    if cap is None:
+        return None
     n = int(dataset.get("direct_samples", 1))
-    return cap if cap is None or n == 1 else {**cap, "direct_samples": n}
+    low = dataset.get("refined_from_spp")
+    return {**cap, **({"direct_samples": n} if n != 1 else {}), **({"refine_from": low} if low is not None else {})}
+
+
+def captured_spp(manifest: Mapping[str, Any]) -> int:
+    """The spp a refined dataset was first captured at (the innermost of its ``refined`` records)."""
+    rec = manifest["refined"]
+    while "before" in rec:
+        rec = rec["before"]
+    return int(rec["from_spp"])
 
 
 def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Dataset, train_idx: list[int],
@@ -197,7 +209,8 @@ def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Datase
                     "scene_hash": ds.manifest.get("scene_hash"), "resolution": [ds.width, ds.height],
                     "train_frames": len(train_idx), "train_indices": list(train_idx), "val_frames": n_val,
                     "capture": {k: ds.manifest.get(k) for k in CAPTURE_KEYS},
-                    "direct_samples": direct_samples(ds.manifest)},
+                    "direct_samples": direct_samples(ds.manifest),
+                    **({"refined_from_spp": captured_spp(ds.manifest)} if "refined" in ds.manifest else {})},
         "versions": versions(),
         "trained_on": trained_on(nets, (resumed or {}).get("trained_on")),
     }

@@ -4,7 +4,9 @@ A recipe has up to six tables, each the fields of one settings dataclass, spelle
 that a field added to a dataclass works in recipes without this module changing:
 
 - ``[recipe]``: ``name`` (default: the file's stem), ``description``, ``scene`` (the scene it was made for);
-- ``[capture]``: `diviewer.data.capture.CaptureSettings` (frames, width, height, spp, split_fractions, ...);
+- ``[capture]``: `diviewer.data.capture.CaptureSettings` (frames, width, height, spp, split_fractions, ...), and
+  ``refine_from`` (optional, `CAPTURE_EXTRA`): capture at that many samples per pixel, then raise the truth to
+  ``spp`` with `diviewer data refine` (a model can train on the capture before the refinement ends);
 - ``[evalset]``: `diviewer.evalset.EvalSetSettings` (frames_per_split, spp, ladder, ...; width and height
   default to the capture's);
 - ``[train]``: `diviewer.train.config.TrainConfig`, every field but ``data``, ``out`` and ``recipe``;
@@ -38,6 +40,9 @@ README's ablations put about 10 dB behind at the same budget."""
 
 TABLES = ("recipe", "capture", "evalset", "train", "export", "ladder")
 """The tables a recipe may hold."""
+CAPTURE_EXTRA = ("refine_from",)
+"""[capture] keys that are not CaptureSettings fields: ``refine_from`` (spp of the capture `diviewer build` renders
+before refining it to ``spp``; absent: captured at ``spp``)."""
 
 NOT_TRAIN = ("data", "out", "recipe")
 """TrainConfig fields a recipe cannot set: where this run reads and writes, and the recipe record itself."""
@@ -180,7 +185,7 @@ def load_recipe(recipe: str | Path) -> Recipe:
                             field="ladder.max_mb")
     rec = Recipe(name=head.get("name", path.stem), path=path, sha256=hashlib.sha256(blob).hexdigest(),
                  description=head.get("description", ""), scene=head.get("scene"),
-                 capture=_fields(path, "capture", data.get("capture", {}), _capture_cls()),
+                 capture=_fields(path, "capture", data.get("capture", {}), _capture_cls(), extra=CAPTURE_EXTRA),
                  evalset=_fields(path, "evalset", data.get("evalset", {}), _evalset_cls()),
                  train=_fields(path, "train", data.get("train", {}), _train_cls(), NOT_TRAIN),
                  export=_fields(path, "export", data.get("export", {}), _export_cls()),
@@ -198,9 +203,11 @@ def _known(path: Path, table: str, values: dict, known: dict[str, str]) -> dict:
     return dict(values)
 
 
-def _fields(path: Path, table: str, values: dict, cls, exclude: tuple[str, ...] = ()) -> dict[str, Any]:
-    """``values`` checked against the fields of ``cls`` (less ``exclude``); TOML arrays become tuples."""
-    known = {f.name for f in dataclasses.fields(cls)} - set(exclude)
+def _fields(path: Path, table: str, values: dict, cls, exclude: tuple[str, ...] = (),
+            extra: tuple[str, ...] = ()) -> dict[str, Any]:
+    """``values`` checked against the fields of ``cls`` (less ``exclude``, plus ``extra``); TOML arrays become
+    tuples."""
+    known = ({f.name for f in dataclasses.fields(cls)} - set(exclude)) | set(extra)
     unknown = sorted(set(values) - known)
     if unknown:
         why = " (set by the command, not the recipe)" if unknown[0] in exclude else ""
@@ -220,6 +227,7 @@ def _check_values(rec: Recipe) -> None:
         raise DiviewerError(f"a value has the wrong type: {exc}", path=where, field="train") from None
     try:
         cap = capture_settings(rec)
+        refine_from(rec)
         _evalset_cls()(**{**{"width": cap.width, "height": cap.height}, **rec.evalset}).check()
         _export_cls()(**rec.export)
     except DiviewerError as exc:
@@ -234,8 +242,21 @@ def train_cfg(rec: Recipe, overrides: dict[str, Any] | None = None, **fields):
 
 
 def capture_settings(rec: Recipe, **overrides):
-    """The CaptureSettings of a recipe (split fractions as a tuple), with ``overrides``."""
-    return _capture_cls()(**{**rec.capture, **overrides})
+    """The CaptureSettings of a recipe (split fractions as a tuple), with ``overrides``: the truth it asks for
+    (``spp``), whether captured so or refined to it (`refine_from`)."""
+    return _capture_cls()(**{**{k: v for k, v in rec.capture.items() if k not in CAPTURE_EXTRA}, **overrides})
+
+
+def refine_from(rec: Recipe) -> int | None:
+    """The spp a build captures at before refining to the recipe's ``spp`` ([capture] refine_from), or None."""
+    n = rec.capture.get("refine_from")
+    if n is None:
+        return None
+    spp = capture_settings(rec).spp
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n < spp:
+        raise DiviewerError(f"must be a whole number of samples per pixel from 1 to below [capture] spp ({spp}), "
+                            f"got {n!r}", path=rec.path, field="capture.refine_from")
+    return n
 
 
 def evalset_settings(rec: Recipe, **overrides):

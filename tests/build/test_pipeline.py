@@ -451,3 +451,50 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
                  "--max-steps", "1"]) == 0
     cfg = load_checkpoint(run / "last.ckpt")["config"]
     assert cfg["K"] == 4 and cfg["recipe"]["name"] == "tinyrecipe" and cfg["recipe"]["overrides"] == {"K": 4}
+
+
+def _refining(recipe: str, low: int, spp: int) -> str:
+    """TINY_RECIPE (or another) captured at ``low`` spp and refined to ``spp``."""
+    return recipe.replace("spp = 2\nmax_depth = 3\nsplit_fractions", f"spp = {spp}\nrefine_from = {low}\nmax_depth = 3\n"
+                          "split_fractions", 1)
+
+
+def test_a_recipe_that_refines_its_capture_plans_the_capture_at_the_lower_count_then_the_refinement(tmp_path):
+    """[capture] refine_from: the capture at that count into WORK/data, a refine stage to the recipe's spp into
+    WORK/data_<spp>spp, which the trainings read; the plan's key says so (a build without it keeps its key)."""
+    from diviewer.build.pipeline import plan_key
+
+    (tmp_path / "r.toml").write_text(_refining(TINY_RECIPE, 2, 8))
+    plan = make_plan("cornell", load_recipe(tmp_path / "r.toml"), tmp_path / "w", machine=CPU)
+    assert [s.name for s in plan.stages][:4] == ["capture", "refine", "check", "evalset"]
+    assert plan.capture.spp == 2 and plan.refine_spp == 8
+    assert plan.capture_dir == tmp_path / "w" / "data" and plan.data == tmp_path / "w" / "data_8spp"
+    assert plan.train_fields(2)["data"] == plan.data
+    refine = next(s for s in plan.stages if s.name == "refine")
+    assert refine.seconds == pytest.approx(costs.refine_seconds("cpu", "cornell", 8, 32, 32, 6))
+    assert plan_key(plan)["refine_spp"] == 8
+    (tmp_path / "t.toml").write_text(TINY_RECIPE)
+    plain = make_plan("cornell", load_recipe(tmp_path / "t.toml"), tmp_path / "w", machine=CPU)
+    assert "refine_spp" not in plan_key(plain) and plain.data == plain.capture_dir and plain.refine_spp is None
+
+
+@pytest.mark.slow
+def test_build_a_tiny_scene_that_refines_its_capture(gl_context, tmp_path):
+    """The pipeline with a refinement: the capture at 2 spp, refined to 6, the model trained on the refined truth;
+    its card's capture record reads back as the recipe's [capture] table (refine_from included)."""
+    from diviewer.data.dataset import Dataset
+
+    scene, recipe = write_tiny_scene(tmp_path), tmp_path / "tinyrecipe.toml"
+    recipe.write_text(_refining(TINY_RECIPE, 2, 6).replace("K = [2, 4]", "K = [2]"))
+    work, ship = tmp_path / "work", tmp_path / "ship"
+    assert main(["build", "--scene", str(scene), "--recipe", str(recipe), "--work", str(work), "--ship",
+                 str(ship)]) == 0
+    captured, refined = Dataset(work / "data"), Dataset(work / "data_6spp")
+    assert captured.manifest["spp"] == 2 and refined.manifest["spp"] == 6 and refined.check() == []
+    assert refined.manifest["refined"]["from_hash"] == captured.hash
+    card = json.loads((ship / "tiny.json").read_text())
+    assert card["dataset_hash"] == refined.hash
+    cap = card["recipe"]["capture"]
+    assert cap["spp"] == 6 and cap["refine_from"] == 2
+    assert {k: cap[k] for k in load_recipe(recipe).capture if k in cap} == {
+        k: (list(v) if isinstance(v, tuple) else v) for k, v in load_recipe(recipe).capture.items() if k in cap}

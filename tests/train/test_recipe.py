@@ -129,6 +129,9 @@ def test_a_resume_keeps_the_checkpoints_settings_and_recipe_unless_one_is_given(
     ("[train]\nupsample = 'bilinear'\n", "train.upsample"),
     ("[evalset]\nspp = 8\nladder = [16]\n", "--ladder"),
     ("[train\nK = 4\n", "not valid TOML"),
+    ("[capture]\nspp = 64\nrefine_from = 64\n", "capture.refine_from"),
+    ("[capture]\nspp = 64\nrefine_from = 0\n", "capture.refine_from"),
+    ("[capture]\nspp = 64\nrefine_from = 8.5\n", "capture.refine_from"),
 ])
 def test_a_bad_recipe_is_refused_naming_the_file_and_the_field(tmp_path, text, field):
     path = tmp_path / "bad.toml"
@@ -166,3 +169,16 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser()
     add_train_parser(ap.add_subparsers(dest="command"))
     return ap.parse_args(["train", *argv])
+
+
+def test_refine_from_is_the_captures_lower_count_and_part_of_what_the_recipe_asks(tmp_path):
+    """[capture] refine_from: a recipe key beside CaptureSettings' fields; the capture settings are the truth asked
+    for (spp), and the recipe's content changes with it."""
+    from diviewer.train.recipe import capture_settings, refine_from
+
+    (tmp_path / "a.toml").write_text("[capture]\nspp = 256\nrefine_from = 64\n")
+    (tmp_path / "b.toml").write_text("[capture]\nspp = 256\n")
+    a, b = load_recipe(tmp_path / "a.toml"), load_recipe(tmp_path / "b.toml")
+    assert refine_from(a) == 64 and refine_from(b) is None
+    assert capture_settings(a) == capture_settings(b) and capture_settings(a).spp == 256
+    assert a.content_sha256() != b.content_sha256()
