@@ -480,15 +480,26 @@ def test_a_recipe_that_refines_its_capture_plans_the_capture_at_the_lower_count_
 
 @pytest.mark.slow
 def test_build_a_tiny_scene_that_refines_its_capture(gl_context, tmp_path):
-    """The pipeline with a refinement: the capture at 2 spp, refined to 6, the model trained on the refined truth;
-    its card's capture record reads back as the recipe's [capture] table (refine_from included)."""
+    """The pipeline with a refinement: the capture at 2 spp (made before, linked in: not rendered again), refined
+    to 6, the model trained on the refined truth; its card's capture record reads back as the recipe's [capture]
+    table (refine_from included)."""
     from diviewer.data.dataset import Dataset
+
+    from diviewer.data.capture import capture
+    from diviewer.train.recipe import capture_settings
 
     scene, recipe = write_tiny_scene(tmp_path), tmp_path / "tinyrecipe.toml"
     recipe.write_text(_refining(TINY_RECIPE, 2, 6).replace("K = [2, 4]", "K = [2]"))
+    # the capture at 2 spp made before (by a build at 2 spp, say): the refining build's data/ links to it
+    first = tmp_path / "first" / "data"
+    capture(str(scene), first, capture_settings(load_recipe(recipe), spp=2), log=lambda *_: None)
+    rendered = {p: p.stat().st_mtime_ns for p in (first / "frames").glob("*.npy")}
     work, ship = tmp_path / "work", tmp_path / "ship"
+    work.mkdir()
+    (work / "data").symlink_to(first, target_is_directory=True)
     assert main(["build", "--scene", str(scene), "--recipe", str(recipe), "--work", str(work), "--ship",
                  str(ship)]) == 0
+    assert {p: p.stat().st_mtime_ns for p in (first / "frames").glob("*.npy")} == rendered, "not rendered again"
     captured, refined = Dataset(work / "data"), Dataset(work / "data_6spp")
     assert captured.manifest["spp"] == 2 and refined.manifest["spp"] == 6 and refined.check() == []
     assert refined.manifest["refined"]["from_hash"] == captured.hash
