@@ -61,7 +61,6 @@ from diviewer.data.evalset_format import EVAL_SPLITS, KIND, is_evalset, load_eva
 from diviewer.errors import DiviewerError
 from diviewer.evalframes import crop
 from diviewer.provenance import versions
-from diviewer.reference.split_path import ONE_PASS
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
 
 STREAM = {"unseen_configs": 0, "unseen_objects": 1, "moved_camera": 2, "window_shapes": 3}
@@ -314,14 +313,9 @@ class EvalTruth:
         frame = self.ref.load_frame(self.scene, config, s.render_width, s.height)
         # every render by the truth's estimator (one pass where the frame allows: split_path)
         out["pt"], out["pt_direct"], self.estimator = frame.full_and_direct(s.spp, seeds["reference"], s.max_depth)
-        one_pass = self.estimator == ONE_PASS
-
-        def full(spp: int, seed: int) -> np.ndarray:
-            return frame.full_and_direct(spp, seed, s.max_depth)[0] if one_pass else frame.full(spp, seed, s.max_depth)
-
-        out[SECOND_SEED] = full(s.spp, seeds["second"])
+        out[SECOND_SEED] = frame.full_light(s.spp, seeds["second"], s.max_depth)
         for n, seed in zip(s.ladder, seeds["ladder"]):
-            out[ladder_channel(n)] = full(n, seed)
+            out[ladder_channel(n)] = frame.full_light(n, seed, s.max_depth)
         return out
 
 

@@ -255,7 +255,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     }
     if noise_floor:
         t0 = time.perf_counter()
-        second = frame.full_and_direct(spp, pt_seed + 1, depth, estimator)[0]  # the same estimator
+        second = frame.full_light(spp, pt_seed + 1, depth)  # the same estimator
         table["seconds"]["noise_floor"] = round(time.perf_counter() - t0, 4)
         table["noise_floor"] = ref.compare_renders(full, second, spp=table["spp"], seeds=(pt_seed, pt_seed + 1))
 

@@ -172,18 +172,19 @@ class GlBench:
 # --- the path tracer -----------------------------------------------------------------------------------------------
 
 def time_path_tracer(scene, configs, width: int, height: int, ladder: list[int], max_depth: int = 16) -> dict:
-    """Wall-clock milliseconds per frame of Mitsuba at each sample count (one untimed warm-up render per count:
-    the first render of a kernel compiles it)."""
+    """Wall-clock milliseconds per frame of Mitsuba at each sample count, by the estimator the evaluation sets' truth
+    and ladder are rendered with (`MitsubaFrame.full_light`: one pass where the frame allows); one untimed
+    warm-up render per count (the first render of a kernel compiles it)."""
     from diviewer.reference.mitsuba import MitsubaFrame
 
     loaded = [MitsubaFrame(scene, c, width, height) for c in configs]
     out = {}
     for spp in ladder:
-        loaded[0].full(spp, 0, max_depth)
+        loaded[0].full_light(spp, 0, max_depth)
         totals = []
         for k, frame in enumerate(loaded):
             t0 = time.perf_counter()
-            frame.full(spp, k + 1, max_depth)
+            frame.full_light(spp, k + 1, max_depth)
             totals.append((time.perf_counter() - t0) * 1e3)
         out[spp] = timing_summary([{"path_trace": t} for t in totals], totals)
     return out
@@ -361,7 +362,7 @@ def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log) 
     exposure = float(ds.manifest["evalset"]["tonemap"]["exposure"]) if ds is not None else \
         fit_exposure([b["direct"] for b in buffers])
     frames = [MitsubaFrame(scene, c, res, res) for c in seq]
-    ref = [f.full(settings.temporal_spp, 0) for f in frames]  # one seed: the reference's noise holds still
+    ref = [f.full_light(settings.temporal_spp, 0) for f in frames]  # one seed: the reference's noise holds still
     seqs = {"direct": [b["direct"] for b in buffers], **vx}
     for v in variants:
         net = net_of(v)
@@ -371,7 +372,7 @@ def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log) 
     ladder = [int(n) for n in ds.manifest["evalset"]["ladder_spp"]] if ds is not None else list(settings.pt_spp)
     ladder = [n for n in ladder if settings.temporal_max_spp is None or n <= settings.temporal_max_spp]
     for n in ladder:  # a real-time path tracer draws new samples every frame
-        seqs[f"pt_spp{n}"] = [f.full(n, 1 + k) for k, f in enumerate(frames)]
+        seqs[f"pt_spp{n}"] = [f.full_light(n, 1 + k) for k, f in enumerate(frames)]
     ref_tm = [tonemap(x, exposure) for x in ref]
     out = {k: temporal_stability([tonemap(x, exposure) for x in s], ref_tm) for k, s in seqs.items()}
     return {"resolution": [res, res], "frames": len(seq), "reference_spp": settings.temporal_spp,

@@ -318,15 +318,32 @@ class MitsubaFrame:
         sample), else in two with one seed ("two_passes", as every capture before 2026-11-28)."""
         from diviewer.reference import split_path
 
-        if estimator not in split_path.ESTIMATORS:
-            raise ValueError(f"estimator must be one of {split_path.ESTIMATORS}, got '{estimator}'")
-        if (estimator == split_path.ONE_PASS and split_path.supports(self.scene, self.config)
-                and self.variant.startswith(("llvm", "cuda"))):
-            mi = _import_mitsuba()
-            mi.set_variant(self.variant)
-            img = self._render(split_path.integrator_dict(mi, max_depth, DEFAULT_RR_DEPTH), spp, seed)
+        if self._one_pass(estimator):
+            img = self._render_one_pass(spp, seed, max_depth)
             return np.ascontiguousarray(img[..., :3]), np.ascontiguousarray(img[..., 3:6]), split_path.ONE_PASS
         return self.full(spp, seed, max_depth), self.direct(spp, seed), split_path.TWO_PASSES
+
+    def full_light(self, spp: int, seed: int, max_depth: int = DEFAULT_MAX_DEPTH) -> np.ndarray:
+        """The full light alone by the truth's estimator: `full_and_direct`'s first image where it takes one pass
+        (its direct part comes with it), else `full` (no direct render)."""
+        if self._one_pass():
+            return np.ascontiguousarray(self._render_one_pass(spp, seed, max_depth)[..., :3])
+        return self.full(spp, seed, max_depth)
+
+    def _one_pass(self, estimator: str = "one_pass") -> bool:
+        from diviewer.reference import split_path
+
+        if estimator not in split_path.ESTIMATORS:
+            raise ValueError(f"estimator must be one of {split_path.ESTIMATORS}, got '{estimator}'")
+        return (estimator == split_path.ONE_PASS and split_path.supports(self.scene, self.config)
+                and self.variant.startswith(("llvm", "cuda")))
+
+    def _render_one_pass(self, spp: int, seed: int, max_depth: int) -> np.ndarray:
+        from diviewer.reference import split_path
+
+        mi = _import_mitsuba()
+        mi.set_variant(self.variant)
+        return self._render(split_path.integrator_dict(mi, max_depth, DEFAULT_RR_DEPTH), spp, seed)
 
     def aovs(self, spp: int = 16, seed: int = 0) -> dict[str, np.ndarray]:
         """depth (H, W) view-space ``-z``, normal (H, W, 3) view space facing the camera, albedo (H, W, 3).

@@ -171,7 +171,7 @@ class ProgressiveReference:
                         self._cond.wait()
                     if not self._current(generation):
                         break
-                img = frame.full(spp, seed, s.max_depth)
+                img = frame.full_light(spp, seed, s.max_depth)  # the truth's estimator (one pass where it can)
                 if not np.all(np.isfinite(img)):
                     img = np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
                 acc = img if acc is None else acc + (img - acc) * (spp / (total + spp))

@@ -38,6 +38,7 @@ def test_the_direct_light_is_the_two_passes_to_round_off(cornell):
     assert how == split_path.ONE_PASS and full.shape == direct.shape == (32, 32, 3)
     two = frame.direct(16, 3)
     assert two.max() > 0
+    np.testing.assert_array_equal(frame.full_light(16, 3), full)  # the full light alone: the same render
     np.testing.assert_allclose(direct, two, rtol=1e-5, atol=1e-7 * two.max())
     indirect = full - direct  # the later bounces of the same paths: never negative
     assert indirect.min() >= -1e-6 * full.max() and indirect.mean() > 0.05 * full.mean()
@@ -108,5 +109,6 @@ def test_area_lights_and_the_sky_keep_the_two_passes():
     assert how == split_path.TWO_PASSES
     np.testing.assert_array_equal(full, frame.full(4, 2))
     np.testing.assert_array_equal(direct, frame.direct(4, 2))
+    np.testing.assert_array_equal(frame.full_light(4, 2), full)
     with pytest.raises(ValueError, match="estimator"):
         frame.full_and_direct(4, 2, estimator="three_passes")
