@@ -110,8 +110,9 @@ def capture_pace(plan: Plan) -> str | None:
     per = statistics.median(seconds[-PACE_FRAMES:])
     planned = plan.stages[0].seconds / plan.capture.frames
     return (f"capture so far: {len(frames)} of {plan.capture.frames} frames in {where}, {per:.1f} s a frame here "
-            f"(median of GL + path tracing, the last {min(len(seconds), PACE_FRAMES)} frames); the {left} left take ~{hms(left * per)} at that pace (the plan assumes "
-            f"{planned:.1f} s, from the costs measured in diviewer/build/costs.py)")
+            f"(median of GL + path tracing, the last {min(len(seconds), PACE_FRAMES)} frames); the {left} left take "
+            f"~{hms(left * per)} at that pace (the plan assumes {planned:.1f} s, from the costs measured in "
+            f"diviewer/build/costs.py)")
 
 
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> dict[str, Any]:
@@ -368,8 +369,8 @@ def _ship(plan: Plan, state: BuildState, log, command: str, **_) -> tuple[list[P
                      "ladder_sha256": sha256_file(plan.work / "ladder.json")}
 
 
-STAGES = {"capture": _capture, "refine": _refine, "check": _check, "evalset": _evalset, "train": _train, "export": _export,
-          "evaluate": _evaluate, "pick": _pick, "ship": _ship}
+STAGES = {"capture": _capture, "refine": _refine, "check": _check, "evalset": _evalset, "train": _train,
+          "export": _export, "evaluate": _evaluate, "pick": _pick, "ship": _ship}
 """Each stage kind's function: (plan, state, log, k=K of a per-K stage, command=the rebuild command) ->
 (outputs whose sha256 the state records, a result record)."""
 

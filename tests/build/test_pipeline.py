@@ -455,8 +455,8 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
 
 def _refining(recipe: str, low: int, spp: int) -> str:
     """TINY_RECIPE (or another) captured at ``low`` spp and refined to ``spp``."""
-    return recipe.replace("spp = 2\nmax_depth = 3\nsplit_fractions", f"spp = {spp}\nrefine_from = {low}\nmax_depth = 3\n"
-                          "split_fractions", 1)
+    return recipe.replace("spp = 2\nmax_depth = 3\nsplit_fractions",
+                          f"spp = {spp}\nrefine_from = {low}\nmax_depth = 3\nsplit_fractions", 1)
 
 
 def test_a_recipe_that_refines_its_capture_plans_the_capture_at_the_lower_count_then_the_refinement(tmp_path):
