@@ -182,3 +182,16 @@ def test_refine_from_is_the_captures_lower_count_and_part_of_what_the_recipe_ask
     assert refine_from(a) == 64 and refine_from(b) is None
     assert capture_settings(a) == capture_settings(b) and capture_settings(a).spp == 256
     assert a.content_sha256() != b.content_sha256()
+
+
+def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
+    """tools/sponza_chain.sh links the 64-spp build's capture into the refining build's folder: the refining recipe
+    must ask for that very capture (its settings at refine_from spp), or the capture stage would refuse it."""
+    from diviewer.train.recipe import capture_settings, refine_from
+
+    walk = load_recipe(Path(__file__).parents[2] / "assets" / "recipes" / "sponza_walk.toml")
+    refined = load_recipe(Path(__file__).parents[2] / "assets" / "recipes" / "sponza_walk256.toml")
+    assert refine_from(refined) == capture_settings(walk).spp == 64 and capture_settings(refined).spp == 256
+    assert capture_settings(refined, spp=refine_from(refined)) == capture_settings(walk)
+    assert {k: v for k, v in refined.train.items()} == walk.train and refined.ks() == walk.ks()
+    assert refined.evalset == walk.evalset and refined.export == walk.export
