@@ -7,7 +7,7 @@
 #   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp) and that model's
 #      scores on it;
 #   3. the ladder on a 256-spp truth (assets/recipes/sponza_walk256.toml: the same recipe, `[capture] refine_from =
-#      64`), in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, ~8 h),
+#      64`), in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, 8-12 h),
 #      then K = 8 and 16, picked on the full evaluation set and shipped to runs/sponza256/ship, then K = 32 (trained,
 #      scored and recorded; the recipe's `[ladder] max_mb` keeps it from shipping), and the shipped model's scores.
 #      At 64 spp the truth is 2-5 dB above the 33 dB target, not the 6 dB it asks; at 256 it is 7-10.
