@@ -97,15 +97,14 @@ def capture_seconds(kind: str, scene: str, frames: int, width: int, height: int,
     """A capture of ``frames`` frames: path tracing (full and direct-only, counted in the measurements, in one pass
     now: ``ONE_PASS_SHARE``) + GL, and with ``direct_samples`` s > 1 the direct light rendered again at s x s the
     pixels (`diviewer.gl.area`)."""
-    per_sample, _ = pt_seconds_per_sample(kind, scene)
-    per_sample *= ONE_PASS_SHARE
     scale = width * height / PIXELS_REF
     gl = GL_SECONDS_PER_FRAME[kind] * scale * (1 + (direct_samples ** 2 if direct_samples > 1 else 0))
-    return frames * (per_sample * width * height * spp + gl)
+    return refine_seconds(kind, scene, frames, width, height, spp) + frames * gl
 
 
 def refine_seconds(kind: str, scene: str, frames: int, width: int, height: int, extra_spp: int) -> float:
-    """`diviewer data refine` of ``frames`` frames by ``extra_spp`` samples a pixel: path tracing alone (one pass)."""
+    """Path tracing ``frames`` frames at ``extra_spp`` samples a pixel in one pass: `diviewer data refine`, and a
+    capture's truth."""
     per_sample, _ = pt_seconds_per_sample(kind, scene)
     return frames * per_sample * ONE_PASS_SHARE * width * height * extra_spp
 

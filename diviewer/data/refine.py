@@ -69,16 +69,12 @@ def refined_manifest(src: Dataset, spp: int) -> dict:
 def source_scene(src: Dataset, out: Path, manifest: dict, verb: str):
     """The scene of a dataset being derived into ``out`` (refined, its direct light re-rendered), refusing an
     output that is the source and a scene file changed since the capture."""
-    from diviewer.scene.loader import load_scene
+    from diviewer.scene.loader import load_recorded_scene
 
     if out.exists() and src.root.resolve() == out.resolve():
         raise DiviewerError(f"{src.root} is both the source and the output", field="--out")
-    recorded = manifest.get("scene_file")  # a scene outside assets/ is found by its file, a shipped one by name
-    scene = load_scene(recorded if recorded and Path(recorded).is_file() else manifest["scene"])
-    if scene.file_hash != manifest["scene_hash"]:
-        raise DiviewerError(f"the scene file of '{scene.name}' has changed since the capture; {verb} it with the "
-                            f"scene it was captured with", path=src.root / "manifest.json", field="scene_hash")
-    return scene
+    return load_recorded_scene(manifest, src.root / "manifest.json",
+                               f"it has changed since the capture; {verb} it with the scene it was captured with")
 
 
 def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), log=print) -> dict:

@@ -311,14 +311,14 @@ class MitsubaFrame:
         """Direct light and visible emission only (path length 2)."""
         return self.full(spp, seed, max_depth=2)
 
-    def full_and_direct(self, spp: int, seed: int, max_depth: int = DEFAULT_MAX_DEPTH,
-                        estimator: str = "one_pass") -> tuple[np.ndarray, np.ndarray, str]:
-        """`full` and `direct`, each (H, W, 3), and how they were made: in one pass (`split_path`) where asked, the
-        frame's lights allow it and the variant is a JIT one (a Python integrator on ``scalar_rgb`` would run per
-        sample), else in two with one seed ("two_passes", as every capture before 2026-11-28)."""
+    def full_and_direct(self, spp: int, seed: int, max_depth: int = DEFAULT_MAX_DEPTH) -> tuple[np.ndarray,
+                                                                                                 np.ndarray, str]:
+        """`full` and `direct`, each (H, W, 3), and how they were made: in one pass (`split_path`) where the frame's
+        lights allow it and the variant is a JIT one (a Python integrator on ``scalar_rgb`` would run per sample),
+        else in two with one seed ("two_passes", as every capture before 2026-11-28)."""
         from diviewer.reference import split_path
 
-        if self._one_pass(estimator):
+        if self._one_pass():
             img = self._render_one_pass(spp, seed, max_depth)
             return np.ascontiguousarray(img[..., :3]), np.ascontiguousarray(img[..., 3:6]), split_path.ONE_PASS
         return self.full(spp, seed, max_depth), self.direct(spp, seed), split_path.TWO_PASSES
@@ -330,13 +330,10 @@ class MitsubaFrame:
             return np.ascontiguousarray(self._render_one_pass(spp, seed, max_depth)[..., :3])
         return self.full(spp, seed, max_depth)
 
-    def _one_pass(self, estimator: str = "one_pass") -> bool:
+    def _one_pass(self) -> bool:
         from diviewer.reference import split_path
 
-        if estimator not in split_path.ESTIMATORS:
-            raise ValueError(f"estimator must be one of {split_path.ESTIMATORS}, got '{estimator}'")
-        return (estimator == split_path.ONE_PASS and split_path.supports(self.scene, self.config)
-                and self.variant.startswith(("llvm", "cuda")))
+        return split_path.supports(self.scene, self.config) and self.variant.startswith(("llvm", "cuda"))
 
     def _render_one_pass(self, spp: int, seed: int, max_depth: int) -> np.ndarray:
         from diviewer.reference import split_path

@@ -30,7 +30,8 @@ NAME = "diviewer_split_path"
 AOV = ("direct.R", "direct.G", "direct.B")
 """The film channels of the direct light, after the image's R, G, B."""
 
-_registered: set[str] = set()
+_classes: dict = {}
+"""The integrator class per Mitsuba variant (Mitsuba's types are per variant), made and registered on first use."""
 mi = dr = None
 """The mitsuba and drjit modules, bound on first use (``@dr.syntax`` re-runs the methods' source in this module's
 namespace, so they must be module names, not a closure's; importing this module imports neither)."""
@@ -50,21 +51,9 @@ def integrator_dict(mitsuba, max_depth: int, rr_depth: int) -> dict:
 def register(mitsuba) -> None:
     """Register the plugin with Mitsuba's current variant (once per variant)."""
     variant = mitsuba.variant()
-    if variant in _registered:
-        return
-    mitsuba.register_integrator(NAME, lambda props: _integrator_class(mitsuba)(props))
-    _registered.add(variant)
-
-
-_classes: dict = {}
-
-
-def _integrator_class(mitsuba):
-    """The integrator class for the current variant (Mitsuba's types are per variant)."""
-    variant = mitsuba.variant()
     if variant not in _classes:
-        _classes[variant] = _define(mitsuba)
-    return _classes[variant]
+        cls = _classes[variant] = _define(mitsuba)
+        mitsuba.register_integrator(NAME, lambda props: cls(props))
 
 
 def _define(mitsuba):

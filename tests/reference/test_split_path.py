@@ -110,5 +110,3 @@ def test_area_lights_and_the_sky_keep_the_two_passes():
     np.testing.assert_array_equal(full, frame.full(4, 2))
     np.testing.assert_array_equal(direct, frame.direct(4, 2))
     np.testing.assert_array_equal(frame.full_light(4, 2), full)
-    with pytest.raises(ValueError, match="estimator"):
-        frame.full_and_direct(4, 2, estimator="three_passes")
