@@ -17,10 +17,10 @@ from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes
 from diviewer.gl.resources import GpuScene, set_uniform
-from diviewer.gl.shadow_fit import RenderSettings, fit_directional, point_faces
+from diviewer.gl.shadow_fit import RenderSettings, fit_directional, light_uniforms, point_faces
 from diviewer.gl.shaders import ShaderCache
 from diviewer.scene import camera as cam
-from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
+from diviewer.scene.model import DirectionalLight, FrameConfig, Scene
 from diviewer.timing import StageTimer
 
 BUFFERS = INPUT_NAMES
@@ -45,11 +45,14 @@ class Renderer:
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, width: int, height: int,
                  settings: RenderSettings | None = None, shaders: ShaderCache | None = None,
-                 timer: StageTimer | None = None, culling: bool = True):
+                 timer: StageTimer | None = None, culling: bool = True, back_faces: bool = False):
         self.ctx, self.scene = ctx, scene
         self.settings = settings or RenderSettings()
         self.culling = culling
         """Leave out what lies outside each pass's frustum (gl/culling.py); the image is the same either way."""
+        self.back_faces = back_faces
+        """Draw the back faces of single-sided materials (``Material.double_sided`` false) in the G-buffer too; by
+        default they are culled: a closed surface's inside, seen only through its seams (docs/speed.md)."""
         self.drawn: dict[str, tuple[int, int]] = {}
         """The last frame's (draw calls, triangles) per pass: gbuffer, shadows (maps rendered this frame)."""
         self.shaders = shaders or ShaderCache(ctx)
@@ -238,9 +241,10 @@ class Renderer:
         return self._draw_cache[2]
 
     def _draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None,
-                      clip: np.ndarray, stage: str) -> None:
+                      clip: np.ndarray, stage: str, cull_back: bool = False) -> None:
         """Draw the frame's objects inside the frustum of ``clip`` (world to clip space) with shaders/<file>;
-        alpha-masked materials use its ALPHA_TEST variant. Counts draws and triangles in ``drawn[stage]``.
+        alpha-masked materials use its ALPHA_TEST variant; ``cull_back``: single-sided materials without their back
+        faces. Counts draws and triangles (before face culling) in ``drawn[stage]``.
 
         ``setup(prog)`` sets the pass's uniforms on each program variant before its first draw.
         """
@@ -255,6 +259,7 @@ class Renderer:
             gmesh, mat_name, model, _ = items[i]
             mat = self.scene.materials[mat_name]
             masked = mat.is_masked
+            (self.ctx.enable if cull_back and not mat.double_sided else self.ctx.disable)(moderngl.CULL_FACE)
             if masked not in progs:
                 progs[masked] = self.shaders.program(file, {**defines, "ALPHA_TEST": 1} if masked else defines)
                 setup(progs[masked])
@@ -276,6 +281,7 @@ class Renderer:
                 set_uniform(prog, "u_alpha_cutoff", float(mat.alpha_cutoff))
             gmesh.vao(prog).render(moderngl.TRIANGLES)
         self.ctx.front_face = "ccw"
+        self.ctx.disable(moderngl.CULL_FACE)
 
     def _gbuffer_pass(self, frame: "FrameView") -> None:
         ctx, config, view, proj = self.ctx, frame.config, frame.view, frame.proj
@@ -290,7 +296,7 @@ class Renderer:
         def setup(prog):
             set_uniform(prog, "m_proj", proj)
             set_uniform(prog, "m_view", view)
-        self._draw_objects(config, "gbuffer.glsl", {}, setup, view, proj @ view, "gbuffer")
+        self._draw_objects(config, "gbuffer.glsl", {}, setup, view, proj @ view, "gbuffer", not self.back_faces)
 
     def _shadow_key(self, config: FrameConfig, light, bounds: np.ndarray) -> tuple:
         """Everything a light's shadow map depends on: the light, each object's pose and the GPU mesh it draws
@@ -398,30 +404,7 @@ class Renderer:
     def set_light_uniforms(self, prog, light, shadow: dict | None) -> None:
         """One light's radiometry and shadow-lookup uniforms for direct.glsl's code (the direct pass, and
         VXGI's injection, which shares the shadow lookup); ``shadow`` is this frame's map of the light."""
-        s = self.settings
-        set_uniform(prog, "u_shadows", shadow is not None)
-        set_uniform(prog, "u_pcf_radius", int(s.pcf_radius))
-        set_uniform(prog, "u_bias", float(s.bias))
-        set_uniform(prog, "u_slope_bias", float(s.slope_bias))
-        set_uniform(prog, "u_normal_offset", float(s.normal_offset))
-        if isinstance(light, DirectionalLight):
-            set_uniform(prog, "u_light_color", tuple(float(c) * light.irradiance for c in light.color))
-            set_uniform(prog, "u_light_dir", tuple(float(x) for x in light.direction))
-            if shadow is not None:
-                shadow["map"].use(location=4)
-                set_uniform(prog, "u_shadow_map", 4)
-                set_uniform(prog, "m_light", shadow["m_light"])
-                set_uniform(prog, "u_texel_world", float(shadow["texel_world"]))
-                set_uniform(prog, "u_depth_range", float(shadow["depth_range"]))
-        else:
-            assert isinstance(light, PointLight)
-            set_uniform(prog, "u_light_color", tuple(float(c) * light.intensity for c in light.color))
-            set_uniform(prog, "u_light_pos", tuple(float(x) for x in light.position))
-            if shadow is not None:
-                shadow["map"].use(location=4)
-                set_uniform(prog, "u_shadow_atlas", 4)
-                set_uniform(prog, "m_faces", shadow["faces"])
-                set_uniform(prog, "u_face_size", float(self._face_size))
+        light_uniforms(prog, light, shadow, self.settings, self._face_size)
 
     def _emission_pass(self) -> None:
         ctx = self.ctx

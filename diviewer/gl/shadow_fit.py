@@ -1,6 +1,6 @@
 """The shadow maps' settings and light-space projections: a directional light's orthographic fit to the scene's
 bounds, a point light's six cube faces. The shadow pass renders with them and direct.glsl looks up with
-the same matrices."""
+the same matrices (`light_uniforms`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from diviewer.gl.resources import set_uniform
 from diviewer.scene import camera as cam
+from diviewer.scene.model import DirectionalLight, PointLight
 
 
 MOVING_SHADOW_SIZE = 2048
@@ -78,3 +80,31 @@ def point_faces(position, bounds: np.ndarray) -> np.ndarray:
     near = max(far * 1e-4, 1e-4)
     proj = cam.perspective(90.0, 1.0, near, far)
     return np.stack([proj @ cam.look_at(p, p + np.array(f), u) for f, u in FACES])
+
+
+def light_uniforms(prog, light, shadow: dict | None, s: RenderSettings, face_size: int) -> None:
+    """One light's radiometry and shadow-lookup uniforms for direct.glsl's code; ``shadow`` is this frame's map of
+    the light (the shadow pass's lookup parameters, None: shadows off), ``face_size`` a point light's cube face."""
+    set_uniform(prog, "u_shadows", shadow is not None)
+    set_uniform(prog, "u_pcf_radius", int(s.pcf_radius))
+    set_uniform(prog, "u_bias", float(s.bias))
+    set_uniform(prog, "u_slope_bias", float(s.slope_bias))
+    set_uniform(prog, "u_normal_offset", float(s.normal_offset))
+    if isinstance(light, DirectionalLight):
+        set_uniform(prog, "u_light_color", tuple(float(c) * light.irradiance for c in light.color))
+        set_uniform(prog, "u_light_dir", tuple(float(x) for x in light.direction))
+        if shadow is not None:
+            shadow["map"].use(location=4)
+            set_uniform(prog, "u_shadow_map", 4)
+            set_uniform(prog, "m_light", shadow["m_light"])
+            set_uniform(prog, "u_texel_world", float(shadow["texel_world"]))
+            set_uniform(prog, "u_depth_range", float(shadow["depth_range"]))
+    else:
+        assert isinstance(light, PointLight)
+        set_uniform(prog, "u_light_color", tuple(float(c) * light.intensity for c in light.color))
+        set_uniform(prog, "u_light_pos", tuple(float(x) for x in light.position))
+        if shadow is not None:
+            shadow["map"].use(location=4)
+            set_uniform(prog, "u_shadow_atlas", 4)
+            set_uniform(prog, "m_faces", shadow["faces"])
+            set_uniform(prog, "u_face_size", float(face_size))

@@ -1,8 +1,8 @@
 """glTF 2.0 scenes (.gltf + .bin + images) as mesh, material and object libraries.
 
 A scene file imports one with ``[gltf] file = "..."``: each primitive becomes a Mesh, each glTF material a
-diffuse Material (base colour factor and texture, ``alphaMode: MASK`` with its ``alphaCutoff``), and each
-node that places a mesh an Object with the node's world pose, so instanced meshes stay instanced.
+diffuse Material (base colour factor and texture, ``alphaMode: MASK`` with its ``alphaCutoff``, ``doubleSided``),
+and each node that places a mesh an Object with the node's world pose, so instanced meshes stay instanced.
 Metallic, roughness, normal maps and ``BLEND`` transparency are not modelled (the renderers are diffuse):
 a BLEND material is drawn opaque. The document is validated, never trusted (diviewer/scene/gltf_check.py):
 indices, types, transforms and the node graph (a cycle is refused). Files are parsed once per process and
@@ -148,7 +148,8 @@ def _material(d: Doc, i: int, name: str, base: Path) -> Material:
         alpha = None  # OPAQUE ignores alpha; BLEND is drawn opaque (no transparency in these renderers)
     emission = d.nums(m, "emissiveFactor", 3, f"{where}.emissiveFactor", (0.0, 0.0, 0.0), lo=0.0)
     return Material(name, albedo=factor[:3], emission=emission, texture=texture, texture_source=source, alpha=alpha,
-                    alpha_cutoff=cutoff if mode == "MASK" else 0.5)
+                    alpha_cutoff=cutoff if mode == "MASK" else 0.5,
+                    double_sided=d.flag(m, "doubleSided", f"{where}.doubleSided", False))
 
 
 def _unique(name, taken: set, default: str) -> str:

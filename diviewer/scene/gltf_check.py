@@ -87,6 +87,12 @@ class Doc:
             raise self.err(field, f"expected a whole number >= {lo}, got {v!r}")
         return v
 
+    def flag(self, obj: dict, key: str, field: str, default: bool) -> bool:
+        v = obj.get(key, default)
+        if not isinstance(v, bool):
+            raise self.err(field, f"expected true or false, got {v!r}")
+        return v
+
     def num(self, obj: dict, key: str, field: str, default: float, lo=None, hi=None) -> float:
         v = obj.get(key, default)
         if not is_num(v):

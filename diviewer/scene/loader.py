@@ -130,7 +130,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
 
 
 def _material(key: str, t: _Table, base: Path, path: Path | None) -> Material:
-    """One [materials.KEY] table: albedo, emission, an optional texture and its alpha cut-out."""
+    """One [materials.KEY] table: albedo, emission, an optional texture and its alpha cut-out, double_sided."""
     texture, alpha, tex_src = None, None, ""
     if t.has("texture"):
         tex_path = base / t.str("texture")
@@ -146,7 +146,8 @@ def _material(key: str, t: _Table, base: Path, path: Path | None) -> Material:
         alpha = None
     return Material(key, albedo=t.vec("albedo", 3, (0.8, 0.8, 0.8), lo=0.0, hi=1.0),
                     emission=t.vec("emission", 3, (0.0, 0.0, 0.0), lo=0.0),
-                    texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff)
+                    texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff,
+                    double_sided=t.bool("double_sided", True))
 
 
 def _objects(root: _Table, path: Path | None, meshes: dict, materials: dict, names: set[str]) -> list[Object]:

@@ -59,6 +59,10 @@ class Material:
     """(H, W) float32 cut-out mask in [0, 1] (the base colour's alpha, same size as ``texture``), or None:
     opaque. Where the filtered alpha is below ``alpha_cutoff`` the surface is not there (glTF MASK)."""
     alpha_cutoff: float = 0.5
+    double_sided: bool = True
+    """Both faces are surfaces. False (glTF's ``doubleSided``, false unless said): a back face is the inside of a
+    closed surface, which the camera does not see, so the rasterizer's camera pass culls it; shadows, VXGI and the
+    path tracer keep both faces (light that meets one still stops there)."""
 
     @property
     def is_emissive(self) -> bool:

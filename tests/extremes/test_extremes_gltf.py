@@ -117,6 +117,7 @@ CASES = {
     "alpha_cutoff_above_1": (_set("materials.0.alphaCutoff", 1.5), "materials[0].alphaCutoff", "[0.0, 1.0]"),
     "alpha_cutoff_negative": (_set("materials.0.alphaCutoff", -0.1), "materials[0].alphaCutoff", "[0.0, 1.0]"),
     "alpha_mode": (_set("materials.0.alphaMode", "CUTOUT"), "materials[0].alphaMode", "not one of"),
+    "double_sided_number": (_set("materials.1.doubleSided", 1), "materials[1].doubleSided", "true or false"),
     "base_colour_3": (_set("materials.1.pbrMetallicRoughness.baseColorFactor", [0.5, 0.5, 0.5]),
                       "materials[1].pbrMetallicRoughness.baseColorFactor", "4 finite numbers"),
     "base_colour_range": (_set("materials.1.pbrMetallicRoughness.baseColorFactor", [2, 0.5, 0.5, 1]),
@@ -173,6 +174,7 @@ def test_the_valid_document_loads_with_its_hierarchy(tmp_path):
     assert cube.rotation[1] == pytest.approx(45.0, abs=1e-4), "the parent's rotation is composed"
     assert scene.materials["leaf"].is_masked and scene.materials["leaf"].alpha_cutoff == 0.5
     assert scene.materials["stone"].albedo == pytest.approx((0.6, 0.5, 0.4))
+    assert not scene.materials["leaf"].double_sided, "glTF's doubleSided is false unless the material says so"
 
 
 # --- textures by their real format ----------------------------------------------------------------------
@@ -221,7 +223,7 @@ def test_oversized_texture_names_itself_and_how_to_downscale(tmp_path):
 KEYS = ["nodes", "children", "mesh", "matrix", "rotation", "scale", "translation", "accessors", "bufferView",
         "byteOffset", "byteStride", "byteLength", "count", "type", "componentType", "normalized", "indices",
         "material", "attributes", "POSITION", "NORMAL", "TEXCOORD_0", "uri", "source", "sampler", "index",
-        "alphaMode", "alphaCutoff", "baseColorFactor", "baseColorTexture", "emissiveFactor", "scene", "mode"]
+        "alphaMode", "alphaCutoff", "doubleSided", "baseColorFactor", "baseColorTexture", "emissiveFactor", "scene", "mode"]
 
 leaves = (st.none() | st.booleans() | st.integers(-3, 8) | st.sampled_from([-1, 2 ** 31, 2 ** 32 + 1, 10 ** 12, 5126, 5123])
           | st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from(["MASK", "VEC3", "SCALAR", "tex.png",

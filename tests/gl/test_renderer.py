@@ -491,6 +491,56 @@ def test_sponza_culling_draws_less_at_a_wall_and_changes_no_pixel(ctx, sponza):
             np.testing.assert_array_equal(frames[name, True][buf], frames[name, False][buf], err_msg=f"{name} {buf}")
 
 
+def test_single_sided_back_faces_leave_the_gbuffer_not_the_shadows(ctx):
+    """Single-sided materials: a closed box seen from outside is bit for bit the two-sided one, from inside it is not
+    there; a sheet seen from behind is not in the G-buffer, and its shadow is still on the wall behind it."""
+    sun = {"name": "sun", "type": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": 3.0}
+    scene = facing_plane(distance=3.0, fov=70.0, lights=[sun], extra_meshes={"sheet": {"shape": "plane", "size": 0.6}},
+                         extra_objects=[{"name": "sheet", "mesh": "sheet", "material": "occ", "position": [0, 0, -1.5],
+                                         "rotation": [-90.0, 0.0, 0.0]}])  # its front faces the wall
+    single = dataclasses.replace(scene, materials={k: dataclasses.replace(m, double_sided=False)
+                                                   for k, m in scene.materials.items()})
+    wall = scene.default.objects[0]
+    inside = dataclasses.replace(scene.default, camera=dataclasses.replace(
+        scene.default.camera, position=tuple(wall.position), target=(0.0, 0.0, -10.0)))
+    frames = {}
+    for name, s, back_faces in (("two-sided", scene, False), ("culled", single, False), ("kept", single, True)):
+        r = Renderer(ctx, s, 48, 48, RenderSettings(shadow_size=256), back_faces=back_faces)
+        try:
+            frames[name] = r.frame()
+            frames[name, "inside"] = r.frame(inside)
+        finally:
+            r.release()
+    seen, culled, kept = frames["two-sided"], frames["culled"], frames["kept"]
+    c = 24  # the centre pixel: the sheet's back face, or the wall through it
+    assert seen["depth"][c, c] == pytest.approx(1.5, rel=1e-4) == kept["depth"][c, c]
+    assert culled["depth"][c, c] == pytest.approx(3.0, rel=1e-4)
+    assert culled["direct"][c, c].max() == 0.0 < culled["direct"][2, 2].min(), "the sheet still shadows the wall"
+    hidden = np.abs(culled["depth"] - seen["depth"]) > 1e-3  # the sheet's pixels
+    assert 0.01 < hidden.mean() < 0.1
+    for buf in seen:
+        np.testing.assert_array_equal(culled[buf][~hidden], seen[buf][~hidden], err_msg=buf)
+        np.testing.assert_array_equal(kept[buf], seen[buf], err_msg=buf)
+    assert (frames["culled", "inside"]["depth"] == 0.0).all(), "inside a single-sided box the camera sees no wall"
+    assert (frames["kept", "inside"]["depth"] > 0.0).all() and (frames["two-sided", "inside"]["depth"] > 0.0).all()
+
+
+def test_back_faces_probe_counts_the_pixels_culling_changes_per_material(ctx):
+    """tools/experiments/back_faces.py: the sheet seen from behind is what changes, and only its material counts."""
+    tool = load_tool("experiments/back_faces")
+    scene = facing_plane(distance=3.0, fov=70.0, extra_meshes={"sheet": {"shape": "plane", "size": 0.6}},
+                         extra_objects=[{"name": "sheet", "mesh": "sheet", "material": "occ", "position": [0, 0, -1.5],
+                                         "rotation": [-90.0, 0.0, 0.0]}])
+    scene = tool.with_sides(scene, {"occ", "m"})
+    configs = tool.cameras(scene, 5)
+    assert [name for name, _ in configs] == ["default"]  # no camera walk
+    out = tool.differences(ctx, scene, configs, 32, 24)
+    assert out["single_sided"] == ["m", "occ"] and out["pixels"] == 32 * 24
+    assert out["changed_pixels_per_material"]["m"] == 0  # the closed wall, seen from outside
+    sheet = out["changed_pixels_per_material"]["occ"]
+    assert 0 < sheet == round(out["changed_share_mean"] * out["pixels"]) < 0.2 * out["pixels"]
+
+
 def test_sponza_draws_opaque_front_to_back_then_masked_and_changes_no_pixel(ctx, sponza, monkeypatch):
     """The G-buffer pass draws the opaque pieces nearest first and the alpha-masked ones last; the buffers are
     bit for bit those of the list's order."""

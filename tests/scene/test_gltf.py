@@ -29,6 +29,8 @@ def test_shipped_sponza_loads(sponza):
     assert sum(len(sponza.meshes[o.mesh].faces) for o in objs) == 262087  # as placed (116k unique)
     assert all(m.texture is not None and m.texture.dtype == np.float32 for m in sponza.materials.values())
     assert {k for k, m in sponza.materials.items() if m.is_masked} == MASKED
+    # the file's doubleSided: the three cut-out sheets; the rest have an inside the camera never sees
+    assert {k for k, m in sponza.materials.items() if m.double_sided} == MASKED
     for k in MASKED:
         m = sponza.materials[k]
         assert m.alpha.shape == m.texture.shape[:2] and m.alpha_cutoff == 0.5

@@ -973,7 +973,8 @@ def _scaled_session(tmp_path: Path, size: tuple[int, int], scale: float) -> None
     assert stats["render_scales"] == {"min": scale, "median": scale, "max": scale, "changes": 0}
     assert stats["scale_ceiling"] == max(scale, 1.0) and stats["scale_floor"] == min(scale, 0.4)
     assert stats["target_fps"] is None and stats["out_of_range"] == [] and stats["frames_out_of_range"] == 0
-    assert stats["culling"] is True and stats["drawn_last_frame"]["gbuffer"]["triangles"] > 0
+    assert stats["culling"] is True and stats["back_faces"] is False
+    assert stats["drawn_last_frame"]["gbuffer"]["triangles"] > 0
 
 
 @pytest.mark.parametrize("size,scale", [((128, 96), 0.5), ((64, 48), 2.0)])
