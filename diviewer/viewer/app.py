@@ -92,7 +92,7 @@ class Viewer:
         self.drawn_scale = self.scaler.scale
         """The render scale of the frame drawn last."""
         self.renderer = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
-                                 self.shaders, timer=self.timer)
+                                 self.shaders, timer=self.timer, back_faces=settings.back_faces)
         self.renderer.moving_shadow_size = settings.moving_shadow_size
         self.upscale = self.ctx.sampler(filter=(moderngl.LINEAR, moderngl.LINEAR), repeat_x=False, repeat_y=False)
         """Bound over the display's texture units where the image is upscaled to the window: bilinear."""

@@ -54,6 +54,9 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--camera-moving", action="store_true",
                    help="start playing the scene's camera path (sponza's walk; as the P key), to time a moving "
                         "camera: culling, the shadow cache and the render scale then see what a walk shows")
+    p.add_argument("--back-faces", action="store_true",
+                   help="draw the back faces of single-sided materials too, as the path tracer sees them (slower; "
+                        "by default the G-buffer culls them)")
     p.add_argument("--stats", type=Path, default=None,
                    help="with --frames: write per-stage times, fps and the resolutions as JSON here")
     p.set_defaults(func=run_view)
@@ -96,7 +99,7 @@ def run_view(args: argparse.Namespace) -> int:
                               controller=args.camera, gi_res=args.gi_res, target_fps=args.target_fps,
                               render_scale=args.render_scale, scale_floor=args.scale_floor,
                               scale_ceiling=args.scale_ceiling,
-                              auto_exposure=args.auto_exposure,
+                              auto_exposure=args.auto_exposure, back_faces=args.back_faces,
                               gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
     script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else []
     if args.camera_moving:

@@ -74,6 +74,9 @@ class ViewerSettings:
     moving_shadow_size: int | None = MOVING_SHADOW_SIZE
     """The sun's shadow map while it moves (Sponza's full map, 8192 texels a side, takes ~325 ms to render on a
     2-core software rasterizer), the scene's full size again at the first frame it rests; None: always full."""
+    back_faces: bool = False
+    """Draw the back faces of single-sided materials in the G-buffer too, as the path tracer sees them (Sponza's
+    G-buffer then takes a third longer: docs/speed.md); by default they are culled (``Renderer.back_faces``)."""
     reference: ReferenceSettings = field(default_factory=ReferenceSettings)
     reference_max_size: int = 512
     """Longest side of the path-traced reference (it is scaled to the view)."""

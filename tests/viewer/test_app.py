@@ -1142,10 +1142,25 @@ def _camera_path_session(tmp_path: Path) -> None:
     from diviewer.viewer.app import run_viewer
     from diviewer.viewer.command import _play_camera_path
 
-    seen = []
+    seen, back_faces = [], []
     script = [(0, _play_camera_path)] + [(f, lambda v: seen.append(v.state.config.camera.position)) for f in (1, 2, 3)]
-    run_viewer("atrium", frames=4, script=script, settings=_settings(size=(64, 64)))
+    script.append((1, lambda v: back_faces.append(v.renderer.back_faces)))
+    run_viewer("atrium", frames=4, script=script, settings=_settings(size=(64, 64), back_faces=True))
     assert len(set(seen)) == 3, seen  # the camera walks the path, one step a frame
+    assert back_faces == [True]  # ViewerSettings.back_faces reaches the renderer
+
+
+def test_back_faces_flag_reaches_the_viewer_settings(monkeypatch):
+    """`diviewer view --back-faces` opens the viewer with the single-sided materials' back faces drawn; without
+    it they are culled."""
+    from diviewer.cli import main
+    from diviewer.viewer import app
+
+    opened = []
+    monkeypatch.setattr(app, "run_viewer", lambda scene, **kw: opened.append(kw["settings"]) or {})
+    for flag in ([], ["--back-faces"]):
+        assert main(["view", "--scene", "atrium", "--model", "none", *flag]) == 0
+    assert [s.back_faces for s in opened] == [False, True]
 
 
 def test_camera_moving_plays_the_path_and_is_refused_without_one(display, tmp_path, capsys):
