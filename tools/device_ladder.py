@@ -1,6 +1,6 @@
 """A recipe's capture and K ladder inside one accelerator lease, against a deadline (tools/device_lease.sh sets up).
 
-Usage on the device:  python3 tools/device_ladder.py --recipe assets/recipes/sponza_walk.toml --minutes 23
+Usage on the device:  python3 tools/device_ladder.py --recipe assets/recipes/sponza.toml --minutes 23
 
 1. capture: the recipe's [capture] (scene from [recipe] scene) in --shards processes into WORK/data, then
    `diviewer data check --fast`;

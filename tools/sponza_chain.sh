@@ -3,10 +3,10 @@
 # (tools/setup.sh), then
 #   1. `diviewer build` with K = 8 alone on the 64-spp capture (the capture, its check, the training, the export, its
 #      scores on the shipped compact evaluation set, the pick and the ship to runs/sponza/ship): the first model,
-#      ~1.6 h after the capture, committed by the session that sees it (runs/ does not outlive its machine);
+#      done and shipped as assets/models/sponza.onnx on 2026-11-28 (on a machine with runs/sponza, every stage skips);
 #   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp) and that model's
 #      scores on it;
-#   3. the ladder on a 256-spp truth (assets/recipes/sponza_walk256.toml: the same recipe, `[capture] refine_from =
+#   3. the ladder on a 256-spp truth (assets/recipes/sponza_walk256.toml: sponza.toml with `[capture] refine_from =
 #      64`), in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, 8-12 h),
 #      then K = 8 and 16, picked on the full evaluation set and shipped to runs/sponza256/ship, then K = 32 (trained,
 #      scored and recorded; the recipe's `[ladder] max_mb` keeps it from shipping), and the shipped model's scores.
@@ -22,7 +22,7 @@ cd "$ROOT"
 WORK="${SPONZA_WORK:-runs/sponza}"
 REFINED="${SPONZA_REFINED_WORK:-runs/sponza256}"
 mkdir -p "$WORK" "$REFINED"
-cp assets/recipes/sponza_walk.toml "$WORK/sponza.toml.part" && mv "$WORK/sponza.toml.part" "$WORK/sponza.toml"
+cp assets/recipes/sponza.toml "$WORK/sponza.toml.part" && mv "$WORK/sponza.toml.part" "$WORK/sponza.toml"
 cp assets/recipes/sponza_walk256.toml "$REFINED/sponza.toml.part" && mv "$REFINED/sponza.toml.part" "$REFINED/sponza.toml"
 [ -e "$REFINED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$REFINED/data"
 

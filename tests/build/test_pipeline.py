@@ -78,7 +78,7 @@ def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, cap
     assert not work.exists()
     assert main(["build", "--recipe", "sponza", "--dry-run", "--work", str(work)]) == 0  # the recipe's scene
     out = capsys.readouterr().out
-    assert out.startswith("build sponza (sponza) with recipe sponza") and "train_k128" in out
+    assert out.startswith("build sponza (sponza) with recipe sponza") and "train_k32" in out
     assert main(["build", "--recipe", "paper", "--dry-run"]) == 2  # the paper's recipe names no scene
     assert "recipe.scene" in capsys.readouterr().err
 

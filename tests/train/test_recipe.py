@@ -189,7 +189,7 @@ def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
     must ask for that very capture (its settings at refine_from spp), or the capture stage would refuse it."""
     from diviewer.train.recipe import capture_settings, refine_from
 
-    walk = load_recipe(Path(__file__).parents[2] / "assets" / "recipes" / "sponza_walk.toml")
+    walk = load_recipe("sponza")
     refined = load_recipe(Path(__file__).parents[2] / "assets" / "recipes" / "sponza_walk256.toml")
     assert refine_from(refined) == capture_settings(walk).spp == 64 and capture_settings(refined).spp == 256
     assert capture_settings(refined, spp=refine_from(refined)) == capture_settings(walk)
