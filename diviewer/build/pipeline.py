@@ -56,10 +56,10 @@ def finished_stages(plan: Plan) -> set[str]:
 
 
 def measured_pace(plan: Plan) -> list[str]:
-    """What the work folder's capture and trainings under way say of this machine's pace, and their time left at
+    """What the work folder's capture, refinement and trainings under way say of this machine's pace, and their time left at
     it, beside the plan's estimates from the costs measured elsewhere: a line each (none before they start or
     once they are done)."""
-    lines = [capture_pace(plan)]
+    lines = [capture_pace(plan), refine_pace(plan)]
     stages = {s.name: s for s in plan.stages}
     for k in plan.ks:
         lines.append(training_pace(plan.run_dir(k) / "metrics.csv", k, plan.steps, stages[f"train_k{k}"].seconds))
@@ -89,6 +89,19 @@ PACE_FRAMES = 200
 """The capture's pace is the median of its last this many frames (the machine's pace now, not a day's mean)."""
 
 
+def _frame_seconds(folder: Path, seconds_of: Callable[[dict], float]) -> tuple[int, list[float]]:
+    """A dataset folder's frame count and each frame's seconds as its sidecar records them (``seconds_of``); frames
+    being written, or of an older format, are counted and not timed."""
+    frames = sorted((folder / "frames").glob("*.json")) if (folder / "manifest.json").is_file() else []
+    seconds = []
+    for f in frames:
+        try:
+            seconds.append(float(seconds_of(json.loads(f.read_text()))))
+        except (ValueError, KeyError, TypeError, OSError):
+            continue  # a frame being written, or one of an older format: the others tell the pace
+    return len(frames), seconds
+
+
 def capture_pace(plan: Plan) -> str | None:
     """What the frames already captured in the work folder say of this machine's pace (each frame's sidecar records
     its GL and path-tracing seconds), and the capture's time left at that pace, beside the plan's estimate from the
@@ -96,23 +109,34 @@ def capture_pace(plan: Plan) -> str | None:
     import statistics
 
     where = plan.capture_dir
-    frames = sorted((where / "frames").glob("*.json")) if (where / "manifest.json").is_file() else []
-    seconds = []
-    for f in frames:
-        try:
-            s = json.loads(f.read_text()).get("seconds") or {}
-            seconds.append(float(s["gl"]) + float(s["gt"]))
-        except (ValueError, KeyError, TypeError, OSError):
-            continue  # a frame being written, or one of an older format: the others tell the pace
-    left = plan.capture.frames - len(frames)
+    count, seconds = _frame_seconds(where, lambda info: float(info["seconds"]["gl"]) + float(info["seconds"]["gt"]))
+    left = plan.capture.frames - count
     if not seconds or left <= 0:
         return None
     per = statistics.median(seconds[-PACE_FRAMES:])
     planned = plan.stages[0].seconds / plan.capture.frames
-    return (f"capture so far: {len(frames)} of {plan.capture.frames} frames in {where}, {per:.1f} s a frame here "
+    return (f"capture so far: {count} of {plan.capture.frames} frames in {where}, {per:.1f} s a frame here "
             f"(median of GL + path tracing, the last {min(len(seconds), PACE_FRAMES)} frames); the {left} left take "
             f"~{hms(left * per)} at that pace (the plan assumes {planned:.1f} s, from the costs measured in "
             f"diviewer/build/costs.py)")
+
+
+def refine_pace(plan: Plan) -> str | None:
+    """As `capture_pace`, for the refinement of the capture (each refined frame's sidecar records its seconds);
+    None without a ``refine`` stage, before its first frame or once it is complete."""
+    import statistics
+
+    stage = next((s for s in plan.stages if s.name == "refine"), None)
+    if stage is None:
+        return None
+    count, seconds = _frame_seconds(plan.data, lambda info: info["refined"]["seconds"])
+    left = plan.capture.frames - count
+    if not seconds or left <= 0:
+        return None
+    per = statistics.median(seconds[-PACE_FRAMES:])
+    return (f"refine so far: {count} of {plan.capture.frames} frames in {plan.data}, {per:.1f} s a frame here "
+            f"(median, the last {min(len(seconds), PACE_FRAMES)} frames); the {left} left take ~{hms(left * per)} at "
+            f"that pace (the plan assumes {stage.seconds / plan.capture.frames:.1f} s)")
 
 
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> dict[str, Any]:

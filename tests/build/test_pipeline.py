@@ -478,6 +478,28 @@ def test_a_recipe_that_refines_its_capture_plans_the_capture_at_the_lower_count_
     assert "refine_spp" not in plan_key(plain) and plain.data == plain.capture_dir and plain.refine_spp is None
 
 
+def test_a_refinement_under_way_tells_this_machines_pace(tmp_path):
+    """The frames refined so far (each sidecar's ``refined.seconds``) give the refinement's pace and its time left,
+    listed after the capture's; a plan without a refine stage says nothing of it."""
+    from diviewer.build.pipeline import measured_pace, refine_pace
+    from diviewer.build.plan import hms
+
+    (tmp_path / "r.toml").write_text(_refining(TINY_RECIPE, 2, 8))
+    plan = make_plan("cornell", load_recipe(tmp_path / "r.toml"), tmp_path / "w", machine=CPU)
+    assert refine_pace(plan) is None  # nothing refined yet
+    frames = plan.data / "frames"
+    frames.mkdir(parents=True)
+    (plan.data / "manifest.json").write_text("{}")
+    for i, s in enumerate([3.0, 5.0, 40.0]):
+        (frames / f"{i:06d}.json").write_text(json.dumps({"index": i, "refined": {"seconds": s}}))
+    line = refine_pace(plan)
+    left = plan.capture.frames - 3
+    assert line.startswith(f"refine so far: 3 of {plan.capture.frames} frames") and "5.0 s a frame here" in line
+    assert f"the {left} left take ~{hms(left * 5.0)} at that pace" in line and line in measured_pace(plan)
+    (tmp_path / "t.toml").write_text(TINY_RECIPE)
+    assert refine_pace(make_plan("cornell", load_recipe(tmp_path / "t.toml"), tmp_path / "w", machine=CPU)) is None
+
+
 @pytest.mark.slow
 def test_build_a_tiny_scene_that_refines_its_capture(gl_context, tmp_path):
     """The pipeline with a refinement: the capture at 2 spp (made before, linked in: not rendered again), refined
