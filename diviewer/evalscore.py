@@ -3,10 +3,11 @@
 What ``eval`` and ``bench`` report for every split of an evaluation set: MSE, PSNR and SSIM on linear
 radiance and tone-mapped (diviewer.metrics.tonemap at the scene's exposure), HDR- and LDR-FLIP, the sums
 behind the pooled checkerboard ratio and bias, and the region metrics: tone-mapped PSNR and SSIM over the
-movable object's pixels (``object``) and over those of them that receive no direct light
-(``object_unlit``: the GL direct light's luminance, exposed by the scene's exposure, below ``UNLIT``).
-A region a frame does not have (the object off screen, or wholly lit) scores None for that frame and the
-aggregate counts the frames that had it.
+movable object's pixels (``object``), over those of them that receive no direct light (``object_unlit``: the GL
+direct light's luminance, exposed by the scene's exposure, below ``UNLIT``), and over the whole frame's pixels
+that receive direct light (``lit``) and those that do not (``shade``: lit by bounced light alone, where a
+network's indirect light is the whole image). A region a frame does not have (the object off screen, a frame
+wholly lit or wholly in shade) scores None for that frame and the aggregate counts the frames that had it.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 EVAL_KEYS = KEYS + ("flip_hdr", "flip_ldr")
 EQUIVALENT_BY = ("psnr_tm", "psnr", "flip_ldr")
 """Metrics the equivalent sample count is read from; the first is the headline (tables, targets)."""
-REGIONS = ("object", "object_unlit")
+REGIONS = ("object", "object_unlit", "lit", "shade")
 REGION_KEYS = tuple(f"{k}_{r}" for r in REGIONS for k in ("psnr_tm", "ssim_tm"))
 UNLIT = 1e-3
 """A pixel receives no direct light when its GL direct luminance times the exposure is below this (the
@@ -56,26 +57,27 @@ def score_frame(image: np.ndarray, truth: np.ndarray, exposure: float, mask: np.
     return s
 
 
-def regions(frame: dict[str, np.ndarray], exposure: float) -> dict[str, np.ndarray] | None:
-    """The frame's region masks (H, W) bool, or None when the evaluation set has no object mask."""
-    if "object" not in frame:
-        return None
-    obj = np.asarray(frame["object"])
-    obj = (obj[..., 0] if obj.ndim == 3 else obj) > 0.5
+def regions(frame: dict[str, np.ndarray], exposure: float) -> dict[str, np.ndarray]:
+    """The frame's region masks (H, W) bool: ``lit`` and ``shade`` always, the object's two where the evaluation
+    set has an object mask."""
     lum = np.asarray(frame["direct"], dtype=np.float64) @ LUMINANCE
-    return {"object": obj, "object_unlit": obj & (lum * exposure < UNLIT)}
+    dark = lum * exposure < UNLIT
+    out = {}
+    if "object" in frame:
+        obj = np.asarray(frame["object"])
+        obj = (obj[..., 0] if obj.ndim == 3 else obj) > 0.5
+        out = {"object": obj, "object_unlit": obj & dark}
+    return {**out, "lit": ~dark, "shade": dark}
 
 
 def score_frame_regions(image: np.ndarray, frame: dict[str, np.ndarray], exposure: float,
                         mask: np.ndarray) -> dict:
     """``score_frame`` against ``frame["pt"]``, plus the region metrics and each region's pixel count."""
     s = score_frame(image, frame["pt"], exposure, mask, frame["direct"])
-    masks = regions(frame, exposure)
-    if masks:
-        a, b = tonemap(image, exposure), tonemap(frame["pt"], exposure)
-        for name, m in masks.items():
-            s[f"psnr_tm_{name}"], s[f"ssim_tm_{name}"] = masked_psnr(a, b, m), masked_ssim(a, b, m)
-            s[f"pixels_{name}"] = int(m.sum())
+    a, b = tonemap(image, exposure), tonemap(frame["pt"], exposure)
+    for name, m in regions(frame, exposure).items():
+        s[f"psnr_tm_{name}"], s[f"ssim_tm_{name}"] = masked_psnr(a, b, m), masked_ssim(a, b, m)
+        s[f"pixels_{name}"] = int(m.sum())
     return s
 
 

@@ -355,7 +355,8 @@ def format_tables(result: dict) -> list[str]:
              f"tone-mapped; eq. spp from PSNR tm; checker = high-frequency power over flat, shadow-edge-free regions "
              f"/ the reference's; bias = summed radiance / the reference's - 1 (indirect: minus GL direct light); "
              f"object / unlit = tone-mapped PSNR and SSIM over the moving object's pixels / those without direct "
-             f"light; < direct = share of frames below direct light alone (whole frame / object / unlit)"]
+             f"light; lit / shade = the same over the frame's pixels with / without direct light; < direct = share "
+             f"of frames below direct light alone (whole frame / object / unlit / lit / shade)"]
     for split, why in result.get("left_out", {}).items():
         lines.append(f"{split}: left out ({why})")
     for split, why in result.get("not_scored", {}).items():
@@ -368,11 +369,12 @@ def format_tables(result: dict) -> list[str]:
                      + (f"; frames scored: {', '.join(map(str, r['frames_scored']))}" if "frames_scored" in r else ""))
         lines.append(f"{'method':<34} {'PSNR':>6} {'SSIM':>6} {'PSNR tm':>7} {'SSIM tm':>7} {'FLIP-HDR':>8} "
                      f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7} {'bias':>7} {'indirect':>8} {'object':>13} "
-                     f"{'unlit':>13} {'< direct':>14}")
+                     f"{'unlit':>13} {'lit':>13} {'shade':>13} {'< direct':>19}")
         for m in r["methods"].values():
             eq = m["equivalent_spp"][EQUIVALENT_BY[0]]
             obj = f"{_cell(m, 'psnr_tm_object', '.2f')}/{_cell(m, 'ssim_tm_object', '.3f')}"
-            unlit = f"{_cell(m, 'psnr_tm_object_unlit', '.2f')}/{_cell(m, 'ssim_tm_object_unlit', '.3f')}"
+            unlit, lit, shade = (f"{_cell(m, f'psnr_tm_{r}', '.2f')}/{_cell(m, f'ssim_tm_{r}', '.3f')}"
+                                 for r in ("object_unlit", "lit", "shade"))
             below = m.get("below_direct")
             below = "/".join(f"{100 * below[k]['share']:.0f}%" if k in below else "-" for k in ("frame", *REGIONS)) \
                 if below is not None else ""
@@ -380,7 +382,7 @@ def format_tables(result: dict) -> list[str]:
                          f"{m['psnr_tm']['mean']:7.2f} {m['ssim_tm']['mean']:7.4f} {m['flip_hdr']['mean']:8.4f} "
                          f"{m['flip_ldr']['mean']:8.4f} {eq['text'] if eq else '-':>8} {_num(m['checkerboard']):>7} "
                          f"{_pct(m.get('bias')):>7} {_pct(m.get('bias_indirect')):>8} {obj:>13} {unlit:>13} "
-                         f"{below:>14}")
+                         f"{lit:>13} {shade:>13} {below:>19}")
         for name, why in r.get("refused", {}).items():
             lines.append(f"{why['label']:<34} refused by the runtime at this shape: {why['reason']}")
     return lines

@@ -203,7 +203,8 @@ def test_regions_and_below_direct_share_on_a_synthetic_frame():
     masks = regions(frame, exposure=1.0)
     assert masks["object"].sum() == 64 and masks["object_unlit"].sum() == 32
     assert not masks["object_unlit"][:8].any()
-    assert regions({"direct": direct, "pt": truth}, 1.0) is None  # no mask: no regions
+    assert masks["lit"][:8].all() and not masks["lit"][8:].any() and (masks["shade"] == ~masks["lit"]).all()
+    assert set(regions({"direct": direct, "pt": truth}, 1.0)) == {"lit", "shade"}  # no object mask: the frame's two
     good = truth.copy()
     good[masks["object_unlit"]] += 0.01  # small error only in the object's shade
     row = score_frame_regions(good, frame, 1.0, np.ones((16, 16), bool))
@@ -214,6 +215,8 @@ def test_regions_and_below_direct_share_on_a_synthetic_frame():
     share = below_direct([row, bad], [row_direct, row_direct])
     assert share["frame"] == {"share": 0.0, "frames": 2}
     assert share["object_unlit"] == {"share": 0.5, "frames": 2}
+    assert row["pixels_shade"] == 128 and row["psnr_tm_lit"] == math.inf  # the error is in the shade only
+    assert row_direct["psnr_tm_shade"] < row["psnr_tm_shade"] < math.inf and share["shade"]["share"] == 0.0
     assert "object" not in below_direct([dict(row, psnr_tm_object=None)], [row_direct])  # a frame without the region
 
 

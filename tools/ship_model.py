@@ -30,7 +30,8 @@ from diviewer import imageio  # noqa: E402
 from diviewer.build.pipeline import write_model_card  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 
-SCORES = ("psnr_tm", "ssim_tm", "psnr_tm_object", "psnr_tm_object_unlit", "ssim_tm_object_unlit")
+SCORES = ("psnr_tm", "ssim_tm", "psnr_tm_object", "psnr_tm_object_unlit", "ssim_tm_object_unlit", "psnr_tm_shade",
+          "ssim_tm_shade")
 """The per-split means a card keeps of each model."""
 
 
