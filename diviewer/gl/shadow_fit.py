@@ -90,21 +90,17 @@ def light_uniforms(prog, light, shadow: dict | None, s: RenderSettings, face_siz
     set_uniform(prog, "u_bias", float(s.bias))
     set_uniform(prog, "u_slope_bias", float(s.slope_bias))
     set_uniform(prog, "u_normal_offset", float(s.normal_offset))
-    if isinstance(light, DirectionalLight):
-        set_uniform(prog, "u_light_color", tuple(float(c) * light.irradiance for c in light.color))
-        set_uniform(prog, "u_light_dir", tuple(float(x) for x in light.direction))
-        if shadow is not None:
-            shadow["map"].use(location=4)
-            set_uniform(prog, "u_shadow_map", 4)
-            set_uniform(prog, "m_light", shadow["m_light"])
-            set_uniform(prog, "u_texel_world", float(shadow["texel_world"]))
-            set_uniform(prog, "u_depth_range", float(shadow["depth_range"]))
-    else:
-        assert isinstance(light, PointLight)
-        set_uniform(prog, "u_light_color", tuple(float(c) * light.intensity for c in light.color))
-        set_uniform(prog, "u_light_pos", tuple(float(x) for x in light.position))
-        if shadow is not None:
-            shadow["map"].use(location=4)
-            set_uniform(prog, "u_shadow_atlas", 4)
-            set_uniform(prog, "m_faces", shadow["faces"])
-            set_uniform(prog, "u_face_size", float(face_size))
+    sun = isinstance(light, DirectionalLight)
+    assert sun or isinstance(light, PointLight)
+    power = light.irradiance if sun else light.intensity
+    set_uniform(prog, "u_light_color", tuple(float(c) * power for c in light.color))
+    name, where = ("u_light_dir", light.direction) if sun else ("u_light_pos", light.position)
+    set_uniform(prog, name, tuple(float(x) for x in where))
+    if shadow is None:
+        return
+    shadow["map"].use(location=4)
+    lookup = ({"u_shadow_map": 4, "m_light": shadow["m_light"], "u_texel_world": float(shadow["texel_world"]),
+               "u_depth_range": float(shadow["depth_range"])} if sun else
+              {"u_shadow_atlas": 4, "m_faces": shadow["faces"], "u_face_size": float(face_size)})
+    for key, value in lookup.items():
+        set_uniform(prog, key, value)
