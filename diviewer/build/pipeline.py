@@ -56,9 +56,9 @@ def finished_stages(plan: Plan) -> set[str]:
 
 
 def measured_pace(plan: Plan) -> list[str]:
-    """What the work folder's capture, refinement and trainings under way say of this machine's pace, and their time left at
-    it, beside the plan's estimates from the costs measured elsewhere: a line each (none before they start or
-    once they are done)."""
+    """What the work folder's capture, refinement and trainings under way say of this machine's pace, and their time
+    left at it, beside the plan's estimates from the costs measured elsewhere: a line each (none before they start
+    or once they are done)."""
     lines = [capture_pace(plan), refine_pace(plan)]
     stages = {s.name: s for s in plan.stages}
     for k in plan.ks:

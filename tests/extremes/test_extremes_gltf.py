@@ -223,7 +223,8 @@ def test_oversized_texture_names_itself_and_how_to_downscale(tmp_path):
 KEYS = ["nodes", "children", "mesh", "matrix", "rotation", "scale", "translation", "accessors", "bufferView",
         "byteOffset", "byteStride", "byteLength", "count", "type", "componentType", "normalized", "indices",
         "material", "attributes", "POSITION", "NORMAL", "TEXCOORD_0", "uri", "source", "sampler", "index",
-        "alphaMode", "alphaCutoff", "doubleSided", "baseColorFactor", "baseColorTexture", "emissiveFactor", "scene", "mode"]
+        "alphaMode", "alphaCutoff", "doubleSided", "baseColorFactor", "baseColorTexture", "emissiveFactor", "scene",
+        "mode"]
 
 leaves = (st.none() | st.booleans() | st.integers(-3, 8) | st.sampled_from([-1, 2 ** 31, 2 ** 32 + 1, 10 ** 12, 5126, 5123])
           | st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from(["MASK", "VEC3", "SCALAR", "tex.png",

@@ -135,8 +135,9 @@ def main() -> None:
     w, h = (int(x) for x in args.res.lower().split("x"))
     ctx = create_context("egl")
     result = {"scene": args.scene, "res": [w, h], **differences(ctx, scene, cameras(scene, args.path_steps), w, h)}
-    print(f"{len(result['cameras'])} cameras at {w}x{h}: pixels changed by culling "
-          f"{100 * result['changed_share_mean']:.4f} % (mean), {100 * result['changed_share_max']:.4f} % (worst camera)")
+    mean, worst = 100 * result["changed_share_mean"], 100 * result["changed_share_max"]
+    print(f"{len(result['cameras'])} cameras at {w}x{h}: pixels changed by culling {mean:.4f} % (mean), "
+          f"{worst:.4f} % (worst camera)")
     for m, n in sorted(result["changed_pixels_per_material"].items(), key=lambda kv: -kv[1]):
         print(f"  {m:14s} {n:7d} px  {100 * n / result['pixels']:.4f} %")
     if args.time:
