@@ -27,20 +27,24 @@ cp assets/recipes/sponza_walk256.toml "$REFINED/sponza.toml.part" && mv "$REFINE
 [ -e "$REFINED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$REFINED/data"
 
 stage() { echo "[sponza_chain] $(date -u '+%F %T') $*"; }
+# A stage that fails is run once more after a minute (it resumes where it stopped): an unattended chain should not
+# wait for the next session over a passing fault (on 2026-11-28 a build crashed when the code was edited under it,
+# its process holding one module of the old code and one of the new). A second failure stops the chain.
+again() { "$@" || { stage "failed (exit $?), once more in 60 s: $*"; sleep 60; "$@"; }; }
 
 stage "build, K = 8, 64 spp"
-diviewer build --scene sponza --recipe "$WORK/sponza.toml" --evalset assets/evalsets/sponza --work "$WORK" \
+again diviewer build --scene sponza --recipe "$WORK/sponza.toml" --evalset assets/evalsets/sponza --work "$WORK" \
   --ship "$WORK/ship" --ks 8
 stage "full evaluation set"
-diviewer evalset --scene sponza --out "$WORK/evalset"
+again diviewer evalset --scene sponza --out "$WORK/evalset"
 if [ ! -f "$WORK/eval_full_k8.json" ]; then
   stage "the 64-spp K = 8 model on the full evaluation set"
-  diviewer eval --evalset "$WORK/evalset" --model "$WORK/ship/sponza.onnx" --out "$WORK/eval_full_k8.json"
+  again diviewer eval --evalset "$WORK/evalset" --model "$WORK/ship/sponza.onnx" --out "$WORK/eval_full_k8.json"
 fi
 REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --evalset "$WORK/evalset" --work "$REFINED"
                --ship "$REFINED/ship")
 stage "build on the 256-spp truth: the refinement, K = 8 and 16"
-"${REFINED_BUILD[@]}" --ks 8 16
+again "${REFINED_BUILD[@]}" --ks 8 16
 stage "build on the 256-spp truth: the whole ladder"
-"${REFINED_BUILD[@]}"
+again "${REFINED_BUILD[@]}"
 stage "done"
