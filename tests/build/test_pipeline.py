@@ -110,7 +110,14 @@ def test_the_estimate_follows_the_measured_costs():
     # cornell's 4,800 train frames at batch 4, 40 epochs: the 48,000 steps the shipped model took
     assert steps == 48000
     # the measured set, made in two passes, at the one pass's share (diviewer.reference.split_path)
-    assert est["evalset"] == pytest.approx(costs.EVALSET_MEASURED["seconds"] * px * costs.ONE_PASS_SHARE, rel=1e-3)
+    cornell = costs.EVALSET_MEASURED["cornell"]
+    assert est["evalset"] == pytest.approx(cornell["seconds"] * px * costs.ONE_PASS_SHARE, rel=1e-3)
+    # each scene's sets at its own measured ratio: Sponza's, measured in one pass, is its time a frame
+    sponza = costs.EVALSET_MEASURED["sponza"]
+    ladder = tuple(sponza["ladder"])
+    assert costs.evalset_seconds("cpu", "sponza", 72, 228, 128, 1024, ladder) == pytest.approx(72 * sponza["seconds"])
+    assert costs.evalset_seconds("cpu", "elsewhere", 7, 64, 64, 256, (1, 4)) == pytest.approx(
+        costs.evalset_seconds("cpu", "sponza", 7, 64, 64, 256, (1, 4)))  # a scene not measured: costed as Sponza
     on_gpu = make_plan("cornell", load_recipe("cornell"), Path("w"), machine=CUDA)
     assert on_gpu.seconds < plan.seconds / 4
     # the direct light over each pixel's area renders the GL light again at s x s the pixels
