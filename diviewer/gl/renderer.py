@@ -259,7 +259,8 @@ class Renderer:
             gmesh, mat_name, model, _ = items[i]
             mat = self.scene.materials[mat_name]
             masked = mat.is_masked
-            (self.ctx.enable if cull_back and not mat.double_sided else self.ctx.disable)(moderngl.CULL_FACE)
+            if cull_back:  # the other passes draw both faces: face culling is never on there
+                (self.ctx.disable if mat.double_sided else self.ctx.enable)(moderngl.CULL_FACE)
             if masked not in progs:
                 progs[masked] = self.shaders.program(file, {**defines, "ALPHA_TEST": 1} if masked else defines)
                 setup(progs[masked])
@@ -281,7 +282,8 @@ class Renderer:
                 set_uniform(prog, "u_alpha_cutoff", float(mat.alpha_cutoff))
             gmesh.vao(prog).render(moderngl.TRIANGLES)
         self.ctx.front_face = "ccw"
-        self.ctx.disable(moderngl.CULL_FACE)
+        if cull_back:
+            self.ctx.disable(moderngl.CULL_FACE)
 
     def _gbuffer_pass(self, frame: "FrameView") -> None:
         ctx, config, view, proj = self.ctx, frame.config, frame.view, frame.proj
