@@ -105,14 +105,18 @@ def _frame_seconds(folder: Path, seconds_of: Callable[[dict], float]) -> tuple[i
 def capture_pace(plan: Plan) -> str | None:
     """What the frames already captured in the work folder say of this machine's pace (each frame's sidecar records
     its GL and path-tracing seconds), and the capture's time left at that pace, beside the plan's estimate from the
-    measured costs (another machine's); None where no frame is there or the capture is complete."""
+    measured costs (another machine's); once every frame is there, that a run renders none (the plan's estimate
+    still counts the stage until a build has recorded it); None where no frame is there."""
     import statistics
 
     where = plan.capture_dir
     count, seconds = _frame_seconds(where, lambda info: float(info["seconds"]["gl"]) + float(info["seconds"]["gt"]))
     left = plan.capture.frames - count
-    if not seconds or left <= 0:
+    if not seconds:
         return None
+    if left <= 0:
+        return (f"capture: all {plan.capture.frames} frames already in {where}; a run checks its settings against "
+                f"the recipe's and renders none")
     per = statistics.median(seconds[-PACE_FRAMES:])
     planned = plan.stages[0].seconds / plan.capture.frames
     return (f"capture so far: {count} of {plan.capture.frames} frames in {where}, {per:.1f} s a frame here "

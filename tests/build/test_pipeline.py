@@ -165,7 +165,8 @@ def test_an_evaluation_set_made_before_costs_nothing_and_brings_its_own_settings
 
 def test_a_capture_under_way_tells_this_machines_pace(tmp_path):
     """The frames captured so far (their sidecars' GL and path-tracing seconds) give this machine's pace and the
-    capture's time left at it; nothing is said before the first frame or once every frame is there."""
+    capture's time left at it; nothing is said before the first frame, and once every frame is there, that a run
+    renders none."""
     from diviewer.build.pipeline import capture_pace
 
     plan = make_plan("cornell", load_recipe("cornell"), tmp_path, machine=CPU)
@@ -183,7 +184,8 @@ def test_a_capture_under_way_tells_this_machines_pace(tmp_path):
     assert f"the {left} left take ~{hms(left * 12.0)} at that pace" in line
     import dataclasses
     done = dataclasses.replace(plan, capture=dataclasses.replace(plan.capture, frames=4))
-    assert capture_pace(done) is None  # every frame there: nothing left to pace
+    assert capture_pace(done) == (f"capture: all 4 frames already in {plan.data}; a run checks its settings against "
+                                  f"the recipe's and renders none")  # every frame there: nothing left to pace
 
 
 def test_a_training_under_way_tells_this_machines_pace(tmp_path):
