@@ -327,7 +327,8 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
         if name in models:
             net = models[name]
             m.update(kind=net.meta.get("kind", "neural"), label=_model_label(net.meta, net.path),
-                     model=str(net.path), provider=net.provider, below_direct=below_direct(rows[name], rows["direct"]),
+                     model=str(net.path), checkpoint_sha256=net.meta.get("checkpoint_sha256"),
+                     provider=net.provider, below_direct=below_direct(rows[name], rows["direct"]),
                      inference_ms={"median": float(np.median(times[name]))})
         elif name == "direct":
             m.update(kind="direct", label="direct light only (GL)")

@@ -42,7 +42,9 @@ def split_scores(ev: dict, method: str, path: Path) -> dict:
         if method not in split["methods"]:
             raise DiviewerError(f"no method '{method}' in split {name}", path=path, field="splits")
         row = split["methods"][method]
-        out[name] = {q: round(row[q]["mean"], 3) for q in SCORES if q in row and row[q]["mean"] is not None}
+        # a region the split has none of (no moving object in the scene) is scored None: left out
+        out[name] = {q: round(row[q]["mean"], 3) for q in SCORES
+                     if isinstance(row.get(q), dict) and row[q]["mean"] is not None}
     return out
 
 
