@@ -192,7 +192,7 @@ def test_shards_render_their_own_frames_into_one_set_and_the_last_scores_it(eval
 def _models(tmp_path):
     scene = load_scene("cornell")
     any_shape = direct_times(tmp_path / "twice.onnx", 1.5, meta={**base_meta(scene.file_hash, "cornell"),
-                                                                 "multiple": 2})
+                                                                 "multiple": 2, "checkpoint_sha256": "c" * 64})
     square = direct_times(tmp_path / "square.onnx", 1.5, meta=base_meta(scene.file_hash, "cornell"))  # multiple 16
     return any_shape, square
 
@@ -221,6 +221,8 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
             assert m["psnr_tm_object"] is not None and m["psnr_tm_object"]["frames"] >= 1
         assert methods["pt_spp1"]["equivalent_spp"]["psnr_tm"]["text"] == "1"
         assert methods["twice"]["psnr"] == methods["twice_1"]["psnr"]
+        # which weights each row scored (tools/card_eval.py checks it): the card's checkpoint, None without one
+        assert methods["twice"]["checkpoint_sha256"] == "c" * 64 and methods["square"]["checkpoint_sha256"] is None
         below = methods["twice"]["below_direct"]
         assert below["frame"]["frames"] == 2 and 0 <= below["frame"]["share"] <= 1
         # Pooled bias: the model returns 1.5 x direct light, so its summed radiance is 1.5 x the direct light's.
