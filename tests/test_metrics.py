@@ -301,3 +301,12 @@ def test_ssim_budget_separates_the_level_from_the_shape():
     assert b["level_fixed"] == pytest.approx(1.0) and b["truth_smooth"] < b["level_fixed"]
     assert b["psnr_tm_level_fixed"] > 100 > 40 > b["psnr_tm"]
     assert b["level_fixed_smooth"] == pytest.approx(b["truth_smooth"])
+    assert "oracle" not in b  # no path-traced direct light stored: no oracle
+    # the oracle: the model's direct light plus the truth's exact indirect light; here the GL direct light misses a
+    # column of the path tracer's, which no indirect light can mend
+    pt_direct = direct.copy()
+    pt_direct[:, 11] = albedo[:, 11]
+    o = tool.budget(half, direct, truth + pt_direct - direct, albedo, 1.0, 2, truth_indirect=truth - direct)
+    assert o["psnr_tm_oracle"] < 40 and o["oracle"] < 1.0
+    exact = tool.budget(half, direct, truth, albedo, 1.0, 2, truth_indirect=truth - direct)
+    assert exact["oracle"] == pytest.approx(1.0) and exact["psnr_tm_oracle"] > 100

@@ -14,7 +14,12 @@ light (the image minus the model's direct-light input):
 - ``truth_smooth``: the truth's indirect light filtered alike: what a model right at every scale above the filter's,
   and smooth below it, would score.
 
-Beside them, the tone-mapped PSNR as scored and with the level fixed (``psnr_tm``, ``psnr_tm_level_fixed``).
+Beside them, the tone-mapped PSNR as scored and with the level fixed (``psnr_tm``, ``psnr_tm_level_fixed``). Where
+the set stores the path tracer's direct light of the truth's own paths (``pt_direct``: sets rendered since the
+one-pass truth of 2026-11-28), ``oracle`` and ``psnr_tm_oracle`` score the model's direct-light input plus the truth's
+exact indirect light (pt - pt_direct): the ceiling of any network that predicts the indirect light, which only the
+rasterizer's direct light (its shadow map, its sampling of each pixel) keeps below 1. A frame with no sunlight in
+view is exact there (PSNR inf): the oracle's mean PSNR is over the others, and ``oracle_exact_frames`` counts them.
 If ``level_fixed`` is far above ``ssim``, the level is wrong; if ``level_fixed_smooth`` is, the model's fine detail
 (noise, blotches) costs it; what is left between ``level_fixed_smooth`` and ``truth_smooth`` is the indirect light's
 shape at scales above the filter's. Measures only.
@@ -47,8 +52,9 @@ def smooth_indirect(indirect: np.ndarray, albedo: np.ndarray, radius: int, floor
 
 
 def budget(image: np.ndarray, direct: np.ndarray, truth: np.ndarray, albedo: np.ndarray, exposure: float,
-           radius: int) -> dict[str, float]:
-    """The four SSIMs of one frame (module doc), and the model's indirect light's sum over the truth's."""
+           radius: int, truth_indirect: np.ndarray | None = None) -> dict[str, float]:
+    """The four SSIMs of one frame (module doc), and the model's indirect light's sum over the truth's; with
+    ``truth_indirect`` (pt - pt_direct), the oracle's SSIM and PSNR too."""
     from diviewer.metrics import psnr, ssim, tonemap
 
     ind, ref = image - direct, truth - direct
@@ -56,14 +62,23 @@ def budget(image: np.ndarray, direct: np.ndarray, truth: np.ndarray, albedo: np.
     k = ref_total / total if total > 0 else 1.0
     score = lambda x: float(ssim(tonemap(x, exposure), tonemap(truth, exposure)))  # noqa: E731
     db = lambda x: float(psnr(tonemap(x, exposure), tonemap(truth, exposure)))  # noqa: E731
-    return {"ssim": score(image), "level_fixed": score(direct + k * ind),
+    oracle = {} if truth_indirect is None else {"oracle": score(np.maximum(direct + truth_indirect, 0.0)),
+                                                 "psnr_tm_oracle": db(np.maximum(direct + truth_indirect, 0.0))}
+    return {**oracle, "ssim": score(image), "level_fixed": score(direct + k * ind),
             "psnr_tm": db(image), "psnr_tm_level_fixed": db(direct + k * ind),
             "level_fixed_smooth": score(direct + smooth_indirect(k * ind, albedo, radius)),
             "truth_smooth": score(direct + smooth_indirect(ref, albedo, radius)),
             "indirect_ratio": total / ref_total if ref_total > 0 else None}
 
 
-KEYS = ("ssim", "level_fixed", "level_fixed_smooth", "truth_smooth", "psnr_tm", "psnr_tm_level_fixed")
+def _finite_mean(values: list[float]) -> float | None:
+    """The mean over the frames with an error (an exact oracle frame, PSNR inf, is counted apart)."""
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else None
+
+
+KEYS = ("ssim", "level_fixed", "level_fixed_smooth", "truth_smooth", "oracle", "psnr_tm", "psnr_tm_level_fixed",
+        "psnr_tm_oracle")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -95,11 +110,18 @@ def main(argv: list[str] | None = None) -> int:
                     f = crop_frame(frame, shape[0])
                     x = model_input(net, f, frame, area, i, shape[0])
                     y = run_model(net, x, scales.get(i), **stored_inputs(net, ev.entry(i), x))
-                    rows.append({"index": i, **budget(y, x["direct"], f["pt"], x["albedo"], ev.exposure, a.radius)})
+                    oracle = f["pt"] - f["pt_direct"] if "pt_direct" in f else None
+                    rows.append({"index": i, **budget(y, x["direct"], f["pt"], x["albedo"], ev.exposure, a.radius,
+                                                      oracle)})
                 key = split_key(split, shape, shapes)
-                splits[key] = {"mean": {k: float(np.mean([r[k] for r in rows])) for k in KEYS}, "frames": rows}
-                print(f"{name} {key}: " + ", ".join(f"{k} {v:.3f}" for k, v in splits[key]["mean"].items()),
-                      flush=True)
+                splits[key] = {"mean": {k: _finite_mean([r[k] for r in rows]) for k in KEYS if k in rows[0]},
+                               "frames": rows}
+                if "psnr_tm_oracle" in rows[0]:  # frames with no sunlight in view: GL and path tracer agree exactly
+                    splits[key]["oracle_exact_frames"] = sum(1 for r in rows if r["psnr_tm_oracle"] == float("inf"))
+                print(f"{name} {key}: " + ", ".join(f"{k} {'-' if v is None else format(v, '.3f')}"
+                                                    for k, v in splits[key]["mean"].items())
+                      + (f" ({splits[key]['oracle_exact_frames']} frames exact: no sunlight in view)"
+                         if "oracle_exact_frames" in splits[key] else ""), flush=True)
     if a.out:
         from diviewer.outputs import write_json
 
