@@ -137,6 +137,22 @@ def test_equivalent_spp_from_psnr_and_non_monotone_ladders():
         metrics.equivalent_spp([4, 1], [1.0, 0.5], 0.7)
 
 
+def test_equivalent_spp_is_read_per_metric_and_ssim_as_its_error():
+    """`equivalent` reads every metric of EQUIVALENT_BY off the ladder; SSIM through 1 - SSIM, so a model whose SSIM
+    lies between two rungs gets a count between them, and a perfect one none."""
+    from diviewer.evalscore import EQUIVALENT_BY, equivalent
+
+    ladder_spp = [1, 4, 16, 64, 256]
+    row = lambda p, q, f: {"psnr_tm": {"mean": p}, "psnr": {"mean": p + 20}, "flip_ldr": {"mean": f},  # noqa: E731
+                           "ssim_tm": {"mean": q}}
+    ladder = [row(20.0 + 6 * i, 1.0 - 0.8 / 4 ** (i / 2), 0.4 / 2 ** i) for i in range(5)]  # 1 - SSIM ~ 1/sqrt(spp)
+    eq = equivalent(row(35.0, 1.0 - 0.8 / 32 ** 0.5, 0.4 / 8), ladder_spp, ladder)
+    assert set(eq) == set(EQUIVALENT_BY) and "ssim_tm" in eq
+    assert eq["psnr_tm"]["spp"] == pytest.approx(32.0) and eq["ssim_tm"]["spp"] == pytest.approx(32.0)
+    assert eq["flip_ldr"]["spp"] == pytest.approx(64.0)  # FLIP 0.4 / sqrt(spp): 0.05 is the 64-spp rung
+    assert equivalent(row(35.0, 1.0, 0.05), ladder_spp, ladder)["ssim_tm"] is None  # a perfect SSIM: no count
+
+
 def test_pooled_bias_is_the_signed_relative_error_of_the_summed_radiance():
     from diviewer.evaluate import aggregate, pooled_bias, score_frame
 
