@@ -5,7 +5,7 @@
 #      scores on the shipped compact evaluation set, the pick and the ship to runs/sponza/ship): the first model,
 #      done and shipped as assets/models/sponza.onnx on 2026-11-28 (on a machine with runs/sponza, every stage skips);
 #   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp) and that model's
-#      scores on it;
+#      scores on it: done on 2026-11-28 (docs/sponza.md);
 #   3. the ladder on a 256-spp truth (assets/recipes/sponza_walk256.toml: sponza.toml with `[capture] refine_from =
 #      64`), in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, 8-12 h),
 #      then K = 8 and 16, picked on the full evaluation set and shipped to runs/sponza256/ship, then K = 32 (trained,
