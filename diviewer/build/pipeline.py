@@ -107,8 +107,6 @@ def capture_pace(plan: Plan) -> str | None:
     its GL and path-tracing seconds), and the capture's time left at that pace, beside the plan's estimate from the
     measured costs (another machine's); once every frame is there, that a run renders none (the plan's estimate
     still counts the stage until a build has recorded it); None where no frame is there."""
-    import statistics
-
     where = plan.capture_dir
     count, seconds = _frame_seconds(where, lambda info: float(info["seconds"]["gl"]) + float(info["seconds"]["gt"]))
     left = plan.capture.frames - count
@@ -117,19 +115,24 @@ def capture_pace(plan: Plan) -> str | None:
     if left <= 0:
         return (f"capture: all {plan.capture.frames} frames already in {where}; a run checks its settings against "
                 f"the recipe's and renders none")
-    per = statistics.median(seconds[-PACE_FRAMES:])
     planned = plan.stages[0].seconds / plan.capture.frames
-    return (f"capture so far: {count} of {plan.capture.frames} frames in {where}, {per:.1f} s a frame here "
-            f"(median of GL + path tracing, the last {min(len(seconds), PACE_FRAMES)} frames); the {left} left take "
-            f"~{hms(left * per)} at that pace (the plan assumes {planned:.1f} s, from the costs measured in "
-            f"diviewer/build/costs.py)")
+    return (f"capture so far: {count} of {plan.capture.frames} frames in {where}, "
+            f"{_pace(seconds, left, 'median of GL + path tracing, ')} (the plan assumes {planned:.1f} s, from the "
+            f"costs measured in diviewer/build/costs.py)")
+
+
+def _pace(seconds: list[float], left: int, what: str = "median, ") -> str:
+    """A frame's time here (the median of the last ``PACE_FRAMES``) and the ``left`` frames' time at it, in words."""
+    import statistics
+
+    per = statistics.median(seconds[-PACE_FRAMES:])
+    return (f"{per:.1f} s a frame here ({what}the last {min(len(seconds), PACE_FRAMES)} frames); the {left} left "
+            f"take ~{hms(left * per)} at that pace")
 
 
 def refine_pace(plan: Plan) -> str | None:
     """As `capture_pace`, for the refinement of the capture (each refined frame's sidecar records its seconds);
     None without a ``refine`` stage, before its first frame or once it is complete."""
-    import statistics
-
     stage = next((s for s in plan.stages if s.name == "refine"), None)
     if stage is None:
         return None
@@ -137,10 +140,8 @@ def refine_pace(plan: Plan) -> str | None:
     left = plan.capture.frames - count
     if not seconds or left <= 0:
         return None
-    per = statistics.median(seconds[-PACE_FRAMES:])
-    return (f"refine so far: {count} of {plan.capture.frames} frames in {plan.data}, {per:.1f} s a frame here "
-            f"(median, the last {min(len(seconds), PACE_FRAMES)} frames); the {left} left take ~{hms(left * per)} at "
-            f"that pace (the plan assumes {stage.seconds / plan.capture.frames:.1f} s)")
+    return (f"refine so far: {count} of {plan.capture.frames} frames in {plan.data}, {_pace(seconds, left)} "
+            f"(the plan assumes {stage.seconds / plan.capture.frames:.1f} s)")
 
 
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> dict[str, Any]:

@@ -40,8 +40,9 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
     return float("inf") if m == 0 else float(10 * np.log10(1.0 / m))
 
 
-def _mean(values: list[float]) -> float | None:
-    """Mean over the frames with an error (an exact frame, PSNR inf, is counted apart); None when there are none."""
+def finite_mean(values: list[float]) -> float | None:
+    """Mean over the frames with an error (an exact frame, PSNR inf, is counted apart); None when there are none
+    (tools/experiments/ssim_budget.py takes its oracle's means with it too)."""
     finite = [v for v in values if np.isfinite(v)]
     return float(np.mean(finite)) if finite else None
 
@@ -100,8 +101,8 @@ def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | 
                     if m is not None and m.any():
                         unlit[name].append(masked_psnr(t, ref, m))
             out[split_key(split, shape, shapes)] = {
-                name: {"psnr_tm": _mean(rows[name]), "frames": len(rows[name]), "psnr_tm_object_unlit":
-                       _mean(unlit[name]), "frames_object_unlit": len(unlit[name]),
+                name: {"psnr_tm": finite_mean(rows[name]), "frames": len(rows[name]), "psnr_tm_object_unlit":
+                       finite_mean(unlit[name]), "frames_object_unlit": len(unlit[name]),
                        "frames_exact": sum(1 for v in rows[name] if v == float("inf")),
                        "frames_object_unlit_exact": sum(1 for v in unlit[name] if v == float("inf"))}
                 for name in rows}

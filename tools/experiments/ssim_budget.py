@@ -33,6 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from direct_ceiling import finite_mean  # noqa: E402  (an exact oracle frame, PSNR inf, is counted apart)
+
 
 def box_filter(x: np.ndarray, radius: int) -> np.ndarray:
     """(H, W, C) mean over a (2 radius + 1)^2 window, edges padded by replication (same size out)."""
@@ -62,19 +65,13 @@ def budget(image: np.ndarray, direct: np.ndarray, truth: np.ndarray, albedo: np.
     k = ref_total / total if total > 0 else 1.0
     score = lambda x: float(ssim(tonemap(x, exposure), tonemap(truth, exposure)))  # noqa: E731
     db = lambda x: float(psnr(tonemap(x, exposure), tonemap(truth, exposure)))  # noqa: E731
-    oracle = {} if truth_indirect is None else {"oracle": score(np.maximum(direct + truth_indirect, 0.0)),
-                                                 "psnr_tm_oracle": db(np.maximum(direct + truth_indirect, 0.0))}
+    best = None if truth_indirect is None else np.maximum(direct + truth_indirect, 0.0)
+    oracle = {} if best is None else {"oracle": score(best), "psnr_tm_oracle": db(best)}
     return {**oracle, "ssim": score(image), "level_fixed": score(direct + k * ind),
             "psnr_tm": db(image), "psnr_tm_level_fixed": db(direct + k * ind),
             "level_fixed_smooth": score(direct + smooth_indirect(k * ind, albedo, radius)),
             "truth_smooth": score(direct + smooth_indirect(ref, albedo, radius)),
             "indirect_ratio": total / ref_total if ref_total > 0 else None}
-
-
-def _finite_mean(values: list[float]) -> float | None:
-    """The mean over the frames with an error (an exact oracle frame, PSNR inf, is counted apart)."""
-    finite = [v for v in values if np.isfinite(v)]
-    return float(np.mean(finite)) if finite else None
 
 
 KEYS = ("ssim", "level_fixed", "level_fixed_smooth", "truth_smooth", "oracle", "psnr_tm", "psnr_tm_level_fixed",
@@ -114,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
                     rows.append({"index": i, **budget(y, x["direct"], f["pt"], x["albedo"], ev.exposure, a.radius,
                                                       oracle)})
                 key = split_key(split, shape, shapes)
-                splits[key] = {"mean": {k: _finite_mean([r[k] for r in rows]) for k in KEYS if k in rows[0]},
+                splits[key] = {"mean": {k: finite_mean([r[k] for r in rows]) for k in KEYS if k in rows[0]},
                                "frames": rows}
                 if "psnr_tm_oracle" in rows[0]:  # frames with no sunlight in view: GL and path tracer agree exactly
                     splits[key]["oracle_exact_frames"] = sum(1 for r in rows if r["psnr_tm_oracle"] == float("inf"))
