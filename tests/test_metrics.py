@@ -324,5 +324,7 @@ def test_ssim_budget_separates_the_level_from_the_shape():
     pt_direct[:, 11] = albedo[:, 11]
     o = tool.budget(half, direct, truth + pt_direct - direct, albedo, 1.0, 2, truth_indirect=truth - direct)
     assert o["psnr_tm_oracle"] < 40 and o["oracle"] < 1.0
+    # the truth's level is its exact indirect light's, not the truth minus the model's direct (the missed column)
+    assert o["indirect_ratio"] == pytest.approx(0.5)
     exact = tool.budget(half, direct, truth, albedo, 1.0, 2, truth_indirect=truth - direct)
     assert exact["oracle"] == pytest.approx(1.0) and exact["psnr_tm_oracle"] > 100

@@ -9,6 +9,7 @@ stage again.
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -85,8 +86,7 @@ class BuildState:
         self.data["stages"][stage] = {
             "done": True, "finished": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
             "seconds": None if seconds is None else round(seconds, 1),
-            "outputs": {str(Path(p).resolve().relative_to(root.resolve())) if _inside(p, root) else str(p):
-                        sha256_file(Path(p)) for p in outputs},
+            "outputs": {_output_key(Path(p), root): sha256_file(Path(p)) for p in outputs},
             "result": result or {}}
         self.save()
 
@@ -110,9 +110,12 @@ def _same(field: str, old: Any, new: Any) -> bool:
     return old == new
 
 
-def _inside(path: Path, root: Path) -> bool:
-    try:
-        Path(path).resolve().relative_to(root.resolve())
-        return True
-    except ValueError:
-        return False
+def _output_key(path: Path, root: Path) -> str:
+    """How a stage's output is recorded, so that `BuildState.done` finds it from ``root`` whatever the working
+    folder: relative to ``root`` where it lies under it as named (through a link too: a work folder whose ``data``
+    links to another build's capture), else its absolute path (``root / absolute`` is that path)."""
+    named, base = Path(os.path.abspath(path)), Path(os.path.abspath(root))
+    if named.is_relative_to(base):
+        return str(named.relative_to(base))
+    resolved = path.resolve()
+    return str(resolved.relative_to(root.resolve())) if resolved.is_relative_to(root.resolve()) else str(resolved)

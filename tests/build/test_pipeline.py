@@ -226,6 +226,28 @@ def test_the_state_skips_only_unchanged_outputs_and_refuses_another_plan(tmp_pat
 
 
 
+def test_an_output_through_a_link_or_outside_the_work_folder_is_found_from_any_working_folder(tmp_path, monkeypatch):
+    # runs/sponza256/data links to runs/sponza/data (tools/sponza_chain.sh): its capture stage recorded the manifest
+    # by a path relative to the working folder, then looked for it under the work folder and ran again every time
+    shared, work, elsewhere = tmp_path / "first" / "data", tmp_path / "second", tmp_path / "elsewhere"
+    shared.mkdir(parents=True)
+    work.mkdir()
+    elsewhere.mkdir()
+    (work / "data").symlink_to(shared)
+    (shared / "manifest.json").write_text("{}")
+    outside = tmp_path / "first" / "other.json"
+    outside.write_text("[]")
+    monkeypatch.chdir(tmp_path)
+    state = BuildState(work / "build.json", {"scene": "x"})
+    state.finish("capture", Path("second"), [Path("second/data/manifest.json"), Path("first/other.json")])
+    assert set(state.data["stages"]["capture"]["outputs"]) == {"data/manifest.json", str(outside.resolve())}
+    monkeypatch.chdir(elsewhere)
+    again = BuildState(work / "build.json", {"scene": "x"})
+    assert again.done("capture", work) is not None
+    outside.write_text("[1]")
+    assert again.done("capture", work) is None, "an output outside the work folder changed: the stage runs again"
+
+
 def test_a_longer_ladder_keeps_every_k_trained_before_and_redoes_the_stages_over_the_ladder(tmp_path):
     out = tmp_path / "a.txt"
     out.write_text("one")

@@ -14,6 +14,11 @@ light (the image minus the model's direct-light input):
 - ``truth_smooth``: the truth's indirect light filtered alike: what a model right at every scale above the filter's,
   and smooth below it, would score.
 
+The truth's indirect light (its level for ``level_fixed``, what ``truth_smooth`` filters) is the path tracer's own
+(pt - pt_direct) where the set stores ``pt_direct``, else the truth minus the model's direct-light input, which holds
+the rasterizer's direct-light error too (smoothed, a shadow edge's error spreads; the record's ``truth_indirect``
+says which).
+
 Beside them, the tone-mapped PSNR as scored and with the level fixed (``psnr_tm``, ``psnr_tm_level_fixed``). Where
 the set stores the path tracer's direct light of the truth's own paths (``pt_direct``: sets rendered since the
 one-pass truth of 2026-11-28), ``oracle`` and ``psnr_tm_oracle`` score the model's direct-light input plus the truth's
@@ -57,10 +62,12 @@ def smooth_indirect(indirect: np.ndarray, albedo: np.ndarray, radius: int, floor
 def budget(image: np.ndarray, direct: np.ndarray, truth: np.ndarray, albedo: np.ndarray, exposure: float,
            radius: int, truth_indirect: np.ndarray | None = None) -> dict[str, float]:
     """The four SSIMs of one frame (module doc), and the model's indirect light's sum over the truth's; with
-    ``truth_indirect`` (pt - pt_direct), the oracle's SSIM and PSNR too."""
+    ``truth_indirect`` (pt - pt_direct), the oracle's SSIM and PSNR too, and the truth's level and smoothed indirect
+    light taken from it rather than from ``truth - direct`` (which holds the rasterizer's direct-light error too)."""
     from diviewer.metrics import psnr, ssim, tonemap
 
-    ind, ref = image - direct, truth - direct
+    ind = image - direct
+    ref = truth - direct if truth_indirect is None else truth_indirect
     total, ref_total = float(ind.sum(dtype=np.float64)), float(ref.sum(dtype=np.float64))
     k = ref_total / total if total > 0 else 1.0
     score = lambda x: float(ssim(tonemap(x, exposure), tonemap(truth, exposure)))  # noqa: E731
@@ -112,7 +119,8 @@ def main(argv: list[str] | None = None) -> int:
                                                       oracle)})
                 key = split_key(split, shape, shapes)
                 splits[key] = {"mean": {k: finite_mean([r[k] for r in rows]) for k in KEYS if k in rows[0]},
-                               "frames": rows}
+                               "truth_indirect": "pt - pt_direct" if "psnr_tm_oracle" in rows[0]
+                               else "pt - the model's direct light", "frames": rows}
                 if "psnr_tm_oracle" in rows[0]:  # frames with no sunlight in view: GL and path tracer agree exactly
                     splits[key]["oracle_exact_frames"] = sum(1 for r in rows if r["psnr_tm_oracle"] == float("inf"))
                 print(f"{name} {key}: " + ", ".join(f"{k} {'-' if v is None else format(v, '.3f')}"
