@@ -196,9 +196,10 @@ def _stale(stage: str, rec: dict[str, Any], plan: Plan) -> bool:
 
 
 def _capture(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
-    from diviewer.data.capture import capture
+    from diviewer.data.capture import capture, refined_stand_in
 
-    summary = capture(plan.scene, plan.capture_dir, plan.capture, log=log)
+    summary = (refined_stand_in(plan.scene, plan.capture_dir, plan.capture, log=log)
+               or capture(plan.scene, plan.capture_dir, plan.capture, log=log))
     return [plan.capture_dir / "manifest.json"], {k: summary.get(k) for k in ("present", "planned", "per_split",
                                                                               "seconds")}
 

@@ -252,6 +252,33 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
     return summary
 
 
+def refined_stand_in(scene_name: str | Path, out: Path, settings: CaptureSettings, log=print) -> dict | None:
+    """A capture refined to ``settings.spp`` in ``out`` (`diviewer data refine`; a build's refined data linked in as
+    another build's capture) stands for the capture at that count, to be refined further: checked against these
+    settings (all but its ``refined`` record) and complete, nothing rendered; returns `summarize`'s summary, or None
+    where ``out`` holds no refined dataset (`capture` renders or resumes it)."""
+    if not (out / "manifest.json").is_file():
+        return None
+    ds = Dataset(out)
+    if "refined" not in ds.manifest:
+        return None
+    expected = build_manifest(load_scene(scene_name), settings)
+    diff = [k for k in _same_identity(ds.manifest, expected) if k != "refined"]
+    if diff:
+        raise DiviewerError(f"a refined dataset of other settings is there (differs in: {', '.join(diff)}); use "
+                            f"another work folder, or a recipe whose capture it is", path=out / "manifest.json",
+                            field=diff[0])
+    summary = summarize(ds)
+    if summary["present"] != summary["planned"]:
+        raise DiviewerError(f"a refined dataset with {summary['planned'] - summary['present']} of its "
+                            f"{summary['planned']} frames missing: refine them first (`diviewer data refine "
+                            f"{ds.manifest.get('refined_from')} --out {out} --spp {settings.spp}`)",
+                            path=out, field="frames")
+    log(f"capture {ds.manifest['scene']}: {out} is the capture at {ds.manifest['refined']['from_spp']} spp refined to "
+        f"{settings.spp} ({summary['present']} frames): it stands for the capture at {settings.spp}, nothing to render")
+    return {**summary, "seconds": 0.0, "rendered": 0}
+
+
 def _check_size(settings: CaptureSettings) -> None:
     from diviewer.gl.context import check_render_size, headless_context
 

@@ -19,6 +19,10 @@ becomes, frame by frame and across sessions, one whose truth is clean enough to 
   ``--shard k/n`` splits the work over processes or machines (`diviewer data merge` joins them).
 - Sample counts are the sampler's effective ones (`diviewer.reference.mitsuba.effective_spp`): the weights of
   the mean, and each frame's sidecar, use what was really taken.
+- A refined dataset refines again (256 spp to 512): its frames weigh by their own effective count (their sidecar's
+  ``refined``: 64 + 195 for Sponza's 256), the new seeds derive from the count refined from, and the manifest's
+  and each sidecar's ``refined`` keep the record before (``before``). `diviewer build` takes such a dataset, linked in
+  as its work folder's ``data``, for the capture at its count (`diviewer.data.capture.refined_stand_in`).
 """
 
 from __future__ import annotations
@@ -103,6 +107,10 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
             for f in todo:
                 i = f["index"]
                 arr = np.load(src.path(i)).astype(np.float32)
+                info = json.loads(src.path(i, ".json").read_text())
+                info.pop("sha256", None)
+                before = info.get("refined")  # a refined source: its frame's own effective count weighs it
+                eff_src = int(before["from_spp"]) + int(before["extra_spp"]) if before else eff_old
                 seed = refine_seed(f["seed"], old)
                 t0 = time.perf_counter()
                 frame = ref.load_frame(scene, config_from_dict(scene, f["config"]), width, height)
@@ -111,17 +119,16 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
                 seconds = time.perf_counter() - t0
                 for name, new in extra.items():
                     s = src.slices[name]
-                    arr[..., s] = (eff_old * arr[..., s] + eff_extra * new) / (eff_old + eff_extra)
+                    arr[..., s] = (eff_src * arr[..., s] + eff_extra * new) / (eff_src + eff_extra)
                 if not np.all(np.isfinite(arr)):
                     raise DiviewerError(f"frame {i}: non-finite values after refining; nothing was written for it",
                                         path=src.path(i))
                 if ds.dtype == np.float16 and np.abs(arr).max() > FLOAT16_MAX:
                     raise DiviewerError(f"frame {i}: radiance {np.abs(arr).max():.3g} exceeds float16's range",
                                         path=src.path(i))
-                info = json.loads(src.path(i, ".json").read_text())
-                info.pop("sha256", None)
-                info["refined"] = {"from_spp": eff_old, "extra_spp": eff_extra, "seed": seed, "variant": variant,
-                                   "pt_estimator": how, "seconds": round(seconds, 3)}
+                info["refined"] = {"from_spp": eff_src, "extra_spp": eff_extra, "seed": seed, "variant": variant,
+                                   "pt_estimator": how, "seconds": round(seconds, 3),
+                                   **({"before": before} if before else {})}
                 write_frame(ds, i, arr.astype(ds.dtype), info)
                 progress.set_postfix_str(f"{seconds:.1f}s/frame", refresh=False)
                 progress.update()

@@ -532,7 +532,7 @@ def test_a_refinement_under_way_tells_this_machines_pace(tmp_path):
 
 
 @pytest.mark.slow
-def test_build_a_tiny_scene_that_refines_its_capture(gl_context, tmp_path):
+def test_build_a_tiny_scene_that_refines_its_capture(gl_context, tmp_path, capsys):
     """The pipeline with a refinement: the capture at 2 spp (made before, linked in: not rendered again), refined
     to 6, the model trained on the refined truth; its card's capture record reads back as the recipe's [capture]
     table (refine_from included)."""
@@ -562,3 +562,35 @@ def test_build_a_tiny_scene_that_refines_its_capture(gl_context, tmp_path):
     assert cap["spp"] == 6 and cap["refine_from"] == 2
     assert {k: cap[k] for k in load_recipe(recipe).capture if k in cap} == {
         k: (list(v) if isinstance(v, tuple) else v) for k, v in load_recipe(recipe).capture.items() if k in cap}
+
+    # refined again (6 spp to 12: Sponza's 256 to 512): a build whose data/ links to the refined set takes it for
+    # the capture at 6, renders none of it, and weighs each frame by its own effective count (2 + 4, not 6)
+    again, more = tmp_path / "again", tmp_path / "more.toml"
+    more.write_text(_refining(TINY_RECIPE, 6, 12).replace("K = [2, 4]", "K = [2]"))
+    again.mkdir()
+    (again / "data").symlink_to(work / "data_6spp", target_is_directory=True)
+    kept = {p: p.stat().st_mtime_ns for p in (work / "data_6spp" / "frames").glob("*.npy")}
+    assert main(["build", "--scene", str(scene), "--recipe", str(more), "--work", str(again), "--ks", "2"]) == 0
+    assert {p: p.stat().st_mtime_ns for p in (work / "data_6spp" / "frames").glob("*.npy")} == kept
+    twice = Dataset(again / "data_12spp")
+    assert twice.manifest["spp"] == 12 and twice.check() == []
+    assert twice.manifest["refined"]["from_hash"] == refined.hash
+    assert twice.manifest["refined"]["before"] == refined.manifest["refined"]
+    for i in twice.indices():
+        step = json.loads(twice.path(i, ".json").read_text())["refined"]
+        first_step = json.loads(refined.path(i, ".json").read_text())["refined"]
+        assert step["before"] == first_step and step["from_spp"] == first_step["from_spp"] + first_step["extra_spp"]
+    state = json.loads((again / "build.json").read_text())["stages"]
+    assert state["capture"]["result"]["present"] == 8 and list(state["capture"]["outputs"]) == ["data/manifest.json"]
+    # a refined set of other settings, or with frames missing, is refused by name
+    other = tmp_path / "other.toml"
+    other.write_text(_refining(TINY_RECIPE, 6, 12).replace("max_depth = 3\nsplit", "max_depth = 4\nsplit", 1))
+    for name in ("third", "fourth"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "data").symlink_to(work / "data_6spp", target_is_directory=True)
+    capsys.readouterr()
+    assert main(["build", "--scene", str(scene), "--recipe", str(other), "--work", str(tmp_path / "third")]) == 2
+    assert "a refined dataset of other settings is there (differs in: max_depth)" in capsys.readouterr().err
+    next(iter(sorted((work / "data_6spp" / "frames").glob("*.npy")))).unlink()
+    assert main(["build", "--scene", str(scene), "--recipe", str(more), "--work", str(tmp_path / "fourth")]) == 2
+    assert "1 of its 8 frames missing: refine them first" in capsys.readouterr().err
