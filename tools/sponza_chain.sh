@@ -6,11 +6,15 @@
 #      done and shipped as assets/models/sponza.onnx on 2026-11-28 (on a machine with runs/sponza, every stage skips);
 #   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp) and that model's
 #      scores on it: done on 2026-11-28 (docs/sponza.md);
-#   3. the ladder on a 256-spp truth (assets/recipes/sponza_walk256.toml: sponza.toml with `[capture] refine_from =
+#   3. K = 8 and 16 on a 256-spp truth (assets/recipes/sponza_walk256.toml: sponza.toml with `[capture] refine_from =
 #      64`), in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, 8-12 h),
-#      then K = 8 and 16, picked on the full evaluation set and shipped to runs/sponza256/ship, then K = 32 (trained,
-#      scored and recorded; the recipe's `[ladder] max_mb` keeps it from shipping), and the shipped model's scores.
-#      At 64 spp the truth is 2-5 dB above the issue's 33 dB target, not the 6 dB it asks; at 256 it is 7-10.
+#      then the two trainings, picked on the full evaluation set and shipped to runs/sponza256/ship;
+#   4. the ladder on a 512-spp truth (assets/recipes/sponza_walk512.toml, `refine_from = 256`), in runs/sponza512
+#      whose data/ links to the 256-spp set: its refinement (~12 h), K = 8 and 16, picked and shipped to
+#      runs/sponza512/ship, then K = 32 (trained, scored and recorded; the recipe's `[ladder] max_mb` keeps it from
+#      shipping). The issue asks for a training truth 6 dB above the model's error: the 64-spp model is 4.6-5.8 dB
+#      under a 256-spp truth, so a model trained on it will likely leave less; 512 spp is 3 dB cleaner again. K = 32
+#      is trained once, on the cleanest truth, rather than at 256 and again at 512 (~11 h each here).
 # Every stage resumes where it stopped and skips what is done, so after a session ends the same command goes on:
 #   nohup setsid bash tools/sponza_chain.sh > runs/sponza_chain.log 2>&1 &
 # Each build reads its recipe as WORK/sponza.toml, a copy under the name its model ships with (the card records the
@@ -21,10 +25,13 @@ set -euo pipefail
 cd "$ROOT"
 WORK="${SPONZA_WORK:-runs/sponza}"
 REFINED="${SPONZA_REFINED_WORK:-runs/sponza256}"
-mkdir -p "$WORK" "$REFINED"
+TWICE="${SPONZA_TWICE_WORK:-runs/sponza512}"
+mkdir -p "$WORK" "$REFINED" "$TWICE"
 cp assets/recipes/sponza.toml "$WORK/sponza.toml.part" && mv "$WORK/sponza.toml.part" "$WORK/sponza.toml"
 cp assets/recipes/sponza_walk256.toml "$REFINED/sponza.toml.part" && mv "$REFINED/sponza.toml.part" "$REFINED/sponza.toml"
+cp assets/recipes/sponza_walk512.toml "$TWICE/sponza.toml.part" && mv "$TWICE/sponza.toml.part" "$TWICE/sponza.toml"
 [ -e "$REFINED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$REFINED/data"
+[ -e "$TWICE/data" ] || ln -s "$(realpath -m "$REFINED/data_256spp")" "$TWICE/data"
 
 stage() { echo "[sponza_chain] $(date -u '+%F %T') $*"; }
 # A stage that fails is run once more after a minute (it resumes where it stopped): an unattended chain should not
@@ -45,6 +52,10 @@ REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --e
                --ship "$REFINED/ship")
 stage "build on the 256-spp truth: the refinement, K = 8 and 16"
 again "${REFINED_BUILD[@]}" --ks 8 16
-stage "build on the 256-spp truth: the whole ladder"
-again "${REFINED_BUILD[@]}"
+TWICE_BUILD=(diviewer build --scene sponza --recipe "$TWICE/sponza.toml" --evalset "$WORK/evalset" --work "$TWICE"
+             --ship "$TWICE/ship")
+stage "build on the 512-spp truth: the refinement, K = 8 and 16"
+again "${TWICE_BUILD[@]}" --ks 8 16
+stage "build on the 512-spp truth: the whole ladder"
+again "${TWICE_BUILD[@]}"
 stage "done"

@@ -195,3 +195,10 @@ def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
     assert capture_settings(refined, spp=refine_from(refined)) == capture_settings(walk)
     assert {k: v for k, v in refined.train.items()} == walk.train and refined.ks() == walk.ks()
     assert refined.evalset == walk.evalset and refined.export == walk.export
+
+    # refined again, 256 to 512: the 256-spp set is the capture the 512-spp build takes (its settings at 256)
+    twice = load_recipe(Path(__file__).parents[2] / "assets" / "recipes" / "sponza_walk512.toml")
+    assert refine_from(twice) == capture_settings(refined).spp == 256 and capture_settings(twice).spp == 512
+    assert capture_settings(twice, spp=refine_from(twice)) == capture_settings(refined)
+    assert twice.train == walk.train and twice.ks() == walk.ks() and twice.evalset == walk.evalset
+    assert twice.export == walk.export and twice.ladder == refined.ladder
