@@ -102,13 +102,27 @@ def _frame_seconds(folder: Path, seconds_of: Callable[[dict], float]) -> tuple[i
     return len(frames), seconds
 
 
+def _manifest(folder: Path) -> dict:
+    """A dataset folder's manifest as read, or {} (none, or unreadable: the stages themselves say so)."""
+    try:
+        return json.loads((folder / "manifest.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
 def capture_pace(plan: Plan) -> str | None:
     """What the frames already captured in the work folder say of this machine's pace (each frame's sidecar records
     its GL and path-tracing seconds), and the capture's time left at that pace, beside the plan's estimate from the
     measured costs (another machine's); once every frame is there, that a run renders none (the plan's estimate
-    still counts the stage until a build has recorded it); None where no frame is there."""
+    still counts the stage until a build has recorded it); None where no frame is there. A refined dataset there
+    (`diviewer.data.capture.refined_stand_in`) is nothing to render: whether it is complete."""
     where = plan.capture_dir
     count, seconds = _frame_seconds(where, lambda info: float(info["seconds"]["gl"]) + float(info["seconds"]["gt"]))
+    refined = _manifest(where).get("refined")
+    if isinstance(refined, dict) and count:
+        return (f"capture: {where} is the capture at {refined.get('from_spp')} spp refined to {plan.capture.spp}, "
+                + ("complete: a run takes it for the capture and renders none" if count >= plan.capture.frames else
+                   f"{count} of {plan.capture.frames} frames: a run refuses it until the rest are refined"))
     left = plan.capture.frames - count
     if not seconds:
         return None

@@ -186,6 +186,12 @@ def test_a_capture_under_way_tells_this_machines_pace(tmp_path):
     done = dataclasses.replace(plan, capture=dataclasses.replace(plan.capture, frames=4))
     assert capture_pace(done) == (f"capture: all 4 frames already in {plan.data}; a run checks its settings against "
                                   f"the recipe's and renders none")  # every frame there: nothing left to pace
+    # a refinement linked in as the capture (runs/sponza512/data -> the 256-spp set): complete or not, nothing to pace
+    (plan.data / "manifest.json").write_text(json.dumps({"refined": {"from_spp": 2}}))
+    assert capture_pace(done) == (f"capture: {plan.data} is the capture at 2 spp refined to {plan.capture.spp}, "
+                                  f"complete: a run takes it for the capture and renders none")
+    assert capture_pace(plan).endswith(f"4 of {plan.capture.frames} frames: a run refuses it until the rest are "
+                                       f"refined")
 
 
 def test_a_training_under_way_tells_this_machines_pace(tmp_path):
