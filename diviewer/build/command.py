@@ -84,10 +84,10 @@ def run_build_command(args: argparse.Namespace) -> int:
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
                      evalset_dir=args.evalset)
     if args.dry_run:
-        from diviewer.build.pipeline import finished_stages, measured_pace
+        from diviewer.build.pipeline import captured, finished_stages, measured_pace
 
         try:
-            done, refusal = finished_stages(plan), None
+            done, refusal = finished_stages(plan) | captured(plan), None
         except DiviewerError as exc:  # the work folder holds another plan's build: the run would stop there
             done, refusal = set(), exc
         for line in [*describe(plan, done), *measured_pace(plan)]:

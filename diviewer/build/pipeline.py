@@ -55,6 +55,16 @@ def finished_stages(plan: Plan) -> set[str]:
             if (rec := state.done(s.name, plan.work)) is not None and not _stale(s.name, rec, plan)}
 
 
+def captured(plan: Plan) -> set[str]:
+    """{"capture"} where the work folder's capture holds every frame the plan asks for (a capture, or a refined set
+    standing for it) though no build has recorded the stage: a run checks its settings and renders none, so a dry
+    run counts it done; else empty."""
+    folder = plan.capture_dir
+    if not (folder / "manifest.json").is_file():
+        return set()
+    return {"capture"} if len(list((folder / "frames").glob("*.json"))) >= plan.capture.frames else set()
+
+
 def measured_pace(plan: Plan) -> list[str]:
     """What the work folder's capture, refinement and trainings under way say of this machine's pace, and their time
     left at it, beside the plan's estimates from the costs measured elsewhere: a line each (none before they start

@@ -83,6 +83,28 @@ def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, cap
     assert "recipe.scene" in capsys.readouterr().err
 
 
+def test_a_dry_run_counts_a_complete_capture_done_before_any_build_recorded_it(tmp_path, capsys):
+    """A work folder whose data/ holds every frame (a capture linked in from another build, or a refined set) with
+    no build.json: the run would render none, so the dry run marks the capture done and leaves it out of the time
+    left; with a frame missing it is still planned."""
+    (tmp_path / "r.toml").write_text(TINY_RECIPE)
+    work = tmp_path / "work"
+    frames = work / "data" / "frames"
+    frames.mkdir(parents=True)
+    (work / "data" / "manifest.json").write_text("{}")
+    for i in range(7):
+        (frames / f"{i:06d}.json").write_text("{}")
+    argv = ["build", "--scene", "cornell", "--recipe", str(tmp_path / "r.toml"), "--work", str(work), "--dry-run"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert not any(" capture " in line and " done " in line for line in out.splitlines()) and " left" not in out
+    (frames / "000007.json").write_text("{}")
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert any(line.split()[1:3] == ["capture", "done"] for line in out.splitlines() if line.startswith("   1.")), out
+    assert "left (stages done in" in out and not (work / "build.json").exists()
+
+
 def test_a_dry_run_on_a_folder_of_another_plan_says_the_run_would_refuse_it(tmp_path, capsys):
     """The dry run prints the plan, then the refusal the run would stop with (one line naming the state file and
     the field), not a plan with nothing done as if the folder were empty."""
