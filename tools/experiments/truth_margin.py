@@ -1,0 +1,122 @@
+"""How far a path-traced truth of N spp stands above a model's error: issue 26's "the ground truth's noise floor must
+be at least 6 dB above the model's error", measured frame by frame.
+
+Usage: python tools/experiments/truth_margin.py --eval EVAL.json [--model-key sponza] [--evalset runs/sponza/evalset]
+           [--project 512] [--out OUT.json]
+
+`diviewer eval` scores a model and the evaluation set's ladder (pt_spp64, pt_spp256, ...) against a 1024-spp truth
+that has noise of its own, so both read lower than their error against the converged image, the ladder's rungs more
+(their error is closer to that noise). The set renders the truth twice (``pt``, ``pt_b``: the noise floor), so per
+frame and window shape, on the tone-mapped images as `diviewer eval` scores them:
+
+- the truth's own noise is half the two renders' squared difference, ``r = mse(pt_b, pt) / 2`` (independent noise);
+- a rung's error against the converged image is ``mse(rung, pt) - r``, the model's ``mse(model, pt) - r`` (its
+  per-frame tone-mapped PSNR from the eval JSON), each floored at 1e-12;
+- the margin of a rung over the model is ``10 log10(model error / rung error)`` dB; ``--project M`` adds a truth of
+  M spp projected from the highest rung (its error times rung / M: Monte-Carlo variance goes as 1 / spp; the
+  256-spp rung's error is 4.3x the 64-spp one's over this set, where 4 is the rule).
+
+Per split: the median margin, its lowest, the share of frames at 6 dB or more, and beside them the margin as the
+difference of the mean PSNRs as scored (what the notes reported before). The subtraction treats the tone map as
+locally linear (small noise). Measures only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+MARGIN_DB = 6.0
+"""The issue's margin: the truth's noise floor at least this far above the model's error."""
+
+FLOOR = 1e-12
+"""Smallest error kept after subtracting the truth's noise (a rung at the truth's own level)."""
+
+
+def margin_db(model_mse: float, rung_mse: float, truth_noise: float) -> float:
+    """The margin (dB) of a rung over the model, both measured against a truth with noise ``truth_noise`` (its own
+    MSE against the converged image), which is taken out of both first."""
+    model = max(model_mse - truth_noise, FLOOR)
+    rung = max(rung_mse - truth_noise, FLOOR)
+    return float(10.0 * math.log10(model / rung))
+
+
+def projected_mse(rung_mse: float, truth_noise: float, rung_spp: int, spp: int) -> float:
+    """A truth of ``spp`` samples projected from a rung of ``rung_spp``: its own error scaled by rung_spp / spp, the
+    reference's noise added back (so it reads as a rung measured against the same truth would)."""
+    return max(rung_mse - truth_noise, FLOOR) * rung_spp / spp + truth_noise
+
+
+def summarize(rows: list[dict], key: str) -> dict:
+    """The margins of one rung over a split's frames: median, lowest, and the share at `MARGIN_DB` or more."""
+    v = np.array([r[key] for r in rows], dtype=np.float64)
+    return {"median_db": float(np.median(v)), "lowest_db": float(v.min()),
+            "share_at_least_6db": float(np.mean(v >= MARGIN_DB)), "frames": int(v.size)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--eval", type=Path, required=True, help="a `diviewer eval` JSON of the model on --evalset")
+    ap.add_argument("--model-key", default=None, help="the model's method key in the JSON (default: its neural one)")
+    ap.add_argument("--evalset", type=Path, default=None, help="the set it scored (default: the JSON's)")
+    ap.add_argument("--project", type=int, action="append", default=[], help="a truth of this many spp, projected")
+    ap.add_argument("--out", type=Path)
+    a = ap.parse_args(argv)
+    from diviewer.evalframes import EvalFrames, crop_frame, split_key
+    from diviewer.metrics import mse, tonemap
+
+    record = json.loads(a.eval.read_text())
+    ev = EvalFrames(a.evalset or Path(record["evalset"]))
+    if not ev.ladder_images:
+        raise SystemExit(f"{ev.root}: a compact set keeps its ladder's scores, not its images; give the full set")
+    rungs = [int(s) for s in record["ladder_spp"]]
+    problems = {p.index: p.problem for p in ev.problems()}
+    out = {"eval": str(a.eval), "evalset": str(ev.root), "exposure": ev.exposure, "ladder_spp": rungs,
+           "projected_spp": a.project, "margin_db": MARGIN_DB, "splits": {}}
+    for split, shapes in ev.splits().items():
+        idx = ev.present(split, problems)
+        for shape in shapes:
+            key = split_key(split, shape, shapes)
+            methods = record["splits"].get(key, {}).get("methods", {})
+            name = a.model_key or next((m for m, v in methods.items() if v.get("kind") == "neural"), None)
+            if name not in methods:
+                continue
+            model = {r["index"]: 10.0 ** (-r["psnr_tm"] / 10.0) for r in methods[name]["per_frame"]}
+            rows = []
+            for i in idx:
+                f = crop_frame(ev.load(i), shape[0])
+                truth = tonemap(f["pt"], ev.exposure)
+                noise = mse(tonemap(f["pt_b"], ev.exposure), truth) / 2.0
+                row = {"index": i, "truth_noise_mse": noise, "model_mse": model[i]}
+                for n in rungs:
+                    row[f"pt_spp{n}_mse"] = mse(tonemap(f[f"pt_spp{n}"], ev.exposure), truth)
+                    row[f"margin_pt_spp{n}"] = margin_db(model[i], row[f"pt_spp{n}_mse"], noise)
+                for n in a.project:
+                    top = max(rungs)
+                    row[f"margin_projected_spp{n}"] = margin_db(
+                        model[i], projected_mse(row[f"pt_spp{top}_mse"], noise, top, n), noise)
+                rows.append(row)
+            keys = [f"margin_pt_spp{n}" for n in rungs] + [f"margin_projected_spp{n}" for n in a.project]
+            as_scored = {f"pt_spp{n}": methods[f"pt_spp{n}"]["psnr_tm"]["mean"] - methods[name]["psnr_tm"]["mean"]
+                         for n in rungs if f"pt_spp{n}" in methods}
+            out["splits"][key] = {"model": name, "per_rung": {k: summarize(rows, k) for k in keys},
+                                  "mean_psnr_difference_as_scored_db": as_scored, "frames": rows}
+            print(f"{key} ({name}, {len(rows)} frames): " + "; ".join(
+                f"{k.removeprefix('margin_')} median {s['median_db']:+.1f} dB (lowest {s['lowest_db']:+.1f}, "
+                f"{s['share_at_least_6db']:.0%} >= {MARGIN_DB:g})" for k, s in out["splits"][key]["per_rung"].items())
+                  + "; as scored (mean PSNRs) " + ", ".join(f"{k} {v:+.1f}" for k, v in as_scored.items()),
+                  flush=True)
+    if a.out:
+        from diviewer.outputs import write_json
+
+        write_json(a.out, out, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
