@@ -13,8 +13,8 @@ frame and window shape, on the tone-mapped images as `diviewer eval` scores them
 - a rung's error against the converged image is ``mse(rung, pt) - r``, the model's ``mse(model, pt) - r`` (its
   per-frame tone-mapped PSNR from the eval JSON), each floored at 1e-12;
 - the margin of a rung over the model is ``10 log10(model error / rung error)`` dB; ``--project M`` adds a truth of
-  M spp projected from the highest rung (its error times rung / M: Monte-Carlo variance goes as 1 / spp; the
-  256-spp rung's error is 4.3x the 64-spp one's over this set, where 4 is the rule).
+  M spp projected from the highest rung (its error times rung / M: Monte-Carlo variance goes as 1 / spp; on
+  Sponza's full set the 64-spp rung's own error is 4.3-4.5x the 256-spp one's, where 1 / spp says 4).
 
 Per split: the median margin, its lowest, the share of frames at 6 dB or more, and beside them the margin as the
 difference of the mean PSNRs as scored (what the notes reported before). The subtraction treats the tone map as
