@@ -68,13 +68,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
     from diviewer.evalframes import EvalFrames, crop_frame, split_key
-    from diviewer.metrics import mse, tonemap
+    from diviewer.metrics import mse, psnr_error, tonemap
 
     record = json.loads(a.eval.read_text())
     ev = EvalFrames(a.evalset or Path(record["evalset"]))
     if not ev.ladder_images:
         raise SystemExit(f"{ev.root}: a compact set keeps its ladder's scores, not its images; give the full set")
     rungs = [int(s) for s in record["ladder_spp"]]
+    top = max(rungs)  # the projections start from the cleanest rung
     problems = {p.index: p.problem for p in ev.problems()}
     out = {"eval": str(a.eval), "evalset": str(ev.root), "exposure": ev.exposure, "ladder_spp": rungs,
            "projected_spp": a.project, "margin_db": MARGIN_DB, "splits": {}}
@@ -86,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
             name = a.model_key or next((m for m, v in methods.items() if v.get("kind") == "neural"), None)
             if name not in methods:
                 continue
-            model = {r["index"]: 10.0 ** (-r["psnr_tm"] / 10.0) for r in methods[name]["per_frame"]}
+            model = {r["index"]: psnr_error(r["psnr_tm"]) for r in methods[name]["per_frame"]}
             rows = []
             for i in idx:
                 f = crop_frame(ev.load(i), shape[0])
@@ -97,7 +98,6 @@ def main(argv: list[str] | None = None) -> int:
                     row[f"pt_spp{n}_mse"] = mse(tonemap(f[f"pt_spp{n}"], ev.exposure), truth)
                     row[f"margin_pt_spp{n}"] = margin_db(model[i], row[f"pt_spp{n}_mse"], noise)
                 for n in a.project:
-                    top = max(rungs)
                     row[f"margin_projected_spp{n}"] = margin_db(
                         model[i], projected_mse(row[f"pt_spp{top}_mse"], noise, top, n), noise)
                 rows.append(row)
