@@ -84,13 +84,16 @@ def run_build_command(args: argparse.Namespace) -> int:
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
                      evalset_dir=args.evalset)
     if args.dry_run:
-        from diviewer.build.pipeline import captured, finished_stages, measured_pace
+        from diviewer.build.pace import captured, measured_pace
+        from diviewer.build.pipeline import finished_stages
 
         try:
             done, refusal = finished_stages(plan) | captured(plan), None
         except DiviewerError as exc:  # the work folder holds another plan's build: the run would stop there
             done, refusal = set(), exc
-        for line in [*describe(plan, done), *measured_pace(plan)]:
+        paces = measured_pace(plan)
+        for line in [*describe(plan, done, {p.stage: p.left for p in paces if p.left is not None}),
+                     *(p.line for p in paces)]:
             print(line)
         if refusal is not None:
             print("dry run: nothing was done; a run of this command would refuse the work folder (below)")

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from diviewer import imageio
+from diviewer.build.pace import measured_pace
 from diviewer.build.plan import RUN_ONLY, Plan, describe, hms
 from diviewer.build.state import BuildState
 from diviewer.data.dataset import sha256_file
@@ -55,122 +56,9 @@ def finished_stages(plan: Plan) -> set[str]:
             if (rec := state.done(s.name, plan.work)) is not None and not _stale(s.name, rec, plan)}
 
 
-def captured(plan: Plan) -> set[str]:
-    """{"capture"} where the work folder's capture holds every frame the plan asks for (a capture, or a refined set
-    standing for it) though no build has recorded the stage: a run checks its settings and renders none, so a dry
-    run counts it done; else empty."""
-    folder = plan.capture_dir
-    if not (folder / "manifest.json").is_file():
-        return set()
-    return {"capture"} if len(list((folder / "frames").glob("*.json"))) >= plan.capture.frames else set()
-
-
-def measured_pace(plan: Plan) -> list[str]:
-    """What the work folder's capture, refinement and trainings under way say of this machine's pace, and their time
-    left at it, beside the plan's estimates from the costs measured elsewhere: a line each (none before they start
-    or once they are done)."""
-    lines = [capture_pace(plan), refine_pace(plan)]
-    stages = {s.name: s for s in plan.stages}
-    for k in plan.ks:
-        lines.append(training_pace(plan.run_dir(k) / "metrics.csv", k, plan.steps, stages[f"train_k{k}"].seconds))
-    return [line for line in lines if line]
-
-
-def training_pace(metrics: Path, k: int, planned_steps: int, planned_seconds: float) -> str | None:
-    """A training run's pace so far from its metrics.csv (the last row's step and its cumulative seconds, resumes
-    included), and its time left at that pace; None before its first row or once it is done."""
-    import csv
-
-    try:
-        with open(metrics, newline="") as f:
-            rows = [r for r in csv.DictReader(f) if r.get("step") and r.get("seconds")]
-        step, seconds = int(rows[-1]["step"]), float(rows[-1]["seconds"])
-    except (OSError, IndexError, ValueError, KeyError):
-        return None
-    if step <= 0 or step >= planned_steps:
-        return None
-    per = seconds / step
-    return (f"train K={k} so far: step {step} of {planned_steps}, {per:.2f} s a step here (validations included); "
-            f"the rest take ~{hms((planned_steps - step) * per)} at that pace (the plan assumes "
-            f"{planned_seconds / planned_steps:.2f} s)")
-
-
-PACE_FRAMES = 200
-"""The capture's pace is the median of its last this many frames (the machine's pace now, not a day's mean)."""
-
-
-def _frame_seconds(folder: Path, seconds_of: Callable[[dict], float]) -> tuple[int, list[float]]:
-    """A dataset folder's frame count and each frame's seconds as its sidecar records them (``seconds_of``); frames
-    being written, or of an older format, are counted and not timed."""
-    frames = sorted((folder / "frames").glob("*.json")) if (folder / "manifest.json").is_file() else []
-    seconds = []
-    for f in frames:
-        try:
-            seconds.append(float(seconds_of(json.loads(f.read_text()))))
-        except (ValueError, KeyError, TypeError, OSError):
-            continue  # a frame being written, or one of an older format: the others tell the pace
-    return len(frames), seconds
-
-
-def _manifest(folder: Path) -> dict:
-    """A dataset folder's manifest as read, or {} (none, or unreadable: the stages themselves say so)."""
-    try:
-        return json.loads((folder / "manifest.json").read_text())
-    except (OSError, ValueError):
-        return {}
-
-
-def capture_pace(plan: Plan) -> str | None:
-    """What the frames already captured in the work folder say of this machine's pace (each frame's sidecar records
-    its GL and path-tracing seconds), and the capture's time left at that pace, beside the plan's estimate from the
-    measured costs (another machine's); once every frame is there, that a run renders none (the plan's estimate
-    still counts the stage until a build has recorded it); None where no frame is there. A refined dataset there
-    (`diviewer.data.capture.refined_stand_in`) is nothing to render: whether it is complete."""
-    where = plan.capture_dir
-    count, seconds = _frame_seconds(where, lambda info: float(info["seconds"]["gl"]) + float(info["seconds"]["gt"]))
-    refined = _manifest(where).get("refined")
-    if isinstance(refined, dict) and count:
-        return (f"capture: {where} is the capture at {refined.get('from_spp')} spp refined to {plan.capture.spp}, "
-                + ("complete: a run takes it for the capture and renders none" if count >= plan.capture.frames else
-                   f"{count} of {plan.capture.frames} frames: a run refuses it until the rest are refined"))
-    left = plan.capture.frames - count
-    if not seconds:
-        return None
-    if left <= 0:
-        return (f"capture: all {plan.capture.frames} frames already in {where}; a run checks its settings against "
-                f"the recipe's and renders none")
-    planned = plan.stages[0].seconds / plan.capture.frames
-    return (f"capture so far: {count} of {plan.capture.frames} frames in {where}, "
-            f"{_pace(seconds, left, 'median of GL + path tracing, ')} (the plan assumes {planned:.1f} s, from the "
-            f"costs measured in diviewer/build/costs.py)")
-
-
-def _pace(seconds: list[float], left: int, what: str = "median, ") -> str:
-    """A frame's time here (the median of the last ``PACE_FRAMES``) and the ``left`` frames' time at it, in words."""
-    import statistics
-
-    per = statistics.median(seconds[-PACE_FRAMES:])
-    return (f"{per:.1f} s a frame here ({what}the last {min(len(seconds), PACE_FRAMES)} frames); the {left} left "
-            f"take ~{hms(left * per)} at that pace")
-
-
-def refine_pace(plan: Plan) -> str | None:
-    """As `capture_pace`, for the refinement of the capture (each refined frame's sidecar records its seconds);
-    None without a ``refine`` stage, before its first frame or once it is complete."""
-    stage = next((s for s in plan.stages if s.name == "refine"), None)
-    if stage is None:
-        return None
-    count, seconds = _frame_seconds(plan.data, lambda info: info["refined"]["seconds"])
-    left = plan.capture.frames - count
-    if not seconds or left <= 0:
-        return None
-    return (f"refine so far: {count} of {plan.capture.frames} frames in {plan.data}, {_pace(seconds, left)} "
-            f"(the plan assumes {stage.seconds / plan.capture.frames:.1f} s)")
-
-
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> dict[str, Any]:
     """Run (or resume) every stage of ``plan``; returns the ladder record with the chosen K."""
-    for line in [*describe(plan), *measured_pace(plan)]:
+    for line in [*describe(plan), *(p.line for p in measured_pace(plan))]:
         log(line)
     plan.work.mkdir(parents=True, exist_ok=True)
     state = BuildState(plan.work / STATE_FILE, plan_key(plan), save_upgrade=True)

@@ -281,9 +281,10 @@ def _fit_scale(cap, train, ev, ks, scene, m, budget: float, given_evalset: Path 
     return lo
 
 
-def describe(plan: Plan, done: set[str] = frozenset()) -> list[str]:
+def describe(plan: Plan, done: set[str] = frozenset(), left_here: dict[str, float] | None = None) -> list[str]:
     """The plan for people: what each stage does and how long it should take on this machine (``done``: stages a
-    build in the work folder has finished, whose outputs still match; they are skipped)."""
+    build in the work folder has finished, whose outputs still match; they are skipped; ``left_here``: the seconds
+    left of stages under way at this machine's measured pace, `diviewer.build.pace`)."""
     r = plan.recipe
     lines = [f"build {plan.scene_name} ({plan.scene}) with recipe {r.name} ({r.path}, sha256 {r.sha256[:12]})",
              f"machine: {plan.machine.kind}, {plan.machine.cpus} CPU cores; {plan.machine.why}",
@@ -304,6 +305,11 @@ def describe(plan: Plan, done: set[str] = frozenset()) -> list[str]:
     lines.append(f"estimated total: {hms(plan.seconds)}" + (f", {hms(left)} left (stages done in {plan.work} are "
                                                              f"skipped)" if done else "")
                  + " (from the costs in diviewer/build/costs.py)")
+    under_way = [s for s in plan.stages if s.name not in done and s.name in (left_here or {})]
+    if under_way:
+        here = sum(left_here.get(s.name, s.seconds) for s in plan.stages if s.name not in done)
+        lines.append(f"left with {', '.join(s.name for s in under_way)} at this machine's measured pace (below) and "
+                     f"the rest as estimated: ~{hms(here)}")
     return lines
 
 

@@ -252,6 +252,14 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
     return summary
 
 
+def settings_differ(scene_name: str | Path, out: Path, settings: CaptureSettings) -> list[str]:
+    """The identity fields in which the dataset in ``out`` differs from a capture of ``scene_name`` with
+    ``settings`` ([] where it is that capture): what `capture` and `refined_stand_in` refuse a folder for. A refined
+    dataset's ``refined`` record is no difference: it stands for the capture at its count."""
+    expected = build_manifest(load_scene(scene_name), settings)
+    return [k for k in _same_identity(Dataset(out).manifest, expected) if k != "refined"]
+
+
 def refined_stand_in(scene_name: str | Path, out: Path, settings: CaptureSettings, log=print) -> dict | None:
     """A capture refined to ``settings.spp`` in ``out`` (`diviewer data refine`; a build's refined data linked in as
     another build's capture) stands for the capture at that count, to be refined further: checked against these
@@ -262,8 +270,7 @@ def refined_stand_in(scene_name: str | Path, out: Path, settings: CaptureSetting
     ds = Dataset(out)
     if "refined" not in ds.manifest:
         return None
-    expected = build_manifest(load_scene(scene_name), settings)
-    diff = [k for k in _same_identity(ds.manifest, expected) if k != "refined"]
+    diff = settings_differ(scene_name, out, settings)
     if diff:
         raise DiviewerError(f"a refined dataset of other settings is there (differs in: {', '.join(diff)}); use "
                             f"another work folder, or a recipe whose capture it is", path=out / "manifest.json",

@@ -245,6 +245,20 @@ class Ranges:
     """A free camera's region, or None (at most one of ``camera`` and ``camera_region`` is set)."""
 
 
+def _record(obj) -> dict:
+    """``dataclasses.asdict`` of a flat record (its fields numbers, strings and tuples of them, immutable): the same
+    dict without asdict's recursive deep copy, which took 33 s of the 35 s it takes to plan Sponza's 3,400 frames
+    (172 objects a frame). A record holding anything mutable or nested gets asdict's copy."""
+    d = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+    if all(_immutable(v) for v in d.values()):
+        return d
+    return dataclasses.asdict(obj)
+
+
+def _immutable(v) -> bool:
+    return isinstance(v, (str, int, float, bool, type(None))) or (isinstance(v, tuple) and all(map(_immutable, v)))
+
+
 @dataclass(frozen=True)
 class FrameConfig:
     """The state of one frame: camera, lights and object poses. Rendering needs Scene + FrameConfig."""
@@ -255,14 +269,14 @@ class FrameConfig:
 
     def to_dict(self) -> dict:
         def light(l):
-            d = dataclasses.asdict(l)
+            d = _record(l)
             d["type"] = d.pop("kind")
             return d
 
         return {
-            "camera": dataclasses.asdict(self.camera),
+            "camera": _record(self.camera),
             "lights": [light(l) for l in self.lights],
-            "objects": [dataclasses.asdict(o) for o in self.objects],
+            "objects": [_record(o) for o in self.objects],
         }
 
     def replace_light(self, name: str, **changes) -> "FrameConfig":

@@ -86,23 +86,37 @@ def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, cap
 def test_a_dry_run_counts_a_complete_capture_done_before_any_build_recorded_it(tmp_path, capsys):
     """A work folder whose data/ holds every frame (a capture linked in from another build, or a refined set) with
     no build.json: the run would render none, so the dry run marks the capture done and leaves it out of the time
-    left; with a frame missing it is still planned."""
+    left; with a frame missing, or with other settings than the recipe's (the run would refuse it), it is not."""
+    import dataclasses
+
+    from diviewer.data.capture import build_manifest
+    from diviewer.scene.loader import load_scene
+
     (tmp_path / "r.toml").write_text(TINY_RECIPE)
     work = tmp_path / "work"
     frames = work / "data" / "frames"
     frames.mkdir(parents=True)
-    (work / "data" / "manifest.json").write_text("{}")
+    settings = make_plan("cornell", load_recipe(tmp_path / "r.toml"), work).capture
+    (work / "data" / "manifest.json").write_text(json.dumps(build_manifest(load_scene("cornell"), settings)))
     for i in range(7):
         (frames / f"{i:06d}.json").write_text("{}")
     argv = ["build", "--scene", "cornell", "--recipe", str(tmp_path / "r.toml"), "--work", str(work), "--dry-run"]
     assert main(argv) == 0
     out = capsys.readouterr().out
-    assert not any(" capture " in line and " done " in line for line in out.splitlines()) and " left" not in out
+    capture_done = lambda text: any(line.split()[1:3] == ["capture", "done"] for line in text.splitlines()
+                                    if line.startswith("   1."))
+    assert not capture_done(out) and " left" not in out
     (frames / "000007.json").write_text("{}")
     assert main(argv) == 0
     out = capsys.readouterr().out
-    assert any(line.split()[1:3] == ["capture", "done"] for line in out.splitlines() if line.startswith("   1.")), out
+    assert capture_done(out), out
     assert "left (stages done in" in out and not (work / "build.json").exists()
+    # every frame there, but of other settings: the run would refuse the folder, so the capture is not counted done
+    other = build_manifest(load_scene("cornell"), dataclasses.replace(settings, max_depth=4))
+    (work / "data" / "manifest.json").write_text(json.dumps(other))
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert not capture_done(out) and " left" not in out
 
 
 def test_a_dry_run_on_a_folder_of_another_plan_says_the_run_would_refuse_it(tmp_path, capsys):
@@ -183,57 +197,6 @@ def test_an_evaluation_set_made_before_costs_nothing_and_brings_its_own_settings
     smaller = make_plan("cornell", rec, Path("w"), budget_hours=1.0, machine=CPU)
     assert budgeted.seconds <= 3600 and budgeted.scale > smaller.scale  # the evaluation set's share goes to the rest
     assert budgeted.evalset == given.evalset
-
-
-def test_a_capture_under_way_tells_this_machines_pace(tmp_path):
-    """The frames captured so far (their sidecars' GL and path-tracing seconds) give this machine's pace and the
-    capture's time left at it; nothing is said before the first frame, and once every frame is there, that a run
-    renders none."""
-    from diviewer.build.pipeline import capture_pace
-
-    plan = make_plan("cornell", load_recipe("cornell"), tmp_path, machine=CPU)
-    assert capture_pace(plan) is None  # no capture yet
-    frames = plan.data / "frames"
-    frames.mkdir(parents=True)
-    (plan.data / "manifest.json").write_text("{}")
-    for i, (gl, gt) in enumerate([(0.5, 9.5), (0.5, 11.5), (0.5, 99.5)]):
-        (frames / f"{i:06d}.json").write_text(json.dumps({"index": i, "seconds": {"gl": gl, "gt": gt}}))
-    (frames / "000003.json").write_text("{")  # a sidecar being written: left out
-    line = capture_pace(plan)
-    left = plan.capture.frames - 4
-    assert line.startswith(f"capture so far: 4 of {plan.capture.frames} frames") and "12.0 s a frame here" in line
-    from diviewer.build.plan import hms
-    assert f"the {left} left take ~{hms(left * 12.0)} at that pace" in line
-    import dataclasses
-    done = dataclasses.replace(plan, capture=dataclasses.replace(plan.capture, frames=4))
-    assert capture_pace(done) == (f"capture: all 4 frames already in {plan.data}; a run checks its settings against "
-                                  f"the recipe's and renders none")  # every frame there: nothing left to pace
-    # a refinement linked in as the capture (runs/sponza512/data -> the 256-spp set): complete or not, nothing to pace
-    (plan.data / "manifest.json").write_text(json.dumps({"refined": {"from_spp": 2}}))
-    assert capture_pace(done) == (f"capture: {plan.data} is the capture at 2 spp refined to {plan.capture.spp}, "
-                                  f"complete: a run takes it for the capture and renders none")
-    assert capture_pace(plan).endswith(f"4 of {plan.capture.frames} frames: a run refuses it until the rest are "
-                                       f"refined")
-
-
-def test_a_training_under_way_tells_this_machines_pace(tmp_path):
-    """A run's metrics.csv (cumulative seconds, resumes included) gives the pace of a build's training and its time
-    left; the plan lists it after the capture's."""
-    from diviewer.build.pipeline import measured_pace, training_pace
-    from diviewer.build.plan import hms
-
-    plan = make_plan("cornell", load_recipe("cornell"), tmp_path, machine=CPU)
-    metrics = plan.run_dir(8) / "metrics.csv"
-    assert training_pace(metrics, 8, plan.steps, 1.0) is None and measured_pace(plan) == []  # nothing started
-    metrics.parent.mkdir(parents=True)
-    metrics.write_text("epoch,step,val_psnr,seconds\n0.1,500,30.1,150.0\n0.2,1000,31.0,300.0\n")
-    line = training_pace(metrics, 8, plan.steps, 2.0 * plan.steps)
-    assert line == (f"train K=8 so far: step 1000 of {plan.steps}, 0.30 s a step here (validations included); the rest "
-                    f"take ~{hms((plan.steps - 1000) * 0.3)} at that pace (the plan assumes 2.00 s)")
-    assert measured_pace(plan) == [training_pace(metrics, 8, plan.steps, plan.stages[3].seconds)]
-    assert training_pace(metrics, 8, 1000, 1.0) is None  # done
-    metrics.write_text("epoch,step,val_psnr,seconds\n")
-    assert training_pace(metrics, 8, plan.steps, 1.0) is None  # a header alone
 
 
 def test_the_state_skips_only_unchanged_outputs_and_refuses_another_plan(tmp_path):
@@ -540,7 +503,7 @@ def test_a_recipe_that_refines_its_capture_plans_the_capture_at_the_lower_count_
 def test_a_refinement_under_way_tells_this_machines_pace(tmp_path):
     """The frames refined so far (each sidecar's ``refined.seconds``) give the refinement's pace and its time left,
     listed after the capture's; a plan without a refine stage says nothing of it."""
-    from diviewer.build.pipeline import measured_pace, refine_pace
+    from diviewer.build.pace import measured_pace, refine_pace
     from diviewer.build.plan import hms
 
     (tmp_path / "r.toml").write_text(_refining(TINY_RECIPE, 2, 8))
@@ -551,10 +514,11 @@ def test_a_refinement_under_way_tells_this_machines_pace(tmp_path):
     (plan.data / "manifest.json").write_text("{}")
     for i, s in enumerate([3.0, 5.0, 40.0]):
         (frames / f"{i:06d}.json").write_text(json.dumps({"index": i, "refined": {"seconds": s}}))
-    line = refine_pace(plan)
-    left = plan.capture.frames - 3
+    pace = refine_pace(plan)
+    line, left = pace.line, plan.capture.frames - 3
     assert line.startswith(f"refine so far: 3 of {plan.capture.frames} frames") and "5.0 s a frame here" in line
-    assert f"the {left} left take ~{hms(left * 5.0)} at that pace" in line and line in measured_pace(plan)
+    assert f"the {left} left take ~{hms(left * 5.0)} at that pace" in line and pace in measured_pace(plan)
+    assert pace.stage == "refine" and pace.left == left * 5.0
     (tmp_path / "t.toml").write_text(TINY_RECIPE)
     assert refine_pace(make_plan("cornell", load_recipe(tmp_path / "t.toml"), tmp_path / "w", machine=CPU)) is None
 

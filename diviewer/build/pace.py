@@ -1,0 +1,158 @@
+"""What a build's work folder says of its progress before the build has recorded it, for ``diviewer build`` (its
+plan's lines, a dry run's too): a capture already complete there (and whether a run takes it), and the pace of a
+capture, refinement or training under way on this machine, beside the plan's estimates from costs measured
+elsewhere."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Callable, NamedTuple
+
+from diviewer.build.plan import Plan, hms
+from diviewer.errors import DiviewerError
+
+def captured(plan: Plan) -> set[str]:
+    """{"capture"} where the work folder's capture holds every frame the plan asks for (a capture, or a refined set
+    standing for it) with the recipe's settings, though no build has recorded the stage: a run renders none, so a dry
+    run counts it done; else empty (a run renders the rest, or refuses the folder: `capture_refusal`)."""
+    folder = plan.capture_dir
+    if not (folder / "manifest.json").is_file() or _frame_count(folder) < plan.capture.frames:
+        return set()
+    return set() if capture_refusal(plan) else {"capture"}
+
+
+def capture_refusal(plan: Plan) -> str | None:
+    """Why a run would refuse the dataset in the work folder's capture folder for the recipe's capture (the identity
+    fields it differs in, as `diviewer.data.capture.settings_differ` reads them, or its manifest's fault), or None
+    where it is that capture."""
+    from diviewer.data.capture import settings_differ
+
+    try:
+        diff = settings_differ(plan.scene, plan.capture_dir, plan.capture)
+    except DiviewerError as exc:
+        return str(exc)
+    return f"it is not the recipe's capture (differs in: {', '.join(diff)})" if diff else None
+
+
+def _frame_count(folder: Path) -> int:
+    return len(list((folder / "frames").glob("*.json")))
+
+
+class Pace(NamedTuple):
+    """What a stage under way says of this machine's pace: a line for people, and the stage's seconds left at that
+    pace (None where it has nothing left to time: a complete capture, taken or refused)."""
+
+    stage: str
+    line: str
+    left: float | None = None
+
+
+def measured_pace(plan: Plan) -> list[Pace]:
+    """What the work folder's capture, refinement and trainings under way say of this machine's pace, and their time
+    left at it, beside the plan's estimates from the costs measured elsewhere: one each (none before they start or
+    once they are done)."""
+    paces = [capture_pace(plan), refine_pace(plan)]
+    stages = {s.name: s for s in plan.stages}
+    for k in plan.ks:
+        paces.append(training_pace(plan.run_dir(k) / "metrics.csv", k, plan.steps, stages[f"train_k{k}"].seconds))
+    return [p for p in paces if p]
+
+
+def training_pace(metrics: Path, k: int, planned_steps: int, planned_seconds: float) -> Pace | None:
+    """A training run's pace so far from its metrics.csv (the last row's step and its cumulative seconds, resumes
+    included), and its time left at that pace; None before its first row or once it is done."""
+    import csv
+
+    try:
+        with open(metrics, newline="") as f:
+            rows = [r for r in csv.DictReader(f) if r.get("step") and r.get("seconds")]
+        step, seconds = int(rows[-1]["step"]), float(rows[-1]["seconds"])
+    except (OSError, IndexError, ValueError, KeyError):
+        return None
+    if step <= 0 or step >= planned_steps:
+        return None
+    per = seconds / step
+    left = (planned_steps - step) * per
+    return Pace(f"train_k{k}", f"train K={k} so far: step {step} of {planned_steps}, {per:.2f} s a step here "
+                f"(validations included); the rest take ~{hms(left)} at that pace (the plan assumes "
+                f"{planned_seconds / planned_steps:.2f} s)", left)
+
+
+PACE_FRAMES = 200
+"""The capture's pace is the median of its last this many frames (the machine's pace now, not a day's mean)."""
+
+
+def _frame_seconds(folder: Path, seconds_of: Callable[[dict], float]) -> tuple[int, list[float]]:
+    """A dataset folder's frame count and each frame's seconds as its sidecar records them (``seconds_of``); frames
+    being written, or of an older format, are counted and not timed."""
+    frames = sorted((folder / "frames").glob("*.json")) if (folder / "manifest.json").is_file() else []
+    seconds = []
+    for f in frames:
+        try:
+            seconds.append(float(seconds_of(json.loads(f.read_text()))))
+        except (ValueError, KeyError, TypeError, OSError):
+            continue  # a frame being written, or one of an older format: the others tell the pace
+    return len(frames), seconds
+
+
+def _manifest(folder: Path) -> dict:
+    """A dataset folder's manifest as read, or {} (none, or unreadable: the stages themselves say so)."""
+    try:
+        return json.loads((folder / "manifest.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def capture_pace(plan: Plan) -> Pace | None:
+    """What the frames already captured in the work folder say of this machine's pace (each frame's sidecar records
+    its GL and path-tracing seconds), and the capture's time left at that pace, beside the plan's estimate from the
+    measured costs (another machine's); once every frame is there, whether a run takes it (`capture_refusal`) and
+    renders none; None where no frame is there. A refined dataset there (`diviewer.data.capture.refined_stand_in`)
+    is nothing to render: whether it is complete, and taken."""
+    where = plan.capture_dir
+    count, seconds = _frame_seconds(where, lambda info: float(info["seconds"]["gl"]) + float(info["seconds"]["gt"]))
+    refined = _manifest(where).get("refined")
+    left = plan.capture.frames - count
+    refusal = capture_refusal(plan) if count and left <= 0 else None
+    if isinstance(refined, dict) and count:
+        return Pace("capture", f"capture: {where} is the capture at {refined.get('from_spp')} spp refined to "
+                    f"{plan.capture.spp}, " + (
+                        f"{count} of {plan.capture.frames} frames: a run refuses it until the rest are refined"
+                        if left > 0 else f"complete, but a run refuses it: {refusal}" if refusal else
+                        "complete: a run takes it for the capture and renders none"))
+    if not seconds:
+        return None
+    if left <= 0:
+        return Pace("capture", f"capture: all {plan.capture.frames} frames already in {where}; "
+                    + (f"but a run refuses it: {refusal}" if refusal else "its settings are the recipe's: a run "
+                       "renders none"))
+    planned = plan.stages[0].seconds / plan.capture.frames
+    per, words = _pace(seconds, left, "median of GL + path tracing, ")
+    return Pace("capture", f"capture so far: {count} of {plan.capture.frames} frames in {where}, {words} (the plan "
+                f"assumes {planned:.1f} s, from the costs measured in diviewer/build/costs.py)", left * per)
+
+
+def _pace(seconds: list[float], left: int, what: str = "median, ") -> tuple[float, str]:
+    """A frame's time here (the median of the last ``PACE_FRAMES``), and it and the ``left`` frames' time at it in
+    words."""
+    import statistics
+
+    per = statistics.median(seconds[-PACE_FRAMES:])
+    return per, (f"{per:.1f} s a frame here ({what}the last {min(len(seconds), PACE_FRAMES)} frames); the {left} "
+                 f"left take ~{hms(left * per)} at that pace")
+
+
+def refine_pace(plan: Plan) -> Pace | None:
+    """As `capture_pace`, for the refinement of the capture (each refined frame's sidecar records its seconds);
+    None without a ``refine`` stage, before its first frame or once it is complete."""
+    stage = next((s for s in plan.stages if s.name == "refine"), None)
+    if stage is None:
+        return None
+    count, seconds = _frame_seconds(plan.data, lambda info: info["refined"]["seconds"])
+    left = plan.capture.frames - count
+    if not seconds or left <= 0:
+        return None
+    per, words = _pace(seconds, left)
+    return Pace("refine", f"refine so far: {count} of {plan.capture.frames} frames in {plan.data}, {words} (the plan "
+                f"assumes {stage.seconds / plan.capture.frames:.1f} s)", left * per)
