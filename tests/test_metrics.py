@@ -339,11 +339,15 @@ def test_truth_margin_takes_the_truths_noise_out_of_both_errors_before_the_margi
     # against the converged image: the model's error 4e-4, a 256-spp rung's 1e-4 (6.0 dB); the truth's noise 2e-5
     assert tool.margin_db(4e-4 + 2e-5, 1e-4 + 2e-5, 2e-5) == pytest.approx(10 * math.log10(4.0))
     assert tool.margin_db(4e-4 + 2e-5, 1e-4 + 2e-5, 0.0) < 6.0 - 0.3, "read as scored, the truth's noise hides margin"
-    assert tool.margin_db(1e-4, 2e-4, 1e-4) < -70, "a model at the truth's own noise: floored, not a math error"
+    # an error at or below the truth's own noise is one the truth cannot resolve: no margin, not a floored one
+    assert tool.margin_db(1e-4, 2e-4, 1e-4) is None and tool.margin_db(4e-4, 1e-4, 1e-4) is None
     # twice the samples halve the rung's own error; the truth's noise comes back as a measured rung would carry it
     assert tool.projected_mse(1e-4 + 2e-5, 2e-5, 256, 512) == pytest.approx(5e-5 + 2e-5)
-    s = tool.summarize([{"m": 7.0}, {"m": 5.0}, {"m": 6.0}, {"m": 9.0}], "m")
-    assert s == {"median_db": 6.5, "lowest_db": 5.0, "share_at_least_6db": 0.75, "frames": 4}
+    assert tool.projected_mse(1e-5, 2e-5, 256, 512) is None
+    s = tool.summarize([{"m": 7.0}, {"m": 5.0}, {"m": 6.0}, {"m": 9.0}, {"m": None}], "m")
+    assert s == {"median_db": 6.5, "lowest_db": 5.0, "share_at_least_6db": 0.75, "frames": 4, "unresolved": 1}
+    assert tool.summarize([{"m": None}], "m") == {"median_db": None, "lowest_db": None, "share_at_least_6db": None,
+                                                   "frames": 0, "unresolved": 1}
 
 
 def test_truth_margin_of_simulated_renders_is_the_one_against_the_converged_image():

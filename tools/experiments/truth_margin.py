@@ -11,7 +11,9 @@ frame and window shape, on the tone-mapped images as `diviewer eval` scores them
 
 - the truth's own noise is half the two renders' squared difference, ``r = mse(pt_b, pt) / 2`` (independent noise);
 - a rung's error against the converged image is ``mse(rung, pt) - r``, the model's ``mse(model, pt) - r`` (its
-  per-frame tone-mapped PSNR from the eval JSON), each floored at 1e-12;
+  per-frame tone-mapped PSNR from the eval JSON); where that leaves nothing (an error at or below the truth's own
+  noise: the truth cannot resolve it), the frame's margin is unresolved (null), left out of the median, the lowest
+  and the share, and counted (``unresolved``);
 - the margin of a rung over the model is ``10 log10(model error / rung error)`` dB; ``--project M`` adds a truth of
   M spp projected from the highest rung (its error times rung / M: Monte-Carlo variance goes as 1 / spp; on
   Sponza's full set the 64-spp rung's own error is 4.3-4.5x the 256-spp one's, where 1 / spp says 4).
@@ -34,29 +36,32 @@ import numpy as np
 MARGIN_DB = 6.0
 """The issue's margin: the truth's noise floor at least this far above the model's error."""
 
-FLOOR = 1e-12
-"""Smallest error kept after subtracting the truth's noise (a rung at the truth's own level)."""
-
-
-def margin_db(model_mse: float, rung_mse: float, truth_noise: float) -> float:
+def margin_db(model_mse: float, rung_mse: float, truth_noise: float) -> float | None:
     """The margin (dB) of a rung over the model, both measured against a truth with noise ``truth_noise`` (its own
-    MSE against the converged image), which is taken out of both first."""
-    model = max(model_mse - truth_noise, FLOOR)
-    rung = max(rung_mse - truth_noise, FLOOR)
+    MSE against the converged image), which is taken out of both first; None where either error is at or below that
+    noise (the truth cannot resolve it: its margin could read anything)."""
+    model, rung = model_mse - truth_noise, rung_mse - truth_noise
+    if model <= 0.0 or rung <= 0.0:
+        return None
     return float(10.0 * math.log10(model / rung))
 
 
-def projected_mse(rung_mse: float, truth_noise: float, rung_spp: int, spp: int) -> float:
+def projected_mse(rung_mse: float, truth_noise: float, rung_spp: int, spp: int) -> float | None:
     """A truth of ``spp`` samples projected from a rung of ``rung_spp``: its own error scaled by rung_spp / spp, the
-    reference's noise added back (so it reads as a rung measured against the same truth would)."""
-    return max(rung_mse - truth_noise, FLOOR) * rung_spp / spp + truth_noise
+    reference's noise added back (so it reads as a rung measured against the same truth would); None where the
+    rung's error is not resolved (at or below the truth's noise)."""
+    own = rung_mse - truth_noise
+    return own * rung_spp / spp + truth_noise if own > 0.0 else None
 
 
 def summarize(rows: list[dict], key: str) -> dict:
-    """The margins of one rung over a split's frames: median, lowest, and the share at `MARGIN_DB` or more."""
-    v = np.array([r[key] for r in rows], dtype=np.float64)
-    return {"median_db": float(np.median(v)), "lowest_db": float(v.min()),
-            "share_at_least_6db": float(np.mean(v >= MARGIN_DB)), "frames": int(v.size)}
+    """The margins of one rung over a split's frames: median, lowest, and the share at `MARGIN_DB` or more, over the
+    frames whose margin the truth resolves; ``unresolved`` counts the others."""
+    v = np.array([r[key] for r in rows if r[key] is not None], dtype=np.float64)
+    stats = ({"median_db": float(np.median(v)), "lowest_db": float(v.min()),
+              "share_at_least_6db": float(np.mean(v >= MARGIN_DB))} if v.size else
+             {"median_db": None, "lowest_db": None, "share_at_least_6db": None})
+    return {**stats, "frames": int(v.size), "unresolved": len(rows) - int(v.size)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -98,8 +103,8 @@ def main(argv: list[str] | None = None) -> int:
                     row[f"pt_spp{n}_mse"] = mse(tonemap(f[f"pt_spp{n}"], ev.exposure), truth)
                     row[f"margin_pt_spp{n}"] = margin_db(model[i], row[f"pt_spp{n}_mse"], noise)
                 for n in a.project:
-                    row[f"margin_projected_spp{n}"] = margin_db(
-                        model[i], projected_mse(row[f"pt_spp{top}_mse"], noise, top, n), noise)
+                    projected = projected_mse(row[f"pt_spp{top}_mse"], noise, top, n)
+                    row[f"margin_projected_spp{n}"] = None if projected is None else margin_db(model[i], projected, noise)
                 rows.append(row)
             keys = [f"margin_pt_spp{n}" for n in rungs] + [f"margin_projected_spp{n}" for n in a.project]
             as_scored = {f"pt_spp{n}": methods[f"pt_spp{n}"]["psnr_tm"]["mean"] - methods[name]["psnr_tm"]["mean"]
@@ -107,8 +112,11 @@ def main(argv: list[str] | None = None) -> int:
             out["splits"][key] = {"model": name, "per_rung": {k: summarize(rows, k) for k in keys},
                                   "mean_psnr_difference_as_scored_db": as_scored, "frames": rows}
             print(f"{key} ({name}, {len(rows)} frames): " + "; ".join(
-                f"{k.removeprefix('margin_')} median {s['median_db']:+.1f} dB (lowest {s['lowest_db']:+.1f}, "
-                f"{s['share_at_least_6db']:.0%} >= {MARGIN_DB:g})" for k, s in out["splits"][key]["per_rung"].items())
+                f"{k.removeprefix('margin_')} " + (f"median {s['median_db']:+.1f} dB (lowest {s['lowest_db']:+.1f}, "
+                                                    f"{s['share_at_least_6db']:.0%} >= {MARGIN_DB:g}"
+                                                    if s["frames"] else "(") +
+                (f", {s['unresolved']} unresolved)" if s["unresolved"] else ")")
+                for k, s in out["splits"][key]["per_rung"].items())
                   + "; as scored (mean PSNRs) " + ", ".join(f"{k} {v:+.1f}" for k, v in as_scored.items()),
                   flush=True)
     if a.out:
