@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -348,6 +350,24 @@ def test_truth_margin_takes_the_truths_noise_out_of_both_errors_before_the_margi
     assert s == {"median_db": 6.5, "lowest_db": 5.0, "share_at_least_6db": 0.75, "frames": 4, "unresolved": 1}
     assert tool.summarize([{"m": None}], "m") == {"median_db": None, "lowest_db": None, "share_at_least_6db": None,
                                                    "frames": 0, "unresolved": 1}
+
+
+def test_truth_margin_refuses_a_model_no_split_scores_and_a_compact_set(tmp_path):
+    """truth_margin.py names what it cannot read, and writes nothing: a model key no split scores, and a compact set
+    (its ladder's scores are kept, not the images the truth's noise is read from)."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/truth_margin")
+    compact = Path(__file__).resolve().parent.parent / "assets" / "evalsets" / "cornell"
+    record = tmp_path / "eval.json"
+    record.write_text(json.dumps({"evalset": str(compact), "ladder_spp": [64], "splits": {
+        "unseen_configs": {"methods": {"cornell": {"kind": "neural"}, "pt_spp64": {"kind": "reference"}}}}}))
+    out = tmp_path / "margin.json"
+    with pytest.raises(SystemExit, match="no split scores the model 'cornell_k16'; nothing written"):
+        tool.main(["--eval", str(record), "--model-key", "cornell_k16", "--out", str(out)])
+    with pytest.raises(SystemExit, match="a compact set keeps its ladder's scores, not its images; give the full set"):
+        tool.main(["--eval", str(record), "--out", str(out)])
+    assert not out.exists()
 
 
 def test_truth_margin_of_simulated_renders_is_the_one_against_the_converged_image():

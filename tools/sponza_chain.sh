@@ -10,7 +10,8 @@
 #      in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, 8-12 h), then
 #      the training, scored on the full evaluation set and shipped to runs/sponza256/ship. K = 8 alone (~1 h here):
 #      a first model on a cleaner truth, and whether a cleaner truth moves the SSIM, before the 512-spp refinement;
-#      the wider K wait for the cleanest truth (K = 16 here would cost ~1.7 h the 512 ladder repeats);
+#      the wider K wait for the cleanest truth (K = 16 here would cost ~1.7 h the 512 ladder repeats). Its margin
+#      over the truth it trained on, frame by frame: WORK/truth_margin_k8.json (as after each build below);
 #   4. the ladder on a 512-spp truth (assets/recipes/sponza_walk512.toml, `refine_from = 256`), in runs/sponza512
 #      whose data/ links to the 256-spp set: its refinement (~12 h), K = 8 and 16, picked and shipped to
 #      runs/sponza512/ship, then K = 32 (trained, scored and recorded; the recipe's `[ladder] max_mb` keeps it from
@@ -54,10 +55,25 @@ REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --e
                --ship "$REFINED/ship")
 stage "build on the 256-spp truth: the refinement, K = 8"
 again "${REFINED_BUILD[@]}" --ks 8
+# Each K's margin over its training truth, frame by frame (tools/experiments/truth_margin.py, seconds), from the build's
+# scores on the full set; again whenever those scores are newer.
+margins() {
+  local work="$1"; shift
+  for k in "$@"; do
+    local out="$work/truth_margin_k$k.json"
+    [ -f "$work/evalset_eval.json" ] && ! [ "$out" -nt "$work/evalset_eval.json" ] || continue
+    stage "truth margin of K = $k in $work"
+    python tools/experiments/truth_margin.py --eval "$work/evalset_eval.json" --model-key "sponza_k$k" --project 512 \
+      --project 1024 --out "$out" || stage "no truth margin for K = $k (above)"
+  done
+}
+margins "$REFINED" 8
 TWICE_BUILD=(diviewer build --scene sponza --recipe "$TWICE/sponza.toml" --evalset "$WORK/evalset" --work "$TWICE"
              --ship "$TWICE/ship")
 stage "build on the 512-spp truth: the refinement, K = 8 and 16"
 again "${TWICE_BUILD[@]}" --ks 8 16
+margins "$TWICE" 8 16
 stage "build on the 512-spp truth: the whole ladder"
 again "${TWICE_BUILD[@]}"
+margins "$TWICE" 8 16 32
 stage "done"

@@ -64,6 +64,11 @@ def summarize(rows: list[dict], key: str) -> dict:
     return {**stats, "frames": int(v.size), "unresolved": len(rows) - int(v.size)}
 
 
+def model_name(methods: dict, key: str | None) -> str | None:
+    """The model's method key in a split's scores: ``key`` as given, else the split's neural method."""
+    return key or next((m for m, v in methods.items() if v.get("kind") == "neural"), None)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--eval", type=Path, required=True, help="a `diviewer eval` JSON of the model on --evalset")
@@ -76,8 +81,11 @@ def main(argv: list[str] | None = None) -> int:
     from diviewer.metrics import mse, psnr_error, tonemap
 
     record = json.loads(a.eval.read_text())
+    if not any(model_name(v.get("methods", {}), a.model_key) in v.get("methods", {}) for v in record["splits"].values()):
+        raise SystemExit(f"{a.eval}: no split scores the model "
+                         + (f"'{a.model_key}'" if a.model_key else "(no neural method)") + "; nothing written")
     ev = EvalFrames(a.evalset or Path(record["evalset"]))
-    if not ev.ladder_images:
+    if not ev.ladder_images():
         raise SystemExit(f"{ev.root}: a compact set keeps its ladder's scores, not its images; give the full set")
     rungs = [int(s) for s in record["ladder_spp"]]
     top = max(rungs)  # the projections start from the cleanest rung
@@ -89,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         for shape in shapes:
             key = split_key(split, shape, shapes)
             methods = record["splits"].get(key, {}).get("methods", {})
-            name = a.model_key or next((m for m, v in methods.items() if v.get("kind") == "neural"), None)
+            name = model_name(methods, a.model_key)
             if name not in methods:
                 continue
             model = {r["index"]: psnr_error(r["psnr_tm"]) for r in methods[name]["per_frame"]}
