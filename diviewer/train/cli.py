@@ -83,6 +83,9 @@ def _model_options(p: argparse.ArgumentParser, d: dict) -> None:
     g.add_argument("--recon-space", choices=CHOICES["recon_space"], default=None,
                    help="reconstruction on encoded values (default), linear radiance x exposure, its log, or relative to the "
                         "prediction's brightness (l2 on linear or relative: unbiased, the mean of a noisy target)")
+    g.add_argument("--ssim-weight", type=float, default=None,
+                   help="weight of 1 - SSIM of the tone-mapped displayed frame beside the reconstruction term, both "
+                        "times lambda_L1 (default 0: none; meant for a clean truth, docs/training.md)")
     g.add_argument("--n-layers-d", dest="n_layers_D", type=int, default=None,
                    help=f"discriminator stride layers (default {d['n_layers_D']}: 70x70 patches)")
     g.add_argument("--norm-d", dest="norm_D", choices=CHOICES["norm_D"], default=None,

@@ -110,6 +110,10 @@ class TrainConfig:
     "linear" (radiance times the dataset exposure; with l2 the one unbiased choice under
     Monte-Carlo noise) or "log" (relative errors: dark regions count); see `diviewer.train.losses`."""
 
+    ssim_weight: float = 0.0
+    """Weight of the structure term, 1 - SSIM of the tone-mapped displayed frame (`diviewer.train.losses.
+    structure_loss`), beside the reconstruction term, both times lambda_L1; 0: none."""
+
     n_layers_D: int = 3
     """Discriminator stride layers (3: the paper's 70x70 PatchGAN; 4 sees 142x142 patches)."""
 
@@ -202,6 +206,8 @@ class TrainConfig:
                 fail(name, f"must be in [0, 1), got {v!r}")
         if not (isinstance(self.lambda_L1, (int, float)) and math.isfinite(self.lambda_L1) and self.lambda_L1 >= 0):
             fail("lambda_L1", f"must be a number >= 0, got {self.lambda_L1!r}")
+        if not (isinstance(self.ssim_weight, (int, float)) and math.isfinite(self.ssim_weight) and self.ssim_weight >= 0):
+            fail("ssim_weight", f"must be a number >= 0, got {self.ssim_weight!r}")
         if not (isinstance(self.dropout, (int, float)) and 0.0 <= self.dropout < 1.0):
             fail("dropout", f"must be in [0, 1), got {self.dropout!r}")
         if self.target not in ("full", "indirect", "residual"):
@@ -272,7 +278,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
 
 RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "lr_decay_start", "beta1", "beta2",
                                  "lambda_L1", "target", "divide_albedo", "seed", "dropout", "ndf", "gan_weight",
-                                 "gan_mode", "recon_loss", "recon_space", "n_layers_D", "norm_D", "d_lr", "upsample",
+                                 "gan_mode", "recon_loss", "recon_space", "ssim_weight", "n_layers_D", "norm_D", "d_lr", "upsample",
                                  "norm", "train_frames", "init_from", "light_scale", "aspect_crops",
                                  "world_inputs", "light_inputs", "output_gain")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change); the schedule

@@ -24,8 +24,17 @@ Monte-Carlo estimate whose noise is heavy-tailed (rare, very bright "firefly" sa
   On Sponza (docs/sponza.md, "Where the dark bias comes from") the median, where L1 goes, is 27-53 % below the
   mean in deep shade at 64 spp, yet a relative-L2 model overshot dim frames 7-44x and L1 stayed the better loss.
 
-The trainer calls `reconstruction_loss(fake_B, real_B, mode, space, encoding)` and nothing else;
-`LossConfig` is the settings dataclass recorded with checkpoints.
+Beside it, an optional **structure term** (`structure_loss`, weight ``ssim_weight`` times lambda_L1): 1 - SSIM of the
+displayed image, GL direct light plus the decoded prediction, tone-mapped as `diviewer eval` scores it, against the
+same image with the target in its place. The L1 term weighs a pixel's error by its radiance; this one by what the
+tone-mapped SSIM, the issue's measure, sees: local means, contrasts and structure in 11x11 windows, the shade as much
+as the sun. Under Monte-Carlo noise it is not neutral: the target's noise adds to its variance in each window but
+not to its covariance with the prediction, so the SSIM against a noisy target is highest for a prediction of more
+contrast than the converged image (by about sqrt(1 + noise variance / signal variance) within a window: 1.7x for a
+sinusoid under noise of its own global variance, simulated). Meant for a clean truth (Sponza's refined ones).
+
+The trainer calls `LossConfig.reconstruction_loss` and `structure_loss`; `LossConfig` is the settings dataclass
+recorded with checkpoints.
 """
 
 from __future__ import annotations
@@ -141,6 +150,60 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
     return nn.functional.mse_loss(fake, real)
 
 
+SSIM_WINDOW, SSIM_SIGMA, SSIM_C1, SSIM_C2 = 11, 1.5, 0.01 ** 2, 0.03 ** 2
+"""`diviewer.metrics.ssim`'s window and constants (data range 1: tone-mapped values)."""
+
+TONEMAP_EPSILON: float = 1e-6
+"""Floor of the tone map's ``y / (1 + y)`` before its gamma, whose slope is unbounded at 0."""
+
+
+def ssim_torch(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Mean SSIM of two NCHW batches in [0, 1] over every wholly-inside window and channel: `diviewer.metrics.ssim`
+    of each frame (data range 1), averaged, differentiable."""
+    x = torch.arange(SSIM_WINDOW, dtype=torch.float32, device=a.device) - (SSIM_WINDOW - 1) / 2.0
+    g = torch.exp(-(x * x) / (2.0 * SSIM_SIGMA ** 2))
+    g = g / g.sum()
+    c = a.shape[1]
+    rows, cols = g.reshape(1, 1, -1, 1).repeat(c, 1, 1, 1), g.reshape(1, 1, 1, -1).repeat(c, 1, 1, 1)
+    blur = lambda t: nn.functional.conv2d(nn.functional.conv2d(t, rows, groups=c), cols, groups=c)  # noqa: E731
+    a, b = a.float(), b.float()
+    mu_a, mu_b = blur(a), blur(b)
+    var_a = (blur(a * a) - mu_a * mu_a).clamp_min(0.0)
+    var_b = (blur(b * b) - mu_b * mu_b).clamp_min(0.0)
+    cov = blur(a * b) - mu_a * mu_b
+    num = (2 * mu_a * mu_b + SSIM_C1) * (2 * cov + SSIM_C2)
+    den = (mu_a * mu_a + mu_b * mu_b + SSIM_C1) * (var_a + var_b + SSIM_C2)
+    return (num / den).mean()
+
+
+def tonemap_torch(x: torch.Tensor, exposure: float) -> torch.Tensor:
+    """`diviewer.metrics.tonemap` on a tensor (Reinhard at ``exposure``, then gamma 2.2), its slope at black bounded
+    by `TONEMAP_EPSILON`."""
+    from diviewer.metrics import TONEMAP_GAMMA
+
+    y = (x * exposure).clamp_min(0.0)
+    return (y / (1.0 + y)).clamp_min(TONEMAP_EPSILON) ** (1.0 / TONEMAP_GAMMA)
+
+
+def structure_loss(fake_B: torch.Tensor, b: Mapping[str, Any], encoding: Encoding, target: str,
+                   divide_albedo: bool) -> torch.Tensor:
+    """1 - SSIM of the displayed frame with netG's output against the same frame with the target, both tone-mapped at
+    the batch's ``tonemap_exposure`` as `diviewer eval` and validation compose and score it (GL direct light plus
+    the decoded indirect light, times the albedo where the target is divided by it, times the light scale), on the
+    frame's own pixels (``b["crop"]``: the stride padding left out). ``b``: `diviewer.train.targets.split_batch`'s
+    planes with ``tonemap_exposure``."""
+    from diviewer.train.targets import compose_radiance
+
+    out = encoding.output()
+    pred, true = exposed_radiance(fake_B.float(), out) / out.exposure, b["target"].float()
+    if "scale" in b:
+        pred, true = pred * b["scale"], true * b["scale"]
+    rows, cols = b["crop"]
+    shown = [tonemap_torch(compose_radiance(x, b["direct"], b["albedo"], target, divide_albedo)[:, :, rows, cols],
+                           b["tonemap_exposure"]) for x in (pred, true)]
+    return 1.0 - ssim_torch(*shown)
+
+
 @dataclass(frozen=True)
 class LossConfig:
     """Loss settings, recorded with checkpoints; the weight of the reconstruction term stays the
@@ -155,12 +218,18 @@ class LossConfig:
     gan_mode: str = "vanilla"
     """Adversarial objective, one of `GAN_MODES` ("vanilla": the paper)."""
 
+    ssim_weight: float = 0.0
+    """Weight of the structure term (`structure_loss`) beside the reconstruction term, both times lambda_L1 (0: none,
+    every model before it)."""
+
     def __post_init__(self) -> None:
         for name, choices in (("reconstruction", RECONSTRUCTION_MODES), ("space", RECONSTRUCTION_SPACES),
                               ("gan_mode", GAN_MODES)):
             value = getattr(self, name)
             if value not in choices:
                 raise DiviewerError(f"must be one of {list(choices)}, got {value!r}", field=f"loss.{name}")
+        if not (isinstance(self.ssim_weight, (int, float)) and 0.0 <= self.ssim_weight < math.inf):
+            raise DiviewerError(f"must be a number >= 0, got {self.ssim_weight!r}", field="loss.ssim_weight")
 
     def reconstruction_loss(self, fake_B: torch.Tensor, real_B: torch.Tensor, encoding: Encoding,
                             mask: torch.Tensor | None = None) -> torch.Tensor:

@@ -22,10 +22,12 @@ if TYPE_CHECKING:
 METRIC_KEYS: tuple[str, ...] = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 """Validation metrics: on linear radiance, then on tone-mapped images (suffix _tm)."""
 
-CSV_COLUMNS: tuple[str, ...] = ("epoch", "step", "loss_D", "loss_G_GAN", "loss_G_L1", "D_acc_real", "D_acc_fake",
+CSV_COLUMNS: tuple[str, ...] = ("epoch", "step", "loss_D", "loss_G_GAN", "loss_G_L1", "loss_G_SSIM", "D_acc_real",
+                                "D_acc_fake",
                                 *(f"val_{k}" for k in METRIC_KEYS), "seconds")
 """metrics.csv columns: fractional epoch, global step, mean train losses over the epoch so far
-(loss_G_L1: the reconstruction term, L1 or L2, already times lambda_L1, as pix2pix reports it;
+(loss_G_L1: the reconstruction term, L1 or L2, already times lambda_L1, as pix2pix reports it; loss_G_SSIM: the
+structure term times lambda_L1 and ssim_weight, empty without it;
 loss_G_GAN unweighted), netD's accuracy on real and on generated pairs over the same steps (0.5:
 at chance; the adversarial columns are empty when gan_weight is 0), validation metrics (empty when
 not validated) and wall-clock seconds since the run began (summed over resumed parts)."""
@@ -109,10 +111,11 @@ def draw_curves(rows: list[Mapping[str, Any]], path: Path, best_epoch: float | N
     panels = [
         ("validation MSE (log)", [("linear", "val_mse"), ("tone-mapped", "val_mse_tm")], True),
         ("validation SSIM", [("linear", "val_ssim"), ("tone-mapped", "val_ssim_tm")], False),
-        ("train losses (log)", [("D", "loss_D"), ("G GAN", "loss_G_GAN"), ("G rec", "loss_G_L1")], True),
+        ("train losses (log)", [("D", "loss_D"), ("G GAN", "loss_G_GAN"), ("G rec", "loss_G_L1"),
+                                ("G SSIM", "loss_G_SSIM")], True),
         ("netD accuracy (0.5: chance)", [("real", "D_acc_real"), ("fake", "D_acc_fake")], False),
     ]
-    colors = [(31, 119, 180), (255, 127, 14), (44, 160, 44)]
+    colors = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (148, 103, 189)]
     pw, ph, ml, mr, mt, mb = 420, 330, 64, 14, 42, 38
     img = Image.new("RGB", (pw * len(panels), ph), "white")
     draw = ImageDraw.Draw(img)

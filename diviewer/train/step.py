@@ -12,10 +12,10 @@ import torch
 from diviewer.encoding import Encoding
 from diviewer.train.config import TrainConfig
 from diviewer.train.distributed import Dist, seed_all
-from diviewer.train.losses import LossConfig
+from diviewer.train.losses import LossConfig, structure_loss
 from diviewer.train.networks import NetConfig, init_weights
 
-STEP_KEYS: tuple[str, ...] = ("loss_D", "loss_G_GAN", "loss_G_L1", "D_acc_real", "D_acc_fake")
+STEP_KEYS: tuple[str, ...] = ("loss_D", "loss_G_GAN", "loss_G_L1", "loss_G_SSIM", "D_acc_real", "D_acc_fake")
 """What one step reports (the adversarial ones are absent when gan_weight is 0: netD does not run)."""
 
 
@@ -37,6 +37,10 @@ class Nets:
     gan_weight: float
     lambda_L1: float
     encoding: Encoding
+    target: str = "full"
+    """What netG predicts (TrainConfig.target) and whether divided by the albedo: the structure term composes the
+    displayed frame as validation does."""
+    divide_albedo: bool = False
 
     @property
     def adversarial(self) -> bool:
@@ -67,11 +71,12 @@ def build_nets(cfg: TrainConfig, net_cfg: NetConfig, enc: Encoding, dev: Dist, s
     optG = torch.optim.Adam(netG.parameters(), lr=cfg.lr, betas=(cfg.beta1, cfg.beta2))
     optD = torch.optim.Adam(netD.parameters(), lr=cfg.d_lr or cfg.lr, betas=(cfg.beta1, cfg.beta2))
     dtype = autocast_dtype(cfg, dev, say)
-    loss = LossConfig(reconstruction=cfg.recon_loss, space=cfg.recon_space, gan_mode=cfg.gan_mode)
+    loss = LossConfig(reconstruction=cfg.recon_loss, space=cfg.recon_space, gan_mode=cfg.gan_mode,
+                      ssim_weight=float(cfg.ssim_weight))
     nets = Nets(netG=netG, netD=netD, netG_m=netG, netD_m=netD, optG=optG, optD=optD,
                 scaler=torch.amp.GradScaler("cuda", enabled=dtype == torch.float16), dtype=dtype, loss=loss,
                 criterionGAN=loss.gan_loss().to(dev.device), gan_weight=float(cfg.gan_weight),
-                lambda_L1=float(cfg.lambda_L1), encoding=enc)
+                lambda_L1=float(cfg.lambda_L1), encoding=enc, target=cfg.target, divide_albedo=cfg.divide_albedo)
     # Dropout draws differ per rank (after identical weights); ranks' states are all saved.
     seed_all(cfg.seed + 1_000_003 * (dev.rank + 1))
     return nets
@@ -121,7 +126,8 @@ def train_step(nets: Nets, b: dict[str, Any]) -> dict[str, float]:
     """One pix2pix step: netD on real and generated pairs, then netG against the updated netD.
 
     Returns the step's numbers (`STEP_KEYS`): netD's loss, netG's adversarial loss (unweighted),
-    the reconstruction term times lambda_L1 (pix2pix's "G_L1", whatever the norm), and netD's
+    the reconstruction term times lambda_L1 (pix2pix's "G_L1", whatever the norm), the structure term times
+    lambda_L1 and ssim_weight (where that is above 0; ``b`` then holds ``tonemap_exposure``), and netD's
     accuracy on the real and the generated pairs before its update (0.5 each: at chance).
     """
     real_A, real_B = b["real_A"], b["real_B"]
@@ -145,6 +151,10 @@ def train_step(nets: Nets, b: dict[str, Any]) -> dict[str, float]:
                    D_acc_fake=_accuracy(pred_fake.detach(), False, nets.loss.gan_mode))
     with torch.autocast(**autocast):
         loss_G = loss_G_L1 = nets.loss.reconstruction_loss(fake_B, real_B, nets.encoding, b.get("mask")) * nets.lambda_L1
+        if nets.loss.ssim_weight > 0:
+            out["loss_G_SSIM"] = structure_loss(fake_B, b, nets.encoding, nets.target, nets.divide_albedo) * (
+                nets.lambda_L1 * nets.loss.ssim_weight)
+            loss_G = loss_G + out["loss_G_SSIM"]
         if nets.adversarial:
             # netG: fool the updated netD. The bare module: under DDP no gradient of netD is
             # reduced in this pass.
@@ -158,6 +168,8 @@ def train_step(nets: Nets, b: dict[str, Any]) -> dict[str, float]:
     nets.scaler.step(nets.optG)
     nets.scaler.update()
     out["loss_G_L1"] = loss_G_L1.detach()
+    if "loss_G_SSIM" in out:
+        out["loss_G_SSIM"] = out["loss_G_SSIM"].detach()
     keys = [k for k in STEP_KEYS if k in out]
     values = torch.stack([out[k].float() for k in keys]).tolist()  # one device sync per step
     return dict(zip(keys, values))

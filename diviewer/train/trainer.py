@@ -334,16 +334,15 @@ def _load_splits(cfg: TrainConfig, dev: Dist, say) -> tuple[Dataset, list[int], 
 
 
 def _batch(run: Run, x16, indices: list[int], epoch: int, batch: int) -> dict[str, Any]:
-    """One training batch for `train_step`: this batch's aspect crop, light scales and padding applied."""
+    """One training batch for `train_step`: its aspect crop, light scales and padding, and validation's tone map."""
     import torch
 
     cfg, ds = run.cfg, run.ds
     plan = crop_plan(cfg, epoch, batch, x16.shape[0], ds.height, ds.width)
-    scale = None if run.train_scales is None else torch.from_numpy(run.train_scales[indices])
-    cams = None if run.train_cams is None else torch.from_numpy(run.train_cams[indices])
-    lights = None if run.train_lights is None else torch.from_numpy(run.train_lights[indices])
-    return split_batch(x16, ds.slices, run.enc, cfg, scale=scale, multiple=run.multiple, crop=plan, cams=cams,
-                       lights=lights)
+    pick = lambda a: None if a is None else torch.from_numpy(a[indices])  # noqa: E731
+    b = split_batch(x16, ds.slices, run.enc, cfg, scale=pick(run.train_scales), multiple=run.multiple, crop=plan,
+                    cams=pick(run.train_cams), lights=pick(run.train_lights))
+    return {**b, "tonemap_exposure": run.enc.exposure if run.tonemap_exposure is None else run.tonemap_exposure}
 
 
 def _open_run(cfg: TrainConfig, ds: Dataset, train_idx: list[int], resume: bool, say) -> dict[str, Any] | None:
@@ -434,7 +433,8 @@ def _patience_spent(cfg: TrainConfig, st: TrainState) -> bool:
 
 
 def _fmt(numbers: dict[str, float]) -> str:
-    names = {"loss_D": "D", "loss_G_GAN": "G", "loss_G_L1": "rec", "D_acc_real": "Dacc real", "D_acc_fake": "fake"}
+    names = {"loss_D": "D", "loss_G_GAN": "G", "loss_G_L1": "rec", "loss_G_SSIM": "ssim", "D_acc_real": "Dacc real",
+             "D_acc_fake": "fake"}
     return " ".join(f"{names[k]} {v:.4f}" for k, v in numbers.items() if k in names)
 
 

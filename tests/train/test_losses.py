@@ -17,6 +17,9 @@ from diviewer.train.losses import (  # noqa: E402
     LossConfig,
     exposed_radiance,
     reconstruction_loss,
+    ssim_torch,
+    structure_loss,
+    tonemap_torch,
 )
 
 ENC = Encoding(exposure=2.0, depth_scale=10.0)
@@ -173,3 +176,63 @@ def test_relative_l2_converges_to_the_mean_while_weighing_dark_pixels_like_brigh
     assert np.isfinite(reconstruction_loss(_encoded([0.0]), _encoded([0.2]), "l2", "relative", ENC).item())
     with pytest.raises(ValueError, match="needs the encoding"):
         reconstruction_loss(_encoded([1.0]), _encoded([1.0]), "l2", "relative")
+
+
+def test_ssim_and_tone_map_on_tensors_are_the_metrics_ones() -> None:
+    """The structure term's SSIM and tone map are `diviewer.metrics`' (what eval and validation score), on tensors."""
+    from diviewer import metrics
+
+    rng = np.random.default_rng(0)
+    a, b = rng.random((2, 3, 20, 24)), rng.random((2, 3, 20, 24))
+    b[1] = 0.7 * a[1] + 0.3 * b[1]  # one pair alike, one not
+    expected = np.mean([metrics.ssim(a[i].transpose(1, 2, 0), b[i].transpose(1, 2, 0)) for i in range(2)])
+    got = ssim_torch(torch.as_tensor(a, dtype=torch.float32), torch.as_tensor(b, dtype=torch.float32))
+    assert got.item() == pytest.approx(expected, abs=1e-5)
+    assert ssim_torch(torch.as_tensor(a), torch.as_tensor(a)).item() == pytest.approx(1.0, abs=1e-6)
+    x = rng.random((1, 3, 4, 4)) * 5.0
+    assert tonemap_torch(torch.as_tensor(x), 1.7).numpy() == pytest.approx(metrics.tonemap(x, 1.7), rel=1e-6)
+    black = torch.zeros(1, 1, 2, 2, requires_grad=True)
+    tonemap_torch(black, 1.0).sum().backward()
+    assert torch.isfinite(black.grad).all(), "the gamma's slope at black is bounded"
+
+
+def _batch(target: torch.Tensor, enc: Encoding, pad: int = 0) -> dict:
+    """A batch as split_batch gives it for target "indirect" divided by the albedo: planes padded by ``pad`` columns
+    of garbage on the right (the stride padding), the frame's crop, the tone map's exposure."""
+    n, _, h, w = target.shape
+    direct, albedo = torch.full((n, 3, h, w), 0.05), torch.full((n, 3, h, w), 0.6)
+    planes = [direct, albedo, target]
+    if pad:
+        planes = [torch.cat([p, torch.full((n, 3, h, pad), 9.0)], 3) for p in planes]
+    return {"direct": planes[0], "albedo": planes[1], "target": planes[2], "crop": (slice(0, h), slice(0, w)),
+            "tonemap_exposure": 1.3}
+
+
+def test_structure_loss_compares_the_displayed_frames_on_the_frames_pixels() -> None:
+    """0 for the target itself, above 0 for a blurred one, with a finite gradient; the stride padding is not scored;
+    the light scale multiplies both frames."""
+    torch.manual_seed(0)
+    enc = Encoding(exposure=2.0, depth_scale=10.0, output_gain=3.0)
+    target = torch.rand(2, 3, 24, 28) * 0.8
+    b = _batch(target, enc)
+    exact = encode_radiance(target, enc.output())
+    assert structure_loss(exact, b, enc, "indirect", True).item() == pytest.approx(0.0, abs=1e-4)
+    blurred = encode_radiance(torch.nn.functional.avg_pool2d(target, 5, 1, 2, count_include_pad=False), enc.output())
+    blurred.requires_grad_(True)
+    loss = structure_loss(blurred, b, enc, "indirect", True)
+    loss.backward()
+    assert loss.item() > 0.05 and torch.isfinite(blurred.grad).all() and blurred.grad.abs().sum() > 0
+    padded = _batch(target, enc, pad=4)
+    garbage = torch.cat([exact, torch.zeros(2, 3, 24, 4)], 3)  # a prediction far off on the padding only
+    assert structure_loss(garbage, padded, enc, "indirect", True).item() == pytest.approx(0.0, abs=1e-4)
+    scaled = {**b, "scale": torch.full((2, 1, 1, 1), 4.0)}
+    assert structure_loss(exact, scaled, enc, "indirect", True).item() == pytest.approx(0.0, abs=1e-4)
+    assert structure_loss(blurred.detach(), scaled, enc, "indirect", True).item() != pytest.approx(loss.item())
+
+
+def test_the_structure_terms_weight_is_checked_and_older_configs_have_none() -> None:
+    assert LossConfig.from_dict({"reconstruction": "l1"}).ssim_weight == 0.0
+    assert LossConfig.from_dict(LossConfig(ssim_weight=0.25).to_dict()).ssim_weight == 0.25
+    for bad in (-0.1, float("inf"), "0.5"):
+        with pytest.raises(DiviewerError, match="loss.ssim_weight"):
+            LossConfig(ssim_weight=bad)

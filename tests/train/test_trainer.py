@@ -491,6 +491,7 @@ def test_resumed_epoch_rows_average_only_their_own_epoch(run, data, tmp_path):
     {"upsample": "resize", "norm": "instance"},
     {"upsample": "shuffle", "norm": "none"},
     {"precision": "bf16"},
+    {"gan_weight": 0.0, "ssim_weight": 0.5, "target": "indirect", "divide_albedo": True},
 ], ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()))
 def test_each_training_option_trains_and_is_recorded(data, tmp_path, options):
     result = train(tiny(data, tmp_path / "o", epochs=1, **options), log=quiet)
@@ -507,6 +508,10 @@ def test_each_training_option_trains_and_is_recorded(data, tmp_path, options):
     adversarial = options.get("gan_weight", 1.0) > 0
     for k in ("loss_D", "loss_G_GAN", "D_acc_real", "D_acc_fake"):
         assert (rows[-1][k] != "") == adversarial, k
+    assert ckpt["loss_config"]["ssim_weight"] == options.get("ssim_weight", 0.0)
+    assert (rows[-1]["loss_G_SSIM"] != "") == ("ssim_weight" in options)
+    if "ssim_weight" in options:  # 1 - SSIM in [0, 2], times lambda_L1 and the weight
+        assert 0.0 < float(rows[-1]["loss_G_SSIM"]) <= 2.0 * 100.0 * options["ssim_weight"]
     if adversarial:
         assert 0 <= float(rows[-1]["D_acc_real"]) <= 1 and 0 <= float(rows[-1]["D_acc_fake"]) <= 1
     netG, _, _ = build_generator_from_checkpoint(ckpt)  # the generator rebuilds with its options
@@ -562,7 +567,7 @@ def test_cli_maps_the_options_onto_the_config(data, tmp_path):
     args = ap.parse_args(["train", "--data", str(data), "--out", str(out), "--device", "cpu", "--k", "4", "--ndf", "8",
                           "--no-world-inputs", "--epochs", "1", "--gan-weight", "0", "--recon-loss", "l2", "--recon-space", "linear",
                           "--n-layers-d", "2", "--d-lr", "1e-3", "--upsample", "resize", "--norm", "instance",
-                          "--train-frames", "8", "--patience", "3", "--val-every-steps", "1", "--precision", "fp32",
+                          "--train-frames", "8", "--patience", "3", "--val-every-steps", "1", "--precision", "fp32", "--ssim-weight", "0.5",
                           "--lr-decay", "none"])  # the default recipe decays from step 20,000
     assert run_train(args) == 0
     cfg = load_checkpoint(out / "last.ckpt")["config"]
@@ -570,6 +575,7 @@ def test_cli_maps_the_options_onto_the_config(data, tmp_path):
         0.0, "l2", "linear", 2, 1e-3)
     assert (cfg["upsample"], cfg["norm"], cfg["train_frames"], cfg["patience"], cfg["val_every_steps"]) == (
         "resize", "instance", 8, 3, 1)
+    assert cfg["ssim_weight"] == 0.5
 
 
 def test_cosine_schedule_runs_from_lr_to_the_floor_and_none_is_constant(data, tmp_path):
