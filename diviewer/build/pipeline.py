@@ -66,6 +66,11 @@ def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> d
         was, now = state.ladder_change
         log(f"the K ladder changed from {', '.join(map(str, was))} to {', '.join(map(str, now))}: every K trained "
             f"before keeps its run; the evaluation, the pick and the ship run again over the new ladder")
+    if state.train_change is not None:
+        was, now = state.train_change
+        edits = ", ".join(f"{k} {was.get(k)} -> {now.get(k)}" for k in sorted({*was, *now}) if was.get(k) != now.get(k))
+        log(f"the recipe changed before any K was trained ({edits or 'outside [train]'}): every stage done before "
+            f"keeps; the training runs with the new settings")
     if state.export_change is not None:
         was, now = state.export_change
         edits = ", ".join(f"{k} {was.get(k)} -> {now.get(k)}" for k in sorted(now) if was.get(k) != now.get(k))

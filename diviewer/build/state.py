@@ -24,7 +24,11 @@ LADDER_STAGES = ("evaluate", "pick", "ship")
 """The stages that read every K of the ladder: run again when the ladder changes (the others keep)."""
 REPLANNABLE = ("ks", "export")
 """Plan fields a finished build may change: the K ladder (`LADDER_STAGES` run again) and the export settings (every
-``export_kK`` and `LADDER_STAGES` run again); anything else is another build."""
+``export_kK`` and `LADDER_STAGES` run again); anything else is another build, but for `BEFORE_TRAINING`."""
+BEFORE_TRAINING = ("recipe", "train")
+"""Plan fields a build may also change while no stage from the training on has finished (a capture refined for
+hours, the training settings edited before any K trains): nothing finished depends on them. The recipe's own key
+changes with its [train] table; a changed capture or evaluation set is keyed apart, and stays another build."""
 
 
 class BuildState:
@@ -39,6 +43,8 @@ class BuildState:
         """(old Ks, new Ks) where this build's ladder differs from the one the work folder was built with."""
         self.export_change: tuple[dict, dict] | None = None
         """(old, new) export settings where the recipe's ``[export]`` differs from the one the folder was built with."""
+        self.train_change: tuple[dict, dict] | None = None
+        """(old, new) training settings where the recipe changed before any K was trained (`BEFORE_TRAINING`)."""
         if self.path.is_file():
             try:
                 old = json.loads(self.path.read_text())
@@ -50,7 +56,13 @@ class BuildState:
             old_plan = old.get("plan", {})
             changed = sorted(k for k in set(plan_key) | set(old_plan)
                              if not _same(k, old_plan.get(k), plan_key.get(k)))
-            if changed and set(changed) <= set(REPLANNABLE):
+            untrained = not any(_from_training(name) for name in old.get("stages", {}))
+            if changed and untrained and set(changed) <= {*REPLANNABLE, *BEFORE_TRAINING}:
+                if set(changed) & set(BEFORE_TRAINING):
+                    self.train_change = (old_plan.get("train") or {}, plan_key.get("train") or {})
+                if "ks" in changed:
+                    self.ladder_change = (list(old_plan["ks"]), list(plan_key["ks"]))
+            elif changed and set(changed) <= set(REPLANNABLE):
                 # the same capture, evaluation set and training settings with more (or fewer) widths, or exported
                 # otherwise: every finished K keeps its training, and what reads the exports runs again
                 if "ks" in changed:
@@ -92,6 +104,11 @@ class BuildState:
 
     def save(self) -> None:
         imageio.write_text(self.path, json.dumps(self.data, indent=1, sort_keys=True, default=str) + "\n")
+
+
+def _from_training(stage: str) -> bool:
+    """Whether a stage depends on the training settings: a K's training or export, or what reads every K."""
+    return stage.startswith(("train_k", "export_k")) or stage in LADDER_STAGES
 
 
 def _same(field: str, old: Any, new: Any) -> bool:

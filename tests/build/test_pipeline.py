@@ -327,6 +327,31 @@ def test_an_edited_export_table_exports_again_and_keeps_every_training(tmp_path)
         BuildState(tmp_path / "build.json", {**edited, "recipe": {**edited["recipe"], "model_sha256": "model-2"}})
 
 
+def test_the_training_settings_may_change_until_a_k_is_trained(tmp_path):
+    """A capture refined for hours, then the recipe's [train] edited: while no stage from the training on has
+    finished, the build goes on with the new settings and keeps every stage; once a K is trained it is another
+    build, as is a changed capture at any time."""
+    out = tmp_path / "a.txt"
+    out.write_text("one")
+    recipe = {"name": "sponza", "sha256": "bytes-1", "content_sha256": "c-1", "model_sha256": "model-1"}
+    key = {"recipe": recipe, "capture": {"spp": 256}, "train": {"lr": 2e-4}, "ks": [8]}
+    state = BuildState(tmp_path / "build.json", key)
+    for stage in ("capture", "refine", "check", "evalset"):
+        state.finish(stage, tmp_path, [out])
+    edited = {**key, "recipe": {**recipe, "model_sha256": "model-2"}, "train": {"lr": 2e-4, "ssim_weight": 0.1}}
+    again = BuildState(tmp_path / "build.json", edited, save_upgrade=True)
+    assert again.train_change == ({"lr": 2e-4}, {"lr": 2e-4, "ssim_weight": 0.1})
+    assert [s for s in ("capture", "refine", "check", "evalset") if again.done(s, tmp_path)] == [
+        "capture", "refine", "check", "evalset"]
+    assert json.loads((tmp_path / "build.json").read_text())["plan"] == edited
+    with pytest.raises(DiviewerError, match="another plan .*capture"):
+        BuildState(tmp_path / "build.json", {**edited, "capture": {"spp": 512}})
+    again.finish("train_k8", tmp_path, [out])
+    with pytest.raises(DiviewerError, match="another plan .*recipe, train"):
+        BuildState(tmp_path / "build.json", key)
+    assert BuildState(tmp_path / "build.json", edited).train_change is None
+
+
 def test_a_key_of_the_version_before_is_the_same_plan_and_is_upgraded_when_a_build_runs(tmp_path):
     """A state file written before the export settings were keyed apart (its recipe hash covers [export]): the same
     recipe is the same plan; a running build writes this version's key at once (a dry run does not), so that the
@@ -334,7 +359,9 @@ def test_a_key_of_the_version_before_is_the_same_plan_and_is_upgraded_when_a_bui
     out = tmp_path / "a.txt"
     out.write_text("one")
     old_key = {"recipe": {"name": "sponza", "sha256": "bytes-1", "content_sha256": "with-export-1"}, "ks": [8]}
-    BuildState(tmp_path / "build.json", old_key).finish("capture", tmp_path, [out])
+    first = BuildState(tmp_path / "build.json", old_key)
+    for stage in ("capture", "train_k8"):  # a K trained: the recipe may no longer change (but for [export])
+        first.finish(stage, tmp_path, [out])
     new_key = {"recipe": {**old_key["recipe"], "model_sha256": "model-1"}, "export": {"half_weights": False},
                "ks": [8]}
     edited = {"recipe": {**new_key["recipe"], "content_sha256": "with-export-2"}, "export": {"half_weights": True},
@@ -355,14 +382,20 @@ def test_the_recipe_is_the_same_plan_when_only_its_comments_changed(tmp_path):
     out = tmp_path / "a.txt"
     out.write_text("one")
     recipe = {"name": "cornell", "sha256": "bytes-1", "content_sha256": "values-1"}
-    BuildState(tmp_path / "build.json", {"recipe": recipe}).finish("capture", tmp_path, [out])
+
+    def trained(path: Path, key: dict) -> None:  # a K trained: another recipe is another build from then on
+        state = BuildState(path, key)
+        for stage in ("capture", "train_k8"):
+            state.finish(stage, tmp_path, [out])
+
+    trained(tmp_path / "build.json", {"recipe": recipe})
     comment = BuildState(tmp_path / "build.json", {"recipe": {**recipe, "sha256": "bytes-2"}})
     assert comment.done("capture", tmp_path) is not None
     with pytest.raises(DiviewerError, match="another plan .*recipe"):
         BuildState(tmp_path / "build.json", {"recipe": {**recipe, "content_sha256": "values-2"}})
     # a state file written before the content was hashed: the same bytes are the same recipe, and it is upgraded
     old = tmp_path / "old" / "build.json"
-    BuildState(old, {"recipe": {"name": "cornell", "sha256": "bytes-1"}}).finish("capture", tmp_path, [out])
+    trained(old, {"recipe": {"name": "cornell", "sha256": "bytes-1"}})
     with pytest.raises(DiviewerError, match="another plan .*recipe"):
         BuildState(old, {"recipe": {**recipe, "sha256": "bytes-2"}})
     upgraded = BuildState(old, {"recipe": recipe})
