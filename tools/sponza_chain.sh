@@ -11,7 +11,8 @@
 #      the training, scored on the full evaluation set and shipped to runs/sponza256/ship. K = 8 alone (~1 h here):
 #      a first model on a cleaner truth, and whether a cleaner truth moves the SSIM, before the 512-spp refinement;
 #      the wider K wait for the cleanest truth (K = 16 here would cost ~1.7 h the 512 ladder repeats). Its margin
-#      over the truth it trained on, frame by frame: WORK/truth_margin_k8.json (as after each build below);
+#      over the truth it trained on, frame by frame: WORK/truth_margin_k8.json (as after each build below); then the
+#      same K = 8 with the structure term (`--ssim-weight 0.1`, ~1 h), scored beside it (3b below);
 #   4. the ladder on a 512-spp truth (assets/recipes/sponza_walk512.toml, `refine_from = 256`), in runs/sponza512
 #      whose data/ links to the 256-spp set: its refinement (~12 h), K = 8 and 16, picked and shipped to
 #      runs/sponza512/ship, then K = 32 (trained, scored and recorded; the recipe's `[ladder] max_mb` keeps it from
@@ -68,6 +69,32 @@ margins() {
   done
 }
 margins "$REFINED" 8
+# 3b. The structure term against the recipe on the same 256-spp truth: K = 8 with `--ssim-weight 0.1` (the term ~5x
+#     the L1 one at the end of a run; docs/training.md), the recipe's whole schedule (~1 h here), best.ckpt by the
+#     validation split's SSIM as the build picks, exported as the recipe exports, scored with the recipe's K = 8 on
+#     the full evaluation set (WORK/eval_full_ssim.json) and its truth margin. Which one the 512-spp ladder trains is
+#     read from the validation split (WORK/ssim_k8/metrics.csv beside WORK/train_k8/metrics.csv) in a session: the
+#     512-spp build takes other [train] settings until its first K trains (docs/build.md). A failure is reported
+#     and the chain goes on to the 512-spp refinement.
+ssim_run() {
+  local run="$REFINED/ssim_k8" resume=()
+  [ -f "$run/last.ckpt" ] && resume=(--resume)
+  diviewer train --data "$REFINED/data_256spp" --out "$run" --recipe "$REFINED/sponza.toml" --k 8 --ssim-weight 0.1 \
+    "${resume[@]}"
+}
+ssim_ablation() {  # each step only after the one before succeeded (errexit does not hold inside `f || ...`)
+  local model="$REFINED/models/sponza_ssim_k8.onnx"
+  again ssim_run \
+    && { [ -f "$model" ] || diviewer export "$REFINED/ssim_k8/best.ckpt" --out "$model" --half-weights; } \
+    && again diviewer eval --evalset "$WORK/evalset" --model "$REFINED/models/sponza_k8.onnx" --model "$model" \
+         --out "$REFINED/eval_full_ssim.json" \
+    && python tools/experiments/truth_margin.py --eval "$REFINED/eval_full_ssim.json" --model-key sponza_ssim_k8 \
+         --project 512 --project 1024 --out "$REFINED/truth_margin_ssim_k8.json"
+}
+if [ ! -f "$REFINED/truth_margin_ssim_k8.json" ]; then
+  stage "K = 8 with the structure term on the 256-spp truth"
+  ssim_ablation || stage "the structure-term run failed (above); on to the 512-spp truth"
+fi
 TWICE_BUILD=(diviewer build --scene sponza --recipe "$TWICE/sponza.toml" --evalset "$WORK/evalset" --work "$TWICE"
              --ship "$TWICE/ship")
 stage "build on the 512-spp truth: the refinement, K = 8 and 16"
