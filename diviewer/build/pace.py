@@ -12,6 +12,7 @@ from typing import Callable, NamedTuple
 from diviewer.build.plan import Plan, hms
 from diviewer.errors import DiviewerError
 
+
 def captured(plan: Plan) -> set[str]:
     """{"capture"} where the work folder's capture holds every frame the plan asks for (a capture, or a refined set
     standing for it) with the recipe's settings, though no build has recorded the stage: a run renders none, so a dry

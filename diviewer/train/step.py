@@ -151,10 +151,6 @@ def train_step(nets: Nets, b: dict[str, Any]) -> dict[str, float]:
                    D_acc_fake=_accuracy(pred_fake.detach(), False, nets.loss.gan_mode))
     with torch.autocast(**autocast):
         loss_G = loss_G_L1 = nets.loss.reconstruction_loss(fake_B, real_B, nets.encoding, b.get("mask")) * nets.lambda_L1
-        if nets.loss.ssim_weight > 0:
-            out["loss_G_SSIM"] = structure_loss(fake_B, b, nets.encoding, nets.target, nets.divide_albedo) * (
-                nets.lambda_L1 * nets.loss.ssim_weight)
-            loss_G = loss_G + out["loss_G_SSIM"]
         if nets.adversarial:
             # netG: fool the updated netD. The bare module: under DDP no gradient of netD is
             # reduced in this pass.
@@ -163,6 +159,10 @@ def train_step(nets: Nets, b: dict[str, Any]) -> dict[str, float]:
             loss_G_GAN = nets.criterionGAN(nets.netD_m(torch.cat([real_A, fake_B], 1)), True)
             loss_G = loss_G + nets.gan_weight * loss_G_GAN
             out["loss_G_GAN"] = loss_G_GAN.detach()
+    if nets.loss.ssim_weight > 0:  # outside the autocast: SSIM's window sums in bfloat16 would lose the structure
+        out["loss_G_SSIM"] = structure_loss(fake_B, b, nets.encoding, nets.target, nets.divide_albedo) * (
+            nets.lambda_L1 * nets.loss.ssim_weight)
+        loss_G = loss_G + out["loss_G_SSIM"]
     nets.optG.zero_grad(set_to_none=True)
     nets.scaler.scale(loss_G).backward()
     nets.scaler.step(nets.optG)

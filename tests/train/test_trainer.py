@@ -491,7 +491,7 @@ def test_resumed_epoch_rows_average_only_their_own_epoch(run, data, tmp_path):
     {"upsample": "resize", "norm": "instance"},
     {"upsample": "shuffle", "norm": "none"},
     {"precision": "bf16"},
-    {"gan_weight": 0.0, "ssim_weight": 0.5, "target": "indirect", "divide_albedo": True},
+    {"gan_weight": 0.0, "ssim_weight": 0.5, "target": "indirect", "divide_albedo": True, "precision": "bf16"},
 ], ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()))
 def test_each_training_option_trains_and_is_recorded(data, tmp_path, options):
     result = train(tiny(data, tmp_path / "o", epochs=1, **options), log=quiet)
