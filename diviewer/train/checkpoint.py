@@ -113,6 +113,7 @@ def build_generator_from_checkpoint(ckpt: Mapping[str, Any] | str | Path):
         "config": dict(config),
         "versions": dict(ckpt.get("versions", {})),
         "capture": capture_record(ckpt["dataset"]),
+        "truth_spp": ckpt["dataset"].get("truth_spp"),
         "loss_config": ckpt.get("loss_config"),
         "init": ckpt.get("init"),
         "trained_on": trained_on_from_config(ckpt),
@@ -194,6 +195,21 @@ def captured_spp(manifest: Mapping[str, Any]) -> int:
     return int(rec["from_spp"])
 
 
+def truth_spp(ds: Dataset, indices: list[int]) -> dict[str, int] | None:
+    """The samples per pixel the truth of a refined dataset's frames really holds ({"min", "max"} over ``indices``):
+    each frame's sidecar records its count before the last refinement and the samples added (the sampler rounds some
+    counts up: Sponza's "256" frames hold 64 + 195). None for a dataset never refined (its manifest's ``spp``)."""
+    import json
+
+    if "refined" not in ds.manifest:
+        return None
+    counts = []
+    for i in indices:
+        rec = json.loads(ds.path(i, ".json").read_text())["refined"]
+        counts.append(int(rec["from_spp"]) + int(rec["extra_spp"]))
+    return {"min": min(counts), "max": max(counts)} if counts else None
+
+
 def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Dataset, train_idx: list[int],
                  n_val: int, resumed: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """What every checkpoint of a run records besides the weights and the progress (`resumed`: the
@@ -210,7 +226,8 @@ def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Datase
                     "train_frames": len(train_idx), "train_indices": list(train_idx), "val_frames": n_val,
                     "capture": {k: ds.manifest.get(k) for k in CAPTURE_KEYS},
                     "direct_samples": direct_samples(ds.manifest),
-                    **({"refined_from_spp": captured_spp(ds.manifest)} if "refined" in ds.manifest else {})},
+                    **({"refined_from_spp": captured_spp(ds.manifest), "truth_spp": truth_spp(ds, train_idx)}
+                       if "refined" in ds.manifest else {})},
         "versions": versions(),
         "trained_on": trained_on(nets, (resumed or {}).get("trained_on")),
     }

@@ -344,6 +344,8 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "scene_hash": meta["scene_hash"],
         "dataset_hash": meta["dataset_hash"],
         "direct_samples": int(meta.get("direct_samples", 1)),
+        # a refined truth's real samples per pixel over the train frames (`checkpoint.truth_spp`); absent: as captured
+        **({"truth_spp": meta["truth_spp"]} if meta.get("truth_spp") else {}),
         "epochs": int(meta["epoch"]),
         "steps": int(meta["step"]),
         "validation": meta["val"],

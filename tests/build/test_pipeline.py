@@ -583,6 +583,9 @@ def test_build_a_tiny_scene_that_refines_its_capture(gl_context, tmp_path, capsy
     assert refined.manifest["refined"]["from_hash"] == captured.hash
     card = json.loads((ship / "tiny.json").read_text())
     assert card["dataset_hash"] == refined.hash
+    first_step = json.loads(refined.path(refined.indices()[0], ".json").read_text())["refined"]
+    held = first_step["from_spp"] + first_step["extra_spp"]
+    assert card["truth_spp"] == {"min": held, "max": held} and held >= 6  # the samples its truth really holds
     cap = card["recipe"]["capture"]
     assert cap["spp"] == 6 and cap["refine_from"] == 2
     assert {k: cap[k] for k in load_recipe(recipe).capture if k in cap} == {
