@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import shutil
 
 import numpy as np
@@ -168,6 +169,26 @@ def test_build_resumes_a_lost_frame_to_the_same_bytes(evalset, tmp_path):
     assert (copy / "frames" / "000003.npy").read_bytes() == (out / "frames" / "000003.npy").read_bytes()
     with pytest.raises(DiviewerError, match="differs in"):
         build_evalset("cornell", copy, EvalSetSettings(**{**TINY.__dict__, "spp": 64}), log=quiet)
+
+
+@pytest.mark.slow
+def test_a_complete_set_run_again_keeps_its_scores_until_a_frame_is_newer(evalset, tmp_path):
+    """Nothing to render: the scores written after the last frame are read back, not computed again (a chain
+    resumes it at every start); a frame written after them (or a deleted summary.json) is scored again."""
+    out, first = evalset
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)  # modification times kept
+    before = (copy / "summary.json").read_bytes()
+    lines = []
+    again = build_evalset("cornell", copy, TINY, log=lines.append)
+    assert any("written after its last frame" in line for line in lines)
+    assert (copy / "summary.json").read_bytes() == before and again["noise_floor"] == first["noise_floor"]
+    later = (copy / "summary.json").stat().st_mtime + 10
+    os.utime(copy / "frames" / "000001.npy", (later, later))
+    lines.clear()
+    rescored = build_evalset("cornell", copy, TINY, log=lines.append)
+    assert not any("written after its last frame" in line for line in lines)
+    assert rescored["noise_floor"] == first["noise_floor"]
 
 
 @pytest.mark.slow
