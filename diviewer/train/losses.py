@@ -159,21 +159,29 @@ TONEMAP_EPSILON: float = 1e-6
 
 def ssim_torch(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """Mean SSIM of two NCHW batches in [0, 1] over every wholly-inside window and channel: `diviewer.metrics.ssim`
-    of each frame (data range 1), averaged, differentiable."""
-    x = torch.arange(SSIM_WINDOW, dtype=torch.float32, device=a.device) - (SSIM_WINDOW - 1) / 2.0
-    g = torch.exp(-(x * x) / (2.0 * SSIM_SIGMA ** 2))
-    g = g / g.sum()
-    c = a.shape[1]
-    rows, cols = g.reshape(1, 1, -1, 1).repeat(c, 1, 1, 1), g.reshape(1, 1, 1, -1).repeat(c, 1, 1, 1)
-    blur = lambda t: nn.functional.conv2d(nn.functional.conv2d(t, rows, groups=c), cols, groups=c)  # noqa: E731
+    of each frame (data range 1), averaged; differentiable in ``a``, ``b`` the reference (no gradient flows into it,
+    and its two window sums are taken without a graph: a third of the term's time on a CPU)."""
     a, b = a.float(), b.float()
-    mu_a, mu_b = blur(a), blur(b)
-    var_a = (blur(a * a) - mu_a * mu_a).clamp_min(0.0)
-    var_b = (blur(b * b) - mu_b * mu_b).clamp_min(0.0)
-    cov = blur(a * b) - mu_a * mu_b
+    c = a.shape[1]
+    with torch.no_grad():
+        mu_b, bb = _window_sums(torch.cat([b, b * b], 1)).split(c, 1)
+    mu_a, aa, ab = _window_sums(torch.cat([a, a * a, a * b], 1)).split(c, 1)
+    var_a = (aa - mu_a * mu_a).clamp_min(0.0)
+    var_b = (bb - mu_b * mu_b).clamp_min(0.0)
+    cov = ab - mu_a * mu_b
     num = (2 * mu_a * mu_b + SSIM_C1) * (2 * cov + SSIM_C2)
     den = (mu_a * mu_a + mu_b * mu_b + SSIM_C1) * (var_a + var_b + SSIM_C2)
     return (num / den).mean()
+
+
+def _window_sums(t: torch.Tensor) -> torch.Tensor:
+    """Each channel of an NCHW batch under the SSIM's Gaussian window, 'valid' (two separable passes)."""
+    x = torch.arange(SSIM_WINDOW, dtype=torch.float32, device=t.device) - (SSIM_WINDOW - 1) / 2.0
+    g = torch.exp(-(x * x) / (2.0 * SSIM_SIGMA ** 2))
+    g = g / g.sum()
+    k = t.shape[1]
+    rows, cols = g.reshape(1, 1, -1, 1).repeat(k, 1, 1, 1), g.reshape(1, 1, 1, -1).repeat(k, 1, 1, 1)
+    return nn.functional.conv2d(nn.functional.conv2d(t, rows, groups=k), cols, groups=k)
 
 
 def tonemap_torch(x: torch.Tensor, exposure: float) -> torch.Tensor:
@@ -195,12 +203,14 @@ def structure_loss(fake_B: torch.Tensor, b: Mapping[str, Any], encoding: Encodin
     from diviewer.train.targets import compose_radiance
 
     out = encoding.output()
-    pred, true = exposed_radiance(fake_B.float(), out) / out.exposure, b["target"].float()
+    rows, cols = b["crop"]  # the frame's own pixels first: nothing is composed on the padding
+    frame = lambda t: t[:, :, rows, cols].float()  # noqa: E731
+    pred, true = exposed_radiance(frame(fake_B), out) / out.exposure, frame(b["target"])
     if "scale" in b:
         pred, true = pred * b["scale"], true * b["scale"]
-    rows, cols = b["crop"]
-    shown = [tonemap_torch(compose_radiance(x, b["direct"], b["albedo"], target, divide_albedo)[:, :, rows, cols],
-                           b["tonemap_exposure"]) for x in (pred, true)]
+    direct, albedo = frame(b["direct"]), frame(b["albedo"])
+    shown = [tonemap_torch(compose_radiance(x, direct, albedo, target, divide_albedo), b["tonemap_exposure"])
+             for x in (pred, true)]
     return 1.0 - ssim_torch(*shown)
 
 
