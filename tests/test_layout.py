@@ -281,3 +281,18 @@ def test_relative_links_in_the_docs_reach_a_file_and_a_heading():
 def test_heading_slugs_follow_githubs_rule():
     assert _slugs("# The viewer's frame time (2026-11-23)\n## A `code` heading: two, words\n# Notes\n# Notes\n") == {
         "the-viewers-frame-time-2026-11-23", "a-code-heading-two-words", "notes", "notes-1"}
+
+
+def test_every_shell_script_parses():
+    """tools/*.sh and .ci/run parse (`bash -n`): the Sponza chain is edited while it runs (write a new file, then
+    `mv`), and a syntax error would surface only when the running chain reached it, sessions later."""
+    import subprocess
+
+    root = PACKAGE.parent
+    scripts = [*sorted((root / "tools").rglob("*.sh")), root / ".ci" / "run"]
+    bad = {}
+    for script in scripts:
+        r = subprocess.run(["bash", "-n", str(script)], capture_output=True, text=True)
+        if r.returncode:
+            bad[str(script.relative_to(root))] = r.stderr.strip()
+    assert len(scripts) > 5 and not bad, bad
