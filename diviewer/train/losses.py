@@ -160,7 +160,7 @@ TONEMAP_EPSILON: float = 1e-6
 def ssim_torch(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """Mean SSIM of two NCHW batches in [0, 1] over every wholly-inside window and channel: `diviewer.metrics.ssim`
     of each frame (data range 1), averaged; differentiable in ``a``, ``b`` the reference (no gradient flows into it,
-    and its two window sums are taken without a graph: a third of the term's time on a CPU)."""
+    and its two window sums are taken without a graph: about a quarter less time on a CPU, micro-benchmarked)."""
     a, b = a.float(), b.float()
     c = a.shape[1]
     with torch.no_grad():
