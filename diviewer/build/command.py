@@ -84,14 +84,14 @@ def run_build_command(args: argparse.Namespace) -> int:
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
                      evalset_dir=args.evalset)
     if args.dry_run:
-        from diviewer.build.pace import captured, measured_pace
+        from diviewer.build.pace import measured_pace
         from diviewer.build.pipeline import finished_stages
 
+        paces = measured_pace(plan)
         try:
-            done, refusal = finished_stages(plan) | captured(plan), None
+            done, refusal = finished_stages(plan) | {p.stage for p in paces if p.done}, None
         except DiviewerError as exc:  # the work folder holds another plan's build: the run would stop there
             done, refusal = set(), exc
-        paces = measured_pace(plan)
         for line in [*describe(plan, done, {p.stage: p.left for p in paces if p.left is not None}),
                      *(p.line for p in paces)]:
             print(line)

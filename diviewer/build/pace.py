@@ -1,7 +1,7 @@
 """What a build's work folder says of its progress before the build has recorded it, for ``diviewer build`` (its
-plan's lines, a dry run's too): a capture already complete there (and whether a run takes it), and the pace of a
-capture, refinement or training under way on this machine, beside the plan's estimates from costs measured
-elsewhere."""
+plan's lines, a dry run's too): a capture already complete there (and whether a run takes it: `Pace.done`), and
+the pace of a capture, refinement or training under way on this machine, beside the plan's estimates from costs
+measured elsewhere."""
 
 from __future__ import annotations
 
@@ -11,16 +11,6 @@ from typing import Callable, NamedTuple
 
 from diviewer.build.plan import Plan, hms
 from diviewer.errors import DiviewerError
-
-
-def captured(plan: Plan) -> set[str]:
-    """{"capture"} where the work folder's capture holds every frame the plan asks for (a capture, or a refined set
-    standing for it) with the recipe's settings, though no build has recorded the stage: a run renders none, so a dry
-    run counts it done; else empty (a run renders the rest, or refuses the folder: `capture_refusal`)."""
-    folder = plan.capture_dir
-    if not (folder / "manifest.json").is_file() or _frame_count(folder) < plan.capture.frames:
-        return set()
-    return set() if capture_refusal(plan) else {"capture"}
 
 
 def capture_refusal(plan: Plan) -> str | None:
@@ -36,17 +26,16 @@ def capture_refusal(plan: Plan) -> str | None:
     return f"it is not the recipe's capture (differs in: {', '.join(diff)})" if diff else None
 
 
-def _frame_count(folder: Path) -> int:
-    return len(list((folder / "frames").glob("*.json")))
-
-
 class Pace(NamedTuple):
     """What a stage under way says of this machine's pace: a line for people, and the stage's seconds left at that
-    pace (None where it has nothing left to time: a complete capture, taken or refused)."""
+    pace (None where it has nothing left to time: a complete capture, taken or refused); ``done``: a capture complete
+    in the work folder with the recipe's settings though no build has recorded it (a run renders none, so a dry run
+    counts it done)."""
 
     stage: str
     line: str
     left: float | None = None
+    done: bool = False
 
 
 def measured_pace(plan: Plan) -> list[Pace]:
@@ -116,18 +105,19 @@ def capture_pace(plan: Plan) -> Pace | None:
     refined = _manifest(where).get("refined")
     left = plan.capture.frames - count
     refusal = capture_refusal(plan) if count and left <= 0 else None
+    taken = bool(count) and left <= 0 and refusal is None
     if isinstance(refined, dict) and count:
         return Pace("capture", f"capture: {where} is the capture at {refined.get('from_spp')} spp refined to "
                     f"{plan.capture.spp}, " + (
                         f"{count} of {plan.capture.frames} frames: a run refuses it until the rest are refined"
                         if left > 0 else f"complete, but a run refuses it: {refusal}" if refusal else
-                        "complete: a run takes it for the capture and renders none"))
-    if not seconds:
-        return None
-    if left <= 0:
+                        "complete: a run takes it for the capture and renders none"), done=taken)
+    if count and left <= 0:
         return Pace("capture", f"capture: all {plan.capture.frames} frames already in {where}; "
                     + (f"but a run refuses it: {refusal}" if refusal else "its settings are the recipe's: a run "
-                       "renders none"))
+                       "renders none"), done=taken)
+    if not seconds:
+        return None
     planned = plan.stages[0].seconds / plan.capture.frames
     per, words = _pace(seconds, left, "median of GL + path tracing, ")
     return Pace("capture", f"capture so far: {count} of {plan.capture.frames} frames in {where}, {words} (the plan "

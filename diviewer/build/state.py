@@ -57,14 +57,11 @@ class BuildState:
             changed = sorted(k for k in set(plan_key) | set(old_plan)
                              if not _same(k, old_plan.get(k), plan_key.get(k)))
             untrained = not any(_from_training(name) for name in old.get("stages", {}))
-            if changed and untrained and set(changed) <= {*REPLANNABLE, *BEFORE_TRAINING}:
+            if changed and set(changed) <= {*REPLANNABLE, *(BEFORE_TRAINING if untrained else ())}:
+                # the same capture and evaluation set with more (or fewer) widths, exported otherwise, or (before any
+                # K trained) trained otherwise: every finished K keeps its training, what reads the exports runs again
                 if set(changed) & set(BEFORE_TRAINING):
                     self.train_change = (old_plan.get("train") or {}, plan_key.get("train") or {})
-                if "ks" in changed:
-                    self.ladder_change = (list(old_plan["ks"]), list(plan_key["ks"]))
-            elif changed and set(changed) <= set(REPLANNABLE):
-                # the same capture, evaluation set and training settings with more (or fewer) widths, or exported
-                # otherwise: every finished K keeps its training, and what reads the exports runs again
                 if "ks" in changed:
                     self.ladder_change = (list(old_plan["ks"]), list(plan_key["ks"]))
                 if "export" in changed:

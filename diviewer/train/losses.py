@@ -176,9 +176,9 @@ def ssim_torch(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 def _window_sums(t: torch.Tensor) -> torch.Tensor:
     """Each channel of an NCHW batch under the SSIM's Gaussian window, 'valid' (two separable passes)."""
-    x = torch.arange(SSIM_WINDOW, dtype=torch.float32, device=t.device) - (SSIM_WINDOW - 1) / 2.0
-    g = torch.exp(-(x * x) / (2.0 * SSIM_SIGMA ** 2))
-    g = g / g.sum()
+    from diviewer.metrics import gaussian_window
+
+    g = torch.as_tensor(gaussian_window(SSIM_WINDOW, SSIM_SIGMA), dtype=torch.float32, device=t.device)
     k = t.shape[1]
     rows, cols = g.reshape(1, 1, -1, 1).repeat(k, 1, 1, 1), g.reshape(1, 1, 1, -1).repeat(k, 1, 1, 1)
     return nn.functional.conv2d(nn.functional.conv2d(t, rows, groups=k), cols, groups=k)

@@ -40,10 +40,12 @@ def test_a_capture_under_way_tells_this_machines_pace(tmp_path):
     assert f"the {left} left take ~{hms(left * 12.0)} at that pace" in line
     assert capture_pace(done).line == (f"capture: all 4 frames already in {plan.data}; its settings are the recipe's: a "
                                   f"run renders none")  # every frame there: nothing left to pace
+    assert capture_pace(done).done and not pace.done  # complete and the recipe's: a dry run counts it done
     other = dataclasses.replace(done.capture, spp=done.capture.spp + 1)
     (plan.data / "manifest.json").write_text(json.dumps(build_manifest(load_scene("cornell"), other)))
     assert capture_pace(done).line == (f"capture: all 4 frames already in {plan.data}; but a run refuses it: it is not "
                                   f"the recipe's capture (differs in: spp)")
+    assert not capture_pace(done).done
     # a refinement linked in as the capture (runs/sponza512/data -> the 256-spp set): complete or not, nothing to pace;
     # its refined record is no difference, its settings are
     refined = {**build_manifest(load_scene("cornell"), done.capture), "refined": {"from_spp": 2}}
