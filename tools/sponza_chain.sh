@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
 # Sponza's model built on a CPU machine, over as many sessions as it takes (docs/sponza.md): set up
 # (tools/setup.sh), then
-#   1. `diviewer build` with K = 8 alone on the 64-spp capture (the capture, its check, the training, the export, its
-#      scores on the shipped compact evaluation set, the pick and the ship to runs/sponza/ship): the first model,
-#      done and shipped as assets/models/sponza.onnx on 2026-11-28 (on a machine with runs/sponza, every stage skips);
-#   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp) and that model's
-#      scores on it: done on 2026-11-28 (docs/sponza.md);
+#   1. the 64-spp capture of the recipe (assets/recipes/sponza.toml) and its check: `diviewer build ... --ks 8
+#      --stop-after check` (~3.5 h here). Its K = 8, the recipe's own, was trained and shipped as
+#      assets/models/sponza.onnx on 2026-11-28; it is not trained again (a machine that lost `runs/` starts here);
+#   1b. K = 8 with the structure term (`--ssim-weight 0.1`) on that capture, the recipe's whole schedule (~2 h):
+#      the shipped model is its control (the same recipe, data and steps), scored beside it on the shipped compact
+#      evaluation set, then on the full one (2 below). A failure is reported and the chain goes on;
+#   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here) and
+#      the shipped model's and 1b's scores on it, with their margins over the 64-spp truth;
 #   3. K = 8 on a 256-spp truth (assets/recipes/sponza_walk256.toml: sponza.toml with `[capture] refine_from = 64`),
 #      in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, 8-12 h), then
 #      the training, scored on the full evaluation set and shipped to runs/sponza256/ship. K = 8 alone (~1 h here):
@@ -34,8 +37,8 @@ mkdir -p "$WORK" "$REFINED" "$TWICE"
 cp assets/recipes/sponza.toml "$WORK/sponza.toml.part" && mv "$WORK/sponza.toml.part" "$WORK/sponza.toml"
 cp assets/recipes/sponza_walk256.toml "$REFINED/sponza.toml.part" && mv "$REFINED/sponza.toml.part" "$REFINED/sponza.toml"
 cp assets/recipes/sponza_walk512.toml "$TWICE/sponza.toml.part" && mv "$TWICE/sponza.toml.part" "$TWICE/sponza.toml"
-[ -e "$REFINED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$REFINED/data"
-[ -e "$TWICE/data" ] || ln -s "$(realpath -m "$REFINED/data_256spp")" "$TWICE/data"
+[ -e "$REFINED/data" ] || [ -L "$REFINED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$REFINED/data"
+[ -e "$TWICE/data" ] || [ -L "$TWICE/data" ] || ln -s "$(realpath -m "$REFINED/data_256spp")" "$TWICE/data"
 
 stage() { echo "[sponza_chain] $(date -u '+%F %T') $*"; }
 # A stage that fails is run once more after a minute (it resumes where it stopped): an unattended chain should not
@@ -43,30 +46,51 @@ stage() { echo "[sponza_chain] $(date -u '+%F %T') $*"; }
 # its process holding one module of the old code and one of the new). A second failure stops the chain.
 again() { "$@" || { stage "failed (exit $?), once more in 60 s: $*"; sleep 60; "$@"; }; }
 
-stage "build, K = 8, 64 spp"
+# Each model's margin over its training truth, frame by frame (tools/experiments/truth_margin.py, seconds), from a
+# `diviewer eval` JSON on the full set: margin EVAL KEY OUT, again whenever the scores are newer.
+margin() {
+  [ -f "$1" ] && ! [ "$3" -nt "$1" ] || return 0
+  stage "truth margin of $2 ($1)"
+  python tools/experiments/truth_margin.py --eval "$1" --model-key "$2" --project 512 --project 1024 --out "$3" \
+    || stage "no truth margin for $2 (above)"
+}
+stage "the 64-spp capture and its check"
 again diviewer build --scene sponza --recipe "$WORK/sponza.toml" --evalset assets/evalsets/sponza --work "$WORK" \
-  --ship "$WORK/ship" --ks 8
+  --ship "$WORK/ship" --ks 8 --stop-after check
+# 1b. The structure term on the 64-spp truth, against the shipped model (the recipe's K = 8 on this capture).
+SSIM64="$WORK/models/sponza_ssim_k8.onnx"
+ssim64_run() {
+  local run="$WORK/ssim_k8" resume=()
+  [ -f "$run/last.ckpt" ] && resume=(--resume)
+  diviewer train --data "$WORK/data" --out "$run" --recipe "$WORK/sponza.toml" --k 8 --ssim-weight 0.1 "${resume[@]}"
+}
+ssim64() {
+  mkdir -p "$(dirname "$SSIM64")"
+  again ssim64_run \
+    && { [ -f "$SSIM64" ] || diviewer export "$WORK/ssim_k8/best.ckpt" --out "$SSIM64" --half-weights; } \
+    && again diviewer eval --evalset assets/evalsets/sponza --model assets/models/sponza.onnx --model "$SSIM64" \
+         --out "$WORK/eval_compact_ssim.json"
+}
+if [ ! -f "$WORK/eval_compact_ssim.json" ]; then
+  stage "K = 8 with the structure term on the 64-spp truth"
+  ssim64 || stage "the structure-term run on the 64-spp truth failed (above); on to the evaluation set"
+fi
 stage "full evaluation set"
 again diviewer evalset --scene sponza --out "$WORK/evalset"
-if [ ! -f "$WORK/eval_full_k8.json" ]; then
-  stage "the 64-spp K = 8 model on the full evaluation set"
-  again diviewer eval --evalset "$WORK/evalset" --model "$WORK/ship/sponza.onnx" --out "$WORK/eval_full_k8.json"
+if [ -f "$SSIM64" ] && [ ! -f "$WORK/eval_full_ssim.json" ]; then
+  stage "the shipped model and the structure term's on the full evaluation set"
+  again diviewer eval --evalset "$WORK/evalset" --model assets/models/sponza.onnx --model "$SSIM64" \
+    --out "$WORK/eval_full_ssim.json"
 fi
+margin "$WORK/eval_full_ssim.json" sponza "$WORK/truth_margin_k8.json"
+margin "$WORK/eval_full_ssim.json" sponza_ssim_k8 "$WORK/truth_margin_ssim_k8.json"
 REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --evalset "$WORK/evalset" --work "$REFINED"
                --ship "$REFINED/ship")
 stage "build on the 256-spp truth: the refinement, K = 8"
 again "${REFINED_BUILD[@]}" --ks 8
-# Each K's margin over its training truth, frame by frame (tools/experiments/truth_margin.py, seconds), from the build's
-# scores on the full set; again whenever those scores are newer.
-margins() {
+margins() {  # each K of a build, from the build's own scores on the full set
   local work="$1"; shift
-  for k in "$@"; do
-    local out="$work/truth_margin_k$k.json"
-    [ -f "$work/evalset_eval.json" ] && ! [ "$out" -nt "$work/evalset_eval.json" ] || continue
-    stage "truth margin of K = $k in $work"
-    python tools/experiments/truth_margin.py --eval "$work/evalset_eval.json" --model-key "sponza_k$k" --project 512 \
-      --project 1024 --out "$out" || stage "no truth margin for K = $k (above)"
-  done
+  for k in "$@"; do margin "$work/evalset_eval.json" "sponza_k$k" "$work/truth_margin_k$k.json"; done
 }
 margins "$REFINED" 8
 # 3b. The structure term against the recipe on the same 256-spp truth: K = 8 with `--ssim-weight 0.1` (the term ~5x
@@ -88,8 +112,7 @@ ssim_ablation() {  # each step only after the one before succeeded (errexit does
     && { [ -f "$model" ] || diviewer export "$REFINED/ssim_k8/best.ckpt" --out "$model" --half-weights; } \
     && again diviewer eval --evalset "$WORK/evalset" --model "$REFINED/models/sponza_k8.onnx" --model "$model" \
          --out "$REFINED/eval_full_ssim.json" \
-    && python tools/experiments/truth_margin.py --eval "$REFINED/eval_full_ssim.json" --model-key sponza_ssim_k8 \
-         --project 512 --project 1024 --out "$REFINED/truth_margin_ssim_k8.json"
+    && margin "$REFINED/eval_full_ssim.json" sponza_ssim_k8 "$REFINED/truth_margin_ssim_k8.json"
 }
 if [ ! -f "$REFINED/truth_margin_ssim_k8.json" ]; then
   stage "K = 8 with the structure term on the 256-spp truth"

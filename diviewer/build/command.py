@@ -34,6 +34,9 @@ def add_build_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--ks", type=int, nargs="+", default=None, metavar="K",
                    help="the widths to train instead of the recipe's ladder")
     p.add_argument("--device", default=None, help="training device: auto (default: CUDA where present), cpu, cuda:N")
+    p.add_argument("--stop-after", default=None, metavar="STAGE",
+                   help="stop once this stage of the plan is done (capture, refine, check, evalset, train_k8, ...): "
+                        "render the data here and train later or elsewhere; the same command without it goes on")
     p.add_argument("--dry-run", action="store_true", help="print the plan and its estimated time; do nothing")
     p.set_defaults(func=run_build_command)
     return p
@@ -83,6 +86,10 @@ def run_build_command(args: argparse.Namespace) -> int:
     plan = make_plan(scene, recipe, work, ship=ship, budget_hours=args.budget,
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
                      evalset_dir=args.evalset)
+    names = [s.name for s in plan.stages]
+    if args.stop_after is not None and args.stop_after not in names:
+        raise DiviewerError(f"'{args.stop_after}' is not a stage of this build's plan ({', '.join(names)})",
+                            field="--stop-after")
     if args.dry_run:
         from diviewer.build.pace import measured_pace
         from diviewer.build.pipeline import finished_stages
@@ -103,7 +110,7 @@ def run_build_command(args: argparse.Namespace) -> int:
     from diviewer.build.pipeline import BuildInterrupted, run_build
 
     try:
-        run_build(plan, rebuild_command(args))
+        run_build(plan, rebuild_command(args), stop_after=args.stop_after)
     except BuildInterrupted as exc:
         print(f"diviewer build: stopped ({exc}); run the same command again to resume")
         return 130

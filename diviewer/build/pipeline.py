@@ -56,10 +56,14 @@ def finished_stages(plan: Plan) -> set[str]:
             if (rec := state.done(s.name, plan.work)) is not None and not _stale(s.name, rec, plan)}
 
 
-def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> dict[str, Any]:
-    """Run (or resume) every stage of ``plan``; returns the ladder record with the chosen K."""
+def run_build(plan: Plan, command: str, log: Callable[[str], None] = print,
+              stop_after: str | None = None) -> dict[str, Any] | None:
+    """Run (or resume) every stage of ``plan``, or those up to the stage named ``stop_after``; returns the ladder
+    record with the chosen K, or None when it stopped before the pick."""
     for line in [*describe(plan), *(p.line for p in measured_pace(plan))]:
         log(line)
+    if stop_after is not None:
+        log(f"stops after {stop_after} (--stop-after)")
     plan.work.mkdir(parents=True, exist_ok=True)
     state = BuildState(plan.work / STATE_FILE, plan_key(plan), save_upgrade=True)
     if state.ladder_change is not None:
@@ -89,6 +93,10 @@ def run_build(plan: Plan, command: str, log: Callable[[str], None] = print) -> d
                 outputs, result = STAGES[kind](plan, state, log, k=int(k) if k else None, command=command)
                 state.finish(stage.name, plan.work, outputs, result, time.perf_counter() - t0)
             bar.update(round(stage.seconds))
+            if stage.name == stop_after and i < len(plan.stages):
+                log(f"stopped after {stage.name} as asked (--stop-after); the same command without it goes on "
+                    f"from {plan.stages[i].name}")
+                return None
     finally:
         bar.close()
     ladder = state.data["stages"]["pick"]["result"]

@@ -83,6 +83,14 @@ def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, cap
     assert "recipe.scene" in capsys.readouterr().err
 
 
+def test_a_stop_after_names_a_stage_of_the_plan(tmp_path, capsys):
+    work = tmp_path / "work"
+    assert main(["build", "--scene", "cornell", "--work", str(work), "--ks", "8", "--stop-after", "train_k16"]) == 2
+    err = capsys.readouterr().err
+    assert "--stop-after" in err and "'train_k16' is not a stage of this build's plan" in err and "train_k8" in err
+    assert not work.exists()
+
+
 def test_a_dry_run_counts_a_complete_capture_done_before_any_build_recorded_it(tmp_path, capsys):
     """A work folder whose data/ holds every frame (a capture linked in from another build, or a refined set) with
     no build.json: the run would render none, so the dry run marks the capture done and leaves it out of the time
@@ -506,6 +514,27 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
                  "--max-steps", "1"]) == 0
     cfg = load_checkpoint(run / "last.ckpt")["config"]
     assert cfg["K"] == 4 and cfg["recipe"]["name"] == "tinyrecipe" and cfg["recipe"]["overrides"] == {"K": 4}
+
+
+@pytest.mark.slow
+@needs_pipeline
+def test_a_build_stops_after_the_stage_asked_and_the_same_command_goes_on(gl_context, tmp_path, capsys):
+    """`--stop-after check`: the data rendered and checked, nothing trained; the same command without it resumes
+    from the next stage with the capture kept."""
+    scene, recipe = write_tiny_scene(tmp_path), tmp_path / "tinyrecipe.toml"
+    recipe.write_text(TINY_RECIPE.replace("K = [2, 4]", "K = [2]"))
+    work = tmp_path / "work"
+    argv = ["build", "--scene", str(scene), "--recipe", str(recipe), "--work", str(work), "--ship", str(tmp_path / "s")]
+    assert main([*argv, "--stop-after", "check"]) == 0
+    out = capsys.readouterr().out
+    assert "stopped after check as asked (--stop-after); the same command without it goes on from evalset" in out
+    assert set(json.loads((work / "build.json").read_text())["stages"]) == {"capture", "check"}
+    frames = {p: p.stat().st_mtime_ns for p in (work / "data" / "frames").glob("*.npy")}
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "capture: done before, outputs checked; skipped" in out and "stopped after" not in out
+    assert {p: p.stat().st_mtime_ns for p in (work / "data" / "frames").glob("*.npy")} == frames
+    assert "ship" in json.loads((work / "build.json").read_text())["stages"]
 
 
 def _refining(recipe: str, low: int, spp: int) -> str:
