@@ -199,6 +199,7 @@ def _train(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path],
 
     cfg = TrainConfig(**plan.train_fields(k))
     out = plan.run_dir(k)
+    _set_aside_if_begun_otherwise(cfg, out, log)
     result = train(cfg, resume=(out / "last.ckpt").is_file(), log=log)
     n_train = min(state.data["stages"]["check"]["result"]["frames"]["train"], cfg.train_frames or math.inf)
     planned = cfg.epochs * math.ceil(n_train / cfg.batch_size)
@@ -209,6 +210,21 @@ def _train(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path],
         raise DiviewerError(f"training K={k} ended without a validated checkpoint", path=out / "best.ckpt")
     return [out / "best.ckpt", out / "metrics.csv"], {"step": result["step"], "best_val_ssim_tm": result["best"],
                                                       "stopped_early": result["stopped_early"]}
+
+
+def _set_aside_if_begun_otherwise(cfg, run: Path, log) -> None:
+    """A K whose training began under the recipe's former [train] settings (edited before any K finished,
+    `BuildState.train_change`) is not resumed, which the training would refuse: the run is kept beside under another
+    name, and the K trains from the start with the recipe's settings."""
+    from diviewer.train.checkpoint import changed_settings, load_checkpoint
+
+    last = run / "last.ckpt"
+    diff = changed_settings(cfg, load_checkpoint(last, mmap=True)) if last.is_file() else []
+    if diff:
+        kept = run.with_name(f"{run.name}_before_{time.strftime('%Y%m%d_%H%M%S', time.gmtime())}")
+        run.rename(kept)
+        log(f"{run}: begun under other training settings ({'; '.join(diff)}); kept as {kept.name}, and trained "
+            f"from the start with the recipe's")
 
 
 def _export(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path], dict]:

@@ -139,12 +139,9 @@ def to_cpu(obj: Any) -> Any:
     return obj
 
 
-def check_resume(cfg: TrainConfig, ckpt: Mapping[str, Any], ds: Dataset, train_idx: list[int], path: Path) -> None:
-    """The resumed run must train the same networks on the same data as the checkpoint's."""
-    if ckpt["dataset"]["hash"] != ds.hash:
-        raise DiviewerError(f"was trained on another dataset (hash {ckpt['dataset']['hash'][:12]}, "
-                            f"{cfg.data} has {ds.hash[:12]}); resume with the same --data or choose another --out",
-                            path=path)
+def changed_settings(cfg: TrainConfig, ckpt: Mapping[str, Any]) -> list[str]:
+    """The settings a run resumed from ``ckpt`` with ``cfg`` may not change (`RESUME_FIXED`) but does, as
+    "name: old -> new"; empty when it may resume."""
     old = ckpt["config"]
     # Settings a checkpoint from before they existed does not record had their default then.
     default = {**{f.name: f.default for f in dataclasses.fields(TrainConfig)}, **LEGACY_DEFAULTS}
@@ -154,8 +151,17 @@ def check_resume(cfg: TrainConfig, ckpt: Mapping[str, Any], ds: Dataset, train_i
 
     same_past = constant_until(old, ckpt["step"]) and constant_until(cfg, ckpt["step"])
     fixed = [k for k in RESUME_FIXED if not (same_past and k in ("lr_decay", "lr_decay_start"))]
-    diff = [f"{k}: {old.get(k, default[k])!r} -> {getattr(cfg, k)!r}" for k in fixed
+    return [f"{k}: {old.get(k, default[k])!r} -> {getattr(cfg, k)!r}" for k in fixed
             if old.get(k, default[k]) != getattr(cfg, k)]
+
+
+def check_resume(cfg: TrainConfig, ckpt: Mapping[str, Any], ds: Dataset, train_idx: list[int], path: Path) -> None:
+    """The resumed run must train the same networks on the same data as the checkpoint's."""
+    if ckpt["dataset"]["hash"] != ds.hash:
+        raise DiviewerError(f"was trained on another dataset (hash {ckpt['dataset']['hash'][:12]}, "
+                            f"{cfg.data} has {ds.hash[:12]}); resume with the same --data or choose another --out",
+                            path=path)
+    diff = changed_settings(cfg, ckpt)
     if diff:
         raise DiviewerError(f"cannot resume with different settings ({'; '.join(diff)}); "
                             "drop those options or choose another --out", path=path)

@@ -360,6 +360,28 @@ def test_the_training_settings_may_change_until_a_k_is_trained(tmp_path):
     assert BuildState(tmp_path / "build.json", edited).train_change is None
 
 
+@pytest.mark.skipif(importlib.util.find_spec("torch") is None, reason="trains a tiny run")
+def test_a_k_begun_under_the_former_training_settings_is_kept_beside_and_trained_from_the_start(tmp_path):
+    """What the state allows (the recipe's [train] edited before any K finished) the training would refuse to
+    resume: the run begun before is renamed, not resumed and not lost; a change the training may resume over
+    (epochs) keeps it."""
+    from diviewer.build.pipeline import _set_aside_if_begun_otherwise
+    from diviewer.train.trainer import train
+    from train.test_trainer import make_dataset, quiet, tiny
+
+    data, run, said = tmp_path / "data", tmp_path / "train_k4", []
+    make_dataset(data)
+    train(tiny(data, run, epochs=1), log=quiet)
+    _set_aside_if_begun_otherwise(tiny(data, run, epochs=3), run, said.append)
+    assert (run / "last.ckpt").is_file() and said == []
+    _set_aside_if_begun_otherwise(tiny(data, run, ssim_weight=0.1), run, said.append)
+    kept = [p for p in tmp_path.iterdir() if p.name.startswith("train_k4_before_")]
+    assert not run.exists() and len(kept) == 1 and (kept[0] / "last.ckpt").is_file()
+    assert len(said) == 1 and "ssim_weight: 0.0 -> 0.1" in said[0] and kept[0].name in said[0]
+    _set_aside_if_begun_otherwise(tiny(data, run, ssim_weight=0.1), run, said.append)  # nothing there: nothing done
+    assert len(said) == 1
+
+
 def test_a_key_of_the_version_before_is_the_same_plan_and_is_upgraded_when_a_build_runs(tmp_path):
     """A state file written before the export settings were keyed apart (its recipe hash covers [export]): the same
     recipe is the same plan; a running build writes this version's key at once (a dry run does not), so that the
