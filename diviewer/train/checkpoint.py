@@ -152,7 +152,7 @@ def changed_settings(cfg: TrainConfig, ckpt: Mapping[str, Any]) -> list[str]:
     same_past = constant_until(old, ckpt["step"]) and constant_until(cfg, ckpt["step"])
     fixed = [k for k in RESUME_FIXED if not (same_past and k in ("lr_decay", "lr_decay_start"))]
     return [f"{k}: {old.get(k, default[k])!r} -> {getattr(cfg, k)!r}" for k in fixed
-            if old.get(k, default[k]) != getattr(cfg, k)]
+              if old.get(k, default[k]) != getattr(cfg, k)]
 
 
 def check_resume(cfg: TrainConfig, ckpt: Mapping[str, Any], ds: Dataset, train_idx: list[int], path: Path) -> None:
