@@ -35,6 +35,7 @@ from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer,
 from diviewer.metrics import flat_mask
 from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
+from diviewer.truthmargin import MARGIN_DB, model_truth_spp, truth_margin
 
 SSIM_MIN = 11
 """SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
@@ -330,6 +331,10 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
                      model=str(net.path), checkpoint_sha256=net.meta.get("checkpoint_sha256"),
                      provider=net.provider, below_direct=below_direct(rows[name], rows["direct"]),
                      inference_ms={"median": float(np.median(times[name]))})
+            spp = model_truth_spp(net.meta)
+            if spp and len(rows[name]) == len(idx) and rows["noise_floor"]:  # its training truth over it
+                m["truth_margin"] = truth_margin(rows[name], rows["noise_floor"],
+                                                 {n: rows[f"pt_spp{n}"] for n in ladder_spp}, spp)
         elif name == "direct":
             m.update(kind="direct", label="direct light only (GL)")
         elif name == "noise_floor":
@@ -386,6 +391,11 @@ def format_tables(result: dict) -> list[str]:
                          f"{lit:>13} {shade:>13} {below:>19}")
         for name, why in r.get("refused", {}).items():
             lines.append(f"{why['label']:<34} refused by the runtime at this shape: {why['reason']}")
+        for m in r["methods"].values():
+            if (t := m.get("truth_margin")) and t["frames"]:
+                lines.append(f"{m['label']}: its {t['truth_spp']}-spp training truth stands {t['median_db']:+.1f} dB "
+                             f"above its error (median frame; lowest {t['lowest_db']:+.1f}; {t['share_at_least_6db']:.0%}"
+                             f" of frames >= {MARGIN_DB:g} dB; {t['unresolved']} unresolved; from {t['from']})")
     return lines
 
 

@@ -50,6 +50,13 @@ def test_the_scores_of_the_same_weights_land_in_the_card_and_the_metadata(tmp_pa
     assert (full["json"], full["evalset"], full["reference_spp"]) == (str(ev), "runs/x/evalset", 1024)
     assert card["evalset_compact"] == {"json": "compact.json"}  # the rest of the card is kept
     assert _weights(model) == weights
+    # `diviewer eval`'s margin of the model's training truth over its error comes along, rounded as cards keep it
+    margin = {"truth_spp": 64, "from": "pt_spp64", "median_db": -0.4321, "lowest_db": -1.987,
+              "share_at_least_6db": 0.0, "frames": 24, "unresolved": 0}
+    ev = _eval(tmp_path / "full.json", "plane", {"checkpoint_sha256": "a" * 64, "truth_margin": margin})
+    card = tool.main(["--eval", str(ev), "--model", str(model)])
+    assert card["evalset_full"]["this_model"]["moved_camera"]["truth_margin"] == {
+        **margin, "median_db": -0.43, "lowest_db": -1.99}
 
 
 def test_an_eval_of_other_weights_is_refused_and_the_card_kept(tmp_path):

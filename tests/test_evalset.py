@@ -212,9 +212,12 @@ def test_shards_render_their_own_frames_into_one_set_and_the_last_scores_it(eval
 
 def _models(tmp_path):
     scene = load_scene("cornell")
+    # cards of a model trained on a 4-spp capture (a rung of the ladder) and on a truth refined to 8 (projected)
     any_shape = direct_times(tmp_path / "twice.onnx", 1.5, meta={**base_meta(scene.file_hash, "cornell"),
-                                                                 "multiple": 2, "checkpoint_sha256": "c" * 64})
-    square = direct_times(tmp_path / "square.onnx", 1.5, meta=base_meta(scene.file_hash, "cornell"))  # multiple 16
+                                                                 "multiple": 2, "checkpoint_sha256": "c" * 64,
+                                                                 "recipe": {"capture": {"spp": 4}}})
+    square = direct_times(tmp_path / "square.onnx", 1.5, meta={**base_meta(scene.file_hash, "cornell"),  # multiple 16
+                                                               "truth_spp": {"min": 8, "max": 9}})
     return any_shape, square
 
 
@@ -259,6 +262,24 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
         assert sum(r["sum"] for r in rows) / sum(r["sum_ref"] for r in rows) - 1 == pytest.approx(methods["twice"]["bias"])
         assert np.mean([r["psnr_tm"] for r in rows]) == pytest.approx(methods["twice"]["psnr_tm"]["mean"])
         assert len(methods["direct"]["per_frame"]) == len(rows) and "per_frame" not in methods["pt_spp1"]
+    # each model's training truth over its error (diviewer.truthmargin), as the tool reads it from the frames
+    from tool_modules import load_tool
+
+    tool, read = load_tool("experiments/truth_margin"), {}
+    for name in ("twice", "square"):
+        assert tool.main(["--eval", str(res), "--model-key", name, "--project", "8", "--out", str(tmp_path / name)]) == 0
+        read[name] = json.loads((tmp_path / name).read_text())["splits"]
+    for key in SPLIT_KEYS:
+        methods = r["splits"][key]["methods"]
+        for name, spp, rung, tool_key in (("twice", 4, "pt_spp4", "margin_pt_spp4"),
+                                          ("square", 8, "pt_spp4, projected to 8 spp", "margin_projected_spp8")):
+            got, want = methods[name]["truth_margin"], read[name][key]["per_rung"][tool_key]
+            assert (got["truth_spp"], got["from"]) == (spp, rung)
+            assert got["frames"] + got["unresolved"] == 2 and (got["frames"], got["unresolved"]) == (
+                want["frames"], want["unresolved"])
+            for k in ("median_db", "lowest_db", "share_at_least_6db"):
+                assert got[k] == pytest.approx(want[k], abs=1e-6), (key, name, k)
+        assert "truth_margin" not in methods["direct"]
 
 
 @pytest.mark.slow

@@ -332,26 +332,6 @@ def test_ssim_budget_separates_the_level_from_the_shape():
     assert exact["oracle"] == pytest.approx(1.0) and exact["psnr_tm_oracle"] > 100
 
 
-def test_truth_margin_takes_the_truths_noise_out_of_both_errors_before_the_margin():
-    """tools/experiments/truth_margin.py: the truth's own noise taken out of a rung's and a model's error before
-    their margin is read, and a truth of more samples projected from a rung."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/truth_margin")
-    # against the converged image: the model's error 4e-4, a 256-spp rung's 1e-4 (6.0 dB); the truth's noise 2e-5
-    assert tool.margin_db(4e-4 + 2e-5, 1e-4 + 2e-5, 2e-5) == pytest.approx(10 * math.log10(4.0))
-    assert tool.margin_db(4e-4 + 2e-5, 1e-4 + 2e-5, 0.0) < 6.0 - 0.3, "read as scored, the truth's noise hides margin"
-    # an error at or below the truth's own noise is one the truth cannot resolve: no margin, not a floored one
-    assert tool.margin_db(1e-4, 2e-4, 1e-4) is None and tool.margin_db(4e-4, 1e-4, 1e-4) is None
-    # twice the samples halve the rung's own error; the truth's noise comes back as a measured rung would carry it
-    assert tool.projected_mse(1e-4 + 2e-5, 2e-5, 256, 512) == pytest.approx(5e-5 + 2e-5)
-    assert tool.projected_mse(1e-5, 2e-5, 256, 512) is None
-    s = tool.summarize([{"m": 7.0}, {"m": 5.0}, {"m": 6.0}, {"m": 9.0}, {"m": None}], "m")
-    assert s == {"median_db": 6.5, "lowest_db": 5.0, "share_at_least_6db": 0.75, "frames": 4, "unresolved": 1}
-    assert tool.summarize([{"m": None}], "m") == {"median_db": None, "lowest_db": None, "share_at_least_6db": None,
-                                                   "frames": 0, "unresolved": 1}
-
-
 def test_truth_margin_refuses_a_model_no_split_scores_and_a_compact_set(tmp_path):
     """truth_margin.py names what it cannot read, and writes nothing: a model key no split scores, and a compact set
     (its ladder's scores are kept, not the images the truth's noise is read from)."""
@@ -368,24 +348,3 @@ def test_truth_margin_refuses_a_model_no_split_scores_and_a_compact_set(tmp_path
     with pytest.raises(SystemExit, match="a compact set keeps its ladder's scores, not its images; give the full set"):
         tool.main(["--eval", str(record), "--out", str(out)])
     assert not out.exists()
-
-
-def test_truth_margin_of_simulated_renders_is_the_one_against_the_converged_image():
-    """truth_margin.py: Noisy images as the evaluation set holds them (a converged image, a truth and its second seed at 1024 spp, a
-    rung at 256): read through mse(pt_b, pt) / 2, the margin is the converged image's within 0.2 dB."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/truth_margin")
-    rng = np.random.default_rng(0)
-    converged = rng.random((128, 128, 3))
-    sigma = 0.5
-    render = lambda spp: converged + rng.normal(0.0, sigma / math.sqrt(spp), converged.shape)  # noqa: E731
-    truth, second, rung = render(1024), render(1024), render(256)
-    model = converged + 0.1 * np.sin(np.arange(128))[None, :, None]
-    mse = lambda a, b: float(np.mean((a - b) ** 2))  # noqa: E731
-    exact = 10 * math.log10(mse(model, converged) / mse(rung, converged))
-    got = tool.margin_db(mse(model, truth), mse(rung, truth), mse(second, truth) / 2)
-    assert got == pytest.approx(exact, abs=0.2)
-    assert 10 * math.log10(mse(model, truth) / mse(rung, truth)) < exact - 0.5  # as scored: the noise hides ~1 dB
-    projected = tool.projected_mse(mse(rung, truth), mse(second, truth) / 2, 256, 1024)
-    assert projected - mse(second, truth) / 2 == pytest.approx(sigma ** 2 / 1024, rel=0.05)

@@ -1,67 +1,23 @@
-"""How far a path-traced truth of N spp stands above a model's error: issue 26's "the ground truth's noise floor must
-be at least 6 dB above the model's error", measured frame by frame.
+"""How far a path-traced truth of N spp stands above a model's error, frame by frame, at every rung of an evaluation
+set's ladder and at projected counts: issue 26's "the ground truth's noise floor must be at least 6 dB above the
+model's error". The method is `diviewer.truthmargin`'s (its docstring); `diviewer eval` reports the truth each model
+trained on, this script every rung and projection of a `diviewer eval` JSON, read from the set's frames.
 
 Usage: python tools/experiments/truth_margin.py --eval EVAL.json [--model-key sponza] [--evalset runs/sponza/evalset]
            [--project 512] [--out OUT.json]
 
-`diviewer eval` scores a model and the evaluation set's ladder (pt_spp64, pt_spp256, ...) against a 1024-spp truth
-that has noise of its own, so both read lower than their error against the converged image, the ladder's rungs more
-(their error is closer to that noise). The set renders the truth twice (``pt``, ``pt_b``: the noise floor), so per
-frame and window shape, on the tone-mapped images as `diviewer eval` scores them:
-
-- the truth's own noise is half the two renders' squared difference, ``r = mse(pt_b, pt) / 2`` (independent noise);
-- a rung's error against the converged image is ``mse(rung, pt) - r``, the model's ``mse(model, pt) - r`` (its
-  per-frame tone-mapped PSNR from the eval JSON); where that leaves nothing (an error at or below the truth's own
-  noise: the truth cannot resolve it), the frame's margin is unresolved (null), left out of the median, the lowest
-  and the share, and counted (``unresolved``);
-- the margin of a rung over the model is ``10 log10(model error / rung error)`` dB; ``--project M`` adds a truth of
-  M spp projected from the highest rung (its error times rung / M: Monte-Carlo variance goes as 1 / spp; on
-  Sponza's full set the 64-spp rung's own error is 4.3-4.5x the 256-spp one's, where 1 / spp says 4).
-
 Per split: the median margin, its lowest, the share of frames at 6 dB or more, and beside them the margin as the
-difference of the mean PSNRs as scored (what the notes reported before). The subtraction treats the tone map as
-locally linear (small noise). Measures only.
+difference of the mean PSNRs as scored (what the notes reported before). Measures only.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
-import numpy as np
-
-MARGIN_DB = 6.0
-"""The issue's margin: the truth's noise floor at least this far above the model's error."""
-
-def margin_db(model_mse: float, rung_mse: float, truth_noise: float) -> float | None:
-    """The margin (dB) of a rung over the model, both measured against a truth with noise ``truth_noise`` (its own
-    MSE against the converged image), which is taken out of both first; None where either error is at or below that
-    noise (the truth cannot resolve it: its margin could read anything)."""
-    model, rung = model_mse - truth_noise, rung_mse - truth_noise
-    if model <= 0.0 or rung <= 0.0:
-        return None
-    return float(10.0 * math.log10(model / rung))
-
-
-def projected_mse(rung_mse: float, truth_noise: float, rung_spp: int, spp: int) -> float | None:
-    """A truth of ``spp`` samples projected from a rung of ``rung_spp``: its own error scaled by rung_spp / spp, the
-    reference's noise added back (so it reads as a rung measured against the same truth would); None where the
-    rung's error is not resolved (at or below the truth's noise)."""
-    own = rung_mse - truth_noise
-    return own * rung_spp / spp + truth_noise if own > 0.0 else None
-
-
-def summarize(rows: list[dict], key: str) -> dict:
-    """The margins of one rung over a split's frames: median, lowest, and the share at `MARGIN_DB` or more, over the
-    frames whose margin the truth resolves; ``unresolved`` counts the others."""
-    v = np.array([r[key] for r in rows if r[key] is not None], dtype=np.float64)
-    stats = ({"median_db": float(np.median(v)), "lowest_db": float(v.min()),
-              "share_at_least_6db": float(np.mean(v >= MARGIN_DB))} if v.size else
-             {"median_db": None, "lowest_db": None, "share_at_least_6db": None})
-    return {**stats, "frames": int(v.size), "unresolved": len(rows) - int(v.size)}
+from diviewer.truthmargin import MARGIN_DB, margin_db, projected_mse, summarize
 
 
 def model_name(methods: dict, key: str | None) -> str | None:
