@@ -61,11 +61,14 @@ def summarize(rows: list[dict], key: str) -> dict:
 
 def model_truth_spp(meta: dict[str, Any]) -> int | None:
     """The samples per pixel of the truth a model trained on, from its card: a refined truth's fewest over its train
-    frames (``truth_spp``), else its capture's (``recipe.capture.spp``); None where the card says neither."""
+    frames (``truth_spp``), else its capture's (``recipe.capture.spp``); None where the card says neither, or where
+    the truth was not path traced (``gt = "vxgi"``: its error is not noise)."""
+    cap = (meta.get("recipe") or {}).get("capture") or {}
+    if cap.get("gt", "pt") != "pt":
+        return None
     if meta.get("truth_spp"):
         return int(meta["truth_spp"]["min"])
-    spp = ((meta.get("recipe") or {}).get("capture") or {}).get("spp")
-    return int(spp) if spp else None
+    return int(cap["spp"]) if cap.get("spp") else None
 
 
 def truth_margin(model: list[dict], noise_floor: list[dict], ladder: dict[int, list[dict]], spp: int) -> dict:
