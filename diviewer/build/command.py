@@ -102,6 +102,9 @@ def run_build_command(args: argparse.Namespace) -> int:
         for line in [*describe(plan, done, {p.stage: p.left for p in paces if p.left is not None}),
                      *(p.line for p in paces)]:
             print(line)
+        if args.stop_after is not None:
+            after = names[names.index(args.stop_after) + 1:]
+            print(f"--stop-after {args.stop_after}: a run stops there" + (f"; not run: {', '.join(after)}" if after else ""))
         if refusal is not None:
             print("dry run: nothing was done; a run of this command would refuse the work folder (below)")
             raise refusal

@@ -89,6 +89,11 @@ def test_a_stop_after_names_a_stage_of_the_plan(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--stop-after" in err and "'train_k16' is not a stage of this build's plan" in err and "train_k8" in err
     assert not work.exists()
+    assert main(["build", "--scene", "cornell", "--work", str(work), "--ks", "8", "--stop-after", "check",
+                 "--dry-run"]) == 0
+    assert "--stop-after check: a run stops there; not run: evalset, train_k8, export_k8, evaluate, pick, ship" in (
+        capsys.readouterr().out)
+    assert not work.exists()
 
 
 def test_a_dry_run_counts_a_complete_capture_done_before_any_build_recorded_it(tmp_path, capsys):
