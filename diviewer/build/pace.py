@@ -1,7 +1,7 @@
 """What a build's work folder says of its progress before the build has recorded it, for ``diviewer build`` (its
 plan's lines, a dry run's too): a capture already complete there (and whether a run takes it: `Pace.done`), and
-the pace of a capture, refinement or training under way on this machine, beside the plan's estimates from costs
-measured elsewhere."""
+the pace of a capture, refinement or training under way on this machine (and of a training not begun, from one
+that has), beside the plan's estimates from costs measured elsewhere."""
 
 from __future__ import annotations
 
@@ -41,17 +41,23 @@ class Pace(NamedTuple):
 def measured_pace(plan: Plan) -> list[Pace]:
     """What the work folder's capture, refinement and trainings under way say of this machine's pace, and their time
     left at it, beside the plan's estimates from the costs measured elsewhere: one each (none before they start or
-    once they are done)."""
+    once they are done); a K not begun, at the pace of the K measured here nearest to it (`scaled_training_pace`)."""
     paces = [capture_pace(plan), refine_pace(plan)]
     stages = {s.name: s for s in plan.stages}
+    rows = {k: last_row(plan.run_dir(k) / "metrics.csv") for k in plan.ks}
+    measured = {k: (*row, stages[f"train_k{k}"].seconds) for k, row in rows.items()
+                if row is not None and row[0] >= MIN_PACE_STEPS}
     for k in plan.ks:
-        paces.append(training_pace(plan.run_dir(k) / "metrics.csv", k, plan.steps, stages[f"train_k{k}"].seconds))
+        if rows[k] is not None:
+            paces.append(training_pace(plan.run_dir(k) / "metrics.csv", k, plan.steps, stages[f"train_k{k}"].seconds))
+        else:
+            paces.append(scaled_training_pace(k, plan.steps, stages[f"train_k{k}"].seconds, measured))
     return [p for p in paces if p]
 
 
-def training_pace(metrics: Path, k: int, planned_steps: int, planned_seconds: float) -> Pace | None:
-    """A training run's pace so far from its metrics.csv (the last row's step and its cumulative seconds, resumes
-    included), and its time left at that pace; None before its first row or once it is done."""
+def last_row(metrics: Path) -> tuple[int, float] | None:
+    """A training run's last step and its cumulative seconds (resumes included) from its metrics.csv; None before
+    its first row (no file, a header alone, a row being written)."""
     import csv
 
     try:
@@ -60,13 +66,45 @@ def training_pace(metrics: Path, k: int, planned_steps: int, planned_seconds: fl
         step, seconds = int(rows[-1]["step"]), float(rows[-1]["seconds"])
     except (OSError, IndexError, ValueError, KeyError):
         return None
-    if step <= 0 or step >= planned_steps:
+    return (step, seconds) if step > 0 else None
+
+
+def training_pace(metrics: Path, k: int, planned_steps: int, planned_seconds: float) -> Pace | None:
+    """A training run's pace so far from its metrics.csv (the last row's step and its cumulative seconds, resumes
+    included), and its time left at that pace; None before its first row or once it is done."""
+    row = last_row(metrics)
+    if row is None or row[0] >= planned_steps:
         return None
+    step, seconds = row
     per = seconds / step
     left = (planned_steps - step) * per
     return Pace(f"train_k{k}", f"train K={k} so far: step {step} of {planned_steps}, {per:.2f} s a step here "
                 f"(validations included); the rest take ~{hms(left)} at that pace (the plan assumes "
                 f"{planned_seconds / planned_steps:.2f} s)", left)
+
+
+MIN_PACE_STEPS = 200
+"""A run's pace stands for the K not begun once it has this many steps (its first rows carry the start's costs)."""
+
+
+def scaled_training_pace(k: int, planned_steps: int, planned_seconds: float,
+                         measured: dict[int, tuple[int, float, float]]) -> Pace | None:
+    """A K not begun, at this machine's pace: the seconds a step of the measured K nearest to it in width (``measured``:
+    K -> its last step, cumulative seconds and the plan's seconds for it), times the plan's ratio of the two Ks'
+    costs; None where no K is measured. The plan's costs were measured on other machines (a 2-core CPU's one torch
+    thread, an H100 shared with other jobs): the ratio between two widths carries over better than either."""
+    import math
+
+    if not measured:
+        return None
+    m = min(measured, key=lambda j: (abs(math.log(k / j)), j))
+    step, seconds, planned_m = measured[m]
+    ratio = planned_seconds / planned_m
+    per = seconds / step * ratio
+    left = planned_steps * per
+    return Pace(f"train_k{k}", f"train K={k} not begun: ~{per:.2f} s a step here, K={m}'s {seconds / step:.2f} s "
+                f"measured over {step} steps times the plan's cost ratio of the two ({ratio:.2f}); ~{hms(left)} at that "
+                f"pace (the plan assumes {planned_seconds / planned_steps:.2f} s)", left)
 
 
 PACE_FRAMES = 200

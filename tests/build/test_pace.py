@@ -74,10 +74,47 @@ def test_a_training_under_way_tells_this_machines_pace(tmp_path):
     assert pace.stage == "train_k8" and pace.left == pytest.approx((plan.steps - 1000) * 0.3)
     assert pace.line == (f"train K=8 so far: step 1000 of {plan.steps}, 0.30 s a step here (validations included); the rest "
                     f"take ~{hms((plan.steps - 1000) * 0.3)} at that pace (the plan assumes 2.00 s)")
-    assert measured_pace(plan) == [training_pace(metrics, 8, plan.steps, plan.stages[3].seconds)]
+    assert measured_pace(plan)[0] == training_pace(metrics, 8, plan.steps, plan.stages[3].seconds)
+    assert [p.stage for p in measured_pace(plan)] == ["train_k8"] + [f"train_k{k}" for k in plan.ks[1:]]
     assert training_pace(metrics, 8, 1000, 1.0) is None  # done
     metrics.write_text("epoch,step,val_psnr,seconds\n")
     assert training_pace(metrics, 8, plan.steps, 1.0) is None  # a header alone
+
+
+def test_a_k_not_begun_is_paced_from_the_k_measured_here_nearest_to_it(tmp_path):
+    """A K whose training has not begun takes the measured pace of the nearest K in width that has run at least
+    MIN_PACE_STEPS steps (done or under way), scaled by the plan's ratio of their costs; fewer steps, or none
+    measured, and it has no pace (the plan's estimate stands)."""
+    from diviewer.build.pace import MIN_PACE_STEPS, measured_pace, scaled_training_pace
+
+    plan = make_plan("cornell", load_recipe("cornell"), tmp_path, machine=CPU, ks=(8, 16, 32))
+    seconds = {s.name: s.seconds for s in plan.stages}
+    metrics = plan.run_dir(16) / "metrics.csv"
+    metrics.parent.mkdir(parents=True)
+    metrics.write_text(f"epoch,step,val_psnr,seconds\n0.1,{MIN_PACE_STEPS - 1},30.1,100.0\n")
+    assert [p.stage for p in measured_pace(plan)] == ["train_k16"]  # too few steps to stand for the others
+    metrics.write_text("epoch,step,val_psnr,seconds\n0.1,500,30.1,150.0\n0.2,1000,31.0,400.0\n")
+    paces = {p.stage: p for p in measured_pace(plan)}
+    assert sorted(paces) == ["train_k16", "train_k32", "train_k8"]
+    for k in (8, 32):
+        ratio = seconds[f"train_k{k}"] / seconds["train_k16"]
+        assert paces[f"train_k{k}"].left == pytest.approx(plan.steps * 0.4 * ratio)
+        assert paces[f"train_k{k}"].line == (
+            f"train K={k} not begun: ~{0.4 * ratio:.2f} s a step here, K=16's 0.40 s measured over 1000 steps times "
+            f"the plan's cost ratio of the two ({ratio:.2f}); ~{hms(plan.steps * 0.4 * ratio)} at that pace (the plan "
+            f"assumes {seconds[f'train_k{k}'] / plan.steps:.2f} s)")
+    # a done K counts too, and the nearest in width is taken (K = 8 for 16, not 32; a tie goes to the narrower)
+    done = plan.run_dir(8) / "metrics.csv"
+    done.parent.mkdir(parents=True)
+    done.write_text(f"epoch,step,val_psnr,seconds\n1.0,{plan.steps},33.0,{0.1 * plan.steps}\n")
+    metrics.unlink()
+    k16 = {p.stage: p for p in measured_pace(plan)}["train_k16"]
+    assert k16.line.startswith(f"train K=16 not begun: ~{0.1 * seconds['train_k16'] / seconds['train_k8']:.2f} s a "
+                               f"step here, K=8's 0.10 s measured over {plan.steps} steps")
+    two = {8: (100, 10.0, 4.0), 16: (100, 30.0, 6.0)}  # K = 12 is nearer 16 (log ratio): 0.30 s x 5 / 6, 10 steps
+    assert scaled_training_pace(12, 10, 5.0, two).left == pytest.approx(2.5)
+    assert "K=2's" in scaled_training_pace(4, 10, 5.0, {2: (100, 10.0, 4.0), 8: (100, 30.0, 6.0)}).line  # a tie
+    assert scaled_training_pace(8, 10, 5.0, {}) is None
 
 
 def test_the_plan_counts_a_stage_under_way_at_this_machines_pace():
