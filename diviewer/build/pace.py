@@ -49,7 +49,7 @@ def measured_pace(plan: Plan) -> list[Pace]:
                 if row is not None and row[0] >= MIN_PACE_STEPS}
     for k in plan.ks:
         if rows[k] is not None:
-            paces.append(training_pace(plan.run_dir(k) / "metrics.csv", k, plan.steps, stages[f"train_k{k}"].seconds))
+            paces.append(_pace_under_way(rows[k], k, plan.steps, stages[f"train_k{k}"].seconds))
         else:
             paces.append(scaled_training_pace(k, plan.steps, stages[f"train_k{k}"].seconds, measured))
     return [p for p in paces if p]
@@ -72,7 +72,10 @@ def last_row(metrics: Path) -> tuple[int, float] | None:
 def training_pace(metrics: Path, k: int, planned_steps: int, planned_seconds: float) -> Pace | None:
     """A training run's pace so far from its metrics.csv (the last row's step and its cumulative seconds, resumes
     included), and its time left at that pace; None before its first row or once it is done."""
-    row = last_row(metrics)
+    return _pace_under_way(last_row(metrics), k, planned_steps, planned_seconds)
+
+
+def _pace_under_way(row: tuple[int, float] | None, k: int, planned_steps: int, planned_seconds: float) -> Pace | None:
     if row is None or row[0] >= planned_steps:
         return None
     step, seconds = row
