@@ -40,8 +40,13 @@ for spec in "$@"; do
   done
   echo "$scene: $n shards started at +$(( $(date +%s) - t0 )) s"
 done
-( sleep 60; nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv > /tmp/evlog/nvidia_smi.csv ) &
-( sleep "$deadline"; for p in ${pids[@]}; do kill "$p" 2>/dev/null; done ) &
+# The watchers write nowhere the call reads (a sleeping child holding stdout kept the call open to the deadline
+# after the work had ended: 7 min for a 30 s dry run) and are stopped when the work ends.
+( sleep 60; nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv > /tmp/evlog/nvidia_smi.csv ) \
+  > /dev/null 2>&1 &
+smi=$!
+( sleep "$deadline"; for p in ${pids[@]}; do kill "$p" 2>/dev/null; done ) > /dev/null 2>&1 &
+watch=$!
 for spec in "$@"; do  # each scene is packed as soon as its own shards end
   scene=${spec%%:*}; name=$(tag "$scene")
   for p in ${pids[$name]}; do wait "$p"; done
@@ -71,5 +76,6 @@ if [ $bench = 1 ] && [ $(( $(date +%s) - t0 )) -lt "$deadline" ]; then
     echo "bench $scene: rc $? at +$(( $(date +%s) - t0 )) s"
   done
 fi
+for w in $smi $watch; do pkill -P "$w" 2>/dev/null; kill "$w" 2>/dev/null; done
 tar czf "$OUT/logs.tar.gz" -C /tmp evlog
 ls -la "$OUT"
