@@ -136,7 +136,7 @@ def _cmd_data_refine(args: argparse.Namespace) -> int:
     from diviewer.data.capture import parse_shard
     from diviewer.data.refine import refine
 
-    refine(args.dir, args.out, args.spp, parse_shard(args.shard))
+    refine(args.dir, args.out, args.spp, parse_shard(args.shard), extras=args.extras)
     return 0
 
 
@@ -364,6 +364,8 @@ def _add_data_parsers(sub) -> None:
     q.add_argument("--spp", type=int, required=True, help="the refined dataset's samples per pixel (above the source's)")
     q.add_argument("--out", type=Path, required=True)
     q.add_argument("--shard", default=None, help="k/n: refine every n-th frame starting at the k-th")
+    q.add_argument("--extras", type=Path, default=None, help="a folder of extra samples rendered elsewhere "
+                   "(tools/device_refine.py): refine only its frames, from them")
     q.set_defaults(func=_cmd_data_refine)
     q = data.add_parser("area-direct", help="re-render a dataset's GL direct light over each pixel's area into a new "
                                             "folder (supersampled, box-filtered; minutes; resumable)")

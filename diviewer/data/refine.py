@@ -34,10 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from diviewer.console import progress_bar
-from diviewer.data.dataset import Dataset, write_frame
+from diviewer.data.dataset import Dataset, frame_name, sha256_file, write_frame
 from diviewer.errors import DiviewerError
 from diviewer.locks import run_lock, shard_part
 
+CHANNELS = ("pt", "pt_direct")
+"""The images a refinement raises, in the order of the six channels of extra samples rendered elsewhere."""
 REFINE_STREAM = 0x4EF1
 """Tag of the new seeds' stream: a frame's extra seed is ``SeedSequence([its seed, REFINE_STREAM, source spp])``."""
 
@@ -81,8 +83,11 @@ def source_scene(src: Dataset, out: Path, manifest: dict, verb: str):
                                f"it has changed since the capture; {verb} it with the scene it was captured with")
 
 
-def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), log=print) -> dict:
-    """Refine the present frames of ``src_dir`` (this shard's) to ``spp`` into ``out``; returns a summary."""
+def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), log=print,
+           extras: Path | None = None) -> dict:
+    """Refine the present frames of ``src_dir`` (this shard's) to ``spp`` into ``out``; returns a summary. With
+    ``extras`` (a folder of extra samples rendered elsewhere: `diviewer.data.refine_extras`), only the frames it holds
+    are refined, from its samples, none rendered here."""
     from diviewer.data.capture import FLOAT16_MAX, open_or_create, summarize
     from diviewer.reference import mitsuba as ref
     from diviewer.scene.loader import config_from_dict
@@ -99,8 +104,12 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
         ds = open_or_create(out, manifest)
         mine = [f for f in src.frames if f["index"] % n == k - 1 and src.check_frame(f["index"], False) is None]
         todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
+        if extras is not None:
+            held = extras_present(extras)
+            todo = [f for f in todo if f["index"] in held]
         log(f"refine {src.root} ({old} spp) -> {out} ({spp} spp): {len(mine) - len(todo)} of {len(mine)} present "
-            f"frames of shard {k}/{n} already refined, {len(todo)} to render ({eff_extra} spp each, {variant})")
+            f"frames of shard {k}/{n} already refined, {len(todo)} to " + (
+                f"render ({eff_extra} spp each, {variant})" if extras is None else f"take from {extras}"))
         progress = progress_bar(len(todo), "refine", "frame")
         t_all = time.perf_counter()
         try:
@@ -113,9 +122,14 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
                 eff_src = int(before["from_spp"]) + int(before["extra_spp"]) if before else eff_old
                 seed = refine_seed(f["seed"], old)
                 t0 = time.perf_counter()
-                frame = ref.load_frame(scene, config_from_dict(scene, f["config"]), width, height)
-                full, direct, how = frame.full_and_direct(spp - old, seed, manifest["max_depth"])
-                extra = {"pt": full, "pt_direct": direct}
+                if extras is None:
+                    frame = ref.load_frame(scene, config_from_dict(scene, f["config"]), width, height)
+                    full, direct, how = frame.full_and_direct(spp - old, seed, manifest["max_depth"])
+                    extra, record = {"pt": full, "pt_direct": direct}, {"variant": variant}
+                else:  # rendered elsewhere: its seconds are that machine's, not this one's (a build's pace)
+                    extra, there = load_extras(extras, i, src, spp, seed, eff_extra)
+                    how, record = there["pt_estimator"], {"elsewhere": {
+                        "variant": there["variant"], "seconds": there["seconds"], "dtype": there["dtype"]}}
                 seconds = time.perf_counter() - t0
                 for name, new in extra.items():
                     s = src.slices[name]
@@ -126,8 +140,8 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
                 if ds.dtype == np.float16 and np.abs(arr).max() > FLOAT16_MAX:
                     raise DiviewerError(f"frame {i}: radiance {np.abs(arr).max():.3g} exceeds float16's range",
                                         path=src.path(i))
-                info["refined"] = {"from_spp": eff_src, "extra_spp": eff_extra, "seed": seed, "variant": variant,
-                                   "pt_estimator": how, "seconds": round(seconds, 3),
+                info["refined"] = {"from_spp": eff_src, "extra_spp": eff_extra, "seed": seed, **record,
+                                   "pt_estimator": how, **({"seconds": round(seconds, 3)} if extras is None else {}),
                                    **({"before": before} if before else {})}
                 write_frame(ds, i, arr.astype(ds.dtype), info)
                 progress.set_postfix_str(f"{seconds:.1f}s/frame", refresh=False)
@@ -138,3 +152,44 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
         summary["rendered"], summary["seconds"] = len(todo), round(time.perf_counter() - t_all, 2)
         log(f"done: {summary['present']}/{summary['planned']} frames present, {summary['seconds']:.0f} s")
     return summary
+
+
+def extras_problem(out: Path, index: int) -> str | None:
+    """Why a frame's extra samples rendered elsewhere (`diviewer.data.refine_extras`) in ``out`` cannot be read (absent, no sidecar, checksum), or None."""
+    path = out / f"{frame_name(index)}.npy"
+    try:
+        info = json.loads(path.with_suffix(".json").read_text())
+    except (OSError, ValueError):
+        return "absent"
+    if not path.is_file() or sha256_file(path) != info.get("sha256"):
+        return "checksum mismatch (corrupted or edited)"
+    return None
+
+
+def extras_present(folder: Path) -> set[int]:
+    """The frame indices a folder of extras has a sidecar for (each one is checked as it is read)."""
+    return {int(p.stem) for p in folder.glob("*.json") if p.stem.isdigit()}
+
+
+def load_extras(folder: Path, index: int, src: Dataset, spp: int, seed: int, eff_extra: int) -> tuple[dict, dict]:
+    """A frame's extra samples from ``folder`` ({"pt", "pt_direct"} as float32) and their record, refused (naming the
+    file and the field) unless they are the samples `refine` would render for it: the same source dataset, counts
+    and seed, its resolution, intact."""
+    path = folder / f"{frame_name(index)}.npy"
+    side = path.with_suffix(".json")
+    why = extras_problem(folder, index)
+    if why is not None:
+        raise DiviewerError(f"frame {index}'s extra samples: {why}", path=side if why == "absent" else path)
+    info = json.loads(side.read_text())
+    want = {"source_hash": src.hash, "spp": spp, "from_spp": int(src.manifest["spp"]), "extra_spp": eff_extra,
+            "seed": seed, "index": index, "channels": list(CHANNELS)}
+    for field, value in want.items():
+        if info.get(field) != value:
+            raise DiviewerError(f"frame {index}'s extra samples are not this refinement's: {field} is "
+                                f"{info.get(field)!r}, the refinement's {value!r}", path=side, field=field)
+    arr = np.load(path)
+    if arr.shape != (src.height, src.width, 6):
+        raise DiviewerError(f"frame {index}'s extra samples are {arr.shape}, the dataset's frames "
+                            f"({src.height}, {src.width}, 6)", path=path, field="shape")
+    arr = arr.astype(np.float32)
+    return {"pt": arr[..., :3], "pt_direct": arr[..., 3:]}, info
