@@ -386,6 +386,24 @@ def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, mo
             a, b = r["splits"][key]["methods"][m], full["splits"][key]["methods"][m]
             assert a["psnr_tm"]["mean"] == pytest.approx(b["psnr_tm"]["mean"], abs=0.05), (key, m)
             assert a["ssim_tm"]["mean"] == pytest.approx(b["ssim_tm"]["mean"], abs=2e-3), (key, m)
+    # The truth-margin tool reads a compact set's stored ladder scores where the full set has the images: the same
+    # margins, rung by rung and projected, up to the compact set's float16 truth.
+    from tool_modules import load_tool
+
+    tool, margins = load_tool("experiments/truth_margin"), {}
+    (tmp_path / "full.json").write_text(json.dumps(full))
+    for name, scores in (("compact", res), ("full", tmp_path / "full.json")):
+        assert tool.main(["--eval", str(scores), "--model-key", "twice", "--project", "8",
+                          "--out", str(tmp_path / f"margin_{name}.json")]) == 0
+        margins[name] = json.loads((tmp_path / f"margin_{name}.json").read_text())["splits"]
+    for key in SPLIT_KEYS:
+        want = margins["full"][key]["per_rung"]
+        assert set(want) == {"margin_pt_spp1", "margin_pt_spp4", "margin_projected_spp8"}
+        for rung, w in want.items():
+            g = margins["compact"][key]["per_rung"][rung]
+            assert (g["frames"], g["unresolved"]) == (w["frames"], w["unresolved"]) and w["frames"] + w["unresolved"] == 1
+            if w["frames"]:
+                assert g["median_db"] == pytest.approx(w["median_db"], abs=0.05), (key, rung)
     # A changed byte in the compact set is refused, naming the frame.
     m = json.loads((compact / "manifest.json").read_text())
     m["frame_list"][1]["sha256"] = "0" * 64

@@ -1,7 +1,9 @@
 """How far a path-traced truth of N spp stands above a model's error, frame by frame, at every rung of an evaluation
 set's ladder and at projected counts: issue 26's "the ground truth's noise floor must be at least 6 dB above the
 model's error". The method is `diviewer.truthmargin`'s (its docstring); `diviewer eval` reports the truth each model
-trained on, this script every rung and projection of a `diviewer eval` JSON, read from the set's frames.
+trained on, this script every rung and projection of a `diviewer eval` JSON, read from the set's frames. On a compact
+set (which keeps its ladder's scores, not its images) each rung's error is its stored score against the full set's
+truth (float32, scored before the set was compacted), the truth's own noise read from its two renders as stored.
 
 Usage: python tools/experiments/truth_margin.py --eval EVAL.json [--model-key sponza] [--evalset runs/sponza/evalset]
            [--project 512] [--out OUT.json]
@@ -41,11 +43,9 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"{a.eval}: no split scores the model "
                          + (f"'{a.model_key}'" if a.model_key else "(no neural method)") + "; nothing written")
     ev = EvalFrames(a.evalset or Path(record["evalset"]))
-    if not ev.ladder_images():
-        raise SystemExit(f"{ev.root}: a compact set keeps its ladder's scores, not its images; give the full set")
     rungs = [int(s) for s in record["ladder_spp"]]
     top = max(rungs)  # the projections start from the cleanest rung
-    problems = {p.index: p.problem for p in ev.problems()}
+    problems = ev.problems()  # absent frames are not scored (a partial set, as `diviewer eval --partial`)
     out = {"eval": str(a.eval), "evalset": str(ev.root), "exposure": ev.exposure, "ladder_spp": rungs,
            "projected_spp": a.project, "margin_db": MARGIN_DB, "splits": {}}
     for split, shapes in ev.splits().items():
@@ -63,8 +63,10 @@ def main(argv: list[str] | None = None) -> int:
                 truth = tonemap(f["pt"], ev.exposure)
                 noise = mse(tonemap(f["pt_b"], ev.exposure), truth) / 2.0
                 row = {"index": i, "truth_noise_mse": noise, "model_mse": model[i]}
+                stored = None if ev.ladder_images() else ev.ladder_rows(i, key)  # a compact set's scores
                 for n in rungs:
-                    row[f"pt_spp{n}_mse"] = mse(tonemap(f[f"pt_spp{n}"], ev.exposure), truth)
+                    row[f"pt_spp{n}_mse"] = (mse(tonemap(f[f"pt_spp{n}"], ev.exposure), truth) if stored is None
+                                             else float(stored[f"pt_spp{n}"]["mse_tm"]))
                     row[f"margin_pt_spp{n}"] = margin_db(model[i], row[f"pt_spp{n}_mse"], noise)
                 for n in a.project:
                     projected = projected_mse(row[f"pt_spp{top}_mse"], noise, top, n)
