@@ -7,7 +7,9 @@
 #   1b. K = 8 with the structure term (`--ssim-weight 0.1`) on that capture, the recipe's whole schedule (~2 h):
 #      the shipped model is its control (the same recipe, data and steps), scored beside it on the shipped compact
 #      evaluation set, then on the full one (2 below). A failure is reported and the chain goes on;
-#   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here) and
+#   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here; or
+#      the same set rendered on a lent device, runs/evalsets/sponza: tools/device_evalsets.sh, compact with every
+#      frame, taken where present, as SPONZA_EVALSET names another) and
 #      the shipped model's and 1b's scores on it, with their margins over the 64-spp truth;
 #   3. K = 8 on a 256-spp truth (assets/recipes/sponza_walk256.toml: sponza.toml with `[capture] refine_from = 64`),
 #      in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, 8-12 h), then
@@ -75,16 +77,21 @@ if [ ! -f "$WORK/eval_compact_ssim.json" ]; then
   stage "K = 8 with the structure term on the 64-spp truth"
   ssim64 || stage "the structure-term run on the 64-spp truth failed (above); on to the evaluation set"
 fi
-stage "full evaluation set"
-again diviewer evalset --scene sponza --out "$WORK/evalset"
+# The full set: a device's render of it where there is one (it holds every frame, float16), else rendered here.
+EVALSET="${SPONZA_EVALSET:-}"
+if [ -z "$EVALSET" ]; then
+  if [ -f runs/evalsets/sponza/manifest.json ]; then EVALSET=runs/evalsets/sponza; else EVALSET="$WORK/evalset"; fi
+fi
+stage "full evaluation set: $EVALSET"
+if [ "$EVALSET" = "$WORK/evalset" ]; then again diviewer evalset --scene sponza --out "$EVALSET"; fi
 if [ -f "$SSIM64" ] && [ ! -f "$WORK/eval_full_ssim.json" ]; then
   stage "the shipped model and the structure term's on the full evaluation set"
-  again diviewer eval --evalset "$WORK/evalset" --model assets/models/sponza.onnx --model "$SSIM64" \
+  again diviewer eval --evalset "$EVALSET" --model assets/models/sponza.onnx --model "$SSIM64" \
     --out "$WORK/eval_full_ssim.json"
 fi
 margin "$WORK/eval_full_ssim.json" sponza "$WORK/truth_margin_k8.json"
 margin "$WORK/eval_full_ssim.json" sponza_ssim_k8 "$WORK/truth_margin_ssim_k8.json"
-REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --evalset "$WORK/evalset" --work "$REFINED"
+REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --evalset "$EVALSET" --work "$REFINED"
                --ship "$REFINED/ship")
 stage "build on the 256-spp truth: the refinement, K = 8"
 again "${REFINED_BUILD[@]}" --ks 8
@@ -110,7 +117,7 @@ ssim_ablation() {  # each step only after the one before succeeded (errexit does
   local model="$REFINED/models/sponza_ssim_k8.onnx"
   again ssim_run \
     && { [ -f "$model" ] || diviewer export "$REFINED/ssim_k8/best.ckpt" --out "$model" --half-weights; } \
-    && again diviewer eval --evalset "$WORK/evalset" --model "$REFINED/models/sponza_k8.onnx" --model "$model" \
+    && again diviewer eval --evalset "$EVALSET" --model "$REFINED/models/sponza_k8.onnx" --model "$model" \
          --out "$REFINED/eval_full_ssim.json" \
     && margin "$REFINED/eval_full_ssim.json" sponza_ssim_k8 "$REFINED/truth_margin_ssim_k8.json"
 }
@@ -118,7 +125,7 @@ if [ ! -f "$REFINED/truth_margin_ssim_k8.json" ]; then
   stage "K = 8 with the structure term on the 256-spp truth"
   ssim_ablation || stage "the structure-term run failed (above); on to the 512-spp truth"
 fi
-TWICE_BUILD=(diviewer build --scene sponza --recipe "$TWICE/sponza.toml" --evalset "$WORK/evalset" --work "$TWICE"
+TWICE_BUILD=(diviewer build --scene sponza --recipe "$TWICE/sponza.toml" --evalset "$EVALSET" --work "$TWICE"
              --ship "$TWICE/ship")
 stage "build on the 512-spp truth: the refinement, K = 8 and 16"
 again "${TWICE_BUILD[@]}" --ks 8 16
