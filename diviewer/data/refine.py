@@ -155,7 +155,8 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
 
 
 def extras_problem(out: Path, index: int) -> str | None:
-    """Why a frame's extra samples rendered elsewhere (`diviewer.data.refine_extras`) in ``out`` cannot be read (absent, no sidecar, checksum), or None."""
+    """Why a frame's extra samples rendered elsewhere (`diviewer.data.refine_extras`) in ``out`` cannot be read
+    (absent, no sidecar, checksum), or None."""
     path = out / f"{frame_name(index)}.npy"
     try:
         info = json.loads(path.with_suffix(".json").read_text())
@@ -167,7 +168,10 @@ def extras_problem(out: Path, index: int) -> str | None:
 
 
 def extras_present(folder: Path) -> set[int]:
-    """The frame indices a folder of extras has a sidecar for (each one is checked as it is read)."""
+    """The frame indices a folder of extras has a sidecar for (each one is checked as it is read); a folder that is
+    not there is refused (a mistyped path would refine nothing, silently)."""
+    if not folder.is_dir():
+        raise DiviewerError("no such folder of extra samples", path=folder, field="--extras")
     return {int(p.stem) for p in folder.glob("*.json") if p.stem.isdigit()}
 
 

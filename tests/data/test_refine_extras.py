@@ -49,6 +49,9 @@ def test_extras_rendered_elsewhere_refine_as_refine_does(gl_context, tmp_path, c
     assert render_extras(job, extras, (2, 2), **QUIET) == {"rendered": 2, "present": 2, "frames": 2,
                                                           "seconds": pytest.approx(0, abs=600)}
     assert extras_present(extras) == {1, 2, 3}
+    with pytest.raises(DiviewerError, match="no such folder") as e:
+        extras_present(tmp_path / "mistyped")
+    assert e.value.field == "--extras"
     # Refined from the extras: only their frames, none rendered; then a plain refine finds them done.
     out, plain = tmp_path / "out", tmp_path / "plain"
     assert main(["data", "refine", str(src), "--spp", "16", "--out", str(out), "--extras", str(extras)]) == 0
