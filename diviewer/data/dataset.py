@@ -246,14 +246,20 @@ class Dataset:
 
 def write_frame(ds: Dataset, index: int, arr: np.ndarray, info: dict) -> None:
     """Write one frame atomically: the array, then its sidecar (with the checksum) marking it complete."""
-    with imageio.atomic_path(ds.path(index)) as tmp:
+    write_checked(ds.path(index), arr, info)
+
+
+def write_checked(path: Path, arr: np.ndarray, info: dict) -> None:
+    """An array at ``path`` (.npy) atomically, then its sidecar beside it (.json, ``info`` with the array's checksum)
+    marking it complete: a frame of a dataset, or one frame's extra samples rendered elsewhere."""
+    with imageio.atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
             np.save(f, arr)
             f.flush()
             os.fsync(f.fileno())
-    info = {**info, "sha256": sha256_file(ds.path(index))}
+    info = {**info, "sha256": sha256_file(path)}
     try:
-        imageio.write_text(ds.path(index, ".json"), json.dumps(info, indent=1))
+        imageio.write_text(path.with_suffix(".json"), json.dumps(info, indent=1))
     except BaseException:
-        ds.path(index).unlink(missing_ok=True)  # no array without its sidecar: the frame is absent, not half there
+        path.unlink(missing_ok=True)  # no array without its sidecar: the frame is absent, not half there
         raise

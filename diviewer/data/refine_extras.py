@@ -35,7 +35,7 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.console import progress_bar
-from diviewer.data.dataset import Dataset, frame_name, sha256_file
+from diviewer.data.dataset import Dataset, frame_name, write_checked
 from diviewer.data.refine import CHANNELS, extras_problem, refine_seed, refined_manifest
 from diviewer.errors import DiviewerError
 
@@ -113,7 +113,7 @@ def render_extras(job_path: Path, out: Path, shard: tuple[int, int] = (1, 1), de
             if not np.all(np.isfinite(arr)) or np.abs(arr).max() > FLOAT16_MAX:
                 raise DiviewerError(f"frame {f['index']}: extra samples non-finite or beyond float16's range; "
                                     "nothing was written for it", path=job_path)
-            _write(out, f["index"], arr.astype(np.float16), {
+            write_checked(out / f"{frame_name(f['index'])}.npy", arr.astype(np.float16), {
                 "index": f["index"], "source_hash": job["source_hash"], "spp": m["spp"], "from_spp": old,
                 "extra_spp": eff_extra, "seed": seed, "variant": variant, "pt_estimator": how,
                 "seconds": round(seconds, 3), "dtype": "float16", "channels": list(CHANNELS)})
@@ -121,14 +121,5 @@ def render_extras(job_path: Path, out: Path, shard: tuple[int, int] = (1, 1), de
             progress.update()
     finally:
         progress.close()
-    present = sum(extras_problem(out, f["index"]) is None for f in mine)
-    return {"rendered": rendered, "present": present, "frames": len(mine),
+    return {"rendered": rendered, "present": len(mine) - len(todo) + rendered, "frames": len(mine),
             "seconds": round(time.perf_counter() - t_all, 2)}
-
-
-def _write(out: Path, index: int, arr: np.ndarray, info: dict) -> None:
-    """One frame's extras atomically: the array, then its sidecar (with the checksum) marking it complete."""
-    path = out / f"{frame_name(index)}.npy"
-    with imageio.atomic_path(path) as tmp:
-        np.save(tmp, arr)
-    imageio.write_text(path.with_suffix(".json"), json.dumps({**info, "sha256": sha256_file(path)}, indent=1))
