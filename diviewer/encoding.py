@@ -1,11 +1,10 @@
 """The network's channel layout and the encoding of its inputs and outputs, defined once.
 
-Training, ONNX export and the runtime all use these functions, so the exported graph can carry the
-encoding: the runtime feeds raw linear buffers and receives linear radiance. Every function here is
-elementwise (plus one concatenation), written against a small set of array operations (`ArrayOps`:
-numpy here, torch's in `diviewer.train.encoding_torch`), and uses only operators the ONNX exporter
-maps one-to-one (Log, Exp, Abs, Sign, Where, Clip, IsNaN, IsInf, Concat). This module never imports
-torch: the viewer and the benchmark run without it.
+Training, ONNX export and the runtime all use these functions, so the exported graph carries the encoding: the
+runtime feeds raw linear buffers and receives linear radiance. Every function here is elementwise (plus one
+concatenation), written against a small set of array operations (`ArrayOps`: numpy here, torch's in
+`diviewer.train.encoding_torch`), and uses only operators the ONNX exporter maps one-to-one (Log, Exp, Abs, Sign,
+Where, Clip, IsNaN, IsInf, Concat). It never imports torch: the viewer and the benchmark run without it.
 
 Radiance curve (used for the direct-light input and for the network's output)::
 
@@ -15,28 +14,25 @@ Radiance curve (used for the direct-light input and for the network's output)::
 
 Why this curve:
 
-- Absolute intensity is kept: the curve is a fixed function of each pixel, with one exposure per
-  dataset, so twice the light decodes to twice the light and nothing depends on the other pixels.
-- It is odd (sign-preserving) and maps 0 to exactly 0, where tanh is linear and float32 is at its
-  most precise. Indirect-light targets can be slightly negative from Monte-Carlo noise, and the
-  very common black pixels (shadow, background) would otherwise sit at a saturated end of tanh.
-- It is linear below |t| ~ 1 and logarithmic above, like a tone curve: dark noise is not amplified
-  (a pure log curve would give 1e-5 the same weight as 1) while highlights up to R are compressed
-  into the top of the range instead of being clipped.
-- Float32: near y = 0 the relative precision of y is that of x, because log1p and expm1 are
-  evaluated with Kahan's exact-cancellation trick instead of log(1 + t) (which loses all digits of
-  t below 6e-8, and which is how the ONNX exporter lowers log1p; expm1 it does not export at all).
-  Near |y| = 1 the absolute spacing of float32 is 6e-8, i.e. a relative error of log1p(R) * 6e-8
-  (7e-7 at R = 1e5) after decoding. Measured float32 round trip: relative error below 2e-6 for
-  every |t| in [1e-30, R], 0 exact. tanh reaches 1.0 in float32 (for pre-activations above ~9), so
-  R itself is reachable by the network. In float16 the spacing near 1 is 5e-4, a relative error of
+- Absolute intensity is kept: a fixed function of each pixel, one exposure per dataset (twice the light decodes to
+  twice the light; nothing depends on the other pixels).
+- It is odd and maps 0 to exactly 0, where tanh is linear and float32 most precise: indirect-light targets can be
+  slightly negative (Monte-Carlo noise), and black pixels would otherwise sit at a saturated end of tanh.
+- It is linear below |t| ~ 1 and logarithmic above, like a tone curve: dark noise is not amplified (a pure log
+  curve would weigh 1e-5 as 1) while highlights up to R are compressed into the top of the range, not clipped.
+- Float32: near y = 0 the relative precision of y is that of x, because log1p and expm1 are evaluated with Kahan's
+  exact-cancellation trick instead of log(1 + t) (which loses all digits of t below 6e-8, and which is how the
+  ONNX exporter lowers log1p; expm1 it does not export at all). Near |y| = 1 the absolute spacing of float32 is
+  6e-8, i.e. a relative error of log1p(R) * 6e-8 (7e-7 at R = 1e5) after decoding. Measured float32 round trip:
+  relative error below 2e-6 for every |t| in [1e-30, R], 0 exact. tanh reaches 1.0 in float32 (for pre-activations
+  above ~9), so R itself is reachable by the network. In float16 the spacing near 1 is 5e-4, a relative error of
   ~0.3 % after decoding: fine for an image, but keep encode/decode in float32 in an fp16 export.
-- NaN maps to 0 and +-Inf to +-1 when encoding; decoding clamps y to [-1, 1] first, so it never
-  produces NaN or Inf (the largest output is radiance_max / exposure, checked to fit in float32).
+- NaN maps to 0 and +-Inf to +-1 when encoding; decoding clamps y to [-1, 1] first: never NaN or Inf (the
+  largest output, radiance_max / exposure, is checked to fit in float32).
 
-Inputs: depth 0 (and NaN, Inf, negative) means no geometry and encodes to -1, while geometry maps
-into [0, 1] (depth / depth_scale), so background stays distinct even next to the near plane.
-Normals are in [-1, 1] already (background (0, 0, 0) stays 0); albedo [0, 1] maps to [-1, 1].
+Inputs: depth 0 (and NaN, Inf, negative) means no geometry and encodes to -1, while geometry maps into [0, 1]
+(depth / depth_scale): background stays distinct even next to the near plane. Normals are in [-1, 1] already
+(background (0, 0, 0) stays 0); albedo [0, 1] maps to [-1, 1].
 """
 
 from __future__ import annotations
@@ -57,6 +53,9 @@ INPUT_CHANNELS: tuple[tuple[str, int], ...] = (("depth", 1), ("normal", 3), ("al
 
 INPUT_CHANNEL_COUNT: int = sum(n for _, n in INPUT_CHANNELS)
 """Total number of network input channels (10)."""
+
+WORLD_CHANNELS: tuple[tuple[str, int], ...] = (("world_position", 3), ("world_normal", 3))
+"""The planes the graph appends to the encoded buffers under encoding version 3 (`diviewer.train.world`), in order."""
 
 OUTPUT_CHANNELS: int = 3
 """Network output channels: linear RGB radiance (full GI or indirect only), encoded."""
@@ -191,6 +190,14 @@ class Encoding:
     def light_inputs(self) -> bool:
         """Whether the network also takes where each light is (version 4)."""
         return self.version >= 4
+
+    @property
+    def input_planes(self) -> int:
+        """The network's input planes: the buffers, the world planes (version 3), three a light (version 4)."""
+        from diviewer.scene.lights import LIGHT_PARAMS
+
+        return (INPUT_CHANNEL_COUNT + (sum(n for _, n in WORLD_CHANNELS) if self.world_inputs else 0)
+                + (LIGHT_PARAMS * self.lights if self.light_inputs else 0))
 
     @property
     def light_scaled(self) -> bool:

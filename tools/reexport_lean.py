@@ -53,8 +53,7 @@ def rebuild_generator(model, meta: dict):
     if meta.get("norm", "batch") != "batch" or meta.get("upsample", "transpose") not in ("transpose", "resize"):
         raise DiviewerError("only batch-norm generators with transpose or resize decoders are rebuilt",
                             field="norm/upsample")
-    from diviewer.encoding import INPUT_CHANNEL_COUNT
-    from diviewer.train.world import WORLD_CHANNELS
+    from diviewer.encoding import INPUT_CHANNEL_COUNT, WORLD_CHANNELS
 
     world = int(meta.get("encoding", {}).get("version", 1)) >= 3  # encoding 3: the world planes are inputs too
     netG = UnetGenerator(in_channels=INPUT_CHANNEL_COUNT + (sum(n for _, n in WORLD_CHANNELS) if world else 0),

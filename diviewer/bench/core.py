@@ -241,7 +241,7 @@ def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, varian
     it allows, and the untrained generators of the cost curve."""
     import onnx
 
-    from diviewer.bench.onnx_tools import generator_flops, untrained_generator
+    from diviewer.bench.onnx_tools import generator_flops, network_inputs, untrained_generator
     from diviewer.runtime import NeuralGI
 
     rows = [_row("direct", "direct light only", res, res, gb.time_direct(configs, settings.warmup))]
@@ -268,6 +268,7 @@ def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, varian
                 lv = int(v["meta"]["levels"])
                 side = -(-(res // step) // 2 ** lv) * 2 ** lv  # as the runtime pads it
                 row["flops"] = generator_flops(int(v["meta"]["K"]), lv, side, side,
+                                               in_channels=network_inputs(v["meta"]),
                                                upsample=v["meta"].get("upsample", "transpose"))["flops"]
             rows.append(row)
     levels = _levels(res)

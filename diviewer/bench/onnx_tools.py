@@ -44,6 +44,16 @@ def widths(K: int, levels: int) -> list[int]:
     return [K * min(2 ** i, 8) for i in range(levels)]
 
 
+def network_inputs(card: dict) -> int:
+    """The planes a model card's generator takes into its first layer: its encoding's inputs (the buffers, the
+    world planes, the lights' planes) and the Fourier features of the world position (``world_frequencies``)."""
+    from diviewer.encoding import Encoding
+
+    enc = card.get("encoding")
+    base = Encoding.from_dict(enc).input_planes if enc else INPUT_CHANNEL_COUNT
+    return base + 6 * int(card.get("world_frequencies") or 0)
+
+
 def generator_flops(K: int, levels: int, width: int, height: int, in_channels: int = INPUT_CHANNEL_COUNT,
                     out_channels: int = OUTPUT_CHANNELS, upsample: str = "transpose") -> dict:
     """FLOPs of one generator frame: 2 x the multiply-adds of its convolutions (elementwise layers not counted).

@@ -111,6 +111,9 @@ def _data_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--light-inputs", action=argparse.BooleanOptionalAction, default=None,
                    help="also feed where each light is: a sun's direction, a point light's position (encoding 4; "
                         "needs --world-inputs; default off)")
+    g.add_argument("--world-frequencies", type=int, default=None, metavar="L",
+                   help="Fourier features of the world position, sin and cos of pi 2^l p for l < L, into the "
+                        "network's first layer (needs --world-inputs; default 0: the position as is)")
     g.add_argument("--output-gain", action=argparse.BooleanOptionalAction, default=None,
                    help="encode the target at its own exposure (its 99th percentile at 1), not the direct light's: "
                         "a sunlit scene's indirect light is a few %% of its direct light (default off)")

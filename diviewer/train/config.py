@@ -159,6 +159,11 @@ class TrainConfig:
     """Encoding version 4 (needs ``world_inputs``): the network also takes where each of the scene's lights is (a
     sun's direction, a point light's position: `diviewer.scene.lights.light_params`), as constant planes."""
 
+    world_frequencies: int = 0
+    """Octaves L of Fourier features of the world position (needs ``world_inputs``): sin and cos of pi 2^l p, l < L,
+    6 L more planes into netG's first encoder (`diviewer.train.networks.UnetGenerator`), so a small network can
+    key its light on fine detail of where a surface is. 0: the position as is."""
+
     output_gain: bool = False
     """Encode the target at its own exposure: the dataset's exposure times a gain that maps the 99th percentile of
     the train split's exposed target to 1 (`diviewer.train.targets.fit_output_gain`; recorded as the encoding's
@@ -224,6 +229,11 @@ class TrainConfig:
             fail("world_inputs", "needs light_scale (encoding 3 extends encoding 2)")
         if self.light_inputs and not self.world_inputs:
             fail("light_inputs", "needs world_inputs (encoding 4 extends encoding 3)")
+        f = self.world_frequencies
+        if isinstance(f, bool) or not isinstance(f, int) or not 0 <= f <= MAX_FREQUENCIES:
+            fail("world_frequencies", f"must be an integer in [0, {MAX_FREQUENCIES}], got {f!r}")
+        if f and not self.world_inputs:
+            fail("world_frequencies", "needs world_inputs (the features are of the world position)")
         if self.aspect_crops is not None:
             a = self.aspect_crops
             ok = (isinstance(a, (tuple, list)) and len(a) == 2
@@ -268,6 +278,10 @@ class TrainConfig:
         return cls(**data)
 
 
+MAX_FREQUENCIES: int = 12
+"""The most octaves of `world_frequencies`: pi 2^11 of a [-1, 1] coordinate, a wavelength of 1/1024 of the scene's
+bounds, is already finer than a capture's texels and than float32 keeps after the multiply."""
+
 CHOICES: dict[str, tuple[str, ...]] = {
     "precision": ("auto", "fp32", "bf16", "fp16"), "gan_mode": ("vanilla", "lsgan"), "recon_loss": ("l1", "l2"),
     "recon_space": ("encoded", "linear", "log", "relative"), "norm_D": ("batch", "instance", "none"),
@@ -280,7 +294,7 @@ RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "lr_decay_
                                  "lambda_L1", "target", "divide_albedo", "seed", "dropout", "ndf", "gan_weight",
                                  "gan_mode", "recon_loss", "recon_space", "ssim_weight", "n_layers_D", "norm_D", "d_lr", "upsample",
                                  "norm", "train_frames", "init_from", "light_scale", "aspect_crops",
-                                 "world_inputs", "light_inputs", "output_gain")
+                                 "world_inputs", "light_inputs", "world_frequencies", "output_gain")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change); the schedule
 (lr_decay, lr_decay_start) may change while both the old and the new one are constant up to the
 checkpoint's step (train.checkpoint.check_resume)."""
@@ -290,6 +304,6 @@ RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save
 device and num_workers describe this invocation and this machine, so they are not inherited)."""
 
 LEGACY_DEFAULTS: dict[str, Any] = {"light_scale": False, "aspect_crops": None, "world_inputs": False,
-                                   "light_inputs": False, "output_gain": False}
+                                   "light_inputs": False, "output_gain": False, "world_frequencies": 0}
 """What a checkpoint from before these settings existed trained with (radiance as is, whole frames), where
 it does not record them; a new run's defaults differ."""

@@ -335,6 +335,8 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         # absent from checkpoints made before these options existed, which were transpose/batch
         "upsample": meta["model_args"].get("upsample", "transpose"),
         "norm": meta["model_args"].get("norm", "batch"),
+        # Fourier octaves of the world position into the first layer (absent: none, as every model before them)
+        **({"world_frequencies": meta["model_args"]["frequencies"]} if meta["model_args"].get("frequencies") else {}),
         "target": meta["target"],
         "divide_albedo": meta["divide_albedo"],
         "encoding": encoding.to_dict(),
@@ -410,7 +412,9 @@ def info(path: str | Path) -> str:
     lines = [f"{path}",
              f"  scene        {m['scene']} (scene file sha256 {m['scene_hash'][:16]}...)",
              f"  network      U-Net K={m['K']} levels={m['levels']} upsample={m.get('upsample', 'transpose')} "
-             f"norm={m.get('norm', 'batch')} ({m['precision']}"
+             f"norm={m.get('norm', 'batch')}"
+             + (f" world-frequencies={m['world_frequencies']}" if m.get("world_frequencies") else "")
+             + f" ({m['precision']}"
              f"{', weights stored fp16' if m.get('weights') == 'fp16' and m['precision'] == 'fp32' else ''}), "
              f"target {m['target']}"
              + (" / albedo" if m.get("divide_albedo") else ""),

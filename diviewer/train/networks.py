@@ -11,6 +11,7 @@ training step lives in another module; this one only builds modules.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -21,6 +22,7 @@ from torch import nn
 from diviewer.encoding import INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
 from diviewer.provenance import check_known_keys
+from diviewer.train.config import MAX_FREQUENCIES
 
 if TYPE_CHECKING:
     from diviewer.data.dataset import Dataset
@@ -37,8 +39,6 @@ LAMBDA_L1: float = 100.0
 
 TARGETS: tuple[str, ...] = ("full", "indirect", "residual")
 """What netG may predict (`diviewer.train.config.TrainConfig.target`)."""
-"""What the generator predicts: the full GI image, or indirect light only (added to exact direct)."""
-
 
 UPSAMPLES: tuple[str, ...] = ("transpose", "resize", "shuffle")
 """Decoder upsampling: "transpose" = ConvTranspose 4x4/2 (pix2pix, the paper); "resize" = nearest
@@ -153,6 +153,8 @@ class UnetGenerator(nn.Module):
         resolution: used only when levels is None, through `levels_for_resolution`.
         upsample: the decoders' upsampling, one of `UPSAMPLES`.
         norm: the normalisation layer, one of `NORMS`.
+        frequencies, frequency_start: L > 0 appends 6 L planes before the first encoder (`fourier_features`, NeRF's
+            positional encoding), sin and cos of pi 2^l p, l < L, of the three planes p from ``frequency_start``.
     """
 
     def __init__(
@@ -165,6 +167,8 @@ class UnetGenerator(nn.Module):
         resolution: int = 256,
         upsample: str = "transpose",
         norm: str = "batch",
+        frequencies: int = 0,
+        frequency_start: int = INPUT_CHANNEL_COUNT,
     ) -> None:
         super().__init__()
         _check_choice("upsample", upsample, UPSAMPLES)
@@ -182,11 +186,14 @@ class UnetGenerator(nn.Module):
         self.dropout = dropout
         self.upsample = upsample
         self.norm = norm
+        if frequencies < 0 or (frequencies and not 0 <= frequency_start <= in_channels - 3):
+            raise ValueError(f"frequencies must be >= 0, of 3 of {in_channels} planes: {frequencies} at {frequency_start}")
+        self.frequencies, self.frequency_start = frequencies, frequency_start
 
         widths = [K * min(2**i, 8) for i in range(levels)]
         self.down = nn.ModuleList()
         for i in range(levels):
-            c_in = in_channels if i == 0 else widths[i - 1]
+            c_in = in_channels + 6 * frequencies if i == 0 else widths[i - 1]
             innermost = i == levels - 1
             norm_layer = _norm_layer(norm, widths[i]) if 0 < i < levels - 1 else None
             layers: list[nn.Module] = [nn.Conv2d(c_in, widths[i], 4, 2, 1, bias=norm_layer is None)]
@@ -231,6 +238,7 @@ class UnetGenerator(nn.Module):
             "dropout": self.dropout,
             "upsample": self.upsample,
             "norm": self.norm,
+            **({"frequencies": self.frequencies, "frequency_start": self.frequency_start} if self.frequencies else {}),
         }
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -245,6 +253,8 @@ class UnetGenerator(nn.Module):
                     f"UnetGenerator with {self.levels} levels needs H and W to be multiples of {m}; "
                     f"got {h}x{w} (pad or resize the input, or build the generator with fewer levels)"
                 )
+        if self.frequencies:
+            x = torch.cat([x, self.fourier_features(x)], 1)
         skips: list[torch.Tensor] = []
         for block in self.down:
             x = block(x)
@@ -255,6 +265,14 @@ class UnetGenerator(nn.Module):
                 x = torch.cat([skips.pop(), x], dim=1)
             x = block(x)
         return x
+
+
+    def fourier_features(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, 6 L, H, W): sin, then cos, of pi 2^l p for l < L (octave by octave, three planes each) of the three
+        planes p from ``frequency_start``: a Mul, a Concat, a Sin and a Cos in the exported graph."""
+        p = x[:, self.frequency_start:self.frequency_start + 3]
+        arg = torch.cat([p * (math.pi * 2.0 ** level) for level in range(self.frequencies)], 1)
+        return torch.cat([torch.sin(arg), torch.cos(arg)], 1)
 
 
 class NLayerDiscriminator(nn.Module):
@@ -357,6 +375,9 @@ class NetConfig:
     norm_D: str = "batch"
     """Discriminator normalisation, one of `NORMS`: "batch" (the paper), "instance", "none"."""
 
+    world_frequencies: int = 0
+    """Octaves of Fourier features of the world position before netG's first encoder (0: none)."""
+
     def __post_init__(self) -> None:
         def fail(field: str, message: str) -> None:
             raise DiviewerError(message, field=f"net.{field}")
@@ -379,6 +400,9 @@ class NetConfig:
             fail("target", f"must be one of {list(TARGETS)}, got {self.target!r}")
         if self.upsample not in UPSAMPLES:
             fail("upsample", f"must be one of {list(UPSAMPLES)}, got {self.upsample!r}")
+        f = self.world_frequencies
+        if isinstance(f, bool) or not isinstance(f, int) or not 0 <= f <= MAX_FREQUENCIES:
+            fail("world_frequencies", f"must be an integer in [0, {MAX_FREQUENCIES}], got {f!r}")
         for name in ("norm", "norm_D"):
             if getattr(self, name) not in NORMS:
                 fail(name, f"must be one of {list(NORMS)}, got {getattr(self, name)!r}")
@@ -391,7 +415,8 @@ class NetConfig:
         """netG for this config (weights not yet initialised: see `init_weights`); ``in_channels``: the encoded
         inputs (10, and 16 with encoding version 3's world planes)."""
         return UnetGenerator(in_channels, OUTPUT_CHANNELS, K=self.K, levels=self.resolved_levels(),
-                             dropout=self.dropout, upsample=self.upsample, norm=self.norm)
+                             dropout=self.dropout, upsample=self.upsample, norm=self.norm,
+                             frequencies=self.world_frequencies)
 
     def build_discriminator(self, in_channels: int = INPUT_CHANNEL_COUNT) -> NLayerDiscriminator:
         """netD for this config, conditioned on the input buffers (input channels + 3)."""
@@ -421,4 +446,4 @@ def net_config(cfg: TrainConfig, ds: Dataset) -> NetConfig:
                             path=ds.root) from None
     return NetConfig(K=cfg.K, levels=levels, resolution=min(ds.width, ds.height), dropout=cfg.dropout,
                      ndf=cfg.ndf, n_layers_D=cfg.n_layers_D, lambda_L1=cfg.lambda_L1, target=cfg.target,
-                     upsample=cfg.upsample, norm=cfg.norm, norm_D=cfg.norm_D)
+                     upsample=cfg.upsample, norm=cfg.norm, norm_D=cfg.norm_D, world_frequencies=cfg.world_frequencies)

@@ -62,10 +62,8 @@ def autocast_dtype(cfg: TrainConfig, dev: Dist, say) -> torch.dtype | None:
 def build_nets(cfg: TrainConfig, net_cfg: NetConfig, enc: Encoding, dev: Dist, say) -> Nets:
     """netG, netD and their optimizers (pix2pix: normal init, Adam(2e-4, (0.5, 0.999)) for each;
     netD may get its own learning rate)."""
-    from diviewer.train.world import input_channels
-
     seed_all(cfg.seed)
-    channels = input_channels(enc)
+    channels = enc.input_planes
     netG = init_weights(net_cfg.build_generator(channels)).to(dev.device)
     netD = init_weights(net_cfg.build_discriminator(channels)).to(dev.device)
     optG = torch.optim.Adam(netG.parameters(), lr=cfg.lr, betas=(cfg.beta1, cfg.beta2))

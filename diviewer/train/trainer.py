@@ -9,21 +9,19 @@ Usage::
 A run folder holds ``last.ckpt`` (every epoch, and wherever a run stops), ``best.ckpt`` (best
 validation SSIM on tone-mapped images), ``metrics.csv`` (one row per epoch) and ``curves.png``.
 
-Resume is exact (the same losses and weights as an uninterrupted run, bit for bit on one CPU): a
-checkpoint holds both networks, both Adam states, the epoch and the step inside it, every process's
-random state (torch, CUDA, numpy, python) and the loss sums of the unfinished epoch, and the data
-order is a pure function of (seed, epoch) (`epoch_batches`). A first Ctrl-C or SIGTERM finishes the
-current step, saves last.ckpt and stops; `max_steps` stops the same way, and so does early
-stopping (`patience` validations without a better tone-mapped SSIM).
+Resume is exact (the same losses and weights as an uninterrupted run, bit for bit on one CPU): a checkpoint holds
+both networks, both Adam states, the epoch and the step inside it, every process's random state (torch, CUDA, numpy,
+python) and the loss sums of the unfinished epoch, and the data order is a pure function of (seed, epoch)
+(`epoch_batches`). A first Ctrl-C or SIGTERM finishes the current step, saves last.ckpt and stops; `max_steps` stops
+the same way, and so does early stopping (`patience` validations without a better tone-mapped SSIM).
 
-No augmentation: a mirrored frame is a valid image only with the x component of the view-space
-normals negated, and even then it shows a mirrored scene whose off-screen geometry (which bounces
-light into the frame) is on the wrong side. The network learns one scene; flips would teach it two.
+No augmentation: a mirrored frame is a valid image only with the x component of the view-space normals negated,
+and even then it shows a mirrored scene whose off-screen geometry (which bounces light into the frame) is on the
+wrong side. The network learns one scene; flips would teach it two.
 
-This module is the loop; its rooms: settings `config.py`, what is learnt `targets.py`, the networks
-`networks.py`, the losses `losses.py`, one update of both networks `step.py`, processes and random
-state `distributed.py`, checkpoints `checkpoint.py`, validation and curves `report.py`, the command
-line `cli.py`.
+This module is the loop; its rooms: settings `config.py`, what is learnt `targets.py`, the networks `networks.py`,
+the losses `losses.py`, one update of both networks `step.py`, processes and random state `distributed.py`,
+checkpoints `checkpoint.py`, validation and curves `report.py`, the command line `cli.py`.
 """
 
 from __future__ import annotations
@@ -369,17 +367,19 @@ def _open_run(cfg: TrainConfig, ds: Dataset, train_idx: list[int], resume: bool,
 def _check_trainable(net_cfg: NetConfig, cfg: TrainConfig, ds: Dataset, n_train: int) -> None:
     """Refuse, before any file is written, a dataset these networks cannot train on.
 
-    One forward pass of both networks on the "meta" device (shapes only: no memory, no weights,
-    no random numbers drawn) in training mode, at the smallest batch the epoch will see: it fails
-    exactly where training would, e.g. a PatchGAN kernel larger than its input (frames under
-    3 * 2**n_layers_D px) or a norm over a single value (a one-frame batch at a 1x1 map).
-    """
+    One forward pass of both networks on the "meta" device (shapes only: no memory, weights or random numbers) in
+    training mode, at the smallest batch the epoch will see: it fails exactly where training would, e.g. a PatchGAN
+    kernel larger than its input (frames under 3 * 2**n_layers_D px) or a norm over one value (a one-frame batch at
+    a 1x1 map)."""
     import torch
 
+    from diviewer.encoding import INPUT_CHANNEL_COUNT, WORLD_CHANNELS
+
     smallest = (n_train % cfg.batch_size or cfg.batch_size) if n_train >= cfg.batch_size else n_train
+    channels = INPUT_CHANNEL_COUNT + sum(n for _, n in WORLD_CHANNELS) * cfg.world_inputs  # light planes: no shape
     try:
         with torch.device("meta"):
-            netG, netD = net_cfg.build_generator().train(), net_cfg.build_discriminator().train()
+            netG, netD = net_cfg.build_generator(channels).train(), net_cfg.build_discriminator(channels).train()
             from diviewer.padding import padded_size
 
             m = 2 ** net_cfg.levels

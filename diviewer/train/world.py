@@ -24,20 +24,7 @@ from typing import Any
 
 import torch
 
-WORLD_CHANNELS: tuple[tuple[str, int], ...] = (("world_position", 3), ("world_normal", 3))
-"""The planes appended to the network's input (encoding version 3), in this order."""
-
 _HUGE = 1e38
-
-
-def input_channels(enc) -> int:
-    """The network's input planes under encoding ``enc``: the buffers, then the world planes (version 3), then
-    three a light (version 4)."""
-    from diviewer.encoding import INPUT_CHANNEL_COUNT
-    from diviewer.scene.lights import LIGHT_PARAMS
-
-    world = sum(n for _, n in WORLD_CHANNELS) if enc.world_inputs else 0
-    return INPUT_CHANNEL_COUNT + world + (LIGHT_PARAMS * enc.lights if enc.light_inputs else 0)
 
 
 def world_planes(depth: torch.Tensor, normal: torch.Tensor, cams: torch.Tensor, center: Any, half: Any) -> torch.Tensor:

@@ -39,6 +39,21 @@ def test_flops_of_a_two_level_generator_match_a_hand_count():
         generator_flops(K=2, levels=3, width=4, height=4)
 
 
+def test_a_cards_first_layer_counts_its_world_light_and_fourier_planes():
+    """The FLOPs of a model row take the planes its first layer reads: 10 buffers, + 6 world planes (encoding 3),
+    + 3 a light (encoding 4), + 6 an octave of Fourier features; a card without an encoding reads the 10."""
+    from diviewer.bench.onnx_tools import network_inputs
+
+    v4 = {"version": 4, "exposure": 1.0, "depth_scale": 10.0, "lights": 1, "world_center": [0, 0, 0],
+          "world_half": [1, 1, 1]}
+    assert network_inputs({}) == 10
+    assert network_inputs({"encoding": {**v4, "version": 3, "lights": None}}) == 16
+    assert network_inputs({"encoding": v4}) == 19
+    assert network_inputs({"encoding": v4, "world_frequencies": 6}) == 19 + 36
+    assert (generator_flops(K=2, levels=2, width=4, height=4, in_channels=19)["layers"][0]
+            == ("down0", 4 * 2 * 19 * 16))
+
+
 def test_untrained_generator_runs_and_matches_the_torch_unet_in_size():
     """The torch-free U-Net has pix2pix's layer shapes (as many convolution weights as UnetGenerator), and
     onnxruntime runs it under the runtime's contract."""

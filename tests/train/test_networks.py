@@ -341,3 +341,44 @@ def test_net_config_options_are_validated_by_name() -> None:
         UnetGenerator(K=4, levels=3, upsample="deconv")
     with pytest.raises(ValueError, match="norm"):
         NLayerDiscriminator(norm="layer")
+
+
+def test_fourier_features_are_the_position_octaves_before_the_first_encoder() -> None:
+    """sin, then cos, of pi 2^l p for l < L of the three planes from frequency_start, 6 L planes into the first
+    conv; the other planes and an L = 0 network as before (an old checkpoint's args rebuild it unchanged)."""
+    netG = init_weights(UnetGenerator(in_channels=16, K=4, levels=3, frequencies=3))
+    assert netG.down[0][0].in_channels == 16 + 18
+    x = torch.rand(2, 16, 16, 24) * 2 - 1
+    f = netG.fourier_features(x)
+    p = x[:, INPUT_CHANNEL_COUNT:INPUT_CHANNEL_COUNT + 3]
+    want = [torch.sin(torch.pi * 2 ** level * p) for level in range(3)]
+    want += [torch.cos(torch.pi * 2 ** level * p) for level in range(3)]
+    torch.testing.assert_close(f, torch.cat(want, 1), atol=1e-6, rtol=0)
+    args = netG.model_args()
+    assert (args["frequencies"], args["frequency_start"]) == (3, INPUT_CHANNEL_COUNT)
+    rebuilt = UnetGenerator(**args)
+    rebuilt.load_state_dict(netG.state_dict())  # strict
+    netG.eval()
+    rebuilt.eval()
+    with torch.no_grad():
+        assert torch.equal(netG(x), rebuilt(x))
+        moved = x.clone()
+        moved[:, INPUT_CHANNEL_COUNT] += 0.01  # the network reads the position's fine detail
+        assert not torch.equal(netG(x), netG(moved))
+    plain = UnetGenerator(in_channels=16, K=4, levels=3)
+    assert "frequencies" not in plain.model_args() and plain.down[0][0].in_channels == 16
+    with pytest.raises(ValueError, match="frequencies"):
+        UnetGenerator(in_channels=12, K=4, levels=3, frequencies=2)  # no three planes from plane 10
+    with pytest.raises(ValueError, match="frequencies"):
+        UnetGenerator(in_channels=16, K=4, levels=3, frequencies=-1)
+
+
+def test_net_config_world_frequencies() -> None:
+    config = NetConfig(K=4, levels=3, resolution=32, world_frequencies=2)
+    assert NetConfig.from_dict(config.to_dict()) == config
+    assert config.build_generator(16).model_args()["frequencies"] == 2
+    assert NetConfig.from_dict({k: v for k, v in config.to_dict().items() if k != "world_frequencies"}
+                               ).world_frequencies == 0  # a card from before the option
+    for bad in (-1, 13, True, 2.0):
+        with pytest.raises(DiviewerError, match=r"net\.world_frequencies"):
+            NetConfig(K=4, resolution=32, world_frequencies=bad)

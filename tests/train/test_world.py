@@ -174,6 +174,42 @@ def test_the_graph_matches_training_on_a_padded_crop(tmp_path, lit):
     np.testing.assert_allclose(got.numpy(), want.numpy(), atol=1e-5)
 
 
+def test_fourier_features_of_the_world_position_train_export_and_run(tmp_path):
+    """world_frequencies: recorded in the checkpoint's network, exported with its Sin and Cos and verified against
+    PyTorch, run by the runtime; refused without world inputs or out of range, naming the field."""
+    from train.test_trainer import quiet, tiny
+
+    from diviewer.runtime import NeuralGI
+    from diviewer.train.export import export
+    from diviewer.train.trainer import train
+
+    data, _ = _world_dataset(tmp_path)
+    out = tmp_path / "run"
+    r = train(tiny(data, out, world_inputs=True, world_frequencies=4), log=quiet)
+    assert r["val"] is not None and np.isfinite(r["val"]["psnr_tm"])
+    ck = load_checkpoint(out / "last.ckpt")
+    assert ck["model_args"]["frequencies"] == 4 and ck["config"]["world_frequencies"] == 4
+    assert ck["netG"]["down.0.0.weight"].shape[1] == 16 + 24
+    card = export(out / "last.ckpt", tmp_path / "m.onnx", log=quiet)
+    assert card["verification"]["max_rel_to_peak"] < 1e-4 and card["verification"]["zero_light_max"] == 0.0
+    from diviewer.bench.onnx_tools import network_inputs
+
+    assert card["world_frequencies"] == 4 and network_inputs(card) == 16 + 24  # the bench's FLOPs count them
+    import onnx
+
+    ops = {n.op_type for n in onnx.load(str(tmp_path / "m.onnx")).graph.node}
+    assert {"Sin", "Cos"} <= ops
+    model = NeuralGI(tmp_path / "m.onnx")
+    frame = np.load(data / "frames" / "000008.npy").astype(np.float32)[..., :10]
+    config = json.loads((data / "manifest.json").read_text())["frame_list"][8]["config"]["camera"]
+    y = model.run(frame, light_scale=1.0, camera=NeuralGI.camera(config, 32, 32))
+    assert y.shape == (32, 32, 3) and np.isfinite(y).all()
+    with pytest.raises(DiviewerError, match="train.world_frequencies: needs world_inputs"):
+        tiny(data, tmp_path / "r2", world_frequencies=2)
+    with pytest.raises(DiviewerError, match="train.world_frequencies: must be an integer in"):
+        tiny(data, tmp_path / "r2", world_inputs=True, world_frequencies=13)
+
+
 def test_world_inputs_need_the_light_scale(tmp_path):
     from train.test_trainer import tiny
 
