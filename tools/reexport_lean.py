@@ -53,12 +53,13 @@ def rebuild_generator(model, meta: dict):
     if meta.get("norm", "batch") != "batch" or meta.get("upsample", "transpose") not in ("transpose", "resize"):
         raise DiviewerError("only batch-norm generators with transpose or resize decoders are rebuilt",
                             field="norm/upsample")
-    from diviewer.encoding import INPUT_CHANNEL_COUNT, WORLD_CHANNELS
+    from diviewer.encoding import INPUT_CHANNEL_COUNT, Encoding
 
-    world = int(meta.get("encoding", {}).get("version", 1)) >= 3  # encoding 3: the world planes are inputs too
-    netG = UnetGenerator(in_channels=INPUT_CHANNEL_COUNT + (sum(n for _, n in WORLD_CHANNELS) if world else 0),
-                         K=int(meta["K"]), levels=int(meta["levels"]), upsample=meta.get("upsample", "transpose"),
-                         norm="batch").eval()
+    # the encoding's own planes (encoding 3's world planes, 4's light planes), and its Fourier features if any
+    planes = Encoding.from_dict(meta["encoding"]).input_planes if meta.get("encoding") else INPUT_CHANNEL_COUNT
+    netG = UnetGenerator(in_channels=planes, K=int(meta["K"]), levels=int(meta["levels"]),
+                         upsample=meta.get("upsample", "transpose"), norm="batch",
+                         frequencies=int(meta.get("world_frequencies") or 0)).eval()
     model = weights_to_float32(model)  # weights stored as float16 (export --half-weights): as initializers again
     inits = _initializers(model)
     nodes = list(model.graph.node)

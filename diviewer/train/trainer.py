@@ -211,7 +211,7 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
     train_cams, val_cams = run_cameras(enc, ds, train_idx, val_arr is not None)
     train_lights, val_lights = run_lights(enc, ds, train_idx, val_arr is not None)
     net_cfg = net_config(cfg, ds)
-    _check_trainable(net_cfg, cfg, ds, len(train_idx))
+    _check_trainable(net_cfg, cfg, ds, len(train_idx), enc.input_planes)
     nets = build_nets(cfg, net_cfg, enc, dev, say)
     st = TrainState()
     if parent:
@@ -364,19 +364,16 @@ def _open_run(cfg: TrainConfig, ds: Dataset, train_idx: list[int], resume: bool,
     return None
 
 
-def _check_trainable(net_cfg: NetConfig, cfg: TrainConfig, ds: Dataset, n_train: int) -> None:
+def _check_trainable(net_cfg: NetConfig, cfg: TrainConfig, ds: Dataset, n_train: int, channels: int) -> None:
     """Refuse, before any file is written, a dataset these networks cannot train on.
 
     One forward pass of both networks on the "meta" device (shapes only: no memory, weights or random numbers) in
     training mode, at the smallest batch the epoch will see: it fails exactly where training would, e.g. a PatchGAN
     kernel larger than its input (frames under 3 * 2**n_layers_D px) or a norm over one value (a one-frame batch at
-    a 1x1 map)."""
+    a 1x1 map). ``channels``: the encoding's input planes."""
     import torch
 
-    from diviewer.encoding import INPUT_CHANNEL_COUNT, WORLD_CHANNELS
-
     smallest = (n_train % cfg.batch_size or cfg.batch_size) if n_train >= cfg.batch_size else n_train
-    channels = INPUT_CHANNEL_COUNT + sum(n for _, n in WORLD_CHANNELS) * cfg.world_inputs  # light planes: no shape
     try:
         with torch.device("meta"):
             netG, netD = net_cfg.build_generator(channels).train(), net_cfg.build_discriminator(channels).train()
