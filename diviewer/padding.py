@@ -9,6 +9,12 @@ back to the frame. Replicated edges are what a render of a slightly larger view 
 Training (`diviewer.train.targets`) and the runtime (`diviewer.runtime.NeuralGI.run`) both pad with
 `pad_index`: gathering rows and columns through these index arrays works on numpy arrays and on torch
 tensors alike, so the two pad exactly alike.
+
+A ``guard`` asks for at least that many pixels of padding a side: a frame the stride would pad by less (a 128-wide
+frame at a stride of 128: none) is padded to the next multiple instead. The runtime guards the columns of models
+trained on random-width crops (`EDGE_GUARD`, `edge_guard`): such a network has nearly always seen its frame's left
+and right edges with a wide band of replicated columns beside them, and run on a frame that fills the stride it
+loses 1-2 dB in the columns next to the edges (docs/sponza.md, "The frame's edge").
 """
 
 from __future__ import annotations
@@ -16,50 +22,64 @@ from __future__ import annotations
 import numpy as np
 
 
-def padded_size(n: int, multiple: int) -> int:
-    """The smallest multiple of ``multiple`` that holds ``n`` pixels (n itself when it is one)."""
-    if n < 1 or multiple < 1:
-        raise ValueError(f"size {n} and multiple {multiple} must be positive")
-    return -(-n // multiple) * multiple
+EDGE_GUARD = 8
+"""Columns of padding a side at least, for a network trained on random-width crops (`edge_guard`). Measured on
+Sponza's and cornell's shipped models (docs/sponza.md, "The frame's edge"): 128-wide frames lose 0.9-2.2 dB
+unguarded, 126-wide (1 a side) 0.7-1.6, 120-wide (4) 0.4-0.8; 130-wide (63 a side) 0.1-0.2, the context alone."""
 
 
-def pad_before(n: int, multiple: int) -> int:
+def edge_guard(aspect_crops) -> int:
+    """The column guard the runtime gives a model trained with these ``aspect_crops`` (None: whole frames, whose
+    edges always filled the stride in training, are not guarded)."""
+    return EDGE_GUARD if aspect_crops else 0
+
+
+def padded_size(n: int, multiple: int, guard: int = 0) -> int:
+    """The smallest multiple of ``multiple`` that holds ``n`` pixels and ``guard`` more a side (n itself when it is
+    a multiple and there is no guard)."""
+    if n < 1 or multiple < 1 or guard < 0:
+        raise ValueError(f"size {n} and multiple {multiple} must be positive, guard {guard} not negative")
+    return -(-(n + 2 * guard) // multiple) * multiple
+
+
+def pad_before(n: int, multiple: int, guard: int = 0) -> int:
     """Pixels of padding before the frame (top or left) along an axis of ``n`` pixels."""
-    return (padded_size(n, multiple) - n) // 2
+    return (padded_size(n, multiple, guard) - n) // 2
 
 
-def pad_index(n: int, multiple: int) -> np.ndarray:
+def pad_index(n: int, multiple: int, guard: int = 0) -> np.ndarray:
     """For each pixel of the padded axis, the frame's pixel it copies (edge replication), int64."""
-    before = pad_before(n, multiple)
-    return np.clip(np.arange(padded_size(n, multiple)) - before, 0, n - 1).astype(np.int64)
+    before = pad_before(n, multiple, guard)
+    return np.clip(np.arange(padded_size(n, multiple, guard)) - before, 0, n - 1).astype(np.int64)
 
 
-def crop_slice(n: int, multiple: int) -> slice:
+def crop_slice(n: int, multiple: int, guard: int = 0) -> slice:
     """Where the frame's ``n`` pixels lie along the padded axis."""
-    before = pad_before(n, multiple)
+    before = pad_before(n, multiple, guard)
     return slice(before, before + n)
 
 
-def valid_mask(n: int, multiple: int) -> np.ndarray:
+def valid_mask(n: int, multiple: int, guard: int = 0) -> np.ndarray:
     """1 where the padded axis holds a frame pixel, 0 on the padding (float32)."""
-    m = np.zeros(padded_size(n, multiple), np.float32)
-    m[crop_slice(n, multiple)] = 1.0
+    m = np.zeros(padded_size(n, multiple, guard), np.float32)
+    m[crop_slice(n, multiple, guard)] = 1.0
     return m
 
 
-def pad_nhwc(x: np.ndarray, multiple: int) -> np.ndarray:
-    """(N, H, W, C) numpy frames edge-padded to multiples of ``multiple`` (x itself if they already are)."""
+def pad_nhwc(x: np.ndarray, multiple: int, guard: int = 0) -> np.ndarray:
+    """(N, H, W, C) numpy frames edge-padded to multiples of ``multiple``, at least ``guard`` columns a side (x
+    itself if they are multiples already and there is no guard). Rows are never guarded."""
     h, w = x.shape[1], x.shape[2]
-    if h % multiple == 0 and w % multiple == 0:
+    if h % multiple == 0 and w % multiple == 0 and not guard:
         return x
-    return np.ascontiguousarray(x[:, pad_index(h, multiple)][:, :, pad_index(w, multiple)])
+    return np.ascontiguousarray(x[:, pad_index(h, multiple)][:, :, pad_index(w, multiple, guard)])
 
 
-def crop_nhwc(y: np.ndarray, height: int, width: int, multiple: int) -> np.ndarray:
-    """The (N, height, width, C) frame out of a padded (N, H', W', C) output."""
+def crop_nhwc(y: np.ndarray, height: int, width: int, multiple: int, guard: int = 0) -> np.ndarray:
+    """The (N, height, width, C) frame out of a padded (N, H', W', C) output (padded with this column ``guard``)."""
     if y.shape[1] == height and y.shape[2] == width:
         return y
-    return np.ascontiguousarray(y[:, crop_slice(height, multiple), crop_slice(width, multiple)])
+    return np.ascontiguousarray(y[:, crop_slice(height, multiple), crop_slice(width, multiple, guard)])
 
 
 def shift_camera_params(cams, left, pad: tuple[int, int], size: tuple[int, int]):
@@ -75,6 +95,8 @@ def shift_camera_params(cams, left, pad: tuple[int, int], size: tuple[int, int])
     return out
 
 
-def pad_camera_params(cams, width: int, height: int, multiple: int) -> np.ndarray:
-    """Cameras of ``width`` x ``height`` frames -> those of the frames padded to ``multiple`` (`shift_camera_params`)."""
-    return shift_camera_params(cams, 0, (pad_before(width, multiple), pad_before(height, multiple)), (width, height))
+def pad_camera_params(cams, width: int, height: int, multiple: int, guard: int = 0) -> np.ndarray:
+    """Cameras of ``width`` x ``height`` frames -> those of the frames padded to ``multiple`` with this column
+    ``guard`` (`shift_camera_params`)."""
+    return shift_camera_params(cams, 0, (pad_before(width, multiple, guard), pad_before(height, multiple)),
+                               (width, height))

@@ -6,7 +6,8 @@ The model contract (written by ``diviewer export``, read here; torch-free):
   (depth, normal xyz, albedo rgb, direct rgb), rows top first; (N, H, W, 10) when the metadata's
   ``layout`` is "NHWC" (every model before the lean graph), (N, 10, H, W) when it is "NCHW" (no
   transpose before the first convolution); H and W multiples of the model's ``multiple``: ``run``
-  pads any other size to it (`diviewer.padding`, as training pads) and crops the output back;
+  pads any other size to it (`diviewer.padding`, as training pads) and crops the output back; a model trained on
+  random-width crops gets at least `diviewer.padding.EDGE_GUARD` columns of padding a side (``edge_guard``);
 - for encoding version 2 a second input ``light_scale``: float32 (N,), each frame's light scale
   (`diviewer.scene.lights.light_scale`): the graph divides the direct light by it and multiplies its
   output by it, so the model is linear in the light (0 gives exactly 0);
@@ -31,7 +32,7 @@ import numpy as np
 
 from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNELS, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
-from diviewer.padding import crop_nhwc, pad_camera_params, pad_nhwc
+from diviewer.padding import crop_nhwc, edge_guard, pad_camera_params, pad_nhwc
 from diviewer.scene.camera import CAMERA_PARAMS
 from diviewer.scene.lights import LIGHT_PARAMS
 from diviewer.timing import StageTimer
@@ -165,11 +166,18 @@ def choose_providers(available: list[str], requested: str | None = None) -> list
     return [name] + (["CPUExecutionProvider"] if name != "CPUExecutionProvider" else [])
 
 
+def model_edge_guard(meta: dict) -> int:
+    """The column guard a model runs with (`diviewer.padding.edge_guard`): from the aspect crops its recipe trained
+    with (the model's ``recipe`` record; none recorded: whole frames, no guard)."""
+    train = (meta.get("recipe") or {}).get("train") or {}
+    return edge_guard(train.get("aspect_crops"))
+
+
 class NeuralGI:
     """One loaded model: checks, then turns (N, H, W, 10) raw buffers into (N, H, W, 3) radiance."""
 
     def __init__(self, path: str | Path, scene=None, provider: str | None = None, threads: int = 0,
-                 spin: bool = False):
+                 spin: bool = False, guard: int | None = None):
         import onnxruntime as ort
 
         self.path = Path(path)
@@ -218,6 +226,11 @@ class NeuralGI:
                                 f"{sum(n for _, n in INPUT_CHANNELS)}", path=self.path, field="input")
         self.provider = self.session.get_providers()[0]
         self.multiple = int(self.meta["multiple"])
+        self.edge_guard = model_edge_guard(self.meta) if guard is None else int(guard)
+        """Columns of padding a side at least (`diviewer.padding`): the model's (`model_edge_guard`) unless
+        ``guard`` is given."""
+        if self.edge_guard < 0:
+            raise DiviewerError(f"an edge guard is a number of columns >= 0, got {self.edge_guard}", field="guard")
         self.resolution = tuple(int(x) for x in self.meta["resolution"])
         self.timer = StageTimer()
         """Times ``inference`` (the session's run alone) unless ``run`` is given the caller's timer."""
@@ -310,7 +323,8 @@ class NeuralGI:
         """(N, H, W, 10) or (H, W, 10) float32 raw buffers to radiance of the same leading shape.
 
         Any H x W: frames that are not multiples of the model's stride are edge-padded to it and the
-        output cropped back (`diviewer.padding`, exactly as training pads). ``light_scale``: each frame's
+        output cropped back (`diviewer.padding`, exactly as training pads), with ``edge_guard`` columns a side at
+        least. ``light_scale``: each frame's
         light scale, a number or (N,) (`light_scale`); needed by encoding-2 models, ignored by older ones.
         ``camera``: each frame's camera over its own H x W pixels, (CAMERA_PARAMS,) or (N, CAMERA_PARAMS)
         (`camera`); needed by encoding-3 models, ignored by older ones. ``light``: each frame's lights, (3 L,) or
@@ -326,7 +340,7 @@ class NeuralGI:
         # what the graph returns non-finite (a NaN in the direct light it adds) stays visible where it
         # arose (the display flags it) instead of being hidden; the counts say how many.
         self.nonfinite_inputs = count_nonfinite(x)
-        feed = pad_nhwc(x, self.multiple)
+        feed = pad_nhwc(x, self.multiple, self.edge_guard)
         if self.layout == "NCHW":
             feed = np.ascontiguousarray(feed.transpose(0, 3, 1, 2))
         feeds = {INPUT_NAME: feed}
@@ -345,7 +359,8 @@ class NeuralGI:
             c = np.asarray(camera, np.float32).reshape(-1, CAMERA_PARAMS)
             if c.shape[0] not in (1, n):
                 raise ValueError(f"camera: expected one or {n}, got {c.shape[0]}")
-            feeds[CAMERA_NAME] = pad_camera_params(np.broadcast_to(c, (n, CAMERA_PARAMS)), width, height, self.multiple)
+            feeds[CAMERA_NAME] = pad_camera_params(np.broadcast_to(c, (n, CAMERA_PARAMS)), width, height, self.multiple,
+                                                   self.edge_guard)
         if self.lit:
             if light is None:
                 raise ValueError(f"{self.path.name} uses encoding version 4: run() needs each frame's lights "
@@ -357,7 +372,7 @@ class NeuralGI:
             feeds[LIGHT_NAME] = np.ascontiguousarray(np.broadcast_to(g, (n, lights)))
         with (timer or self.timer).stage("inference"):
             (y,) = self.session.run([OUTPUT_NAME], feeds)
-        y = crop_nhwc(y, height, width, self.multiple)
+        y = crop_nhwc(y, height, width, self.multiple, self.edge_guard)
         self.nonfinite_outputs = count_nonfinite(y)
         # Radiance is never negative: the runtime clamps (models exported before the graph did so,
         # e.g. an indirect-target model's undershoot, would otherwise darken the composite below 0).

@@ -40,3 +40,27 @@ def test_the_same_index_pads_torch_tensors_as_training_does():
 def test_bad_sizes_are_refused():
     with pytest.raises(ValueError):
         padded_size(0, 16)
+
+
+@pytest.mark.parametrize(("n", "m", "guard", "size", "before"), [(128, 128, 8, 256, 64), (228, 128, 8, 256, 14),
+                                                                (110, 128, 8, 128, 9), (120, 128, 8, 256, 68),
+                                                                (16, 16, 1, 32, 8), (7, 4, 0, 8, 0)])
+def test_a_guard_asks_for_that_much_padding_a_side_at_least(n, m, guard, size, before):
+    assert padded_size(n, m, guard) == size and pad_before(n, m, guard) == before
+    assert before >= guard and size - n - before >= guard
+    idx = pad_index(n, m, guard)
+    assert len(idx) == size and np.all(idx[:before] == 0) and np.all(idx[before + n:] == n - 1)
+    assert valid_mask(n, m, guard)[crop_slice(n, m, guard)].all() and valid_mask(n, m, guard).sum() == n
+
+
+def test_the_guard_pads_columns_only_and_crops_back():
+    from diviewer.padding import EDGE_GUARD, edge_guard
+
+    x = np.random.default_rng(1).random((1, 32, 32, 3)).astype(np.float32)
+    p = pad_nhwc(x, 16, 4)
+    assert p.shape == (1, 32, 48, 3)  # rows fill the stride: unguarded; columns 8 a side
+    np.testing.assert_array_equal(crop_nhwc(p, 32, 32, 16, 4), x)
+    np.testing.assert_array_equal(p[:, :, :8], np.repeat(x[:, :, :1], 8, axis=2))
+    assert edge_guard(None) == 0 and edge_guard((0.5625, 1.7778)) == EDGE_GUARD > 0
+    with pytest.raises(ValueError, match="guard"):
+        padded_size(10, 4, -1)

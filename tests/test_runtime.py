@@ -107,21 +107,66 @@ def test_any_size_is_padded_to_the_stride_and_cropped_back():
     scale = 1.0 if model.light_scaled else None  # encoding 2 takes each frame's light scale
     view = {"position": (0.0, 1.0, 3.4), "target": (0.0, 1.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 40.0}
     rng = np.random.default_rng(0)
-    for h, w in [(24, 24), (20, 36), (40, 12)]:
+    for h, w in [(24, 24), (20, 36), (40, 12), (12, m)]:  # a frame that fills the stride: its column guard
         x = random_buffers(rng, h, w)
         cam = NeuralGI.camera(view, w, h) if model.world else None  # encoding 3 takes each frame's camera
         y = model.run(x, light_scale=scale, camera=cam)
         assert y.shape == (h, w, 3) and np.all(np.isfinite(y))
-        padded = pad_nhwc(x[None], m)
-        assert padded.shape[1] % m == 0 and padded.shape[2] % m == 0
+        g = model.edge_guard
+        padded = pad_nhwc(x[None], m, g)
+        assert padded.shape[1] % m == 0 and padded.shape[2] % m == 0 and padded.shape[2] >= w + 2 * g
         # the padded frame's camera: the frame's, its rays clamped to the frame (the runtime's pad_camera_params)
         if cam is None:
             y_pad = model.run(padded, light_scale=scale)
         else:  # the graph itself on the padded frame and the padded frame's camera (run() would widen its rays)
             feeds = {"buffers": padded, "light_scale": np.full(1, scale, np.float32),
-                     "camera": pad_camera_params(cam, w, h, m)[None]}
+                     "camera": pad_camera_params(cam, w, h, m, g)[None]}
             y_pad = model.session.run(["radiance"], feeds)[0]
-        np.testing.assert_array_equal(y, crop_nhwc(np.maximum(y_pad, 0), h, w, m)[0])
+        np.testing.assert_array_equal(y, crop_nhwc(np.maximum(y_pad, 0), h, w, m, g)[0])
+
+
+def test_a_model_trained_on_random_width_crops_guards_its_columns_and_a_whole_frame_one_does_not(tmp_path):
+    """The guard comes from the aspect crops the model's recipe record trained with (diviewer.padding.edge_guard);
+    an explicit ``guard`` overrides it, and a negative one is refused naming the field."""
+    from diviewer.padding import EDGE_GUARD
+
+    whole = direct_times(tmp_path / "whole.onnx")
+    crops = direct_times(tmp_path / "crops.onnx",
+                         meta={**base_meta(), "recipe": {"train": {"aspect_crops": [0.5625, 1.7778]}}})
+    assert NeuralGI(whole).edge_guard == 0 and NeuralGI(crops).edge_guard == EDGE_GUARD > 0
+    assert NeuralGI(crops, guard=0).edge_guard == 0 and NeuralGI(whole, guard=3).edge_guard == 3
+    with pytest.raises(DiviewerError, match="guard"):
+        NeuralGI(crops, guard=-1)
+    x = random_buffers(np.random.default_rng(1), 16, 16)  # fills the stride of 16: guarded, run at 16x48
+    np.testing.assert_allclose(NeuralGI(crops).run(x), 2.0 * x[..., input_channel_slices()["direct"]], rtol=1e-6)
+    assert [m.edge_guard for m in map(NeuralGI, SHIPPED)] == [
+        EDGE_GUARD if _aspect_crops(p) else 0 for p in SHIPPED]
+
+
+def _aspect_crops(path):
+    return ((read_metadata(path).get("recipe") or {}).get("train") or {}).get("aspect_crops")
+
+
+def test_the_guard_changes_what_a_crop_trained_network_sees_only_at_widths_the_stride_barely_pads():
+    """A shipped crop-trained model: at a width the stride pads by EDGE_GUARD or more a side the guard changes
+    nothing; at a width that fills the stride it runs the frame with replicated columns beside it."""
+    from diviewer.padding import EDGE_GUARD
+
+    path = next((p for p in SHIPPED if _aspect_crops(p) and read_metadata(p)["encoding"].get("version", 1) < 4), None)
+    if path is None:
+        pytest.skip("no shipped crop-trained model without light inputs")
+    guarded, bare = NeuralGI(path), NeuralGI(path, guard=0)
+    m = guarded.multiple
+    view = {"position": (0.0, 1.0, 3.4), "target": (0.0, 1.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 40.0}
+    rng = np.random.default_rng(2)
+
+    def both(w):
+        x = random_buffers(rng, 8, w)
+        extra = {"light_scale": 1.0, "camera": NeuralGI.camera(view, w, 8) if guarded.world else None}
+        return guarded.run(x, **extra), bare.run(x, **extra)
+
+    np.testing.assert_array_equal(*both(m - 2 * EDGE_GUARD))  # padded by EDGE_GUARD a side either way
+    assert not np.array_equal(*both(m))
 
 
 def test_pack_shader_refuses_a_layout_it_does_not_write(ctx):

@@ -5,8 +5,9 @@
 #      --stop-after check` (~3.5 h here). Its K = 8, the recipe's own, was trained and shipped as
 #      assets/models/sponza.onnx on 2026-11-28; it is not trained again (a machine that lost `runs/` starts here);
 #   1b. K = 8 with the structure term (`--ssim-weight 0.1`) on that capture, the recipe's whole schedule (~2 h):
-#      the shipped model is its control (the same recipe, data and steps), scored beside it on the shipped compact
-#      evaluation set, then on the full one (2 below). A failure is reported and the chain goes on;
+#      the model shipped then is its control (the same recipe, data and steps), scored beside it on the shipped
+#      compact evaluation set, then on the full one (2 below); it ships since 2026-11-29, the term now the recipe's
+#      (done: skipped). A failure is reported and the chain goes on;
 #   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here; or
 #      the same set rendered on a lent device, runs/evalsets/sponza: tools/device_evalsets.sh, compact with every
 #      frame, taken where present, as SPONZA_EVALSET names another) and
@@ -17,7 +18,7 @@
 #      a first model on a cleaner truth, and whether a cleaner truth moves the SSIM, before the 512-spp refinement;
 #      the wider K wait for the cleanest truth (K = 16 here would cost ~1.7 h the 512 ladder repeats). Its margin
 #      over the truth it trained on, frame by frame: WORK/truth_margin_k8.json (as after each build below); then the
-#      same K = 8 with the structure term (`--ssim-weight 0.1`, ~1 h), scored beside it (3b below);
+#      same K = 8 without the recipe's structure term (`--ssim-weight 0`, ~1 h), scored beside it (3b below);
 #   4. the ladder on a 512-spp truth (assets/recipes/sponza_walk512.toml, `refine_from = 256`), in runs/sponza512
 #      whose data/ links to the 256-spp set: its refinement (~12 h), K = 8 and 16, picked and shipped to
 #      runs/sponza512/ship, then K = 32 (trained, scored and recorded; the recipe's `[ladder] max_mb` keeps it from
@@ -100,30 +101,30 @@ margins() {  # each K of a build, from the build's own scores on the full set
   for k in "$@"; do margin "$work/evalset_eval.json" "sponza_k$k" "$work/truth_margin_k$k.json"; done
 }
 margins "$REFINED" 8
-# 3b. The structure term against the recipe on the same 256-spp truth: K = 8 with `--ssim-weight 0.1` (the term ~5x
-#     the L1 one at the end of a run; docs/training.md), the recipe's whole schedule (~1 h here), best.ckpt by the
-#     validation split's SSIM as the build picks, exported as the recipe exports, scored with the recipe's K = 8 on
-#     the full evaluation set (WORK/eval_full_ssim.json) and its truth margin. Which one the 512-spp ladder trains is
-#     read from the validation split (WORK/ssim_k8/metrics.csv beside WORK/train_k8/metrics.csv) in a session: the
-#     512-spp build takes other [train] settings until its first K trains (docs/build.md). A failure is reported
-#     and the chain goes on to the 512-spp refinement.
-ssim_run() {
-  local run="$REFINED/ssim_k8" resume=()
+# 3b. The recipe against itself without the structure term, on the same 256-spp truth: K = 8 with `--ssim-weight 0`
+#     (the recipe's term since 2026-11-29, when the model trained with it on the 64-spp truth shipped: docs/sponza.md,
+#     "The frame's edge"), the recipe's whole schedule (~1 h here), best.ckpt by the validation split's SSIM as the
+#     build picks, exported as the recipe exports, scored with the recipe's K = 8 on the full evaluation set
+#     (WORK/eval_full_l1.json) and its truth margin: whether the term still pays on a cleaner truth, before the
+#     512-spp ladder trains with it (the 512-spp build takes other [train] settings until its first K trains:
+#     docs/build.md). A failure is reported and the chain goes on to the 512-spp refinement.
+l1_run() {
+  local run="$REFINED/l1_k8" resume=()
   [ -f "$run/last.ckpt" ] && resume=(--resume)
-  diviewer train --data "$REFINED/data_256spp" --out "$run" --recipe "$REFINED/sponza.toml" --k 8 --ssim-weight 0.1 \
+  diviewer train --data "$REFINED/data_256spp" --out "$run" --recipe "$REFINED/sponza.toml" --k 8 --ssim-weight 0 \
     "${resume[@]}"
 }
-ssim_ablation() {  # each step only after the one before succeeded (errexit does not hold inside `f || ...`)
-  local model="$REFINED/models/sponza_ssim_k8.onnx"
-  again ssim_run \
-    && { [ -f "$model" ] || diviewer export "$REFINED/ssim_k8/best.ckpt" --out "$model" --half-weights; } \
+l1_ablation() {  # each step only after the one before succeeded (errexit does not hold inside `f || ...`)
+  local model="$REFINED/models/sponza_l1_k8.onnx"
+  again l1_run \
+    && { [ -f "$model" ] || diviewer export "$REFINED/l1_k8/best.ckpt" --out "$model" --half-weights; } \
     && again diviewer eval --evalset "$EVALSET" --model "$REFINED/models/sponza_k8.onnx" --model "$model" \
-         --out "$REFINED/eval_full_ssim.json" \
-    && margin "$REFINED/eval_full_ssim.json" sponza_ssim_k8 "$REFINED/truth_margin_ssim_k8.json"
+         --out "$REFINED/eval_full_l1.json" \
+    && margin "$REFINED/eval_full_l1.json" sponza_l1_k8 "$REFINED/truth_margin_l1_k8.json"
 }
-if [ ! -f "$REFINED/truth_margin_ssim_k8.json" ]; then
-  stage "K = 8 with the structure term on the 256-spp truth"
-  ssim_ablation || stage "the structure-term run failed (above); on to the 512-spp truth"
+if [ ! -f "$REFINED/truth_margin_l1_k8.json" ]; then
+  stage "K = 8 without the structure term on the 256-spp truth (the recipe's control)"
+  l1_ablation || stage "the control run failed (above); on to the 512-spp truth"
 fi
 TWICE_BUILD=(diviewer build --scene sponza --recipe "$TWICE/sponza.toml" --evalset "$EVALSET" --work "$TWICE"
              --ship "$TWICE/ship")

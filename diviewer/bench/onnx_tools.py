@@ -21,7 +21,8 @@ import numpy as np
 
 from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, OUTPUT_CHANNELS, input_channel_slices
 from diviewer.errors import DiviewerError, missing_extra
-from diviewer.runtime import CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
+from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME,
+                              model_edge_guard)
 from diviewer.weights import weights_to_float32
 from diviewer.scene.lights import light_params
 
@@ -306,6 +307,7 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
     meta = get_meta(plain)
     version = int(meta.get("encoding", {}).get("version", 1))
     multiple = int(meta.get("multiple", 1))  # padded as the runtime pads (a 228x128 model runs at 256x128)
+    guard = model_edge_guard(meta)  # and its column guard (a 128x128 frame of a crop-trained model at 256x128)
 
     class Reader(CalibrationDataReader):
         def __init__(self):
@@ -316,11 +318,11 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
             if item is None:
                 return None
             n, h, w = item[0].shape[:3]
-            feed = {INPUT_NAME: pad_nhwc(item[0], multiple)}
+            feed = {INPUT_NAME: pad_nhwc(item[0], multiple, guard)}
             if version >= 2:
                 feed[LIGHT_SCALE_NAME] = np.full(n, item[1], np.float32)
             if version >= 3:
-                feed[CAMERA_NAME] = pad_camera_params(np.asarray(item[2], np.float32), w, h, multiple)
+                feed[CAMERA_NAME] = pad_camera_params(np.asarray(item[2], np.float32), w, h, multiple, guard)
             if version >= 4:  # the frame's lights in the model's world box (encoding 4)
                 enc = meta["encoding"]
                 feed[LIGHT_NAME] = np.tile(light_params(item[3], enc["world_center"], enc["world_half"]), (n, 1))
