@@ -129,7 +129,7 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
     summary = {
         "model": str(model_path), "data": str(data_dir), "split": split, "frames": len(idx),
         "scene": ds.manifest["scene"], "reference_spp": ds.manifest["spp"], "provider": model.provider,
-        "K": model.meta["K"], "target": model.meta["target"], "precision": model.meta["precision"],
+        "edge_guard": model.edge_guard, "K": model.meta["K"], "target": model.meta["target"], "precision": model.meta["precision"],
         "tonemap": {"exposure": exposure, "from": exposure_from},
         "inference_ms": {"median": float(np.median(times)), "p95": float(np.percentile(times, 95))},
         "black_reference_frames": black,
@@ -329,7 +329,8 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
             net = models[name]
             m.update(kind=net.meta.get("kind", "neural"), label=_model_label(net.meta, net.path),
                      model=str(net.path), checkpoint_sha256=net.meta.get("checkpoint_sha256"),
-                     provider=net.provider, below_direct=below_direct(rows[name], rows["direct"]),
+                     provider=net.provider, edge_guard=net.edge_guard,
+                     below_direct=below_direct(rows[name], rows["direct"]),
                      inference_ms={"median": float(np.median(times[name]))})
             spp = model_truth_spp(net.meta)
             if spp and len(rows[name]) == len(idx) and rows["noise_floor"]:  # its training truth over it

@@ -247,6 +247,7 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
         assert methods["twice"]["psnr"] == methods["twice_1"]["psnr"]
         # which weights each row scored (tools/card_eval.py checks it): the card's checkpoint, None without one
         assert methods["twice"]["checkpoint_sha256"] == "c" * 64 and methods["square"]["checkpoint_sha256"] is None
+        assert methods["twice"]["edge_guard"] == 0  # the padding it ran with: no aspect crops recorded, no guard
         below = methods["twice"]["below_direct"]
         assert below["frame"]["frames"] == 2 and 0 <= below["frame"]["share"] <= 1
         # Pooled bias: the model returns 1.5 x direct light, so its summed radiance is 1.5 x the direct light's.

@@ -261,7 +261,7 @@ def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, varian
                 continue
             row = _row(v["kind"], _label(v, step), res, res // step,
                        gb.time_model(net, configs, settings.warmup, step))
-            row.update(model=v["source"], precision=v["precision"], provider=net.provider,
+            row.update(model=v["source"], precision=v["precision"], provider=net.provider, edge_guard=net.edge_guard,
                        K=v["meta"].get("K"), levels=v["meta"].get("levels"), step=step,
                        accuracy_key=f"{v['path']}|{step}", converted_from=v.get("converted_from"),
                        calibration=v.get("calibration"))

@@ -400,7 +400,7 @@ def _hardware(t: dict | None) -> str:
 
 def info(path: str | Path) -> str:
     """A readable summary of a model's metadata (`diviewer export --info`)."""
-    from diviewer.runtime import read_metadata
+    from diviewer.runtime import model_edge_guard, read_metadata
 
     m = read_metadata(path)
     if m.get("kind") == "linear_baseline":
@@ -419,7 +419,7 @@ def info(path: str | Path) -> str:
              f"target {m['target']}"
              + (" / albedo" if m.get("divide_albedo") else ""),
              f"  trained at   {m['resolution'][0]}x{m['resolution'][1]}; runs any size, padded to multiples of "
-             f"{m['multiple']}",
+             f"{m['multiple']}" + (f" with {g} columns a side at least" if (g := model_edge_guard(m)) else ""),
              f"  trained on   {_hardware(m.get('trained_on'))}",
              f"  training     {m.get('epochs')} epochs, {m.get('steps')} steps, dataset {m['dataset_hash'][:16]}...",
              f"  input        {m['input']} {m['layout']} channels "

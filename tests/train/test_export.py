@@ -161,6 +161,14 @@ def test_cli_export_and_info(checkpoints, tmp_path, capsys):
     assert "K=4" in text and "synthetic" in text and "multiples of" in text
     assert "trained on   cpu" in text and "fp32" in text
     assert info(out).splitlines()[0] == str(out)
+    assert "columns a side" not in text  # whole frames, no aspect crops: no column guard
+
+
+def test_info_names_the_column_guard_of_a_model_trained_on_aspect_crops():
+    from diviewer.padding import EDGE_GUARD
+    from diviewer.paths import models_dir
+
+    assert f"padded to multiples of 128 with {EDGE_GUARD} columns a side at least" in info(models_dir() / "sponza.onnx")
 
 
 def test_bad_checkpoint_is_refused(tmp_path, capsys):

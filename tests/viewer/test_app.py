@@ -692,6 +692,7 @@ def _neural_session(tmp_path: Path) -> None:
     assert record["resolution"] == [128, 96] and record["gi_size"] == [64, 48]
     stats = json.loads((tmp_path / "stats.json").read_text())
     assert stats["frames"] == 9 and stats["gi_size"] == [64, 48] and stats["render_size"] == [128, 96]
+    assert stats["edge_guard"] == 0  # a whole-frame model (its record names no aspect crops): no column guard
     assert stats["fps"] > 0 and {"shadows", "gbuffer", "direct", "readback", "inference", "upsample",
                                  "composite"} <= set(stats["stages_ms"])
     assert stats["timing"] == "GPU timer queries"
