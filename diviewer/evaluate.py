@@ -129,7 +129,8 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
     summary = {
         "model": str(model_path), "data": str(data_dir), "split": split, "frames": len(idx),
         "scene": ds.manifest["scene"], "reference_spp": ds.manifest["spp"], "provider": model.provider,
-        "edge_guard": model.edge_guard, "K": model.meta["K"], "target": model.meta["target"], "precision": model.meta["precision"],
+        "edge_guard": model.edge_guard, "K": model.meta["K"], "target": model.meta["target"],
+        "precision": model.meta["precision"],
         "tonemap": {"exposure": exposure, "from": exposure_from},
         "inference_ms": {"median": float(np.median(times)), "p95": float(np.percentile(times, 95))},
         "black_reference_frames": black,
