@@ -243,7 +243,7 @@ def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, varian
 
     from diviewer.bench.onnx_tools import generator_flops, network_inputs, untrained_generator
     from diviewer.padding import padded_size
-    from diviewer.runtime import NeuralGI, model_edge_guard
+    from diviewer.runtime import NeuralGI
 
     rows = [_row("direct", "direct light only", res, res, gb.time_direct(configs, settings.warmup))]
     for g in settings.vxgi_grids:
@@ -267,9 +267,9 @@ def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, varian
                        calibration=v.get("calibration"))
             if v["kind"] == "neural":
                 lv = int(v["meta"]["levels"])
-                # as the runtime pads it: to the stride, with the model's column guard
-                rows_, cols = (padded_size(res // step, 2 ** lv, g) for g in (0, model_edge_guard(v["meta"])))
-                row["flops"] = generator_flops(int(v["meta"]["K"]), lv, cols, rows_,
+                side = res // step  # padded as the runtime pads it: to the stride, its columns with net's guard
+                row["flops"] = generator_flops(int(v["meta"]["K"]), lv, padded_size(side, 2 ** lv, net.edge_guard),
+                                               padded_size(side, 2 ** lv),
                                                in_channels=network_inputs(v["meta"]),
                                                upsample=v["meta"].get("upsample", "transpose"))["flops"]
             rows.append(row)

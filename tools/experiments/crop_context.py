@@ -34,12 +34,6 @@ from pathlib import Path
 import numpy as np
 
 
-def crop_cols(image: np.ndarray, width: int) -> np.ndarray:
-    from diviewer.evalframes import crop
-
-    return crop(image, width)
-
-
 def _scores(y: np.ndarray, f: dict, direct: np.ndarray, exposure: float) -> dict:
     from diviewer.metrics import psnr, ssim, tonemap
 
@@ -71,7 +65,7 @@ def _summary(rows: list[dict], sq_alone: np.ndarray, sq_of_full: np.ndarray, fra
 def measure(net, ev, idx: list[int], area: dict, width: int) -> dict:
     """One model at one centred width over the split's frames (the module doc's three scores)."""
     from diviewer.data.scales import light_scales
-    from diviewer.evalframes import crop_frame
+    from diviewer.evalframes import crop, crop_frame
     from diviewer.evaluate import model_input, run_model, stored_inputs
     from diviewer.metrics import tonemap
 
@@ -85,11 +79,11 @@ def measure(net, ev, idx: list[int], area: dict, width: int) -> dict:
         xc = model_input(net, f, frame, area, i, width)
         yc = run_model(net, xc, scales.get(i), **stored_inputs(net, ev.entry(i), xc))
         rows.append({"index": i, "full": _scores(y, frame, x["direct"], ev.exposure),
-                     "centre_of_full": _scores(crop_cols(y, width), f, xc["direct"], ev.exposure),
+                     "centre_of_full": _scores(crop(y, width), f, xc["direct"], ev.exposure),
                      "centre_alone": _scores(yc, f, xc["direct"], ev.exposure)})
         truth = tonemap(f["pt"], ev.exposure)
         sq_alone += ((tonemap(yc, ev.exposure) - truth) ** 2).mean(axis=(0, 2))
-        sq_of_full += ((tonemap(crop_cols(y, width), ev.exposure) - truth) ** 2).mean(axis=(0, 2))
+        sq_of_full += ((tonemap(crop(y, width), ev.exposure) - truth) ** 2).mean(axis=(0, 2))
     return _summary(rows, sq_alone, sq_of_full, len(idx))
 
 
