@@ -364,11 +364,10 @@ def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log) 
     frames = [MitsubaFrame(scene, c, res, res) for c in seq]
     ref = [f.full_light(settings.temporal_spp, 0) for f in frames]  # one seed: the reference's noise holds still
     seqs = {"direct": [b["direct"] for b in buffers], **vx}
-    for v in variants:
+    for v in variants:  # any size runs: the runtime pads to the model's stride (and guard) and crops back
         net = net_of(v)
-        if res % net.multiple == 0:
-            seqs[f"{v['path']}|1"] = [net.run(pack_buffers(b), **net.frame_inputs(c, res, res, scene))
-                                      for b, c in zip(buffers, seq)]
+        seqs[f"{v['path']}|1"] = [net.run(pack_buffers(b), **net.frame_inputs(c, res, res, scene))
+                                  for b, c in zip(buffers, seq)]
     ladder = [int(n) for n in ds.manifest["evalset"]["ladder_spp"]] if ds is not None else list(settings.pt_spp)
     ladder = [n for n in ladder if settings.temporal_max_spp is None or n <= settings.temporal_max_spp]
     for n in ladder:  # a real-time path tracer draws new samples every frame

@@ -238,6 +238,32 @@ def test_temporal_rows_stop_at_temporal_max_spp(ctx, tiny_bench_inputs):
     assert QUICK["temporal_max_spp"] == QUICK["temporal_spp"]
 
 
+@pytest.mark.mitsuba
+def test_temporal_rows_run_a_model_whose_stride_the_sequence_does_not_fill(ctx, tiny_bench_inputs):
+    """The runtime pads any size to the model's stride, so the temporal sequence (32x32 here) runs a model of
+    stride 64 as well: its row is there, with the frame-to-frame change of images it really drew."""
+    import onnx
+
+    from diviewer.bench.core import BenchSettings, _open_evalset
+    from diviewer.bench.onnx_tools import untrained_generator
+    from diviewer.bench.runner import gl_timing_mode, temporal_rows
+    from diviewer.runtime import NeuralGI
+    from diviewer.scene import load_scene
+
+    scene = load_scene("cornell")
+    path = tiny_bench_inputs / "stride64.onnx"
+    onnx.save(untrained_generator(4, 6, scene, 64), str(path))
+    net = NeuralGI(path)
+    assert net.multiple == 64
+    ds = _open_evalset(BenchSettings(evalset=str(tiny_bench_inputs / "es")), scene, [])
+    settings = BenchSettings(temporal_frames=2, temporal_spp=2, temporal_max_spp=1, vxgi_grids=())
+    t = temporal_rows(ctx, settings, scene, ds, [{"path": str(path)}], lambda v: net, gl_timing_mode(ctx, "sync"),
+                      [], lambda *_: None)
+    assert t["resolution"] == [32, 32]
+    row = t["methods"][f"{path}|1"]
+    assert math.isfinite(row["change"]) and row["change"] > 0 and row["reference_change"] > 0
+
+
 def test_bench_accuracy_from_a_compact_set_matches_the_full_set(tiny_bench_inputs, tmp_path, monkeypatch):
     """The bench's default evaluation set is the scene's compact one; its ladder (stored as scores) and its
     images score as the full set's frames do."""
