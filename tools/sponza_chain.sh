@@ -24,7 +24,7 @@
 #      runs/sponza512/ship, then K = 32 (trained, scored and recorded; the recipe's `[ladder] max_mb` keeps it from
 #      shipping). The issue asks for a training truth 6 dB above the model's error: the 64-spp model is 4.6-5.8 dB
 #      under a 256-spp truth, so a model trained on it will likely leave less; 512 spp is 3 dB cleaner again. K = 32
-#      is trained once, on the cleanest truth, rather than at 256 and again at 512 (~11 h each here).
+#      is trained once, on the cleanest truth, rather than at 256 and again at 512 (~3 h each here: docs/build.md).
 # Every stage resumes where it stopped and skips what is done, so after a session ends the same command goes on:
 #   nohup setsid bash tools/sponza_chain.sh > runs/sponza_chain.log 2>&1 &
 # Each build reads its recipe as WORK/sponza.toml, a copy under the name its model ships with (the card records the

@@ -62,6 +62,12 @@ TRAIN_SECONDS_PER_STEP = {
 }
 """Seconds per training step at batch 4, 128x128, without a discriminator, by machine kind and K."""
 
+CPU_WIDE_K_STEP_RATIO = 2.1
+"""On the CPU, a training step's time per doubling of K above 16: measured 2.0-2.1x from K = 16 to 32 (and 1.6x from 8
+to 16) with `tools/experiments/train_speed.py --data runs/sponza/data --recipe assets/recipes/sponza.toml --k K`
+(2-core Intel Xeon, 2026-11-29; docs/data/train_speed_k/), not the 4x of the convolutions' work: the wider layers
+keep the cores busier. Planned before at 4x, Sponza's K = 32 read ~11 h where it takes ~3."""
+
 CUDA_STEPS_PER_SECOND = {8: 17.0, 128: 7.0}
 """H100, batch 16, 128x128, bf16, seven trainings sharing the GPU beside a capture (README, device lease of
 2026-11-23: "7-17 steps/s each"): the fastest rate for the smallest K, the slowest for the largest."""
@@ -141,8 +147,8 @@ def evalset_seconds(kind: str, scene: str, frames: int, width: int, height: int,
 
 
 def train_step_seconds(kind: str, K: int, batch_size: int, width: int, height: int, gan: bool) -> float:
-    """One training step. On the CPU: the two measured widths, a power law between and below them, K^2 (the
-    convolutions' work) above K = 16; on CUDA: the shared H100 rates, log-interpolated in K."""
+    """One training step. On the CPU: the two measured widths, a power law between and below them, and
+    `CPU_WIDE_K_STEP_RATIO` a doubling above K = 16; on CUDA: the shared H100 rates, log-interpolated in K."""
     scale = width * height / PIXELS_REF * (GAN_STEP_FACTOR if gan else 1.0)
     if kind == "cuda":
         (k0, r0), (k1, r1) = sorted(CUDA_STEPS_PER_SECOND.items())
@@ -150,5 +156,5 @@ def train_step_seconds(kind: str, K: int, batch_size: int, width: int, height: i
         rate = r0 * (r1 / r0) ** t
         return scale * batch_size / 16 / rate * (K / k1) ** 2 if K > k1 else scale * batch_size / 16 / rate
     s8, s16 = TRAIN_SECONDS_PER_STEP[("cpu", 8)], TRAIN_SECONDS_PER_STEP[("cpu", 16)]
-    per = s16 * (K / 16) ** 2 if K > 16 else s8 * (K / 8) ** math.log2(s16 / s8)
+    per = s16 * (K / 16) ** math.log2(CPU_WIDE_K_STEP_RATIO) if K > 16 else s8 * (K / 8) ** math.log2(s16 / s8)
     return scale * batch_size / 4 * per
