@@ -6,6 +6,11 @@ GL work runs asynchronously, so a GL stage is timed either by waiting for the GP
 where the driver has ARB_timer_query); with neither it is not recorded, since its wall time would only
 be the time taken to submit it. No GL here: the GL side hands in ``ctx.finish`` and ``ctx.query``
 (``diviewer.gl.context.stage_timer``).
+
+Reading a timer query's result waits for its stage to finish on the GPU, so read at the stage's end it is a sync
+too: the driver cannot rasterize one stage while the CPU submits the next. ``deferred`` queries are read only when
+the frame's times are collected (``collect``, which ``reset`` calls first): the viewer collects after the buffer
+swap, which has waited for the frame anyway, so timing no longer stalls its frame.
 """
 
 from __future__ import annotations
@@ -21,17 +26,22 @@ import numpy as np
 class StageTimer:
     """Milliseconds per named stage of the current frame; a stage entered twice adds up."""
 
-    def __init__(self, sync: Callable[[], None] | None = None, gpu_query: Callable[[], Any] | None = None):
+    def __init__(self, sync: Callable[[], None] | None = None, gpu_query: Callable[[], Any] | None = None,
+                 deferred: bool = False):
         """
         Args:
             sync: waits for the GPU (``ctx.finish``); given, GL stages are timed by the wall clock around it.
             gpu_query: makes a timer query (``ctx.query(time=True)``: a context manager with ``elapsed`` in ns);
-                used for GL stages when ``sync`` is not given. One query is kept per stage name.
+                used for GL stages when ``sync`` is not given. Queries are kept per stage name and reused.
+            deferred: read the queries when the frame's times are collected (``collect``), not at each stage's end.
         """
         self.sync = sync
         self.gpu_query = gpu_query
+        self.deferred = deferred
         self.times: dict[str, float] = {}
-        self._queries: dict[str, Any] = {}
+        self._queries: dict[str, list[Any]] = {}
+        self._pending: list[tuple[str, Any]] = []
+        """Deferred queries of this frame not read yet: (stage name, query), in order."""
 
     @property
     def enabled(self) -> bool:
@@ -43,10 +53,21 @@ class StageTimer:
         """How GL stages are timed, in words (the panel's and the stats JSON's)."""
         if self.sync is not None:
             return "wall clock around a GPU sync"
-        return "GPU timer queries" if self.gpu_query is not None else "off"
+        if self.gpu_query is None:
+            return "off"
+        return "GPU timer queries, read after the frame" if self.deferred else "GPU timer queries"
+
+    def collect(self) -> dict[str, float]:
+        """Read this frame's deferred queries into ``times`` (waiting for their stages where they are still running);
+        returns ``times``."""
+        pending, self._pending = self._pending, []
+        for name, query in pending:
+            self.add(name, query.elapsed / 1e6)
+        return self.times
 
     def reset(self) -> dict[str, float]:
-        """Start a new frame; returns the last frame's times."""
+        """Start a new frame; returns the last frame's times (its deferred queries read first)."""
+        self.collect()
         last, self.times = self.times, {}
         return last
 
@@ -60,12 +81,17 @@ class StageTimer:
             if self.gpu_query is None:
                 yield
                 return
-            query = self._queries.get(name)
-            if query is None:
-                query = self._queries[name] = self.gpu_query()
+            pool = self._queries.setdefault(name, [])
+            in_flight = sum(1 for n, _ in self._pending if n == name)  # a query is reused once it has been read
+            if in_flight == len(pool):
+                pool.append(self.gpu_query())
+            query = pool[in_flight]
             with query:
                 yield
-            self.add(name, query.elapsed / 1e6)  # waits for this stage's result only
+            if self.deferred:
+                self._pending.append((name, query))
+            else:
+                self.add(name, query.elapsed / 1e6)  # waits for this stage's result only
             return
         if gpu:
             self.sync()
@@ -77,11 +103,14 @@ class StageTimer:
 
     def release(self) -> None:
         """Release the timer queries where they can be (moderngl 5's Query cannot: its GL query lives as long
-        as the context, which is why one is kept per stage name rather than made per frame)."""
-        for q in self._queries.values():
-            if hasattr(q, "release"):
-                q.release()
+        as the context, which is why they are kept per stage name rather than made per frame). Deferred queries not read
+yet are dropped."""
+        for pool in self._queries.values():
+            for q in pool:
+                if hasattr(q, "release"):
+                    q.release()
         self._queries.clear()
+        self._pending.clear()
 
 
 def percentiles(values: Iterable[float], qs: tuple[float, ...] = (50.0, 95.0)) -> tuple[float, ...]:

@@ -104,11 +104,12 @@ def check_render_size(ctx: moderngl.Context, width: int, height: int, option: st
         ctx.error  # a failed allocation leaves GL_OUT_OF_MEMORY behind: read (and clear) it
 
 
-def stage_timer(ctx: moderngl.Context, sync: bool = False, queries: bool = False) -> StageTimer:
+def stage_timer(ctx: moderngl.Context, sync: bool = False, queries: bool = False, deferred: bool = False) -> StageTimer:
     """The program's stage timer for GL work on ``ctx``: waits for the GPU around each GL stage (``sync``), or
-    reads GL timer queries (``queries``; ARB_timer_query, which llvmpipe has), or leaves GL stages untimed."""
+    reads GL timer queries (``queries``; ARB_timer_query, which llvmpipe has), or leaves GL stages untimed;
+    ``deferred``: its queries are read when the frame's times are collected (`StageTimer.collect`)."""
     return StageTimer(sync=ctx.finish if sync else None,
-                      gpu_query=(lambda: ctx.query(time=True)) if queries else None)
+                      gpu_query=(lambda: ctx.query(time=True)) if queries else None, deferred=deferred)
 
 
 def set_stage_timing(timer: StageTimer, ctx: moderngl.Context, on: bool) -> None:

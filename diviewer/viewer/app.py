@@ -82,7 +82,7 @@ class Viewer:
         self.state = ViewerState(scene, controller=settings.controller)
         self.state.show_panel = settings.panel
         self.shaders = ShaderCache(self.ctx)
-        self.timer = stage_timer(self.ctx)
+        self.timer = stage_timer(self.ctx, deferred=True)  # read after the swap: timing does not stall the frame
         """One timer for every stage of a frame: renderer passes, neural pass, inference, display, panel."""
         self.set_timing(settings.timing)
         fb_w, fb_h = (max(1, s) for s in self.window.fb_size)
@@ -345,7 +345,7 @@ class Viewer:
         while self.shots.pending:
             self._save_view(self.shots.pending.pop(0), images)
         self.window.swap()
-        st.stats.record(frame_ms or (time.perf_counter() - start) * 1e3, self.timer.times, now=start)
+        st.stats.record(frame_ms or (time.perf_counter() - start) * 1e3, self.timer.collect(), now=start)
         self.frame_index += 1
         return True
 

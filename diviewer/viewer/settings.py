@@ -50,8 +50,8 @@ class ViewerSettings:
     controller: str = "fly"
     """Camera controller at start: fly or orbit."""
     timing: bool = True
-    """Time each stage: GL stages by GPU timer queries (by waiting for the GPU around them where the driver
-    has none), the rest by the wall clock."""
+    """Time each stage: GL stages by GPU timer queries read once the frame is swapped (by waiting for the GPU around
+    them where the driver has none), the rest by the wall clock."""
     gi_res: str = "model"
     """The neural GI's resolution: ``model`` (its training size), a fraction of the window (``1/4``: snapped
     to the model's stride) or ``WxH`` (a multiple of the stride, else refused)."""

@@ -1,0 +1,72 @@
+"""What the viewer's own stage timing costs its frame: the same run with the GL stages' timer queries read at each
+stage's end, read after the frame, and with timing off.
+
+Usage: xvfb-run -a -s "-screen 0 1920x1200x24" python tools/experiments/viewer_timing_ab.py [--scene sponza]
+           [--rounds 3] [--frames 100] [--size 768x768] --out-dir DIR
+
+Arms, run in turn within each round (so the machine's drift falls on all of them), each a fresh viewer process
+(`diviewer.viewer.app.run_viewer`, the default settings but vsync off, the scene's shipped model):
+
+- ``blocking``: each GL stage's timer query read at the stage's end (the viewer until 2026-11-29): reading waits for
+  the stage to finish, so the driver cannot rasterize one stage while the next is submitted;
+- ``deferred``: the queries read once the frame is swapped (`diviewer.timing.StageTimer.collect`; the viewer's
+  default since);
+- ``off``: no GL stage timed (the panel's "per-stage timing" unticked).
+
+Each run writes the viewer's ``--stats`` JSON as DIR/SCENE_ARM_ROUND.json; a summary line per run and per arm is
+printed (the frame rate over the run, and at the final render scale). Stop other jobs first (SIGSTOP). Measures only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+ARMS = ("blocking", "deferred", "off")
+
+CHILD = """
+import sys
+from diviewer.viewer.app import run_viewer
+from diviewer.viewer.settings import ViewerSettings
+from diviewer.frames import parse_resolution
+arm, scene, frames, size, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), parse_resolution(sys.argv[4]), sys.argv[5]
+settings = ViewerSettings(size=size, vsync=False, model="auto", timing=arm != "off")
+script = [(0, lambda v: setattr(v.timer, "deferred", False))] if arm == "blocking" else []
+run_viewer(scene, frames=frames, settings=settings, stats=out, script=script)
+"""
+
+
+def run_arm(arm: str, scene: str, frames: int, size: str, out: Path) -> dict:
+    """One viewer run in its own process; its stats JSON."""
+    subprocess.run([sys.executable, "-c", CHILD, arm, scene, str(frames), size, str(out)], check=True,
+                   stdout=subprocess.DEVNULL)
+    return json.loads(out.read_text())
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scene", default="sponza")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--frames", type=int, default=100)
+    ap.add_argument("--size", default="768x768")
+    ap.add_argument("--out-dir", type=Path, required=True)
+    a = ap.parse_args(argv)
+    a.out_dir.mkdir(parents=True, exist_ok=True)
+    fps: dict[str, list[float]] = {arm: [] for arm in ARMS}
+    for r in range(1, a.rounds + 1):
+        for arm in ARMS:
+            d = run_arm(arm, a.scene, a.frames, a.size, a.out_dir / f"{a.scene}_{arm}_{r}.json")
+            fps[arm].append(d["fps"])
+            print(f"round {r} {arm}: {d['fps']:.2f} fps ({d['at_final_scale']['fps']:.2f} at the final scale "
+                  f"{d['render_scales']['median']}), timing: {d['timing']}", flush=True)
+    for arm, v in fps.items():
+        print(f"{arm}: mean {statistics.mean(v):.2f} fps, " + ", ".join(f"{x:.2f}" for x in v))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
