@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import ctypes
+import ctypes.util
+import functools
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 import moderngl
@@ -125,3 +128,18 @@ def set_stage_timing(timer: StageTimer, ctx: moderngl.Context, on: bool) -> None
             timer.gpu_query = lambda: ctx.query(time=True)
         except Exception:  # noqa: BLE001
             timer.sync = ctx.finish
+
+
+@functools.lru_cache(maxsize=1)
+def gl_flush() -> Callable[[], None] | None:
+    """``glFlush`` for the context current on this thread, or None where it cannot be had. moderngl 5 has no flush of
+    its own; its loader (glcontext) calls GL through the library ``find_library("GL")`` names, for a GLFW window's
+    context and an EGL one alike (GLVND dispatches to the current context), so this takes glFlush from the same."""
+    name = ctypes.util.find_library("GL")
+    try:
+        fn = ctypes.CDLL(name).glFlush if name else None
+    except (OSError, AttributeError):
+        return None
+    if fn is not None:
+        fn.restype, fn.argtypes = None, []
+    return fn

@@ -491,6 +491,27 @@ def test_sponza_culling_draws_less_at_a_wall_and_changes_no_pixel(ctx, sponza):
             np.testing.assert_array_equal(frames[name, True][buf], frames[name, False][buf], err_msg=f"{name} {buf}")
 
 
+def test_sponza_gbuffer_flushed_in_parts_changes_no_pixel(ctx, sponza):
+    """The G-buffer flushes every ``flush_every`` draws (glFlush, for the rasterizer's threads to start on the first
+    draws): Sponza's atrium view, flushed after every draw, is bit for bit the frame drawn with one flush at the end."""
+    from diviewer.gl.context import gl_flush
+    from diviewer.gl.renderer import FLUSH_EVERY_DRAWS
+
+    assert gl_flush() is not None and FLUSH_EVERY_DRAWS > 0
+    frames, flushes = {}, {}
+    for every in (0, 1):
+        r = Renderer(ctx, sponza, 48, 48, RenderSettings(shadow_size=256), flush_every=every)
+        try:
+            frames[every] = r.frame()
+            flushes[every], draws = r.flushes, r.drawn["gbuffer"][0]
+        finally:
+            r.release()
+    assert flushes[0] == 0 and flushes[1] == draws - 1 > 10
+    assert frames[1]["albedo"].std() > 0.01
+    for buf in frames[0]:
+        np.testing.assert_array_equal(frames[1][buf], frames[0][buf], err_msg=buf)
+
+
 def test_single_sided_back_faces_leave_the_gbuffer_not_the_shadows(ctx):
     """Single-sided materials: a closed box seen from outside is bit for bit the two-sided one, from inside it is not
     there; a sheet seen from behind is not in the G-buffer, and its shadow is still on the wall behind it."""

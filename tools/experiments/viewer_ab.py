@@ -1,18 +1,19 @@
-"""What the viewer's own stage timing costs its frame: the same run with the GL stages' timer queries read at each
-stage's end, read after the frame, and with timing off.
+"""What the viewer's frame gains or loses from one of its settings: the same run in several arms, alternated.
 
-Usage: xvfb-run -a -s "-screen 0 1920x1200x24" python tools/experiments/viewer_timing_ab.py [--scene sponza]
-           [--rounds 3] [--frames 100] [--size 768x768] --out-dir DIR
+Usage: xvfb-run -a -s "-screen 0 1920x1200x24" python tools/experiments/viewer_ab.py [--scene sponza]
+           [--arms blocking,deferred,off] [--rounds 3] [--frames 100] [--size 768x768] --out-dir DIR
 
 Arms, run in turn within each round (so the machine's drift falls on all of them), each a fresh viewer process
 (`diviewer.viewer.app.run_viewer`, the default settings but vsync off, the scene's shipped model):
 
+- ``deferred``: the default: the GL stages' timer queries read once the frame is swapped
+  (`diviewer.timing.StageTimer.collect`), the G-buffer flushed every `FLUSH_EVERY_DRAWS` draws;
 - ``blocking``: each GL stage's timer query read at the stage's end (the viewer until 2026-11-29): reading waits for
   the stage to finish, so the driver cannot rasterize one stage while the next is submitted;
-- ``deferred``: the queries read once the frame is swapped (`diviewer.timing.StageTimer.collect`; the viewer's
-  default since);
-- ``off``: no GL stage timed (the panel's "per-stage timing" unticked).
+- ``off``: no GL stage timed (the panel's "per-stage timing" unticked);
+- ``noflush``: the default, but the G-buffer flushed only at its end (`Renderer.flush_every` 0).
 
+The timer arms of docs/speed.md's table ran before the G-buffer's flushes existed (both sides flushed at the end).
 Each run writes the viewer's ``--stats`` JSON as DIR/SCENE_ARM_ROUND.json; a summary line per run and per arm is
 printed (the frame rate over the run, and at the final render scale). Stop other jobs first (SIGSTOP). Measures only.
 """
@@ -26,7 +27,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-ARMS = ("blocking", "deferred", "off")
+ARMS = ("blocking", "deferred", "off", "noflush")
 
 CHILD = """
 import sys
@@ -35,7 +36,8 @@ from diviewer.viewer.settings import ViewerSettings
 from diviewer.frames import parse_resolution
 arm, scene, frames, size, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), parse_resolution(sys.argv[4]), sys.argv[5]
 settings = ViewerSettings(size=size, vsync=False, model="auto", timing=arm != "off")
-script = [(0, lambda v: setattr(v.timer, "deferred", False))] if arm == "blocking" else []
+script = {"blocking": [(0, lambda v: setattr(v.timer, "deferred", False))],
+          "noflush": [(0, lambda v: setattr(v.renderer, "flush_every", 0))]}.get(arm, [])
 run_viewer(scene, frames=frames, settings=settings, stats=out, script=script)
 """
 
@@ -50,15 +52,19 @@ def run_arm(arm: str, scene: str, frames: int, size: str, out: Path) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="sponza")
+    ap.add_argument("--arms", default="blocking,deferred,off", help=f"comma-separated, of {', '.join(ARMS)}")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--size", default="768x768")
     ap.add_argument("--out-dir", type=Path, required=True)
     a = ap.parse_args(argv)
     a.out_dir.mkdir(parents=True, exist_ok=True)
-    fps: dict[str, list[float]] = {arm: [] for arm in ARMS}
+    arms = [x.strip() for x in a.arms.split(",") if x.strip()]
+    if not arms or set(arms) - set(ARMS):
+        ap.error(f"--arms: each of {', '.join(ARMS)}, got {a.arms!r}")
+    fps: dict[str, list[float]] = {arm: [] for arm in arms}
     for r in range(1, a.rounds + 1):
-        for arm in ARMS:
+        for arm in arms:
             d = run_arm(arm, a.scene, a.frames, a.size, a.out_dir / f"{a.scene}_{arm}_{r}.json")
             fps[arm].append(d["fps"])
             print(f"round {r} {arm}: {d['fps']:.2f} fps ({d['at_final_scale']['fps']:.2f} at the final scale "
