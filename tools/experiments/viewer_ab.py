@@ -1,7 +1,7 @@
 """What the viewer's frame gains or loses from one of its settings: the same run in several arms, alternated.
 
 Usage: xvfb-run -a -s "-screen 0 1920x1200x24" python tools/experiments/viewer_ab.py [--scene sponza]
-           [--arms blocking,deferred,off] [--rounds 3] [--frames 100] [--size 768x768] --out-dir DIR
+           [--arms blocking,deferred,off] [--rounds 3] [--frames 100] [--size 768x768] [--light-moving] --out-dir DIR
 
 Arms, run in turn within each round (so the machine's drift falls on all of them), each a fresh viewer process
 (`diviewer.viewer.app.run_viewer`, the default settings but vsync off, the scene's shipped model):
@@ -12,6 +12,8 @@ Arms, run in turn within each round (so the machine's drift falls on all of them
   the stage to finish, so the driver cannot rasterize one stage while the next is submitted;
 - ``off``: no GL stage timed (the panel's "per-stage timing" unticked);
 - ``noflush``: the default, but the G-buffer flushed only at its end (`Renderer.flush_every` 0).
+
+``--light-moving`` animates the light from the first frame (the L key), so the shadow map is drawn every frame.
 
 The timer arms of docs/speed.md's table ran before the G-buffer's flushes existed (both sides flushed at the end).
 Each run writes the viewer's ``--stats`` JSON as DIR/SCENE_ARM_ROUND.json; a summary line per run and per arm is
@@ -38,14 +40,16 @@ arm, scene, frames, size, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), pars
 settings = ViewerSettings(size=size, vsync=False, model="auto", timing=arm != "off")
 script = {"blocking": [(0, lambda v: setattr(v.timer, "deferred", False))],
           "noflush": [(0, lambda v: setattr(v.renderer, "flush_every", 0))]}.get(arm, [])
+if sys.argv[6] == "1":  # the sun animated (the L key): its shadow map is drawn every frame
+    script.append((0, lambda v: setattr(v.state, "animate_light", True)))
 run_viewer(scene, frames=frames, settings=settings, stats=out, script=script)
 """
 
 
-def run_arm(arm: str, scene: str, frames: int, size: str, out: Path) -> dict:
+def run_arm(arm: str, scene: str, frames: int, size: str, out: Path, light_moving: bool = False) -> dict:
     """One viewer run in its own process; its stats JSON."""
-    subprocess.run([sys.executable, "-c", CHILD, arm, scene, str(frames), size, str(out)], check=True,
-                   stdout=subprocess.DEVNULL)
+    subprocess.run([sys.executable, "-c", CHILD, arm, scene, str(frames), size, str(out), str(int(light_moving))],
+                   check=True, stdout=subprocess.DEVNULL)
     return json.loads(out.read_text())
 
 
@@ -56,6 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--size", default="768x768")
+    ap.add_argument("--light-moving", action="store_true", help="the light animated: shadows drawn every frame")
     ap.add_argument("--out-dir", type=Path, required=True)
     a = ap.parse_args(argv)
     a.out_dir.mkdir(parents=True, exist_ok=True)
@@ -65,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     fps: dict[str, list[float]] = {arm: [] for arm in arms}
     for r in range(1, a.rounds + 1):
         for arm in arms:
-            d = run_arm(arm, a.scene, a.frames, a.size, a.out_dir / f"{a.scene}_{arm}_{r}.json")
+            d = run_arm(arm, a.scene, a.frames, a.size, a.out_dir / f"{a.scene}_{arm}_{r}.json", a.light_moving)
             fps[arm].append(d["fps"])
             print(f"round {r} {arm}: {d['fps']:.2f} fps ({d['at_final_scale']['fps']:.2f} at the final scale "
                   f"{d['render_scales']['median']}), timing: {d['timing']}", flush=True)
