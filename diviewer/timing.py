@@ -103,8 +103,8 @@ class StageTimer:
 
     def release(self) -> None:
         """Release the timer queries where they can be (moderngl 5's Query cannot: its GL query lives as long
-        as the context, which is why they are kept per stage name rather than made per frame). Deferred queries not read
-yet are dropped."""
+        as the context, which is why they are kept per stage name rather than made per frame); deferred queries not
+        read yet are dropped."""
         for pool in self._queries.values():
             for q in pool:
                 if hasattr(q, "release"):

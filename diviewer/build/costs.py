@@ -63,7 +63,7 @@ TRAIN_SECONDS_PER_STEP = {
 """Seconds per training step at batch 4, 128x128, without a discriminator, by machine kind and K."""
 
 CPU_WIDE_K_STEP_RATIO = 2.1
-"""On the CPU, a training step's time per doubling of K above 16: measured 2.0-2.1x from K = 16 to 32 (and 1.6x from 8
+"""On the CPU, a training step's time per doubling of K above 16: measured 2.0-2.2x from K = 16 to 32 (and 1.6x from 8
 to 16) with `tools/experiments/train_speed.py --data runs/sponza/data --recipe assets/recipes/sponza.toml --k K`
 (2-core Intel Xeon, 2026-11-29; docs/data/train_speed_k/), not the 4x of the convolutions' work: the wider layers
 keep the cores busier. Planned before at 4x, Sponza's K = 32 read ~11 h where it takes ~3."""
