@@ -9,8 +9,8 @@ how much indirect light it gives each frame against the truth's. This asks what 
 every split and shape is run once (as `diviewer eval` runs it: the model's guard, its light scale and stored
 inputs), then scored, tone-mapped as the set's, with its indirect light (output minus the direct-light input)
 multiplied by each ``--gain``. Per split and shape: the mean tone-mapped SSIM and PSNR at each gain, and the median
-frame's indirect ratio (the model's sum over the truth's, pt - pt_direct where the set stores it, else the truth
-minus the direct input). A diagnostic on the evaluation set itself: a gain read off it is not a fix (it would be
+frame's indirect ratio (the model's sum over the truth's, each less the direct-light input, as `diviewer eval`'s
+``sum_indirect`` over ``sum_indirect_ref``). A diagnostic on the evaluation set itself: a gain read off it is not a fix (it would be
 fitted on the frames it scores). Measures only.
 """
 
@@ -43,9 +43,10 @@ def score_gains(net, ev, area: dict, gains: list[float]) -> dict:
                 x = model_input(net, f, frame, area, i, shape[0])
                 y = run_model(net, x, scales.get(i), **stored_inputs(net, ev.entry(i), x))
                 truth = tonemap(f["pt"], ev.exposure)
-                ref = float((f["pt"] - f.get("pt_direct", x["direct"])).sum(dtype=np.float64))
+                d = float(x["direct"].sum(dtype=np.float64))
+                ref = float(f["pt"].sum(dtype=np.float64)) - d
                 if ref > 0:
-                    ratios.append(float((y - x["direct"]).sum(dtype=np.float64)) / ref)
+                    ratios.append((float(y.sum(dtype=np.float64)) - d) / ref)
                 for g in gains:
                     t = tonemap(x["direct"] + g * (y - x["direct"]), ev.exposure)
                     scores[g].append((float(ssim(t, truth)), float(psnr(t, truth))))
