@@ -11,7 +11,9 @@ Arms, run in turn within each round (so the machine's drift falls on all of them
 - ``blocking``: each GL stage's timer query read at the stage's end (the viewer until 2026-11-29): reading waits for
   the stage to finish, so the driver cannot rasterize one stage while the next is submitted;
 - ``off``: no GL stage timed (the panel's "per-stage timing" unticked);
-- ``noflush``: the default, but the G-buffer flushed only at its end (`Renderer.flush_every` 0).
+- ``noflush``: the default, but the G-buffer flushed only at its end (`Renderer.flush_every` 0);
+- ``offflush``: as ``off``, with a ``glFlush`` where each GL stage ends (where ``deferred`` ends its timer query):
+  whether the queries' own flushes are what once made ``deferred`` faster than ``off`` (they were not: 2026-11-29).
 
 ``--light-moving`` animates the light from the first frame (the L key), so the shadow map is drawn every frame.
 
@@ -29,7 +31,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-ARMS = ("blocking", "deferred", "off", "noflush")
+ARMS = ("blocking", "deferred", "off", "noflush", "offflush")
 
 CHILD = """
 import sys
@@ -37,7 +39,19 @@ from diviewer.viewer.app import run_viewer
 from diviewer.viewer.settings import ViewerSettings
 from diviewer.frames import parse_resolution
 arm, scene, frames, size, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), parse_resolution(sys.argv[4]), sys.argv[5]
-settings = ViewerSettings(size=size, vsync=False, model="auto", timing=arm != "off")
+settings = ViewerSettings(size=size, vsync=False, model="auto", timing=arm not in ("off", "offflush"))
+if arm == "offflush":
+    import contextlib
+    from diviewer import timing
+    from diviewer.gl.context import gl_flush
+    untimed = timing.StageTimer.stage
+    @contextlib.contextmanager
+    def stage(self, name, gpu=False):
+        with untimed(self, name, gpu):
+            yield
+        if gpu and self.gpu_query is None and self.sync is None:
+            gl_flush()()
+    timing.StageTimer.stage = stage
 script = {"blocking": [(0, lambda v: setattr(v.timer, "deferred", False))],
           "noflush": [(0, lambda v: setattr(v.renderer, "flush_every", 0))]}.get(arm, [])
 if sys.argv[6] == "1":  # the sun animated (the L key): its shadow map is drawn every frame
