@@ -296,6 +296,11 @@ def test_train_fit_pools_the_indirect_light_and_ranks_frames_by_the_truths():
     r = tool.ratios(rows)
     assert r["pooled"] == pytest.approx((sum(0.5 * b for b in range(1, 13)) + 3.0) / sum(range(1, 13)))
     assert r["brightest_10"][0] == 0.5 and len(r["brightest_10"]) == 10 and r["dimmest_10"][0] is None
+    # by the truth's direct share: deep shade at a quarter, the sunlit frames at the full light, a black truth left out
+    rows = [(0.25, 1.0), (0.5, 2.0), (3.0, 3.0), (4.0, 4.0), (9.0, 0.0)]
+    b = tool.by_direct_share(rows, [0.0, 0.01, 0.7, 1.0, 0.3])
+    assert b["0-0.05"] == {"frames": 2, "median_ratio": 0.25} and b["0.6-1"] == {"frames": 2, "median_ratio": 1.0}
+    assert b["0.05-0.6"] == {"frames": 0, "median_ratio": None}
 
 
 def test_ssim_budget_separates_the_level_from_the_shape():

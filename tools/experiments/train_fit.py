@@ -8,7 +8,8 @@ Usage: python tools/experiments/train_fit.py --data runs/sponza/data --model M.o
 ``--frames`` frames drawn (seeded) from the first ``--first`` train frames (the frames an ablation trained on, as
 ``diviewer train --train-frames``). Per model: the pooled ratio sum(output - GL direct) / sum(pt - pt_direct)
 (the trainer's target: the path tracer's indirect light), and the per-frame ratios of the 10 brightest and the
-10 dimmest frames by their truth's indirect light. Measures only.
+10 dimmest frames by their truth's indirect light, and the median per-frame ratio of the frames by the share of their
+truth that is direct light (`SHARES`: deep shade, between, in the sun). Measures only.
 """
 
 from __future__ import annotations
@@ -26,6 +27,20 @@ def ratios(rows: list[tuple[float, float]]) -> dict:
     pooled = sum(a for a, _ in rows) / sum(b for _, b in rows)
     ranked = [a / b if b > 0 else None for a, b in sorted(rows, key=lambda r: r[1])]
     return {"pooled": float(pooled), "brightest_10": ranked[-10:][::-1], "dimmest_10": ranked[:10]}
+
+
+SHARES = ((0.0, 0.05), (0.05, 0.6), (0.6, 1.0))
+"""Buckets of a frame's direct share (sum(pt_direct) / sum(pt)): no sunlit pixel of note in view, some, mostly."""
+
+
+def by_direct_share(rows: list[tuple[float, float]], shares: list[float]) -> dict:
+    """``rows`` as for `ratios`, ``shares`` each frame's direct share -> per bucket of `SHARES` ("0.05-0.6"): its
+    frame count and median per-frame ratio (None without a frame whose truth is > 0)."""
+    out = {}
+    for lo, hi in SHARES:
+        r = [a / b for (a, b), s in zip(rows, shares) if b > 0 and (lo <= s < hi or s == hi == 1.0)]
+        out[f"{lo:g}-{hi:g}"] = {"frames": len(r), "median_ratio": float(np.median(r)) if r else None}
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -49,17 +64,21 @@ def main(argv: list[str] | None = None) -> int:
     record = {"data": str(a.data), "first": a.first, "frames": pick, "models": {}}
     for path in a.model:
         net = NeuralGI(path)
-        rows = []
+        rows, shares = [], []
         for i in pick:
             f, entry = ds.load(i), ds.entry(i)
             h, w = f["depth"].shape
             y = net.run(pack_buffers(f), **net.frame_inputs(config_from_dict(scene, entry["config"]), w, h, scene))
             rows.append((float(y.sum(dtype=np.float64) - f["direct"].sum(dtype=np.float64)),
                          float(f["pt"].sum(dtype=np.float64) - f["pt_direct"].sum(dtype=np.float64))))
+            shares.append(float(f["pt_direct"].sum(dtype=np.float64) / max(f["pt"].sum(dtype=np.float64), 1e-30)))
         r = record["models"][str(path)] = ratios(rows)
+        r["by_direct_share"] = by_direct_share(rows, shares)
         fmt = lambda v: " ".join("-" if x is None else f"{x:.2f}" for x in v)  # noqa: E731
         print(f"{path}: indirect light {r['pooled']:.3f} of the truth's over {len(pick)} train frames; "
-              f"brightest 10: {fmt(r['brightest_10'])}; dimmest 10: {fmt(r['dimmest_10'])}", flush=True)
+              f"brightest 10: {fmt(r['brightest_10'])}; dimmest 10: {fmt(r['dimmest_10'])}; by direct share: "
+              + ", ".join(f"{k} {v['frames']} frames x{v['median_ratio'] or 0:.2f}" for k, v in r["by_direct_share"].items()),
+              flush=True)
     if a.out:
         from diviewer.outputs import write_json
 
