@@ -49,7 +49,7 @@ if arm == "offflush":
     def stage(self, name, gpu=False):
         with untimed(self, name, gpu):
             yield
-        if gpu and self.gpu_query is None and self.sync is None:
+        if gpu and self.gpu_query is None and self.sync is None and gl_flush() is not None:
             gl_flush()()
     timing.StageTimer.stage = stage
 script = {"blocking": [(0, lambda v: setattr(v.timer, "deferred", False))],
