@@ -77,8 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         fmt = lambda v: " ".join("-" if x is None else f"{x:.2f}" for x in v)  # noqa: E731
         print(f"{path}: indirect light {r['pooled']:.3f} of the truth's over {len(pick)} train frames; "
               f"brightest 10: {fmt(r['brightest_10'])}; dimmest 10: {fmt(r['dimmest_10'])}; by direct share: "
-              + ", ".join(f"{k} {v['frames']} frames x" + ("-" if v["median_ratio"] is None else f"{v['median_ratio']:.2f}")
-                          for k, v in r["by_direct_share"].items()),
+              + ", ".join(f"{k} {v['frames']} frames x{fmt([v['median_ratio']])}" for k, v in r["by_direct_share"].items()),
               flush=True)
     if a.out:
         from diviewer.outputs import write_json

@@ -44,13 +44,13 @@ if arm == "offflush":
     import contextlib
     from diviewer import timing
     from diviewer.gl.context import gl_flush
-    untimed = timing.StageTimer.stage
+    untimed, flush = timing.StageTimer.stage, gl_flush()
     @contextlib.contextmanager
     def stage(self, name, gpu=False):
         with untimed(self, name, gpu):
             yield
-        if gpu and self.gpu_query is None and self.sync is None and gl_flush() is not None:
-            gl_flush()()
+        if gpu and flush is not None:
+            flush()
     timing.StageTimer.stage = stage
 script = {"blocking": [(0, lambda v: setattr(v.timer, "deferred", False))],
           "noflush": [(0, lambda v: setattr(v.renderer, "flush_every", 0))]}.get(arm, [])
