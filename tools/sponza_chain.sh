@@ -2,16 +2,14 @@
 # Sponza's model built on a CPU machine, over as many sessions as it takes (docs/sponza.md): set up
 # (tools/setup.sh), then
 #   1. the 64-spp capture of the recipe (assets/recipes/sponza.toml) and its check: `diviewer build ... --ks 8
-#      --stop-after check` (~3.5 h here). Its K = 8, the recipe's own, was trained and shipped as
-#      assets/models/sponza.onnx on 2026-11-28; it is not trained again (a machine that lost `runs/` starts here);
-#   1b. K = 8 with the structure term (`--ssim-weight 0.1`) on that capture, the recipe's whole schedule (~2 h):
-#      the model shipped then is its control (the same recipe, data and steps), scored beside it on the shipped
-#      compact evaluation set, then on the full one (2 below); it ships since 2026-11-29, the term now the recipe's
-#      (done: skipped). A failure is reported and the chain goes on;
+#      --stop-after check` (~3.5 h here). The recipe's K = 8 on it ships as assets/models/sponza.onnx
+#      (1b); it is not trained again (a machine that lost `runs/` starts here, as on 2026-11-29);
+#   1b. (done, not run again) K = 8 with the structure term (`--ssim-weight 0.1`) on that capture: it ships since
+#      2026-11-29 as assets/models/sponza.onnx, the term now the recipe's;
 #   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here; or
 #      the same set rendered on a lent device, runs/evalsets/sponza: tools/device_evalsets.sh, compact with every
 #      frame, taken where present, as SPONZA_EVALSET names another) and
-#      the shipped model's and 1b's scores on it, with their margins over the 64-spp truth;
+#      the shipped model's scores on it, with its margin over the 64-spp truth;
 #   3. K = 8 on a 256-spp truth (assets/recipes/sponza_walk256.toml: sponza.toml with `[capture] refine_from = 64`),
 #      in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, 8-12 h), then
 #      the training, scored on the full evaluation set and shipped to runs/sponza256/ship. K = 8 alone (~1 h here):
@@ -60,24 +58,8 @@ margin() {
 stage "the 64-spp capture and its check"
 again diviewer build --scene sponza --recipe "$WORK/sponza.toml" --evalset assets/evalsets/sponza --work "$WORK" \
   --ship "$WORK/ship" --ks 8 --stop-after check
-# 1b. The structure term on the 64-spp truth, against the shipped model (the recipe's K = 8 on this capture).
-SSIM64="$WORK/models/sponza_ssim_k8.onnx"
-ssim64_run() {
-  local run="$WORK/ssim_k8" resume=()
-  [ -f "$run/last.ckpt" ] && resume=(--resume)
-  diviewer train --data "$WORK/data" --out "$run" --recipe "$WORK/sponza.toml" --k 8 --ssim-weight 0.1 "${resume[@]}"
-}
-ssim64() {
-  mkdir -p "$(dirname "$SSIM64")"
-  again ssim64_run \
-    && { [ -f "$SSIM64" ] || diviewer export "$WORK/ssim_k8/best.ckpt" --out "$SSIM64" --half-weights; } \
-    && again diviewer eval --evalset assets/evalsets/sponza --model assets/models/sponza.onnx --model "$SSIM64" \
-         --out "$WORK/eval_compact_ssim.json"
-}
-if [ ! -f "$WORK/eval_compact_ssim.json" ]; then
-  stage "K = 8 with the structure term on the 64-spp truth"
-  ssim64 || stage "the structure-term run on the 64-spp truth failed (above); on to the evaluation set"
-fi
+# 1b (the structure term on the 64-spp truth) is done: its model ships as assets/models/sponza.onnx since 2026-11-29
+# (docs/sponza.md, "The frame's edge"), the recipe's own K = 8 now; a machine that lost `runs/` does not train it again.
 # The full set: a device's render of it where there is one (it holds every frame, float16), else rendered here.
 EVALSET="${SPONZA_EVALSET:-}"
 if [ -z "$EVALSET" ]; then
@@ -85,13 +67,11 @@ if [ -z "$EVALSET" ]; then
 fi
 stage "full evaluation set: $EVALSET"
 if [ "$EVALSET" = "$WORK/evalset" ]; then again diviewer evalset --scene sponza --out "$EVALSET"; fi
-if [ -f "$SSIM64" ] && [ ! -f "$WORK/eval_full_ssim.json" ]; then
-  stage "the shipped model and the structure term's on the full evaluation set"
-  again diviewer eval --evalset "$EVALSET" --model assets/models/sponza.onnx --model "$SSIM64" \
-    --out "$WORK/eval_full_ssim.json"
+if [ ! -f "$WORK/eval_full_shipped.json" ]; then
+  stage "the shipped model on the full evaluation set"
+  again diviewer eval --evalset "$EVALSET" --model assets/models/sponza.onnx --out "$WORK/eval_full_shipped.json"
 fi
-margin "$WORK/eval_full_ssim.json" sponza "$WORK/truth_margin_k8.json"
-margin "$WORK/eval_full_ssim.json" sponza_ssim_k8 "$WORK/truth_margin_ssim_k8.json"
+margin "$WORK/eval_full_shipped.json" sponza "$WORK/truth_margin_k8.json"
 REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --evalset "$EVALSET" --work "$REFINED"
                --ship "$REFINED/ship")
 stage "build on the 256-spp truth: the refinement, K = 8"
