@@ -81,6 +81,26 @@ def boxes_visible(planes: np.ndarray, boxes: np.ndarray, margin: float = 1e-4) -
     return np.all(np.einsum("npk,pk->np", far, n) + d[None, :] >= -margin, axis=1)
 
 
+def shadow_casters(boxes: np.ndarray, camera_clip: np.ndarray, direction, bounds: np.ndarray,
+                   margin: float) -> np.ndarray:
+    """Which boxes (N, 2, 3) can shade what the camera of ``camera_clip`` (world to clip) sees, lit by a sun whose
+    light travels along ``direction``: a box's shadow is the box swept along it until the sweep leaves the scene's
+    ``bounds``, and a box whose sweep lies wholly outside one plane of the camera's frustum shades nothing in view.
+    ``margin`` (world units) widens each box first: a visible point's shadow lookup reads the map a few texels
+    beside it (its normal offset, the filter's taps). Conservative, as `boxes_visible`: a dropped caster changes no
+    lookup of a visible point, for one beyond that point never shadows it and one before it sweeps through it."""
+    d = np.asarray(direction, np.float64) / max(float(np.linalg.norm(direction)), 1e-30)
+    lo, hi, b = boxes[:, 0, :] - margin, boxes[:, 1, :] + margin, np.asarray(bounds, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):  # per axis, the longest way any point of a box has left
+        travel = np.where(d > 0, (b[1] - lo) / d, np.where(d < 0, (b[0] - hi) / d, np.inf))
+    reach = np.maximum(travel.min(axis=1), 0.0) if len(boxes) else np.zeros(0)
+    planes = frustum_planes(camera_clip)
+    n = planes[:, :3]
+    far = np.where(n[None, :, :] >= 0.0, hi[:, None, :], lo[:, None, :])  # (N, 6, 3)
+    ahead = np.einsum("npk,pk->np", far, n) + planes[None, :, 3] + reach[:, None] * np.maximum(n @ d, 0.0)[None, :]
+    return np.all(ahead >= -1e-4, axis=1)
+
+
 def draw_list(scene: Scene, config: FrameConfig, gpu, ctx) -> list[tuple]:
     """(GPU mesh, material, model matrix or None for world space, world box) per draw, opaque first.
 

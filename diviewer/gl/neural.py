@@ -23,6 +23,7 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.renderer import Renderer
 from diviewer.gl.resources import set_uniform
+from diviewer.gl.shadow_fit import light_defines
 from diviewer.timing import StageTimer
 
 PACK_DEFINES = {
@@ -141,7 +142,7 @@ class NeuralPass:
         if not self.inline_direct:
             r.ensure_direct()
             return {}
-        return {"INLINE_DIRECT": 1, **r.light_defines(self._light), **({"EMISSIVE": 1} if r.emissive else {})}
+        return {"INLINE_DIRECT": 1, **light_defines(self._light), **({"EMISSIVE": 1} if r.emissive else {})}
 
     def _bind_gbuffer(self, prog) -> None:
         """Units 0-3: depth, normal, albedo and the direct target (or the emission buffer); unit 4: the

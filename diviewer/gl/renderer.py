@@ -15,9 +15,10 @@ import numpy as np
 
 from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import gl_flush, unbind_framebuffer
-from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes
+from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes, shadow_casters
 from diviewer.gl.resources import GpuScene, set_uniform
-from diviewer.gl.shadow_fit import RenderSettings, fit_directional, light_uniforms, point_faces
+from diviewer.gl.shadow_fit import (RenderSettings, fit_directional, light_defines, light_uniforms, point_faces,
+                                    sun_footprint)
 from diviewer.gl.shaders import ShaderCache
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, Scene
@@ -86,6 +87,9 @@ class Renderer:
         self.moving_shadow_size: int | None = None
         """A sun's map size while it, or an object, moves (the viewer's: an 8192 map takes ~325 ms here), the full one
         again at the first frame all rests; None: always the full size (captures, evaluation)."""
+        self.shadow_footprint = True
+        """A map drawn at ``moving_shadow_size`` holds only what can shade the camera's view (`shadow_casters`; the
+        frame is the same); VXGI, which reads the map over its whole grid, turns it off."""
         self.passes = (("shadows", self._shadow_pass), ("gbuffer", self._gbuffer_pass), ("direct", self._direct_pass))
         """The frame, in order: (stage name, pass(frame view)); each pass is one timed stage."""
         self.frame_view: FrameView | None = None
@@ -226,13 +230,6 @@ class Renderer:
         lights = self.frame_view.config.lights if self.frame_view is not None else ()
         return len(lights) <= 1, (lights[0] if lights else None)
 
-    @staticmethod
-    def light_defines(light) -> dict[str, int]:
-        """direct.glsl's defines for one light's term (none: no light)."""
-        if light is None:
-            return {}
-        return {"DIRECTIONAL": 1} if isinstance(light, DirectionalLight) else {"POINT_LIGHT": 1}
-
     def set_direct_uniforms(self, prog, light) -> None:
         """The uniforms of direct.glsl's light_term() for ``light`` in the last frame: the camera's inverse
         view and field of view, the light, its shadow map (texture unit 4)."""
@@ -252,17 +249,18 @@ class Renderer:
         return self._draw_cache[2]
 
     def _draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None,
-                      clip: np.ndarray, stage: str, cull_back: bool = False) -> None:
+                      clip: np.ndarray, stage: str, cull_back: bool = False, sweep: tuple | None = None) -> None:
         """Draw the frame's objects inside the frustum of ``clip`` (world to clip space) with shaders/<file>;
         alpha-masked materials use its ALPHA_TEST variant; ``cull_back``: single-sided materials without their back
-        faces. Counts draws and triangles (before face culling) in ``drawn[stage]``. The G-buffer flushes every
-        ``flush_every`` draws.
+        faces; ``sweep``: `shadow_casters`' arguments after the boxes, to draw only those. Counts draws and triangles
+        (before face culling) in ``drawn[stage]``. The G-buffer flushes every ``flush_every`` draws.
 
         ``setup(prog)`` sets the pass's uniforms on each program variant before its first draw.
         """
         progs: dict[bool, moderngl.Program] = {}
         items, boxes, cut_out = self._draw_list(config)
         keep = boxes_visible(frustum_planes(clip), boxes) if self.culling else np.ones(len(items), bool)
+        keep &= shadow_casters(boxes, *sweep) if sweep is not None else True
         draws, triangles = self.drawn.get(stage, (0, 0))
         triangles += sum(it[0].triangles for it, k in zip(items, keep) if k)
         self.drawn[stage] = (draws + int(keep.sum()), triangles)
@@ -337,29 +335,32 @@ class Renderer:
             key = self._shadow_key(frame.config, light, frame.bounds)
             cached = self._shadows.get(light.name)
             rests = cached is not None and self._shadow_keys.get(light.name) == key
-            if rests and cached.get("size") in (None, self.settings.shadow_size):
+            if rests and cached.get("size") in (None, self.settings.shadow_size) and not cached.get("footprint"):
                 shadows[light.name] = cached
                 continue
             # the light or an object moved since the last frame: the moving size (if smaller); at rest: the full map
             moving = self.moving_shadow_size if cached is not None and not rests else None
-            shadows[light.name] = self._render_shadow(frame.config, light, frame.bounds,
-                                                      min(moving or math.inf, self.settings.shadow_size))
+            shadows[light.name] = self._render_shadow(frame, light, min(moving or math.inf, self.settings.shadow_size),
+                                                      moving is not None and self.shadow_footprint)
             self._shadow_keys[light.name] = key
             self.shadow_renders += 1
         self._shadows = shadows
 
-    def _render_shadow(self, config: FrameConfig, light, bounds: np.ndarray, size: int) -> dict:
-        ctx = self.ctx
+    def _render_shadow(self, frame: "FrameView", light, size: int, footprint: bool) -> dict:
+        ctx, config, bounds = self.ctx, frame.config, frame.bounds
         ctx.enable_only(moderngl.DEPTH_TEST)
         kind, tex, fbo, _ = self._shadow_target(light, size)
         if kind == "dir":
             m_light, extent, depth_range = fit_directional(bounds, light.direction)
             fbo.use()
             fbo.clear(depth=1.0)
+            sweep, fbo.scissor = (sun_footprint(frame.proj @ frame.view, light, bounds, m_light, extent, size,
+                                                self.settings) if footprint else (None, None))
             self._draw_objects(config, "shadow.glsl", {}, lambda prog: set_uniform(prog, "m_light", m_light), None,
-                               m_light, "shadows")
+                               m_light, "shadows", sweep=sweep)
+            fbo.scissor = None
             return {"map": tex, "m_light": m_light, "texel_world": extent / size, "depth_range": depth_range,
-                    "size": size}
+                    "size": size, "footprint": footprint}
         faces = point_faces(light.position, bounds)
         fbo.use()
         fbo.clear(1e30, 1e30, 1e30, 1e30, depth=1.0)
@@ -414,7 +415,7 @@ class Renderer:
         self._direct_fbo.use()
         ctx.enable_only(moderngl.BLEND if blend else moderngl.NOTHING)
         ctx.blend_func = moderngl.ONE, moderngl.ONE
-        prog = self._screen_program(self.light_defines(light))
+        prog = self._screen_program(light_defines(light))
         self.set_direct_uniforms(prog, light)
         self._fullscreen(prog)
         ctx.disable(moderngl.BLEND)

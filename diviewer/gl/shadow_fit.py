@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from diviewer.gl.culling import frustum_planes
 from diviewer.gl.resources import set_uniform
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, PointLight
@@ -66,6 +67,62 @@ def fit_directional(bounds: np.ndarray, direction) -> tuple[np.ndarray, float, f
     return cam.orthographic(half[0], half[1], near, far) @ shift @ view, 2.0 * float(half.max()), far - near
 
 
+CUBE_EDGES = tuple((a, a | bit) for a in range(8) for bit in (4, 2, 1) if not a & bit)
+"""The 12 edges of a box's corners listed x-major ([x, y, z] for x for y for z): pairs one bit apart."""
+
+
+def _corners(lo, hi) -> np.ndarray:
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
+
+
+def _edge_crossings(corners: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Where the edges of a hexahedron (its corners as `_corners` lists them) cross the planes (P, 4)."""
+    p0, p1 = corners[[e[0] for e in CUBE_EDGES]], corners[[e[1] for e in CUBE_EDGES]]
+    s0, s1 = p0 @ planes[:, :3].T + planes[:, 3], p1 @ planes[:, :3].T + planes[:, 3]  # (12, P)
+    cross = s0 * s1 < 0.0  # the ends on either side: s0 - s1 is not 0
+    t = np.where(cross, s0 / np.where(cross, s0 - s1, 1.0), 0.0)
+    return (p0[:, None, :] + t[..., None] * (p1 - p0)[:, None, :])[cross]
+
+
+def view_in_bounds(clip: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """The corners (M, 3) of the part of the scene's ``bounds`` that the camera of ``clip`` (world to clip) sees: the
+    frustum's corners inside the box, the box's inside the frustum, and where the edges of each cross the other's
+    faces (the convex hull of these is that part); (0, 3) when the view holds none of the box."""
+    b = np.asarray(bounds, np.float64)
+    h = np.c_[_corners((-1, -1, -1), (1, 1, 1)), np.ones(8)] @ np.linalg.inv(np.asarray(clip, np.float64)).T
+    frustum, box = h[:, :3] / h[:, 3:], _corners(b[0], b[1])
+    view_planes = frustum_planes(clip)
+    box_planes = np.concatenate([np.c_[np.eye(3), -b[0]], np.c_[-np.eye(3), b[1]]])  # n . p + d >= 0 inside
+    p = np.concatenate([frustum, box, _edge_crossings(frustum, box_planes), _edge_crossings(box, view_planes)])
+    tol = 1e-6 * (1.0 + float(np.abs(b).max()))
+    inside = np.all(p @ view_planes[:, :3].T + view_planes[:, 3] >= -tol, axis=1)
+    return p[inside & np.all(p @ box_planes[:, :3].T + box_planes[:, 3] >= -tol, axis=1)]
+
+
+def footprint_rect(m_light: np.ndarray, points: np.ndarray, size: int, margin: float) -> tuple[int, int, int, int]:
+    """The texels (x, y, width, height) of a ``size`` map of ``m_light`` over which ``points`` (M, 3) lie, widened by
+    ``margin`` texels a side and clamped to the map; (0, 0, 0, 0) for no points."""
+    if len(points) == 0:
+        return (0, 0, 0, 0)
+    q = np.c_[points, np.ones(len(points))] @ np.asarray(m_light, np.float64).T
+    t = (q[:, :2] / q[:, 3:] * 0.5 + 0.5) * size
+    lo = np.clip(np.floor(t.min(axis=0) - margin), 0, size).astype(int)
+    hi = np.clip(np.ceil(t.max(axis=0) + margin), 0, size).astype(int)
+    return (int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1]))
+
+
+def sun_footprint(camera_clip: np.ndarray, light, bounds: np.ndarray, m_light: np.ndarray, extent: float, size: int,
+                  s: RenderSettings) -> tuple[tuple, tuple[int, int, int, int]]:
+    """What a moving sun's map needs to hold for the camera of ``camera_clip`` alone: `culling.shadow_casters`'
+    arguments after the boxes (the casters whose shadow can reach the view) and the map's scissor rectangle (the
+    texels over the part of the scene in view). A visible point's lookup reads up to its normal offset plus the
+    filter's radius plus one texel beside it: both are widened by that and a texel more. Texels and casters left
+    out are ones no visible point's lookup reads, so the frame is the same (tests/gl/test_renderer.py)."""
+    margin = s.normal_offset + s.pcf_radius + 2.0
+    rect = footprint_rect(m_light, view_in_bounds(camera_clip, bounds), size, margin)
+    return (camera_clip, light.direction, bounds, margin * extent / size), rect
+
+
 # Cube-face (forward, up) pairs for point-light shadows; the lookup uses the same matrices.
 FACES = (((1, 0, 0), (0, -1, 0)), ((-1, 0, 0), (0, -1, 0)), ((0, 1, 0), (0, 0, 1)),
          ((0, -1, 0), (0, 0, -1)), ((0, 0, 1), (0, -1, 0)), ((0, 0, -1), (0, -1, 0)))
@@ -80,6 +137,13 @@ def point_faces(position, bounds: np.ndarray) -> np.ndarray:
     near = max(far * 1e-4, 1e-4)
     proj = cam.perspective(90.0, 1.0, near, far)
     return np.stack([proj @ cam.look_at(p, p + np.array(f), u) for f, u in FACES])
+
+
+def light_defines(light) -> dict[str, int]:
+    """direct.glsl's defines for one light's term (none: no light)."""
+    if light is None:
+        return {}
+    return {"DIRECTIONAL": 1} if isinstance(light, DirectionalLight) else {"POINT_LIGHT": 1}
 
 
 def light_uniforms(prog, light, shadow: dict | None, s: RenderSettings, face_size: int) -> None:

@@ -187,6 +187,7 @@ class VXGIPass(VoxelGridPasses):
         self.timer = timer or renderer.timer
         """Each stage is timed here (the renderer's timer unless given one)."""
         self.shaders = renderer.shaders
+        renderer.shadow_footprint = False  # the injection reads the sun's map over the whole grid, not the view
         res = settings.resolution
         self.levels = int(math.log2(res)) + 1
         self.voxels = ctx.texture3d((res, res, res), 4, dtype="f2")
@@ -292,7 +293,8 @@ class VXGIPass(VoxelGridPasses):
                     self._voxelize(self._lists[part], objects)
                 self._keys[part] = key
                 updated.append(part)
-        light_key = (config.lights, self.renderer.settings)
+        # again whenever a map is drawn again: at rest a sun's map is drawn at its full size (`moving_shadow_size`)
+        light_key = (config.lights, self.renderer.settings, self.renderer.shadow_renders)
         if updated or self._keys.get("light") != light_key:
             with self.timer.stage("vxgi_inject", gpu=True):
                 self._inject(config)

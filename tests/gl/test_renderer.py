@@ -460,6 +460,105 @@ def test_frustum_culling_keeps_what_the_camera_sees():
     np.testing.assert_array_equal(boxes_visible(frustum_planes(ortho), boxes[:3]), [True, False, False])
 
 
+def test_shadow_casters_keep_what_can_shade_the_view():
+    """A caster is kept when its box, swept the way the sun's light travels until it leaves the scene's bounds,
+    reaches the camera's frustum: above the view under a sun from overhead, or off to the side of it under a slanting
+    sun that carries its shadow across; not behind the camera, beneath what it sees, or beside the view."""
+    from diviewer.gl.culling import shadow_casters
+
+    view = cam.look_at((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0))
+    clip = cam.perspective(60.0, 1.0, 0.1, 50.0) @ view
+    bounds = np.array([[-60.0, -60.0, -60.0], [60.0, 60.0, 60.0]])
+    box = lambda centre: np.array([np.subtract(centre, 0.5), np.add(centre, 0.5)])
+    boxes = np.array([box(c) for c in [
+        (0, 10, -5),      # over the view
+        (0, 10, 5),       # over the space behind the camera
+        (0, -40, -5),     # beneath the view: its shadow falls further down
+        (30, 10, -6),     # over the ground far to the right of the view
+        (0, 0, -5),       # in the view
+        (-12, 10, -5),    # up and to the left
+    ]])
+    down = (0.0, -1.0, 0.0)
+    np.testing.assert_array_equal(shadow_casters(boxes, clip, down, bounds, 0.0),
+                                  [True, False, False, False, True, False])
+    # A sun slanting to the right carries the left caster's shadow through the view; slanting left, away from it.
+    assert shadow_casters(boxes[5:], clip, (1.0, -1.0, 0.0), bounds, 0.0)[0]
+    assert not shadow_casters(boxes[5:], clip, (-1.0, -1.0, 0.0), bounds, 0.0)[0]
+    # The sweep ends where it leaves the scene: with the floor at y = 5 the shadow of the first never reaches the view.
+    low = np.array([[-60.0, 5.0, -60.0], [60.0, 60.0, 60.0]])
+    assert not shadow_casters(boxes[:1], clip, down, low, 0.0)[0]
+    # The margin keeps a caster whose sweep passes just beside the view (a lookup reads texels beside its point).
+    edge = np.tan(np.radians(30.0)) * 5.5  # the right plane's x at the box's far face (z = -5.5)
+    beside = np.array([[[edge + 0.05, 9.5, -5.5], [edge + 0.1, 10.5, -4.5]]])
+    assert not shadow_casters(beside, clip, down, bounds, 0.0)[0]
+    assert shadow_casters(beside, clip, down, bounds, 0.2)[0]
+
+
+def test_view_in_bounds_is_the_part_of_the_box_the_camera_sees_and_its_map_rectangle():
+    """`view_in_bounds`' corners span the frustum clipped to the scene's box: every point in both lies in their hull
+    (checked on the axes' ranges), none of them outside either; `footprint_rect` covers their texels plus a margin."""
+    from diviewer.gl.culling import frustum_planes
+    from diviewer.gl.shadow_fit import fit_directional, footprint_rect, view_in_bounds
+
+    view = cam.look_at((0.0, 1.0, 0.0), (0.0, 1.0, -1.0), (0.0, 1.0, 0.0))
+    clip = cam.perspective(60.0, 1.5, 0.1, 200.0) @ view
+    bounds = np.array([[-10.0, 0.0, -30.0], [10.0, 8.0, 5.0]])
+    p = view_in_bounds(clip, bounds)
+    planes = frustum_planes(clip)
+    assert len(p) >= 8
+    assert np.all(p @ planes[:, :3].T + planes[:, 3] >= -1e-6) and np.all((p >= bounds[0] - 1e-9) & (p <= bounds[1] + 1e-9))
+    rng = np.random.default_rng(0)
+    q = rng.uniform(bounds[0], bounds[1], (20000, 3))
+    q = q[np.all(q @ planes[:, :3].T + planes[:, 3] >= 0.0, axis=1)]
+    assert len(q) > 1000 and np.all(q.min(axis=0) >= p.min(axis=0) - 1e-9) and np.all(q.max(axis=0) <= p.max(axis=0) + 1e-9)
+    # The box ends 30 m ahead, left, right, floor and ceiling: the far plane (200 m) adds nothing beyond it.
+    np.testing.assert_allclose(p.min(axis=0), [-10.0, 0.0, -30.0], atol=1e-6)
+    assert p.max(axis=0)[2] <= 0.0 + 1e-6  # nothing behind the camera
+    assert len(view_in_bounds(clip, bounds + [0.0, 0.0, 40.0])) == 0  # a box wholly behind the camera
+    m_light, _, _ = fit_directional(bounds, (0.0, -1.0, 0.0))
+    x, y, w, h = footprint_rect(m_light, p, 256, 3.0)
+    assert 0 <= x and 0 <= y and x + w <= 256 and y + h <= 256 and 0 < w * h < 256 * 256
+    t = (np.c_[q, np.ones(len(q))] @ m_light.T)[:, :2] * 0.5 + 0.5
+    assert np.all(t * 256 >= [x, y]) and np.all(t * 256 <= [x + w, y + h])  # every point in view, in the rectangle
+    inner = footprint_rect(m_light, p, 256, 0.0)  # the margin widens each side by 3 texels, within the map
+    assert (x, y) == (max(inner[0] - 3, 0), max(inner[1] - 3, 0))
+    assert (x + w, y + h) == (min(inner[0] + inner[2] + 3, 256), min(inner[1] + inner[3] + 3, 256))
+    assert footprint_rect(m_light, p[:0], 256, 3.0) == (0, 0, 0, 0)
+
+
+def test_sponza_moving_sun_map_holds_only_what_shades_the_view_and_changes_no_pixel(ctx, sponza):
+    """While the sun moves (``moving_shadow_size``), its map holds only what can shade the camera's view: from the
+    gallery, along the sunlit one across the atrium, fewer triangles and fewer texels than with the footprint off (the casters whose shadow
+    can reach the view, the texels over the part of the scene in view), and the same frame bit for bit, the map's
+    texels that a visible point reads being the same. At rest the map is drawn again whole."""
+    gallery = dataclasses.replace(sponza.default.camera, position=(5.9, 11.8, 4.4), target=(4.8, 11.4, -3.05))
+    sun = next(light for light in sponza.default.lights if light.kind == "directional")
+    view = dataclasses.replace(sponza.default, camera=gallery)
+    turned = [view.replace_light(sun.name, direction=(-0.349 + 0.02 * k, -0.903, -0.251 + 0.01 * k)) for k in range(3)]
+    drawn, frames, written = {}, {}, {}
+    for footprint in (True, False):
+        r = Renderer(ctx, sponza, 48, 48, RenderSettings(shadow_size=512))
+        r.moving_shadow_size, r.shadow_footprint = 512, footprint
+        try:
+            r.frame(turned[0])  # the first map is drawn whole
+            for k in (1, 2):
+                frames[footprint, k] = r.frame(turned[k])
+                drawn[footprint, k] = r.drawn["shadows"][1]
+                assert r._shadows[sun.name]["footprint"] is footprint
+                written[footprint, k] = (np.frombuffer(r._shadows[sun.name]["map"].read(), "f4") < 1.0).mean()
+            renders = r.shadow_renders
+            frames[footprint, "rest"] = r.frame(turned[2])  # the sun rests: a footprint map is not kept
+            assert r.shadow_renders == renders + footprint and not r._shadows[sun.name]["footprint"]
+        finally:
+            r.release()
+    for k in (1, 2):
+        assert drawn[True, k] < 0.8 * drawn[False, k]
+        assert 0.0 < written[True, k] < 0.5 * written[False, k]  # the scissor: only the texels over the view
+        assert (frames[True, k]["direct"].max(axis=2) > 0.0).mean() > 0.05  # sunlit pixels in view
+        np.testing.assert_array_equal(frames[True, k]["direct"], frames[False, k]["direct"], err_msg=str(k))
+    np.testing.assert_array_equal(frames[True, "rest"]["direct"], frames[False, "rest"]["direct"])
+
+
 @pytest.fixture(scope="module")
 def sponza():
     from diviewer.scene import load_scene

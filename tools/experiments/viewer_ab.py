@@ -1,7 +1,8 @@
 """What the viewer's frame gains or loses from one of its settings: the same run in several arms, alternated.
 
 Usage: xvfb-run -a -s "-screen 0 1920x1200x24" python tools/experiments/viewer_ab.py [--scene sponza]
-           [--arms blocking,deferred,off] [--rounds 3] [--frames 100] [--size 768x768] [--light-moving] --out-dir DIR
+           [--arms blocking,deferred,off] [--rounds 3] [--frames 100] [--size 768x768] [--light-moving]
+           [--camera-moving] --out-dir DIR
 
 Arms, run in turn within each round (so the machine's drift falls on all of them), each a fresh viewer process
 (`diviewer.viewer.app.run_viewer`, the default settings but vsync off, the scene's shipped model):
@@ -13,9 +14,12 @@ Arms, run in turn within each round (so the machine's drift falls on all of them
 - ``off``: no GL stage timed (the panel's "per-stage timing" unticked);
 - ``noflush``: the default, but the G-buffer flushed only at its end (`Renderer.flush_every` 0);
 - ``offflush``: as ``off``, with a ``glFlush`` where each GL stage ends (where ``deferred`` ends its timer query):
-  whether the queries' own flushes are what once made ``deferred`` faster than ``off`` (they were not: 2026-11-29).
+  whether the queries' own flushes are what once made ``deferred`` faster than ``off`` (they were not: 2026-11-29);
+- ``nofootprint``: the default, but a moving sun's map drawn whole (`Renderer.shadow_footprint` off), not only what
+  can shade the view: with ``--light-moving``, what the footprint saves.
 
-``--light-moving`` animates the light from the first frame (the L key), so the shadow map is drawn every frame.
+``--light-moving`` animates the light from the first frame (the L key), so the shadow map is drawn every frame;
+``--camera-moving`` walks the scene's camera path from the first frame (the P key).
 
 The timer arms of docs/speed.md's table ran before the G-buffer's flushes existed (both sides flushed at the end).
 Each run writes the viewer's ``--stats`` JSON as DIR/SCENE_ARM_ROUND.json; a summary line per run and per arm is
@@ -31,7 +35,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-ARMS = ("blocking", "deferred", "off", "noflush", "offflush")
+ARMS = ("blocking", "deferred", "off", "noflush", "offflush", "nofootprint")
 
 CHILD = """
 import sys
@@ -53,17 +57,21 @@ if arm == "offflush":
             flush()
     timing.StageTimer.stage = stage
 script = {"blocking": [(0, lambda v: setattr(v.timer, "deferred", False))],
-          "noflush": [(0, lambda v: setattr(v.renderer, "flush_every", 0))]}.get(arm, [])
+          "noflush": [(0, lambda v: setattr(v.renderer, "flush_every", 0))],
+          "nofootprint": [(0, lambda v: setattr(v.renderer, "shadow_footprint", False))]}.get(arm, [])
 if sys.argv[6] == "1":  # the sun animated (the L key): its shadow map is drawn every frame
     script.append((0, lambda v: setattr(v.state, "animate_light", True)))
+if sys.argv[7] == "1":  # the camera walks the scene's path (the P key)
+    script.append((0, lambda v: v.state.toggle_path()))
 run_viewer(scene, frames=frames, settings=settings, stats=out, script=script)
 """
 
 
-def run_arm(arm: str, scene: str, frames: int, size: str, out: Path, light_moving: bool = False) -> dict:
+def run_arm(arm: str, scene: str, frames: int, size: str, out: Path, light_moving: bool = False,
+            camera_moving: bool = False) -> dict:
     """One viewer run in its own process; its stats JSON."""
-    subprocess.run([sys.executable, "-c", CHILD, arm, scene, str(frames), size, str(out), str(int(light_moving))],
-                   check=True, stdout=subprocess.DEVNULL)
+    subprocess.run([sys.executable, "-c", CHILD, arm, scene, str(frames), size, str(out), str(int(light_moving)),
+                    str(int(camera_moving))], check=True, stdout=subprocess.DEVNULL)
     return json.loads(out.read_text())
 
 
@@ -75,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--size", default="768x768")
     ap.add_argument("--light-moving", action="store_true", help="the light animated: shadows drawn every frame")
+    ap.add_argument("--camera-moving", action="store_true", help="the camera walking the scene's path")
     ap.add_argument("--out-dir", type=Path, required=True)
     a = ap.parse_args(argv)
     a.out_dir.mkdir(parents=True, exist_ok=True)
@@ -84,7 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     fps: dict[str, list[float]] = {arm: [] for arm in arms}
     for r in range(1, a.rounds + 1):
         for arm in arms:
-            d = run_arm(arm, a.scene, a.frames, a.size, a.out_dir / f"{a.scene}_{arm}_{r}.json", a.light_moving)
+            d = run_arm(arm, a.scene, a.frames, a.size, a.out_dir / f"{a.scene}_{arm}_{r}.json", a.light_moving,
+                        a.camera_moving)
             fps[arm].append(d["fps"])
             print(f"round {r} {arm}: {d['fps']:.2f} fps ({d['at_final_scale']['fps']:.2f} at the final scale "
                   f"{d['render_scales']['median']}), timing: {d['timing']}", flush=True)
