@@ -187,7 +187,9 @@ class VXGIPass(VoxelGridPasses):
         self.timer = timer or renderer.timer
         """Each stage is timed here (the renderer's timer unless given one)."""
         self.shaders = renderer.shaders
-        renderer.shadow_footprint = False  # the injection reads the sun's map over the whole grid, not the view
+        # The injection reads the sun's map over the whole grid, not the view: whole maps while this pass lives (the
+        # viewer's, from the first VXGI frame to the scene's change), the renderer's choice again at its release.
+        self._footprint_before, renderer.shadow_footprint = renderer.shadow_footprint, False
         res = settings.resolution
         self.levels = int(math.log2(res)) + 1
         self.voxels = ctx.texture3d((res, res, res), 4, dtype="f2")
@@ -259,6 +261,7 @@ class VXGIPass(VoxelGridPasses):
         self.textures = {}
 
     def release(self) -> None:
+        self.renderer.shadow_footprint = self._footprint_before
         if self.width:
             self._release_targets()
         unbind_framebuffer(self.ctx)

@@ -168,6 +168,28 @@ def test_grid_is_rebuilt_only_when_something_changes(ctx, cornell):
         r.release()
 
 
+def test_grid_is_lit_by_whole_maps_and_again_when_the_sun_comes_to_rest(ctx, cornell):
+    """While a VXGI pass lives, its renderer draws a moving sun's map whole (the injection reads it over the whole
+    grid, not only the view's footprint), and the light is injected again when the map is drawn again at its full
+    size as the sun comes to rest; the renderer's footprint is back at the pass's release."""
+    r = Renderer(ctx, cornell, 16, 16)
+    r.moving_shadow_size = 256
+    v = VXGIPass(ctx, r, GRID)
+    try:
+        assert not r.shadow_footprint
+        cfg = cornell.default
+        turned = cfg.replace_light("sun", direction=(0.35, -0.42, -0.84))
+        for config, expected in [(cfg, ("static", "dynamic", "inject")), (turned, ("inject",)), (turned, ("inject",)),
+                                 (turned, ())]:
+            r.render(config)
+            v.run(config)
+            assert v.updated == expected and not r._shadows["sun"]["footprint"]
+    finally:
+        v.release()
+        assert r.shadow_footprint
+        r.release()
+
+
 @pytest.mark.slow
 def test_lower_trace_resolution_stays_close(ctx, cornell):
     cfg = cornell.default
