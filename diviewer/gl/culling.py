@@ -93,7 +93,7 @@ def shadow_casters(boxes: np.ndarray, camera_clip: np.ndarray, direction, bounds
     lo, hi, b = boxes[:, 0, :] - margin, boxes[:, 1, :] + margin, np.asarray(bounds, np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):  # per axis, the longest way any point of a box has left
         travel = np.where(d > 0, (b[1] - lo) / d, np.where(d < 0, (b[0] - hi) / d, np.inf))
-    reach = np.maximum(travel.min(axis=1), 0.0) if len(boxes) else np.zeros(0)
+    reach = np.maximum(travel.min(axis=1), 0.0)
     planes = frustum_planes(camera_clip)
     n = planes[:, :3]
     far = np.where(n[None, :, :] >= 0.0, hi[:, None, :], lo[:, None, :])  # (N, 6, 3)
