@@ -506,11 +506,13 @@ def test_view_in_bounds_is_the_part_of_the_box_the_camera_sees_and_its_map_recta
     p = view_in_bounds(clip, bounds)
     planes = frustum_planes(clip)
     assert len(p) >= 8
-    assert np.all(p @ planes[:, :3].T + planes[:, 3] >= -1e-6) and np.all((p >= bounds[0] - 1e-9) & (p <= bounds[1] + 1e-9))
+    assert np.all(p @ planes[:, :3].T + planes[:, 3] >= -1e-6)
+    assert np.all((p >= bounds[0] - 1e-9) & (p <= bounds[1] + 1e-9))
     rng = np.random.default_rng(0)
     q = rng.uniform(bounds[0], bounds[1], (20000, 3))
     q = q[np.all(q @ planes[:, :3].T + planes[:, 3] >= 0.0, axis=1)]
-    assert len(q) > 1000 and np.all(q.min(axis=0) >= p.min(axis=0) - 1e-9) and np.all(q.max(axis=0) <= p.max(axis=0) + 1e-9)
+    assert len(q) > 1000
+    assert np.all(q.min(axis=0) >= p.min(axis=0) - 1e-9) and np.all(q.max(axis=0) <= p.max(axis=0) + 1e-9)
     # The box ends 30 m ahead, left, right, floor and ceiling: the far plane (200 m) adds nothing beyond it.
     np.testing.assert_allclose(p.min(axis=0), [-10.0, 0.0, -30.0], atol=1e-6)
     assert p.max(axis=0)[2] <= 0.0 + 1e-6  # nothing behind the camera
@@ -526,11 +528,18 @@ def test_view_in_bounds_is_the_part_of_the_box_the_camera_sees_and_its_map_recta
     assert footprint_rect(m_light, p[:0], 256, 3.0) == (0, 0, 0, 0)
 
 
+@pytest.fixture(scope="module")
+def sponza():
+    from diviewer.scene import load_scene
+
+    return load_scene("sponza")
+
+
 def test_sponza_moving_sun_map_holds_only_what_shades_the_view_and_changes_no_pixel(ctx, sponza):
     """While the sun moves (``moving_shadow_size``), its map holds only what can shade the camera's view: from the
-    gallery, along the sunlit one across the atrium, fewer triangles and fewer texels than with the footprint off (the casters whose shadow
-    can reach the view, the texels over the part of the scene in view), and the same frame bit for bit, the map's
-    texels that a visible point reads being the same. At rest the map is drawn again whole."""
+    gallery, along the sunlit one across the atrium, fewer triangles and fewer texels than with the footprint off
+    (the casters whose shadow can reach the view, the texels over the part of the scene in view), and the same frame
+    bit for bit, the map's texels that a visible point reads being the same. At rest the map is drawn again whole."""
     gallery = dataclasses.replace(sponza.default.camera, position=(5.9, 11.8, 4.4), target=(4.8, 11.4, -3.05))
     sun = next(light for light in sponza.default.lights if light.kind == "directional")
     view = dataclasses.replace(sponza.default, camera=gallery)
@@ -557,13 +566,6 @@ def test_sponza_moving_sun_map_holds_only_what_shades_the_view_and_changes_no_pi
         assert (frames[True, k]["direct"].max(axis=2) > 0.0).mean() > 0.05  # sunlit pixels in view
         np.testing.assert_array_equal(frames[True, k]["direct"], frames[False, k]["direct"], err_msg=str(k))
     np.testing.assert_array_equal(frames[True, "rest"]["direct"], frames[False, "rest"]["direct"])
-
-
-@pytest.fixture(scope="module")
-def sponza():
-    from diviewer.scene import load_scene
-
-    return load_scene("sponza")
 
 
 def test_sponza_culling_draws_less_at_a_wall_and_changes_no_pixel(ctx, sponza):
