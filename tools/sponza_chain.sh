@@ -2,10 +2,9 @@
 # Sponza's model built on a CPU machine, over as many sessions as it takes (docs/sponza.md): set up
 # (tools/setup.sh), then
 #   1. the 64-spp capture of the recipe (assets/recipes/sponza.toml) and its check: `diviewer build ... --ks 8
-#      --stop-after check` (~3.5 h here). The recipe's K = 8 on it ships as assets/models/sponza.onnx
-#      (1b); it is not trained again (a machine that lost `runs/` starts here, as on 2026-11-29);
-#   1b. (done, not run again) K = 8 with the structure term (`--ssim-weight 0.1`) on that capture: it ships since
-#      2026-11-29 as assets/models/sponza.onnx, the term now the recipe's;
+#      --stop-after check` (~3.5 h here; a machine that lost `runs/` starts here, as on 2026-11-29). The recipe's
+#      K = 8 on it (1b, the structure term `--ssim-weight 0.1` now the recipe's) ships as assets/models/sponza.onnx
+#      since 2026-11-29 and is not trained again;
 #   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here; or
 #      the same set rendered on a lent device, runs/evalsets/sponza: tools/device_evalsets.sh, compact with every
 #      frame, taken where present, as SPONZA_EVALSET names another) and
@@ -58,8 +57,6 @@ margin() {
 stage "the 64-spp capture and its check"
 again diviewer build --scene sponza --recipe "$WORK/sponza.toml" --evalset assets/evalsets/sponza --work "$WORK" \
   --ship "$WORK/ship" --ks 8 --stop-after check
-# 1b (the structure term on the 64-spp truth) is done: its model ships as assets/models/sponza.onnx since 2026-11-29
-# (docs/sponza.md, "The frame's edge"), the recipe's own K = 8 now; a machine that lost `runs/` does not train it again.
 # The full set: a device's render of it where there is one (it holds every frame, float16), else rendered here.
 EVALSET="${SPONZA_EVALSET:-}"
 if [ -z "$EVALSET" ]; then

@@ -52,13 +52,18 @@ def split_mesh(mesh: Mesh, max_triangles: int = CHUNK_TRIANGLES) -> list[Mesh]:
     return out
 
 
+def box_corners(bounds) -> np.ndarray:
+    """The 8 corners (8, 3) of a box (2, 3), x-major: [x, y, z] for x in (lo, hi) for y ... for z ...; two corners
+    one bit apart in their index share an edge."""
+    b = np.asarray(bounds, np.float64)
+    return np.array([[b[i, 0], b[j, 1], b[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+
+
 def world_box(bounds: np.ndarray, model: np.ndarray | None) -> np.ndarray:
     """The world-space box (2, 3) of an object-space box under ``model`` (None: the box is world-space)."""
     if model is None:
         return np.asarray(bounds, np.float64)
-    b = np.asarray(bounds, np.float64)
-    corners = np.array([[b[i, 0], b[j, 1], b[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-    w = corners @ model[:3, :3].T + model[:3, 3]
+    w = box_corners(bounds) @ model[:3, :3].T + model[:3, 3]
     return np.stack([w.min(axis=0), w.max(axis=0)])
 
 
@@ -73,12 +78,14 @@ def frustum_planes(clip: np.ndarray) -> np.ndarray:
 def boxes_visible(planes: np.ndarray, boxes: np.ndarray, margin: float = 1e-4) -> np.ndarray:
     """Which boxes (N, 2, 3) are not wholly outside any plane: per box, the corner furthest along each plane's
     normal must lie inside it (``margin`` in world units of slack against round-off)."""
-    if len(boxes) == 0:
-        return np.zeros(0, bool)
-    lo, hi = boxes[:, 0, :], boxes[:, 1, :]
-    n, d = planes[:, :3], planes[:, 3]
-    far = np.where(n[None, :, :] >= 0.0, hi[:, None, :], lo[:, None, :])  # (N, 6, 3)
-    return np.all(np.einsum("npk,pk->np", far, n) + d[None, :] >= -margin, axis=1)
+    return np.all(_furthest_inside(planes, boxes[:, 0, :], boxes[:, 1, :]) >= -margin, axis=1)
+
+
+def _furthest_inside(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(N, P): how far inside each plane (P, 4) each box's (lo, hi: (N, 3)) corner furthest along its normal lies."""
+    n = planes[:, :3]
+    far = np.where(n[None, :, :] >= 0.0, hi[:, None, :], lo[:, None, :])  # (N, P, 3)
+    return np.einsum("npk,pk->np", far, n) + planes[None, :, 3]
 
 
 def shadow_casters(boxes: np.ndarray, camera_clip: np.ndarray, direction, bounds: np.ndarray,
@@ -94,10 +101,8 @@ def shadow_casters(boxes: np.ndarray, camera_clip: np.ndarray, direction, bounds
     with np.errstate(divide="ignore", invalid="ignore"):  # per axis, the longest way any point of a box has left
         travel = np.where(d > 0, (b[1] - lo) / d, np.where(d < 0, (b[0] - hi) / d, np.inf))
     reach = np.maximum(travel.min(axis=1), 0.0)
-    planes = frustum_planes(camera_clip)
-    n = planes[:, :3]
-    far = np.where(n[None, :, :] >= 0.0, hi[:, None, :], lo[:, None, :])  # (N, 6, 3)
-    ahead = np.einsum("npk,pk->np", far, n) + planes[None, :, 3] + reach[:, None] * np.maximum(n @ d, 0.0)[None, :]
+    planes = frustum_planes(camera_clip)  # the sweep reaches further inside the planes whose normal has d in it
+    ahead = _furthest_inside(planes, lo, hi) + reach[:, None] * np.maximum(planes[:, :3] @ d, 0.0)[None, :]
     return np.all(ahead >= -1e-4, axis=1)
 
 

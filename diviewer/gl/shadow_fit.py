@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from diviewer.gl.culling import frustum_planes
+from diviewer.gl.culling import box_corners, frustum_planes
 from diviewer.gl.resources import set_uniform
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, PointLight
@@ -56,8 +56,7 @@ def fit_directional(bounds: np.ndarray, direction) -> tuple[np.ndarray, float, f
     d = cam.normalize(direction)
     up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
     view = cam.look_at(centre - d * 2.0 * radius, centre, up)
-    corners = np.array([[b[i, 0], b[j, 1], b[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-    p = corners @ view[:3, :3].T + view[:3, 3]
+    p = box_corners(b) @ view[:3, :3].T + view[:3, 3]
     lo, hi = p.min(axis=0), p.max(axis=0)
     pad = 1e-3 * radius  # geometry on the bounds' faces stays inside the map and the depth range
     half = (hi[:2] - lo[:2]) / 2.0 + pad
@@ -68,15 +67,12 @@ def fit_directional(bounds: np.ndarray, direction) -> tuple[np.ndarray, float, f
 
 
 CUBE_EDGES = tuple((a, a | bit) for a in range(8) for bit in (4, 2, 1) if not a & bit)
-"""The 12 edges of a box's corners listed x-major ([x, y, z] for x for y for z): pairs one bit apart."""
-
-
-def _corners(lo, hi) -> np.ndarray:
-    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
+"""The 12 edges of a box's corners as `box_corners` lists them: index pairs one bit apart."""
+NDC_CUBE = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
 
 
 def _edge_crossings(corners: np.ndarray, planes: np.ndarray) -> np.ndarray:
-    """Where the edges of a hexahedron (its corners as `_corners` lists them) cross the planes (P, 4)."""
+    """Where the edges of a hexahedron (its corners as `box_corners` lists them) cross the planes (P, 4)."""
     p0, p1 = corners[[e[0] for e in CUBE_EDGES]], corners[[e[1] for e in CUBE_EDGES]]
     s0, s1 = p0 @ planes[:, :3].T + planes[:, 3], p1 @ planes[:, :3].T + planes[:, 3]  # (12, P)
     cross = s0 * s1 < 0.0  # the ends on either side: s0 - s1 is not 0
@@ -89,8 +85,8 @@ def view_in_bounds(clip: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     frustum's corners inside the box, the box's inside the frustum, and where the edges of each cross the other's
     faces (the convex hull of these is that part); (0, 3) when the view holds none of the box."""
     b = np.asarray(bounds, np.float64)
-    h = np.c_[_corners((-1, -1, -1), (1, 1, 1)), np.ones(8)] @ np.linalg.inv(np.asarray(clip, np.float64)).T
-    frustum, box = h[:, :3] / h[:, 3:], _corners(b[0], b[1])
+    h = np.c_[box_corners(NDC_CUBE), np.ones(8)] @ np.linalg.inv(np.asarray(clip, np.float64)).T
+    frustum, box = h[:, :3] / h[:, 3:], box_corners(b)
     view_planes = frustum_planes(clip)
     box_planes = np.concatenate([np.c_[np.eye(3), -b[0]], np.c_[-np.eye(3), b[1]]])  # n . p + d >= 0 inside
     p = np.concatenate([frustum, box, _edge_crossings(frustum, box_planes), _edge_crossings(box, view_planes)])
@@ -132,8 +128,7 @@ def point_faces(position, bounds: np.ndarray) -> np.ndarray:
     """World -> clip matrices (6, 4, 4) of a point light's cube faces, far enough to reach every corner
     of the scene's bounds."""
     p = np.asarray(position, dtype=np.float64)
-    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-    far = float(np.linalg.norm(corners - p, axis=1).max()) * 1.01 + 1e-3
+    far = float(np.linalg.norm(box_corners(bounds) - p, axis=1).max()) * 1.01 + 1e-3
     near = max(far * 1e-4, 1e-4)
     proj = cam.perspective(90.0, 1.0, near, far)
     return np.stack([proj @ cam.look_at(p, p + np.array(f), u) for f, u in FACES])
