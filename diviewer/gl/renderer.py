@@ -17,11 +17,11 @@ from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import gl_flush, unbind_framebuffer
 from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes, shadow_casters
 from diviewer.gl.resources import GpuScene, set_uniform
-from diviewer.gl.shadow_fit import (RenderSettings, fit_directional, light_defines, light_uniforms, point_faces,
-                                    sun_footprint)
+from diviewer.gl.shadow_fit import RenderSettings, light_defines, light_uniforms
+from diviewer.gl.shadow_pass import ShadowPass
 from diviewer.gl.shaders import ShaderCache
 from diviewer.scene import camera as cam
-from diviewer.scene.model import DirectionalLight, FrameConfig, Scene
+from diviewer.scene.model import FrameConfig, Scene
 from diviewer.timing import StageTimer
 
 BUFFERS = INPUT_NAMES
@@ -75,22 +75,22 @@ class Renderer:
         self._draw_cache: tuple = (None, None, [])
         self._bounds: tuple = (None, None, None)
         self._emissive: tuple = (None, False)
-        self._face_size = max(self.settings.shadow_size // 2, 16)
-        self._shadow_targets: dict[str, tuple] = {}
-        """Per light name: (kind, texture, framebuffer, depth renderbuffer or None)."""
-        self._shadows: dict[str, dict] = {}
-        """This frame's shadow lookup parameters per light (None entries: shadows off)."""
-        self._shadow_keys: dict[str, tuple] = {}
-        """Per light name: what its cached map was rendered from (``_shadow_key``)."""
         self.shadow_renders = 0
-        """Shadow maps rendered so far (a cached map is not counted): the shadow cache's witness."""
+        """Shadow maps drawn so far (a cached map is not counted, one drawn in bands counts at its last): the shadow
+        cache's witness."""
         self.moving_shadow_size: int | None = None
         """A sun's map size while it, or an object, moves (the viewer's: an 8192 map takes ~325 ms here), the full one
         again at the first frame all rests; None: always the full size (captures, evaluation)."""
         self.shadow_footprint = True
         """A map drawn at ``moving_shadow_size`` holds only what can shade the camera's view (`shadow_casters`; the
         frame is the same); VXGI, which reads the map over its whole grid, turns it off."""
-        self.passes = (("shadows", self._shadow_pass), ("gbuffer", self._gbuffer_pass), ("direct", self._direct_pass))
+        self.rest_in_bands = False
+        """At rest after a move, a sun's full map is drawn in bands over the next frames, each band as many texels as
+        the moving map, the moving map shown meanwhile (gl/shadow_pass.py; the viewer's); else whole at once."""
+        self.shadow_pass = ShadowPass(self)
+        """The shadow maps: drawn, kept, and this frame's lookups (``shadow_pass.maps``)."""
+        self.passes = (("shadows", self.shadow_pass.run), ("gbuffer", self._gbuffer_pass),
+                       ("direct", self._direct_pass))
         """The frame, in order: (stage name, pass(frame view)); each pass is one timed stage."""
         self.frame_view: FrameView | None = None
         """The last frame rendered: its configuration, camera matrices and bounds."""
@@ -150,44 +150,9 @@ class Renderer:
         self._emission_fbo.release()
         self._direct_fbo.release()
 
-    def _shadow_target(self, light, size: int) -> tuple:
-        """The light's shadow map and framebuffer, made at its first use (again at another ``size``): a depth texture
-        compared in hardware (sun, ``size`` texels a side), or a 3x2 atlas of cube faces holding distances (point)."""
-        kind = "dir" if isinstance(light, DirectionalLight) else "point"
-        target = self._shadow_targets.get(light.name)
-        if target is not None and target[0] == kind and (kind == "point" or target[1].size == (size, size)):
-            return target
-        if target is not None:
-            self._release_shadow_target(light.name)
-        ctx = self.ctx
-        if kind == "dir":
-            tex = ctx.depth_texture((size, size))
-            tex.compare_func = "<="
-            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            tex.repeat_x = tex.repeat_y = False
-            target = (kind, tex, ctx.framebuffer(depth_attachment=tex), None)
-        else:
-            s = self._face_size
-            tex = ctx.texture((3 * s, 2 * s), 1, dtype="f4")
-            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            depth = ctx.depth_renderbuffer((3 * s, 2 * s))
-            target = (kind, tex, ctx.framebuffer([tex], depth), depth)
-        self._shadow_targets[light.name] = target
-        return target
-
-    def _release_shadow_target(self, name: str) -> None:
-        unbind_framebuffer(self.ctx)
-        self._shadow_keys.pop(name, None)
-        self._shadows.pop(name, None)
-        _, tex, fbo, depth = self._shadow_targets.pop(name)
-        for r in (fbo, tex, depth):
-            if r is not None:
-                r.release()
-
     def release(self) -> None:
         self._release_targets()
-        for name in list(self._shadow_targets):
-            self._release_shadow_target(name)
+        self.shadow_pass.release()
         for vao in self._screen_vaos.values():
             vao.release()
         self.gpu.release()
@@ -237,7 +202,7 @@ class Renderer:
         t = math.tan(math.radians(config.camera.fov) / 2.0)
         set_uniform(prog, "m_inv_view", cam.view_to_world(view))
         set_uniform(prog, "u_tan_half_fov", (t * self.width / self.height, t))
-        self.set_light_uniforms(prog, light, self._shadows.get(light.name))
+        self.set_light_uniforms(prog, light, self.shadow_pass.maps.get(light.name))
 
     def _draw_list(self, config: FrameConfig) -> tuple:
         """culling.draw_list per (scene, objects tuple), its boxes (N, 2, 3) and its alpha-masked items (N,)."""
@@ -248,7 +213,7 @@ class Renderer:
             self._draw_cache = (self.scene, config.objects, (items, boxes, cut_out))
         return self._draw_cache[2]
 
-    def _draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None,
+    def draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None,
                       clip: np.ndarray, stage: str, cull_back: bool = False, sweep: tuple | None = None) -> None:
         """Draw the frame's objects inside the frustum of ``clip`` (world to clip space) with shaders/<file>;
         alpha-masked materials use its ALPHA_TEST variant; ``cull_back``: single-sided materials without their back
@@ -312,68 +277,7 @@ class Renderer:
         def setup(prog):
             set_uniform(prog, "m_proj", proj)
             set_uniform(prog, "m_view", view)
-        self._draw_objects(config, "gbuffer.glsl", {}, setup, view, proj @ view, "gbuffer", not self.back_faces)
-
-    def _shadow_key(self, config: FrameConfig, light, bounds: np.ndarray) -> tuple:
-        """Everything a light's shadow map depends on: the light, each object's pose and the GPU mesh it draws
-        (a mesh loaded again under the same name is a new one), the settings. Not the camera."""
-        objects = tuple((o, id(self.gpu.meshes.get(o.mesh))) for o in config.objects)
-        return (light, objects, tuple(np.asarray(bounds, float).ravel()), self.settings)
-
-    def invalidate_shadows(self) -> None:
-        """Forget the cached shadow maps: the next frame renders them all."""
-        self._shadow_keys.clear()
-
-    def _shadow_pass(self, frame: "FrameView") -> None:
-        """Each light's shadow map (none with shadows off), reused from an earlier frame when nothing it
-        depends on moved."""
-        shadows = {}
-        for light in frame.config.lights:
-            if not self.settings.shadows:
-                shadows[light.name] = None
-                continue
-            key = self._shadow_key(frame.config, light, frame.bounds)
-            cached = self._shadows.get(light.name)
-            rests = cached is not None and self._shadow_keys.get(light.name) == key
-            if rests and cached.get("size") in (None, self.settings.shadow_size) and not cached.get("footprint"):
-                shadows[light.name] = cached
-                continue
-            # the light or an object moved since the last frame: the moving size (if smaller); at rest: the full map
-            moving = self.moving_shadow_size if cached is not None and not rests else None
-            shadows[light.name] = self._render_shadow(frame, light, min(moving or math.inf, self.settings.shadow_size),
-                                                      moving is not None and self.shadow_footprint)
-            self._shadow_keys[light.name] = key
-            self.shadow_renders += 1
-        self._shadows = shadows
-
-    def _render_shadow(self, frame: "FrameView", light, size: int, footprint: bool) -> dict:
-        ctx, config, bounds = self.ctx, frame.config, frame.bounds
-        ctx.enable_only(moderngl.DEPTH_TEST)
-        kind, tex, fbo, _ = self._shadow_target(light, size)
-        if kind == "dir":
-            m_light, extent, depth_range = fit_directional(bounds, light.direction)
-            fbo.use()
-            fbo.clear(depth=1.0)
-            sweep, fbo.scissor = (sun_footprint(frame.proj @ frame.view, light, bounds, m_light, extent, size,
-                                                self.settings) if footprint else (None, None))
-            self._draw_objects(config, "shadow.glsl", {}, lambda prog: set_uniform(prog, "m_light", m_light), None,
-                               m_light, "shadows", sweep=sweep)
-            fbo.scissor = None
-            return {"map": tex, "m_light": m_light, "texel_world": extent / size, "depth_range": depth_range,
-                    "size": size, "footprint": footprint}
-        faces = point_faces(light.position, bounds)
-        fbo.use()
-        fbo.clear(1e30, 1e30, 1e30, 1e30, depth=1.0)
-        s = self._face_size
-        for i, m in enumerate(faces):
-            fbo.viewport = ((i % 3) * s, (i // 3) * s, s, s)
-
-            def setup(prog, m=m):
-                set_uniform(prog, "u_light_pos", tuple(light.position))
-                set_uniform(prog, "m_light", m)
-            self._draw_objects(config, "shadow.glsl", {"POINT_LIGHT": 1}, setup, None, m, "shadows")
-        fbo.viewport = (0, 0, 3 * s, 2 * s)
-        return {"map": tex, "faces": faces}
+        self.draw_objects(config, "gbuffer.glsl", {}, setup, view, proj @ view, "gbuffer", not self.back_faces)
 
     def _screen_program(self, defines: dict) -> moderngl.Program:
         prog = self.shaders.program("direct.glsl", defines)
@@ -423,7 +327,7 @@ class Renderer:
     def set_light_uniforms(self, prog, light, shadow: dict | None) -> None:
         """One light's radiometry and shadow-lookup uniforms for direct.glsl's code (the direct pass, and
         VXGI's injection, which shares the shadow lookup); ``shadow`` is this frame's map of the light."""
-        light_uniforms(prog, light, shadow, self.settings, self._face_size)
+        light_uniforms(prog, light, shadow, self.settings, self.shadow_pass.face_size)
 
     def _emission_pass(self) -> None:
         ctx = self.ctx

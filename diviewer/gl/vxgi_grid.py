@@ -83,7 +83,7 @@ class VoxelGridPasses:
                 prog = self.shaders.compute("vxgi_inject.glsl")
             else:
                 # This frame's shadow map of the light, as the renderer's direct pass used it.
-                shadow = r._shadows.get(light.name)
+                shadow = r.shadow_pass.maps.get(light.name)
                 directional = isinstance(light, DirectionalLight)
                 prog = self.shaders.compute("vxgi_inject.glsl", {"DIRECTIONAL": 1} if directional else {"POINT_LIGHT": 1})
                 self.renderer.set_light_uniforms(prog, light, shadow)

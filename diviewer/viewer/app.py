@@ -91,9 +91,9 @@ class Viewer:
         """The window's framebuffer size the image is shown at (the renderer's is this times the scale)."""
         self.drawn_scale = self.scaler.scale
         """The render scale of the frame drawn last."""
-        self.renderer = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
-                                 self.shaders, timer=self.timer, back_faces=settings.back_faces)
-        self.renderer.moving_shadow_size = settings.moving_shadow_size
+        self.renderer = r = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
+                                     self.shaders, timer=self.timer, back_faces=settings.back_faces)
+        r.moving_shadow_size, r.rest_in_bands = settings.moving_shadow_size, settings.rest_in_bands
         self.upscale = self.ctx.sampler(filter=(moderngl.LINEAR, moderngl.LINEAR), repeat_x=False, repeat_y=False)
         """Bound over the display's texture units where the image is upscaled to the window: bilinear."""
         self.meter = Meter(self.ctx, self.shaders)

@@ -51,7 +51,8 @@ def write_stats(path: Path, viewer, per_frame: list[dict[str, float]],
                 shown: list[tuple[float, int]] | None = None) -> dict:
     """The stage table of a scripted run as JSON: per stage median/p95/mean ms over the frames (the first,
     which compiles shaders and warms onnxruntime, left out when there are others), fps, resolutions, the
-    render scales and the training-range check (``shown``: per frame, its scale and its number of reasons)."""
+    render scales and the training-range check (``shown``: per frame, its scale and its number of reasons), and each
+    frame's time in order (``frame_ms``: where one frame stalls)."""
     frames = per_frame[1:] if len(per_frame) > 1 else per_frame
     shown = (shown[1:] if len(shown or ()) > 1 else shown) or [(viewer.render_scale, 0)]
     scales = np.array([s for s, _ in shown], np.float64)
@@ -63,6 +64,7 @@ def write_stats(path: Path, viewer, per_frame: list[dict[str, float]],
         "frames": len(frames),
         "fps": 1000.0 / frame_ms if frame_ms > 0 else 0.0,
         "stages_ms": table,
+        "frame_ms": [round(float(f["frame"]), 2) for f in frames if "frame" in f],
         "render_size": list(viewer.render_size),
         "window_size": list(viewer.view_size),
         "render_scale": viewer.render_scale,

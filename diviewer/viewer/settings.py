@@ -73,7 +73,10 @@ class ViewerSettings:
     render: RenderSettings = field(default_factory=RenderSettings)
     moving_shadow_size: int | None = MOVING_SHADOW_SIZE
     """The sun's shadow map while it moves (Sponza's full map, 8192 texels a side, takes ~325 ms to render on a
-    2-core software rasterizer), the scene's full size again at the first frame it rests; None: always full."""
+    2-core software rasterizer), the scene's full size again once it rests; None: always full."""
+    rest_in_bands: bool = True
+    """At rest, the full map is drawn in bands over the next frames, each as many texels as the moving map, the
+    moving map shown until the last (``Renderer.rest_in_bands``): no frame stalls when the sun stops."""
     back_faces: bool = False
     """Draw the back faces of single-sided materials in the G-buffer too, as the path tracer sees them (Sponza's
     G-buffer then takes a third longer: docs/speed.md); by default they are culled (``Renderer.back_faces``)."""

@@ -528,13 +528,6 @@ def test_view_in_bounds_is_the_part_of_the_box_the_camera_sees_and_its_map_recta
     assert footprint_rect(m_light, p[:0], 256, 3.0) == (0, 0, 0, 0)
 
 
-@pytest.fixture(scope="module")
-def sponza():
-    from diviewer.scene import load_scene
-
-    return load_scene("sponza")
-
-
 def test_sponza_moving_sun_map_holds_only_what_shades_the_view_and_changes_no_pixel(ctx, sponza):
     """While the sun moves (``moving_shadow_size``), its map holds only what can shade the camera's view: from the
     gallery, along the sunlit one across the atrium, fewer triangles and fewer texels than with the footprint off
@@ -553,11 +546,11 @@ def test_sponza_moving_sun_map_holds_only_what_shades_the_view_and_changes_no_pi
             for k in (1, 2):
                 frames[footprint, k] = r.frame(turned[k])
                 drawn[footprint, k] = r.drawn["shadows"][1]
-                assert r._shadows[sun.name]["footprint"] is footprint
-                written[footprint, k] = (np.frombuffer(r._shadows[sun.name]["map"].read(), "f4") < 1.0).mean()
+                assert r.shadow_pass.maps[sun.name]["footprint"] is footprint
+                written[footprint, k] = (np.frombuffer(r.shadow_pass.maps[sun.name]["map"].read(), "f4") < 1.0).mean()
             renders = r.shadow_renders
             frames[footprint, "rest"] = r.frame(turned[2])  # the sun rests: a footprint map is not kept
-            assert r.shadow_renders == renders + footprint and not r._shadows[sun.name]["footprint"]
+            assert r.shadow_renders == renders + footprint and not r.shadow_pass.maps[sun.name]["footprint"]
         finally:
             r.release()
     for k in (1, 2):
@@ -764,7 +757,7 @@ def test_the_renderer_takes_the_scenes_shadow_map_size_where_its_settings_name_n
     scene = dataclasses.replace(facing_plane(), shadow_size=512)
     r = Renderer(ctx, scene, 16, 16)
     try:
-        assert r.settings.shadow_size == 512 and r._face_size == 256
+        assert r.settings.shadow_size == 512 and r.shadow_pass.face_size == 256
         r.settings = RenderSettings(shadows=False)
         assert r.settings == RenderSettings(shadows=False, shadow_size=512)
     finally:
@@ -833,7 +826,7 @@ def test_a_moving_sun_renders_its_map_at_the_moving_size_and_the_full_one_when_i
             if direction is not None:
                 config = config.replace_light("sun", direction=direction)
             frame = r.frame(config)["direct"]
-            sizes.append((r.shadow_renders, r._shadows["sun"]["map"].size[0]))
+            sizes.append((r.shadow_renders, r.shadow_pass.maps["sun"]["map"].size[0]))
         assert sizes == [(1, 256), (2, 32), (3, 32), (4, 256), (4, 256)]
         np.testing.assert_array_equal(frame, plain.frame(config)["direct"])
         moving = r.frame(config.replace_light("sun", direction=(0.3, -0.4, -1.0)))["direct"]

@@ -669,7 +669,9 @@ def _neural_session(tmp_path: Path) -> None:
     from diviewer.viewer.app import run_viewer
 
     model = _cornell_model(tmp_path / "cornell_k8.onnx")
-    script = [(1, "screenshot", {"path": tmp_path / "final.png"}),
+    shadows = []
+    script = [(0, lambda v: shadows.append((v.renderer.moving_shadow_size, v.renderer.rest_in_bands))),
+              (1, "screenshot", {"path": tmp_path / "final.png"}),
               (2, "set_view_mode", {"name": "direct"}), (3, "screenshot", {"path": tmp_path / "direct.png"}),
               (4, "set_view_mode", {"name": "net_output"}), (5, "screenshot", {"path": tmp_path / "raw.png"}),
               (6, "set_view_mode", {"name": "difference", "a": "final", "b": "direct"}),
@@ -681,6 +683,7 @@ def _neural_session(tmp_path: Path) -> None:
     summary = run_viewer("cornell", model=model, frames=10, script=script, settings=_settings(size=(128, 96)),
                          stats=tmp_path / "stats.json")
     assert summary["gl_error"] == "GL_NO_ERROR"
+    assert shadows == [(2048, True)]  # the viewer's shadow settings reach its renderer (ViewerSettings)
     assert summary["model"] == "cornell_k8.onnx" and summary["provider"] == "CPUExecutionProvider"
     assert summary["gi_size"] == (64, 48) and summary["render_size"] == (128, 96)
     assert summary["stages_ms"]["inference"] > 0.0 and summary["stages_ms"]["upload"] > 0.0
@@ -692,6 +695,7 @@ def _neural_session(tmp_path: Path) -> None:
     assert record["resolution"] == [128, 96] and record["gi_size"] == [64, 48]
     stats = json.loads((tmp_path / "stats.json").read_text())
     assert stats["frames"] == 9 and stats["gi_size"] == [64, 48] and stats["render_size"] == [128, 96]
+    assert len(stats["frame_ms"]) == 9 and min(stats["frame_ms"]) > 0  # each frame's time, in order
     assert stats["edge_guard"] == 0  # a whole-frame model (its record names no aspect crops): no column guard
     assert stats["fps"] > 0 and {"shadows", "gbuffer", "direct", "readback", "inference", "upsample",
                                  "composite"} <= set(stats["stages_ms"])

@@ -2,7 +2,7 @@
 
 Usage: xvfb-run -a -s "-screen 0 1920x1200x24" python tools/experiments/viewer_ab.py [--scene sponza]
            [--arms blocking,deferred,off] [--rounds 3] [--frames 100] [--size 768x768] [--light-moving]
-           [--camera-moving] --out-dir DIR
+           [--camera-moving] [--light-stops-at N] --out-dir DIR
 
 Arms, run in turn within each round (so the machine's drift falls on all of them), each a fresh viewer process
 (`diviewer.viewer.app.run_viewer`, the default settings but vsync off, the scene's shipped model):
@@ -16,10 +16,13 @@ Arms, run in turn within each round (so the machine's drift falls on all of them
 - ``offflush``: as ``off``, with a ``glFlush`` where each GL stage ends (where ``deferred`` ends its timer query):
   whether the queries' own flushes are what once made ``deferred`` faster than ``off`` (they were not: 2026-11-29);
 - ``nofootprint``: the default, but a moving sun's map drawn whole (`Renderer.shadow_footprint` off), not only what
-  can shade the view: with ``--light-moving``, what the footprint saves.
+  can shade the view: with ``--light-moving``, what the footprint saves;
+- ``wholerest``: the default, but a sun come to rest has its full map drawn whole at once (`Renderer.rest_in_bands`
+  off), not in bands over the next frames: with ``--light-stops-at``, the frame that stalls.
 
 ``--light-moving`` animates the light from the first frame (the L key), so the shadow map is drawn every frame;
-``--camera-moving`` walks the scene's camera path from the first frame (the P key).
+``--camera-moving`` walks the scene's camera path from the first frame (the P key); ``--light-stops-at N`` stops the
+light at frame N (the summary then gives the slowest of the frames drawn with it at rest).
 
 The timer arms of docs/speed.md's table ran before the G-buffer's flushes existed (both sides flushed at the end).
 Each run writes the viewer's ``--stats`` JSON as DIR/SCENE_ARM_ROUND.json; a summary line per run and per arm is
@@ -35,7 +38,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-ARMS = ("blocking", "deferred", "off", "noflush", "offflush", "nofootprint")
+ARMS = ("blocking", "deferred", "off", "noflush", "offflush", "nofootprint", "wholerest")
 
 CHILD = """
 import sys
@@ -58,20 +61,23 @@ if arm == "offflush":
     timing.StageTimer.stage = stage
 script = {"blocking": [(0, lambda v: setattr(v.timer, "deferred", False))],
           "noflush": [(0, lambda v: setattr(v.renderer, "flush_every", 0))],
-          "nofootprint": [(0, lambda v: setattr(v.renderer, "shadow_footprint", False))]}.get(arm, [])
+          "nofootprint": [(0, lambda v: setattr(v.renderer, "shadow_footprint", False))],
+          "wholerest": [(0, lambda v: setattr(v.renderer, "rest_in_bands", False))]}.get(arm, [])
 if sys.argv[6] == "1":  # the sun animated (the L key): its shadow map is drawn every frame
     script.append((0, lambda v: setattr(v.state, "animate_light", True)))
 if sys.argv[7] == "1":  # the camera walks the scene's path (the P key)
     script.append((0, lambda v: v.state.toggle_path()))
+if int(sys.argv[8]) > 0:  # the light stops there
+    script.append((int(sys.argv[8]), lambda v: setattr(v.state, "animate_light", False)))
 run_viewer(scene, frames=frames, settings=settings, stats=out, script=script)
 """
 
 
 def run_arm(arm: str, scene: str, frames: int, size: str, out: Path, light_moving: bool = False,
-            camera_moving: bool = False) -> dict:
+            camera_moving: bool = False, light_stops_at: int = 0) -> dict:
     """One viewer run in its own process; its stats JSON."""
     subprocess.run([sys.executable, "-c", CHILD, arm, scene, str(frames), size, str(out), str(int(light_moving)),
-                    str(int(camera_moving))], check=True, stdout=subprocess.DEVNULL)
+                    str(int(camera_moving)), str(light_stops_at)], check=True, stdout=subprocess.DEVNULL)
     return json.loads(out.read_text())
 
 
@@ -84,6 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", default="768x768")
     ap.add_argument("--light-moving", action="store_true", help="the light animated: shadows drawn every frame")
     ap.add_argument("--camera-moving", action="store_true", help="the camera walking the scene's path")
+    ap.add_argument("--light-stops-at", type=int, default=0, help="stop the light at this frame (0: never)")
     ap.add_argument("--out-dir", type=Path, required=True)
     a = ap.parse_args(argv)
     a.out_dir.mkdir(parents=True, exist_ok=True)
@@ -94,10 +101,14 @@ def main(argv: list[str] | None = None) -> int:
     for r in range(1, a.rounds + 1):
         for arm in arms:
             d = run_arm(arm, a.scene, a.frames, a.size, a.out_dir / f"{a.scene}_{arm}_{r}.json", a.light_moving,
-                        a.camera_moving)
+                        a.camera_moving, a.light_stops_at)
             fps[arm].append(d["fps"])
+            # frame_ms leaves out the first frame: [N] is frame N + 1, the first the light is still in (the action
+            # at frame N runs after that frame's light step)
+            stop = (f", slowest frame at rest {max(d['frame_ms'][a.light_stops_at:]):.1f} ms"
+                    if a.light_stops_at > 0 else "")
             print(f"round {r} {arm}: {d['fps']:.2f} fps ({d['at_final_scale']['fps']:.2f} at the final scale "
-                  f"{d['render_scales']['median']}), timing: {d['timing']}", flush=True)
+                  f"{d['render_scales']['median']}), timing: {d['timing']}{stop}", flush=True)
     for arm, v in fps.items():
         print(f"{arm}: mean {statistics.mean(v):.2f} fps, " + ", ".join(f"{x:.2f}" for x in v))
     return 0
