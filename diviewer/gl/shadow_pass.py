@@ -143,7 +143,8 @@ class ShadowPass:
 
     def _next_band(self, frame, light, moving: dict) -> dict:
         """One band more of a resting sun's full map; the full map once its last band is drawn, until then the
-        moving one (drawn again for this view if it holds only what shaded another)."""
+        moving one (drawn again for this view if it holds only what shaded another, whole once the renderer's
+        ``shadow_footprint`` is off)."""
         r, full = self.renderer, self.renderer.settings.shadow_size
         bands = max(math.ceil(full / moving["size"]) ** 2, 1)
         done = self._bands.get(light.name, 0)
@@ -153,8 +154,10 @@ class ShadowPass:
             r.shadow_renders += 1
             return drawn
         self._bands[light.name] = done + 1
-        if moving["footprint"] and not np.array_equal(moving["clip"], frame.proj @ frame.view):
-            moving = self._draw(frame, light, moving["size"], True)
+        # a map of what shaded another view, or one the renderer no longer wants cut to the view (VXGI reads it over
+        # its whole grid): the moving map again, as the renderer wants it now
+        if moving["footprint"] and not (r.shadow_footprint and np.array_equal(moving["clip"], frame.proj @ frame.view)):
+            moving = self._draw(frame, light, moving["size"], r.shadow_footprint)
             r.shadow_renders += 1
         return moving
 

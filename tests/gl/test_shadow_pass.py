@@ -82,6 +82,31 @@ def test_a_resting_sun_shows_the_moving_map_until_its_last_band_then_the_map_dra
             x.release()
 
 
+def test_a_moving_map_cut_to_the_view_is_drawn_whole_mid_bands_once_the_footprint_is_turned_off(ctx):
+    """VXGI turns the renderer's ``shadow_footprint`` off when it starts (it reads the map over its whole grid): a
+    resting sun whose bands show a moving map cut to the view gets its moving map drawn whole at the next frame
+    (a map drawn more, which tells VXGI to inject again), and its bands go on to the full map."""
+    scene = _sun_scene()
+    r = Renderer(ctx, scene, RES, RES, RenderSettings(shadow_size=256))
+    r.moving_shadow_size, r.rest_in_bands = 128, True
+    try:
+        turned = scene.default.replace_light("sun", direction=(0.4, -0.4, -1.0))
+        r.frame(scene.default)
+        r.frame(turned)
+        r.frame(turned)  # band 1 of 4
+        assert r.shadow_pass.maps["sun"]["footprint"] and r.shadow_renders == 2
+        r.shadow_footprint = False
+        r.frame(turned)  # band 2
+        assert not r.shadow_pass.maps["sun"]["footprint"] and r.shadow_pass.maps["sun"]["size"] == 128
+        assert r.shadow_renders == 3
+        r.frame(turned)  # band 3: the whole moving map is kept
+        assert r.shadow_renders == 3
+        r.frame(turned)  # band 4: the full map
+        assert r.shadow_pass.maps["sun"]["size"] == 256 and r.shadow_renders == 4
+    finally:
+        r.release()
+
+
 def test_without_a_smaller_moving_map_a_resting_sun_is_drawn_whole_at_once(ctx):
     """Bands need a moving map smaller than the full one to show meanwhile; with none the full map is drawn at the
     first frame the sun rests, as without bands."""
@@ -101,9 +126,10 @@ def test_without_a_smaller_moving_map_a_resting_sun_is_drawn_whole_at_once(ctx):
 
 def test_sponza_bands_cull_their_casters_and_a_walking_camera_sees_the_same_frames(ctx, sponza):
     """Sponza from the gallery, the sun come to rest, the camera walking on: each band draws only the casters over its
-    rows (each fewer triangles than the map drawn whole, the outer ones a fifth, every caster in some band); the moving map, which holds only what
-    shades the view, is drawn again for each new view while the bands go on, so every frame is the one a renderer
-    whose moving map holds everything shows; the last band's frame is the full map's, bit for bit."""
+    rows (each fewer triangles than the map drawn whole, the outer ones under a fifth, every caster in some band); the
+    moving map, which holds only what shades the view, is drawn again for each new view while the bands go on, so
+    every frame is the one a renderer whose moving map holds everything shows; the last band's frame is the full
+    map's, bit for bit."""
     gallery = dataclasses.replace(sponza.default.camera, position=(5.9, 11.8, 4.4), target=(4.8, 11.4, -3.05))
     sun = next(light for light in sponza.default.lights if light.kind == "directional")
     start = dataclasses.replace(sponza.default, camera=gallery)
