@@ -81,8 +81,9 @@ def _model_options(p: argparse.ArgumentParser, d: dict) -> None:
     g.add_argument("--gan-mode", choices=CHOICES["gan_mode"], default=None, help="adversarial objective (default vanilla)")
     g.add_argument("--recon-loss", choices=CHOICES["recon_loss"], default=None, help="reconstruction norm (default l1)")
     g.add_argument("--recon-space", choices=CHOICES["recon_space"], default=None,
-                   help="reconstruction on encoded values (default), linear radiance x exposure, its log, or relative to the "
-                        "prediction's brightness (l2 on linear or relative: unbiased, the mean of a noisy target)")
+                   help="reconstruction on encoded values (default), linear radiance x exposure, its log, relative to the "
+                        "prediction's brightness (l2 on linear or relative: unbiased, the mean of a noisy target), or "
+                        "levels (4x4 block means and the detail around them: l1 near a noisy target's mean)")
     g.add_argument("--ssim-weight", type=float, default=None,
                    help="weight of 1 - SSIM of the tone-mapped displayed frame beside the reconstruction term, both "
                         "times lambda_L1 (default 0: none; meant for a clean truth, docs/training.md)")

@@ -108,7 +108,8 @@ class TrainConfig:
     recon_space: str = "encoded"
     """Where the reconstruction loss is taken: "encoded" (the network's values, the paper),
     "linear" (radiance times the dataset exposure; with l2 the one unbiased choice under
-    Monte-Carlo noise) or "log" (relative errors: dark regions count); see `diviewer.train.losses`."""
+    Monte-Carlo noise), "log" (relative errors: dark regions count), "relative" or "levels" (4x4 block means and
+    the detail around them: L1 sets a block's level near its noisy target's mean); see `diviewer.train.losses`."""
 
     ssim_weight: float = 0.0
     """Weight of the structure term, 1 - SSIM of the tone-mapped displayed frame (`diviewer.train.losses.
@@ -284,7 +285,7 @@ Sponza's 51 m), finer than the pixels of a capture see."""
 
 CHOICES: dict[str, tuple[str, ...]] = {
     "precision": ("auto", "fp32", "bf16", "fp16"), "gan_mode": ("vanilla", "lsgan"), "recon_loss": ("l1", "l2"),
-    "recon_space": ("encoded", "linear", "log", "relative"), "norm_D": ("batch", "instance", "none"),
+    "recon_space": ("encoded", "linear", "log", "relative", "levels"), "norm_D": ("batch", "instance", "none"),
     "upsample": ("transpose", "resize", "shuffle"), "norm": ("batch", "instance", "none"),
     "lr_decay": ("none", "cosine"),
 }

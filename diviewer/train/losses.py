@@ -23,6 +23,12 @@ Monte-Carlo estimate whose noise is heavy-tailed (rare, very bright "firefly" sa
   overshoot costs at most ~1 a pixel however large, and in shade single bright samples dominate its gradient.
   On Sponza (docs/sponza.md, "Where the dark bias comes from") the median, where L1 goes, is 27-53 % below the
   mean in deep shade at 64 spp, yet a relative-L2 model overshot dim frames 7-44x and L1 stayed the better loss.
+- "levels": the frame split into the means of its `LEVEL_POOL` x `LEVEL_POOL` blocks of linear radiance (compared on
+  the encoded scale) and each pixel's departure from its block's mean (compared in linear radiance, weighed by the
+  encoding's slope at the predicted block mean, not differentiated). A block's mean holds LEVEL_POOL^2 times the
+  samples of a pixel, so its noise is near symmetric and its median near its mean: L1 sets the level there, not at a
+  pixel's median. The departures sum to zero over a block, so their term cannot move the level (a shift of the whole
+  block leaves them as they are): it carries the detail at full resolution.
 
 Beside it, an optional **structure term** (`structure_loss`, weight ``ssim_weight`` times lambda_L1): 1 - SSIM of the
 displayed image, GL direct light plus the decoded prediction, tone-mapped as `diviewer eval` scores it, against the
@@ -55,13 +61,17 @@ from diviewer.provenance import check_known_keys
 RECONSTRUCTION_MODES: tuple[str, ...] = ("l1", "l2")
 """Reconstruction norms: mean absolute error (pix2pix, the paper) or mean squared error."""
 
-RECONSTRUCTION_SPACES: tuple[str, ...] = ("encoded", "linear", "log", "relative")
+RECONSTRUCTION_SPACES: tuple[str, ...] = ("encoded", "linear", "log", "relative", "levels")
 """Where the reconstruction loss is taken: on the network's encoded values (the paper's choice, as
 the network sees them), on linear radiance times the dataset's exposure (so ~1 is a typical value), or
 on log(LOG_EPSILON + exposed radiance), where an error counts relative to the pixel's own brightness:
 dark regions (an object lit only by bounced light) weigh as much as bright ones; or "relative": linear errors
 divided by the prediction's own brightness (+ REL_EPSILON), not differentiated, so that with "l2" the loss still
-converges to the mean of a noisy target while weighing dark regions as the log space does."""
+converges to the mean of a noisy target while weighing dark regions as the log space does; or "levels": block means
+and the detail around them (`levels_loss`), where L1 sets each block's level near its noisy target's mean."""
+
+LEVEL_POOL: int = 4
+"""The "levels" space's block side, pixels: a block's mean holds 16 pixels' samples (1,024 at 64 spp)."""
 
 LOG_EPSILON: float = 0.01
 """Offset of the "log" space, in exposed radiance (~1 typical): below it errors count absolutely, so
@@ -132,6 +142,10 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
     if space not in RECONSTRUCTION_SPACES:
         raise ValueError(f"space must be one of {list(RECONSTRUCTION_SPACES)}, got {space!r}")
     fake, real = fake_B.float(), real_B.float()
+    if space == "levels":
+        if encoding is None:
+            raise ValueError(f"space '{space}' needs the encoding to decode radiance")
+        return levels_loss(fake, real, mode, encoding, mask)
     if space in ("linear", "log", "relative"):
         if encoding is None:
             raise ValueError(f"space '{space}' needs the encoding to decode radiance")
@@ -148,6 +162,33 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
     if mode == "l1":
         return nn.functional.l1_loss(fake, real)
     return nn.functional.mse_loss(fake, real)
+
+
+def levels_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str, encoding: Encoding,
+                mask: torch.Tensor | None = None, pool: int = LEVEL_POOL) -> torch.Tensor:
+    """The "levels" reconstruction term (module docstring): the blocks' means on the encoded scale plus each pixel's
+    departure from its block's mean, in linear radiance times the encoding's slope at the predicted mean. Both
+    encoded, (N, C, H, W) with H and W multiples of ``pool``; ``mask`` as in `reconstruction_loss` (a block's mean
+    over its frame pixels, a block without any left out)."""
+    n, _, h, w = fake_B.shape
+    if h % pool or w % pool:
+        raise ValueError(f"the levels loss needs frames whose sides are multiples of {pool}, got {w}x{h}")
+    c = math.log1p(encoding.radiance_max)
+    x, t = exposed_radiance(fake_B.float(), encoding), exposed_radiance(real_B.float(), encoding)
+    m = (torch.ones((n, 1, h, w), dtype=x.dtype, device=x.device) if mask is None
+         else mask.to(x.dtype).expand(n, 1, h, w))
+    share = nn.functional.avg_pool2d(m, pool)
+    level_x, level_t = (nn.functional.avg_pool2d(v * m, pool) / share.clamp_min(1e-6) for v in (x, t))
+    scaled = [torch.sign(v) * torch.log1p(v.abs()) / c for v in (level_x, level_t)]  # the encoding, odd
+    up_x, up_t = (v.repeat_interleave(pool, 2).repeat_interleave(pool, 3) for v in (level_x, level_t))
+    slope = 1.0 / ((1.0 + up_x.detach().abs()) * c)
+    pairs = ((scaled[0], scaled[1], (share > 0).to(x.dtype)), ((x - up_x) * slope, (t - up_t) * slope, m))
+    total = x.new_zeros(())
+    for a, b, weight in pairs:
+        err = (a - b).abs() if mode == "l1" else (a - b).square()
+        weight = weight.expand_as(err)
+        total = total + (err * weight).sum() / weight.sum().clamp(min=1.0)
+    return total
 
 
 SSIM_WINDOW, SSIM_SIGMA, SSIM_C1, SSIM_C2 = 11, 1.5, 0.01 ** 2, 0.03 ** 2
