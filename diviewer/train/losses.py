@@ -25,10 +25,12 @@ Monte-Carlo estimate whose noise is heavy-tailed (rare, very bright "firefly" sa
   mean in deep shade at 64 spp, yet a relative-L2 model overshot dim frames 7-44x and L1 stayed the better loss.
 - "levels": the frame split into the means of its `LEVEL_POOL` x `LEVEL_POOL` blocks of linear radiance (compared on
   the encoded scale) and each pixel's departure from its block's mean (compared in linear radiance, weighed by the
-  encoding's slope at the predicted block mean, not differentiated). A block's mean holds LEVEL_POOL^2 times the
-  samples of a pixel, so its noise is near symmetric and its median near its mean: L1 sets the level there, not at a
-  pixel's median. The departures sum to zero over a block, so their term cannot move the level (a shift of the whole
-  block leaves them as they are): it carries the detail at full resolution.
+  encoding's slope at the target's block mean: one weight for a whole block). A block's mean holds LEVEL_POOL^2
+  times the samples of a pixel, so its noise is near symmetric and its median near its mean: L1 sets the level
+  there, not at a pixel's median. The departures sum to zero over a block and share its weight, so their term
+  cannot move the level (a shift of the whole block leaves them as they are): it carries the detail at full
+  resolution. (Weighed at the predicted mean instead, a network still dark early on saw the sunlit blocks' detail
+  uncompressed, and a K = 8 run at 8,000 steps ended darker than its L1 control: docs/training.md.)
 
 Beside it, an optional **structure term** (`structure_loss`, weight ``ssim_weight`` times lambda_L1): 1 - SSIM of the
 displayed image, GL direct light plus the decoded prediction, tone-mapped as `diviewer eval` scores it, against the
@@ -167,7 +169,7 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
 def levels_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str, encoding: Encoding,
                 mask: torch.Tensor | None = None, pool: int = LEVEL_POOL) -> torch.Tensor:
     """The "levels" reconstruction term (module docstring): the blocks' means on the encoded scale plus each pixel's
-    departure from its block's mean, in linear radiance times the encoding's slope at the predicted mean. Both
+    departure from its block's mean, in linear radiance times the encoding's slope at the target's mean. Both
     encoded, (N, C, H, W) with H and W multiples of ``pool``; ``mask`` as in `reconstruction_loss` (a block's mean
     over its frame pixels, a block without any left out)."""
     n, _, h, w = fake_B.shape
@@ -181,7 +183,7 @@ def levels_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str, encoding:
     level_x, level_t = (nn.functional.avg_pool2d(v * m, pool) / share.clamp_min(1e-6) for v in (x, t))
     scaled = [torch.sign(v) * torch.log1p(v.abs()) / c for v in (level_x, level_t)]  # the encoding, odd
     up_x, up_t = (v.repeat_interleave(pool, 2).repeat_interleave(pool, 3) for v in (level_x, level_t))
-    slope = 1.0 / ((1.0 + up_x.detach().abs()) * c)
+    slope = 1.0 / ((1.0 + up_t.abs()) * c)
     pairs = ((scaled[0], scaled[1], (share > 0).to(x.dtype)), ((x - up_x) * slope, (t - up_t) * slope, m))
     total = x.new_zeros(())
     for a, b, weight in pairs:
