@@ -80,7 +80,8 @@ class Renderer:
         cache's witness."""
         self.moving_shadow_size: int | None = None
         """A sun's map size while it, or an object, moves (the viewer's: an 8192 map takes ~325 ms here), the full one
-        again at the first frame all rests; None: always the full size (captures, evaluation)."""
+        again once all rests (at the first frame, or over the next ones with ``rest_in_bands``); None: always the full
+        size (captures, evaluation)."""
         self.shadow_footprint = True
         """A map drawn at ``moving_shadow_size`` holds only what can shade the camera's view (`shadow_casters`; the
         frame is the same); VXGI, which reads the map over its whole grid, turns it off."""
@@ -214,7 +215,7 @@ class Renderer:
         return self._draw_cache[2]
 
     def draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None,
-                      clip: np.ndarray, stage: str, cull_back: bool = False, sweep: tuple | None = None) -> None:
+                     clip: np.ndarray, stage: str, cull_back: bool = False, sweep: tuple | None = None) -> None:
         """Draw the frame's objects inside the frustum of ``clip`` (world to clip space) with shaders/<file>;
         alpha-masked materials use its ALPHA_TEST variant; ``cull_back``: single-sided materials without their back
         faces; ``sweep``: `shadow_casters`' arguments after the boxes, to draw only those. Counts draws and triangles

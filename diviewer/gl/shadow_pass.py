@@ -108,11 +108,6 @@ class ShadowPass:
         objects = tuple((o, id(self.renderer.gpu.meshes.get(o.mesh))) for o in config.objects)
         return (light, objects, tuple(np.asarray(bounds, float).ravel()), self.renderer.settings)
 
-    def invalidate(self) -> None:
-        """Forget the cached maps: the next frame draws them all."""
-        self._keys.clear()
-        self._bands.clear()
-
     def run(self, frame) -> None:
         """Each light's shadow map (none with shadows off), reused from an earlier frame when nothing it depends on
         moved; ``frame`` is the renderer's FrameView."""
