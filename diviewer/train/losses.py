@@ -29,8 +29,9 @@ Monte-Carlo estimate whose noise is heavy-tailed (rare, very bright "firefly" sa
   times the samples of a pixel, so its noise is near symmetric and its median near its mean: L1 sets the level
   there, not at a pixel's median. The departures sum to zero over a block and share its weight, so their term
   cannot move the level (a shift of the whole block leaves them as they are): it carries the detail at full
-  resolution. (Weighed at the predicted mean instead, a network still dark early on saw the sunlit blocks' detail
-  uncompressed, and a K = 8 run at 8,000 steps ended darker than its L1 control: docs/training.md.)
+  resolution. On Sponza's 64-spp capture, K = 8 at 8,000 steps, it did not beat L1 (docs/training.md), nor did a
+  first version that weighed the departures at the predicted mean (a dark early network then sees the sunlit
+  blocks' detail uncompressed).
 
 Beside it, an optional **structure term** (`structure_loss`, weight ``ssim_weight`` times lambda_L1): 1 - SSIM of the
 displayed image, GL direct light plus the decoded prediction, tone-mapped as `diviewer eval` scores it, against the
