@@ -57,6 +57,9 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--back-faces", action="store_true",
                    help="draw the back faces of single-sided materials too, as the path tracer sees them (slower; "
                         "by default the G-buffer culls them)")
+    p.add_argument("--shadow-bands", action=argparse.BooleanOptionalAction, default=True,
+                   help="once a moving sun rests, draw its full shadow map in bands over the next frames, the moving "
+                        "map shown meanwhile (default; no stalled frame), or whole at the first frame it rests")
     p.add_argument("--stats", type=Path, default=None,
                    help="with --frames: write per-stage times, fps and the resolutions as JSON here")
     p.set_defaults(func=run_view)
@@ -100,6 +103,7 @@ def run_view(args: argparse.Namespace) -> int:
                               render_scale=args.render_scale, scale_floor=args.scale_floor,
                               scale_ceiling=args.scale_ceiling,
                               auto_exposure=args.auto_exposure, back_faces=args.back_faces,
+                              rest_in_bands=args.shadow_bands,
                               gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
     script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else []
     if args.camera_moving:

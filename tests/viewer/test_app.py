@@ -338,7 +338,8 @@ def test_view_command_line():
     assert args.func is run_view and args.scene == "cornell" and args.model == "none" and args.no_vsync
     assert args.frames == 3 and args.screenshot == Path("x.png") and args.provider == "cpu"
     args = ap.parse_args(["view"])
-    assert args.model == "auto" and args.frames is None and not args.no_vsync
+    assert args.model == "auto" and args.frames is None and not args.no_vsync and args.shadow_bands
+    assert not ap.parse_args(["view", "--no-shadow-bands"]).shadow_bands  # ViewerSettings.rest_in_bands
     with pytest.raises(SystemExit):
         ap.parse_args(["view", "--provider", "opengl"])
 
