@@ -141,7 +141,7 @@ class ShadowPass:
         moving one (drawn again for this view if it holds only what shaded another, whole once the renderer's
         ``shadow_footprint`` is off)."""
         r, full = self.renderer, self.renderer.settings.shadow_size
-        bands = max(math.ceil(full / moving["size"]) ** 2, 1)
+        bands = math.ceil(full / moving["size"]) ** 2  # the moving map is smaller: 4 at least
         done = self._bands.get(light.name, 0)
         drawn = self._draw(frame, light, full, False, band=band_rows(full, bands, done))
         if done + 1 == bands:

@@ -60,6 +60,7 @@ from torch import nn
 from diviewer.encoding import Encoding
 from diviewer.errors import DiviewerError
 from diviewer.provenance import check_known_keys
+from diviewer.train.encoding_torch import encode_radiance
 
 RECONSTRUCTION_MODES: tuple[str, ...] = ("l1", "l2")
 """Reconstruction norms: mean absolute error (pix2pix, the paper) or mean squared error."""
@@ -182,7 +183,7 @@ def levels_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str, encoding:
          else mask.to(x.dtype).expand(n, 1, h, w))
     share = nn.functional.avg_pool2d(m, pool)
     level_x, level_t = (nn.functional.avg_pool2d(v * m, pool) / share.clamp_min(1e-6) for v in (x, t))
-    scaled = [torch.sign(v) * torch.log1p(v.abs()) / c for v in (level_x, level_t)]  # the encoding, odd
+    scaled = [encode_radiance(v / encoding.exposure, encoding) for v in (level_x, level_t)]
     up_x, up_t = (v.repeat_interleave(pool, 2).repeat_interleave(pool, 3) for v in (level_x, level_t))
     slope = 1.0 / ((1.0 + up_t.abs()) * c)
     pairs = ((scaled[0], scaled[1], (share > 0).to(x.dtype)), ((x - up_x) * slope, (t - up_t) * slope, m))
