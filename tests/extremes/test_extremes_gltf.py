@@ -5,7 +5,6 @@ load (and render), each within a time limit."""
 from __future__ import annotations
 
 import contextlib
-import copy
 import itertools
 import json
 import signal
@@ -22,6 +21,7 @@ from diviewer.scene import load_scene
 from diviewer.scene.colour import srgb_to_linear
 from diviewer.scene.textures import MAX_TEXTURE_SIDE, load_texture
 from gltf_doc import gltf_document, write_scene
+from mutation import mutate
 
 LIMIT_S = 30
 """Hard limit on one load (SIGALRM): a hang (a node cycle, a runaway allocation) fails the test instead of
@@ -234,32 +234,11 @@ values = st.recursive(leaves, lambda kids: st.lists(kids, max_size=5) | st.dicti
                       max_leaves=12)
 
 
-def _paths(obj, prefix=()):
-    yield prefix
-    items = obj.items() if isinstance(obj, dict) else enumerate(obj) if isinstance(obj, list) else ()
-    for k, v in items:
-        yield from _paths(v, prefix + (k,))
-
-
 @st.composite
 def mutated_documents(draw):
     """The valid document with 1-3 edits: a value replaced, a key or item removed, or an item added."""
     doc, _ = gltf_document()
-    for _ in range(draw(st.integers(1, 3))):
-        paths = [p for p in _paths(doc) if p]
-        path = draw(st.sampled_from(paths))
-        parent = doc
-        for k in path[:-1]:
-            parent = parent[k]
-        op = draw(st.sampled_from(["replace", "replace", "delete", "add"]))
-        if op == "replace":
-            parent[path[-1]] = draw(values)
-        elif op == "delete":
-            del parent[path[-1]]
-        elif isinstance(parent, list):
-            parent.append(copy.deepcopy(parent[path[-1]]) if draw(st.booleans()) else draw(values))
-        else:
-            parent[draw(st.sampled_from(KEYS))] = draw(values)
+    mutate(draw, doc, draw(st.integers(1, 3)), values, st.sampled_from(KEYS))
     return doc
 
 

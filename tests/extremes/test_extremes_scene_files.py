@@ -4,7 +4,6 @@ error naming file and field, or in a scene whose every split samples finite conf
 
 from __future__ import annotations
 
-import copy
 from datetime import timedelta
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from diviewer.errors import DiviewerError
 from diviewer.scene import sample_config
 from diviewer.scene.loader import parse_scene
 from diviewer.scene.scene_ranges import train_length
+from mutation import mutate
 from test_extremes_gltf import LIMIT_S, time_limit
 
 PATH = Path("/scenes/fuzz.toml")
@@ -116,30 +116,10 @@ toml_values = st.recursive(toml_leaves, lambda kids: st.lists(kids, max_size=4)
                            | st.dictionaries(st.sampled_from(SCENE_KEYS), kids, max_size=3), max_leaves=10)
 
 
-def _paths(obj, prefix=()):
-    yield prefix
-    items = obj.items() if isinstance(obj, dict) else enumerate(obj) if isinstance(obj, list) else ()
-    for k, v in items:
-        yield from _paths(v, prefix + (k,))
-
-
 @st.composite
 def mutated_scenes(draw):
     data = valid_scene()
-    for _ in range(draw(st.integers(1, 3))):
-        path = draw(st.sampled_from([p for p in _paths(data) if p]))
-        parent = data
-        for k in path[:-1]:
-            parent = parent[k]
-        op = draw(st.sampled_from(["replace", "replace", "delete", "add"]))
-        if op == "replace":
-            parent[path[-1]] = draw(toml_values)
-        elif op == "delete":
-            del parent[path[-1]]
-        elif isinstance(parent, list):
-            parent.append(copy.deepcopy(parent[path[-1]]) if draw(st.booleans()) else draw(toml_values))
-        else:
-            parent[draw(st.sampled_from(SCENE_KEYS))] = draw(toml_values)
+    mutate(draw, data, draw(st.integers(1, 3)), toml_values, st.sampled_from(SCENE_KEYS))
     return data
 
 
