@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import copy
 
+from hypothesis import strategies as st
+
 
 def paths(obj, prefix=()):
     """Every path (a tuple of keys and indices) into a nested dict/list document, the root's () first."""
@@ -17,8 +19,6 @@ def paths(obj, prefix=()):
 def mutate(draw, doc, edits, values, keys) -> None:
     """Apply ``edits`` random edits to ``doc`` in place (``draw``: hypothesis's); a replaced or added value is
     drawn from the strategy ``values``, a new key of a table from the strategy ``keys``."""
-    from hypothesis import strategies as st
-
     for _ in range(edits):
         path = draw(st.sampled_from([p for p in paths(doc) if p]))
         parent = doc
