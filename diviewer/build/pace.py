@@ -177,14 +177,47 @@ def _pace(seconds: list[float], left: int, what: str = "median, ") -> tuple[floa
 
 def refine_pace(plan: Plan) -> Pace | None:
     """As `capture_pace`, for the refinement of the capture (each refined frame's sidecar records its seconds);
-    None without a ``refine`` stage, before its first frame or once it is complete."""
+    before its first frame, the capture's own path tracing here scaled to the refinement's samples
+    (`_capture_sample_seconds`); None without a ``refine`` stage, without either, or once it is complete."""
     stage = next((s for s in plan.stages if s.name == "refine"), None)
     if stage is None:
         return None
     count, seconds = _frame_seconds(plan.data, lambda info: info["refined"]["seconds"])
     left = plan.capture.frames - count
-    if not seconds or left <= 0:
+    assumed = f"the plan assumes {stage.seconds / plan.capture.frames:.1f} s"
+    if left <= 0:
         return None
+    if not seconds:
+        sample = _capture_sample_seconds(plan)
+        if sample is None:
+            return None
+        per = sample * (plan.refine_spp - plan.capture.spp)
+        return Pace("refine", f"refine not begun: ~{per:.1f} s a frame here, the capture's path tracing on this "
+                    f"machine (median of its last {PACE_FRAMES} frames) per sample, times the "
+                    f"{plan.refine_spp - plan.capture.spp} samples a frame to add; the {left} frames take "
+                    f"~{hms(left * per)} at that pace ({assumed})", left * per)
     per, words = _pace(seconds, left)
-    return Pace("refine", f"refine so far: {count} of {plan.capture.frames} frames in {plan.data}, {words} (the plan "
-                f"assumes {stage.seconds / plan.capture.frames:.1f} s)", left * per)
+    return Pace("refine", f"refine so far: {count} of {plan.capture.frames} frames in {plan.data}, {words} "
+                f"({assumed})", left * per)
+
+
+def _capture_sample_seconds(plan: Plan) -> float | None:
+    """This machine's path-tracing seconds per sample a frame from the capture's frames (the median of the last
+    ``PACE_FRAMES``): a frame's ``gt`` seconds over the capture's spp, or, in a capture that is itself a
+    refinement (its sidecars' ``refined``), the refinement's seconds over its samples. Frames path traced with
+    another kind of Mitsuba variant (a CUDA device's against this CPU) do not tell this machine's pace; None where
+    none do."""
+    import statistics
+
+    cuda = plan.machine.kind == "cuda"
+
+    def per_sample(info: dict) -> float:  # a ValueError or KeyError leaves the frame out (`_frame_seconds`)
+        r = info.get("refined")
+        variant, seconds, spp = ((r["variant"], r["seconds"], r["extra_spp"]) if r else
+                                 (info["variant"], info["seconds"]["gt"], plan.capture.spp))
+        if variant.startswith("cuda") != cuda:
+            raise ValueError(f"path traced with {variant}")
+        return float(seconds) / int(spp)
+
+    _, seconds = _frame_seconds(plan.capture_dir, per_sample)
+    return statistics.median(seconds[-PACE_FRAMES:]) if seconds else None

@@ -612,6 +612,39 @@ def test_a_refinement_under_way_tells_this_machines_pace(tmp_path):
     assert refine_pace(make_plan("cornell", load_recipe(tmp_path / "t.toml"), tmp_path / "w", machine=CPU)) is None
 
 
+def test_a_refinement_not_begun_is_paced_from_the_captures_path_tracing_here(tmp_path):
+    """Before its first frame the refinement's pace is the capture's path tracing on this machine (each sidecar's
+    ``gt`` seconds over the capture's spp, or a refined capture's ``refined`` seconds over its samples; median), times
+    the samples a frame it adds; frames traced by another kind of variant (a CUDA device's on a CPU) are left out."""
+    from diviewer.build.pace import refine_pace
+
+    (tmp_path / "r.toml").write_text(_refining(TINY_RECIPE, 2, 8))
+    plan = make_plan("cornell", load_recipe(tmp_path / "r.toml"), tmp_path / "w", machine=CPU)
+    frames, n = plan.capture_dir / "frames", plan.capture.frames
+    frames.mkdir(parents=True)
+    (plan.capture_dir / "manifest.json").write_text("{}")
+    assert refine_pace(plan) is None  # no frame captured: nothing to pace from
+    for i, (variant, gt) in enumerate([("llvm_ad_rgb", 2.0), ("llvm_ad_rgb", 4.0), ("llvm_ad_rgb", 100.0),
+                                       ("cuda_ad_rgb", 0.5)]):
+        (frames / f"{i:06d}.json").write_text(json.dumps({"index": i, "variant": variant,
+                                                          "seconds": {"gl": 0.5, "gt": gt}}))
+    pace = refine_pace(plan)  # 4.0 s for 2 spp: 2 s a sample, 6 samples a frame to add
+    assert pace.stage == "refine" and pace.left == pytest.approx(n * 12.0)
+    assert pace.line.startswith("refine not begun: ~12.0 s a frame here") and f"the {n} frames take" in pace.line
+    cuda = make_plan("cornell", load_recipe(tmp_path / "r.toml"), tmp_path / "w", machine=CUDA)
+    assert refine_pace(cuda).left == pytest.approx(n * 1.5)  # its own variant's frame alone
+    for i in range(4):  # a capture that is itself a refinement: its refinement's seconds over its samples
+        (frames / f"{i:06d}.json").write_text(json.dumps({"index": i, "variant": "llvm_ad_rgb",
+                                                          "seconds": {"gl": 0.5, "gt": 1.0},
+                                                          "refined": {"variant": "llvm_ad_rgb", "seconds": 9.0,
+                                                                      "extra_spp": 3}}))
+    assert refine_pace(plan).left == pytest.approx(n * 18.0)
+    (plan.data / "frames").mkdir(parents=True)  # the first refined frame: its own pace from then on
+    (plan.data / "manifest.json").write_text("{}")
+    (plan.data / "frames" / "000000.json").write_text(json.dumps({"index": 0, "refined": {"seconds": 5.0}}))
+    assert refine_pace(plan).line.startswith(f"refine so far: 1 of {n} frames")
+
+
 @pytest.mark.slow
 def test_build_a_tiny_scene_that_refines_its_capture(gl_context, tmp_path, capsys):
     """The pipeline with a refinement: the capture at 2 spp (made before, linked in: not rendered again), refined
