@@ -212,7 +212,7 @@ def _capture_sample_seconds(plan: Plan) -> float | None:
     cuda = plan.machine.kind == "cuda"
 
     def per_sample(info: dict) -> float:  # a ValueError or KeyError leaves the frame out (`_frame_seconds`)
-        r = info.get("refined")
+        r = info["refined"] if "refined" in info else None  # (a sidecar that is no object: a TypeError below)
         variant, seconds, spp = ((r["variant"], r["seconds"], r["extra_spp"]) if r else
                                  (info["variant"], info["seconds"]["gt"], plan.capture.spp))
         if variant.startswith("cuda") != cuda:
