@@ -10,7 +10,7 @@
 #      frame, taken where present, as SPONZA_EVALSET names another) and
 #      the shipped model's scores on it, with its margin over the 64-spp truth;
 #   3. K = 8 on a 256-spp truth (assets/recipes/sponza_walk256.toml: sponza.toml with `[capture] refine_from = 64`),
-#      in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, ~11 h here), then
+#      in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, ~11 h), then
 #      the training, scored on the full evaluation set and shipped to runs/sponza256/ship. K = 8 alone (~1 h here):
 #      a first model on a cleaner truth, and whether a cleaner truth moves the SSIM, before the 512-spp refinement;
 #      the wider K wait for the cleanest truth (K = 16 here would cost ~1.7 h the 512 ladder repeats). Its margin
