@@ -191,10 +191,11 @@ def refine_pace(plan: Plan) -> Pace | None:
         sample = _capture_sample_seconds(plan)
         if sample is None:
             return None
-        per = sample * (plan.refine_spp - plan.capture.spp)
+        extra = plan.refine_spp - plan.capture.spp
+        per = sample * extra
         return Pace("refine", f"refine not begun: ~{per:.1f} s a frame here, the capture's path tracing on this "
-                    f"machine (median of its last {PACE_FRAMES} frames) per sample, times the "
-                    f"{plan.refine_spp - plan.capture.spp} samples a frame to add; the {left} frames take "
+                    f"machine (median of its last {PACE_FRAMES} frames) per sample, times the {extra} samples a "
+                    f"frame to add; the {left} frames take "
                     f"~{hms(left * per)} at that pace ({assumed})", left * per)
     per, words = _pace(seconds, left)
     return Pace("refine", f"refine so far: {count} of {plan.capture.frames} frames in {plan.data}, {words} "

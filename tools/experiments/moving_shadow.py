@@ -25,14 +25,9 @@ from diviewer.data.dataset import read_manifest
 from diviewer.evalframes import default_evalset
 from diviewer.gl.context import headless_context
 from diviewer.gl.renderer import Renderer, RenderSettings
-from diviewer.metrics import tonemap
+from diviewer.metrics import psnr, tonemap
 from diviewer.scene import load_scene
 from diviewer.scene.loader import config_from_dict
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a - b) ** 2))
-    return math.inf if mse == 0.0 else 10.0 * math.log10(1.0 / mse)
 
 
 def measure(scene_name: str, sizes: list[int], shadow_sizes: list[int]) -> dict:
