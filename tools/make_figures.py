@@ -3,8 +3,10 @@
 Usage: python tools/make_figures.py [--scene NAME ...] [--spp 1024]
 Writes assets/figures/cornell_buffers.png (depth, normals, albedo, direct light) and, for each scene
 (default cornell) whose model assets/models/NAME.onnx exists, assets/figures/NAME_neural.png: for two test
-configurations (cornell: objects the network never saw; sponza: unseen stretches of the camera path)
-GL direct light | neural GI | Mitsuba path tracing at --spp.
+configurations (cornell: objects the network never saw; sponza: unseen stretches of the camera path, the most and
+the least directly lit of the first 40) GL direct light | neural GI | Mitsuba path tracing at --spp, each row at
+one exposure: the scene file's, or for a scene that asks for auto exposure the viewer's meter on the path-traced
+frame (`diviewer.exposure.still_ev`, as `diviewer render` meters its PNGs), plus --stops.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ def row(tiles: list[np.ndarray]) -> np.ndarray:
 
 
 def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int, ...] | None, stops: float) -> None:
+    from diviewer.exposure import still_ev
     from diviewer.reference.mitsuba import load_frame
     from diviewer.render import model_pass
     from diviewer.runtime import NeuralGI
@@ -46,9 +49,10 @@ def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int,
     w, h = model.resolution
     renderer = Renderer(ctx, scene, w, h)
     rows = []
-    if seeds is None:  # the two of the first 40 test configurations with the most direct light (GL only: cheap)
+    if seeds is None:  # the most and the least directly lit of the first 40 test configurations (GL only: cheap)
         lit = {s: float(renderer.frame(sample_config(scene, s, "test"))["direct"].mean()) for s in range(40)}
-        seeds = sorted(sorted(lit, key=lit.get)[-2:])
+        seeds = (max(lit, key=lit.get), min(lit, key=lit.get))
+    evs = []
     for seed in seeds:
         config = sample_config(scene, seed, "test")
         frame = renderer.frame(config)
@@ -59,12 +63,14 @@ def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int,
         if area is not None:
             area.release()
         pt = load_frame(scene, config, w, h).full(spp=spp, seed=0)
-        images = [frame["direct"], out, pt]
-        rows.append(row([np.kron(comp.to_ldr(im, scene.exposure + stops), np.ones((2, 2, 1), np.uint8))
-                         for im in images]))
+        ev = still_ev(scene.exposure, scene.auto_exposure, pt)[0] + stops
+        evs.append(ev)
+        rows.append(row([np.kron(comp.to_ldr(im, ev), np.ones((2, 2, 1), np.uint8))
+                         for im in (frame["direct"], out, pt)]))
     gap = np.full((GAP, rows[0].shape[1], 3), 255, np.uint8)
     imageio.write_png(OUT / f"{name}_neural.png", np.concatenate([rows[0], gap, rows[1]], axis=0))
-    print(f"wrote {OUT / f'{name}_neural.png'} (test seeds {list(seeds)}, exposure {scene.exposure + stops:+g} stops)")
+    print(f"wrote {OUT / f'{name}_neural.png'} ({model_path.name}, {w}x{h}, test seeds {list(seeds)}, exposures "
+          f"{', '.join(f'{ev:+.2f}' for ev in evs)} stops)")
     renderer.release()
 
 
@@ -73,7 +79,7 @@ def main() -> None:
     ap.add_argument("--scene", action="append", default=None, help="scene(s) of the neural figure (default cornell)")
     ap.add_argument("--spp", type=int, default=1024, help="path-traced samples per pixel of the right column")
     ap.add_argument("--seeds", default=None, help="test-split seeds of the two rows (default: cornell 3,11; "
-                    "other scenes: the two most directly lit of the first 40)")
+                    "other scenes: the most and the least directly lit of the first 40)")
     ap.add_argument("--stops", type=float, default=0.0, help="display exposure added to the scene's (stops)")
     a = ap.parse_args()
     scene = load_scene("cornell")
