@@ -1,12 +1,13 @@
 """Rebuild the figures of the README and docs/ from the shipped scenes and models.
 
-Usage: python tools/make_figures.py [--scene NAME ...] [--spp 1024]
+Usage: python tools/make_figures.py [--scene NAME ...] [--spp 1024] [--model M.onnx --out-dir DIR]
 Writes assets/figures/cornell_buffers.png (depth, normals, albedo, direct light) and, for each scene
 (default cornell) whose model assets/models/NAME.onnx exists, assets/figures/NAME_neural.png: for two test
 configurations (cornell: objects the network never saw; sponza: unseen stretches of the camera path, the most and
 the least directly lit of the first 40) GL direct light | neural GI | Mitsuba path tracing at --spp, each row at
 one exposure: the scene file's, or for a scene that asks for auto exposure the viewer's meter on the path-traced
-frame (`diviewer.exposure.still_ev`, as `diviewer render` meters its PNGs), plus --stops.
+frame (`diviewer.exposure.still_ev`, as `diviewer render` meters its PNGs), plus --stops. ``--model`` runs another
+model of the one scene named (a candidate before it ships) and ``--out-dir`` writes the figures elsewhere.
 """
 
 from __future__ import annotations
@@ -34,13 +35,14 @@ def row(tiles: list[np.ndarray]) -> np.ndarray:
     return np.concatenate([x for t in tiles for x in (t, gap)][:-1], axis=1)
 
 
-def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int, ...] | None, stops: float) -> None:
+def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int, ...] | None, stops: float,
+                  model_path: Path | None = None, out_dir: Path = OUT) -> None:
     from diviewer.exposure import still_ev
     from diviewer.reference.mitsuba import load_frame
     from diviewer.render import model_pass
     from diviewer.runtime import NeuralGI
 
-    model_path = models_dir() / f"{name}.onnx"
+    model_path = model_path or models_dir() / f"{name}.onnx"
     if not model_path.is_file():
         print(f"no {model_path}: no {name}_neural.png")
         return
@@ -68,8 +70,8 @@ def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int,
         rows.append(row([np.kron(comp.to_ldr(im, ev), np.ones((2, 2, 1), np.uint8))
                          for im in (frame["direct"], out, pt)]))
     gap = np.full((GAP, rows[0].shape[1], 3), 255, np.uint8)
-    imageio.write_png(OUT / f"{name}_neural.png", np.concatenate([rows[0], gap, rows[1]], axis=0))
-    print(f"wrote {OUT / f'{name}_neural.png'} ({model_path.name}, {w}x{h}, test seeds {list(seeds)}, exposures "
+    imageio.write_png(out_dir / f"{name}_neural.png", np.concatenate([rows[0], gap, rows[1]], axis=0))
+    print(f"wrote {out_dir / f'{name}_neural.png'} ({model_path.name}, {w}x{h}, test seeds {list(seeds)}, exposures "
           f"{', '.join(f'{ev:+.2f}' for ev in evs)} stops)")
     renderer.release()
 
@@ -81,7 +83,12 @@ def main() -> None:
     ap.add_argument("--seeds", default=None, help="test-split seeds of the two rows (default: cornell 3,11; "
                     "other scenes: the most and the least directly lit of the first 40)")
     ap.add_argument("--stops", type=float, default=0.0, help="display exposure added to the scene's (stops)")
+    ap.add_argument("--model", type=Path, default=None, help="the model of the one --scene (default: its shipped one)")
+    ap.add_argument("--out-dir", type=Path, default=OUT, help=f"where the figures go (default {OUT})")
     a = ap.parse_args()
+    if a.model is not None and len(a.scene or ["cornell"]) != 1:
+        ap.error("--model needs exactly one --scene")
+    a.out_dir.mkdir(parents=True, exist_ok=True)
     scene = load_scene("cornell")
     with headless_context() as ctx:
         renderer = Renderer(ctx, scene, 256, 256)
@@ -89,12 +96,12 @@ def main() -> None:
         f = renderer.frame()
         tiles = [imageio.depth_preview(f["depth"])[..., None].repeat(3, -1), imageio.normal_preview(f["normal"]),
                  srgb8(f["albedo"]), comp.to_ldr(f["direct"], scene.exposure)]
-        imageio.write_png(OUT / "cornell_buffers.png", row(tiles))
-        print(f"wrote {OUT / 'cornell_buffers.png'}")
+        imageio.write_png(a.out_dir / "cornell_buffers.png", row(tiles))
+        print(f"wrote {a.out_dir / 'cornell_buffers.png'}")
         renderer.release()
         for name in a.scene or ["cornell"]:
             seeds = tuple(int(x) for x in a.seeds.split(",")) if a.seeds else ((3, 11) if name == "cornell" else None)
-            neural_figure(ctx, comp, name, a.spp, seeds, a.stops)
+            neural_figure(ctx, comp, name, a.spp, seeds, a.stops, a.model, a.out_dir)
         comp.release()
 
 
