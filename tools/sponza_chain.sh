@@ -78,6 +78,16 @@ margins() {  # each K of a build, from the build's own scores on the full set
   for k in "$@"; do margin "$work/evalset_eval.json" "sponza_k$k" "$work/truth_margin_k$k.json"; done
 }
 margins "$REFINED" 8
+# The new K = 8 beside the shipped model as the viewer shows them (each frame at its metered exposure:
+# tools/experiments/metered_scores.py, docs/accuracy.md) and in the README's figure (tools/make_figures.py, the same
+# two configurations): seconds, and minutes of Mitsuba; a failure is reported and the chain goes on.
+if [ ! -f "$REFINED/metered_k8.json" ] && [ -f "$REFINED/models/sponza_k8.onnx" ]; then
+  stage "the 256-spp K = 8 at the viewer's exposure, and its figure"
+  python tools/experiments/metered_scores.py --model assets/models/sponza.onnx --model "$REFINED/models/sponza_k8.onnx" \
+    --evalset "$EVALSET" --out "$REFINED/metered_k8.json" || stage "no metered scores (above)"
+  python tools/make_figures.py --scene sponza --model "$REFINED/models/sponza_k8.onnx" --out-dir "$REFINED/figures" \
+    || stage "no figure (above)"
+fi
 # 3b. The recipe against itself without the structure term, on the same 256-spp truth: K = 8 with `--ssim-weight 0`
 #     (the recipe's term since 2026-11-29, when the model trained with it on the 64-spp truth shipped: docs/sponza.md,
 #     "The frame's edge"), the recipe's whole schedule (~1 h here), best.ckpt by the validation split's SSIM as the
