@@ -79,7 +79,7 @@ margins() {  # each K of a build, from the build's own scores on the full set
 }
 margins "$REFINED" 8
 # The new K = 8 beside the shipped model as the viewer shows them (each frame at its metered exposure:
-# tools/experiments/metered_scores.py, docs/accuracy.md) and in the README's figure (tools/make_figures.py, the same
+# tools/experiments/metered_scores.py, docs/accuracy.md) and in accuracy.md's figure (tools/make_figures.py, the same
 # two configurations): seconds, and minutes of Mitsuba; a failure is reported and the chain goes on.
 if [ ! -f "$REFINED/metered_k8.json" ] && [ -f "$REFINED/models/sponza_k8.onnx" ]; then
   stage "the 256-spp K = 8 at the viewer's exposure, and its figure"
