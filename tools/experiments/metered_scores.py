@@ -69,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         idx = ev.present(split, problems)
         if not idx:
             continue
+        scales = dict(zip(idx, light_scales(ev, idx))) if any(n.light_scaled for n in nets.values()) else {}
         for shape in shapes:
             key = split_key(split, shape, shapes)
             rows = {arm: {m: [] for m in (*nets, *images)} for arm in ("fixed", "metered")}
@@ -81,8 +82,8 @@ def main(argv: list[str] | None = None) -> int:
                 out = {m: f[ch] for m, ch in images.items()}
                 for name, net in nets.items():
                     x = model_input(net, f, frame, area, i, shape[0])
-                    scale = light_scales(ev, [i])[0] if net.light_scaled else None
-                    out[name] = run_model(net, x, scale, **stored_inputs(net, ev.entry(i), x))
+                    out[name] = run_model(net, x, scales.get(i) if net.light_scaled else None,
+                                          **stored_inputs(net, ev.entry(i), x))
                 for arm, exposure in (("fixed", ev.exposure), ("metered", 2.0 ** ev_i)):
                     for m, img in out.items():
                         rows[arm][m].append({k: v for k, v in score(img, f["pt"], exposure).items() if k in KEYS})
