@@ -19,7 +19,7 @@ from diviewer.errors import DiviewerError
 from diviewer.locks import run_lock
 from diviewer.outputs import check_output_dir
 from diviewer.train.config import CHOICES, LEGACY_DEFAULTS, RESUME_INHERITED, TrainConfig
-from diviewer.train.recipe import DEFAULT_RECIPE, load_recipe
+from diviewer.train.recipe import DEFAULT_RECIPE, load_recipe, shipped_recipes
 
 
 def add_train_parser(subparsers) -> argparse.ArgumentParser:
@@ -34,7 +34,7 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--data", type=Path, required=True, help="dataset folder (diviewer capture --out)")
     p.add_argument("--out", type=Path, required=True, help="run folder: checkpoints, metrics.csv, curves.png")
     p.add_argument("--recipe", default=None, metavar="R",
-                   help=f"a shipped recipe's name (cornell, sponza, paper) or a .toml file; its [train] table gives "
+                   help=f"a shipped recipe's name ({', '.join(shipped_recipes())}) or a .toml file; its [train] table gives "
                         f"every setting the options below do not (default {DEFAULT_RECIPE}: the best measured; "
                         f"on --resume, the checkpoint's settings)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out exactly where it stopped")
@@ -69,13 +69,28 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     _data_options(p)
     p.add_argument("--num-workers", type=int, default=None, help="DataLoader workers (default 0)")
     p.add_argument("--device", default=None, help="auto, cpu, cuda or cuda:N (default auto)")
+    _show_recipe_values(p, d)
     p.set_defaults(func=run_train)
     return p
 
 
+def _show_recipe_values(p: argparse.ArgumentParser, d: dict) -> None:
+    """Add to each option's help the value the default recipe gives it where that is not TrainConfig's default:
+    a plain `diviewer train` runs the recipe, so `--help` should say what the run will take (K 8, not 32)."""
+    try:
+        given = load_recipe(DEFAULT_RECIPE).train
+    except DiviewerError:  # a broken shipped recipe is reported when a run loads it, not by --help
+        return
+    for action in p._actions:
+        if action.dest in given and given[action.dest] != d.get(action.dest) and action.help:
+            value = given[action.dest]
+            shown = ":".join(f"{v:.4g}" for v in value) if isinstance(value, (list, tuple)) else value
+            action.help += f" [the {DEFAULT_RECIPE} recipe: {shown}]"
+
+
 def _model_options(p: argparse.ArgumentParser, d: dict) -> None:
     """`train`'s ablation options: the losses, the discriminator and the generator (``d``: TrainConfig's defaults)."""
-    g = p.add_argument_group("losses and discriminator (ablations; the defaults are the paper's)")
+    g = p.add_argument_group("losses and discriminator (ablations; defaults the paper's unless the recipe sets them)")
     g.add_argument("--gan-weight", type=float, default=None,
                    help=f"weight of the adversarial term (default {d['gan_weight']}; 0: reconstruction only)")
     g.add_argument("--gan-mode", choices=CHOICES["gan_mode"], default=None, help="adversarial objective (default vanilla)")
@@ -92,7 +107,7 @@ def _model_options(p: argparse.ArgumentParser, d: dict) -> None:
     g.add_argument("--norm-d", dest="norm_D", choices=CHOICES["norm_D"], default=None,
                    help="discriminator normalisation (default batch)")
     g.add_argument("--d-lr", type=float, default=None, help="discriminator learning rate (default: --lr)")
-    g = p.add_argument_group("generator (ablations; the defaults are the paper's)")
+    g = p.add_argument_group("generator (ablations; defaults the paper's unless the recipe sets them)")
     g.add_argument("--upsample", choices=CHOICES["upsample"], default=None, help="decoder upsampling (default transpose)")
     g.add_argument("--norm", choices=CHOICES["norm"], default=None, help="normalisation (default batch)")
 

@@ -204,3 +204,19 @@ def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
     assert capture_settings(twice, spp=refine_from(twice)) == capture_settings(refined)
     assert twice.train == walk.train and twice.ks() == walk.ks() and twice.evalset == walk.evalset
     assert twice.export == walk.export and twice.ladder == refined.ladder
+
+
+def test_train_help_says_what_the_default_recipe_sets_beside_the_papers_defaults():
+    """A plain `diviewer train` runs the default recipe, so its --help shows the recipe's value of each option the
+    recipe sets (K, epochs, target...) beside TrainConfig's default, and lists every shipped recipe."""
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="command")
+    add_train_parser(sub)
+    train = sub.choices["train"]
+    helps = {a.dest: a.help for a in train._actions}
+    given = load_recipe(DEFAULT_RECIPE).train
+    assert f"[the {DEFAULT_RECIPE} recipe: {given['K']}]" in helps["K"]
+    assert f"[the {DEFAULT_RECIPE} recipe: {given['epochs']}]" in helps["epochs"]
+    assert f"[the {DEFAULT_RECIPE} recipe: {given['target']}]" in helps["target"]
+    assert "recipe:" not in helps["data"] and "recipe:" not in helps["resume"]
+    assert all(name in helps["recipe"] for name in shipped_recipes())
