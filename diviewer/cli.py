@@ -206,6 +206,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     if args.checkpoint is None or args.out is None:
         raise DiviewerError("give a checkpoint and --out (or --info MODEL)", field="export")
     export(args.checkpoint, args.out, ExportSettings(fp16=args.fp16, half_weights=args.half_weights,
+                                                     int8_weights=args.int8_weights,
                                                      verify_frames=args.verify_frames, layout=args.layout))
     return 0
 
@@ -295,6 +296,9 @@ def _add_export_parser(sub) -> None:
     p.add_argument("--fp16", action="store_true", help="float16 weights and generator (encoding stays float32)")
     p.add_argument("--half-weights", action="store_true",
                    help="float32 generator with its weights stored as float16: half the file, cast back on load")
+    p.add_argument("--int8-weights", action="store_true",
+                   help="float32 generator with its inner convolutions' weights stored as int8 (a scale per output "
+                        "channel), the rest as float16: a quarter of float32's file, cast back on load")
     p.add_argument("--layout", choices=("NHWC", "NCHW"), default="NHWC",
                    help="the graph's input layout: NHWC as the GL pack writes it (default), or NCHW")
     p.add_argument("--verify-frames", type=int, default=4, help="frames compared with PyTorch before writing")

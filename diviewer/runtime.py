@@ -18,7 +18,9 @@ The model contract (written by ``diviewer export``, read here; torch-free):
 - the encoding and decoding live inside the graph; the metadata key ``diviewer`` holds a JSON
   object describing the model (see REQUIRED_META);
 - the weights may be stored as float16 in a float32 graph (metadata ``weights`` "fp16", ``export
-  --half-weights``): each behind a Cast to float32 that onnxruntime folds at load (`diviewer.weights`).
+  --half-weights``): each behind a Cast to float32 that onnxruntime folds at load (`diviewer.weights`); or the
+  inner convolutions' as int8 (``weights`` "int8", ``export --int8-weights``): each behind a Cast and a Mul by
+  its per-channel scales, folded alike.
 """
 
 from __future__ import annotations

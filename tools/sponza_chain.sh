@@ -104,7 +104,7 @@ l1_run() {
 l1_ablation() {  # each step only after the one before succeeded (errexit does not hold inside `f || ...`)
   local model="$REFINED/models/sponza_l1_k8.onnx"
   again l1_run \
-    && { [ -f "$model" ] || diviewer export "$REFINED/l1_k8/best.ckpt" --out "$model" --half-weights; } \
+    && { [ -f "$model" ] || diviewer export "$REFINED/l1_k8/best.ckpt" --out "$model" --int8-weights; } \
     && again diviewer eval --evalset "$EVALSET" --model "$REFINED/models/sponza_k8.onnx" --model "$model" \
          --out "$REFINED/eval_full_l1.json" \
     && margin "$REFINED/eval_full_l1.json" sponza_l1_k8 "$REFINED/truth_margin_l1_k8.json"

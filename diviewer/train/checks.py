@@ -24,6 +24,16 @@ FP16_TOLERANCE = 1e-2
 Measured 3.9e-4 (the shipped cornell K=16 fp16 model) and 5.6e-4 (tests' tiny model): float16's 11-bit
 mantissa through a dozen layers; 1e-2 leaves room for deeper models and refuses a graph that overflowed
 or lost a layer's range."""
+HALF_WEIGHTS_TOLERANCE = FP16_TOLERANCE
+"""The same for fp32 with ``half_weights``: float16's rounding of every weight (2**-11 of it at most) through
+the network. Measured on cornell v3 K=16 (4 capture frames): 2.0e-3 of peak at the worst pixel, a mean
+|difference| of 6e-6 (PSNR 108 dB against PyTorch); its scores on the compact evaluation set are the float32
+file's to 0.01 dB. No tighter than a float16 graph's, whose every product is rounded so."""
+INT8_WEIGHTS_TOLERANCE = 5e-2
+"""The same for fp32 with ``int8_weights``: the inner convolutions' weights rounded to 1/254 of their output
+channel's range. Measured against the shipped half-weights files on their compact evaluation sets (the stored
+direct light): Sponza K=8 2.6e-2 of peak at the worst pixel of 15 frames (median frame 1.0e-2), cornell K=16
+3.7e-3; their scores there move by 0.02 dB and 0.0005 of SSIM at most (docs/training.md)."""
 
 CONSTANT_SPREAD = 1e-6
 """The generator's output is constant when its spread (max - min over every pixel of every verification
@@ -71,7 +81,8 @@ def check_weights(netG, fp16: bool, ckpt_path: Path) -> None:
                                 f"({a.min():.3g}); export an earlier checkpoint", path=ckpt_path, field=name)
         if fp16 and a.size and np.abs(a).max() > FP16_MAX:
             raise DiviewerError(f"{name} holds {np.abs(a).max():.3g}, beyond float16's range ({FP16_MAX:g}): a "
-                                f"float16 export (--fp16, --half-weights) would make it infinite; export without them",
+                                f"float16 export (--fp16, --half-weights, --int8-weights' end layers) would make it infinite; "
+                                f"export without them",
                                 path=ckpt_path, field=name)
 
 
@@ -101,7 +112,7 @@ def extreme_frame(frame: np.ndarray) -> np.ndarray:
     return x
 
 
-def refuse_departures(check: dict, reference: np.ndarray, fp16: bool, half_weights: bool, precision: str,
+def refuse_departures(check: dict, reference: np.ndarray, fp16: bool, stored: str, precision: str,
                       out: Path) -> None:
     """Refuse, naming ``out``, a graph whose verification record ``check`` departs from PyTorch's ``reference``:
     non-finite where PyTorch is finite, non-finite elsewhere on extreme buffers, or beyond its tolerance."""
@@ -116,7 +127,7 @@ def refuse_departures(check: dict, reference: np.ndarray, fp16: bool, half_weigh
         raise DiviewerError(f"the fp16 ONNX model differs from PyTorch by {check['max_rel_to_peak']:.2g} of peak "
                             f"(tolerance {FP16_TOLERANCE}); export without --fp16; not written", path=out)
     if not fp16 and max(check["max_rel_to_peak"], check["extremes_max_rel_to_peak"]) > tolerance:
-        raise DiviewerError(f"the ONNX model{' with float16-stored weights' if half_weights else ''} "
+        raise DiviewerError(f"the ONNX model{'' if stored == 'fp32' else f' with {stored}-stored weights'} "
                             f"differs from PyTorch by {check['max_rel_to_peak']:.2g} of peak "
                             f"({check['extremes_max_rel_to_peak']:.2g} on extreme buffers; tolerance "
                             f"{tolerance}); not written", path=out)

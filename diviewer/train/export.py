@@ -30,17 +30,13 @@ from diviewer.padding import crop_nhwc, pad_camera_params, pad_nhwc
 from diviewer.provenance import versions
 from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT,
                               OUTPUT_NAME)
-from diviewer.weights import store_weights_half
-from diviewer.train.checks import FP16_TOLERANCE, extreme_frame, refuse_broken, refuse_departures
+from diviewer.weights import store_weights_half, store_weights_int8
+from diviewer.train.checks import (FP16_TOLERANCE, HALF_WEIGHTS_TOLERANCE, INT8_WEIGHTS_TOLERANCE, extreme_frame,
+                                   refuse_broken, refuse_departures)
 
 OPSET = 17
 FP32_TOLERANCE = 1e-4
 """fp32 export fails if max |onnx - torch| exceeds this fraction of the reference's peak radiance."""
-HALF_WEIGHTS_TOLERANCE = FP16_TOLERANCE
-"""The same for fp32 with ``half_weights``: float16's rounding of every weight (2**-11 of it at most) through
-the network. Measured on cornell v3 K=16 (4 capture frames): 2.0e-3 of peak at the worst pixel, a mean
-|difference| of 6e-6 (PSNR 108 dB against PyTorch); its scores on the compact evaluation set are the float32
-file's to 0.01 dB. No tighter than a float16 graph's, whose every product is rounded so."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +50,11 @@ class ExportSettings:
     onnxruntime loads the model (it folds the casts), so the file is half the size and the arithmetic is the
     float32 graph's, on weights rounded to 11 significant bits (`HALF_WEIGHTS_TOLERANCE`). Not with ``fp16``,
     whose weights are float16 already."""
+    int8_weights: bool = False
+    """Store the inner convolutions' weights as int8 with a float32 scale per output channel, the rest as
+    ``half_weights`` stores them, and run in float32: onnxruntime folds the casts and scales as it loads the model,
+    so the file is about a quarter of float32's and the arithmetic the float32 graph's, on weights rounded to 1/254
+    of their channel's range (`INT8_WEIGHTS_TOLERANCE`; `diviewer.weights.store_weights_int8`)."""
     verify_frames: int = 4
     """Frames compared between onnxruntime and PyTorch before the file is written."""
     layout: str = "NHWC"
@@ -65,6 +66,14 @@ class ExportSettings:
         if self.fp16 and self.half_weights:
             raise DiviewerError("half_weights stores float32 weights as float16; an fp16 export's are float16 "
                                 "already: give one of the two", field="half_weights")
+        if self.int8_weights and (self.fp16 or self.half_weights):
+            raise DiviewerError("int8_weights stores a float32 generator's weights as int8 and float16: not with "
+                                f"{'fp16' if self.fp16 else 'half_weights'}; give one of them", field="int8_weights")
+
+    @property
+    def stored(self) -> str:
+        """How the file stores the weights, the card's ``weights``: fp32, fp16 or int8."""
+        return "int8" if self.int8_weights else "fp16" if self.fp16 or self.half_weights else "fp32"
 
 
 def _torch():
@@ -229,7 +238,7 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     netG = make_netG()
     ref_module = gi_module(netG, encoding, meta, lean=False)
     # broken weights, or an output that is constant or non-finite: refused, naming the checkpoint
-    reference = refuse_broken(netG, ref_module, frames, settings.fp16 or settings.half_weights,
+    reference = refuse_broken(netG, ref_module, frames, settings.stored != "fp32",
                               weights_from or out, scales, cams, lights)
     ext = extreme_frame(frames[0])[None]
     def head(a):  # a per-frame input's first row (encoding 2's light scale, 3's camera, 4's lights), or None
@@ -243,8 +252,8 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     example = example.permute(0, 3, 1, 2).contiguous() if settings.layout == "NCHW" else example
     data = onnx_bytes(module, example, *first)
     model = onnx.load_from_string(data)
-    if settings.half_weights:  # verified as written: the float16-stored weights, cast back in the session
-        store_weights_half(model)
+    if settings.half_weights or settings.int8_weights:  # verified as written: the stored weights, cast back
+        (store_weights_int8 if settings.int8_weights else store_weights_half)(model)
         data = model.SerializeToString()
     session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
     got = run_session(session, frames, scales, settings.layout, cams, lights)
@@ -263,8 +272,8 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
         "onnx_finite": bool(np.isfinite(got).all()),
         "extremes_same_nonfinite": bool(np.array_equal(np.isfinite(got_ext), np.isfinite(ref_ext))),
         "extremes_max_rel_to_peak": ext_diff / peak,
-        "tolerance_rel_to_peak": FP16_TOLERANCE if settings.fp16 else
-        HALF_WEIGHTS_TOLERANCE if settings.half_weights else FP32_TOLERANCE,
+        "tolerance_rel_to_peak": FP16_TOLERANCE if settings.fp16 else HALF_WEIGHTS_TOLERANCE if settings.half_weights
+        else INT8_WEIGHTS_TOLERANCE if settings.int8_weights else FP32_TOLERANCE,
     }
     precision = "fp16" if settings.fp16 else "fp32"
     if scales is not None:
@@ -273,7 +282,7 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     log(f"verify {precision} against torch on {source}: max |diff| {check['max_abs_diff']:.3g} "
         f"({check['max_rel_to_peak']:.2g} of peak {peak:.3g}), mean {check['mean_abs_diff']:.3g}, "
         f"PSNR {check['psnr_db']:.1f} dB; extremes {check['extremes_max_rel_to_peak']:.2g} of peak")
-    refuse_departures(check, reference, settings.fp16, settings.half_weights, precision, out)
+    refuse_departures(check, reference, settings.fp16, settings.stored, precision, out)
     return model, check
 
 
@@ -341,7 +350,7 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
         "divide_albedo": meta["divide_albedo"],
         "encoding": encoding.to_dict(),
         "precision": precision,
-        "weights": "fp16" if settings.fp16 or settings.half_weights else "fp32",
+        "weights": settings.stored,
         "scene": meta["scene"],
         "scene_hash": meta["scene_hash"],
         "dataset_hash": meta["dataset_hash"],
@@ -415,7 +424,7 @@ def info(path: str | Path) -> str:
              f"norm={m.get('norm', 'batch')}"
              + (f" world-frequencies={m['world_frequencies']}" if m.get("world_frequencies") else "")
              + f" ({m['precision']}"
-             f"{', weights stored fp16' if m.get('weights') == 'fp16' and m['precision'] == 'fp32' else ''}), "
+             f"{', weights stored ' + m['weights'] if m.get('weights', 'fp32') != m['precision'] else ''}), "
              f"target {m['target']}"
              + (" / albedo" if m.get("divide_albedo") else ""),
              f"  trained at   {m['resolution'][0]}x{m['resolution'][1]}; runs any size, padded to multiples of "

@@ -13,7 +13,7 @@ pytest.importorskip("onnx")
 from diviewer.cli import main  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 from diviewer.runtime import NeuralGI, read_metadata  # noqa: E402
-from diviewer.train.export import ExportSettings, export, gi_module, info  # noqa: E402
+from diviewer.train.export import INT8_WEIGHTS_TOLERANCE, ExportSettings, export, gi_module, info  # noqa: E402
 from diviewer.train.checkpoint import build_generator_from_checkpoint  # noqa: E402
 from diviewer.train.trainer import train  # noqa: E402
 from train.test_trainer import make_dataset, quiet, tiny  # noqa: E402
@@ -142,6 +142,37 @@ def test_half_weights_store_float16_and_run_float32_as_close_as_the_float32_file
     assert not np.array_equal(a, b), "the weights were rounded: not the float32 file by another name"
     with pytest.raises(DiviewerError, match="half_weights"):
         export(checkpoints["indirect"], tmp_path / "x.onnx", ExportSettings(fp16=True, half_weights=True), log=quiet)
+
+
+@pytest.mark.slow
+def test_int8_weights_store_the_inner_convolutions_as_int8_verified_and_run_float32(checkpoints, tmp_path):
+    """--int8-weights: the inner convolutions' weights are int8 in the file (the ends float16), verified as written
+    against PyTorch within INT8_WEIGHTS_TOLERANCE, run in float32, close to the float32 file; the card says so; not
+    with --fp16 or --half-weights."""
+    import onnx
+    from onnx import TensorProto
+
+    fp32, q = tmp_path / "f.onnx", tmp_path / "q.onnx"
+    export(checkpoints["indirect"], fp32, log=quiet)
+    card = export(checkpoints["indirect"], q, ExportSettings(int8_weights=True), log=quiet)
+    assert card["precision"] == "fp32" and card["weights"] == "int8"
+    assert "weights stored int8" in info(q)
+    graph = onnx.load(str(q)).graph
+    assert sum(i.data_type == TensorProto.INT8 for i in graph.initializer) > 0
+    assert q.stat().st_size < fp32.stat().st_size
+    v = card["verification"]
+    assert v["tolerance_rel_to_peak"] == INT8_WEIGHTS_TOLERANCE and v["max_rel_to_peak"] <= INT8_WEIGHTS_TOLERANCE, v
+    assert v["zero_light_max"] == 0.0, "linear in the light as the float32 file is"
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.uniform(1, 5, (1, 32, 48, 1)), rng.uniform(-1, 1, (1, 32, 48, 3)),
+                        rng.uniform(0, 1, (1, 32, 48, 3)), rng.uniform(0, 3, (1, 32, 48, 3))], -1).astype(np.float32)
+    a, b = NeuralGI(fp32).run(x, light_scale=1.3), NeuralGI(q).run(x, light_scale=1.3)
+    assert b.dtype == np.float32 and np.abs(b - a).max() <= INT8_WEIGHTS_TOLERANCE * np.abs(a).max()
+    assert not np.array_equal(a, b)
+    with pytest.raises(DiviewerError, match="int8_weights"):
+        ExportSettings(int8_weights=True, half_weights=True)
+    with pytest.raises(DiviewerError, match="int8_weights"):
+        ExportSettings(int8_weights=True, fp16=True)
 
 
 @pytest.mark.slow
