@@ -81,8 +81,8 @@ def check_weights(netG, fp16: bool, ckpt_path: Path) -> None:
                                 f"({a.min():.3g}); export an earlier checkpoint", path=ckpt_path, field=name)
         if fp16 and a.size and np.abs(a).max() > FP16_MAX:
             raise DiviewerError(f"{name} holds {np.abs(a).max():.3g}, beyond float16's range ({FP16_MAX:g}): a "
-                                f"float16 export (--fp16, --half-weights, --int8-weights' end layers) would make it infinite; "
-                                f"export without them",
+                                f"float16 export (--fp16, --half-weights, --int8-weights' end layers) would make "
+                                f"it infinite; export without them",
                                 path=ckpt_path, field=name)
 
 
