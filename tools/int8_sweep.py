@@ -1,6 +1,6 @@
 """The int8 calibration sweep: a model quantised with each activation-range rule, all scored by `diviewer eval`.
 
-    python tools/int8_sweep.py --model assets/models/cornell.onnx --out docs/data/int8_calibration.json
+    python tools/int8_sweep.py --model assets/models/cornell.onnx --out docs/data/int8_calibration_cornell.json
 
 Calibration is what `diviewer bench` uses (GL renders of 16 training configurations of the model's scene at its
 size); each int8 twin differs only in how each activation's range is taken from those frames: its extremes
