@@ -34,9 +34,9 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--data", type=Path, required=True, help="dataset folder (diviewer capture --out)")
     p.add_argument("--out", type=Path, required=True, help="run folder: checkpoints, metrics.csv, curves.png")
     p.add_argument("--recipe", default=None, metavar="R",
-                   help=f"a shipped recipe's name ({', '.join(shipped_recipes())}) or a .toml file; its [train] table gives "
-                        f"every setting the options below do not (default {DEFAULT_RECIPE}: the best measured; "
-                        f"on --resume, the checkpoint's settings)")
+                   help=f"a shipped recipe's name ({', '.join(shipped_recipes())}) or a .toml file; its [train] "
+                        f"table gives every setting the options below do not (default {DEFAULT_RECIPE}: the best "
+                        f"measured; on --resume, the checkpoint's settings)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out exactly where it stopped")
     p.add_argument("--k", dest="K", type=int, default=None, help=f"generator base width (default {d['K']})")
     p.add_argument("--epochs", type=int, default=None, help=f"default {d['epochs']}")
