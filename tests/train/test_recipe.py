@@ -54,6 +54,7 @@ def test_a_shipped_cards_recipe_is_its_scenes_recipe_file(card):
     assert meta["K"] in rec.ks() and meta["ladder"]["chosen_K"] == meta["K"]
     assert bool(rec.export.get("fp16")) == (meta["precision"] == "fp16")
     assert bool(rec.export.get("half_weights")) == (meta["precision"] == "fp32" and meta.get("weights") == "fp16")
+    assert bool(rec.export.get("int8_weights")) == (meta.get("weights") == "int8")
 
 
 @pytest.mark.parametrize("card", CARDS)
