@@ -255,6 +255,8 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
     if settings.half_weights or settings.int8_weights:  # verified as written: the stored weights, cast back
         (store_weights_int8 if settings.int8_weights else store_weights_half)(model)
         data = model.SerializeToString()
+    tolerance = FP16_TOLERANCE if settings.fp16 else {"fp32": FP32_TOLERANCE, "fp16": HALF_WEIGHTS_TOLERANCE,
+                                                      "int8": INT8_WEIGHTS_TOLERANCE}[settings.stored]
     session = ort.InferenceSession(data, providers=["CPUExecutionProvider"])
     got = run_session(session, frames, scales, settings.layout, cams, lights)
     got_ext = run_session(session, ext, head(scales), settings.layout, head(cams), head(lights))
@@ -272,8 +274,7 @@ def verified_onnx(make_netG, encoding, meta: dict, settings: ExportSettings, fra
         "onnx_finite": bool(np.isfinite(got).all()),
         "extremes_same_nonfinite": bool(np.array_equal(np.isfinite(got_ext), np.isfinite(ref_ext))),
         "extremes_max_rel_to_peak": ext_diff / peak,
-        "tolerance_rel_to_peak": FP16_TOLERANCE if settings.fp16 else HALF_WEIGHTS_TOLERANCE if settings.half_weights
-        else INT8_WEIGHTS_TOLERANCE if settings.int8_weights else FP32_TOLERANCE,
+        "tolerance_rel_to_peak": tolerance,
     }
     precision = "fp16" if settings.fp16 else "fp32"
     if scales is not None:

@@ -32,18 +32,14 @@ def variant(src: Path, out: Path, ends: bool) -> dict:
     """Write ``src`` with int8-stored weights to ``out`` (the ends float16 unless ``ends``); its record."""
     import onnx
 
-    from diviewer.runtime import META_KEY
+    from diviewer.bench.onnx_tools import get_meta, set_meta
     from diviewer.weights import int8_weight_names, store_weights_int8, weights_to_float32
 
     model = weights_to_float32(onnx.load(str(src)))
     inner = int8_weight_names(model)
     every = {n.input[1] for n in model.graph.node if n.op_type in ("Conv", "ConvTranspose")}
     n8 = store_weights_int8(model, (every & {i.name for i in model.graph.initializer}) if ends else None)
-    for p in model.metadata_props:  # the card inside the file says how it stores its weights
-        if p.key == META_KEY:
-            meta = json.loads(p.value)
-            meta["weights"] = "int8"
-            p.value = json.dumps(meta)
+    set_meta(model, {**get_meta(model), "weights": "int8"})  # the card inside the file says how it stores them
     onnx.save(model, str(out))
     return {"file": str(out), "bytes": out.stat().st_size, "int8_tensors": n8,
             "int8_weights": "every convolution's" if ends else f"{len(inner)} inner convolutions'"}
