@@ -98,6 +98,17 @@ class EvalFrames:
     # --- what the set holds ----------------------------------------------------------------------------------------
 
     @property
+    def subset(self) -> str:
+        """Which of the rendered frames the set holds, for a reader of an evaluation's JSON: ``compact`` names how
+        a set is stored, and a compact set may keep every frame of the set it came from."""
+        if not self.compact:
+            return f"every frame rendered ({len(self.frames)})"
+        c = self.manifest["compact"]
+        whole = len(self.frames) == c.get("full_frames")
+        return (f"{'every frame' if whole else 'a subset'}: {len(self.frames)} of the full set's "
+                f"{c.get('full_frames', '?')} ({c['frames_per_split']} per split at most)")
+
+    @property
     def exposure(self) -> float:
         return float(self.info["tonemap"]["exposure"])
 

@@ -212,7 +212,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
     ladder = ladder_methods(ev)
     images = {"direct": "direct", "noise_floor": info["second_seed_channel"],
               **(ladder if ev.ladder_images() else {})}
-    result = {"evalset": str(evalset_dir), "compact": ev.compact, "scene": ev.manifest["scene"],
+    result = {"evalset": str(evalset_dir), "compact": ev.compact, "frames": ev.subset, "scene": ev.manifest["scene"],
               "reference_spp": ev.manifest["spp"], "tonemap_exposure": exposure,
               "tonemap_from": "the evaluation set's manifest (one per scene)", "ladder_spp": ladder_spp,
               "flip": {"flip_hdr": "HDR-FLIP on linear radiance (negative values clamped to 0)",

@@ -296,3 +296,23 @@ def test_every_shell_script_parses():
         if r.returncode:
             bad[str(script.relative_to(root))] = r.stderr.strip()
     assert len(scripts) > 5 and not bad, bad
+
+
+TREE_BUDGET_BYTES = 35_000_000
+"""The tracked tree's ceiling: the device machine carries the working tree with the built environment in 64 MiB, and
+a shipped model that outgrows it (a wider K of the ladder) is caught here, not when a lease refuses the carry."""
+
+
+def test_the_tracked_tree_fits_its_budget():
+    import shutil
+    import subprocess
+
+    root = PACKAGE.parent
+    if shutil.which("git") is None or not (root / ".git").exists():
+        pytest.skip("not a git checkout: no tracked tree to size")
+    names = subprocess.run(["git", "ls-files", "-z"], cwd=root, capture_output=True, check=True).stdout.split(b"\0")
+    sizes = {n.decode(): (root / n.decode()).stat().st_size for n in names if n and (root / n.decode()).is_file()}
+    total = sum(sizes.values())
+    largest = sorted(sizes.items(), key=lambda kv: -kv[1])[:5]
+    assert len(sizes) > 100 and total < TREE_BUDGET_BYTES, (
+        f"tracked tree {total / 1e6:.2f} MB, budget {TREE_BUDGET_BYTES / 1e6:.0f} MB; largest: {largest}")

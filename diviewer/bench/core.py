@@ -380,6 +380,7 @@ def _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log) -> d
     scored["path"] = str(ds.root)
     scored["resolution"] = [E, H]
     scored["compact"] = ds.compact
+    scored["frames"] = ds.subset
     scored["reference_spp"] = ds.manifest["spp"]
     return scored
 
