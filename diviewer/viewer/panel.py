@@ -13,6 +13,7 @@ from typing import Any, Protocol
 from imgui_bundle import imgui
 
 from diviewer.errors import DiviewerError
+from diviewer.exposure import ExposureSettings
 from diviewer.gl.display import TONEMAPS
 from diviewer.scene.model import DirectionalLight
 from diviewer.viewer.input import SHORTCUTS
@@ -25,6 +26,8 @@ from diviewer.viewer.view_modes import VIEW_MODES, single_modes, view_mode
 PANEL_WIDTH = 390
 WARN = (1.0, 0.75, 0.3, 1.0)
 DIM = (0.6, 0.6, 0.6, 1.0)
+EXPOSURE_RANGE = ExposureSettings().limits
+"""The exposure slider's range (stops): the auto exposure's, so a metered exposure always sits on the slider."""
 
 
 class PanelActions(Protocol):
@@ -193,7 +196,7 @@ class Panel:
                 _, st.split_position = imgui.slider_float("divider", st.split_position, 0.0, 1.0)
             else:
                 _, st.diff_gain_ev = imgui.slider_float("gain (stops)", st.diff_gain_ev, 0.0, 8.0, "%.1f")
-        changed, ev = imgui.slider_float("exposure (EV)", st.exposure, -8.0, 8.0, "%.1f")
+        changed, ev = imgui.slider_float("exposure (EV)", st.exposure, *EXPOSURE_RANGE, "%.1f")
         if changed:
             st.set_auto_exposure(False)
             st.set_exposure(ev)
