@@ -7,7 +7,9 @@ movable object's pixels (``object``), over those of them that receive no direct 
 direct light's luminance, exposed by the scene's exposure, below ``UNLIT``), and over the whole frame's pixels
 that receive direct light (``lit``) and those that do not (``shade``: lit by bounced light alone, where a
 network's indirect light is the whole image). A region a frame does not have (the object off screen, a frame
-wholly lit or wholly in shade) scores None for that frame and the aggregate counts the frames that had it.
+wholly lit or wholly in shade) scores None for that frame and the aggregate counts the frames that had it. In the
+shade also the pattern locked to the pixel grid a decoder's stride leaves (``stride_shade``), which the
+checkerboard ratio's flat regions miss on a textured scene.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from concurrent.futures import Future, ProcessPoolExecutor
 import numpy as np
 
 from diviewer.metrics import (equivalent_spp, flip, highpass_power, masked_psnr, masked_ssim, mse, power_ratio,
-                              psnr, psnr_error, ssim, tonemap)
+                              psnr, psnr_error, ssim, stride_pattern, tonemap)
 from diviewer.outputs import strict
 
 KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
@@ -74,16 +76,21 @@ def regions(frame: dict[str, np.ndarray], exposure: float) -> dict[str, np.ndarr
 
 def score_frame_regions(image: np.ndarray, frame: dict[str, np.ndarray], exposure: float,
                         mask: np.ndarray) -> dict:
-    """``score_frame`` against ``frame["pt"]``, plus the region metrics and each region's pixel count."""
+    """``score_frame`` against ``frame["pt"]``, plus the region metrics and each region's pixel count, and, where the
+    frame has its G-buffer's albedo and depth, the grid-locked pattern in its shade (``stride_shade``:
+    `diviewer.metrics.stride_pattern`, None with too little shade to read)."""
     s = score_frame(image, frame["pt"], exposure, mask, frame["direct"])
     a, b = tonemap(image, exposure), tonemap(frame["pt"], exposure)
-    for name, m in regions(frame, exposure).items():
+    parts = regions(frame, exposure)
+    for name, m in parts.items():
         s[f"psnr_tm_{name}"], s[f"ssim_tm_{name}"] = masked_psnr(a, b, m), masked_ssim(a, b, m)
         s[f"pixels_{name}"] = int(m.sum())
+    if "albedo" in frame and "depth" in frame:
+        s["stride_shade"] = stride_pattern(image, frame["albedo"], frame["depth"], parts["shade"])
     return s
 
 
-SCORED_CHANNELS = ("pt", "direct", "object")
+SCORED_CHANNELS = ("pt", "direct", "object", "albedo", "depth")
 """What ``score_frame_regions`` reads of a frame (all that is sent to a worker process)."""
 
 
@@ -166,6 +173,10 @@ def aggregate(rows: list[dict]) -> dict:
     out["checkerboard"] = power_ratio(sum(r["hf_power"] for r in rows), sum(r["hf_power_ref"] for r in rows))
     out["bias"] = pooled_bias(rows)
     out["bias_indirect"] = pooled_bias(rows, "sum_indirect")
+    # The decoder-stride pattern in the shade, over the frames with shade enough to read: its mean and its worst
+    # frame (a pattern is seen where it is strongest). None where no row has it (a compact set's stored ladder rows).
+    v = [r["stride_shade"] for r in rows if r.get("stride_shade") is not None]
+    out["stride_shade"] = {"mean": float(np.mean(v)), "max": float(np.max(v)), "frames": len(v)} if v else None
     if any(k in r for r in rows for k in REGION_KEYS):
         for k in REGION_KEYS:
             v = [r[k] for r in rows if r.get(k) is not None]
@@ -173,7 +184,7 @@ def aggregate(rows: list[dict]) -> dict:
     return out
 
 
-PER_FRAME_KEYS = ("psnr_tm", "ssim_tm", "flip_ldr", "sum", "sum_ref", "sum_indirect", "sum_indirect_ref")
+PER_FRAME_KEYS = ("psnr_tm", "ssim_tm", "flip_ldr", "sum", "sum_ref", "sum_indirect", "sum_indirect_ref", "stride_shade")
 """What `per_frame` keeps of each frame's scores: enough to read a split frame by frame (which frames fall below
 direct light, which carry a pooled bias)."""
 

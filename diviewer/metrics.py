@@ -24,6 +24,9 @@ import math
 
 import numpy as np
 
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+"""Rec. 709 luminance weights of linear RGB."""
+
 
 def _pair(a, b) -> tuple[np.ndarray, np.ndarray]:
     a = np.asarray(a, dtype=np.float64)
@@ -259,6 +262,69 @@ def highpass_power(image, mask) -> float:
     hx = (x[1:-1, :-2] - 2 * x[1:-1, 1:-1] + x[1:-1, 2:]) / 4.0
     hy = (x[:-2, 1:-1] - 2 * x[1:-1, 1:-1] + x[2:, 1:-1]) / 4.0
     return float(np.mean((hx[m] ** 2 + hy[m] ** 2) / 2.0))
+
+
+STRIDE_PERIOD = 8
+"""The period (pixels) `stride_pattern` analyses: a U-Net decoder's transposed convolutions of stride 2 leave
+patterns of period 2, 4 and 8 at its three finest levels, all periodic in 8."""
+
+
+def _box_mean(x: np.ndarray, weight: np.ndarray, size: int) -> np.ndarray:
+    """The ``weight``-weighted mean of ``x`` (H, W) over each pixel's size x size box (clamped at the border)."""
+    def box(a):
+        h, w = a.shape
+        c = np.zeros((h + 1, w + 1))
+        c[1:, 1:] = np.cumsum(np.cumsum(a, axis=0), axis=1)
+        y0 = np.clip(np.arange(h) - size // 2, 0, h)
+        y1 = np.clip(np.arange(h) - size // 2 + size, 0, h)
+        x0 = np.clip(np.arange(w) - size // 2, 0, w)
+        x1 = np.clip(np.arange(w) - size // 2 + size, 0, w)
+        return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
+    return box(x * weight) / np.maximum(box(weight), 1e-12)
+
+
+def stride_pattern(image, albedo, depth, mask=None, period: int = STRIDE_PERIOD,
+                   min_albedo: float = 0.03) -> float | None:
+    """The RMS amplitude of the part of an image that repeats on the pixel grid with ``period``, relative to the
+    image: 0.1 is a pattern of +-10 % on every surface, the grid-locked pattern of a network's decoder stride.
+
+    The flat-region checkerboard ratio cannot see it on a textured scene (Sponza has few flat pixels) nor in shade,
+    where the reference's own noise swamps its high frequencies. Here the irradiance (luminance over the albedo's,
+    which takes the textures out) is divided by its local mean over period x period pixels (which removes every
+    component of that period, so the quotient keeps them whole), and the quotient is averaged per phase of the grid
+    (y and x modulo ``period``) over the geometry's pixels (depth > 0, albedo luminance >= ``min_albedo``; within the
+    (H, W) ``mask`` if one is given, as the frame's shade, where no rasterized direct light adds its own). Nothing
+    grid-locked averages out over a frame; a decoder's pattern adds up. The phase means' power is corrected for the
+    noise each mean keeps (the quotient's variance over the pixels of a phase), so a noisy path-traced reference
+    scores about 0 rather than its noise. Deviations are clipped at +-4 (a firefly weighs no more than that). None
+    with too few pixels to read (fewer than 16 a phase).
+    """
+    lum = np.asarray(image, dtype=np.float64)
+    alb = np.asarray(albedo, dtype=np.float64)
+    lum = lum @ LUMA if lum.ndim == 3 else lum
+    alb = alb @ LUMA if alb.ndim == 3 else alb
+    z = np.asarray(depth, dtype=np.float64)
+    z = z[..., 0] if z.ndim == 3 else z
+    valid = np.isfinite(z) & (z > 0) & (alb >= min_albedo) & np.isfinite(lum)
+    if mask is not None:
+        valid &= np.asarray(mask, dtype=bool)
+    if valid.sum() < 16 * period * period:
+        return None
+    q = np.where(valid, np.maximum(lum, 0.0) / np.maximum(alb, min_albedo), 0.0)
+    local = _box_mean(q, valid.astype(np.float64), period)
+    valid &= local > 0
+    if valid.sum() < 16 * period * period:
+        return None
+    u = np.clip(np.where(valid, q / np.where(local > 0, local, 1.0) - 1.0, 0.0), -4.0, 4.0)[valid]
+    ys, xs = np.nonzero(valid)
+    phase = (ys % period) * period + xs % period
+    n = np.bincount(phase, minlength=period * period).astype(np.float64)
+    if n.min() < 1:
+        return None
+    means = np.bincount(phase, weights=u, minlength=period * period) / n
+    means -= np.average(means, weights=n)
+    power = float(np.average(means ** 2, weights=n)) - float(np.var(u)) * period * period / len(u)
+    return math.sqrt(max(power, 0.0))
 
 
 def checkerboard_ratio(image, reference, mask) -> float:

@@ -238,6 +238,61 @@ def test_regions_and_below_direct_share_on_a_synthetic_frame():
     assert "object" not in below_direct([dict(row, psnr_tm_object=None)], [row_direct])  # a frame without the region
 
 
+def _textured_frame(seed: int = 0, size: int = 128):
+    """A smooth irradiance over a random texture, the albedo the G-buffer gives, and geometry everywhere."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:size, 0:size]
+    irradiance = 0.2 + 0.1 * np.sin(xx / 20.0) + 0.05 * np.cos(yy / 13.0)
+    albedo = np.full((size, size, 3), 0.5) * (0.6 + 0.4 * rng.random((size, size)))[..., None]
+    return irradiance[..., None] * albedo, albedo, np.ones((size, size)), (yy, xx)
+
+
+def test_stride_pattern_reads_a_grid_locked_pattern_and_not_texture_or_noise():
+    image, albedo, depth, (yy, xx) = _textured_frame()
+    rng = np.random.default_rng(1)
+    checker = np.where((yy + xx) % 2 == 0, 1.1, 0.9)[..., None]  # +-10 % on every pixel: RMS 0.1
+    stripes = (1 + 0.05 * np.cos(2 * np.pi * xx / 4))[..., None]  # period 4, amplitude 5 %: RMS 0.035
+    noisy = image * (1 + 0.5 * rng.standard_normal(image.shape[:2]))[..., None]  # a path tracer's noise, 50 %
+    assert metrics.stride_pattern(image, albedo, depth) < 0.005  # texture and smooth shading: nothing grid-locked
+    assert metrics.stride_pattern(image * checker, albedo, depth) == pytest.approx(0.1, abs=0.005)
+    assert metrics.stride_pattern(image * stripes, albedo, depth) == pytest.approx(0.05 / math.sqrt(2), abs=0.004)
+    assert metrics.stride_pattern(noisy, albedo, depth) < 0.01  # the noise the phase means keep is taken out
+    assert metrics.stride_pattern(noisy * checker, albedo, depth) == pytest.approx(0.1, abs=0.015)
+    # The mask (the frame's shade) and the geometry choose the pixels read; too few to read gives None.
+    half = np.zeros(depth.shape, bool)
+    half[:, 64:] = True
+    patterned = image * np.where(half[..., None], checker, 1.0)
+    assert metrics.stride_pattern(patterned, albedo, depth, half) == pytest.approx(0.1, abs=0.005)
+    assert metrics.stride_pattern(patterned, albedo, depth, ~half) < 0.005
+    assert metrics.stride_pattern(image, albedo, np.zeros_like(depth)) is None
+    assert metrics.stride_pattern(image[:16, :16], albedo[:16, :16], depth[:16, :16]) is None
+    # A black image has no relative pattern; a firefly weighs no more than the clip allows.
+    assert metrics.stride_pattern(np.zeros_like(image), albedo, depth) is None
+    hot = image.copy()
+    hot[40, 40] = 1e6
+    assert metrics.stride_pattern(hot, albedo, depth) < 0.02
+
+
+def test_stride_pattern_is_scored_in_the_shade_and_pooled_per_split():
+    from diviewer.evalscore import PER_FRAME_KEYS, aggregate, score_frame_regions
+
+    image, albedo, depth, (yy, xx) = _textured_frame()
+    direct = np.zeros_like(image)
+    direct[:, :48] = 1.0  # lit on the left: the shade is the rest, 80 columns
+    checker = np.where((yy + xx) % 2 == 0, 1.2, 0.8)[..., None]
+    frame = {"pt": image + direct, "direct": direct, "albedo": albedo, "depth": depth}
+    flat = np.ones(depth.shape, bool)
+    rows = [score_frame_regions(im, frame, 1.0, flat) for im in (image * checker + direct, 1.01 * image + direct)]
+    assert rows[0]["stride_shade"] == pytest.approx(0.2, abs=0.01) and rows[1]["stride_shade"] < 0.005
+    pooled = aggregate(rows)["stride_shade"]
+    assert pooled["frames"] == 2 and pooled["max"] == rows[0]["stride_shade"]
+    assert pooled["mean"] == pytest.approx((rows[0]["stride_shade"] + rows[1]["stride_shade"]) / 2)
+    assert "stride_shade" in PER_FRAME_KEYS
+    # Without the G-buffer (a caller's frame of truth and direct light alone) nothing is read or pooled.
+    bare = score_frame_regions(1.01 * image + direct, {"pt": image + direct, "direct": direct}, 1.0, flat)
+    assert "stride_shade" not in bare and aggregate([bare])["stride_shade"] is None
+
+
 def test_per_frame_keeps_each_frame_with_its_index_or_nothing_when_rows_are_missing():
     from diviewer.evalscore import PER_FRAME_KEYS, per_frame
 
