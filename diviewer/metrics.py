@@ -297,7 +297,8 @@ def stride_pattern(image, albedo, depth, mask=None, period: int = STRIDE_PERIOD,
     grid-locked averages out over a frame; a decoder's pattern adds up. The phase means' power is corrected for the
     noise each mean keeps (the quotient's variance over the pixels of a phase), so a noisy path-traced reference
     scores about 0 rather than its noise. Deviations are clipped at +-4 (a firefly weighs no more than that). None
-    with too few pixels to read (fewer than 16 a phase).
+    with too few pixels to read (fewer than 16 a phase), or where the image is black over half of them or more
+    (direct light alone in the shade: a few soft shadow edges are not a pattern of the image).
     """
     lum = np.asarray(image, dtype=np.float64)
     alb = np.asarray(albedo, dtype=np.float64)
@@ -312,9 +313,10 @@ def stride_pattern(image, albedo, depth, mask=None, period: int = STRIDE_PERIOD,
         return None
     q = np.where(valid, np.maximum(lum, 0.0) / np.maximum(alb, min_albedo), 0.0)
     local = _box_mean(q, valid.astype(np.float64), period)
-    valid &= local > 0
-    if valid.sum() < 16 * period * period:
+    read = valid & (local > 0)
+    if read.sum() < max(16 * period * period, valid.sum() / 2):  # black over half the pixels: nothing to read
         return None
+    valid = read
     u = np.clip(np.where(valid, q / np.where(local > 0, local, 1.0) - 1.0, 0.0), -4.0, 4.0)[valid]
     ys, xs = np.nonzero(valid)
     phase = (ys % period) * period + xs % period

@@ -266,8 +266,12 @@ def test_stride_pattern_reads_a_grid_locked_pattern_and_not_texture_or_noise():
     assert metrics.stride_pattern(patterned, albedo, depth, ~half) < 0.005
     assert metrics.stride_pattern(image, albedo, np.zeros_like(depth)) is None
     assert metrics.stride_pattern(image[:16, :16], albedo[:16, :16], depth[:16, :16]) is None
-    # A black image has no relative pattern; a firefly weighs no more than the clip allows.
+    # A black image has no relative pattern, nor one black over half its pixels (direct light in the shade, but for
+    # a few shadow edges); a firefly weighs no more than the clip allows.
     assert metrics.stride_pattern(np.zeros_like(image), albedo, depth) is None
+    edges = np.zeros_like(image)
+    edges[:, 60:68] = image[:, 60:68] * checker[:, 60:68]
+    assert metrics.stride_pattern(edges, albedo, depth) is None
     hot = image.copy()
     hot[40, 40] = 1e6
     assert metrics.stride_pattern(hot, albedo, depth) < 0.02
