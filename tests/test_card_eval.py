@@ -21,7 +21,7 @@ def _shipped(path: Path, sha: str) -> Path:
 def _eval(path: Path, method: str, row_extra: dict) -> Path:
     stat = lambda v: {"mean": v, "std": 0.0}
     row = {"psnr_tm": stat(35.0), "ssim_tm": stat(0.88), "psnr_tm_shade": stat(36.0), "flip_ldr": stat(0.06),
-           "psnr_tm_object": None, **row_extra}  # None: a scene with no moving object has no object region
+           "psnr_tm_object": None, "stride_shade": {"mean": 0.0512, "max": 0.31, "frames": 24}, **row_extra}  # None: a scene with no moving object has no object region
     ev = {"evalset": "runs/x/evalset", "reference_spp": 1024,
           "splits": {s: {"frames": 24, "methods": {method: row, "direct": {"psnr_tm": stat(25.0)}}}
                      for s in ("moved_camera", "window_shapes_228x128")}}
@@ -45,7 +45,8 @@ def test_the_scores_of_the_same_weights_land_in_the_card_and_the_metadata(tmp_pa
     card = tool.main(["--eval", str(ev), "--model", str(model)])
     assert json.loads(model.with_suffix(".json").read_text()) == card == read_metadata(model)
     full = card["evalset_full"]
-    assert full["this_model"]["moved_camera"] == {"psnr_tm": 35.0, "ssim_tm": 0.88, "psnr_tm_shade": 36.0}
+    assert full["this_model"]["moved_camera"] == {"psnr_tm": 35.0, "ssim_tm": 0.88, "psnr_tm_shade": 36.0,
+                                                  "stride_shade": 0.051}
     assert full["frames"] == {"moved_camera": 24, "window_shapes_228x128": 24}
     assert (full["json"], full["evalset"], full["reference_spp"]) == (str(ev), "runs/x/evalset", 1024)
     assert card["evalset_compact"] == {"json": "compact.json"}  # the rest of the card is kept

@@ -31,8 +31,9 @@ from diviewer.build.pipeline import write_model_card  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 
 SCORES = ("psnr_tm", "ssim_tm", "psnr_tm_object", "psnr_tm_object_unlit", "ssim_tm_object_unlit", "psnr_tm_shade",
-          "ssim_tm_shade")
-"""The per-split means a card keeps of each model."""
+          "ssim_tm_shade", "stride_shade")
+"""The per-split means a card keeps of each model (``stride_shade``: the decoder-stride pattern in the shade, as a
+fraction of the irradiance; an eval JSON from before 2026-11-30 has none)."""
 
 
 def split_scores(ev: dict, method: str, path: Path) -> dict:
