@@ -21,8 +21,8 @@ from concurrent.futures import Future, ProcessPoolExecutor
 
 import numpy as np
 
-from diviewer.metrics import (equivalent_spp, flip, highpass_power, masked_psnr, masked_ssim, mse, power_ratio,
-                              psnr, psnr_error, ssim, stride_pattern, tonemap)
+from diviewer.metrics import (LUMA, equivalent_spp, flip, highpass_power, masked_psnr, masked_ssim, mse,
+                              power_ratio, psnr, psnr_error, ssim, stride_pattern, tonemap)
 from diviewer.outputs import strict
 
 KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
@@ -36,7 +36,7 @@ REGION_KEYS = tuple(f"{k}_{r}" for r in REGIONS for k in ("psnr_tm", "ssim_tm"))
 UNLIT = 1e-3
 """A pixel receives no direct light when its GL direct luminance times the exposure is below this (the
 tone map's white is at 1): shadowed or facing away from every light."""
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+LUMINANCE = LUMA
 
 
 def score(image: np.ndarray, truth: np.ndarray, exposure: float) -> dict[str, float]:
@@ -184,7 +184,8 @@ def aggregate(rows: list[dict]) -> dict:
     return out
 
 
-PER_FRAME_KEYS = ("psnr_tm", "ssim_tm", "flip_ldr", "sum", "sum_ref", "sum_indirect", "sum_indirect_ref", "stride_shade")
+PER_FRAME_KEYS = ("psnr_tm", "ssim_tm", "flip_ldr", "sum", "sum_ref", "sum_indirect", "sum_indirect_ref",
+                  "stride_shade")
 """What `per_frame` keeps of each frame's scores: enough to read a split frame by frame (which frames fall below
 direct light, which carry a pooled bias)."""
 

@@ -362,7 +362,8 @@ def format_tables(result: dict) -> list[str]:
              f"exposure {result['tonemap_exposure']:.3g} (the scene's); FLIP-HDR on linear radiance, FLIP-LDR on "
              f"tone-mapped; eq. spp from PSNR tm; checker = high-frequency power over flat, shadow-edge-free regions "
              f"/ the reference's; stride = the pattern locked to the pixel grid (period 8) in the shade, RMS % of "
-             f"the irradiance, mean over frames (a path-traced truth reads its scene's own, ~1-2 %); bias = summed radiance / the reference's - 1 (indirect: minus GL direct light); "
+             f"the irradiance, mean over frames (a path-traced truth reads its scene's own, ~1-2 %); bias = summed "
+             f"radiance / the reference's - 1 (indirect: minus GL direct light); "
              f"object / unlit = tone-mapped PSNR and SSIM over the moving object's pixels / those without direct "
              f"light; lit / shade = the same over the frame's pixels with / without direct light; < direct = share "
              f"of frames below direct light alone (whole frame / object / unlit / lit / shade)"]
@@ -377,8 +378,8 @@ def format_tables(result: dict) -> list[str]:
         lines.append(f"{split} ({r['frames']} frames at {r['shape'][0]}x{r['shape'][1]})"
                      + (f"; frames scored: {', '.join(map(str, r['frames_scored']))}" if "frames_scored" in r else ""))
         lines.append(f"{'method':<34} {'PSNR':>6} {'SSIM':>6} {'PSNR tm':>7} {'SSIM tm':>7} {'FLIP-HDR':>8} "
-                     f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7} {'stride':>6} {'bias':>7} {'indirect':>8} {'object':>13} "
-                     f"{'unlit':>13} {'lit':>13} {'shade':>13} {'< direct':>19}")
+                     f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7} {'stride':>6} {'bias':>7} {'indirect':>8} "
+                     f"{'object':>13} {'unlit':>13} {'lit':>13} {'shade':>13} {'< direct':>19}")
         for m in r["methods"].values():
             eq = m["equivalent_spp"][EQUIVALENT_BY[0]]
             obj = f"{_cell(m, 'psnr_tm_object', '.2f')}/{_cell(m, 'ssim_tm_object', '.3f')}"
@@ -390,8 +391,8 @@ def format_tables(result: dict) -> list[str]:
             lines.append(f"{m['label']:<34} {m['psnr']['mean']:6.2f} {m['ssim']['mean']:6.4f} "
                          f"{m['psnr_tm']['mean']:7.2f} {m['ssim_tm']['mean']:7.4f} {m['flip_hdr']['mean']:8.4f} "
                          f"{m['flip_ldr']['mean']:8.4f} {eq['text'] if eq else '-':>8} {_num(m['checkerboard']):>7} "
-                         f"{_stride(m.get('stride_shade')):>6} {_pct(m.get('bias')):>7} {_pct(m.get('bias_indirect')):>8} {obj:>13} {unlit:>13} "
-                         f"{lit:>13} {shade:>13} {below:>19}")
+                         f"{_stride(m.get('stride_shade')):>6} {_pct(m.get('bias')):>7} "
+                         f"{_pct(m.get('bias_indirect')):>8} {obj:>13} {unlit:>13} {lit:>13} {shade:>13} {below:>19}")
         for name, why in r.get("refused", {}).items():
             lines.append(f"{why['label']:<34} refused by the runtime at this shape: {why['reason']}")
         for m in r["methods"].values():
