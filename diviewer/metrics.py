@@ -292,14 +292,26 @@ def stride_pattern(image, albedo, depth, mask=None, period: int = STRIDE_PERIOD,
     where the reference's own noise swamps its high frequencies. Here the irradiance (luminance over the albedo's,
     which takes the textures out) is divided by its local mean over period x period pixels (which removes every
     component of that period, so the quotient keeps them whole), and the quotient is averaged per phase of the grid
-    (y and x modulo ``period``) over the geometry's pixels (depth > 0, albedo luminance >= ``min_albedo``; within the
-    (H, W) ``mask`` if one is given, as the frame's shade, where no rasterized direct light adds its own). Nothing
-    grid-locked averages out over a frame; a decoder's pattern adds up. The phase means' power is corrected for the
-    noise each mean keeps (the quotient's variance over the pixels of a phase), so a noisy path-traced reference
-    scores about 0 rather than its noise. Deviations are clipped at +-4 (a firefly weighs no more than that). None
-    with too few pixels to read (fewer than 16 a phase), or where the image is black over half of them or more
-    (direct light alone in the shade: a few soft shadow edges are not a pattern of the image).
+    (y and x modulo ``period``: `stride_phases`). Nothing grid-locked averages out over a frame; a decoder's pattern
+    adds up. The phase means' power is corrected for the noise each mean keeps (the quotient's variance over the
+    pixels of a phase), so a noisy path-traced reference scores about 0 rather than its noise. None where
+    `stride_phases` reads nothing.
     """
+    read = stride_phases(image, albedo, depth, mask, period, min_albedo)
+    if read is None:
+        return None
+    means, counts, noise = read
+    return math.sqrt(max(float(np.average(means ** 2, weights=counts)) - noise, 0.0))
+
+
+def stride_phases(image, albedo, depth, mask=None, period: int = STRIDE_PERIOD, min_albedo: float = 0.03):
+    """`stride_pattern`'s reading: the (period, period) mean relative deviation of the irradiance per phase of the
+    grid (centred), each phase's pixel count, and the power of the noise the means keep (the quotient's variance x
+    period^2 / pixels). Pixels read: the geometry's (depth > 0, albedo luminance >= ``min_albedo``), within the
+    (H, W) ``mask`` if one is given (the frame's shade, where no rasterized direct light adds its own). Deviations
+    are clipped at +-4 (a firefly weighs no more than that). None with too few pixels (fewer than 16 a phase), or
+    where the image is black over half of them or more (direct light alone in the shade: a few soft shadow edges
+    are not a pattern of the image)."""
     lum = np.asarray(image, dtype=np.float64)
     alb = np.asarray(albedo, dtype=np.float64)
     lum = lum @ LUMA if lum.ndim == 3 else lum
@@ -316,17 +328,16 @@ def stride_pattern(image, albedo, depth, mask=None, period: int = STRIDE_PERIOD,
     read = valid & (local > 0)
     if read.sum() < max(16 * period * period, valid.sum() / 2):  # black over half the pixels: nothing to read
         return None
-    valid = read
-    u = np.clip(np.where(valid, q / np.where(local > 0, local, 1.0) - 1.0, 0.0), -4.0, 4.0)[valid]
-    ys, xs = np.nonzero(valid)
+    u = np.clip(q[read] / local[read] - 1.0, -4.0, 4.0)
+    ys, xs = np.nonzero(read)
     phase = (ys % period) * period + xs % period
-    n = np.bincount(phase, minlength=period * period).astype(np.float64)
-    if n.min() < 1:
+    counts = np.bincount(phase, minlength=period * period).astype(np.float64)
+    if counts.min() < 1:
         return None
-    means = np.bincount(phase, weights=u, minlength=period * period) / n
-    means -= np.average(means, weights=n)
-    power = float(np.average(means ** 2, weights=n)) - float(np.var(u)) * period * period / len(u)
-    return math.sqrt(max(power, 0.0))
+    means = np.bincount(phase, weights=u, minlength=period * period) / counts
+    means -= np.average(means, weights=counts)
+    noise = float(np.var(u)) * period * period / len(u)
+    return means.reshape(period, period), counts.reshape(period, period), noise
 
 
 def checkerboard_ratio(image, reference, mask) -> float:
