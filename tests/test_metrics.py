@@ -410,3 +410,23 @@ def test_truth_margin_refuses_a_model_no_split_scores(tmp_path):
     with pytest.raises(SystemExit, match="no split scores the model 'cornell_k16'; nothing written"):
         tool.main(["--eval", str(record), "--model-key", "cornell_k16", "--out", str(out)])
     assert not out.exists()
+
+
+def test_stride_phases_names_the_period_of_a_pattern():
+    """tools/experiments/stride_phases.py: a checkerboard is k = (4, 4), columns alternating (0, 4), a period of 4
+    columns (0, 2), each with the RMS it contributes; metrics.stride_phases gives the grid they are read from."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/stride_phases")
+    image, albedo, depth, (yy, xx) = _textured_frame()
+    checker = np.where((yy + xx) % 2 == 0, 1.1, 0.9)[..., None]
+    columns = (1 + 0.05 * np.cos(2 * np.pi * xx / 4))[..., None]
+    means, counts, noise = metrics.stride_phases(image * checker * columns, albedo, depth)
+    assert means.shape == counts.shape == (8, 8) and counts.sum() == depth.size and noise >= 0
+    found = {tuple(c["k"]): c for c in tool.components(means)}
+    assert list(found)[:2] == [(4, 4), (0, 2)]
+    assert found[(4, 4)]["rms"] == pytest.approx(0.1, abs=0.005)
+    assert found[(0, 2)]["rms"] == pytest.approx(0.05 / math.sqrt(2), abs=0.004)
+    assert found[(0, 2)]["period_cols"] == 4 and found[(0, 2)]["period_rows"] is None
+    stripes = np.where(xx % 2 == 0, 1.1, 0.9)[..., None]
+    assert tool.components(metrics.stride_phases(image * stripes, albedo, depth)[0])[0]["k"] == [0, 4]
