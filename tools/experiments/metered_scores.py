@@ -5,8 +5,8 @@ Usage: python tools/experiments/metered_scores.py --model M.onnx [--model ...] [
 
 `diviewer eval` tone-maps every frame of a scene at one exposure (the evaluation set's, fitted to its lit direct
 light), as issue 26 asks. A scene that asks for auto exposure (Sponza) is shown brighter in the viewer, the more so
-the less sunlight is in view (up to +13.5 stops on Sponza's full set; the meter's limit is +16): its shade is shown where the scene's one exposure leaves it
-dark, and what a network does there weighs more. Here each frame and shape of the evaluation set (the model given the
+the less sunlight is in view (up to +13.5 stops on Sponza's full set; the meter's limit is +16): its shade is shown
+where the scene's one exposure leaves it dark, and what a network does there weighs more. Here each frame and shape of the evaluation set (the model given the
 inputs `diviewer eval` gives it) is tone-mapped with `diviewer.metrics.tonemap` at 2 ** ev, ev the exposure (stops)
 `diviewer.exposure.still_ev` meters off the frame's truth (as `diviewer render` meters a still; the viewer meters the
 frame it shows and smooths over frames, and settles at that reading when the camera rests), one exposure for every
