@@ -1,5 +1,5 @@
 """Image error metrics (numpy only, no torch): MSE, PSNR, SSIM (whole frame and over a region), FLIP, a
-checkerboard measure and the equivalent sample count.
+checkerboard measure, the pattern a decoder's stride locks to the pixel grid, and the equivalent sample count.
 
 Conventions, the same everywhere this package reports a number:
 
