@@ -102,6 +102,9 @@ def _model_options(p: argparse.ArgumentParser, d: dict) -> None:
     g.add_argument("--ssim-weight", type=float, default=None,
                    help="weight of 1 - SSIM of the tone-mapped displayed frame beside the reconstruction term, both "
                         "times lambda_L1 (default 0: none; meant for a clean truth, docs/training.md)")
+    g.add_argument("--ssim-exposure", choices=CHOICES["ssim_exposure"], default=None,
+                   help="where that term tone-maps: the scene's exposure (default, as eval scores), each frame's "
+                        "metered exposure (as the viewer shows it) or the mean of both")
     g.add_argument("--n-layers-d", dest="n_layers_D", type=int, default=None,
                    help=f"discriminator stride layers (default {d['n_layers_D']}: 70x70 patches)")
     g.add_argument("--norm-d", dest="norm_D", choices=CHOICES["norm_D"], default=None,

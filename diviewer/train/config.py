@@ -115,6 +115,10 @@ class TrainConfig:
     """Weight of the structure term, 1 - SSIM of the tone-mapped displayed frame (`diviewer.train.losses.
     structure_loss`), beside the reconstruction term, both times lambda_L1; 0: none."""
 
+    ssim_exposure: str = "scene"
+    """Where the structure term tone-maps: "scene" (the scene's exposure, as `diviewer eval` scores), "metered" (each
+    frame at the exposure the viewer's meter reads off its target) or "both" (the mean of the two terms)."""
+
     n_layers_D: int = 3
     """Discriminator stride layers (3: the paper's 70x70 PatchGAN; 4 sees 142x142 patches)."""
 
@@ -214,6 +218,8 @@ class TrainConfig:
             fail("lambda_L1", f"must be a number >= 0, got {self.lambda_L1!r}")
         if not (isinstance(self.ssim_weight, (int, float)) and math.isfinite(self.ssim_weight) and self.ssim_weight >= 0):
             fail("ssim_weight", f"must be a number >= 0, got {self.ssim_weight!r}")
+        if self.ssim_exposure != "scene" and not self.ssim_weight:
+            fail("ssim_exposure", f"{self.ssim_exposure!r} needs the structure term (ssim_weight > 0)")
         if not (isinstance(self.dropout, (int, float)) and 0.0 <= self.dropout < 1.0):
             fail("dropout", f"must be in [0, 1), got {self.dropout!r}")
         if self.target not in ("full", "indirect", "residual"):
@@ -287,13 +293,14 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "precision": ("auto", "fp32", "bf16", "fp16"), "gan_mode": ("vanilla", "lsgan"), "recon_loss": ("l1", "l2"),
     "recon_space": ("encoded", "linear", "log", "relative", "levels"), "norm_D": ("batch", "instance", "none"),
     "upsample": ("transpose", "resize", "shuffle"), "norm": ("batch", "instance", "none"),
-    "lr_decay": ("none", "cosine"),
+    "lr_decay": ("none", "cosine"), "ssim_exposure": ("scene", "metered", "both"),
 }
 """The settings that take one of a few names (the network ones are `networks.UPSAMPLES`/`NORMS`)."""
 
 RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "lr_decay_start", "beta1", "beta2",
                                  "lambda_L1", "target", "divide_albedo", "seed", "dropout", "ndf", "gan_weight",
-                                 "gan_mode", "recon_loss", "recon_space", "ssim_weight", "n_layers_D", "norm_D", "d_lr", "upsample",
+                                 "gan_mode", "recon_loss", "recon_space", "ssim_weight", "ssim_exposure",
+                                 "n_layers_D", "norm_D", "d_lr", "upsample",
                                  "norm", "train_frames", "init_from", "light_scale", "aspect_crops",
                                  "world_inputs", "light_inputs", "world_frequencies", "output_gain")
 """Settings a resumed run must share with its checkpoint (the others, e.g. epochs, may change); the schedule
@@ -305,6 +312,7 @@ RESUME_INHERITED: tuple[str, ...] = (*RESUME_FIXED, "epochs", "val_every", "save
 device and num_workers describe this invocation and this machine, so they are not inherited)."""
 
 LEGACY_DEFAULTS: dict[str, Any] = {"light_scale": False, "aspect_crops": None, "world_inputs": False,
-                                   "light_inputs": False, "output_gain": False, "world_frequencies": 0}
+                                   "light_inputs": False, "output_gain": False, "world_frequencies": 0,
+                                   "ssim_exposure": "scene"}
 """What a checkpoint from before these settings existed trained with (radiance as is, whole frames), where
 it does not record them; a new run's defaults differ."""

@@ -41,6 +41,11 @@ as the sun. Under Monte-Carlo noise it is not neutral: the target's noise adds t
 not to its covariance with the prediction, so the SSIM against a noisy target is highest for a prediction of more
 contrast than the converged image (by about sqrt(1 + noise variance / signal variance) within a window: 1.7x for a
 sinusoid under noise of its own global variance, simulated). Meant for a clean truth (Sponza's refined ones).
+Where it tone-maps (``ssim_exposure``): at the scene's one exposure, as `diviewer eval` scores ("scene"); at each frame's
+metered exposure, as the viewer shows it ("metered": `metered_exposure_torch`, the viewer's meter read off the target's
+frame); or the mean of both terms ("both"). At the scene's exposure Sponza's shade lies ~9 stops under the sunlit
+floor, where the tone map's slope leaves the decoder's grid-locked pattern (docs/accuracy.md, "The stride pattern in
+the shade") almost unseen; the meter lifts a shaded frame by up to 13 stops, as the viewer does.
 
 The trainer calls `LossConfig.reconstruction_loss` and `structure_loss`; `LossConfig` is the settings dataclass
 recorded with checkpoints.
@@ -84,6 +89,9 @@ the black background and Monte-Carlo noise around zero do not dominate."""
 REL_EPSILON: float = 0.01
 """Offset of the "relative" space's denominator, in exposed radiance (Noise2Noise's 0.01): below it errors count
 absolutely, so a black pixel does not weigh without bound."""
+
+SSIM_EXPOSURES: tuple[str, ...] = ("scene", "metered", "both")
+"""Where the structure term tone-maps: the scene's exposure, each frame's metered one, or the mean of both terms."""
 
 GAN_MODES: tuple[str, ...] = ("vanilla", "lsgan")
 """Adversarial objectives (pix2pix's names): BCE on logits (the paper), or least squares (Mao et al.)."""
@@ -232,22 +240,45 @@ def _window_sums(t: torch.Tensor) -> torch.Tensor:
     return nn.functional.conv2d(nn.functional.conv2d(t, rows, groups=k), cols, groups=k)
 
 
-def tonemap_torch(x: torch.Tensor, exposure: float) -> torch.Tensor:
+def tonemap_torch(x: torch.Tensor, exposure: float | torch.Tensor) -> torch.Tensor:
     """`diviewer.metrics.tonemap` on a tensor (Reinhard at ``exposure``, then gamma 2.2), its slope at black bounded
-    by `TONEMAP_EPSILON`."""
+    by `TONEMAP_EPSILON`; ``exposure`` one number or one per frame (N, 1, 1, 1)."""
     from diviewer.metrics import TONEMAP_GAMMA
 
     y = (x * exposure).clamp_min(0.0)
     return (y / (1.0 + y)).clamp_min(TONEMAP_EPSILON) ** (1.0 / TONEMAP_GAMMA)
 
 
+def metered_exposure_torch(rgb: torch.Tensor) -> torch.Tensor:
+    """Each frame's exposure factor (N, 1, 1, 1) as the viewer's meter reads it off an NCHW batch of linear radiance:
+    2 ** `diviewer.exposure.metered_ev` (the trimmed log-average luminance brought to middle grey, within the meter's
+    limits), 1 where nothing is lit; no gradient."""
+    from diviewer.exposure import LUMA, ExposureSettings
+
+    s = ExposureSettings()
+    lo, hi = s.limits
+    with torch.no_grad():
+        lum = (rgb.float() * torch.as_tensor(LUMA, device=rgb.device).reshape(1, 3, 1, 1)).sum(1).flatten(1)
+        evs = []
+        for row in lum:
+            lit = torch.sort(row[torch.isfinite(row) & (row > s.floor)]).values
+            if len(lit) == 0:
+                evs.append(0.0)
+                continue
+            k = int(len(lit) * s.trim)
+            kept = lit[k: len(lit) - k] if len(lit) - 2 * k > 0 else lit
+            evs.append(min(max(math.log2(s.key) - float(torch.log2(kept.double()).mean()), lo), hi))
+        return torch.tensor(evs, dtype=torch.float32, device=rgb.device).exp2().reshape(-1, 1, 1, 1)
+
+
 def structure_loss(fake_B: torch.Tensor, b: Mapping[str, Any], encoding: Encoding, target: str,
-                   divide_albedo: bool) -> torch.Tensor:
+                   divide_albedo: bool, exposure: str = "scene") -> torch.Tensor:
     """1 - SSIM of the displayed frame with netG's output against the same frame with the target, both tone-mapped at
     the batch's ``tonemap_exposure`` as `diviewer eval` and validation compose and score it (GL direct light plus
     the decoded indirect light, times the albedo where the target is divided by it, times the light scale), on the
     frame's own pixels (``b["crop"]``: the stride padding left out). ``b``: `diviewer.train.targets.split_batch`'s
-    planes with ``tonemap_exposure``."""
+    planes with ``tonemap_exposure``. ``exposure`` (one of `SSIM_EXPOSURES`): "metered" tone-maps each frame at
+    the exposure the viewer's meter reads off its target's frame instead, "both" takes the mean of the two terms."""
     from diviewer.train.targets import compose_radiance
 
     out = encoding.output()
@@ -257,9 +288,11 @@ def structure_loss(fake_B: torch.Tensor, b: Mapping[str, Any], encoding: Encodin
     if "scale" in b:
         pred, true = pred * b["scale"], true * b["scale"]
     direct, albedo = frame(b["direct"]), frame(b["albedo"])
-    shown = [tonemap_torch(compose_radiance(x, direct, albedo, target, divide_albedo), b["tonemap_exposure"])
-             for x in (pred, true)]
-    return 1.0 - ssim_torch(*shown)
+    pred, true = (compose_radiance(x, direct, albedo, target, divide_albedo) for x in (pred, true))
+    exposures = {"scene": [b["tonemap_exposure"]], "metered": [metered_exposure_torch(true)]}
+    exposures["both"] = exposures["scene"] + exposures["metered"]
+    terms = [1.0 - ssim_torch(tonemap_torch(pred, e), tonemap_torch(true, e)) for e in exposures[exposure]]
+    return sum(terms) / len(terms)
 
 
 @dataclass(frozen=True)
@@ -280,9 +313,12 @@ class LossConfig:
     """Weight of the structure term (`structure_loss`) beside the reconstruction term, both times lambda_L1 (0: none,
     every model before it)."""
 
+    ssim_exposure: str = "scene"
+    """Where the structure term tone-maps, one of `SSIM_EXPOSURES` ("scene": every model before it)."""
+
     def __post_init__(self) -> None:
         for name, choices in (("reconstruction", RECONSTRUCTION_MODES), ("space", RECONSTRUCTION_SPACES),
-                              ("gan_mode", GAN_MODES)):
+                              ("gan_mode", GAN_MODES), ("ssim_exposure", SSIM_EXPOSURES)):
             value = getattr(self, name)
             if value not in choices:
                 raise DiviewerError(f"must be one of {list(choices)}, got {value!r}", field=f"loss.{name}")

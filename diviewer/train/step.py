@@ -70,7 +70,7 @@ def build_nets(cfg: TrainConfig, net_cfg: NetConfig, enc: Encoding, dev: Dist, s
     optD = torch.optim.Adam(netD.parameters(), lr=cfg.d_lr or cfg.lr, betas=(cfg.beta1, cfg.beta2))
     dtype = autocast_dtype(cfg, dev, say)
     loss = LossConfig(reconstruction=cfg.recon_loss, space=cfg.recon_space, gan_mode=cfg.gan_mode,
-                      ssim_weight=float(cfg.ssim_weight))
+                      ssim_weight=float(cfg.ssim_weight), ssim_exposure=cfg.ssim_exposure)
     nets = Nets(netG=netG, netD=netD, netG_m=netG, netD_m=netD, optG=optG, optD=optD,
                 scaler=torch.amp.GradScaler("cuda", enabled=dtype == torch.float16), dtype=dtype, loss=loss,
                 criterionGAN=loss.gan_loss().to(dev.device), gan_weight=float(cfg.gan_weight),
@@ -158,7 +158,8 @@ def train_step(nets: Nets, b: dict[str, Any]) -> dict[str, float]:
             loss_G = loss_G + nets.gan_weight * loss_G_GAN
             out["loss_G_GAN"] = loss_G_GAN.detach()
     if nets.loss.ssim_weight > 0:  # outside the autocast: SSIM's window sums in bfloat16 would lose the structure
-        out["loss_G_SSIM"] = structure_loss(fake_B, b, nets.encoding, nets.target, nets.divide_albedo) * (
+        out["loss_G_SSIM"] = structure_loss(fake_B, b, nets.encoding, nets.target, nets.divide_albedo,
+                                              nets.loss.ssim_exposure) * (
             nets.lambda_L1 * nets.loss.ssim_weight)
         loss_G = loss_G + out["loss_G_SSIM"]
     nets.optG.zero_grad(set_to_none=True)

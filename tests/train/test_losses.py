@@ -15,7 +15,9 @@ from diviewer.train import networks  # noqa: E402
 from diviewer.train.losses import (  # noqa: E402
     GANLoss,
     LossConfig,
+    SSIM_EXPOSURES,
     exposed_radiance,
+    metered_exposure_torch,
     reconstruction_loss,
     ssim_torch,
     structure_loss,
@@ -313,9 +315,61 @@ def test_structure_loss_compares_the_displayed_frames_on_the_frames_pixels() -> 
     assert structure_loss(blurred.detach(), scaled, enc, "indirect", True).item() != pytest.approx(loss.item())
 
 
+def test_the_meter_on_tensors_is_the_viewers() -> None:
+    """`metered_exposure_torch` reads each frame as `diviewer.exposure.metered_ev` does: a sunlit frame, a frame in
+    deep shade, one darker than the meter's limit (held at +16 stops), one with unlit samples left out, and a black
+    one (1: nothing to meter)."""
+    from diviewer.exposure import ExposureSettings, metered_ev
+
+    rng = np.random.default_rng(1)
+    frames = rng.lognormal(0.0, 1.5, (5, 3, 12, 16)) * np.array([4.0, 2e-3, 1e-6, 0.3, 0.0]).reshape(5, 1, 1, 1)
+    frames[2] = 2e-6  # lit, above the meter's floor, 16.5 stops under middle grey
+    frames[3, :, :4] = 0.0  # a void beside the lit pixels
+    got = metered_exposure_torch(torch.as_tensor(frames, dtype=torch.float32)).flatten().tolist()
+    for frame, factor in zip(frames[:4], got):
+        assert np.log2(factor) == pytest.approx(metered_ev(frame.transpose(1, 2, 0)), abs=1e-4)
+    assert np.log2(got[2]) == ExposureSettings().limits[1] and got[4] == 1.0
+
+
+def _frame_at(target: torch.Tensor, light: float, enc: Encoding, blur: bool) -> tuple[torch.Tensor, dict]:
+    """The prediction (the target, blurred or not) and the batch of a frame whose light is ``light`` times
+    `_batch`'s."""
+    b = _batch(target * light, enc)
+    b["direct"] = b["direct"] * light
+    shown = torch.nn.functional.avg_pool2d(target, 5, 1, 2, count_include_pad=False) if blur else target
+    return encode_radiance(shown * light, enc.output()), b
+
+
+def test_the_structure_term_at_the_metered_exposure_sees_the_shade_as_the_sun() -> None:
+    """At each frame's metered exposure the term does not depend on how bright the frame is (the meter brings it to
+    middle grey, as the viewer does); at the scene's it all but vanishes in a frame 9 stops darker. "both" is the
+    mean of the two; each is 0 for the target itself."""
+    torch.manual_seed(2)
+    enc = Encoding(exposure=2.0, depth_scale=10.0, output_gain=3.0)
+    target = torch.rand(2, 3, 24, 28) * 0.8
+    loss = {}
+    for light in (1.0, 2.0 ** -9):
+        fake, b = _frame_at(target, light, enc, blur=True)
+        exact, _ = _frame_at(target, light, enc, blur=False)
+        for mode in SSIM_EXPOSURES:
+            loss[mode, light] = structure_loss(fake, b, enc, "indirect", True, mode).item()
+            assert structure_loss(exact, b, enc, "indirect", True, mode).item() == pytest.approx(0.0, abs=1e-4)
+        assert loss["both", light] == pytest.approx((loss["scene", light] + loss["metered", light]) / 2, rel=1e-5)
+    assert loss["metered", 2.0 ** -9] == pytest.approx(loss["metered", 1.0], rel=1e-3)
+    assert loss["metered", 2.0 ** -9] > 0.05 and loss["scene", 2.0 ** -9] < loss["scene", 1.0] / 10
+    fake, b = _frame_at(target, 2.0 ** -9, enc, blur=True)
+    fake.requires_grad_(True)
+    structure_loss(fake, b, enc, "indirect", True, "metered").backward()
+    assert torch.isfinite(fake.grad).all() and fake.grad.abs().sum() > 0
+
+
 def test_the_structure_terms_weight_is_checked_and_older_configs_have_none() -> None:
     assert LossConfig.from_dict({"reconstruction": "l1"}).ssim_weight == 0.0
     assert LossConfig.from_dict(LossConfig(ssim_weight=0.25).to_dict()).ssim_weight == 0.25
     for bad in (-0.1, float("inf"), "0.5"):
         with pytest.raises(DiviewerError, match="loss.ssim_weight"):
             LossConfig(ssim_weight=bad)
+    assert LossConfig.from_dict({"reconstruction": "l1"}).ssim_exposure == "scene"
+    assert LossConfig.from_dict(LossConfig(ssim_weight=0.1, ssim_exposure="both").to_dict()).ssim_exposure == "both"
+    with pytest.raises(DiviewerError, match="loss.ssim_exposure"):
+        LossConfig(ssim_exposure="viewer")

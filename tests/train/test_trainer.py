@@ -435,6 +435,13 @@ def test_config_validation_names_the_field(tmp_path):
         TrainConfig(data=tmp_path, out=tmp_path, divide_albedo=True)
     with pytest.raises(DiviewerError, match="train.batch_size"):
         TrainConfig(data=tmp_path, out=tmp_path, batch_size=0)
+    with pytest.raises(DiviewerError, match="train.ssim_exposure.*ssim_weight > 0"):
+        TrainConfig(data=tmp_path, out=tmp_path, ssim_exposure="metered")
+    with pytest.raises(DiviewerError, match="train.ssim_exposure.*one of scene, metered, both"):
+        TrainConfig(data=tmp_path, out=tmp_path, ssim_weight=0.1, ssim_exposure="viewer")
+    from diviewer.train.config import CHOICES
+    from diviewer.train.losses import SSIM_EXPOSURES
+    assert CHOICES["ssim_exposure"] == SSIM_EXPOSURES, "the config's choices are the loss's"
     cfg = TrainConfig(data=tmp_path, out=tmp_path / "r", K=16, max_steps=5)
     assert TrainConfig.from_dict(cfg.to_dict()) == cfg
 
@@ -492,6 +499,7 @@ def test_resumed_epoch_rows_average_only_their_own_epoch(run, data, tmp_path):
     {"upsample": "shuffle", "norm": "none"},
     {"precision": "bf16"},
     {"gan_weight": 0.0, "ssim_weight": 0.5, "target": "indirect", "divide_albedo": True, "precision": "bf16"},
+    {"gan_weight": 0.0, "ssim_weight": 0.5, "ssim_exposure": "both", "target": "indirect", "divide_albedo": True},
 ], ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()))
 def test_each_training_option_trains_and_is_recorded(data, tmp_path, options):
     result = train(tiny(data, tmp_path / "o", epochs=1, **options), log=quiet)
@@ -509,6 +517,7 @@ def test_each_training_option_trains_and_is_recorded(data, tmp_path, options):
     for k in ("loss_D", "loss_G_GAN", "D_acc_real", "D_acc_fake"):
         assert (rows[-1][k] != "") == adversarial, k
     assert ckpt["loss_config"]["ssim_weight"] == options.get("ssim_weight", 0.0)
+    assert ckpt["loss_config"]["ssim_exposure"] == options.get("ssim_exposure", "scene")
     assert (rows[-1]["loss_G_SSIM"] != "") == ("ssim_weight" in options)
     if "ssim_weight" in options:  # 1 - SSIM in [0, 2], times lambda_L1 and the weight
         assert 0.0 < float(rows[-1]["loss_G_SSIM"]) <= 2.0 * 100.0 * options["ssim_weight"]
@@ -568,14 +577,14 @@ def test_cli_maps_the_options_onto_the_config(data, tmp_path):
                           "--no-world-inputs", "--epochs", "1", "--gan-weight", "0", "--recon-loss", "l2", "--recon-space", "linear",
                           "--n-layers-d", "2", "--d-lr", "1e-3", "--upsample", "resize", "--norm", "instance",
                           "--train-frames", "8", "--patience", "3", "--val-every-steps", "1", "--precision", "fp32", "--ssim-weight", "0.5",
-                          "--lr-decay", "none"])  # the default recipe decays from step 20,000
+                          "--ssim-exposure", "metered", "--lr-decay", "none"])  # the default recipe decays from step 20,000
     assert run_train(args) == 0
     cfg = load_checkpoint(out / "last.ckpt")["config"]
     assert (cfg["gan_weight"], cfg["recon_loss"], cfg["recon_space"], cfg["n_layers_D"], cfg["d_lr"]) == (
         0.0, "l2", "linear", 2, 1e-3)
     assert (cfg["upsample"], cfg["norm"], cfg["train_frames"], cfg["patience"], cfg["val_every_steps"]) == (
         "resize", "instance", 8, 3, 1)
-    assert cfg["ssim_weight"] == 0.5
+    assert (cfg["ssim_weight"], cfg["ssim_exposure"]) == (0.5, "metered")
 
 
 def test_cosine_schedule_runs_from_lr_to_the_floor_and_none_is_constant(data, tmp_path):
