@@ -288,10 +288,12 @@ def structure_loss(fake_B: torch.Tensor, b: Mapping[str, Any], encoding: Encodin
     if "scale" in b:
         pred, true = pred * b["scale"], true * b["scale"]
     direct, albedo = frame(b["direct"]), frame(b["albedo"])
+    if exposure not in SSIM_EXPOSURES:
+        raise ValueError(f"exposure must be one of {list(SSIM_EXPOSURES)}, got {exposure!r}")
     pred, true = (compose_radiance(x, direct, albedo, target, divide_albedo) for x in (pred, true))
-    exposures = {"scene": [b["tonemap_exposure"]], "metered": [metered_exposure_torch(true)]}
-    exposures["both"] = exposures["scene"] + exposures["metered"]
-    terms = [1.0 - ssim_torch(tonemap_torch(pred, e), tonemap_torch(true, e)) for e in exposures[exposure]]
+    exposures = ([b["tonemap_exposure"]] if exposure in ("scene", "both") else []) + (
+        [metered_exposure_torch(true)] if exposure in ("metered", "both") else [])
+    terms = [1.0 - ssim_torch(tonemap_torch(pred, e), tonemap_torch(true, e)) for e in exposures]
     return sum(terms) / len(terms)
 
 

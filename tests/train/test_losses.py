@@ -361,6 +361,8 @@ def test_the_structure_term_at_the_metered_exposure_sees_the_shade_as_the_sun() 
     fake.requires_grad_(True)
     structure_loss(fake, b, enc, "indirect", True, "metered").backward()
     assert torch.isfinite(fake.grad).all() and fake.grad.abs().sum() > 0
+    with pytest.raises(ValueError, match="exposure must be one of"):
+        structure_loss(fake, b, enc, "indirect", True, "viewer")
 
 
 def test_the_structure_terms_weight_is_checked_and_older_configs_have_none() -> None:
