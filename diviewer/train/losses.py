@@ -251,24 +251,12 @@ def tonemap_torch(x: torch.Tensor, exposure: float | torch.Tensor) -> torch.Tens
 
 def metered_exposure_torch(rgb: torch.Tensor) -> torch.Tensor:
     """Each frame's exposure factor (N, 1, 1, 1) as the viewer's meter reads it off an NCHW batch of linear radiance:
-    2 ** `diviewer.exposure.metered_ev` (the trimmed log-average luminance brought to middle grey, within the meter's
-    limits), 1 where nothing is lit; no gradient."""
-    from diviewer.exposure import LUMA, ExposureSettings
+    2 ** `diviewer.exposure.metered_ev` of each frame (1 where nothing is lit); no gradient."""
+    from diviewer.exposure import metered_ev
 
-    s = ExposureSettings()
-    lo, hi = s.limits
-    with torch.no_grad():
-        lum = (rgb.float() * torch.as_tensor(LUMA, device=rgb.device).reshape(1, 3, 1, 1)).sum(1).flatten(1)
-        evs = []
-        for row in lum:
-            lit = torch.sort(row[torch.isfinite(row) & (row > s.floor)]).values
-            if len(lit) == 0:
-                evs.append(0.0)
-                continue
-            k = int(len(lit) * s.trim)
-            kept = lit[k: len(lit) - k] if len(lit) - 2 * k > 0 else lit
-            evs.append(min(max(math.log2(s.key) - float(torch.log2(kept.double()).mean()), lo), hi))
-        return torch.tensor(evs, dtype=torch.float32, device=rgb.device).exp2().reshape(-1, 1, 1, 1)
+    frames = rgb.detach().float().permute(0, 2, 3, 1).cpu().numpy()
+    evs = [metered_ev(f) or 0.0 for f in frames]
+    return torch.tensor(evs, dtype=torch.float32, device=rgb.device).exp2().reshape(-1, 1, 1, 1)
 
 
 def structure_loss(fake_B: torch.Tensor, b: Mapping[str, Any], encoding: Encoding, target: str,
