@@ -1,17 +1,17 @@
 #!/usr/bin/env bash
 # Sponza's model built on a CPU machine, over as many sessions as it takes (docs/sponza.md): set up
 # (tools/setup.sh), then
-#   1. the 64-spp capture of the recipe (assets/recipes/sponza.toml) and its check: `diviewer build ... --ks 8
-#      --stop-after check` (~3.5 h here; a machine that lost `runs/` starts here, as on 2026-11-29). The recipe's
-#      K = 8 on it (1b, the structure term `--ssim-weight 0.1` now the recipe's) ships as assets/models/sponza.onnx
-#      since 2026-11-29 and is not trained again;
+#   1. the 64-spp capture (assets/recipes/sponza_walk64.toml) and its check: `diviewer build ... --ks 8
+#      --stop-after check` (~3.5 h here; a machine that lost `runs/` starts here, as on 2026-11-29). Its K = 8
+#      shipped from 2026-11-29 to 2026-11-30 and is not trained again;
 #   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here; or
 #      the same set rendered on a lent device, runs/evalsets/sponza: tools/device_evalsets.sh, compact with every
 #      frame, taken where present, as SPONZA_EVALSET names another) and
 #      the shipped model's scores on it, with its margin over the 64-spp truth;
-#   3. K = 8 on a 256-spp truth (assets/recipes/sponza_walk256.toml: sponza.toml with `[capture] refine_from = 64`),
+#   3. K = 8 on a 256-spp truth (assets/recipes/sponza.toml: sponza_walk64.toml with `[capture] refine_from = 64`),
 #      in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, ~11 h), then
-#      the training, scored on the full evaluation set and shipped to runs/sponza256/ship. K = 8 alone (~1 h here):
+#      the training, scored on the full evaluation set and shipped to runs/sponza256/ship (assets/models/sponza.onnx
+#      since 2026-11-30). K = 8 alone (~1 h here):
 #      a first model on a cleaner truth, and whether a cleaner truth moves the SSIM, before the 512-spp refinement;
 #      the wider K wait for the cleanest truth (K = 16 here would cost ~1.7 h the 512 ladder repeats). Its margin
 #      over the truth it trained on, frame by frame: WORK/truth_margin_k8.json (as after each build below); then the
@@ -34,8 +34,8 @@ WORK="${SPONZA_WORK:-runs/sponza}"
 REFINED="${SPONZA_REFINED_WORK:-runs/sponza256}"
 TWICE="${SPONZA_TWICE_WORK:-runs/sponza512}"
 mkdir -p "$WORK" "$REFINED" "$TWICE"
-cp assets/recipes/sponza.toml "$WORK/sponza.toml.part" && mv "$WORK/sponza.toml.part" "$WORK/sponza.toml"
-cp assets/recipes/sponza_walk256.toml "$REFINED/sponza.toml.part" && mv "$REFINED/sponza.toml.part" "$REFINED/sponza.toml"
+cp assets/recipes/sponza_walk64.toml "$WORK/sponza.toml.part" && mv "$WORK/sponza.toml.part" "$WORK/sponza.toml"
+cp assets/recipes/sponza.toml "$REFINED/sponza.toml.part" && mv "$REFINED/sponza.toml.part" "$REFINED/sponza.toml"
 cp assets/recipes/sponza_walk512.toml "$TWICE/sponza.toml.part" && mv "$TWICE/sponza.toml.part" "$TWICE/sponza.toml"
 [ -e "$REFINED/data" ] || [ -L "$REFINED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$REFINED/data"
 [ -e "$TWICE/data" ] || [ -L "$TWICE/data" ] || ln -s "$(realpath -m "$REFINED/data_256spp")" "$TWICE/data"

@@ -188,23 +188,25 @@ def test_refine_from_is_the_captures_lower_count_and_part_of_what_the_recipe_ask
 
 
 def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
-    """tools/sponza_chain.sh links the 64-spp build's capture into the refining build's folder: the refining recipe
-    must ask for that very capture (its settings at refine_from spp), or the capture stage would refuse it; it
-    trains and scores as the 64-spp recipe does, and exports with int8-stored weights."""
+    """tools/sponza_chain.sh links the 64-spp build's capture (sponza_walk64.toml) into the shipped recipe's build
+    folder: the shipped recipe must ask for that very capture (its settings at refine_from spp), or the capture stage
+    would refuse it; it trains and scores as the 64-spp recipe does, and exports with int8-stored weights."""
     from diviewer.train.recipe import capture_settings, refine_from
 
-    walk = load_recipe("sponza")
-    refined = load_recipe(Path(__file__).parents[2] / "assets" / "recipes" / "sponza_walk256.toml")
+    recipes = Path(__file__).parents[2] / "assets" / "recipes"
+    walk = load_recipe(recipes / "sponza_walk64.toml")
+    refined = load_recipe("sponza")
     assert refine_from(refined) == capture_settings(walk).spp == 64 and capture_settings(refined).spp == 256
+    assert refine_from(walk) is None
     assert capture_settings(refined, spp=refine_from(refined)) == capture_settings(walk)
     assert {k: v for k, v in refined.train.items()} == walk.train and refined.ks() == walk.ks()
     assert refined.evalset == walk.evalset
-    # the next models store their inner weights as int8 where the shipped one stores float16 (docs/training.md)
+    # the models since the first store their inner weights as int8 where it stored float16 (docs/training.md)
     int8 = {**{k: v for k, v in walk.export.items() if k != "half_weights"}, "int8_weights": True}
     assert walk.export.get("half_weights") and refined.export == int8
 
     # refined again, 256 to 512: the 256-spp set is the capture the 512-spp build takes (its settings at 256)
-    twice = load_recipe(Path(__file__).parents[2] / "assets" / "recipes" / "sponza_walk512.toml")
+    twice = load_recipe(recipes / "sponza_walk512.toml")
     assert refine_from(twice) == capture_settings(refined).spp == 256 and capture_settings(twice).spp == 512
     assert capture_settings(twice, spp=refine_from(twice)) == capture_settings(refined)
     assert twice.train == walk.train and twice.ks() == walk.ks() and twice.evalset == walk.evalset
