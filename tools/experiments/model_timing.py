@@ -6,8 +6,9 @@ Usage: python tools/experiments/model_timing.py MODEL [MODEL ...] [--size 128 25
 
 Each model is loaded with `diviewer.runtime.NeuralGI` (all graph optimisations, the runtime's threads) and run
 on one frame of plausible buffers (`diviewer.runtime.probe_frame`, light scale 1, the scene's default camera for
-encoding 3) at each square size. A round runs every model ``--runs`` times in turn; the figure is the median
-over ``--rounds`` rounds of each round's mean, with the rounds' spread (min, max). Stop other jobs first.
+encoding 3, its default lights for encoding 4) at each square size. A round runs every model ``--runs`` times in
+turn; the figure is the median over ``--rounds`` rounds of each round's mean, with the rounds' spread (min, max).
+Stop other jobs first.
 """
 
 from __future__ import annotations
@@ -39,7 +40,10 @@ def time_models(paths: list[Path], sizes: list[int], rounds: int, runs: int) -> 
         feeds = {}
         for key, (net, scene) in nets.items():
             cam = NeuralGI.camera(scene.default.camera, size, size)[None] if scene is not None else None
-            feeds[key] = {"light_scale": 1.0, **({"camera": cam} if cam is not None else {})}
+            # encoding 4 takes the lights too: the scene's default frame's
+            light = net.lights(scene.default)[None] if net.meta["encoding"].get("version", 1) >= 4 else None
+            feeds[key] = {"light_scale": 1.0, **({"camera": cam} if cam is not None else {}),
+                          **({"light": light} if light is not None else {})}
             net.run(frame, **feeds[key])  # warm-up: the first run allocates
         per_round: dict[str, list[float]] = {k: [] for k in nets}
         for _ in range(rounds):
