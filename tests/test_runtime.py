@@ -378,3 +378,15 @@ def test_model_timing_times_each_model_at_each_size_and_records_it(tmp_path):
             assert 0 < t["min_ms"] <= t["median_ms"] <= t["max_ms"]
     env = result["environment"]
     assert env["cpu"] and env["cpu_count"] >= 1 and "onnxruntime" in env["versions"]
+
+
+def test_model_timing_feeds_an_encoding_4_model_its_scenes_lights(tmp_path):
+    """A model that takes the lights (Sponza's, encoding 4) is timed with its scene's default frame's lights, as
+    the viewer feeds it, not refused for want of them."""
+    from tool_modules import load_tool
+
+    tool = load_tool("experiments/model_timing")
+    model = models_dir() / "sponza.onnx"
+    assert read_metadata(model)["encoding"]["version"] == 4
+    result = tool.main([str(model), "--size", "32", "--rounds", "1", "--runs", "1"])
+    assert result["times"][32][str(model)]["median_ms"] > 0
