@@ -39,11 +39,9 @@ def time_models(paths: list[Path], sizes: list[int], rounds: int, runs: int) -> 
         frame = probe_frame(size, size)
         feeds = {}
         for key, (net, scene) in nets.items():
-            cam = NeuralGI.camera(scene.default.camera, size, size)[None] if scene is not None else None
-            # encoding 4 takes the lights too: the scene's default frame's
-            light = net.lights(scene.default)[None] if net.meta["encoding"].get("version", 1) >= 4 else None
-            feeds[key] = {"light_scale": 1.0, **({"camera": cam} if cam is not None else {}),
-                          **({"light": light} if light is not None else {})}
+            # the scene's default frame's camera (encoding 3) and lights (encoding 4), as the viewer feeds them
+            given = net.frame_inputs(scene.default, size, size, scene) if scene is not None else {}
+            feeds[key] = {**given, "light_scale": 1.0}
             net.run(frame, **feeds[key])  # warm-up: the first run allocates
         per_round: dict[str, list[float]] = {k: [] for k in nets}
         for _ in range(rounds):
