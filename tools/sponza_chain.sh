@@ -2,26 +2,28 @@
 # Sponza's model built on a CPU machine, over as many sessions as it takes (docs/sponza.md): set up
 # (tools/setup.sh), then
 #   1. the 64-spp capture (assets/recipes/sponza_walk64.toml) and its check: `diviewer build ... --ks 8
-#      --stop-after check` (~3.5 h here; a machine that lost `runs/` starts here, as on 2026-11-29). Its K = 8
-#      shipped from 2026-11-29 to 2026-11-30 and is not trained again;
+#      --stop-after check` (~4.2 h here; a machine that lost `runs/` starts here, as on 2026-11-29 and 2026-11-30). Its
+#      K = 8 shipped from 2026-11-29 to 2026-11-30 and is not trained again;
 #   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here; or
 #      the same set rendered on a lent device, runs/evalsets/sponza: tools/device_evalsets.sh, compact with every
 #      frame, taken where present, as SPONZA_EVALSET names another) and
 #      the shipped model's scores on it, with its margin over the 64-spp truth;
-#   3. K = 8 on a 256-spp truth (assets/recipes/sponza.toml: sponza_walk64.toml with `[capture] refine_from = 64`),
+#   3. only with SPONZA_REBUILD_256=1: the shipped model's own build and its two controls, as they ran on
+#      2026-11-30 (docs/sponza.md; the card's `commands` name this stage). K = 8 on a 256-spp truth
+#      (assets/recipes/sponza.toml: sponza_walk64.toml with `[capture] refine_from = 64`),
 #      in runs/sponza256 whose data/ links to the 64-spp capture: the refinement (`diviewer data refine`, ~11 h), then
 #      the training, scored on the full evaluation set and shipped to runs/sponza256/ship (assets/models/sponza.onnx
-#      since 2026-11-30). K = 8 alone (~1 h here):
-#      a first model on a cleaner truth, and whether a cleaner truth moves the SSIM, before the 512-spp refinement;
-#      the wider K wait for the cleanest truth (K = 16 here would cost ~1.7 h the 512 ladder repeats). Its margin
-#      over the truth it trained on, frame by frame: WORK/truth_margin_k8.json (as after each build below); then the
-#      same K = 8 without the recipe's structure term (`--ssim-weight 0`, ~1 h), scored beside it (3b below);
-#   4. the ladder on a 512-spp truth (assets/recipes/sponza_walk512.toml, `refine_from = 256`), in runs/sponza512
-#      whose data/ links to the 256-spp set: its refinement (~16 h here), K = 8 and 16, picked and shipped to
-#      runs/sponza512/ship, then K = 32 (trained, scored and recorded; the recipe's `[ladder] max_mb` keeps it from
-#      shipping). The issue asks for a training truth 6 dB above the model's error: the 64-spp model is 4.6-5.8 dB
-#      under a 256-spp truth, so a model trained on it will likely leave less; 512 spp is 3 dB cleaner again. K = 32
-#      is trained once, on the cleanest truth, rather than at 256 and again at 512 (~3 h each here: docs/build.md).
+#      since 2026-11-30). K = 8 alone (~1 h here). Its margin
+#      over the truth it trained on, frame by frame: WORK/truth_margin_k8.json (as after each build below); then
+#      3a, the stride-pattern lever, and 3b, the same K = 8 without the recipe's structure term (`--ssim-weight 0`,
+#      ~1 h), scored beside it. Their figures are in docs/data/sponza256 and docs/accuracy.md; a machine that lost
+#      `runs/` (2026-11-30, 13:25 UTC) skips them: ~11 h that the 512-spp ladder does not need;
+#   4. the ladder on a 512-spp truth (assets/recipes/sponza_walk512.toml, `refine_from = 64`), in runs/sponza512
+#      whose data/ links to the 64-spp capture: its refinement (448 samples a frame, ~26 h here), K = 8 and 16,
+#      picked and shipped to runs/sponza512/ship, then K = 32 (trained, scored and recorded; the recipe's
+#      `[ladder] max_mb` keeps it from shipping). The issue asks for a training truth 6 dB above the model's error:
+#      the 256-spp K = 8 is 3.0-4.8 dB under its truth (median per split), and 512 spp is 3 dB cleaner. K = 32 is
+#      trained once, on the cleanest truth (~3 h here: docs/build.md).
 # Every stage resumes where it stopped and skips what is done, so after a session ends the same command goes on:
 #   nohup setsid bash tools/sponza_chain.sh > runs/sponza_chain.log 2>&1 &
 # Each build reads its recipe as WORK/sponza.toml, a copy under the name its model ships with (the card records the
@@ -38,7 +40,12 @@ cp assets/recipes/sponza_walk64.toml "$WORK/sponza.toml.part" && mv "$WORK/sponz
 cp assets/recipes/sponza.toml "$REFINED/sponza.toml.part" && mv "$REFINED/sponza.toml.part" "$REFINED/sponza.toml"
 cp assets/recipes/sponza_walk512.toml "$TWICE/sponza.toml.part" && mv "$TWICE/sponza.toml.part" "$TWICE/sponza.toml"
 [ -e "$REFINED/data" ] || [ -L "$REFINED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$REFINED/data"
-[ -e "$TWICE/data" ] || [ -L "$TWICE/data" ] || ln -s "$(realpath -m "$REFINED/data_256spp")" "$TWICE/data"
+[ -e "$TWICE/data" ] || [ -L "$TWICE/data" ] || ln -s "$(realpath -m "$WORK/data")" "$TWICE/data"
+if [ "$(realpath -m "$TWICE/data")" != "$(realpath -m "$WORK/data")" ]; then  # the link of before 2026-11-30
+  echo "[sponza_chain] $TWICE/data: links to $(realpath -m "$TWICE/data"), not the 64-spp capture $WORK/data that" \
+       "sponza_walk512.toml refines (refine_from = 64); move that folder aside" >&2
+  exit 1
+fi
 
 stage() { echo "[sponza_chain] $(date -u '+%F %T') $*"; }
 # A stage that fails is run once more after a minute (it resumes where it stopped): an unattended chain should not
@@ -69,82 +76,91 @@ if [ ! -f "$WORK/eval_full_shipped.json" ]; then
   again diviewer eval --evalset "$EVALSET" --model assets/models/sponza.onnx --out "$WORK/eval_full_shipped.json"
 fi
 margin "$WORK/eval_full_shipped.json" sponza "$WORK/truth_margin_k8.json"
-REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --evalset "$EVALSET" --work "$REFINED"
-               --ship "$REFINED/ship")
-stage "build on the 256-spp truth: the refinement, K = 8"
-again "${REFINED_BUILD[@]}" --ks 8
 margins() {  # each K of a build, from the build's own scores on the full set
   local work="$1"; shift
   for k in "$@"; do margin "$work/evalset_eval.json" "sponza_k$k" "$work/truth_margin_k$k.json"; done
 }
-margins "$REFINED" 8
-# The new K = 8 beside the shipped model as the viewer shows them (each frame at its metered exposure:
-# tools/experiments/metered_scores.py, docs/accuracy.md) and in accuracy.md's figure (tools/make_figures.py, the same
-# two configurations): seconds, and minutes of Mitsuba; a failure is reported and the chain goes on.
-if [ ! -f "$REFINED/metered_k8.json" ] && [ -f "$REFINED/models/sponza_k8.onnx" ]; then
-  stage "the 256-spp K = 8 at the viewer's exposure, and its figure"
-  python tools/experiments/metered_scores.py --model assets/models/sponza.onnx --model "$REFINED/models/sponza_k8.onnx" \
-    --evalset "$EVALSET" --out "$REFINED/metered_k8.json" || stage "no metered scores (above)"
-  python tools/make_figures.py --scene sponza --model "$REFINED/models/sponza_k8.onnx" --out-dir "$REFINED/figures" \
-    || stage "no figure (above)"
-fi
-# 3a. The stride-pattern lever on it (docs/accuracy.md, "The stride pattern in the shade"): the K = 8 trained on for
-#     3,000 steps at a constant 5e-5, once with the structure term at the scene's exposure (the control) and once at
-#     the mean of the scene's and each frame's metered exposure (`--ssim-exposure both`), scored beside the K = 8 on
-#     the full evaluation set (WORK/eval_full_lever.json) and at the viewer's exposure (WORK/metered_lever.json):
-#     whether the lever holds on a converged model of the cleaner truth, before the 512-spp ladder trains (~25 min
-#     here). A failure is reported and the chain goes on.
-lever_run() {
-  local run="$REFINED/lever_$1"
-  if [ -f "$run/last.ckpt" ]; then
-    diviewer train --out "$run" --data "$REFINED/data_256spp" --resume --max-steps 3000
-  else
-    diviewer train --data "$REFINED/data_256spp" --out "$run" --recipe "$REFINED/sponza.toml" --k 8 \
-      --ssim-exposure "$1" --init-from "$REFINED/train_k8/best.ckpt" --lr 5e-5 --lr-decay none --max-steps 3000 \
-      --val-every-steps 3000 --save-every 500
+rebuild_256() {  # stage 3 (SPONZA_REBUILD_256=1): the shipped model's build and its two controls
+  REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --evalset "$EVALSET" --work "$REFINED"
+                 --ship "$REFINED/ship")
+  stage "build on the 256-spp truth: the refinement, K = 8"
+  again "${REFINED_BUILD[@]}" --ks 8
+  margins "$REFINED" 8
+  # The new K = 8 beside the shipped model as the viewer shows them (each frame at its metered exposure:
+  # tools/experiments/metered_scores.py, docs/accuracy.md) and in accuracy.md's figure (tools/make_figures.py, the same
+  # two configurations): seconds, and minutes of Mitsuba; a failure is reported and the chain goes on.
+  if [ ! -f "$REFINED/metered_k8.json" ] && [ -f "$REFINED/models/sponza_k8.onnx" ]; then
+    stage "the 256-spp K = 8 at the viewer's exposure, and its figure"
+    python tools/experiments/metered_scores.py --model assets/models/sponza.onnx \
+      --model "$REFINED/models/sponza_k8.onnx" --evalset "$EVALSET" --out "$REFINED/metered_k8.json" \
+      || stage "no metered scores (above)"
+    python tools/make_figures.py --scene sponza --model "$REFINED/models/sponza_k8.onnx" --out-dir "$REFINED/figures" \
+      || stage "no figure (above)"
+  fi
+  # 3a. The stride-pattern lever on it (docs/accuracy.md, "The stride pattern in the shade"): the K = 8 trained on for
+  #     3,000 steps at a constant 5e-5, once with the structure term at the scene's exposure (the control) and once at
+  #     the mean of the scene's and each frame's metered exposure (`--ssim-exposure both`), scored beside the K = 8 on
+  #     the full evaluation set (WORK/eval_full_lever.json) and at the viewer's exposure (WORK/metered_lever.json):
+  #     whether the lever holds on a converged model of the cleaner truth, before the 512-spp ladder trains (~25 min
+  #     here). A failure is reported and the chain goes on.
+  lever_run() {
+    local run="$REFINED/lever_$1"
+    if [ -f "$run/last.ckpt" ]; then
+      diviewer train --out "$run" --data "$REFINED/data_256spp" --resume --max-steps 3000
+    else
+      diviewer train --data "$REFINED/data_256spp" --out "$run" --recipe "$REFINED/sponza.toml" --k 8 \
+        --ssim-exposure "$1" --init-from "$REFINED/train_k8/best.ckpt" --lr 5e-5 --lr-decay none --max-steps 3000 \
+        --val-every-steps 3000 --save-every 500
+    fi
+  }
+  lever() {
+    local arm models=("$REFINED/models/sponza_k8.onnx")
+    for arm in scene both; do
+      models+=("$REFINED/models/sponza_lever_$arm.onnx")
+      again lever_run "$arm" || return 1
+      [ -f "${models[-1]}" ] || diviewer export "$REFINED/lever_$arm/last.ckpt" --out "${models[-1]}" --int8-weights \
+        || return 1
+    done
+    local args=() m
+    for m in "${models[@]}"; do args+=(--model "$m"); done
+    again diviewer eval --evalset "$EVALSET" "${args[@]}" --out "$REFINED/eval_full_lever.json" \
+      && python tools/experiments/metered_scores.py "${args[@]}" --evalset "$EVALSET" \
+           --out "$REFINED/metered_lever.json"
+  }
+  if [ ! -f "$REFINED/metered_lever.json" ] && [ -f "$REFINED/train_k8/best.ckpt" ]; then
+    stage "the stride-pattern lever on the 256-spp K = 8 (--ssim-exposure both against its control)"
+    lever || stage "the lever test failed (above); on to the control run"
+  fi
+  # 3b. The recipe against itself without the structure term, on the same 256-spp truth: K = 8 with `--ssim-weight 0`
+  #     (the recipe's term since 2026-11-29, when the model trained with it on the 64-spp truth shipped: docs/sponza.md,
+  #     "The frame's edge"), the recipe's whole schedule (~1 h here), best.ckpt by the validation split's SSIM as the
+  #     build picks, exported as the recipe exports, scored with the recipe's K = 8 on the full evaluation set
+  #     (WORK/eval_full_l1.json) and its truth margin: whether the term still pays on a cleaner truth, before the
+  #     512-spp ladder trains with it (the 512-spp build takes other [train] settings until its first K trains:
+  #     docs/build.md). A failure is reported and the chain goes on to the 512-spp refinement.
+  l1_run() {
+    local run="$REFINED/l1_k8" resume=()
+    [ -f "$run/last.ckpt" ] && resume=(--resume)
+    diviewer train --data "$REFINED/data_256spp" --out "$run" --recipe "$REFINED/sponza.toml" --k 8 --ssim-weight 0 \
+      "${resume[@]}"
+  }
+  l1_ablation() {  # each step only after the one before succeeded (errexit does not hold inside `f || ...`)
+    local model="$REFINED/models/sponza_l1_k8.onnx"
+    again l1_run \
+      && { [ -f "$model" ] || diviewer export "$REFINED/l1_k8/best.ckpt" --out "$model" --int8-weights; } \
+      && again diviewer eval --evalset "$EVALSET" --model "$REFINED/models/sponza_k8.onnx" --model "$model" \
+           --out "$REFINED/eval_full_l1.json" \
+      && margin "$REFINED/eval_full_l1.json" sponza_l1_k8 "$REFINED/truth_margin_l1_k8.json"
+  }
+  if [ ! -f "$REFINED/truth_margin_l1_k8.json" ]; then
+    stage "K = 8 without the structure term on the 256-spp truth (the recipe's control)"
+    l1_ablation || stage "the control run failed (above); on to the 512-spp truth"
   fi
 }
-lever() {
-  local arm models=("$REFINED/models/sponza_k8.onnx")
-  for arm in scene both; do
-    models+=("$REFINED/models/sponza_lever_$arm.onnx")
-    again lever_run "$arm" || return 1
-    [ -f "${models[-1]}" ] || diviewer export "$REFINED/lever_$arm/last.ckpt" --out "${models[-1]}" --int8-weights \
-      || return 1
-  done
-  local args=() m
-  for m in "${models[@]}"; do args+=(--model "$m"); done
-  again diviewer eval --evalset "$EVALSET" "${args[@]}" --out "$REFINED/eval_full_lever.json" \
-    && python tools/experiments/metered_scores.py "${args[@]}" --evalset "$EVALSET" --out "$REFINED/metered_lever.json"
-}
-if [ ! -f "$REFINED/metered_lever.json" ] && [ -f "$REFINED/train_k8/best.ckpt" ]; then
-  stage "the stride-pattern lever on the 256-spp K = 8 (--ssim-exposure both against its control)"
-  lever || stage "the lever test failed (above); on to the control run"
-fi
-# 3b. The recipe against itself without the structure term, on the same 256-spp truth: K = 8 with `--ssim-weight 0`
-#     (the recipe's term since 2026-11-29, when the model trained with it on the 64-spp truth shipped: docs/sponza.md,
-#     "The frame's edge"), the recipe's whole schedule (~1 h here), best.ckpt by the validation split's SSIM as the
-#     build picks, exported as the recipe exports, scored with the recipe's K = 8 on the full evaluation set
-#     (WORK/eval_full_l1.json) and its truth margin: whether the term still pays on a cleaner truth, before the
-#     512-spp ladder trains with it (the 512-spp build takes other [train] settings until its first K trains:
-#     docs/build.md). A failure is reported and the chain goes on to the 512-spp refinement.
-l1_run() {
-  local run="$REFINED/l1_k8" resume=()
-  [ -f "$run/last.ckpt" ] && resume=(--resume)
-  diviewer train --data "$REFINED/data_256spp" --out "$run" --recipe "$REFINED/sponza.toml" --k 8 --ssim-weight 0 \
-    "${resume[@]}"
-}
-l1_ablation() {  # each step only after the one before succeeded (errexit does not hold inside `f || ...`)
-  local model="$REFINED/models/sponza_l1_k8.onnx"
-  again l1_run \
-    && { [ -f "$model" ] || diviewer export "$REFINED/l1_k8/best.ckpt" --out "$model" --int8-weights; } \
-    && again diviewer eval --evalset "$EVALSET" --model "$REFINED/models/sponza_k8.onnx" --model "$model" \
-         --out "$REFINED/eval_full_l1.json" \
-    && margin "$REFINED/eval_full_l1.json" sponza_l1_k8 "$REFINED/truth_margin_l1_k8.json"
-}
-if [ ! -f "$REFINED/truth_margin_l1_k8.json" ]; then
-  stage "K = 8 without the structure term on the 256-spp truth (the recipe's control)"
-  l1_ablation || stage "the control run failed (above); on to the 512-spp truth"
+if [ "${SPONZA_REBUILD_256:-0}" = 1 ]; then
+  rebuild_256
+else
+  stage "the 256-spp build and its controls: skipped (SPONZA_REBUILD_256=1 runs them; docs/data/sponza256 holds them)"
 fi
 TWICE_BUILD=(diviewer build --scene sponza --recipe "$TWICE/sponza.toml" --evalset "$EVALSET" --work "$TWICE"
              --ship "$TWICE/ship")
