@@ -235,3 +235,17 @@ def test_train_help_says_what_the_default_recipe_sets_beside_the_papers_defaults
     assert f"[the {DEFAULT_RECIPE} recipe: {given['target']}]" in helps["target"]
     assert "recipe:" not in helps["data"] and "recipe:" not in helps["resume"]
     assert all(name in helps["recipe"] for name in shipped_recipes())
+
+
+def test_the_sponza_chain_parses_and_builds_only_recipes_that_load():
+    """tools/sponza_chain.sh runs unattended over sessions: it must parse, and every recipe it copies into a work
+    folder must exist and load (a renamed recipe would stop the chain only when it reached that stage, hours later)."""
+    import re
+    import subprocess
+
+    chain = Path(__file__).parents[2] / "tools" / "sponza_chain.sh"
+    assert subprocess.run(["bash", "-n", str(chain)], capture_output=True).returncode == 0
+    named = set(re.findall(r"^cp (assets/recipes/[\w.]+\.toml) ", chain.read_text(), flags=re.M))
+    assert {"assets/recipes/sponza_walk64.toml", "assets/recipes/sponza_walk768.toml"} <= named
+    for path in named:
+        assert load_recipe(Path(__file__).parents[2] / path).scene == "sponza", path
