@@ -66,7 +66,8 @@ again() { "$@" || { stage "failed (exit $?), once more in 60 s: $*"; sleep 60; "
 margin() {
   [ -f "$1" ] && ! [ "$3" -nt "$1" ] || return 0
   stage "truth margin of $2 ($1)"
-  python tools/experiments/truth_margin.py --eval "$1" --model-key "$2" --project 512 --project 1024 --out "$3" \
+  python tools/experiments/truth_margin.py --eval "$1" --model-key "$2" --project 512 --project 768 --project 1024 \
+    --out "$3" \
     || stage "no truth margin for $2 (above)"
 }
 stage "the 64-spp capture and its check"
