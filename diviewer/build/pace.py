@@ -13,6 +13,17 @@ from diviewer.build.plan import Plan, hms
 from diviewer.errors import DiviewerError
 
 
+def missing_link(plan: Plan) -> str | None:
+    """Why a run refuses the work folder's capture folder before looking in it: a link to a folder that is not there
+    (a refined set another build has yet to make, as tools/sponza_chain.sh links them ahead), which a capture would
+    otherwise fill through the link, at the recipe's ``refine_from`` spp, for hours; None where it is not one."""
+    where = plan.capture_dir
+    if not where.is_symlink() or where.exists():
+        return None
+    return (f"links to {where.readlink()}, which is not there: a run refuses it (make that set first, or remove the "
+            f"link to capture in {plan.work})")
+
+
 def capture_refusal(plan: Plan) -> str | None:
     """Why a run would refuse the dataset in the work folder's capture folder for the recipe's capture (the identity
     fields it differs in, as `diviewer.data.capture.settings_differ` reads them, or its manifest's fault), or None
@@ -142,6 +153,8 @@ def capture_pace(plan: Plan) -> Pace | None:
     renders none; None where no frame is there. A refined dataset there (`diviewer.data.capture.refined_stand_in`)
     is nothing to render: whether it is complete, and taken."""
     where = plan.capture_dir
+    if (why := missing_link(plan)) is not None:
+        return Pace("capture", f"capture: {where} {why}")
     count, seconds = _frame_seconds(where, lambda info: float(info["seconds"]["gl"]) + float(info["seconds"]["gt"]))
     refined = _manifest(where).get("refined")
     left = plan.capture.frames - count

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from diviewer import imageio
-from diviewer.build.pace import measured_pace
+from diviewer.build.pace import measured_pace, missing_link
 from diviewer.build.plan import RUN_ONLY, Plan, describe, hms
 from diviewer.build.state import BuildState
 from diviewer.data.dataset import sha256_file
@@ -123,6 +123,8 @@ def _stale(stage: str, rec: dict[str, Any], plan: Plan) -> bool:
 def _capture(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     from diviewer.data.capture import capture, refined_stand_in
 
+    if (why := missing_link(plan)) is not None:
+        raise DiviewerError(why, path=plan.capture_dir)
     summary = (refined_stand_in(plan.scene, plan.capture_dir, plan.capture, log=log)
                or capture(plan.scene, plan.capture_dir, plan.capture, log=log))
     return [plan.capture_dir / "manifest.json"], {k: summary.get(k) for k in ("present", "planned", "per_split",

@@ -589,6 +589,24 @@ def test_a_recipe_that_refines_its_capture_plans_the_capture_at_the_lower_count_
     assert "refine_spp" not in plan_key(plain) and plain.data == plain.capture_dir and plain.refine_spp is None
 
 
+def test_a_capture_folder_that_links_to_a_set_not_yet_made_is_refused_not_captured_through(tmp_path, capsys):
+    """tools/sponza_chain.sh links the 768-spp build's data/ to the 512-spp build's refined set before that set
+    exists: a run of the later build then must not capture at its refine_from spp through the link (hours, into the
+    other build's folder); the dry run says so, and the run stops on one line naming the link, having made nothing."""
+    (tmp_path / "r.toml").write_text(_refining(TINY_RECIPE, 2, 8))
+    work, later = tmp_path / "w", tmp_path / "other" / "data_2spp"
+    work.mkdir()
+    (work / "data").symlink_to(later)
+    argv = ["build", "--scene", "cornell", "--recipe", str(tmp_path / "r.toml"), "--work", str(work)]
+    assert main(argv + ["--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert f"capture: {work / 'data'} links to {later}, which is not there: a run refuses it" in out
+    assert main(argv) == 2
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert str(work / "data") in line and "which is not there" in line and "remove the link" in line, line
+    assert not later.exists() and not (tmp_path / "other").exists()
+
+
 def test_a_refinement_under_way_tells_this_machines_pace(tmp_path):
     """The frames refined so far (each sidecar's ``refined.seconds``) give the refinement's pace and its time left,
     listed after the capture's; a plan without a refine stage says nothing of it."""
