@@ -39,12 +39,10 @@ WORK="${SPONZA_WORK:-runs/sponza}"
 REFINED="${SPONZA_REFINED_WORK:-runs/sponza256}"
 TWICE="${SPONZA_TWICE_WORK:-runs/sponza512}"
 LADDER="${SPONZA_LADDER_WORK:-runs/sponza768}"
-mkdir -p "$WORK" "$REFINED" "$TWICE" "$LADDER"
+mkdir -p "$WORK" "$TWICE" "$LADDER"
 cp assets/recipes/sponza_walk64.toml "$WORK/sponza.toml.part" && mv "$WORK/sponza.toml.part" "$WORK/sponza.toml"
-cp assets/recipes/sponza.toml "$REFINED/sponza.toml.part" && mv "$REFINED/sponza.toml.part" "$REFINED/sponza.toml"
 cp assets/recipes/sponza_walk512.toml "$TWICE/sponza.toml.part" && mv "$TWICE/sponza.toml.part" "$TWICE/sponza.toml"
 cp assets/recipes/sponza_walk768.toml "$LADDER/sponza.toml.part" && mv "$LADDER/sponza.toml.part" "$LADDER/sponza.toml"
-[ -e "$REFINED/data" ] || [ -L "$REFINED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$REFINED/data"
 [ -e "$TWICE/data" ] || [ -L "$TWICE/data" ] || ln -s "$(realpath -m "$WORK/data")" "$TWICE/data"
 [ -e "$LADDER/data" ] || [ -L "$LADDER/data" ] || ln -s "$(realpath -m "$TWICE/data_512spp")" "$LADDER/data"
 links_to() {  # links_to LINK TARGET WHY: refused, naming the link, if it leads elsewhere (runs/ of before 2026-11-30)
@@ -90,6 +88,9 @@ margins() {  # each K of a build, from the build's own scores on the full set
   for k in "$@"; do margin "$work/evalset_eval.json" "sponza_k$k" "$work/truth_margin_k$k.json"; done
 }
 rebuild_256() {  # stage 3 (SPONZA_REBUILD_256=1): the shipped model's build and its two controls
+  mkdir -p "$REFINED"
+  cp assets/recipes/sponza.toml "$REFINED/sponza.toml.part" && mv "$REFINED/sponza.toml.part" "$REFINED/sponza.toml"
+  [ -e "$REFINED/data" ] || [ -L "$REFINED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$REFINED/data"
   REFINED_BUILD=(diviewer build --scene sponza --recipe "$REFINED/sponza.toml" --evalset "$EVALSET" --work "$REFINED"
                  --ship "$REFINED/ship")
   stage "build on the 256-spp truth: the refinement, K = 8"

@@ -1,5 +1,5 @@
-"""Issue 26's truth margin projected for a model not yet trained: from a `truth_margin.py` JSON, which keeps each frame's
-errors (the model's, its top rung's and the truth's own noise), the margin a truth of N spp would stand above a model
+"""Issue 26's truth margin projected for a model not yet trained: from a `truth_margin.py` JSON, which keeps each
+frame's errors (the model's, its top rung's and the truth's own noise), the margin a truth of N spp would stand above a model
 whose error is D dB lower than the scored one's (its tone-mapped MSE, the truth's noise included as `diviewer eval`
 scores it, times 10^(-D/10)). Which refinement a model trained on a cleaner truth needs, read before the compute is
 spent: a cleaner truth trains a better model, and the better model needs a cleaner truth again.
@@ -48,7 +48,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
     record = json.loads(a.margin.read_text())
-    if not all("frames" in s and s["frames"] and "model_mse" in s["frames"][0] for s in record.get("splits", {}).values()):
+    splits = record.get("splits", {}).values()
+    if not all(s.get("frames") and "model_mse" in s["frames"][0] for s in splits):
         raise SystemExit(f"{a.margin}: not a truth_margin.py JSON with its frames (splits.*.frames); nothing written")
     better = a.better_db or [0.0]
     table = project(record, a.project, better)
