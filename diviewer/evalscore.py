@@ -14,7 +14,6 @@ checkerboard ratio's flat regions miss on a textured scene.
 
 from __future__ import annotations
 
-import json
 import multiprocessing
 import os
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -23,7 +22,7 @@ import numpy as np
 
 from diviewer.metrics import (LUMA, equivalent_spp, flip, highpass_power, masked_psnr, masked_ssim, mse,
                               power_ratio, psnr, psnr_error, ssim, stride_pattern, tonemap)
-from diviewer.outputs import strict
+from diviewer.outputs import dumps_rows, strict
 
 KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 EVAL_KEYS = KEYS + ("flip_hdr", "flip_ldr")
@@ -235,5 +234,6 @@ def ladder_methods(ev) -> dict[str, str]:
 
 
 def strict_json(obj) -> str:
-    """JSON without NaN or Infinity (a perfect PSNR, a ratio over a perfectly smooth reference): they become null."""
-    return json.dumps(strict(obj), indent=1, allow_nan=False)
+    """JSON without NaN or Infinity (a perfect PSNR, a ratio over a perfectly smooth reference): they become null.
+    Laid out by rows (diviewer.outputs.dumps_rows): one line per frame's record."""
+    return dumps_rows(obj)

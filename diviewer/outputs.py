@@ -202,11 +202,35 @@ def dumps(obj, **kwargs) -> str:
     return json.dumps(strict(obj), allow_nan=False, **kwargs)
 
 
+def dumps_rows(obj, indent: int = 1) -> str:
+    """Strict JSON laid out by rows: a list or object whose members are all numbers, strings, booleans or null
+    stays on one line (a frame's record, a curve), larger ones open one member a line. Reads as ``json.loads``
+    reads any JSON; a third smaller than ``indent=1`` for the evaluation JSONs, whose bulk is per-frame records."""
+    return _rows(strict(obj), 0, indent)
+
+
+def _rows(obj, depth: int, step: int) -> str:
+    members = obj.values() if isinstance(obj, dict) else obj if isinstance(obj, list) else None
+    if members is None or not any(isinstance(v, (dict, list)) for v in members):
+        return json.dumps(obj, allow_nan=False)
+    pad, end = " " * (depth + step), " " * depth
+    if isinstance(obj, dict):
+        rows = [f"{pad}{_key(k)}: {_rows(v, depth + step, step)}" for k, v in obj.items()]
+        return "{\n" + ",\n".join(rows) + "\n" + end + "}"
+    return "[\n" + ",\n".join(pad + _rows(v, depth + step, step) for v in obj) + "\n" + end + "]"
+
+
+def _key(k) -> str:
+    """A member's name as ``json`` writes it: a number, boolean or null key becomes its JSON text, quoted."""
+    return json.dumps(k if isinstance(k, str) else json.dumps(k))
+
+
 def write_json(path: str | Path, obj, **kwargs) -> None:
-    """Write strict JSON atomically (temporary name, then rename)."""
+    """Write strict JSON atomically (temporary name, then rename): laid out by rows (``dumps_rows``), or as
+    ``json.dumps`` lays it out with ``kwargs``."""
     from diviewer.imageio import write_text
 
-    write_text(path, dumps(obj, **kwargs))
+    write_text(path, dumps(obj, **kwargs) if kwargs else dumps_rows(obj))
 
 
 class Staging:

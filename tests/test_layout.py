@@ -316,3 +316,14 @@ def test_the_tracked_tree_fits_its_budget():
     largest = sorted(sizes.items(), key=lambda kv: -kv[1])[:5]
     assert len(sizes) > 100 and total < TREE_BUDGET_BYTES, (
         f"tracked tree {total / 1e6:.2f} MB, budget {TREE_BUDGET_BYTES / 1e6:.0f} MB; largest: {largest}")
+
+
+def test_the_data_the_docs_cite_is_laid_out_by_rows(capsys):
+    """docs/data/ and the shipped sets' manifests: one line per record (tools/relayout_json.py), a fifth smaller than
+    one member a line, which is 2 MB of the tree's budget."""
+    from tool_modules import load_tool
+
+    root = PACKAGE.parent
+    folders = [str(root / "docs" / "data"), str(root / "assets" / "evalsets")]
+    status = load_tool("relayout_json").main(["--check", *folders])
+    assert status == 0, capsys.readouterr().out

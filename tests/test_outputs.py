@@ -187,3 +187,23 @@ def test_bench_refuses_a_plot_without_matplotlib_before_the_work(monkeypatch, ca
     err = capsys.readouterr().err
     assert rc == 2 and "'matplotlib'" in err and "diviewer[bench]" in err and "torch" not in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_json_by_rows_reads_back_the_same_with_each_record_on_a_line():
+    from diviewer.outputs import dumps_rows, strict
+
+    record = {"splits": {"a": {"frames": [{"psnr": 30.5, "ssim": 0.9, "name": "x"}, {"psnr": float("inf")}],
+                               "curve": [1, 2.5, None, True], "empty": {}, "none": []}},
+              "z_first": 1, "a_after": np.float32(0.5)}
+    text = dumps_rows(record)
+    back = json.loads(text)
+    assert back["splits"]["a"]["frames"] == [{"psnr": 30.5, "ssim": 0.9, "name": "x"}, {"psnr": None}]
+    assert list(back) == ["splits", "z_first", "a_after"] and back["a_after"] == 0.5  # key order, numpy scalars
+    lines = text.splitlines()
+    assert any(line.strip() == '{"psnr": 30.5, "ssim": 0.9, "name": "x"},' for line in lines)  # a record a line
+    assert any(line.strip() == '"curve": [1, 2.5, null, true],' for line in lines)
+    assert any(line.strip() == '"empty": {},' for line in lines)
+    assert len(text) < len(json.dumps(strict(record), indent=1))
+    assert dumps_rows(3.0) == "3.0" and dumps_rows([]) == "[]"
+    keyed = {1: [{2: "a"}], 2.5: {}, True: [[1]], None: [{}]}  # non-string keys, as json.dumps writes them
+    assert json.loads(dumps_rows(keyed)) == json.loads(json.dumps(keyed))

@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
         from diviewer.outputs import write_json
 
         write_json(a.out, {"margin": str(a.margin), "model": {k: s.get("model") for k, s in record["splits"].items()},
-                           "projected_spp": a.project, "better_db": better, "splits": table}, indent=2)
+                           "projected_spp": a.project, "better_db": better, "splits": table})
     return 0
 
 

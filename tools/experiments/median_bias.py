@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
 
         write_json(a.out, {"evalset": str(a.evalset), "spp": a.spp, "renders": a.renders, "scale": a.scale,
                            "card": str(a.card), "encoding_exposure": a.exposure, "tonemap_exposure": exposure, "splits": splits,
-                           "frames": rows}, indent=2)
+                           "frames": rows})
     return 0
 
 

@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         from diviewer.outputs import write_json
 
-        write_json(a.out, record, indent=2)  # strict JSON (a frame's inf PSNR as null), written atomically
+        write_json(a.out, record)  # strict JSON (a frame's inf PSNR as null), written atomically
     return 0
 
 

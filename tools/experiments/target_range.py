@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         from diviewer.outputs import write_json
 
-        write_json(a.out, {"data": str(a.data), "seed": a.seed, **r}, indent=2)
+        write_json(a.out, {"data": str(a.data), "seed": a.seed, **r})
     return 0
 
 

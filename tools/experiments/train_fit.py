@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         from diviewer.outputs import write_json
 
-        write_json(a.out, record, indent=2)
+        write_json(a.out, record)
     return 0
 
 

@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         from diviewer.outputs import write_json
 
-        write_json(a.out, record, indent=2)  # atomic
+        write_json(a.out, record)  # atomic
     return 0
 
 

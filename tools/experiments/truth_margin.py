@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         from diviewer.outputs import write_json
 
-        write_json(a.out, out, indent=2)
+        write_json(a.out, out)
     return 0
 
 
