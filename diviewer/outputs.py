@@ -205,7 +205,7 @@ def dumps(obj, **kwargs) -> str:
 def dumps_rows(obj, indent: int = 1) -> str:
     """Strict JSON laid out by rows: a list or object whose members are all numbers, strings, booleans or null
     stays on one line (a frame's record, a curve), larger ones open one member a line. Reads as ``json.loads``
-    reads any JSON; a third smaller than ``indent=1`` for the evaluation JSONs, whose bulk is per-frame records."""
+    reads any JSON; a fifth smaller than ``indent=1`` for the evaluation JSONs, whose bulk is per-frame records."""
     return _rows(strict(obj), 0, indent)
 
 
