@@ -33,7 +33,7 @@ from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer,
                                 equivalent, ladder_methods, per_frame, pooled_bias, score, score_frame,
                                 strict_json)
 from diviewer.metrics import flat_mask
-from diviewer.outputs import check_output_file
+from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
 from diviewer.truthmargin import MARGIN_DB, model_truth_spp, truth_margin
 
@@ -150,7 +150,7 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
         log(f"warning: {len(black)} frame(s) have an all-black reference ({', '.join(map(str, black[:8]))}"
             f"{', ...' if len(black) > 8 else ''}); their scores say little: check the dataset's lights")
     if out is not None:
-        imageio.write_text(out, strict_json(summary))  # strict JSON: an infinite PSNR (identical images) is null
+        write_json(out, summary)  # strict JSON: an infinite PSNR (identical images) is null
     return summary
 
 

@@ -225,12 +225,11 @@ def _key(k) -> str:
     return json.dumps(k if isinstance(k, str) else json.dumps(k))
 
 
-def write_json(path: str | Path, obj, **kwargs) -> None:
-    """Write strict JSON atomically (temporary name, then rename): laid out by rows (``dumps_rows``), or as
-    ``json.dumps`` lays it out with ``kwargs``."""
+def write_json(path: str | Path, obj) -> None:
+    """Write strict JSON laid out by rows (``dumps_rows``) atomically (temporary name, then rename)."""
     from diviewer.imageio import write_text
 
-    write_text(path, dumps(obj, **kwargs) if kwargs else dumps_rows(obj))
+    write_text(path, dumps_rows(obj))
 
 
 class Staging:

@@ -35,20 +35,9 @@ def relaid(path: Path) -> tuple[str, str]:
     except (OSError, UnicodeDecodeError, ValueError) as e:
         raise DiviewerError(f"cannot be laid out: {e}", path=path) from None
     new = dumps_rows(data) + ("\n" if text.endswith("\n") else "")
-    if json.loads(new) != data or list(_keys(json.loads(new))) != list(_keys(data)):
+    if json.loads(new, object_pairs_hook=list) != json.loads(text, object_pairs_hook=list):  # key order included
         raise DiviewerError("laid out by rows it would read otherwise; left as it is", path=path)
     return text, new
-
-
-def _keys(obj):
-    """Every key in document order (== on dicts ignores order)."""
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            yield k
-            yield from _keys(v)
-    elif isinstance(obj, list):
-        for v in obj:
-            yield from _keys(v)
 
 
 def json_files(targets: list[Path]) -> list[Path]:
