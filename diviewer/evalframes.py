@@ -7,7 +7,8 @@ spread over the split's meshes, so a split of several unseen objects keeps each 
 - ``manifest.json``: the full set's manifest fields (scene, hash, splits, left-out splits, the scene's
   tone-map exposure, ladder sample counts) with its frame list cut to the chosen frames; each frame records
   its stored width (the split's widest shape: the square splits are stored cropped to the model's width),
-  the sha256 of its decoded array and, for the path-tracer ladder, its scores (below);
+  the sha256 of its decoded array and, for the path-tracer ladder, its scores (below); each distinct frame
+  object list is stored once (``diviewer.data.object_lists``: Sponza's 170 static objects, not 15 copies);
 - ``frames.zip``: per frame and channel, the float16 array split into its high and low bytes (the
   high bytes, sign and exponent, compress well), LZMA-compressed in a zip (``np.load`` reads it).
 
@@ -29,6 +30,7 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.data.dataset import FrameProblem, read_manifest
+from diviewer.data.object_lists import share_object_lists
 from diviewer.errors import DiviewerError
 
 COMPACT_FILE = "frames.zip"
@@ -314,7 +316,7 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=prin
                 z.writestr(name, blob)
     from diviewer.evalscore import strict_json
 
-    imageio.write_text(out / "manifest.json", strict_json(manifest))
+    imageio.write_text(out / "manifest.json", strict_json(share_object_lists(manifest)))
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     log(f"compact evaluation set: {len(chosen)} frames ({frames_per_split} per split of "
         f"{', '.join(splits)}) in {out}, {size / 2**20:.2f} MB")

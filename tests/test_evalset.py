@@ -368,6 +368,11 @@ def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, mo
     ev = EvalFrames(compact)
     assert ev.compact and len(ev.frames) == 4 and ev.problems() == []
     assert {f["stored_width"] for f in ev.frames} == {16, 28}  # square splits stored cropped
+    # Each distinct object list is stored once; read back, every frame's configuration is the full set's.
+    raw = json.loads((compact / "manifest.json").read_text())
+    assert all(set(f["config"]["objects"]) == {"list"} for f in raw["frame_list"]) and raw["object_lists"]
+    configs = {f["index"]: f["config"] for f in EvalFrames(out).frames}
+    assert all(f["config"] == configs[f["index"]] for f in ev.frames)
     assert not (compact / "frames").exists() and main(["data", "check", str(compact)]) == 0
     monkeypatch.setattr("diviewer.evalframes.DEFAULT_EVALSETS", tmp_path / "evalsets")
     assert default_evalset("cornell") == compact

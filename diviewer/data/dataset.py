@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer import imageio
+from diviewer.data.object_lists import expand_object_lists
 from diviewer.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError
 
@@ -83,6 +84,7 @@ def read_manifest(root: Path) -> dict:
     if version > FORMAT_VERSION:
         raise DiviewerError(f"dataset format {manifest['format_version']} is newer than this diviewer reads "
                             f"({FORMAT_VERSION}); upgrade diviewer", path=path, field="format_version")
+    manifest = expand_object_lists(manifest, path)
     _check_manifest(manifest, path)
     return manifest
 
