@@ -22,6 +22,7 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.data.dataset import CHANNELS, DERIVED, FORMAT, FORMAT_VERSION, IDENTITY, Dataset, frame_name, write_frame
+from diviewer.data.object_lists import share_object_lists
 from diviewer.errors import DiviewerError
 from diviewer.exposure import still_ev
 from diviewer.locks import run_lock, shard_part
@@ -146,7 +147,7 @@ def open_or_create(out: Path, manifest: dict) -> Dataset:
             raise DiviewerError(f"a different dataset is already there (differs in: {', '.join(diff)}); "
                                 f"use another --out or the same settings to resume", path=out)
     else:
-        imageio.write_text(path, json.dumps(manifest, indent=1))
+        imageio.write_text(path, json.dumps(share_object_lists(manifest), indent=1))
     (out / "frames").mkdir(parents=True, exist_ok=True)
     return Dataset(out)
 

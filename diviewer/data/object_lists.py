@@ -1,18 +1,18 @@
 """Frame configurations' object lists stored once in a manifest (torch-free).
 
 Every frame of a manifest records its configuration: camera, lights and objects. A scene whose objects do not
-move (Sponza: 170 static objects) repeats the same object list in every frame, 37 kB a frame in the shipped
-compact evaluation set. A manifest may instead hold each distinct list once, in ``object_lists``, and a frame's
+move (Sponza: 170 static objects) repeats the same object list in every frame: 37 kB a frame in the shipped
+compact evaluation set, 206 MB of a 3,400-frame capture's manifest. A manifest may instead hold each distinct list once, in ``object_lists``, and a frame's
 ``config.objects`` names its list: ``{"list": k}``.
 
-``share_object_lists`` writes that form (the compact evaluation set's writer uses it), ``expand_object_lists``
+``share_object_lists`` writes that form (every dataset and evaluation set manifest, ``capture.open_or_create``, and
+the compact set's), ``expand_object_lists``
 reads it back (``diviewer.data.dataset.read_manifest`` calls it), so every reader of a manifest sees each frame's
 full object list and nothing downstream knows the difference. A manifest without ``object_lists`` is read as it is.
 """
 
 from __future__ import annotations
 
-import copy
 import json
 from pathlib import Path
 
@@ -60,6 +60,9 @@ def expand_object_lists(manifest: dict, path: Path | None = None) -> dict:
     frames = manifest.get("frame_list")
     if not isinstance(frames, list):
         return manifest  # read_manifest's own check names frame_list
+    # Each frame gets its own copy (a reader may edit one frame's list), parsed from the list's JSON: 2.4x faster
+    # than copy.deepcopy. A 3,400-frame Sponza manifest reads in 3.6 s so, 4.7-5.5 s unshared (docs/architecture.md).
+    texts = [json.dumps(x) for x in lists]
     out_frames = []
     for k, entry in enumerate(frames):
         ref = (entry.get("config") or {}).get("objects") if isinstance(entry, dict) else None
@@ -68,7 +71,7 @@ def expand_object_lists(manifest: dict, path: Path | None = None) -> dict:
             if not (isinstance(j, int) and not isinstance(j, bool) and 0 <= j < len(lists)) or len(ref) != 1:
                 raise DiviewerError(f"expected {{\"list\": 0..{len(lists) - 1}}} (an index into {FIELD}), got "
                                     f"{repr(ref)[:80]}", path=path, field=f"frame_list[{k}].config.objects")
-            entry = {**entry, "config": {**entry["config"], "objects": copy.deepcopy(lists[j])}}
+            entry = {**entry, "config": {**entry["config"], "objects": json.loads(texts[j])}}
         out_frames.append(entry)
     out = {k: v for k, v in manifest.items() if k not in (FIELD, "frame_list")}
     out["frame_list"] = out_frames
