@@ -21,6 +21,12 @@ from diviewer.errors import DiviewerError
 FIELD = "object_lists"
 
 
+def _objects(entry) -> object:
+    """A frame entry's ``config.objects``, or None where the entry or its configuration is not a table."""
+    config = entry.get("config") if isinstance(entry, dict) else None
+    return config.get("objects") if isinstance(config, dict) else None
+
+
 def share_object_lists(manifest: dict) -> dict:
     """The manifest with each distinct frame object list stored once in ``object_lists`` (in order of first use)
     and every frame's ``config.objects`` naming its list. A frame without an object list is left as it is; so is
@@ -31,7 +37,7 @@ def share_object_lists(manifest: dict) -> dict:
     index_of: dict[str, int] = {}
     frames = []
     for entry in manifest.get("frame_list", []):
-        objects = (entry.get("config") or {}).get("objects") if isinstance(entry, dict) else None
+        objects = _objects(entry)
         if not isinstance(objects, list):
             frames.append(entry)
             continue
@@ -65,7 +71,7 @@ def expand_object_lists(manifest: dict, path: Path | None = None) -> dict:
     texts = [json.dumps(x) for x in lists]
     out_frames = []
     for k, entry in enumerate(frames):
-        ref = (entry.get("config") or {}).get("objects") if isinstance(entry, dict) else None
+        ref = _objects(entry)
         if isinstance(ref, dict):
             j = ref.get("list")
             if not (isinstance(j, int) and not isinstance(j, bool) and 0 <= j < len(lists)) or len(ref) != 1:

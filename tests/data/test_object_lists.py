@@ -21,6 +21,7 @@ def _manifest() -> dict:
     frames = [{"index": i, "split": "test", "config": {"camera": {"fov": 40 + i}, "objects": copy.deepcopy(objs)}}
               for i, objs in enumerate((wall, box, wall, box, wall))]
     frames.append({"index": 5, "split": "test", "config": {"camera": {"fov": 50}}})  # no object list: left as is
+    frames.append({"index": 6, "split": "test", "config": "not a table"})  # read_manifest's checks are not ours
     return {"format": "diviewer-dataset", "scene": "s", "frame_list": frames, "after": 1}
 
 
@@ -30,8 +31,8 @@ def test_distinct_lists_are_stored_once_in_order_of_first_use_and_read_back_equa
     shared = share_object_lists(m)
     assert m == before  # the input is not changed
     assert [len(x) for x in shared[FIELD]] == [1, 2]
-    assert [f["config"].get("objects") for f in shared["frame_list"]] == [
-        {"list": 0}, {"list": 1}, {"list": 0}, {"list": 1}, {"list": 0}, None]
+    assert [f["config"].get("objects") if isinstance(f["config"], dict) else None for f in shared["frame_list"]] == [
+        {"list": 0}, {"list": 1}, {"list": 0}, {"list": 1}, {"list": 0}, None, None]
     assert share_object_lists(shared) is shared  # already shared
     back = expand_object_lists(json.loads(json.dumps(shared)))
     assert back == before and FIELD not in back
