@@ -2,13 +2,13 @@
 
 Every frame of a manifest records its configuration: camera, lights and objects. A scene whose objects do not
 move (Sponza: 170 static objects) repeats the same object list in every frame: 37 kB a frame in the shipped
-compact evaluation set, 206 MB of a 3,400-frame capture's manifest. A manifest may instead hold each distinct list once, in ``object_lists``, and a frame's
-``config.objects`` names its list: ``{"list": k}``.
+compact evaluation set, 206 MB of a 3,400-frame capture's manifest. A manifest may instead hold each distinct
+list once, in ``object_lists``, and a frame's ``config.objects`` names its list: ``{"list": k}``.
 
-``share_object_lists`` writes that form (every dataset and evaluation set manifest, ``capture.open_or_create``, and
-the compact set's), ``expand_object_lists``
-reads it back (``diviewer.data.dataset.read_manifest`` calls it), so every reader of a manifest sees each frame's
-full object list and nothing downstream knows the difference. A manifest without ``object_lists`` is read as it is.
+``share_object_lists`` writes that form (every dataset and evaluation set manifest, ``capture.open_or_create``,
+and the compact set's), ``expand_object_lists`` reads it back (``diviewer.data.dataset.read_manifest`` calls
+it), so every reader of a manifest sees each frame's full object list and nothing downstream knows the
+difference. A manifest without ``object_lists`` is read as it is.
 """
 
 from __future__ import annotations
