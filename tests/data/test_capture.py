@@ -75,9 +75,10 @@ def test_small_capture_writes_a_sound_dataset(gl_context, tmp_path):
     assert m["scene_hash"] == load_scene("cornell").file_hash and "versions" in m and len(m["frame_list"]) == 16
     # each distinct object list stored once (diviewer.data.object_lists); read back, every frame's is the plan's
     distinct = {json.dumps(f["config"]["objects"], sort_keys=True) for f in ds.frames}  # cornell's objects move
-    assert len(m["object_lists"]) == len(distinct) and all(set(f["config"]["objects"]) == {"list"} for f in m["frame_list"])
-    planned = {f["index"]: f["config"] for f in plan_frames(load_scene("cornell"), CaptureSettings(frames=16, seed=0,
-                                                                                                   **TINY))}
+    assert len(m["object_lists"]) == len(distinct)
+    assert all(set(f["config"]["objects"]) == {"list"} for f in m["frame_list"])
+    plan = plan_frames(load_scene("cornell"), CaptureSettings(frames=16, seed=0, **TINY))
+    planned = {f["index"]: f["config"] for f in plan}
     assert all(f["config"] == json.loads(json.dumps(planned[f["index"]])) for f in ds.frames)
     assert list((out / "thumbs").glob("*.png"))
     # running it again renders nothing and changes nothing
