@@ -189,9 +189,10 @@ def test_refine_from_is_the_captures_lower_count_and_part_of_what_the_recipe_ask
 
 def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
     """tools/sponza_chain.sh links the 64-spp build's capture (sponza_walk64.toml) into the shipped recipe's build
-    folder and the 512-spp one's (sponza_walk512.toml), whose refined set the ladder's build (sponza_walk768.toml) takes
-    for its capture: each must ask for the capture it is given (its settings at refine_from spp), or the capture stage
-    would refuse it; each trains and scores as the 64-spp recipe does, and exports with int8-stored weights."""
+    folder, whose 256-spp set the 512-spp build (sponza_walk512.toml) takes for its capture, and that one's refined set
+    the ladder's build (sponza_walk768.toml): each must ask for the capture it is given (its settings at refine_from
+    spp), or the capture stage would refuse it; each trains and scores as the 64-spp recipe does, and exports with
+    int8-stored weights."""
     from diviewer.train.recipe import capture_settings, refine_from
 
     recipes = Path(__file__).parents[2] / "assets" / "recipes"
@@ -206,11 +207,11 @@ def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
     int8 = {**{k: v for k, v in walk.export.items() if k != "half_weights"}, "int8_weights": True}
     assert walk.export.get("half_weights") and refined.export == int8
 
-    # the 512-spp truth refines the same 64-spp capture (its settings at 64), as the shipped one does to 256
+    # the 512-spp truth refines the shipped recipe's 256-spp set (its settings at 256), itself the 64-spp capture's
     twice = load_recipe(recipes / "sponza_walk512.toml")
-    assert refine_from(twice) == capture_settings(walk).spp == 64 and capture_settings(twice).spp == 512
-    assert capture_settings(twice, spp=refine_from(twice)) == capture_settings(walk)
-    assert capture_settings(twice, spp=256) == capture_settings(refined)
+    assert refine_from(twice) == capture_settings(refined).spp == 256 and capture_settings(twice).spp == 512
+    assert capture_settings(twice, spp=refine_from(twice)) == capture_settings(refined)
+    assert capture_settings(twice, spp=64) == capture_settings(walk)
     assert twice.train == walk.train and twice.ks() == walk.ks() and twice.evalset == walk.evalset
     assert twice.export == refined.export and twice.ladder == refined.ladder
     # the ladder's recipe: that 512-spp set refined again to 768 (the set is the capture its build takes)
