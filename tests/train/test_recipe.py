@@ -222,6 +222,31 @@ def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
     assert ladder.export == refined.export and ladder.ladder == refined.ladder
 
 
+def test_each_link_of_the_sponza_chain_gives_a_build_the_set_its_recipe_refines():
+    """tools/sponza_chain.sh links each refining build's data/ to the set of the build before it (a capture's data/, or
+    a refinement's data_NNNspp/): the set must hold the truth that build's recipe refines from (`refine_from`), or the
+    build would refuse it hours later, or capture through the link; a recipe edited without its link (as the 512-spp
+    one was on 2026-12-01, from 64 to 256) fails here, not in the chain."""
+    import re
+
+    from diviewer.train.recipe import capture_settings, refine_from
+
+    root = Path(__file__).parents[2]
+    text = (root / "tools" / "sponza_chain.sh").read_text()
+    recipes = {var: load_recipe(root / path) for path, var in
+               re.findall(r'^cp (assets/recipes/[\w.]+\.toml) "\$(\w+)/sponza\.toml\.part"', text, flags=re.M)}
+    links = re.findall(r'ln -s "\$\(realpath -m "\$(\w+)/(data|data_\d+spp)"\)" "\$(\w+)/data"', text)
+    assert len(links) == 3 and len(recipes) == 4, (links, list(recipes))
+    for src, folder, dst in links:
+        given = capture_settings(recipes[src]).spp
+        if folder == "data":  # the capture's own folder: the spp it captured at, before any refinement
+            given = refine_from(recipes[src]) or given
+        else:  # a refined set: named by the spp its build refined to
+            assert folder == f"data_{given}spp", (src, folder)
+        assert refine_from(recipes[dst]) == given, (dst, src, folder)
+        assert capture_settings(recipes[dst], spp=given) == capture_settings(recipes[src], spp=given), (dst, src)
+
+
 def test_train_help_says_what_the_default_recipe_sets_beside_the_papers_defaults():
     """A plain `diviewer train` runs the default recipe, so its --help shows the recipe's value of each option the
     recipe sets (K, epochs, target...) beside TrainConfig's default, and lists every shipped recipe."""
