@@ -53,6 +53,37 @@ def test_ship_writes_card_fields_and_files_and_replaces_the_shipped_model(tmp_pa
     assert shipped.read_bytes() != (tmp_path / "new_k8.onnx").read_bytes()  # the card is in its metadata
 
 
+def test_ship_draws_the_ladders_curves_from_each_ks_run_sized_by_the_ladder_record(tmp_path):
+    """--ladder-run K RUN, once per K: one figure of every K's metrics.csv, named in the card's ladder."""
+    from PIL import Image
+
+    from diviewer.runtime import read_metadata
+
+    tool = load_tool("ship_model")
+    ship = tmp_path / "ship"
+    ship.mkdir()
+    scene = base_meta()["scene"]
+    runs = []
+    for k, level in ((4, 30.0), (8, 31.0)):
+        run = tmp_path / f"run_k{k}"
+        run.mkdir()
+        (run / "metrics.csv").write_text("epoch,step,loss_G_L1,val_psnr_tm,val_ssim_tm\n"
+                                         + "".join(f"{i},{10 * i},{1 / i},{level + i},{0.8 + i / 100}\n"
+                                                   for i in range(1, 5)))
+        runs += ["--ladder-run", str(k), str(run)]
+    (ship / f"{scene}_ladder.json").write_text(json.dumps({"rows": [{"K": 4, "bytes": 700_000},
+                                                                    {"K": 8, "bytes": 2_700_000}]}))
+    new = _model(tmp_path / "new_k8.onnx", 2.0)
+    ev = _eval(tmp_path / "ev.json", {"new_k8": 35.0, scene: 33.0})
+    card = tool.main(["--model", str(new), "--run", str(tmp_path / "run_k8"), "--eval", str(ev), "--command", "c",
+                      "--note", "n", "--ladder-why", "w", "--ship", str(ship), *runs])
+    assert card["ladder"]["curves"] == f"{scene}_ladder_curves.png" == read_metadata(ship / f"{scene}.onnx")[
+        "ladder"]["curves"]
+    with Image.open(ship / card["ladder"]["curves"]) as im:
+        px = {tuple(int(v) for v in c) for c in im.convert("RGB").getdata()}
+    assert {(31, 119, 180), (255, 127, 14)} <= px  # a line for each K
+
+
 def test_a_model_missing_from_the_eval_json_is_refused_by_name(tmp_path):
     from diviewer.errors import DiviewerError
 

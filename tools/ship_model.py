@@ -5,6 +5,7 @@ the rebuild command. `diviewer build` does the same at the end of a full build; 
 Usage: python tools/ship_model.py --model runs/cornell/fly_eval/fly_area4_k8_fp32.onnx --run runs/cornell/fly_area4_k8
            --eval docs/data/compact/EVAL.json --command "diviewer capture ..." [--command ...] --note TEXT
            --ladder-why TEXT [--ladder-file cornell_ladder.json] [--ship assets/models] [--previous-eval OLD.json]
+           [--ladder-run 8 runs/cornell/fly_k8 --ladder-run 16 ...]
 
 EVAL.json: `diviewer eval --model MODEL --model assets/models/SCENE.onnx --out EVAL.json` on the compact evaluation
 set (the card records the tone-mapped region scores of both, per split: ``evalset_compact``). A model that ships
@@ -12,7 +13,7 @@ with an edited scene file (a new ``scene_hash``) cannot be scored on the old mod
 new: ``--previous-eval`` then names the old model's JSON on the same frames (the set before
 `tools/restamp_scene_hash.py`), and ``--eval`` holds the new model's. The card and the ONNX
 metadata are written together (`diviewer.build.pipeline.write_model_card`); the run's curves.png and metrics.csv
-are copied beside them. The shipped card's recipe must be the scene's recipe file (tests/train/test_recipe.py).
+are copied beside them, and with ``--ladder-run`` every K's curves on one figure (SCENE_ladder_curves.png). The shipped card's recipe must be the scene's recipe file (tests/train/test_recipe.py).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from diviewer import imageio  # noqa: E402
-from diviewer.build.pipeline import write_model_card  # noqa: E402
+from diviewer.build.pipeline import write_ladder_curves, write_model_card  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 
 SCORES = ("psnr_tm", "ssim_tm", "psnr_tm_object", "psnr_tm_object_unlit", "ssim_tm_object_unlit", "psnr_tm_shade",
@@ -53,7 +54,8 @@ def split_scores(ev: dict, method: str, path: Path) -> dict:
 
 
 def ship(model: Path, run: Path, eval_json: Path, commands: list[str], note: str, ladder_why: str,
-         ladder_file: str | None, dest: Path, previous_eval: Path | None = None) -> dict:
+         ladder_file: str | None, dest: Path, previous_eval: Path | None = None,
+         ladder_runs: dict[int, Path] | None = None) -> dict:
     card = json.loads(model.with_suffix(".json").read_text())
     scene = card["scene"]
     shipped = dest / f"{scene}.onnx"
@@ -66,6 +68,11 @@ def ship(model: Path, run: Path, eval_json: Path, commands: list[str], note: str
     card.update(commands=commands, note=note, rebuild=f"diviewer build --scene {scene}",
                 ladder={"chosen_K": card["K"], "why": ladder_why, "file": ladder_file or f"{scene}_ladder.json"},
                 evalset_compact=compact)
+    if ladder_runs:  # every K's curves on one figure, sized from the ladder record beside the model
+        card["ladder"]["curves"] = f"{scene}_ladder_curves.png"
+        record = dest / card["ladder"]["file"]
+        write_ladder_curves(json.loads(record.read_text()) if record.is_file() else {"rows": []}, ladder_runs,
+                            dest / card["ladder"]["curves"])
     write_model_card(model, shipped, card)
     for name, suffix in (("curves.png", "_curves.png"), ("metrics.csv", "_metrics.csv")):
         if (run / name).is_file():
@@ -86,9 +93,14 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--note", required=True, help="what it is, in a sentence or two")
     ap.add_argument("--ladder-why", required=True, help="why this K (the ladder's verdict)")
     ap.add_argument("--ladder-file", default=None, help="the ladder record beside it (default SCENE_ladder.json)")
+    ap.add_argument("--ladder-run", nargs=2, action="append", default=[], metavar=("K", "RUN"),
+                    help="a K of the ladder and its training run, once per K: their curves on one figure, "
+                         "SCENE_ladder_curves.png (the card's ladder.curves)")
     ap.add_argument("--ship", type=Path, default=ROOT / "assets" / "models")
     a = ap.parse_args(argv)
-    card = ship(a.model, a.run, a.eval, a.command, a.note, a.ladder_why, a.ladder_file, a.ship, a.previous_eval)
+    runs = {int(k): Path(run) for k, run in a.ladder_run}
+    card = ship(a.model, a.run, a.eval, a.command, a.note, a.ladder_why, a.ladder_file, a.ship, a.previous_eval,
+                runs)
     print(f"shipped {a.model} as {a.ship / (card['scene'] + '.onnx')} (K={card['K']})")
     return card
 

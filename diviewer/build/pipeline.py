@@ -327,10 +327,13 @@ def _ship(plan: Plan, state: BuildState, log, command: str, **_) -> tuple[list[P
     k, name = ladder["chosen_K"], plan.scene_name
     dst = plan.ship / f"{name}.onnx"
     card = json.loads(plan.model(k).with_suffix(".json").read_text())
-    card["ladder"] = {"chosen_K": k, "why": ladder["rule"], "file": f"{name}_ladder.json"}
+    card["ladder"] = {"chosen_K": k, "why": ladder["rule"], "file": f"{name}_ladder.json",
+                      "curves": f"{name}_ladder_curves.png"}
     card["rebuild"] = command
+    curves = plan.ship / card["ladder"]["curves"]
+    write_ladder_curves(ladder, {r["K"]: plan.run_dir(r["K"]) for r in ladder["rows"]}, curves)
     write_model_card(plan.model(k), dst, card)
-    outputs = [dst, dst.with_suffix(".json")]
+    outputs = [dst, dst.with_suffix(".json"), curves]
     for src, suffix in ((plan.run_dir(k) / "curves.png", "_curves.png"),
                         (plan.run_dir(k) / "metrics.csv", "_metrics.csv"), (plan.work / "ladder.json", "_ladder.json")):
         if src.is_file():
@@ -346,6 +349,16 @@ STAGES = {"capture": _capture, "refine": _refine, "check": _check, "evalset": _e
           "export": _export, "evaluate": _evaluate, "pick": _pick, "ship": _ship}
 """Each stage kind's function: (plan, state, log, k=K of a per-K stage, command=the rebuild command) ->
 (outputs whose sha256 the state records, a result record)."""
+
+
+def write_ladder_curves(ladder: dict, runs: dict[int, Path], path: Path) -> None:
+    """SCENE_ladder_curves.png: every K of the ladder record ``ladder`` on one figure, from each K's run folder's
+    metrics.csv (``runs``: K -> run folder), labelled with the K and its model's size."""
+    from diviewer.train.report import draw_ladder_curves, read_metrics
+
+    size = {r["K"]: r["bytes"] for r in ladder["rows"]}
+    draw_ladder_curves({f"K = {k} ({size[k] / 1e6:.1f} MB)" if k in size else f"K = {k}":
+                        read_metrics(run / "metrics.csv") for k, run in sorted(runs.items())}, path)
 
 
 def write_model_card(src: Path, dst: Path, card: dict) -> None:

@@ -1,5 +1,5 @@
 """Validation and what a person reads of a run: per-frame metrics of the composed image against the
-path tracer, metrics.csv (one row per validation or stop) and curves.png."""
+path tracer, metrics.csv (one row per validation or stop), curves.png and a ladder's curves side by side."""
 
 from __future__ import annotations
 
@@ -106,8 +106,6 @@ def draw_curves(rows: list[Mapping[str, Any]], path: Path, best_epoch: float | N
                 stop_epoch: float | None = None) -> None:
     """curves.png: validation MSE and SSIM per epoch (linear and tone-mapped), the train losses and
     netD's accuracy; a grey line marks the best validation, a red one where early stopping stopped."""
-    from PIL import Image, ImageDraw, ImageFont
-
     panels = [
         ("validation MSE (log)", [("linear", "val_mse"), ("tone-mapped", "val_mse_tm")], True),
         ("validation SSIM", [("linear", "val_ssim"), ("tone-mapped", "val_ssim_tm")], False),
@@ -115,25 +113,57 @@ def draw_curves(rows: list[Mapping[str, Any]], path: Path, best_epoch: float | N
                                 ("G SSIM", "loss_G_SSIM")], True),
         ("netD accuracy (0.5: chance)", [("real", "D_acc_real"), ("fake", "D_acc_fake")], False),
     ]
+    no_netD = "no discriminator (--gan-weight 0)" if any(r.get("loss_G_L1") is not None for r in rows) else None
+    _draw_panels([(title, [(label, _series(rows, "epoch", key, log_y)) for label, key in series], log_y,
+                   no_netD if title.startswith("netD") else None) for title, series, log_y in panels],
+                 path, "epoch", [(best_epoch, (150, 150, 150), "best"), (stop_epoch, (214, 39, 40), "stop")])
+
+
+def draw_ladder_curves(runs: Mapping[str, list[Mapping[str, Any]]], path: Path) -> None:
+    """SCENE_ladder_curves.png: each K of a ladder (``runs``: its label -> its metrics.csv rows) on one budget,
+    per training step: validation PSNR and SSIM on tone-mapped frames and the train reconstruction loss, so the
+    widths read side by side where each run's curves.png shows one."""
+    panels = [("validation PSNR, tone-mapped (dB)", "val_psnr_tm", False),
+              ("validation SSIM, tone-mapped", "val_ssim_tm", False),
+              ("train reconstruction loss (log)", "loss_G_L1", True)]
+    _draw_panels([(title, [(label, _series(rows, "step", key, log_y)) for label, rows in runs.items()], log_y, None)
+                  for title, key, log_y in panels], path, "step", [])
+
+
+def _series(rows: list[Mapping[str, Any]], x_key: str, key: str, log_y: bool) -> list[tuple[float, float]]:
+    """The finite (x, y) points of column ``key`` against ``x_key`` (y as log10 on a log panel)."""
+    p = [(float(r[x_key]), float(r[key])) for r in rows
+         if r.get(key) is not None and math.isfinite(float(r[key])) and (not log_y or float(r[key]) > 0)]
+    return [(x, math.log10(y) if log_y else y) for x, y in p]
+
+
+def _draw_panels(panels: list[tuple[str, list[tuple[str, list[tuple[float, float]]]], bool, str | None]],
+                 path: Path, x_label: str, marks: list[tuple[float | None, tuple[int, int, int], str]]) -> None:
+    """Panels side by side, each (title, [(legend label, points)], log y, what to say when it has no points: a
+    panel that does not apply, or None for "no data yet"), with vertical ``marks`` (x, colour, label) on each;
+    written atomically as a PNG."""
+    from PIL import Image, ImageDraw, ImageFont
+
     colors = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (148, 103, 189)]
     pw, ph, ml, mr, mt, mb = 420, 330, 64, 14, 42, 38
     img = Image.new("RGB", (pw * len(panels), ph), "white")
     draw = ImageDraw.Draw(img)
     font = ImageFont.load_default()
-    for k, (title, series, log_y) in enumerate(panels):
+    for k, (title, series, log_y, empty) in enumerate(panels):
         x0, x1, y0, y1 = k * pw + ml, (k + 1) * pw - mr, mt, ph - mb
         draw.text((k * pw + ml, 6), title, fill="black", font=font)
         draw.rectangle([x0, y0, x1, y1], outline="black")
-        pts = {}
-        for label, key in series:
-            p = [(float(r["epoch"]), float(r[key])) for r in rows
-                 if r.get(key) is not None and math.isfinite(float(r[key])) and (not log_y or float(r[key]) > 0)]
-            pts[label] = [(x, math.log10(y) if log_y else y) for x, y in p]
-        allp = [q for p in pts.values() for q in p]
+        allp = [q for _, p in series for q in p]
+        if not allp and empty:  # a panel that does not apply to the run: a sentence, no legend
+            draw.text((x0 + 10, (y0 + y1) // 2), empty, fill="gray", font=font)
+            continue
+        lx = x0  # the legend: one row between the title and the plot, every series named, with points or not
+        for j, (label, _) in enumerate(series):
+            draw.line([lx, 28, lx + 16, 28], fill=colors[j % len(colors)], width=2)
+            draw.text((lx + 20, 22), label, fill="black", font=font)
+            lx += 20 + int(draw.textlength(label, font=font)) + 18
         if not allp:
-            no_netD = title.startswith("netD") and any(r.get("loss_G_L1") is not None for r in rows)
-            draw.text((x0 + 10, (y0 + y1) // 2), "no discriminator (--gan-weight 0)" if no_netD else "no data yet",
-                      fill="gray", font=font)
+            draw.text((x0 + 10, (y0 + y1) // 2), "no data yet", fill="gray", font=font)
             continue
         xlo, xhi = min(q[0] for q in allp), max(q[0] for q in allp)
         ylo, yhi = min(q[1] for q in allp), max(q[1] for q in allp)
@@ -151,29 +181,21 @@ def draw_curves(rows: list[Mapping[str, Any]], path: Path, best_epoch: float | N
             px, _ = to_px(fx, ylo)
             _, py = to_px(xlo, fy)
             draw.line([px, y1, px, y1 + 4], fill="black")
-            draw.text((px - 10, y1 + 6), f"{fx:.3g}", fill="black", font=font)
+            draw.text((px - 10, y1 + 6), f"{fx:,.0f}" if abs(fx) >= 1000 else f"{fx:.3g}", fill="black", font=font)
             draw.line([x0 - 4, py, x0, py], fill="black")
             draw.text((k * pw + 4, py - 6), f"{10 ** fy if log_y else fy:.3g}", fill="black", font=font)
-        draw.text(((x0 + x1) // 2 - 14, ph - 14), "epoch", fill="black", font=font)
-        for mark, color, label in ((best_epoch, (150, 150, 150), "best"), (stop_epoch, (214, 39, 40), "stop")):
+        draw.text(((x0 + x1) // 2 - 14, ph - 14), x_label, fill="black", font=font)
+        for mark, color, label in marks:
             if mark is not None and xlo <= mark <= xhi:
                 px, _ = to_px(mark, ylo)
                 draw.line([px, y0, px, y1], fill=color, width=1)
                 draw.text((px + 3, y0 + 3), label, fill=color, font=font)
-        lx = x0  # the legend: one row between the title and the plot
-        for j, (label, p) in enumerate(pts.items()):
+        for j, (_, p) in enumerate(series):
             color = colors[j % len(colors)]
             xy = [to_px(x, y) for x, y in p]
             if len(xy) > 1:
                 draw.line(xy, fill=color, width=2)
             for px, py in xy:
                 draw.ellipse([px - 2, py - 2, px + 2, py + 2], fill=color)
-            draw.line([lx, 28, lx + 16, 28], fill=color, width=2)
-            draw.text((lx + 20, 22), label, fill="black", font=font)
-            lx += 20 + int(draw.textlength(label, font=font)) + 18
     with imageio.atomic_path(path) as tmp:
         img.save(tmp, format="PNG")
-
-
-# ---------------------------------------------------------------------------------------------
-# The training loop

@@ -491,6 +491,7 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
     assert rec["name"] == "tinyrecipe" and rec["sha256"] == load_recipe(recipe).sha256
     assert rec["overrides"] == ({"K": 4} if card["K"] == 4 else {})
     assert (ship / "tiny_curves.png").is_file() and (ship / "tiny_metrics.csv").is_file()
+    assert card["ladder"]["curves"] == "tiny_ladder_curves.png" and (ship / "tiny_ladder_curves.png").is_file()
     for r in ladder["rows"]:
         # the scene camera's splits and, as every evaluation set has them now, 4:3 and 16:9 at the model's rows
         assert set(r["evalset"]) == {"unseen_configs", "unseen_objects", "window_shapes_42x32", "window_shapes_56x32"}

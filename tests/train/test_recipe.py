@@ -52,6 +52,8 @@ def test_a_shipped_cards_recipe_is_its_scenes_recipe_file(card):
     assert {**rec.capture, "split_fractions": list(rec.capture["split_fractions"])} == {
         **{k: v for k, v in cap.items()}, "width": meta["resolution"][0], "height": meta["resolution"][1]}
     assert meta["K"] in rec.ks() and meta["ladder"]["chosen_K"] == meta["K"]
+    for name in (meta["ladder"]["file"], meta["ladder"].get("curves")):  # what the card names ships beside it
+        assert name is None or (models_dir() / name).is_file(), name
     assert bool(rec.export.get("fp16")) == (meta["precision"] == "fp16")
     assert bool(rec.export.get("half_weights")) == (meta["precision"] == "fp32" and meta.get("weights") == "fp16")
     assert bool(rec.export.get("int8_weights")) == (meta.get("weights") == "int8")
