@@ -54,7 +54,8 @@ def test_ship_writes_card_fields_and_files_and_replaces_the_shipped_model(tmp_pa
 
 
 def test_ship_draws_the_ladders_curves_from_each_ks_run_sized_by_the_ladder_record(tmp_path):
-    """--ladder-run K RUN, once per K: one figure of every K's metrics.csv, named in the card's ladder."""
+    """--ladder-run K RUN (a run folder or its metrics.csv), once per K: one figure of every K's curves, named in
+    the card's ladder."""
     from PIL import Image
 
     from diviewer.runtime import read_metadata
@@ -70,7 +71,7 @@ def test_ship_draws_the_ladders_curves_from_each_ks_run_sized_by_the_ladder_reco
         (run / "metrics.csv").write_text("epoch,step,loss_G_L1,val_psnr_tm,val_ssim_tm\n"
                                          + "".join(f"{i},{10 * i},{1 / i},{level + i},{0.8 + i / 100}\n"
                                                    for i in range(1, 5)))
-        runs += ["--ladder-run", str(k), str(run)]
+        runs += ["--ladder-run", str(k), str(run if k == 4 else run / "metrics.csv")]  # a run, or its metrics
     (ship / f"{scene}_ladder.json").write_text(json.dumps({"rows": [{"K": 4, "bytes": 700_000},
                                                                     {"K": 8, "bytes": 2_700_000}]}))
     new = _model(tmp_path / "new_k8.onnx", 2.0)

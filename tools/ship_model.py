@@ -13,7 +13,8 @@ with an edited scene file (a new ``scene_hash``) cannot be scored on the old mod
 new: ``--previous-eval`` then names the old model's JSON on the same frames (the set before
 `tools/restamp_scene_hash.py`), and ``--eval`` holds the new model's. The card and the ONNX
 metadata are written together (`diviewer.build.pipeline.write_model_card`); the run's curves.png and metrics.csv
-are copied beside them, and with ``--ladder-run`` every K's curves on one figure (SCENE_ladder_curves.png). The shipped card's recipe must be the scene's recipe file (tests/train/test_recipe.py).
+are copied beside them, and with ``--ladder-run`` every K's curves on one figure (SCENE_ladder_curves.png). The
+shipped card's recipe must be the scene's recipe file (tests/train/test_recipe.py).
 """
 
 from __future__ import annotations
@@ -94,8 +95,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--ladder-why", required=True, help="why this K (the ladder's verdict)")
     ap.add_argument("--ladder-file", default=None, help="the ladder record beside it (default SCENE_ladder.json)")
     ap.add_argument("--ladder-run", nargs=2, action="append", default=[], metavar=("K", "RUN"),
-                    help="a K of the ladder and its training run, once per K: their curves on one figure, "
-                         "SCENE_ladder_curves.png (the card's ladder.curves)")
+                    help="a K of the ladder and its training run (or the run's metrics.csv), once per K: their "
+                         "curves on one figure, SCENE_ladder_curves.png (the card's ladder.curves)")
     ap.add_argument("--ship", type=Path, default=ROOT / "assets" / "models")
     a = ap.parse_args(argv)
     runs = {int(k): Path(run) for k, run in a.ladder_run}

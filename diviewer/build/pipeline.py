@@ -352,13 +352,15 @@ STAGES = {"capture": _capture, "refine": _refine, "check": _check, "evalset": _e
 
 
 def write_ladder_curves(ladder: dict, runs: dict[int, Path], path: Path) -> None:
-    """SCENE_ladder_curves.png: every K of the ladder record ``ladder`` on one figure, from each K's run folder's
-    metrics.csv (``runs``: K -> run folder), labelled with the K and its model's size."""
+    """SCENE_ladder_curves.png: every K of the ladder record ``ladder`` on one figure, from each K's metrics.csv
+    (``runs``: K -> its run folder, or the metrics.csv itself as kept beside a shipped model), labelled with the K
+    and its model's size."""
     from diviewer.train.report import draw_ladder_curves, read_metrics
 
     size = {r["K"]: r["bytes"] for r in ladder["rows"]}
     draw_ladder_curves({f"K = {k} ({size[k] / 1e6:.1f} MB)" if k in size else f"K = {k}":
-                        read_metrics(run / "metrics.csv") for k, run in sorted(runs.items())}, path)
+                        read_metrics(run if run.is_file() else run / "metrics.csv")
+                        for k, run in sorted(runs.items())}, path)
 
 
 def write_model_card(src: Path, dst: Path, card: dict) -> None:
