@@ -11,7 +11,6 @@ from pathlib import Path
 
 from diviewer import __version__
 from diviewer.errors import DiviewerError
-from diviewer.locks import run_lock
 from diviewer.outputs import ENVIRONMENT_ERRNOS, check_command_outputs, is_scratch
 
 # Numeric options by destination, the same rule in every subcommand: (lowest, highest or None).
@@ -90,63 +89,6 @@ def parse_splits(text: str) -> tuple[float, float, float]:
     return fractions
 
 
-def _cmd_data_check(args: argparse.Namespace) -> int:
-    from diviewer.data.capture import summarize
-    from diviewer.data.dataset import Dataset, read_manifest
-
-    if "compact" in read_manifest(args.dir):  # a compact evaluation set: one zip, checksums in its manifest
-        from diviewer.evalframes import EvalFrames
-
-        ev = EvalFrames(args.dir)
-        problems = ev.problems()
-        for p in problems:
-            print(f"frame {p.index:6d}: {p.problem}")
-        print(f"{args.dir}: compact evaluation set of {ev.manifest['scene']}, {len(ev.frames)} frames: "
-              + (f"{len(problems)} bad; write it again with `diviewer evalset --compact FULL_DIR --out {args.dir}`"
-                 if problems else "all present and sound"))
-        return 1 if problems else 0
-    ds = Dataset(args.dir)
-    problems = ds.check(verify_checksum=not args.fast)
-    s = summarize(ds)
-    print(f"{args.dir}: {ds.manifest['scene']} {ds.width}x{ds.height}, {s['present']}/{s['planned']} frames present "
-          f"({', '.join(f'{k} {v}' for k, v in s['per_split'].items())}), {s['disk_mb']:.1f} MB")
-    for p in problems:
-        print(f"frame {p.index:6d}: {p.problem}")
-    if problems:
-        command = "evalset" if ds.manifest.get("kind") == "evalset" else "capture"  # whose folder this is
-        print(f"{len(problems)} frame(s) missing or bad; run the same `diviewer {command}` again to render them")
-        return 1
-    print("all frames present and sound")
-    return 0
-
-
-def _cmd_data_merge(args: argparse.Namespace) -> int:
-    from diviewer.data.capture import merge
-
-    for src in args.sources:
-        if src.exists() and args.out.exists() and src.resolve() == args.out.resolve():
-            raise DiviewerError(f"{src} is both a source and the output", field="--out")
-
-    with run_lock(args.out, "data merge"):  # the same lock as a capture into this folder
-        merge(args.sources, args.out)
-    return 0
-
-
-def _cmd_data_refine(args: argparse.Namespace) -> int:
-    from diviewer.data.capture import parse_shard
-    from diviewer.data.refine import refine
-
-    refine(args.dir, args.out, args.spp, parse_shard(args.shard), extras=args.extras)
-    return 0
-
-
-def _cmd_data_area_direct(args: argparse.Namespace) -> int:
-    from diviewer.data.area import area_direct
-
-    area_direct(args.dir, args.out, args.samples)
-    return 0
-
-
 def _cmd_baseline(args: argparse.Namespace) -> int:
     from diviewer.baseline import build_baseline
 
@@ -222,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--version", action="version", version=f"diviewer {__version__}")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
     from diviewer.build.command import add_build_parser
+    from diviewer.datacommand import add_data_parsers
     from diviewer.evalcommand import add_eval_parsers
     from diviewer.train.cli import add_train_parser
     from diviewer.viewer.command import add_view_parser
@@ -235,7 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_eval_parsers(sub, _add_variant_arg)
     _add_baseline_parser(sub)
     _add_bench_parser(sub)
-    _add_data_parsers(sub)
+    add_data_parsers(sub)
     return ap
 
 
@@ -348,35 +291,6 @@ def _add_bench_parser(sub) -> None:
     p.add_argument("--plot", type=Path, default=None, help="write the speed/accuracy plot (PNG)")
     p.add_argument("--quick", action="store_true", help="a few frames at 32x32 (seconds): the test suite's run")
     p.set_defaults(func=_cmd_bench)
-
-
-def _add_data_parsers(sub) -> None:
-    """`diviewer data check | merge | refine | area-direct`."""
-    p = sub.add_parser("data", help="inspect datasets")
-    data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")
-    q = data.add_parser("check", help="verify every frame: present, readable, finite, shapes, checksum")
-    q.add_argument("dir", type=Path)
-    q.add_argument("--fast", action="store_true", help="skip checksums")
-    q.set_defaults(func=_cmd_data_check)
-    q = data.add_parser("merge", help="merge shards captured into separate folders")
-    q.add_argument("sources", type=Path, nargs="+")
-    q.add_argument("--out", type=Path, required=True)
-    q.set_defaults(func=_cmd_data_merge)
-    q = data.add_parser("refine", help="raise a path-traced dataset's sample count into a new folder (renders only "
-                                       "the extra samples; resumable)")
-    q.add_argument("dir", type=Path)
-    q.add_argument("--spp", type=int, required=True, help="the refined dataset's samples per pixel (above the source's)")
-    q.add_argument("--out", type=Path, required=True)
-    q.add_argument("--shard", default=None, help="k/n: refine every n-th frame starting at the k-th")
-    q.add_argument("--extras", type=Path, default=None, help="a folder of extra samples rendered elsewhere "
-                   "(tools/device_refine.py): refine only its frames, from them")
-    q.set_defaults(func=_cmd_data_refine)
-    q = data.add_parser("area-direct", help="re-render a dataset's GL direct light over each pixel's area into a new "
-                                            "folder (supersampled, box-filtered; minutes; resumable)")
-    q.add_argument("dir", type=Path)
-    q.add_argument("--samples", type=int, default=4, help="samples per axis (default 4: 16 per pixel)")
-    q.add_argument("--out", type=Path, required=True)
-    q.set_defaults(func=_cmd_data_area_direct)
 
 
 def _chosen_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:

@@ -61,10 +61,12 @@ def summarize(rows: list[dict], key: str) -> dict:
 
 def model_truth_spp(meta: dict[str, Any]) -> int | None:
     """The samples per pixel of the truth a model trained on, from its card: a refined truth's fewest over its train
-    frames (``truth_spp``), else its capture's (``recipe.capture.spp``); None where the card says neither, or where
-    the truth was not path traced (``gt = "vxgi"``: its error is not noise)."""
+    frames (``truth_spp``), else its capture's (``recipe.capture.spp``); None where the card says neither, where
+    the truth was not path traced (``gt = "vxgi"``: its error is not noise), or where it was filtered
+    (``truth_filter``: the set's ladder is not filtered, so its rungs do not measure that truth;
+    tools/experiments/filtered_truth_margin.py does)."""
     cap = (meta.get("recipe") or {}).get("capture") or {}
-    if cap.get("gt", "pt") != "pt":
+    if cap.get("gt", "pt") != "pt" or cap.get("truth_filter"):
         return None
     if meta.get("truth_spp"):
         return int(meta["truth_spp"]["min"])

@@ -284,6 +284,58 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
 
 
 @pytest.mark.slow
+def test_the_filtered_truths_margin_is_read_from_passes_traced_again_and_resumes(evalset, tmp_path):
+    """tools/experiments/filtered_truth_margin.py: each frame traced again in passes (kept, extended when more are
+    asked, never traced twice), the truth at 1, 2, ... passes raw and filtered, each margin over the model as
+    `diviewer.truthmargin` takes it; on the box's flat walls the filtered truth is the closer of the two."""
+    from diviewer.data.truth_filter import TruthFilter, filter_truth
+    from diviewer.metrics import mse, psnr_error, tonemap
+    from diviewer.truthmargin import margin_db
+    from tool_modules import load_tool
+
+    out, _ = evalset
+    model, _ = _models(tmp_path)
+    scores = tmp_path / "eval.json"
+    assert main(["eval", "--model", str(model), "--evalset", str(out), "--out", str(scores)]) == 0
+    tool, renders, res = load_tool("experiments/filtered_truth_margin"), tmp_path / "renders", tmp_path / "m.json"
+    argv = ["--eval", str(scores), "--model-key", "twice", "--evalset", str(out), "--pass-spp", "2",
+            "--renders", str(renders), "--out", str(res)]
+    assert tool.main(argv + ["--passes", "1"]) == 0
+    first = {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")}
+    assert len(first) == 8
+    assert tool.main(argv + ["--passes", "2"]) == 0  # extended: each file holds two passes now
+    second = {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")}
+    assert set(second) == set(first) and all(second[p] != first[p] for p in first)
+    assert tool.main(argv + ["--passes", "2"]) == 0  # nothing left to trace
+    assert {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")} == second
+    r = json.loads(res.read_text())
+    ev, closer = EvalFrames(out), []
+    for key in SPLIT_KEYS:
+        split = r["splits"][key]
+        assert set(split["per_truth"]) == {"2_raw", "2_filtered_1_32_0.01", "4_raw", "4_filtered_1_32_0.01"}
+        width = json.loads(scores.read_text())["splits"][key]["shape"][0]
+        for row in split["frames"]:
+            i = row["index"]
+            frame = {k: crop(v, width) for k, v in ev.load(i).items()}
+            passes = np.load(renders / f"{i:06d}_spp2.npz")
+            pt, direct = (crop(passes[c].mean(axis=0), width) for c in ("pt", "direct"))
+            truth = tonemap(frame["pt"], ev.exposure)
+            noise = mse(tonemap(frame["pt_b"], ev.exposure), truth) / 2
+            raw = mse(tonemap(pt, ev.exposure), truth)
+            filtered = mse(tonemap(filter_truth(pt, direct, frame["albedo"], frame["normal"], frame["depth"],
+                                                ev.entry(i)["config"]["camera"]["fov"], TruthFilter()),
+                                   ev.exposure), truth)
+            assert row["4_raw_mse"] == pytest.approx(raw, rel=1e-5)
+            assert row["4_filtered_1_32_0.01_mse"] == pytest.approx(filtered, rel=1e-5)
+            assert row["margin_4_raw"] == pytest.approx(margin_db(row["model_mse"], raw, noise))
+            assert row["truth_noise_mse"] == pytest.approx(noise) and row["model_mse"] == pytest.approx(
+                psnr_error(next(f["psnr_tm"] for f in json.loads(scores.read_text())["splits"][key]["methods"]
+                                ["twice"]["per_frame"] if f["index"] == i)))
+            closer.append(filtered < raw)
+    assert np.mean(closer) > 0.5
+
+
+@pytest.mark.slow
 def test_scoring_in_worker_processes_gives_the_same_numbers_in_the_same_order(evalset, tmp_path):
     out, _ = evalset
     model, _ = _models(tmp_path)

@@ -52,6 +52,9 @@ def test_the_truth_a_model_trained_on_is_read_from_its_card():
     assert tm.model_truth_spp({"truth_spp": {"min": 259, "max": 262}, "recipe": {"capture": {"spp": 256}}}) == 259
     assert tm.model_truth_spp({}) is None and tm.model_truth_spp({"recipe": {"capture": None}}) is None
     assert tm.model_truth_spp({"recipe": {"capture": {"spp": 64, "gt": "vxgi"}}}) is None  # not a noisy truth
+    # a filtered truth: the set's ladder is not filtered, its rungs do not measure it (filtered_truth_margin.py does)
+    assert tm.model_truth_spp({"truth_spp": {"min": 259, "max": 262},
+                               "recipe": {"capture": {"spp": 256, "truth_filter": {"levels": 1}}}}) is None
 
 
 def test_a_split_reads_its_truths_rung_or_projects_the_top_one():

@@ -35,8 +35,8 @@ def add_build_parser(subparsers) -> argparse.ArgumentParser:
                    help="the widths to train instead of the recipe's ladder")
     p.add_argument("--device", default=None, help="training device: auto (default: CUDA where present), cpu, cuda:N")
     p.add_argument("--stop-after", default=None, metavar="STAGE",
-                   help="stop once this stage of the plan is done (capture, refine, check, evalset, train_k8, ...): "
-                        "render the data here and train later or elsewhere; the same command without it goes on")
+                   help="stop once this stage of the plan is done (capture, refine, filter, check, evalset, "
+                        "train_k8, ...): render the data here and train later or elsewhere; the same command without it goes on")
     p.add_argument("--dry-run", action="store_true", help="print the plan and its estimated time; do nothing")
     p.set_defaults(func=run_build_command)
     return p

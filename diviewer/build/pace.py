@@ -195,7 +195,7 @@ def refine_pace(plan: Plan) -> Pace | None:
     stage = next((s for s in plan.stages if s.name == "refine"), None)
     if stage is None:
         return None
-    count, seconds = _frame_seconds(plan.data, lambda info: info["refined"]["seconds"])
+    count, seconds = _frame_seconds(plan.truth_dir, lambda info: info["refined"]["seconds"])
     left = plan.capture.frames - count
     assumed = f"the plan assumes {stage.seconds / plan.capture.frames:.1f} s"
     if left <= 0:
@@ -211,7 +211,7 @@ def refine_pace(plan: Plan) -> Pace | None:
                     f"frame to add; the {left} frames take "
                     f"~{hms(left * per)} at that pace ({assumed})", left * per)
     per, words = _pace(seconds, left)
-    return Pace("refine", f"refine so far: {count} of {plan.capture.frames} frames in {plan.data}, {words} "
+    return Pace("refine", f"refine so far: {count} of {plan.capture.frames} frames in {plan.truth_dir}, {words} "
                 f"({assumed})", left * per)
 
 

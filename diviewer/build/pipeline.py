@@ -41,6 +41,7 @@ def plan_key(plan: Plan) -> dict[str, Any]:
         "export": dataclasses.asdict(export_settings(plan.recipe)),
         "capture": dataclasses.asdict(plan.capture), "evalset": dataclasses.asdict(plan.evalset),
         **({"refine_spp": plan.refine_spp} if plan.refine_spp is not None else {}),  # absent: every build before it
+        **({"truth_filter": plan.truth_filter.record()} if plan.truth_filter is not None else {}),  # absent: as before
         **({"given_evalset": str(plan.given_evalset.resolve())} if plan.given_evalset is not None else {}),
         "train": {k: v for k, v in plan.train.items() if k not in RUN_ONLY}, "ks": list(plan.ks)}, default=str))
 
@@ -132,13 +133,25 @@ def _capture(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]
 
 
 def _refine(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
-    """The capture refined to the recipe's spp (`diviewer data refine`, resumable) into ``plan.data``."""
+    """The capture refined to the recipe's spp (`diviewer data refine`, resumable) into ``plan.truth_dir``."""
     from diviewer.data.refine import refine
 
-    summary = refine(plan.capture_dir, plan.data, plan.refine_spp, log=log)
+    summary = refine(plan.capture_dir, plan.truth_dir, plan.refine_spp, log=log)
     if summary["present"] != summary["planned"]:
         raise BuildInterrupted(f"refine: {summary['present']} of {summary['planned']} frames")
-    return [plan.data / "manifest.json"], {"spp": plan.refine_spp, "from_spp": plan.capture.spp,
+    return [plan.truth_dir / "manifest.json"], {"spp": plan.refine_spp, "from_spp": plan.capture.spp,
+                                                **{k: summary.get(k) for k in ("present", "planned", "seconds")}}
+
+
+def _filter(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
+    """The truth's indirect light filtered over each surface (`diviewer data filter-truth`, resumable) into
+    ``plan.data``."""
+    from diviewer.data.truth_filter import filter_dataset
+
+    summary = filter_dataset(plan.truth_dir, plan.data, plan.truth_filter, log=log)
+    if summary["present"] != summary["planned"]:
+        raise BuildInterrupted(f"filter: {summary['present']} of {summary['planned']} frames")
+    return [plan.data / "manifest.json"], {**plan.truth_filter.record(),
                                            **{k: summary.get(k) for k in ("present", "planned", "seconds")}}
 
 
@@ -345,8 +358,8 @@ def _ship(plan: Plan, state: BuildState, log, command: str, **_) -> tuple[list[P
                      "ladder_sha256": sha256_file(plan.work / "ladder.json")}
 
 
-STAGES = {"capture": _capture, "refine": _refine, "check": _check, "evalset": _evalset, "train": _train,
-          "export": _export, "evaluate": _evaluate, "pick": _pick, "ship": _ship}
+STAGES = {"capture": _capture, "refine": _refine, "filter": _filter, "check": _check, "evalset": _evalset,
+          "train": _train, "export": _export, "evaluate": _evaluate, "pick": _pick, "ship": _ship}
 """Each stage kind's function: (plan, state, log, k=K of a per-K stage, command=the rebuild command) ->
 (outputs whose sha256 the state records, a result record)."""
 

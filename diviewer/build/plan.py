@@ -76,6 +76,9 @@ class Plan:
     """An evaluation set made before (``--evalset``), scored instead of rendering the recipe's; None: render it."""
     refine_spp: int | None = None
     """The spp the capture is refined to before training (`diviewer data refine`); None: trained as captured."""
+    truth_filter: Any = None
+    """The `diviewer.data.truth_filter.TruthFilter` run over the truth before training; None: trained on it as
+    rendered."""
 
     @property
     def seconds(self) -> float:
@@ -87,9 +90,16 @@ class Plan:
         return self.work / "data"
 
     @property
-    def data(self) -> Path:
-        """The dataset the trainings read: the capture, or its refinement."""
+    def truth_dir(self) -> Path:
+        """The truth as rendered: the capture, or its refinement."""
         return self.capture_dir if self.refine_spp is None else self.work / f"data_{self.refine_spp}spp"
+
+    @property
+    def data(self) -> Path:
+        """The dataset the trainings read: `truth_dir`, or that truth filtered (``data_Nspp_filtered``)."""
+        if self.truth_filter is None:
+            return self.truth_dir
+        return self.work / f"data_{self.refine_spp or self.capture.spp}spp_filtered"
 
     @property
     def evalset_dir(self) -> Path:
@@ -152,7 +162,7 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
     """The build's plan: the recipe's stages, sized to ``budget_hours`` if given; ``evalset_dir``: score on that
     evaluation set instead of rendering the recipe's (its settings then come from its manifest)."""
     from diviewer.scene.loader import resolve_scene_path
-    from diviewer.train.recipe import capture_settings, evalset_settings, refine_from
+    from diviewer.train.recipe import capture_settings, evalset_settings, refine_from, truth_filter
 
     import tomllib
 
@@ -181,11 +191,12 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
         s = _fit_scale(capture, train, evalset, ks, scene_name, machine, budget, evalset_dir, refine_spp)
         capture, train = scaled(capture, train, s)
     overrides = {k: v for k, v in train.items() if recipe.train.get(k) != v and k not in ("K", *RUN_ONLY)}
-    stages = _stages(scene_name, machine, capture, train, evalset, ks, evalset_dir, refine_spp)
+    stages = _stages(scene_name, machine, capture, train, evalset, ks, evalset_dir, refine_spp, truth_filter(recipe))
     return Plan(scene=str(scene), scene_name=scene_name, recipe=recipe, capture=capture, evalset=evalset,
                 train={k: v for k, v in train.items() if k != "K"}, ks=ks, steps=planned_steps(capture, train),
                 scale=s, machine=machine, work=Path(work), ship=ship, stages=stages, overrides=overrides,
-                given_evalset=None if evalset_dir is None else Path(evalset_dir), refine_spp=refine_spp)
+                given_evalset=None if evalset_dir is None else Path(evalset_dir), refine_spp=refine_spp,
+                truth_filter=truth_filter(recipe))
 
 
 def given_evalset_settings(path: Path, recipe_settings, scene: str):
@@ -218,7 +229,7 @@ def check_evalset_scene(ev, scene, given_as: str) -> None:
 
 
 def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tuple[int, ...],
-            given_evalset: Path | None = None, refine_spp: int | None = None) -> tuple[Stage, ...]:
+            given_evalset: Path | None = None, refine_spp: int | None = None, filt=None) -> tuple[Stage, ...]:
     steps = planned_steps(cap, train)
     gan = train.get("gan_weight", 1.0) > 0
     batch = train.get("batch_size", 4)
@@ -230,7 +241,11 @@ def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tu
     if refine_spp is not None:
         out.append(Stage("refine", f"refine the capture to {refine_spp} spp ({refine_spp - cap.spp} more a frame)",
                          costs.refine_seconds(m.kind, scene, cap.frames, cap.width, cap.height, refine_spp - cap.spp)))
-    out.append(Stage("check", "check every frame of the " + ("refined capture" if refine_spp else "capture"), 0.0))
+    if filt is not None:
+        out.append(Stage("filter", f"filter the truth's indirect light over each surface ({filt.levels} level(s))",
+                         cap.frames * filt.levels * costs.FILTER_FRAME_SECONDS))
+    out.append(Stage("check", "check every frame of the " + ("filtered " if filt else "") +
+                     ("refined capture" if refine_spp else "capture"), 0.0))
     if given_evalset is not None:
         out.append(Stage("evalset", f"evaluation set made before: {given_evalset} ({ev.frames_per_split} frames per "
                                     f"split, {ev.spp} spp; checked, not rendered)", 0.0))

@@ -38,13 +38,15 @@ CHANNELS = (*INPUT_CHANNELS, ("pt", 3), ("pt_direct", 3))
 # Manifest fields that define a dataset: a resumed capture or a shard must agree on all of them.
 IDENTITY = ("format", "format_version", "scene", "scene_hash", "resolution", "channels", "dtype", "gt", "spp",
             "max_depth", "seed", "frames", "split_fractions", "render_settings")
-DERIVED = ("refined", "direct_area")
-"""Records of a dataset derived from another (`diviewer data refine`, `area-direct`): part of its identity."""
+DERIVED = ("refined", "direct_area", "truth_filter")
+"""Records of a dataset derived from another (`diviewer data refine`, `area-direct`, `filter-truth`): part of its
+identity."""
 
 
 def identity(manifest: dict) -> dict:
     """The fields that make a dataset what it is (``Dataset.hash``): IDENTITY, and the records of a dataset made
-    by `diviewer.data.refine` (``refined``) or `diviewer.data.area` (``direct_area``), absent from every other
+    by `diviewer.data.refine` (``refined``), `diviewer.data.area` (``direct_area``) or `diviewer.data.truth_filter`
+    (``truth_filter``), absent from every other
     manifest, whose hash they leave as it was."""
     ident = {k: manifest.get(k) for k in IDENTITY}
     for key in DERIVED:

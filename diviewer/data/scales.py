@@ -1,6 +1,7 @@
-"""Each captured frame's light scale (`diviewer.scene.lights.light_scale`) from its stored configuration
-and the scene the dataset was captured from: what encoding version 2 divides training data by, and what
-`diviewer eval` passes to an encoding-2 model. No torch."""
+"""What a dataset's targets are divided by: each captured frame's light scale (`diviewer.scene.lights.light_scale`)
+from its stored configuration and the scene the dataset was captured from (what encoding version 2 divides training
+data by, and what `diviewer eval` passes to an encoding-2 model), and the albedo with its floor (``divide_albedo``).
+No torch."""
 
 from __future__ import annotations
 
@@ -11,6 +12,15 @@ import numpy as np
 
 if TYPE_CHECKING:
     from diviewer.data.dataset import Dataset
+
+ALBEDO_FLOOR: float = 0.05
+"""With divide_albedo, indirect light is divided by max(albedo, ALBEDO_FLOOR) and multiplied back by
+the same: exactly invertible, and dark or background pixels (albedo 0) do not amplify noise."""
+
+
+def floored_albedo(albedo: np.ndarray) -> np.ndarray:
+    """Albedo within [ALBEDO_FLOOR, 1], a NaN taken as black (`diviewer.train.targets`' floor, in numpy)."""
+    return np.clip(np.where(np.isnan(albedo), 0.0, albedo), ALBEDO_FLOOR, 1.0)
 
 
 def dataset_scene(ds: Dataset):

@@ -183,14 +183,16 @@ CAPTURE_KEYS: tuple[str, ...] = ("frames", "spp", "max_depth", "seed", "split_fr
 def capture_record(dataset: Mapping[str, Any]) -> dict[str, Any] | None:
     """A checkpoint's dataset record as `diviewer capture` settings (a card's ``recipe.capture``): the manifest's
     CAPTURE_KEYS, ``direct_samples`` where the direct light covers each pixel's area (captured so, or derived by
-    `diviewer data area-direct`: the same frames, tested), and ``refine_from`` where the truth was refined from a
-    capture at fewer samples (`diviewer data refine`), so that a recipe's [capture] table reads back alike."""
+    `diviewer data area-direct`: the same frames, tested), ``refine_from`` where the truth was refined from a
+    capture at fewer samples (`diviewer data refine`) and ``truth_filter`` where its indirect light was filtered
+    (`diviewer data filter-truth`), so that a recipe's [capture] table reads back alike."""
     cap = dataset.get("capture")
     if cap is None:
         return None
     n = int(dataset.get("direct_samples", 1))
-    low = dataset.get("refined_from_spp")
-    return {**cap, **({"direct_samples": n} if n != 1 else {}), **({"refine_from": low} if low is not None else {})}
+    low, filt = dataset.get("refined_from_spp"), dataset.get("truth_filter")
+    return {**cap, **({"direct_samples": n} if n != 1 else {}), **({"refine_from": low} if low is not None else {}),
+            **({"truth_filter": dict(filt)} if filt else {})}
 
 
 def captured_spp(manifest: Mapping[str, Any]) -> int:
@@ -216,6 +218,14 @@ def truth_spp(ds: Dataset, indices: list[int]) -> dict[str, int] | None:
     return {"min": min(counts), "max": max(counts)} if counts else None
 
 
+def filter_settings(manifest: Mapping[str, Any]) -> dict[str, Any]:
+    """The settings of a filtered truth (`diviewer data filter-truth`) as a recipe's [capture] truth_filter table."""
+    from diviewer.data.truth_filter import TruthFilter
+
+    return TruthFilter.from_dict({k: manifest["truth_filter"][k] for k in ("levels", "normal_power", "plane")},
+                                 "truth_filter").record()
+
+
 def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Dataset, train_idx: list[int],
                  n_val: int, resumed: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """What every checkpoint of a run records besides the weights and the progress (`resumed`: the
@@ -233,7 +243,8 @@ def run_metadata(cfg: TrainConfig, nets: Any, net_cfg: Any, enc: Any, ds: Datase
                     "capture": {k: ds.manifest.get(k) for k in CAPTURE_KEYS},
                     "direct_samples": direct_samples(ds.manifest),
                     **({"refined_from_spp": captured_spp(ds.manifest), "truth_spp": truth_spp(ds, train_idx)}
-                       if "refined" in ds.manifest else {})},
+                       if "refined" in ds.manifest else {}),
+                    **({"truth_filter": filter_settings(ds.manifest)} if "truth_filter" in ds.manifest else {})},
         "versions": versions(),
         "trained_on": trained_on(nets, (resumed or {}).get("trained_on")),
     }

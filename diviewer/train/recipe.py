@@ -6,7 +6,9 @@ that a field added to a dataclass works in recipes without this module changing:
 - ``[recipe]``: ``name`` (default: the file's stem), ``description``, ``scene`` (the scene it was made for);
 - ``[capture]``: `diviewer.data.capture.CaptureSettings` (frames, width, height, spp, split_fractions, ...), and
   ``refine_from`` (optional, `CAPTURE_EXTRA`): capture at that many samples per pixel, then raise the truth to
-  ``spp`` with `diviewer data refine` (a model can train on the capture before the refinement ends);
+  ``spp`` with `diviewer data refine` (a model can train on the capture before the refinement ends), and
+  ``truth_filter`` (optional, a table: `diviewer.data.truth_filter.TruthFilter`): train on the truth with its indirect
+  light filtered over each surface (`diviewer data filter-truth`);
 - ``[evalset]``: `diviewer.evalset.EvalSetSettings` (frames_per_split, spp, ladder, ...; width and height
   default to the capture's);
 - ``[train]``: `diviewer.train.config.TrainConfig`, every field but ``data``, ``out`` and ``recipe``;
@@ -40,9 +42,10 @@ README's ablations put about 10 dB behind at the same budget."""
 
 TABLES = ("recipe", "capture", "evalset", "train", "export", "ladder")
 """The tables a recipe may hold."""
-CAPTURE_EXTRA = ("refine_from",)
+CAPTURE_EXTRA = ("refine_from", "truth_filter")
 """[capture] keys that are not CaptureSettings fields: ``refine_from`` (spp of the capture `diviewer build` renders
-before refining it to ``spp``; absent: captured at ``spp``)."""
+before refining it to ``spp``; absent: captured at ``spp``) and ``truth_filter`` (the filter `diviewer build` runs
+over the truth before training; absent: trained on the truth as rendered)."""
 
 NOT_TRAIN = ("data", "out", "recipe")
 """TrainConfig fields a recipe cannot set: where this run reads and writes, and the recipe record itself."""
@@ -228,6 +231,7 @@ def _check_values(rec: Recipe) -> None:
     try:
         cap = capture_settings(rec)
         refine_from(rec)
+        truth_filter(rec)
         _evalset_cls()(**{**{"width": cap.width, "height": cap.height}, **rec.evalset}).check()
         _export_cls()(**rec.export)
     except DiviewerError as exc:
@@ -257,6 +261,20 @@ def refine_from(rec: Recipe) -> int | None:
         raise DiviewerError(f"must be a whole number of samples per pixel from 1 to below [capture] spp ({spp}), "
                             f"got {n!r}", path=rec.path, field="capture.refine_from")
     return n
+
+
+def truth_filter(rec: Recipe):
+    """The `diviewer.data.truth_filter.TruthFilter` a build runs over the truth ([capture] truth_filter), or None."""
+    from diviewer.data.truth_filter import TruthFilter
+
+    table = rec.capture.get("truth_filter")
+    if table is None:
+        return None
+    try:
+        return TruthFilter.from_dict(table, "capture.truth_filter")
+    except DiviewerError as exc:
+        raise DiviewerError(str(exc).split(": ", 1)[-1] if exc.field else str(exc), path=rec.path,
+                            field=exc.field) from None
 
 
 def evalset_settings(rec: Recipe, **overrides):

@@ -9,8 +9,9 @@ import math
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
-
 import numpy as np
+
+from diviewer.data.scales import ALBEDO_FLOOR, floored_albedo  # noqa: F401 (ALBEDO_FLOOR re-exported: the trainer's floor)
 
 if TYPE_CHECKING:
     import torch
@@ -18,10 +19,6 @@ if TYPE_CHECKING:
     from diviewer.data.dataset import Dataset
     from diviewer.encoding import Encoding
     from diviewer.train.config import TrainConfig
-
-ALBEDO_FLOOR: float = 0.05
-"""With divide_albedo, indirect light is divided by max(albedo, ALBEDO_FLOOR) and multiplied back by
-the same: exactly invertible, and dark or background pixels (albedo 0) do not amplify noise."""
 
 
 def target_radiance(pt: Any, pt_direct: Any, albedo: Any, target: str, divide_albedo: bool, direct: Any = None) -> Any:
@@ -64,7 +61,7 @@ def _albedo_floor(albedo: Any) -> Any:
         import torch
 
         return torch.where(torch.isnan(albedo), torch.zeros_like(albedo), albedo).clamp(ALBEDO_FLOOR, 1.0)
-    return np.clip(np.where(np.isnan(albedo), 0.0, albedo), ALBEDO_FLOOR, 1.0)
+    return floored_albedo(albedo)
 
 
 def run_light_scales(cfg: TrainConfig, ds: Dataset, train_idx: list[int],

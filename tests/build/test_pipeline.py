@@ -730,3 +730,56 @@ def test_build_a_tiny_scene_that_refines_its_capture(gl_context, tmp_path, capsy
     next(iter(sorted((work / "data_6spp" / "frames").glob("*.npy")))).unlink()
     assert main(["build", "--scene", str(scene), "--recipe", str(more), "--work", str(tmp_path / "fourth")]) == 2
     assert "1 of its 8 frames missing: refine them first" in capsys.readouterr().err
+
+
+def _filtering(recipe: str, table: str = "{ levels = 1 }") -> str:
+    """TINY_RECIPE (or another) with its truth filtered before training ([capture] truth_filter)."""
+    return recipe.replace("max_depth = 3\nsplit_fractions", f"truth_filter = {table}\nmax_depth = 3\nsplit_fractions", 1)
+
+
+def test_a_recipe_that_filters_its_truth_plans_the_filter_after_the_refinement_and_trains_on_its_output(tmp_path):
+    """[capture] truth_filter: a filter stage from the truth as rendered (the capture, or its refinement) into
+    WORK/data_<spp>spp_filtered, which the trainings read; the plan's key records the settings; a bad table is refused
+    when the recipe is read, naming the field."""
+    from diviewer.build.pipeline import plan_key
+
+    (tmp_path / "r.toml").write_text(_filtering(_refining(TINY_RECIPE, 2, 8)))
+    plan = make_plan("cornell", load_recipe(tmp_path / "r.toml"), tmp_path / "w", machine=CPU)
+    assert [s.name for s in plan.stages][:5] == ["capture", "refine", "filter", "check", "evalset"]
+    assert plan.truth_dir == tmp_path / "w" / "data_8spp" and plan.data == tmp_path / "w" / "data_8spp_filtered"
+    assert plan.train_fields(2)["data"] == plan.data
+    assert plan_key(plan)["truth_filter"] == {"levels": 1, "normal_power": 32.0, "plane": 0.01}
+    (tmp_path / "c.toml").write_text(_filtering(TINY_RECIPE, "{ levels = 2, plane = 0.02 }"))
+    plan = make_plan("cornell", load_recipe(tmp_path / "c.toml"), tmp_path / "w", machine=CPU)
+    assert [s.name for s in plan.stages][:3] == ["capture", "filter", "check"]
+    assert plan.truth_dir == plan.capture_dir and plan.data == tmp_path / "w" / "data_2spp_filtered"
+    assert next(s for s in plan.stages if s.name == "filter").seconds == pytest.approx(
+        8 * 2 * costs.FILTER_FRAME_SECONDS)
+    (tmp_path / "bad.toml").write_text(_filtering(TINY_RECIPE, "{ levels = 0 }"))
+    with pytest.raises(DiviewerError) as err:
+        load_recipe(tmp_path / "bad.toml")
+    assert "bad.toml" in str(err.value) and "capture.truth_filter.levels" in str(err.value)
+
+
+@pytest.mark.slow
+def test_build_a_tiny_scene_on_a_filtered_truth(gl_context, tmp_path, capsys):
+    """The pipeline with the truth filtered: the model trains on the filtered set; its card's capture record reads
+    back as the recipe's [capture] table (truth_filter included), and `diviewer eval` reports no margin read from
+    the set's unfiltered ladder for it."""
+    from diviewer.data.dataset import Dataset
+
+    scene, recipe = write_tiny_scene(tmp_path), tmp_path / "tinyrecipe.toml"
+    recipe.write_text(_filtering(TINY_RECIPE).replace("K = [2, 4]", "K = [2]"))
+    work, ship = tmp_path / "work", tmp_path / "ship"
+    assert main(["build", "--scene", str(scene), "--recipe", str(recipe), "--work", str(work), "--ship",
+                 str(ship)]) == 0
+    captured, filtered = Dataset(work / "data"), Dataset(work / "data_2spp_filtered")
+    assert filtered.check() == [] and filtered.manifest["truth_filter"]["from_hash"] == captured.hash
+    card = json.loads((ship / "tiny.json").read_text())
+    assert card["dataset_hash"] == filtered.hash
+    assert card["recipe"]["capture"]["truth_filter"] == {"levels": 1, "normal_power": 32.0, "plane": 0.01}
+    scores = json.loads((work / "evalset_eval.json").read_text())
+    for split in scores["splits"].values():
+        assert "truth_margin" not in split["methods"]["tiny_k2"]
+    state = json.loads((work / "build.json").read_text())["stages"]
+    assert state["filter"]["result"]["present"] == 8 and state["filter"]["result"]["levels"] == 1

@@ -190,12 +190,13 @@ def test_refine_from_is_the_captures_lower_count_and_part_of_what_the_recipe_ask
 
 
 def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
-    """tools/sponza_chain.sh links the 64-spp build's capture (sponza_walk64.toml) into the shipped recipe's build
-    folder, whose 256-spp set the 512-spp build (sponza_walk512.toml) takes for its capture, and that one's refined set
-    the ladder's build (sponza_walk768.toml): each must ask for the capture it is given (its settings at refine_from
-    spp), or the capture stage would refuse it; each trains and scores as the 64-spp recipe does, and exports with
-    int8-stored weights."""
-    from diviewer.train.recipe import capture_settings, refine_from
+    """tools/sponza_chain.sh links the 64-spp build's capture (sponza_walk64.toml) into the filtered recipe's build
+    folder (sponza_filtered.toml: the shipped recipe with its truth filtered before training), whose 256-spp set the
+    512-spp build (sponza_walk512.toml) takes for its capture, and that one's refined set the 768-spp build
+    (sponza_walk768.toml): each must ask for the capture it is given (its settings at refine_from spp), or the capture
+    stage would refuse it; each trains and scores as the 64-spp recipe does, and exports with int8-stored weights."""
+    from diviewer.data.truth_filter import TruthFilter
+    from diviewer.train.recipe import capture_settings, refine_from, truth_filter
 
     recipes = Path(__file__).parents[2] / "assets" / "recipes"
     walk = load_recipe(recipes / "sponza_walk64.toml")
@@ -208,6 +209,13 @@ def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
     # the models since the first store their inner weights as int8 where it stored float16 (docs/training.md)
     int8 = {**{k: v for k, v in walk.export.items() if k != "half_weights"}, "int8_weights": True}
     assert walk.export.get("half_weights") and refined.export == int8
+    # the ladder's recipe since 2026-12-02: the shipped one, its refined truth filtered before training
+    filtered = load_recipe(recipes / "sponza_filtered.toml")
+    assert {k: v for k, v in filtered.capture.items() if k != "truth_filter"} == refined.capture
+    assert truth_filter(filtered) == TruthFilter(levels=1, normal_power=32.0, plane=0.01)
+    assert truth_filter(refined) is None and truth_filter(walk) is None
+    assert (filtered.train, filtered.evalset, filtered.export, filtered.ks(), filtered.max_mb) == (
+        refined.train, refined.evalset, refined.export, refined.ks(), refined.max_mb)
 
     # the 512-spp truth refines the shipped recipe's 256-spp set (its settings at 256), itself the 64-spp capture's
     twice = load_recipe(recipes / "sponza_walk512.toml")

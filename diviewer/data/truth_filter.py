@@ -1,0 +1,192 @@
+"""A path-traced truth's indirect light filtered over each surface: ``diviewer data filter-truth``.
+
+A capture's ground truth at s spp carries Monte-Carlo noise that falls only as 1 / s; Sponza's 256-spp truth stands
+a median 2.4-4.4 dB above the error of the model trained on it, where issue 26 asks for 6 (docs/sponza.md). Each
+doubling of the samples buys 3 dB for the whole capture's time again. Filtering the truth's indirect light over the
+surface each pixel sees buys more for seconds: measured on the compact Sponza set against two 1024-spp renders
+(`tools/experiments/filtered_truth_margin.py`), one level of this filter raised the 256-spp truth's margin over the
+shipped model by 4.8-8.6 dB per split, bias included (docs/sponza.md, "A filtered truth").
+
+The filter (an edge-avoiding a-trous wavelet pass, as in Dammertz et al. 2010, with geometry alone as its guide):
+- it filters the irradiance the network is trained on, ``E = (pt - pt_direct) / max(albedo, ALBEDO_FLOOR)``
+  (`diviewer.train.targets`; the floor is `diviewer.data.scales`'), never the direct light nor the albedo's texture, and writes
+  ``pt = pt_direct + max(albedo, ALBEDO_FLOOR) E'``, so ``pt_direct`` and every input stay as captured;
+- each level is a 5x5 B3-spline kernel with holes (step 1, 2, 4, ... pixels); a neighbour's weight is the kernel's
+  times ``max(0, n . n')^normal_power`` (view-space normals) times ``exp(-(d / plane)^2)``, where ``d`` is the
+  neighbour's distance from the pixel's tangent plane over the pixel's depth: a neighbour on another surface, or
+  across a crease or a step, counts little or nothing;
+- pixels without geometry (depth 0) neither give nor take.
+It does not look at the noisy light itself (no luminance term): its bias is a blur of the irradiance within a
+surface, which the margin's measurement counts (a filtered truth's error against the converged image is its noise
+and its bias together).
+
+The filtered dataset is written into a new folder, as `diviewer.data.refine` does: its manifest is the source's
+with a ``truth_filter`` record (the settings, the source's hash), part of the dataset's identity, and
+``truth_filter_from`` (its folder). Seconds for a whole capture; resumable; the source is never changed.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from diviewer.data.scales import floored_albedo
+from diviewer.errors import DiviewerError
+
+KERNEL = np.array([1.0, 4.0, 6.0, 4.0, 1.0], dtype=np.float32) / 16.0
+"""The B3-spline taps of one level (per axis)."""
+HOW = ("a-trous over E = (pt - pt_direct) / max(albedo, floor): 5x5 B3 taps at step 2^level, weight x max(0, n.n')^p "
+       "x exp(-(plane distance / depth / plane)^2); pt = pt_direct + max(albedo, floor) E'")
+"""The record's words for what was done (the manifest's ``truth_filter.how``)."""
+
+
+@dataclass(frozen=True)
+class TruthFilter:
+    """The filter's settings (a recipe's ``[capture] truth_filter`` table; `diviewer data filter-truth`'s options)."""
+
+    levels: int = 1
+    """A-trous levels (1: the 5x5 neighbourhood; each more doubles the reach)."""
+    normal_power: float = 32.0
+    """Exponent of the normals' cosine: 32 halves a neighbour's weight at 12 degrees."""
+    plane: float = 0.01
+    """Distance from the pixel's tangent plane, over its depth, at which a neighbour's weight falls to 1/e."""
+
+    def check(self, where: str = "truth_filter") -> TruthFilter:
+        if not (isinstance(self.levels, int) and not isinstance(self.levels, bool) and 1 <= self.levels <= 5):
+            raise DiviewerError(f"levels must be an integer from 1 to 5, got {self.levels!r}", field=f"{where}.levels")
+        for name, lo in (("normal_power", 0.0), ("plane", 1e-6)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < lo:
+                raise DiviewerError(f"{name} must be a finite number of at least {lo:g}, got {v!r}",
+                                    field=f"{where}.{name}")
+        return self
+
+    @classmethod
+    def from_dict(cls, data, where: str = "truth_filter") -> TruthFilter:
+        if not isinstance(data, dict):
+            raise DiviewerError(f"must be a table (levels, normal_power, plane), got {data!r}", field=where)
+        unknown = sorted(set(data) - {"levels", "normal_power", "plane"})
+        if unknown:
+            raise DiviewerError(f"unknown field(s) {', '.join(unknown)} (levels, normal_power, plane)", field=where)
+        return cls(**data).check(where)
+
+    def record(self) -> dict:
+        return asdict(self)
+
+
+def view_positions(depth: np.ndarray, fov_y_deg: float) -> np.ndarray:
+    """(H, W, 3) view-space positions of the pixels' centres from the G-buffer's depth (view-space -z)."""
+    from diviewer.scene.camera import pixel_rays_view
+
+    h, w = depth.shape
+    rays = pixel_rays_view(w, h, fov_y_deg).astype(np.float64)
+    return (rays / -rays[..., 2:3] * depth[..., None]).astype(np.float32)
+
+
+def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_y_deg: float,
+                      settings: TruthFilter = TruthFilter()) -> np.ndarray:
+    """``e`` (H, W, C) filtered over the surfaces the G-buffer (view-space ``normal``, ``depth``) shows."""
+    hit = depth > 0.0
+    pos = view_positions(np.where(hit, depth, 0.0), fov_y_deg)
+    n = normal.astype(np.float32)
+    inv_z = np.where(hit, 1.0 / np.maximum(depth, 1e-6), 0.0).astype(np.float32)
+    out = e.astype(np.float32)
+    h, w = hit.shape
+    for level in range(settings.levels):
+        step = 1 << level
+        r = 2 * step
+        pad = lambda a: np.pad(a, [(r, r), (r, r)] + [(0, 0)] * (a.ndim - 2))  # noqa: E731
+        pe, pn, pp, ph = pad(out), pad(n), pad(pos), pad(hit)
+        acc = np.zeros_like(out)
+        wsum = np.zeros((h, w), np.float32)
+        for a, ky in enumerate(KERNEL):
+            for b, kx in enumerate(KERNEL):
+                y, x = r + (a - 2) * step, r + (b - 2) * step
+                nq, pq = pn[y:y + h, x:x + w], pp[y:y + h, x:x + w]
+                cos = np.maximum(np.sum(n * nq, axis=-1), 0.0)
+                d = np.abs(np.sum(n * (pq - pos), axis=-1)) * inv_z / settings.plane
+                wq = (ky * kx) * ph[y:y + h, x:x + w] * cos ** settings.normal_power * np.exp(-d * d)
+                acc += wq[..., None] * pe[y:y + h, x:x + w]
+                wsum += wq
+        done = hit & (wsum > 0.0)
+        out = np.where(done[..., None], acc / np.maximum(wsum, 1e-30)[..., None], out)
+    return out
+
+
+def filter_truth(pt: np.ndarray, pt_direct: np.ndarray, albedo: np.ndarray, normal: np.ndarray, depth: np.ndarray,
+                 fov_y_deg: float, settings: TruthFilter = TruthFilter()) -> np.ndarray:
+    """The full image with its indirect light filtered (`filter_irradiance` on the albedo-divided indirect light);
+    ``pt_direct`` as it was. Pixels without geometry keep ``pt``."""
+    a = floored_albedo(np.asarray(albedo, np.float32)).astype(np.float32)
+    e = (pt.astype(np.float32) - pt_direct.astype(np.float32)) / a
+    filtered = pt_direct.astype(np.float32) + a * filter_irradiance(e, normal, depth, fov_y_deg, settings)
+    return np.where((depth > 0.0)[..., None], filtered, pt.astype(np.float32))
+
+
+def truth_filter_manifest(src, settings: TruthFilter) -> dict:
+    """The source's manifest with the ``truth_filter`` record (refused for a truth filtered already, or not path
+    traced)."""
+    m = json.loads(json.dumps(src.manifest))
+    where = src.root / "manifest.json"
+    if m.get("gt") != "pt":
+        raise DiviewerError(f"only a path-traced truth is filtered (its ground truth is '{m.get('gt')}')", path=where,
+                            field="gt")
+    if "truth_filter" in m:
+        raise DiviewerError(f"its truth is filtered already; filter the dataset it came from "
+                            f"({m.get('truth_filter_from')})", path=where, field="truth_filter")
+    missing = [c for c in ("pt", "pt_direct", "albedo", "normal", "depth") if c not in src.slices]
+    if missing:
+        raise DiviewerError(f"the dataset has no {', '.join(missing)} channel", path=where, field="channels")
+    m["truth_filter"] = {**settings.record(), "from_hash": src.hash, "how": HOW}
+    m["truth_filter_from"] = str(src.root)
+    return m
+
+
+def filter_dataset(src_dir: Path, out: Path, settings: TruthFilter = TruthFilter(), log=print) -> dict:
+    """Write ``src_dir``'s present frames with their truth filtered into ``out``; returns a summary."""
+    from diviewer.console import progress_bar
+    from diviewer.data.capture import open_or_create, summarize
+    from diviewer.data.dataset import Dataset, write_frame
+    from diviewer.data.refine import source_scene
+    from diviewer.locks import run_lock
+    from diviewer.scene.loader import config_from_dict
+
+    src = Dataset(src_dir)
+    if out.exists() and src.root.resolve() == out.resolve():  # before the manifest: a derived source says why not
+        raise DiviewerError(f"{src_dir} is both the source and the output", field="--out")
+    settings.check("--levels/--normal-power/--plane")
+    manifest = truth_filter_manifest(src, settings)
+    scene = source_scene(src, out, manifest, "filter")
+    sl = src.slices
+    with run_lock(out, "data filter-truth"):
+        ds = open_or_create(out, manifest)
+        present = [f for f in src.frames if src.check_frame(f["index"], False) is None]
+        todo = [f for f in present if ds.check_frame(f["index"]) is not None]
+        log(f"filter-truth {src.root} -> {out}: {len(present) - len(todo)} of {len(present)} present frames already "
+            f"written, {len(todo)} to filter ({settings.levels} level(s), normal power {settings.normal_power:g}, "
+            f"plane {settings.plane:g})")
+        t_all = time.perf_counter()
+        progress = progress_bar(len(todo), "filter-truth", "frame")
+        try:
+            for f in todo:
+                i = f["index"]
+                arr = np.load(src.path(i))
+                fov = config_from_dict(scene, f["config"]).camera.fov
+                c = {k: arr[..., sl[k]].astype(np.float32) for k in ("pt", "pt_direct", "albedo", "normal", "depth")}
+                arr[..., sl["pt"]] = filter_truth(c["pt"], c["pt_direct"], c["albedo"], c["normal"], c["depth"][..., 0],
+                                                  fov, settings).astype(arr.dtype)
+                info = json.loads(src.path(i, ".json").read_text())
+                info.pop("sha256", None)
+                info["truth_filter"] = settings.record()
+                write_frame(ds, i, arr, info)
+                progress.update()
+        finally:
+            progress.close()
+        summary = summarize(ds)
+        summary["filtered"], summary["seconds"] = len(todo), round(time.perf_counter() - t_all, 2)
+        log(f"done: {summary['present']}/{summary['planned']} frames present, {summary['seconds']:.0f} s")
+    return summary

@@ -1,0 +1,112 @@
+"""The `diviewer data` subcommands (check, merge, refine, area-direct, filter-truth): their options and what they
+run."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from diviewer.errors import DiviewerError
+from diviewer.locks import run_lock
+
+
+def _cmd_data_check(args: argparse.Namespace) -> int:
+    from diviewer.data.capture import summarize
+    from diviewer.data.dataset import Dataset, read_manifest
+
+    if "compact" in read_manifest(args.dir):  # a compact evaluation set: one zip, checksums in its manifest
+        from diviewer.evalframes import EvalFrames
+
+        ev = EvalFrames(args.dir)
+        problems = ev.problems()
+        for p in problems:
+            print(f"frame {p.index:6d}: {p.problem}")
+        print(f"{args.dir}: compact evaluation set of {ev.manifest['scene']}, {len(ev.frames)} frames: "
+              + (f"{len(problems)} bad; write it again with `diviewer evalset --compact FULL_DIR --out {args.dir}`"
+                 if problems else "all present and sound"))
+        return 1 if problems else 0
+    ds = Dataset(args.dir)
+    problems = ds.check(verify_checksum=not args.fast)
+    s = summarize(ds)
+    print(f"{args.dir}: {ds.manifest['scene']} {ds.width}x{ds.height}, {s['present']}/{s['planned']} frames present "
+          f"({', '.join(f'{k} {v}' for k, v in s['per_split'].items())}), {s['disk_mb']:.1f} MB")
+    for p in problems:
+        print(f"frame {p.index:6d}: {p.problem}")
+    if problems:
+        command = "evalset" if ds.manifest.get("kind") == "evalset" else "capture"  # whose folder this is
+        print(f"{len(problems)} frame(s) missing or bad; run the same `diviewer {command}` again to render them")
+        return 1
+    print("all frames present and sound")
+    return 0
+
+
+def _cmd_data_merge(args: argparse.Namespace) -> int:
+    from diviewer.data.capture import merge
+
+    for src in args.sources:
+        if src.exists() and args.out.exists() and src.resolve() == args.out.resolve():
+            raise DiviewerError(f"{src} is both a source and the output", field="--out")
+
+    with run_lock(args.out, "data merge"):  # the same lock as a capture into this folder
+        merge(args.sources, args.out)
+    return 0
+
+
+def _cmd_data_refine(args: argparse.Namespace) -> int:
+    from diviewer.data.capture import parse_shard
+    from diviewer.data.refine import refine
+
+    refine(args.dir, args.out, args.spp, parse_shard(args.shard), extras=args.extras)
+    return 0
+
+
+def _cmd_data_area_direct(args: argparse.Namespace) -> int:
+    from diviewer.data.area import area_direct
+
+    area_direct(args.dir, args.out, args.samples)
+    return 0
+
+
+def _cmd_data_filter_truth(args: argparse.Namespace) -> int:
+    from diviewer.data.truth_filter import TruthFilter, filter_dataset
+
+    filter_dataset(args.dir, args.out, TruthFilter(args.levels, args.normal_power, args.plane))
+    return 0
+
+
+def add_data_parsers(sub) -> None:
+    """`diviewer data check | merge | refine | area-direct | filter-truth`."""
+    p = sub.add_parser("data", help="inspect datasets")
+    data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")
+    q = data.add_parser("check", help="verify every frame: present, readable, finite, shapes, checksum")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--fast", action="store_true", help="skip checksums")
+    q.set_defaults(func=_cmd_data_check)
+    q = data.add_parser("merge", help="merge shards captured into separate folders")
+    q.add_argument("sources", type=Path, nargs="+")
+    q.add_argument("--out", type=Path, required=True)
+    q.set_defaults(func=_cmd_data_merge)
+    q = data.add_parser("refine", help="raise a path-traced dataset's sample count into a new folder (renders only "
+                                       "the extra samples; resumable)")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--spp", type=int, required=True, help="the refined dataset's samples per pixel (above the source's)")
+    q.add_argument("--out", type=Path, required=True)
+    q.add_argument("--shard", default=None, help="k/n: refine every n-th frame starting at the k-th")
+    q.add_argument("--extras", type=Path, default=None, help="a folder of extra samples rendered elsewhere "
+                   "(tools/device_refine.py): refine only its frames, from them")
+    q.set_defaults(func=_cmd_data_refine)
+    q = data.add_parser("area-direct", help="re-render a dataset's GL direct light over each pixel's area into a new "
+                                            "folder (supersampled, box-filtered; minutes; resumable)")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--samples", type=int, default=4, help="samples per axis (default 4: 16 per pixel)")
+    q.add_argument("--out", type=Path, required=True)
+    q.set_defaults(func=_cmd_data_area_direct)
+    q = data.add_parser("filter-truth", help="filter a path-traced dataset's indirect light over each surface into a new "
+                                             "folder (seconds; resumable)")
+    q.add_argument("dir", type=Path)
+    q.add_argument("--out", type=Path, required=True)
+    q.add_argument("--levels", type=int, default=1, help="a-trous levels (default 1: the 5x5 neighbourhood)")
+    q.add_argument("--normal-power", type=float, default=32.0, help="exponent of the normals' cosine (default 32)")
+    q.add_argument("--plane", type=float, default=0.01,
+                   help="distance from the tangent plane, over the depth, at which a weight falls to 1/e (default 0.01)")
+    q.set_defaults(func=_cmd_data_filter_truth)
