@@ -15,15 +15,12 @@ point-sampled direct light becomes one a model of the area's direct light trains
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
 
-from diviewer.console import progress_bar
-from diviewer.data.dataset import Dataset, write_frame
+from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
-from diviewer.locks import run_lock
 
 
 def direct_samples(manifest: dict) -> int:
@@ -53,10 +50,9 @@ def area_manifest(src: Dataset, samples: int) -> dict:
 
 def area_direct(src_dir: Path, out: Path, samples: int, log=print) -> dict:
     """Write ``src_dir``'s present frames with the area's direct light into ``out``; returns a summary."""
-    from diviewer.data.capture import open_or_create, summarize
+    from diviewer.data.refine import derive_frames, source_scene
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
-    from diviewer.data.refine import source_scene
     from diviewer.scene.loader import config_from_dict
 
     src = Dataset(src_dir)
@@ -65,30 +61,15 @@ def area_direct(src_dir: Path, out: Path, samples: int, log=print) -> dict:
     manifest = area_manifest(src, samples)
     scene = source_scene(src, out, manifest, "derive")
     s = src.slices["direct"]
-    with run_lock(out, "data area-direct"):
-        ds = open_or_create(out, manifest)
-        present = [f for f in src.frames if src.check_frame(f["index"], False) is None]
-        todo = [f for f in present if ds.check_frame(f["index"]) is not None]
-        log(f"area-direct {src.root} -> {out}: {len(present) - len(todo)} of {len(present)} present frames already "
-            f"written, {len(todo)} to render ({samples}x{samples} samples per pixel)")
-        t_all = time.perf_counter()
-        progress = progress_bar(len(todo), "area-direct", "frame")
-        with headless_context() as ctx:
-            area = AreaDirect(ctx, scene, src.width, src.height, samples)
-            try:
-                for f in todo:
-                    i = f["index"]
-                    arr = np.load(src.path(i))
-                    arr[..., s] = area(config_from_dict(scene, f["config"])).astype(arr.dtype)
-                    info = json.loads(src.path(i, ".json").read_text())
-                    info.pop("sha256", None)
-                    info["direct_area"] = {"samples": samples}
-                    write_frame(ds, i, arr, info)
-                    progress.update()
-            finally:
-                area.release()
-                progress.close()
-        summary = summarize(ds)
-        summary["rendered"], summary["seconds"] = len(todo), round(time.perf_counter() - t_all, 2)
-        log(f"done: {summary['present']}/{summary['planned']} frames present, {summary['seconds']:.0f} s")
-    return summary
+    with headless_context() as ctx:
+        area = AreaDirect(ctx, scene, src.width, src.height, samples)
+
+        def per_frame(f: dict, arr: np.ndarray) -> tuple[str, dict]:
+            arr[..., s] = area(config_from_dict(scene, f["config"])).astype(arr.dtype)
+            return "direct_area", {"samples": samples}
+
+        try:
+            return derive_frames(src, out, manifest, "area-direct", f"render ({samples}x{samples} samples per pixel)",
+                                 per_frame, log=log)
+        finally:
+            area.release()

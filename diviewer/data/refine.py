@@ -83,6 +83,40 @@ def source_scene(src: Dataset, out: Path, manifest: dict, verb: str):
                                f"it has changed since the capture; {verb} it with the scene it was captured with")
 
 
+def derive_frames(src: Dataset, out: Path, manifest: dict, verb: str, what: str, per_frame, tally: str = "rendered",
+                  log=print) -> dict:
+    """Write ``src``'s present frames into ``out`` (a dataset of ``manifest``), each changed in place by
+    ``per_frame(entry, arr) -> (sidecar key, record)``, the record added to its sidecar; frames already there (and
+    sound) are kept. Returns `summarize`'s summary with ``tally`` (the frames written now) and the seconds. What
+    `diviewer data area-direct` and `filter-truth` share; ``what`` says what each frame gets, in the log line."""
+    from diviewer.data.capture import open_or_create, summarize
+
+    with run_lock(out, f"data {verb}"):
+        ds = open_or_create(out, manifest)
+        present = [f for f in src.frames if src.check_frame(f["index"], False) is None]
+        todo = [f for f in present if ds.check_frame(f["index"]) is not None]
+        log(f"{verb} {src.root} -> {out}: {len(present) - len(todo)} of {len(present)} present frames already "
+            f"written, {len(todo)} to {what}")
+        t_all = time.perf_counter()
+        progress = progress_bar(len(todo), verb, "frame")
+        try:
+            for f in todo:
+                i = f["index"]
+                arr = np.load(src.path(i))
+                key, record = per_frame(f, arr)
+                info = json.loads(src.path(i, ".json").read_text())
+                info.pop("sha256", None)
+                info[key] = record
+                write_frame(ds, i, arr, info)
+                progress.update()
+        finally:
+            progress.close()
+        summary = summarize(ds)
+        summary[tally], summary["seconds"] = len(todo), round(time.perf_counter() - t_all, 2)
+        log(f"done: {summary['present']}/{summary['planned']} frames present, {summary['seconds']:.0f} s")
+    return summary
+
+
 def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), log=print,
            extras: Path | None = None) -> dict:
     """Refine the present frames of ``src_dir`` (this shard's) to ``spp`` into ``out``; returns a summary. With

@@ -28,7 +28,6 @@ with a ``truth_filter`` record (the settings, the source's hash), part of the da
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -147,12 +146,10 @@ def truth_filter_manifest(src, settings: TruthFilter) -> dict:
 
 
 def filter_dataset(src_dir: Path, out: Path, settings: TruthFilter = TruthFilter(), log=print) -> dict:
-    """Write ``src_dir``'s present frames with their truth filtered into ``out``; returns a summary."""
-    from diviewer.console import progress_bar
-    from diviewer.data.capture import open_or_create, summarize
-    from diviewer.data.dataset import Dataset, write_frame
-    from diviewer.data.refine import source_scene
-    from diviewer.locks import run_lock
+    """Write ``src_dir``'s present frames with their truth filtered into ``out``; returns a summary (``filtered``:
+    the frames written now)."""
+    from diviewer.data.dataset import Dataset
+    from diviewer.data.refine import derive_frames, source_scene
     from diviewer.scene.loader import config_from_dict
 
     src = Dataset(src_dir)
@@ -162,31 +159,13 @@ def filter_dataset(src_dir: Path, out: Path, settings: TruthFilter = TruthFilter
     manifest = truth_filter_manifest(src, settings)
     scene = source_scene(src, out, manifest, "filter")
     sl = src.slices
-    with run_lock(out, "data filter-truth"):
-        ds = open_or_create(out, manifest)
-        present = [f for f in src.frames if src.check_frame(f["index"], False) is None]
-        todo = [f for f in present if ds.check_frame(f["index"]) is not None]
-        log(f"filter-truth {src.root} -> {out}: {len(present) - len(todo)} of {len(present)} present frames already "
-            f"written, {len(todo)} to filter ({settings.levels} level(s), normal power {settings.normal_power:g}, "
-            f"plane {settings.plane:g})")
-        t_all = time.perf_counter()
-        progress = progress_bar(len(todo), "filter-truth", "frame")
-        try:
-            for f in todo:
-                i = f["index"]
-                arr = np.load(src.path(i))
-                fov = config_from_dict(scene, f["config"]).camera.fov
-                c = {k: arr[..., sl[k]].astype(np.float32) for k in ("pt", "pt_direct", "albedo", "normal", "depth")}
-                arr[..., sl["pt"]] = filter_truth(c["pt"], c["pt_direct"], c["albedo"], c["normal"], c["depth"][..., 0],
-                                                  fov, settings).astype(arr.dtype)
-                info = json.loads(src.path(i, ".json").read_text())
-                info.pop("sha256", None)
-                info["truth_filter"] = settings.record()
-                write_frame(ds, i, arr, info)
-                progress.update()
-        finally:
-            progress.close()
-        summary = summarize(ds)
-        summary["filtered"], summary["seconds"] = len(todo), round(time.perf_counter() - t_all, 2)
-        log(f"done: {summary['present']}/{summary['planned']} frames present, {summary['seconds']:.0f} s")
-    return summary
+
+    def per_frame(f: dict, arr: np.ndarray) -> tuple[str, dict]:
+        c = {k: arr[..., sl[k]].astype(np.float32) for k in ("pt", "pt_direct", "albedo", "normal", "depth")}
+        fov = config_from_dict(scene, f["config"]).camera.fov
+        arr[..., sl["pt"]] = filter_truth(c["pt"], c["pt_direct"], c["albedo"], c["normal"], c["depth"][..., 0], fov,
+                                          settings).astype(arr.dtype)
+        return "truth_filter", settings.record()
+
+    return derive_frames(src, out, manifest, "filter-truth", f"filter ({settings.levels} level(s), normal power "
+                         f"{settings.normal_power:g}, plane {settings.plane:g})", per_frame, tally="filtered", log=log)
