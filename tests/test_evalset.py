@@ -306,8 +306,10 @@ def test_the_filtered_truths_margin_is_read_from_passes_traced_again_and_resumes
     assert tool.main(argv + ["--passes", "2"]) == 0  # extended: each file holds two passes now
     second = {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")}
     assert set(second) == set(first) and all(second[p] != first[p] for p in first)
-    assert tool.main(argv + ["--passes", "2"]) == 0  # nothing left to trace
-    assert {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")} == second
+    assert tool.main(argv + ["--passes", "2", "--counts", "2", "--out", str(tmp_path / "only.json")]) == 0
+    assert {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")} == second  # nothing left to trace
+    only = json.loads((tmp_path / "only.json").read_text())["splits"]["moved_camera"]["per_truth"]
+    assert set(only) == {"4_raw", "4_filtered_1_32_0.01"}
     r = json.loads(res.read_text())
     ev, closer = EvalFrames(out), []
     for key in SPLIT_KEYS:

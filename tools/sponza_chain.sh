@@ -88,7 +88,7 @@ filtered_margin() {
   [ -f "$scores" ] && ! [ "$out" -nt "$scores" ] || return 0
   stage "the filtered truth's margin over K = $1 ($scores)"
   python tools/experiments/filtered_truth_margin.py --eval "$scores" --model-key "sponza_k$1" --evalset "$EVALSET" \
-    --pass-spp 64 --passes 4 --renders runs/filtered_truth_renders_full --out "$out" \
+    --pass-spp 64 --passes 4 --counts 4 --renders runs/filtered_truth_renders_full --out "$out" \
     || stage "no filtered margin for K = $1 (above)"
 }
 FILTERED_BUILD=(diviewer build --scene sponza --recipe "$FILTERED/sponza.toml" --evalset "$EVALSET" --work "$FILTERED"

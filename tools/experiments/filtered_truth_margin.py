@@ -78,6 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--evalset", type=Path, default=None, help="the set (default: the JSON's)")
     ap.add_argument("--pass-spp", type=int, default=64)
     ap.add_argument("--passes", type=int, default=4, help="passes a frame (the truth at 1, 2, 4, ... of them)")
+    ap.add_argument("--counts", type=int, nargs="+", default=None,
+                    help="score only the truth at these many passes (default: 1, 2, 4, ... up to --passes)")
     ap.add_argument("--filter", type=parse_filter, action="append", default=None,
                     help="LEVELS:NORMAL_POWER:PLANE, repeatable (default 1:32:0.01, the recipe's)")
     ap.add_argument("--renders", type=Path, default=Path("runs/filtered_truth_renders"))
@@ -92,7 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     record = json.loads(a.eval.read_text())
     ev = EvalFrames(a.evalset or Path(record["evalset"]))
     scene = load_recorded_scene(ev.manifest, ev.root / "manifest.json", "render it with the scene it was made with")
-    counts = [1 << k for k in range(a.passes.bit_length()) if 1 << k <= a.passes]
+    counts = a.counts or [1 << k for k in range(a.passes.bit_length()) if 1 << k <= a.passes]
+    if not all(1 <= c <= a.passes for c in counts):
+        raise SystemExit(f"--counts: each from 1 to --passes ({a.passes}), got {counts}; nothing written")
     names = [f"{a.pass_spp * c}_{tag}" for c in counts
              for tag in ["raw"] + [f"filtered_{f.levels}_{f.normal_power:g}_{f.plane:g}" for f in filters]]
     out = {"eval": str(a.eval), "model": a.model_key, "evalset": str(ev.root), "exposure": ev.exposure,
