@@ -74,7 +74,7 @@ def run_build_command(args: argparse.Namespace) -> int:
         raise DiviewerError("give a scene (--scene NAME or a .toml path), or a recipe that names one", field="--scene")
     recipe = load_recipe(args.recipe or default_recipe(str(args.scene)))
     if args.scene is None and recipe.scene is None:
-        raise DiviewerError(f"the recipe names no scene ([recipe] scene); give --scene", path=recipe.path,
+        raise DiviewerError("the recipe names no scene ([recipe] scene); give --scene", path=recipe.path,
                             field="recipe.scene")
     scene = args.scene = str(args.scene or recipe.scene)
     shipped = Path(scene).suffix != ".toml" and (scenes_dir() / f"{scene}.toml").is_file()

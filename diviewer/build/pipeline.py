@@ -13,7 +13,7 @@ from typing import Any, Callable
 
 from diviewer import imageio
 from diviewer.build.pace import measured_pace, missing_link
-from diviewer.build.plan import RUN_ONLY, Plan, describe, hms
+from diviewer.build.plan import RUN_ONLY, Plan, describe
 from diviewer.build.state import BuildState
 from diviewer.data.dataset import sha256_file
 from diviewer.console import progress_bar
