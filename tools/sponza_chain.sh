@@ -19,7 +19,7 @@
 #   4. only with SPONZA_768=1: the unfiltered 256-spp set refined on to 512 (assets/recipes/sponza_walk512.toml in
 #      runs/sponza512, whose data/ links to runs/sponza256f/data_256spp; ~14 h here) and 768 (sponza_walk768.toml in
 #      runs/sponza768, data/ linked to runs/sponza512/data_512spp; ~14 h), then the ladder on it: the plan before the
-#      filter, ~45 h of this machine that `runs/` never outlived (17, 46, 26 and 28 h).
+#      filter, ~45 h of this machine that `runs/` never outlived (17, 46, 26 and 24 h).
 # Every stage resumes where it stopped and skips what is done, so after a session ends the same command goes on:
 #   nohup setsid bash tools/sponza_chain.sh > runs/sponza_chain.log 2>&1 &
 # Each build reads its recipe as WORK/sponza.toml, a copy under the name its model ships with (the card records the
