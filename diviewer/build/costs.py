@@ -35,9 +35,9 @@ ONE_PASS_SHARE = 0.55
 figures above were measured with (Sponza 228x128 at 64 spp on the Intel 2-core: 3.1-4.2 s against 5.7-7.7 s;
 docs/architecture.md). Frames with area lights still take two passes: their scenes are costed low by this share."""
 
-FILTER_FRAME_SECONDS = 0.3
-"""`diviewer data filter-truth` of one 228x128 frame, one level, its read and write included: 0.18-0.41 s of filtering
-on the Intel 2-core beside a capture (2026-12-02); seconds for a capture either way."""
+FILTER_FRAME_SECONDS = 0.06
+"""`diviewer data filter-truth` of one 228x128 frame, one level, its read and write included: 407 of Sponza's 64-spp
+frames in 21 s on the Intel 2-core beside a capture (2026-12-02, runs/ab/filt64); a level more costs as much again."""
 
 GL_SECONDS_PER_FRAME = {"cpu": 0.05, "cuda": 0.0}
 """The GL inputs of one 128x128 frame: +0.05 s on the 2-core CPU's llvmpipe (README, "Training on VXGI instead
