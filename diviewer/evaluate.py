@@ -35,7 +35,7 @@ from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer,
 from diviewer.metrics import flat_mask
 from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
-from diviewer.truthmargin import MARGIN_DB, model_truth_spp, truth_margin
+from diviewer.truthmargin import FILTERED_MARGIN, MARGIN_DB, model_truth_spp, truth_margin
 
 SSIM_MIN = 11
 """SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
@@ -337,6 +337,8 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
             if spp and len(rows[name]) == len(idx) and rows["noise_floor"]:  # its training truth over it
                 m["truth_margin"] = truth_margin(rows[name], rows["noise_floor"],
                                                  {n: rows[f"pt_spp{n}"] for n in ladder_spp}, spp)
+            elif filt := ((net.meta.get("recipe") or {}).get("capture") or {}).get("truth_filter"):
+                m["truth_margin"] = {"truth_filter": filt, "from": FILTERED_MARGIN}
         elif name == "direct":
             m.update(kind="direct", label="direct light only (GL)")
         elif name == "noise_floor":
@@ -396,10 +398,12 @@ def format_tables(result: dict) -> list[str]:
         for name, why in r.get("refused", {}).items():
             lines.append(f"{why['label']:<34} refused by the runtime at this shape: {why['reason']}")
         for m in r["methods"].values():
-            if (t := m.get("truth_margin")) and t["frames"]:
+            if (t := m.get("truth_margin")) and t.get("frames"):
                 lines.append(f"{m['label']}: its {t['truth_spp']}-spp training truth stands {t['median_db']:+.1f} dB "
                              f"above its error (median frame; lowest {t['lowest_db']:+.1f}; {t['share_at_least_6db']:.0%}"
                              f" of frames >= {MARGIN_DB:g} dB; {t['unresolved']} unresolved; from {t['from']})")
+            elif t and "truth_filter" in t:
+                lines.append(f"{m['label']}: its training truth was filtered; {t['from']}")
     return lines
 
 

@@ -29,6 +29,9 @@ import numpy as np
 
 MARGIN_DB = 6.0
 """The issue's margin: the truth's noise floor at least this far above the model's error."""
+FILTERED_MARGIN = ("the set's ladder is not filtered, so its rungs do not measure that truth: "
+                   "tools/experiments/filtered_truth_margin.py does")
+"""What `diviewer eval` records in place of the margin of a model whose card says its truth was filtered."""
 
 
 def margin_db(model_mse: float, rung_mse: float, truth_noise: float) -> float | None:
