@@ -54,14 +54,16 @@ class TruthFilter:
     plane: float = 0.01
     """Distance from the pixel's tangent plane, over its depth, at which a neighbour's weight falls to 1/e."""
 
-    def check(self, where: str = "truth_filter") -> TruthFilter:
+    def check(self, where: str = "truth_filter", options: bool = False) -> TruthFilter:
+        """Refuse a setting out of range, naming it as ``where.name`` (a recipe's table), or with ``options`` as the
+        command's option (``--normal-power``)."""
+        field = (lambda name: "--" + name.replace("_", "-")) if options else (lambda name: f"{where}.{name}")
         if not (isinstance(self.levels, int) and not isinstance(self.levels, bool) and 1 <= self.levels <= 5):
-            raise DiviewerError(f"levels must be an integer from 1 to 5, got {self.levels!r}", field=f"{where}.levels")
+            raise DiviewerError(f"levels must be an integer from 1 to 5, got {self.levels!r}", field=field("levels"))
         for name, lo in (("normal_power", 0.0), ("plane", 1e-6)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < lo:
-                raise DiviewerError(f"{name} must be a finite number of at least {lo:g}, got {v!r}",
-                                    field=f"{where}.{name}")
+                raise DiviewerError(f"{name} must be a finite number of at least {lo:g}, got {v!r}", field=field(name))
         return self
 
     @classmethod
@@ -152,10 +154,10 @@ def filter_dataset(src_dir: Path, out: Path, settings: TruthFilter = TruthFilter
     from diviewer.data.refine import derive_frames, source_scene
     from diviewer.scene.loader import config_from_dict
 
+    settings.check(options=True)
     src = Dataset(src_dir)
     if out.exists() and src.root.resolve() == out.resolve():  # before the manifest: a derived source says why not
         raise DiviewerError(f"{src_dir} is both the source and the output", field="--out")
-    settings.check("--levels/--normal-power/--plane")
     manifest = truth_filter_manifest(src, settings)
     scene = source_scene(src, out, manifest, "filter")
     sl = src.slices

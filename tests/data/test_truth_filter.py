@@ -102,6 +102,14 @@ def test_settings_out_of_range_are_refused_by_name(table, field):
     assert TruthFilter.from_dict({"levels": 2}).record() == {"levels": 2, "normal_power": 32.0, "plane": 0.01}
 
 
+@pytest.mark.parametrize("argv, option", [(["--levels", "0"], "--levels"), (["--plane", "nan"], "--plane"),
+                                          (["--normal-power", "-2"], "--normal-power")])
+def test_the_command_refuses_a_setting_out_of_range_in_one_line_naming_the_option(tmp_path, capsys, argv, option):
+    assert main(["data", "filter-truth", str(tmp_path / "none"), "--out", str(tmp_path / "out")] + argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{option}: " in err[0] and not (tmp_path / "out").exists()
+
+
 def test_the_record_is_part_of_the_identity():
     m = build_manifest(load_scene("cornell"), CaptureSettings(frames=4, **TINY))
     assert "truth_filter" not in identity(m)
