@@ -90,12 +90,14 @@ def view_positions(depth: np.ndarray, fov_y_deg: float) -> np.ndarray:
 
 def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_y_deg: float,
                       settings: TruthFilter = TruthFilter()) -> np.ndarray:
-    """``e`` (H, W, C) filtered over the surfaces the G-buffer (view-space ``normal``, ``depth``) shows."""
-    hit = depth > 0.0
+    """``e`` (H, W, C) filtered over the surfaces the G-buffer (view-space ``normal``, ``depth``) shows. A texel whose
+    light, normal or depth is not finite, or that has no geometry, gives nothing to its neighbours and keeps its own
+    value; every other output is a convex mix of finite inputs."""
+    n = np.nan_to_num(normal.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    hit = (depth > 0.0) & np.isfinite(depth) & np.all(np.isfinite(e), axis=-1) & np.any(n != 0.0, axis=-1)
     pos = view_positions(np.where(hit, depth, 0.0), fov_y_deg)
-    n = normal.astype(np.float32)
     inv_z = np.where(hit, 1.0 / np.maximum(depth, 1e-6), 0.0).astype(np.float32)
-    out = e.astype(np.float32)
+    out = np.where(hit[..., None], e, 0.0).astype(np.float32)
     h, w = hit.shape
     for level in range(settings.levels):
         step = 1 << level
@@ -115,7 +117,7 @@ def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_
                 wsum += wq
         done = hit & (wsum > 0.0)
         out = np.where(done[..., None], acc / np.maximum(wsum, 1e-30)[..., None], out)
-    return out
+    return np.where(hit[..., None], out, e.astype(np.float32))
 
 
 def filter_truth(pt: np.ndarray, pt_direct: np.ndarray, albedo: np.ndarray, normal: np.ndarray, depth: np.ndarray,
