@@ -191,12 +191,13 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
         s = _fit_scale(capture, train, evalset, ks, scene_name, machine, budget, evalset_dir, refine_spp)
         capture, train = scaled(capture, train, s)
     overrides = {k: v for k, v in train.items() if recipe.train.get(k) != v and k not in ("K", *RUN_ONLY)}
-    stages = _stages(scene_name, machine, capture, train, evalset, ks, evalset_dir, refine_spp, truth_filter(recipe))
+    filt = truth_filter(recipe)
+    stages = _stages(scene_name, machine, capture, train, evalset, ks, evalset_dir, refine_spp, filt)
     return Plan(scene=str(scene), scene_name=scene_name, recipe=recipe, capture=capture, evalset=evalset,
                 train={k: v for k, v in train.items() if k != "K"}, ks=ks, steps=planned_steps(capture, train),
                 scale=s, machine=machine, work=Path(work), ship=ship, stages=stages, overrides=overrides,
                 given_evalset=None if evalset_dir is None else Path(evalset_dir), refine_spp=refine_spp,
-                truth_filter=truth_filter(recipe))
+                truth_filter=filt)
 
 
 def given_evalset_settings(path: Path, recipe_settings, scene: str):
