@@ -4,19 +4,26 @@
 #   1. the 64-spp capture (assets/recipes/sponza_walk64.toml) and its check: `diviewer build ... --ks 8
 #      --stop-after check` (~3.5-4.2 h here; a machine that lost `runs/` starts here, as on 2026-11-29, 2026-11-30,
 #      2026-12-01 and 2026-12-02). Its K = 8 shipped from 2026-11-29 to 2026-11-30 and is not trained again;
-#   2. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here; or
+#   2. the first stop, a filtered 128-spp truth (since 2026-12-03: docs/sponza.md, "A first stop at 128 spp"):
+#      assets/recipes/sponza_filtered128.toml in runs/sponza128f, whose data/ links to the 64-spp capture: the
+#      refinement to 128 spp (64 samples a frame, ~3.2 h), the filter (minutes), K = 16 alone (`--ks 16`, ~1.4 h),
+#      scored on the compact set, and its margin over the filtered truth it trained on, frame by frame on that set
+#      (tools/experiments/filtered_truth_margin.py: the set's frames traced again at 2 x 64 spp, filtered as the
+#      recipe filters; ~10 min): runs/sponza128f/filtered_margin_k16.json. ~5 h after the capture: an answer
+#      to the issue's 6 dB within a day of this machine, which `runs/` has not always outlived;
+#   3. the full evaluation set (`diviewer evalset --scene sponza`, 24 frames a split at 1024 spp, ~3 h here; or
 #      the same set rendered on a lent device, runs/evalsets/sponza: tools/device_evalsets.sh, compact with every
 #      frame, taken where present, as SPONZA_EVALSET names another) and
 #      the shipped model's scores on it, with its margin over the 256-spp truth it trained on;
-#   3. the ladder on the filtered 256-spp truth (since 2026-12-02: docs/sponza.md, "A filtered truth"):
-#      assets/recipes/sponza_filtered.toml in runs/sponza256f, whose data/ links to the 64-spp capture: the refinement
-#      to 256 spp (`diviewer data refine`, 192 samples a frame, ~8-9 h), the filter (`diviewer data filter-truth`,
-#      minutes), then K = 8 and 16 (~2.5 h), scored on the full set, picked and shipped to runs/sponza256f/ship, then
+#   4. the ladder on the filtered 256-spp truth (docs/sponza.md, "A filtered truth"):
+#      assets/recipes/sponza_filtered.toml in runs/sponza256f, whose data/ links to the 128-spp set of step 2
+#      (runs/sponza128f/data_128spp): the refinement to 256 spp (128 samples a frame, ~6.4 h), the filter, then
+#      K = 8 and 16 (~2.5 h), scored on the full set, picked and shipped to runs/sponza256f/ship, then
 #      K = 32 (~2.7 h). Each K's margin over the filtered truth it trained on, frame by frame on the full set
-#      (tools/experiments/filtered_truth_margin.py: the set's frames traced again at 4 x 64 spp, filtered as the
-#      recipe filters; ~30 min for the first K, seconds for the next): WORK/filtered_margin_kK.json. The 256-spp
-#      ladder on the unfiltered truth (2026-12-02) is recorded in docs/data/sponza256_ladder and is not trained again;
-#   4. only with SPONZA_768=1: the unfiltered 256-spp set refined on to 512 (assets/recipes/sponza_walk512.toml in
+#      (the set's frames traced again at 4 x 64 spp; ~30 min for the first K, seconds for the next):
+#      WORK/filtered_margin_kK.json. The 256-spp ladder on the unfiltered truth (2026-12-02) is recorded in
+#      docs/data/sponza256_ladder and is not trained again;
+#   5. only with SPONZA_768=1: the unfiltered 256-spp set refined on to 512 (assets/recipes/sponza_walk512.toml in
 #      runs/sponza512, whose data/ links to runs/sponza256f/data_256spp; ~14 h here) and 768 (sponza_walk768.toml in
 #      runs/sponza768, data/ linked to runs/sponza512/data_512spp; ~14 h), then the ladder on it: the plan before the
 #      filter, ~45 h of this machine that `runs/` never outlived (17, 46, 26 and 24 h).
@@ -29,16 +36,19 @@ set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 cd "$ROOT"
 WORK="${SPONZA_WORK:-runs/sponza}"
+FIRST="${SPONZA_FIRST_WORK:-runs/sponza128f}"
 FILTERED="${SPONZA_FILTERED_WORK:-runs/sponza256f}"
 TWICE="${SPONZA_TWICE_WORK:-runs/sponza512}"
 LADDER="${SPONZA_LADDER_WORK:-runs/sponza768}"
-mkdir -p "$WORK" "$FILTERED" "$TWICE" "$LADDER"
+mkdir -p "$WORK" "$FIRST" "$FILTERED" "$TWICE" "$LADDER"
 cp assets/recipes/sponza_walk64.toml "$WORK/sponza.toml.part" && mv "$WORK/sponza.toml.part" "$WORK/sponza.toml"
+cp assets/recipes/sponza_filtered128.toml "$FIRST/sponza.toml.part" && mv "$FIRST/sponza.toml.part" "$FIRST/sponza.toml"
 cp assets/recipes/sponza_filtered.toml "$FILTERED/sponza.toml.part" \
   && mv "$FILTERED/sponza.toml.part" "$FILTERED/sponza.toml"
 cp assets/recipes/sponza_walk512.toml "$TWICE/sponza.toml.part" && mv "$TWICE/sponza.toml.part" "$TWICE/sponza.toml"
 cp assets/recipes/sponza_walk768.toml "$LADDER/sponza.toml.part" && mv "$LADDER/sponza.toml.part" "$LADDER/sponza.toml"
-[ -e "$FILTERED/data" ] || [ -L "$FILTERED/data" ] || ln -s "$(realpath -m "$WORK/data")" "$FILTERED/data"
+[ -e "$FIRST/data" ] || [ -L "$FIRST/data" ] || ln -s "$(realpath -m "$WORK/data")" "$FIRST/data"
+[ -e "$FILTERED/data" ] || [ -L "$FILTERED/data" ] || ln -s "$(realpath -m "$FIRST/data_128spp")" "$FILTERED/data"
 [ -e "$TWICE/data" ] || [ -L "$TWICE/data" ] || ln -s "$(realpath -m "$FILTERED/data_256spp")" "$TWICE/data"
 [ -e "$LADDER/data" ] || [ -L "$LADDER/data" ] || ln -s "$(realpath -m "$TWICE/data_512spp")" "$LADDER/data"
 links_to() {  # links_to LINK TARGET WHY: refused, naming the link, if it leads elsewhere (a runs/ of another plan)
@@ -46,7 +56,8 @@ links_to() {  # links_to LINK TARGET WHY: refused, naming the link, if it leads 
   echo "[sponza_chain] $1: links to $(realpath -m "$1"), not $2 that $3; move that folder aside" >&2
   exit 1
 }
-links_to "$FILTERED/data" "$WORK/data" "sponza_filtered.toml refines (refine_from = 64)"
+links_to "$FIRST/data" "$WORK/data" "sponza_filtered128.toml refines (refine_from = 64)"
+links_to "$FILTERED/data" "$FIRST/data_128spp" "sponza_filtered.toml refines (refine_from = 128)"
 links_to "$TWICE/data" "$FILTERED/data_256spp" "sponza_walk512.toml refines (refine_from = 256)"
 links_to "$LADDER/data" "$TWICE/data_512spp" "sponza_walk768.toml refines (refine_from = 512)"
 
@@ -68,6 +79,20 @@ margin() {
 stage "the 64-spp capture and its check"
 again diviewer build --scene sponza --recipe "$WORK/sponza.toml" --evalset assets/evalsets/sponza --work "$WORK" \
   --ship "$WORK/ship" --ks 8 --stop-after check
+# A model's margin over the filtered truth it trained on, from a build's scores: filtered_margin WORK K PASSES RENDERS.
+# The set's frames are traced at PASSES x 64 spp once (RENDERS) and filtered as the recipe does.
+filtered_margin() {
+  local scores="$1/evalset_eval.json" out="$1/filtered_margin_k$2.json"
+  [ -f "$scores" ] && ! [ "$out" -nt "$scores" ] || return 0
+  stage "the filtered truth's margin over K = $2 ($scores)"
+  python tools/experiments/filtered_truth_margin.py --eval "$scores" --model-key "sponza_k$2" \
+    --pass-spp 64 --passes "$3" --counts "$3" --renders "$4" --out "$out" \
+    || stage "no filtered margin for K = $2 (above)"
+}
+stage "the first stop: K = 16 on the filtered 128-spp truth, scored on the compact set"
+again diviewer build --scene sponza --recipe "$FIRST/sponza.toml" --evalset assets/evalsets/sponza --work "$FIRST" \
+  --ship "$FIRST/ship" --ks 16
+filtered_margin "$FIRST" 16 2 runs/filtered_truth_renders
 # The full set: a device's render of it where there is one (it holds every frame, float16), else rendered here.
 EVALSET="${SPONZA_EVALSET:-}"
 if [ -z "$EVALSET" ]; then
@@ -81,27 +106,15 @@ if [ ! -f "$WORK/eval_full_shipped.json" ]; then
 fi
 margin "$WORK/eval_full_shipped.json" sponza "$WORK/truth_margin_shipped.json"
 
-# A model's margin over the filtered truth it trained on, on the full set, from the build's scores: filtered_margin K.
-# The set's frames are traced at 4 x 64 spp once (runs/filtered_truth_renders_full) and filtered as the recipe does.
-filtered_margin() {
-  local scores="$FILTERED/evalset_eval.json" out="$FILTERED/filtered_margin_k$1.json"
-  [ -f "$scores" ] && ! [ "$out" -nt "$scores" ] || return 0
-  stage "the filtered truth's margin over K = $1 ($scores)"
-  python tools/experiments/filtered_truth_margin.py --eval "$scores" --model-key "sponza_k$1" --evalset "$EVALSET" \
-    --pass-spp 64 --passes 4 --counts 4 --renders runs/filtered_truth_renders_full --out "$out" \
-    || stage "no filtered margin for K = $1 (above)"
-}
 FILTERED_BUILD=(diviewer build --scene sponza --recipe "$FILTERED/sponza.toml" --evalset "$EVALSET" --work "$FILTERED"
                 --ship "$FILTERED/ship")
 stage "build on the filtered 256-spp truth: the refinement, the filter, K = 8 and 16"
 again "${FILTERED_BUILD[@]}" --ks 8 16
-filtered_margin 16
-filtered_margin 8
+filtered_margin "$FILTERED" 16 4 runs/filtered_truth_renders_full
+filtered_margin "$FILTERED" 8 4 runs/filtered_truth_renders_full
 stage "build on the filtered 256-spp truth: the whole ladder"
 again "${FILTERED_BUILD[@]}"
-filtered_margin 32
-filtered_margin 16
-filtered_margin 8
+for k in 32 16 8; do filtered_margin "$FILTERED" "$k" 4 runs/filtered_truth_renders_full; done
 if [ "${SPONZA_768:-0}" != 1 ]; then
   stage "done (SPONZA_768=1 refines the unfiltered set on to 512 and 768 spp and trains the ladder on it)"
   exit 0

@@ -190,8 +190,9 @@ def test_refine_from_is_the_captures_lower_count_and_part_of_what_the_recipe_ask
 
 
 def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
-    """tools/sponza_chain.sh links the 64-spp build's capture (sponza_walk64.toml) into the filtered recipe's build
-    folder (sponza_filtered.toml: the shipped recipe with its truth filtered before training), whose 256-spp set the
+    """tools/sponza_chain.sh links the 64-spp build's capture (sponza_walk64.toml) into the first stop's build folder
+    (sponza_filtered128.toml), whose 128-spp set it links into the filtered recipe's (sponza_filtered.toml: the
+    shipped recipe with its truth filtered before training), whose 256-spp set the
     512-spp build (sponza_walk512.toml) takes for its capture, and that one's refined set the 768-spp build
     (sponza_walk768.toml): each must ask for the capture it is given (its settings at refine_from spp), or the capture
     stage would refuse it; each trains and scores as the 64-spp recipe does, and exports with int8-stored weights."""
@@ -209,13 +210,23 @@ def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
     # the models since the first store their inner weights as int8 where it stored float16 (docs/training.md)
     int8 = {**{k: v for k, v in walk.export.items() if k != "half_weights"}, "int8_weights": True}
     assert walk.export.get("half_weights") and refined.export == int8
-    # the ladder's recipe since 2026-12-02: the shipped one, its refined truth filtered before training
+    # the ladder's recipe since 2026-12-02: the shipped one, its refined truth filtered before training; since
+    # 2026-12-03 it refines the 128-spp set of its first stop (sponza_filtered128.toml), which refines the capture
     filtered = load_recipe(recipes / "sponza_filtered.toml")
-    assert {k: v for k, v in filtered.capture.items() if k != "truth_filter"} == refined.capture
-    assert truth_filter(filtered) == TruthFilter(levels=1, normal_power=32.0, plane=0.01)
+    first = load_recipe(recipes / "sponza_filtered128.toml")
+    assert refine_from(first) == 64 and capture_settings(first).spp == refine_from(filtered) == 128
+    assert capture_settings(first, spp=64) == capture_settings(walk)
+    assert capture_settings(filtered, spp=128) == capture_settings(first)
+    others = {"truth_filter", "refine_from", "spp"}
+    assert {k: v for k, v in filtered.capture.items() if k not in others} == {
+        k: v for k, v in refined.capture.items() if k not in others} == {
+        k: v for k, v in first.capture.items() if k not in others}
+    assert capture_settings(filtered).spp == capture_settings(refined).spp == 256
+    assert truth_filter(filtered) == truth_filter(first) == TruthFilter(levels=1, normal_power=32.0, plane=0.01)
     assert truth_filter(refined) is None and truth_filter(walk) is None
-    assert (filtered.train, filtered.evalset, filtered.export, filtered.ks(), filtered.max_mb) == (
-        refined.train, refined.evalset, refined.export, refined.ks(), refined.max_mb)
+    for r in (filtered, first):
+        assert (r.train, r.evalset, r.export, r.ks(), r.max_mb) == (
+            refined.train, refined.evalset, refined.export, refined.ks(), refined.max_mb)
 
     # the 512-spp truth refines the shipped recipe's 256-spp set (its settings at 256), itself the 64-spp capture's
     twice = load_recipe(recipes / "sponza_walk512.toml")
@@ -246,7 +257,7 @@ def test_each_link_of_the_sponza_chain_gives_a_build_the_set_its_recipe_refines(
     recipes = {var: load_recipe(root / path) for path, var in
                re.findall(r'^cp (assets/recipes/[\w.]+\.toml) "\$(\w+)/sponza\.toml\.part"', text, flags=re.M)}
     links = re.findall(r'ln -s "\$\(realpath -m "\$(\w+)/(data|data_\d+spp)"\)" "\$(\w+)/data"', text)
-    assert len(links) == 3 and len(recipes) == 4, (links, list(recipes))
+    assert len(links) == 4 and len(recipes) == 5, (links, list(recipes))
     for src, folder, dst in links:
         given = capture_settings(recipes[src]).spp
         if folder == "data":  # the capture's own folder: the spp it captured at, before any refinement
