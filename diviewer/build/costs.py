@@ -58,19 +58,27 @@ EVALSET_MEASURED = {
 """Evaluation sets as measured, per scene: each scene's sets are costed with the ratio of its measured time to what
 its samples predict (`EVALSET_FACTOR`); a scene not listed with Sponza's, as its path tracing is."""
 
+SPONZA_LADDER_PIXELS = (72 + 227) / 2 * 128
+"""The mean pixels of a training frame of Sponza's ladder: 228x128 frames cut to aspect crops 0.5625-1.78 wide
+(`train_pixels`), 72 to 227 columns drawn uniformly."""
+
 TRAIN_SECONDS_PER_STEP = {
-    # 2-core CPU, one torch thread, float32, batch 4, 128x128, no discriminator: the shipped cornell ladder (card
-    # cornell.json, ladder.rows[].train_seconds): K = 8 3,544 s and K = 16 5,911 s for 50,050 steps each.
-    ("cpu", 8): 3544.0 / 50050,
-    ("cpu", 16): 5911.0 / 50050,
+    # 2-core Intel Xeon, one torch thread, float32, batch 4, no discriminator: Sponza's ladder on its 256-spp truth,
+    # 45,900 steps each, its training time alone (docs/sponza.md, "The ladder's first two rungs", 2026-12-02):
+    # K = 8 4,043 s and K = 16 5,186 s, brought to 128x128 from the crops' mean pixels. Planned before from the
+    # cornell ladder's 3,544 and 5,911 s as if at 128x128, its 228x128 frames' crops counted whole: the plan read
+    # K = 8 1 h 36 and K = 16 2 h 41 for Sponza's 1.1 and 1.4 h.
+    ("cpu", 8): 4043.0 / 45900 * PIXELS_REF / SPONZA_LADDER_PIXELS,
+    ("cpu", 16): 5186.0 / 45900 * PIXELS_REF / SPONZA_LADDER_PIXELS,
 }
 """Seconds per training step at batch 4, 128x128, without a discriminator, by machine kind and K."""
 
-CPU_WIDE_K_STEP_RATIO = 2.1
-"""On the CPU, a training step's time per doubling of K above 16: measured 2.0-2.2x from K = 16 to 32 (and 1.6x from 8
-to 16) with `tools/experiments/train_speed.py --data runs/sponza/data --recipe assets/recipes/sponza.toml --k K`
-(2-core Intel Xeon, 2026-11-29; docs/data/train_speed_k/), not the 4x of the convolutions' work: the wider layers
-keep the cores busier. Planned before at 4x, Sponza's K = 32 read ~11 h where it takes ~3."""
+CPU_WIDE_K_STEP_RATIO = 9774.0 / 5186.0
+"""On the CPU, a training step's time per doubling of K above 16: Sponza's ladder (above) took 9,774 s for K = 32
+against K = 16's 5,186 (1.88x); `tools/experiments/train_speed.py --data runs/sponza/data --recipe
+assets/recipes/sponza.toml --k K` had measured 2.0-2.2x (1.6x from 8 to 16; 2-core Intel Xeon, 2026-11-29;
+docs/data/train_speed_k/), not the 4x of the convolutions' work: the wider layers keep the cores busier. Planned at
+4x before that, Sponza's K = 32 read ~11 h where it takes ~3."""
 
 CUDA_STEPS_PER_SECOND = {8: 17.0, 128: 7.0}
 """H100, batch 16, 128x128, bf16, seven trainings sharing the GPU beside a capture (README, device lease of
@@ -150,10 +158,22 @@ def evalset_seconds(kind: str, scene: str, frames: int, width: int, height: int,
     return factor * _evalset_predicted(kind, scene, frames, width, height, spp, ladder)
 
 
-def train_step_seconds(kind: str, K: int, batch_size: int, width: int, height: int, gan: bool) -> float:
-    """One training step. On the CPU: the two measured widths, a power law between and below them, and
-    `CPU_WIDE_K_STEP_RATIO` a doubling above K = 16; on CUDA: the shared H100 rates, log-interpolated in K."""
-    scale = width * height / PIXELS_REF * (GAN_STEP_FACTOR if gan else 1.0)
+def train_pixels(width: int, height: int, aspect_crops: tuple[float, float] | None = None) -> float:
+    """The mean pixels a training step sees of each frame: the whole frame, or with ``aspect_crops`` the mean of
+    the crop widths the trainer draws uniformly (`diviewer.train.targets.crop_widths`) times the height."""
+    if not aspect_crops:
+        return float(width * height)
+    from diviewer.train.targets import crop_widths
+
+    return sum(crop_widths(aspect_crops, height, width)) / 2 * height
+
+
+def train_step_seconds(kind: str, K: int, batch_size: int, width: int, height: int, gan: bool,
+                       aspect_crops: tuple[float, float] | None = None) -> float:
+    """One training step on frames of ``width`` x ``height`` (cut to ``aspect_crops``: `train_pixels`). On the CPU:
+    the two measured widths, a power law between and below them, and `CPU_WIDE_K_STEP_RATIO` a doubling above
+    K = 16; on CUDA: the shared H100 rates, log-interpolated in K."""
+    scale = train_pixels(width, height, aspect_crops) / PIXELS_REF * (GAN_STEP_FACTOR if gan else 1.0)
     if kind == "cuda":
         (k0, r0), (k1, r1) = sorted(CUDA_STEPS_PER_SECOND.items())
         t = min(max(math.log(K / k0) / math.log(k1 / k0), 0.0), 1.0)

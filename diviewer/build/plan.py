@@ -256,7 +256,8 @@ def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tu
                          costs.evalset_seconds(m.kind, scene, frames, ev.width, ev.height, ev.spp, tuple(ev.ladder))))
     for k in ks:
         out.append(Stage(f"train_k{k}", f"train K={k}: {steps} steps of batch {batch}",
-                         steps * costs.train_step_seconds(m.kind, k, batch, cap.width, cap.height, gan)))
+                         steps * costs.train_step_seconds(m.kind, k, batch, cap.width, cap.height, gan,
+                                                          train.get("aspect_crops"))))
         out.append(Stage(f"export_k{k}", f"export K={k} and score it on the capture's test split",
                          costs.EXPORT_EVAL_ALLOWANCE))
     out += [Stage("evaluate", "score every K on the evaluation set", 0.0),

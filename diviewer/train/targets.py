@@ -232,15 +232,21 @@ def run_lights(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool)
     return lights(train_idx), lights(sorted(ds.indices("val"))) if with_val else None
 
 
+def crop_widths(aspect_crops: tuple[float, float], height: int, width: int) -> tuple[int, int]:
+    """The narrowest and widest aspect crop of a ``height`` x ``width`` frame (``aspect_crops`` x height, at most
+    the frame's width); `crop_plan` draws between them uniformly, and the build's cost model takes their mean."""
+    lo, hi = aspect_crops
+    w_lo = max(2, min(width, int(math.ceil(lo * height))))
+    return w_lo, max(w_lo, min(width, int(math.floor(hi * height))))
+
+
 def crop_plan(cfg: TrainConfig, epoch: int, batch: int, n: int, height: int, width: int) -> tuple[int, list[int]] | None:
-    """This batch's random aspect crop, or None: one width for the whole batch (within
-    ``cfg.aspect_crops`` x height, at most the frame's width) and each frame's left edge. A pure function of
-    (seed, epoch, batch), like the data order, so a resumed run crops exactly as an uninterrupted one."""
+    """This batch's random aspect crop, or None: one width for the whole batch (`crop_widths`) and each frame's
+    left edge. A pure function of (seed, epoch, batch), like the data order, so a resumed run crops exactly as an
+    uninterrupted one."""
     if not cfg.aspect_crops:
         return None
-    lo, hi = cfg.aspect_crops
-    w_lo = max(2, min(width, int(math.ceil(lo * height))))
-    w_hi = max(w_lo, min(width, int(math.floor(hi * height))))
+    w_lo, w_hi = crop_widths(cfg.aspect_crops, height, width)
     rng = np.random.default_rng([cfg.seed, 0xA5EC7, epoch, batch])
     w = int(rng.integers(w_lo, w_hi + 1))
     return w, [int(x) for x in rng.integers(0, width - w + 1, size=n)]

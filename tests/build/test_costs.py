@@ -28,3 +28,32 @@ def test_cpu_step_grows_with_K_and_pixels_and_doubles_with_the_discriminator():
     assert all(math.isfinite(t) and t > 0 for t in times)
     assert step(16, 256, 128) == pytest.approx(2 * step(16))
     assert costs.train_step_seconds("cpu", 16, 4, 128, 128, gan=True) == pytest.approx(costs.GAN_STEP_FACTOR * step(16))
+
+
+def test_a_step_sees_the_mean_aspect_crop_as_the_trainer_draws_it():
+    from diviewer.train.targets import crop_widths
+
+    crops = (0.5625, 16 / 9)
+    assert crop_widths(crops, 128, 228) == (72, 227)
+    assert costs.train_pixels(228, 128, crops) == costs.SPONZA_LADDER_PIXELS == (72 + 227) / 2 * 128
+    assert costs.train_pixels(228, 128) == costs.train_pixels(228, 128, None) == 228 * 128
+    # a frame narrower than the widest crop: the crops stop at its width
+    assert costs.train_pixels(100, 128, crops) == (72 + 100) / 2 * 128
+    with_crops = costs.train_step_seconds("cpu", 16, 4, 228, 128, gan=False, aspect_crops=crops)
+    assert with_crops == pytest.approx(step(16, 228, 128) * (72 + 227) / 2 / 228)
+
+
+def test_sponzas_plan_reads_its_ladder_as_it_trained():
+    """The costs come from Sponza's ladder on the Intel Xeon (45,900 steps: K = 8 4,043 s, 16 5,186 s, 32 9,774
+    s); its recipe planned on a CPU gives those times back, where the plan read 1 h 36 / 2 h 41 / 5 h 38 before."""
+    from pathlib import Path
+
+    from diviewer.build.plan import make_plan
+    from diviewer.train.recipe import load_recipe
+
+    cpu = costs.Machine("cpu", 2, "test")
+    plan = make_plan("sponza", load_recipe("sponza"), Path("w"), machine=cpu)
+    est = {s.name: s.seconds for s in plan.stages}
+    assert est["train_k8"] == pytest.approx(4043.0)
+    assert est["train_k16"] == pytest.approx(5186.0)
+    assert est["train_k32"] == pytest.approx(9774.0)

@@ -152,10 +152,12 @@ def test_the_estimate_follows_the_measured_costs():
     plan = make_plan("cornell", load_recipe("cornell"), Path("w"), machine=CPU)
     steps = planned_steps(plan.capture, {**plan.train, "K": 8})
     est = {s.name: s.seconds for s in plan.stages}
-    # costs are measured at 128x128 and scale with the pixels: the recipe's frames are 228x128
-    px = 228 * 128 / (128 * 128)
-    assert est["train_k8"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 8)] * px)
-    assert est["train_k16"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 16)] * px)
+    # costs are measured at 128x128 and scale with the pixels a step sees: the recipe's 228x128 frames cut to its
+    # aspect crops, 72 to 227 columns wide
+    crops = (72 + 227) / 2 * 128 / (128 * 128)
+    assert est["train_k8"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 8)] * crops)
+    assert est["train_k16"] == pytest.approx(steps * costs.TRAIN_SECONDS_PER_STEP[("cpu", 16)] * crops)
+    px = 228 * 128 / (128 * 128)  # the rendering's pixels: the whole frame
     # cornell's 4,800 train frames at batch 4, 40 epochs: the 48,000 steps the shipped model took
     assert steps == 48000
     # the measured set, made in two passes, at the one pass's share (diviewer.reference.split_path)
