@@ -22,7 +22,7 @@ import numpy as np
 
 from diviewer.metrics import (LUMA, equivalent_spp, flip, highpass_power, masked_psnr, masked_ssim, mse,
                               power_ratio, psnr, psnr_error, ssim, stride_pattern, tonemap)
-from diviewer.outputs import dumps_rows, strict
+from diviewer.outputs import dumps_rows
 
 KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 EVAL_KEYS = KEYS + ("flip_hdr", "flip_ldr")

@@ -3,7 +3,6 @@ an earlier result intact until the whole new one is known good (temporary names,
 
 from __future__ import annotations
 
-import errno
 import json
 import math
 import os

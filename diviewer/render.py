@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -10,7 +9,7 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.errors import DiviewerError
-from diviewer.frames import frame_record, load_frame_json, parse_resolution, read_frame_json, with_user_meshes
+from diviewer.frames import frame_record, parse_resolution, read_frame_json, with_user_meshes
 from diviewer.outputs import check_output_dir, dumps, staged
 from diviewer.provenance import settings_dict
 from diviewer.scene import FrameConfig, Scene, config_from_dict, load_scene, sample_config

@@ -79,7 +79,7 @@ def _metadata(session, path: Path) -> dict:
     except json.JSONDecodeError as exc:
         raise DiviewerError(f"the model's metadata is not valid JSON: {exc}", path=path, field=META_KEY) from exc
     if not isinstance(meta, dict):
-        raise DiviewerError(f"the model's metadata is not a JSON object", path=path, field=META_KEY)
+        raise DiviewerError("the model's metadata is not a JSON object", path=path, field=META_KEY)
     missing = [k for k in REQUIRED_META if k not in meta]
     if missing:
         raise DiviewerError(f"the model's metadata lacks {', '.join(missing)}", path=path, field=META_KEY)

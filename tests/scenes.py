@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 from diviewer.scene.loader import parse_scene
 
@@ -90,9 +91,8 @@ test_meshes = ["sphere"]
 """A procedural scene small enough to capture, train and evaluate end to end in seconds (`write_tiny_scene`)."""
 
 
-def write_tiny_scene(folder) -> "Path":
+def write_tiny_scene(folder) -> Path:
     """Write the tiny scene as folder/tiny.toml (a scene file, as `diviewer build --scene` takes one)."""
-    from pathlib import Path
 
     path = Path(folder) / "tiny.toml"
     path.parent.mkdir(parents=True, exist_ok=True)

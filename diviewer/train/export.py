@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import hashlib
 import io
-import json
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -436,7 +435,7 @@ def info(path: str | Path) -> str:
              + ", ".join(f"{n}({c})" for n, c in m["channels"])
              + (" + light_scale (N,): linear in the light" if int(m["encoding"].get("version", 1)) >= 2 else ""),
              f"  output       {m['output']} (N, H, W, 3) linear radiance",
-             f"  encoding     " + ", ".join(f"{k}={v}" for k, v in m["encoding"].items())]
+             "  encoding     " + ", ".join(f"{k}={v}" for k, v in m["encoding"].items())]
     if val:
         lines.append("  validation   " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
                                                 for k, v in val.items()))

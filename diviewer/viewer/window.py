@@ -7,7 +7,12 @@ larger on a HiDPI screen whose system scales the framebuffer) and the image's (t
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from diviewer.errors import DiviewerError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 GL_MAJOR, GL_MINOR = 4, 3
 
@@ -122,7 +127,7 @@ class Window:
     def key_down(self, key: int) -> bool:
         return self.glfw.get_key(self.handle, key) == self.glfw.PRESS
 
-    def read_pixels(self) -> "np.ndarray":
+    def read_pixels(self) -> np.ndarray:
         """What the window shows: its back buffer as drawn so far, (H, W, 3) uint8, top row first.
 
         Read with glReadPixels on the default framebuffer's GL_BACK: moderngl's ``ctx.screen.read()`` asks

@@ -356,7 +356,6 @@ def test_int8_quantisation_calibrates_an_encoding_2_model_with_its_light_scales(
     with 'Required inputs (['light_scale']) are missing')."""
     pytest.importorskip("onnx")
     from diviewer.bench.onnx_tools import get_meta, quantize_int8
-    from diviewer.paths import models_dir
     from diviewer.runtime import NeuralGI, read_metadata
 
     src = _encoding_2_model(tmp_path / "v2.onnx")

@@ -210,7 +210,6 @@ def test_a_light_scaled_model_is_black_at_zero_light_and_linear_in_it(cornell_fr
     from diviewer.bench.onnx_tools import get_meta, set_meta
     from diviewer.encoding import Encoding
     from diviewer.paths import models_dir
-    from diviewer.scene.lights import light_scale
     from diviewer.train.export import gi_module, onnx_bytes
 
     scene, frames, _ = cornell_frames

@@ -232,8 +232,6 @@ def test_pipelined_inference_shows_the_previous_frame(ctx, tmp_path):
 def test_any_gi_size_runs_padded_to_the_models_stride(ctx, tmp_path):
     """A GI size that is not a multiple of the model's stride (4 here) is padded and cropped back by the
     runtime: the output has the GI size, and a per-pixel model's output lands on its own pixels."""
-    from diviewer.runtime import pack_buffers
-
     renderer, neural = _pass(ctx, tmp_path, gi=(10, 13))
     try:
         renderer.frame()

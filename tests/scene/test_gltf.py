@@ -11,7 +11,6 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.renderer import Renderer, RenderSettings
 from diviewer.paths import assets_dir
 from diviewer.scene import DirectionalLight, FrameConfig, Material, Mesh, Object, Scene, load_scene
-from diviewer.scene import camera as cam
 from diviewer.scene.gltf import load_texture
 from diviewer.scene.loader import parse_scene
 

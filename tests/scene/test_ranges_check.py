@@ -8,7 +8,7 @@ import pytest
 
 from diviewer.scene import load_scene, sample_config
 from diviewer.scene.lights import rotate_light, scale_light
-from diviewer.scene.model import Camera, CameraRange, LightRange, ObjectRange
+from diviewer.scene.model import Camera, CameraRange, ObjectRange
 from diviewer.scene.ranges_check import (camera_path_reasons, camera_region_reasons, light_reasons, object_reasons,
                                          out_of_range)
 

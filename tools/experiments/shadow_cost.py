@@ -14,7 +14,6 @@ when the times matter.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path

@@ -118,7 +118,7 @@ def main() -> None:
         for name, by in r["models"].items():
             print(f"  {name}: " + ", ".join(f"{k} {v['bias']:+.1%} ({v['pixels']} px)" for k, v in by.items()
                                               if v["bias"] is not None))
-            print(f"    object_unlit by mesh: " + ", ".join(f"{k} {v['bias']:+.1%} ({v['pixels']} px)"
+            print("    object_unlit by mesh: " + ", ".join(f"{k} {v['bias']:+.1%} ({v['pixels']} px)"
                                                           for k, v in r["object_unlit_by_mesh"][name].items()
                                                           if v["bias"] is not None))
     if a.out:
