@@ -174,7 +174,7 @@ def test_the_estimate_follows_the_measured_costs():
     # the direct light over each pixel's area renders the GL light again at s x s the pixels
     area = costs.capture_seconds("cpu", "cornell", 10, 128, 128, 64, direct_samples=4)
     assert area - costs.capture_seconds("cpu", "cornell", 10, 128, 128, 64) == pytest.approx(
-        10 * costs.GL_SECONDS_PER_FRAME["cpu"] * 16)
+        10 * costs.GL_AREA_SECONDS_PER_PASS["cpu"] * 16)
 
 
 def test_a_budget_scales_frames_and_steps_together_and_keeps_the_schedule():
