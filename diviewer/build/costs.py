@@ -16,29 +16,14 @@ from dataclasses import dataclass
 PIXELS_REF = 128 * 128
 """The resolution every figure below was measured at."""
 
-ONE_PASS_SHARE = 0.55
-"""The one-pass truth (`diviewer.reference.split_path`, 2026-11-28) takes 54-55 % of the time of the two passes the
-figures below were measured with (Sponza 228x128 at 64 spp on the Intel 2-core: 3.1-4.2 s against 5.7-7.7 s;
-docs/architecture.md). Frames with area lights still take two passes: their scenes are costed low by this share."""
-
-PT_SECONDS_PER_RENDER = {
-    # The same two Sponza figures: 4.35 - 64 x 0.041 = 1.73 s each render (the Intel Xeon, 228x128, one pass). With it
-    # the full evaluation set's 113.2 s a frame (`EVALSET_MEASURED`: seven renders) is predicted within 3 %.
-    ("cpu", "sponza"): 4.35 - 64 * (9.6 - 4.35) / (192 - 64),
-}
-"""Seconds each path-traced render costs besides its samples (loading the frame's camera and sun, the kernel's
-launch, the read-back), by machine kind and scene; measured for Sponza on the CPU only, at 228x128 (a scene costed
-as Sponza takes it too), and 0 where not measured (the per-sample figures there include it)."""
-
 PT_SECONDS_PER_SAMPLE = {
     # 2-core CPU, Mitsuba llvm_ad_rgb (DESIGN.md, "Facts measured", 2026-11-24): cornell 128x128 at 256 spp 1.2 s.
     ("cpu", "cornell"): 1.2 / (PIXELS_REF * 256),
-    # The Intel Xeon 2-core, one pass: Sponza 228x128 at 64 spp 4.35 s a frame (the median of the 2026-12-03
-    # capture's 1,819 first frames' sidecars, `seconds.gt`) and 192 more samples 9.6 s a frame (the 256-spp
-    # refinement, docs/sponza.md "The 256-spp refinement began at 21:23 UTC"): 0.041 s a sample past a fixed
-    # `PT_SECONDS_PER_RENDER`, brought to two passes (the figures above are). Planned at 12 s a 128x128 frame at
-    # 256 spp before, with nothing fixed: a 64-spp capture read 2.9 s a frame of path tracing for its 4.4.
-    ("cpu", "sponza"): (9.6 - 4.35) / (192 - 64) / (228 * 128) / ONE_PASS_SHARE,
+    # The same machine: Sponza 128x128 at 256 spp ~12 s (at 64 spp ~4 s). Linear in the samples: on the Intel
+    # Xeon of 2026-12-03, 228x128 in one pass, 1.2-1.8 / 4.1-4.5 / 12.4-13.5 s at 16 / 64 / 192 spp (frames 0, 700
+    # and 1,400 of the capture, the chain paused), 0.2 s at 1 spp. That machine traced ~1.45x slower a sample than the
+    # Intel VMs of 2026-11-28 to 12-02, whose capture, refinement and evaluation set matched this figure.
+    ("cpu", "sponza"): 12.0 / (PIXELS_REF * 256),
     # H100, cuda_ad_rgb (README, "The same recipes at full budget on an H100", 2026-11-23): 4,600 cornell frames
     # at 256 spp in 3 minutes with 4 shards.
     ("cuda", "cornell"): 180.0 / 4600 / (PIXELS_REF * 256),
@@ -47,6 +32,11 @@ PT_SECONDS_PER_SAMPLE = {
 }
 """Seconds of path tracing per pixel per sample, by machine kind and scene; a scene not listed is costed as
 Sponza (262k triangles, textured, alpha-masked: the heaviest measured)."""
+
+ONE_PASS_SHARE = 0.55
+"""The one-pass truth (`diviewer.reference.split_path`, 2026-11-28) takes 54-55 % of the time of the two passes the
+figures above were measured with (Sponza 228x128 at 64 spp on the Intel 2-core: 3.1-4.2 s against 5.7-7.7 s;
+docs/architecture.md). Frames with area lights still take two passes: their scenes are costed low by this share."""
 
 FILTER_FRAME_SECONDS = 0.06
 """`diviewer data filter-truth` of one 228x128 frame, one level, its read and write included: 407 of Sponza's 64-spp
@@ -59,9 +49,9 @@ of path tracing"); on the H100 the capture figures above include them."""
 GL_AREA_SECONDS_PER_PASS = {"cpu": (0.4775 - 0.05 * 228 * 128 / PIXELS_REF) / 16 / (228 * 128 / PIXELS_REF),
                             "cuda": 0.0}
 """The direct light over each pixel's area (`diviewer.gl.area`), per 128x128 pass of its s x s: Sponza's 2026-12-03
-capture read 0.4775 s of GL a 228x128 frame with s = 4 (the median of 1,819 sidecars, `seconds.gl`), the G-buffer's
-share above taken out: 0.014 s a pass. Costed at the G-buffer's 0.05 s a pass before, its 64-spp capture read 1.5 s
-of GL a frame."""
+capture read 0.4775 s of GL a 228x128 frame with s = 4 (the median of its first 1,819 frames' sidecars,
+`seconds.gl`), the G-buffer's share above taken out: 0.014 s a pass. Costed at the G-buffer's 0.05 s a pass before,
+that capture planned 1.5 s of GL a frame."""
 
 EVALSET_MEASURED = {
     # Cornell's evaluation set (24 + 24 frames, 1024 spp twice, ladder 1..256) took about 70 minutes on the 2-core
@@ -135,38 +125,31 @@ def detect_machine() -> Machine:
 
 def pt_seconds_per_sample(kind: str, scene: str) -> tuple[float, str]:
     """Path-tracing seconds per pixel-sample, and which measurement it is."""
-    key = _pt_key(kind, scene)
+    key = (kind, scene) if (kind, scene) in PT_SECONDS_PER_SAMPLE else (kind, "sponza")
     return PT_SECONDS_PER_SAMPLE[key], f"{key[1]} on {kind}"
 
 
-def _pt_key(kind: str, scene: str) -> tuple[str, str]:
-    """The measurement a scene's path tracing is costed with: its own, else Sponza's."""
-    return (kind, scene) if (kind, scene) in PT_SECONDS_PER_SAMPLE else (kind, "sponza")
-
-
 def capture_seconds(kind: str, scene: str, frames: int, width: int, height: int, spp: int,
-                    direct_samples: int = 1, renders: int = 1) -> float:
+                    direct_samples: int = 1) -> float:
     """A capture of ``frames`` frames: path tracing (full and direct-only, counted in the measurements, in one pass
     now: ``ONE_PASS_SHARE``) + GL, and with ``direct_samples`` s > 1 the direct light rendered again at s x s the
     pixels (`diviewer.gl.area`)."""
     scale = width * height / PIXELS_REF
     area = GL_AREA_SECONDS_PER_PASS[kind] * direct_samples ** 2 if direct_samples > 1 else 0.0
     gl = scale * (GL_SECONDS_PER_FRAME[kind] + area)
-    return refine_seconds(kind, scene, frames, width, height, spp, renders) + frames * gl
+    return refine_seconds(kind, scene, frames, width, height, spp) + frames * gl
 
 
-def refine_seconds(kind: str, scene: str, frames: int, width: int, height: int, extra_spp: int,
-                   renders: int = 1) -> float:
-    """Path tracing ``frames`` frames at ``extra_spp`` samples a pixel in one pass, in ``renders`` renders a frame:
-    `diviewer data refine`, and a capture's truth."""
+def refine_seconds(kind: str, scene: str, frames: int, width: int, height: int, extra_spp: int) -> float:
+    """Path tracing ``frames`` frames at ``extra_spp`` samples a pixel in one pass: `diviewer data refine`, and a
+    capture's truth."""
     per_sample, _ = pt_seconds_per_sample(kind, scene)
-    fixed = renders * PT_SECONDS_PER_RENDER.get(_pt_key(kind, scene), 0.0)
-    return frames * (fixed + per_sample * ONE_PASS_SHARE * width * height * extra_spp)
+    return frames * per_sample * ONE_PASS_SHARE * width * height * extra_spp
 
 
 def _evalset_predicted(kind: str, scene: str, frames: int, width: int, height: int, spp: int,
                        ladder: tuple[int, ...]) -> float:
-    return capture_seconds(kind, scene, frames, width, height, 2 * spp + sum(ladder), renders=2 + len(ladder))
+    return capture_seconds(kind, scene, frames, width, height, 2 * spp + sum(ladder))
 
 
 def _evalset_factor(m: dict, scene: str) -> float:
