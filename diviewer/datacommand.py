@@ -70,7 +70,7 @@ def _cmd_data_area_direct(args: argparse.Namespace) -> int:
 def _cmd_data_filter_truth(args: argparse.Namespace) -> int:
     from diviewer.data.truth_filter import TruthFilter, filter_dataset
 
-    filter_dataset(args.dir, args.out, TruthFilter(args.levels, args.normal_power, args.plane))
+    filter_dataset(args.dir, args.out, TruthFilter(args.levels, args.normal_power, args.plane, args.range_sigma))
     return 0
 
 
@@ -109,4 +109,7 @@ def add_data_parsers(sub) -> None:
     q.add_argument("--normal-power", type=float, default=32.0, help="exponent of the normals' cosine (default 32)")
     q.add_argument("--plane", type=float, default=0.01,
                    help="distance from the tangent plane, over the depth, at which a weight falls to 1/e (default 0.01)")
+    q.add_argument("--range-sigma", type=float, default=0.0,
+                   help="the range term: the relative difference of the light (filtered by one level) at which a "
+                        "weight falls to 1/e (default 0: geometry alone)")
     q.set_defaults(func=_cmd_data_filter_truth)

@@ -15,10 +15,14 @@ The filter (an edge-avoiding a-trous wavelet pass, as in Dammertz et al. 2010, w
   times ``max(0, n . n')^normal_power`` (view-space normals) times ``exp(-(d / plane)^2)``, where ``d`` is the
   neighbour's distance from the pixel's tangent plane over the pixel's depth: a neighbour on another surface, or
   across a crease or a step, counts little or nothing;
-- pixels without geometry (depth 0) neither give nor take.
-It does not look at the noisy light itself (no luminance term): its bias is a blur of the irradiance within a
-surface, which the margin's measurement counts (a filtered truth's error against the converged image is its noise
-and its bias together).
+- pixels without geometry (depth 0) neither give nor take;
+- with ``range_sigma`` > 0, a range term as joint bilateral filters have: the guide is ``E`` filtered by one level of
+  geometry alone, and a neighbour's weight is multiplied by ``exp(-(dg / (range_sigma x mean g + RANGE_FLOOR))^2)``,
+  ``dg`` the guides' luminance difference: an edge of the light itself within a surface (a contact shadow of the
+  indirect light, the edge of a bounce's patch) counts little.
+Without the range term it does not look at the noisy light itself: its bias is a blur of the irradiance within a
+surface. Either way the margin's measurement counts that bias (a filtered truth's error against the converged image
+is its noise and its bias together).
 
 The filtered dataset is written into a new folder, as `diviewer.data.refine` does: its manifest is the source's
 with a ``truth_filter`` record (the settings, the source's hash), part of the dataset's identity, and
@@ -41,6 +45,14 @@ KERNEL = np.array([1.0, 4.0, 6.0, 4.0, 1.0], dtype=np.float32) / 16.0
 HOW = ("a-trous over E = (pt - pt_direct) / max(albedo, floor): 5x5 B3 taps at step 2^level, weight x max(0, n.n')^p "
        "x exp(-(plane distance / depth / plane)^2); pt = pt_direct + max(albedo, floor) E'")
 """The record's words for what was done (the manifest's ``truth_filter.how``)."""
+HOW_RANGE = ("; with range_sigma, weight x exp(-(dg / (range_sigma mean(g) + floor))^2), g the luminance of E "
+             "filtered by one level of geometry alone")
+"""Added to `HOW` for a filter with a range term."""
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+"""Rec. 709 luminance weights: the guide's channels to one."""
+RANGE_FLOOR = 1e-4
+"""Added to the range term's scale (irradiance, linear): in light this dark the range term fades and geometry alone
+decides."""
 
 
 @dataclass(frozen=True)
@@ -53,6 +65,9 @@ class TruthFilter:
     """Exponent of the normals' cosine: 32 halves a neighbour's weight at 12 degrees."""
     plane: float = 0.01
     """Distance from the pixel's tangent plane, over its depth, at which a neighbour's weight falls to 1/e."""
+    range_sigma: float = 0.0
+    """The range term's width: the guides' luminance difference, over their mean, at which a neighbour's weight
+    falls to 1/e; 0: no range term (geometry alone)."""
 
     def check(self, where: str = "truth_filter", options: bool = False) -> TruthFilter:
         """Refuse a setting out of range, naming it as ``where.name`` (a recipe's table), or with ``options`` as the
@@ -60,7 +75,7 @@ class TruthFilter:
         field = (lambda name: "--" + name.replace("_", "-")) if options else (lambda name: f"{where}.{name}")
         if not (isinstance(self.levels, int) and not isinstance(self.levels, bool) and 1 <= self.levels <= 5):
             raise DiviewerError(f"levels must be an integer from 1 to 5, got {self.levels!r}", field=field("levels"))
-        for name, lo in (("normal_power", 0.0), ("plane", 1e-6)):
+        for name, lo in (("normal_power", 0.0), ("plane", 1e-6), ("range_sigma", 0.0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < lo:
                 raise DiviewerError(f"{name} must be a finite number of at least {lo:g}, got {v!r}", field=field(name))
@@ -69,14 +84,23 @@ class TruthFilter:
     @classmethod
     def from_dict(cls, data, where: str = "truth_filter") -> TruthFilter:
         if not isinstance(data, dict):
-            raise DiviewerError(f"must be a table (levels, normal_power, plane), got {data!r}", field=where)
-        unknown = sorted(set(data) - {"levels", "normal_power", "plane"})
+            raise DiviewerError(f"must be a table ({', '.join(FIELDS)}), got {data!r}", field=where)
+        unknown = sorted(set(data) - set(FIELDS))
         if unknown:
-            raise DiviewerError(f"unknown field(s) {', '.join(unknown)} (levels, normal_power, plane)", field=where)
+            raise DiviewerError(f"unknown field(s) {', '.join(unknown)} ({', '.join(FIELDS)})", field=where)
         return cls(**data).check(where)
 
     def record(self) -> dict:
-        return asdict(self)
+        """The settings as a recipe's table; ``range_sigma`` only where there is a range term, so the records of
+        the filters before it (and their datasets' identities) read as they did."""
+        rec = asdict(self)
+        if not self.range_sigma:
+            del rec["range_sigma"]
+        return rec
+
+
+FIELDS = ("levels", "normal_power", "plane", "range_sigma")
+"""A truth_filter table's fields."""
 
 
 def view_positions(depth: np.ndarray, fov_y_deg: float) -> np.ndarray:
@@ -93,6 +117,11 @@ def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_
     """``e`` (H, W, C) filtered over the surfaces the G-buffer (view-space ``normal``, ``depth``) shows. A texel whose
     light, normal or depth is not finite, or that has no geometry, gives nothing to its neighbours and keeps its own
     value; every other output is a convex mix of finite inputs."""
+    guide = None
+    if settings.range_sigma > 0.0:
+        one = TruthFilter(1, settings.normal_power, settings.plane)
+        guide = np.nan_to_num(np.maximum(filter_irradiance(e, normal, depth, fov_y_deg, one) @ LUMINANCE, 0.0),
+                              nan=0.0, posinf=0.0)  # a broken texel's guide: it gives nothing in any case
     n = np.nan_to_num(normal.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
     hit = (depth > 0.0) & np.isfinite(depth) & np.all(np.isfinite(e), axis=-1) & np.any(n != 0.0, axis=-1)
     pos = view_positions(np.where(hit, depth, 0.0), fov_y_deg)
@@ -104,6 +133,7 @@ def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_
         r = 2 * step
         pad = lambda a: np.pad(a, [(r, r), (r, r)] + [(0, 0)] * (a.ndim - 2))  # noqa: E731
         pe, pn, pp, ph = pad(out), pad(n), pad(pos), pad(hit)
+        pg = pad(guide) if guide is not None else None
         acc = np.zeros_like(out)
         wsum = np.zeros((h, w), np.float32)
         for a, ky in enumerate(KERNEL):
@@ -113,6 +143,10 @@ def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_
                 cos = np.maximum(np.sum(n * nq, axis=-1), 0.0)
                 d = np.abs(np.sum(n * (pq - pos), axis=-1)) * inv_z / settings.plane
                 wq = (ky * kx) * ph[y:y + h, x:x + w] * cos ** settings.normal_power * np.exp(-d * d)
+                if pg is not None:
+                    gq = pg[y:y + h, x:x + w]
+                    rel = (gq - guide) / (settings.range_sigma * 0.5 * (gq + guide) + RANGE_FLOOR)
+                    wq = wq * np.exp(-rel * rel)
                 acc += wq[..., None] * pe[y:y + h, x:x + w]
                 wsum += wq
         done = hit & (wsum > 0.0)
@@ -144,7 +178,8 @@ def truth_filter_manifest(src, settings: TruthFilter) -> dict:
     missing = [c for c in ("pt", "pt_direct", "albedo", "normal", "depth") if c not in src.slices]
     if missing:
         raise DiviewerError(f"the dataset has no {', '.join(missing)} channel", path=where, field="channels")
-    m["truth_filter"] = {**settings.record(), "from_hash": src.hash, "how": HOW}
+    m["truth_filter"] = {**settings.record(), "from_hash": src.hash,
+                         "how": HOW + (HOW_RANGE if settings.range_sigma else "")}
     m["truth_filter_from"] = str(src.root)
     return m
 
@@ -171,5 +206,6 @@ def filter_dataset(src_dir: Path, out: Path, settings: TruthFilter = TruthFilter
                                           settings).astype(arr.dtype)
         return "truth_filter", settings.record()
 
-    return derive_frames(src, out, manifest, "filter-truth", f"filter ({settings.levels} level(s), normal power "
-                         f"{settings.normal_power:g}, plane {settings.plane:g})", per_frame, tally="filtered", log=log)
+    what = (f"filter ({settings.levels} level(s), normal power {settings.normal_power:g}, plane {settings.plane:g}"
+            + (f", range {settings.range_sigma:g})" if settings.range_sigma else ")"))
+    return derive_frames(src, out, manifest, "filter-truth", what, per_frame, tally="filtered", log=log)

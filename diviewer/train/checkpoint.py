@@ -220,9 +220,9 @@ def truth_spp(ds: Dataset, indices: list[int]) -> dict[str, int] | None:
 
 def filter_settings(manifest: Mapping[str, Any]) -> dict[str, Any]:
     """The settings of a filtered truth (`diviewer data filter-truth`) as a recipe's [capture] truth_filter table."""
-    from diviewer.data.truth_filter import TruthFilter
+    from diviewer.data.truth_filter import FIELDS, TruthFilter
 
-    return TruthFilter.from_dict({k: manifest["truth_filter"][k] for k in ("levels", "normal_power", "plane")},
+    return TruthFilter.from_dict({k: manifest["truth_filter"][k] for k in FIELDS if k in manifest["truth_filter"]},
                                  "truth_filter").record()
 
 

@@ -73,6 +73,23 @@ def test_a_tilted_plane_still_smooths_and_the_plane_distance_scales_with_depth()
     assert float(np.std(out[4:-4, 4:-4])) < 0.2 / 3  # neighbours on the same plane keep their weight
 
 
+def test_the_range_term_keeps_an_edge_of_the_light_within_a_surface_and_still_smooths_its_noise():
+    normal, depth = wall()
+    rng = np.random.default_rng(3)
+    light = np.full((H, W, 3), 0.2, np.float32)
+    light[:, :W // 2] = 1.0  # one wall, a patch of bounced light on its left half
+    noisy = light * (1.0 + rng.normal(0.0, 0.05, (H, W, 3))).astype(np.float32)
+    plain = filter_irradiance(noisy, normal, depth, FOV, TruthFilter(levels=2))
+    ranged = filter_irradiance(noisy, normal, depth, FOV, TruthFilter(levels=2, range_sigma=0.6))
+    edge = np.s_[4:-4, W // 2 - 3:W // 2 + 3]
+    err = lambda out: float(np.sqrt(np.mean((out[edge] - light[edge]) ** 2)))  # noqa: E731
+    assert err(ranged) < 0.6 * err(plain)  # geometry alone blurs the edge; the guide, blurred by one level, less
+    inside = np.s_[4:-4, 3:W // 2 - 5]
+    assert float(np.std(ranged[inside])) < float(np.std(noisy[inside])) / 2.5  # noise of 5 % within 0.6 x the mean
+    np.testing.assert_array_equal(filter_irradiance(noisy, normal, depth, FOV, TruthFilter(levels=2, range_sigma=0.0)),
+                                  plain)
+
+
 def test_filter_truth_keeps_the_direct_light_and_pixels_without_geometry():
     normal, depth = wall()
     depth[:4] = 0.0  # sky
@@ -92,7 +109,8 @@ def test_filter_truth_keeps_the_direct_light_and_pixels_without_geometry():
 
 @pytest.mark.parametrize("table, field", [({"levels": 0}, "levels"), ({"levels": 2.0}, "levels"),
                                           ({"normal_power": -1.0}, "normal_power"), ({"plane": 0.0}, "plane"),
-                                          ({"plane": float("nan")}, "plane"), ({"radius": 2}, "radius")])
+                                          ({"plane": float("nan")}, "plane"), ({"radius": 2}, "radius"),
+                                          ({"range_sigma": -0.1}, "range_sigma")])
 def test_settings_out_of_range_are_refused_by_name(table, field):
     with pytest.raises(DiviewerError) as err:
         TruthFilter.from_dict(table, "capture.truth_filter")
@@ -100,10 +118,14 @@ def test_settings_out_of_range_are_refused_by_name(table, field):
     with pytest.raises(DiviewerError, match="must be a table"):
         TruthFilter.from_dict(3, "capture.truth_filter")
     assert TruthFilter.from_dict({"levels": 2}).record() == {"levels": 2, "normal_power": 32.0, "plane": 0.01}
+    ranged = TruthFilter.from_dict({"levels": 2, "range_sigma": 0.6})
+    assert ranged.record() == {"levels": 2, "normal_power": 32.0, "plane": 0.01, "range_sigma": 0.6}
+    assert TruthFilter.from_dict(ranged.record()) == ranged  # a card's record reads back as the recipe's table
 
 
 @pytest.mark.parametrize("argv, option", [(["--levels", "0"], "--levels"), (["--plane", "nan"], "--plane"),
-                                          (["--normal-power", "-2"], "--normal-power")])
+                                          (["--normal-power", "-2"], "--normal-power"),
+                                          (["--range-sigma", "-1"], "--range-sigma")])
 def test_the_command_refuses_a_setting_out_of_range_in_one_line_naming_the_option(tmp_path, capsys, argv, option):
     assert main(["data", "filter-truth", str(tmp_path / "none"), "--out", str(tmp_path / "out")] + argv) == 2
     err = capsys.readouterr().err.strip().splitlines()

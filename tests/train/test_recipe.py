@@ -222,7 +222,10 @@ def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
         k: v for k, v in refined.capture.items() if k not in others} == {
         k: v for k, v in first.capture.items() if k not in others}
     assert capture_settings(filtered).spp == capture_settings(refined).spp == 256
-    assert truth_filter(filtered) == truth_filter(first) == TruthFilter(levels=1, normal_power=32.0, plane=0.01)
+    # the first stop's filter since 2026-12-04: two levels with a range term (docs/sponza.md, "The range term on
+    # frames it was not chosen on"); the 256-spp ladder's keeps one level, chosen before the range term
+    assert truth_filter(filtered) == TruthFilter(levels=1, normal_power=32.0, plane=0.01)
+    assert truth_filter(first) == TruthFilter(levels=2, normal_power=32.0, plane=0.01, range_sigma=0.6)
     assert truth_filter(refined) is None and truth_filter(walk) is None
     for r in (filtered, first):
         assert (r.train, r.evalset, r.export, r.ks(), r.max_mb) == (

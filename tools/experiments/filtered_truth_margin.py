@@ -36,12 +36,21 @@ SEED_STREAM = 0xF117
 
 def parse_filter(text: str):
     from diviewer.data.truth_filter import TruthFilter
+    from diviewer.errors import DiviewerError
 
     try:
-        levels, power, plane = text.split(":")
-        return TruthFilter(int(levels), float(power), float(plane)).check("--filter")
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"LEVELS:NORMAL_POWER:PLANE, e.g. 1:32:0.01 (got {text!r})") from exc
+        levels, power, plane, *rest = text.split(":")
+        if len(rest) > 1:
+            raise ValueError(text)
+        return TruthFilter(int(levels), float(power), float(plane), *map(float, rest)).check("--filter")
+    except (ValueError, DiviewerError) as exc:
+        raise argparse.ArgumentTypeError(f"LEVELS:NORMAL_POWER:PLANE[:RANGE_SIGMA], e.g. 1:32:0.01 or 2:32:0.01:0.6 "
+                                         f"(got {text!r})") from exc
+
+
+def filter_tag(f) -> str:
+    """A filter's name in the output: ``filtered_LEVELS_POWER_PLANE``, ``_rRANGE`` after it with a range term."""
+    return f"filtered_{f.levels}_{f.normal_power:g}_{f.plane:g}" + (f"_r{f.range_sigma:g}" if f.range_sigma else "")
 
 
 def render_passes(ev, entry: dict, scene, passes: int, spp: int, cache: Path) -> dict[str, np.ndarray]:
@@ -81,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--counts", type=int, nargs="+", default=None,
                     help="score only the truth at these many passes (default: 1, 2, 4, ... up to --passes)")
     ap.add_argument("--filter", type=parse_filter, action="append", default=None,
-                    help="LEVELS:NORMAL_POWER:PLANE, repeatable (default 1:32:0.01, the recipe's)")
+                    help="LEVELS:NORMAL_POWER:PLANE[:RANGE_SIGMA], repeatable (default 1:32:0.01, the recipe's)")
     ap.add_argument("--renders", type=Path, default=Path("runs/filtered_truth_renders"))
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
@@ -98,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     if not all(1 <= c <= a.passes for c in counts):
         raise SystemExit(f"--counts: each from 1 to --passes ({a.passes}), got {counts}; nothing written")
     names = [f"{a.pass_spp * c}_{tag}" for c in counts
-             for tag in ["raw"] + [f"filtered_{f.levels}_{f.normal_power:g}_{f.plane:g}" for f in filters]]
+             for tag in ["raw"] + [filter_tag(f) for f in filters]]
     out = {"eval": str(a.eval), "model": a.model_key, "evalset": str(ev.root), "exposure": ev.exposure,
            "pass_spp": a.pass_spp, "counts_spp": [a.pass_spp * c for c in counts],
            "filters": [f.record() for f in filters], "margin_db": MARGIN_DB, "splits": {}}
