@@ -8,6 +8,7 @@ import json
 import math
 import os
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -310,6 +311,18 @@ def test_the_filtered_truths_margin_is_read_from_passes_traced_again_and_resumes
     assert {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")} == second  # nothing left to trace
     only = json.loads((tmp_path / "only.json").read_text())["splits"]["moved_camera"]["per_truth"]
     assert set(only) == {"4_raw", "4_filtered_1_32_0.01"}
+    # the filter a recipe trains on, first (tools/sponza_chain.sh scores each build's so); a recipe without one refused
+    recipes = Path(__file__).parents[1] / "assets" / "recipes"
+    argv_recipe = argv + ["--passes", "2", "--counts", "2", "--out", str(tmp_path / "recipe.json"),
+                          "--filter", "1:32:0.01"]
+    assert tool.main(argv_recipe + ["--recipe", str(recipes / "sponza_filtered128.toml")]) == 0
+    got = json.loads((tmp_path / "recipe.json").read_text())
+    assert got["filters"][0] == {"levels": 2, "normal_power": 32.0, "plane": 0.01, "range_sigma": 0.6}
+    assert set(got["splits"]["moved_camera"]["per_truth"]) == {
+        "4_raw", "4_filtered_2_32_0.01_r0.6", "4_filtered_1_32_0.01"}
+    with pytest.raises(SystemExit, match=r"sponza_walk64\.toml: capture\.truth_filter: the recipe filters nothing"):
+        tool.main(argv_recipe + ["--recipe", str(recipes / "sponza_walk64.toml"), "--out", str(tmp_path / "no.json")])
+    assert not (tmp_path / "no.json").exists()
     r = json.loads(res.read_text())
     ev, closer = EvalFrames(out), []
     for key in SPLIT_KEYS:

@@ -80,13 +80,13 @@ stage "the 64-spp capture and its check"
 again diviewer build --scene sponza --recipe "$WORK/sponza.toml" --evalset assets/evalsets/sponza --work "$WORK" \
   --ship "$WORK/ship" --ks 8 --stop-after check
 # A model's margin over the filtered truth it trained on, from a build's scores: filtered_margin WORK K PASSES RENDERS.
-# The set's frames are traced at PASSES x 64 spp once (RENDERS) and filtered as the recipe does.
+# The set's frames are traced at PASSES x 64 spp once (RENDERS) and filtered as the build's recipe does (--recipe).
 filtered_margin() {
   local scores="$1/evalset_eval.json" out="$1/filtered_margin_k$2.json"
   [ -f "$scores" ] && ! [ "$out" -nt "$scores" ] || return 0
   stage "the filtered truth's margin over K = $2 ($scores)"
   python tools/experiments/filtered_truth_margin.py --eval "$scores" --model-key "sponza_k$2" \
-    --pass-spp 64 --passes "$3" --counts "$3" --renders "$4" --out "$out" \
+    --recipe "$1/sponza.toml" --pass-spp 64 --passes "$3" --counts "$3" --renders "$4" --out "$out" \
     || stage "no filtered margin for K = $2 (above)"
 }
 stage "the first stop: K = 16 on the filtered 128-spp truth, scored on the compact set"

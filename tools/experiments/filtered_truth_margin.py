@@ -12,7 +12,7 @@ comes out of both errors; a filtered truth's error is then its noise and its bia
 its per-frame scores in a `diviewer eval` JSON of the same set.
 
 Usage: python tools/experiments/filtered_truth_margin.py --eval EVAL.json --model-key sponza_k16
-           [--evalset assets/evalsets/sponza] [--pass-spp 64] [--passes 4] [--filter 1:32:0.01 ...]
+           [--evalset assets/evalsets/sponza] [--pass-spp 64] [--passes 4] [--recipe R.toml] [--filter 1:32:0.01 ...]
            [--renders runs/filtered_truth_renders] [--out OUT.json]
 
 The renders are kept per frame in ``--renders`` (resumable; ~5 s a 64-spp pass of a Sponza frame on a 2-core CPU).
@@ -46,6 +46,24 @@ def parse_filter(text: str):
     except (ValueError, DiviewerError) as exc:
         raise argparse.ArgumentTypeError(f"LEVELS:NORMAL_POWER:PLANE[:RANGE_SIGMA], e.g. 1:32:0.01 or 2:32:0.01:0.6 "
                                          f"(got {text!r})") from exc
+
+
+def recipe_filters(path: Path | None) -> list:
+    """The filter a recipe's truth is filtered with, as a list (empty without ``path``); a recipe that filters
+    nothing is refused in one line naming the file and the field."""
+    if path is None:
+        return []
+    from diviewer.errors import DiviewerError
+    from diviewer.train.recipe import load_recipe, truth_filter
+
+    try:
+        f = truth_filter(load_recipe(path))
+    except DiviewerError as exc:
+        raise SystemExit(f"{exc}; nothing written") from None
+    if f is None:
+        raise SystemExit(f"{path}: capture.truth_filter: the recipe filters nothing, there is no filter to score; "
+                         "nothing written")
+    return [f]
 
 
 def filter_tag(f) -> str:
@@ -90,7 +108,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--counts", type=int, nargs="+", default=None,
                     help="score only the truth at these many passes (default: 1, 2, 4, ... up to --passes)")
     ap.add_argument("--filter", type=parse_filter, action="append", default=None,
-                    help="LEVELS:NORMAL_POWER:PLANE[:RANGE_SIGMA], repeatable (default 1:32:0.01, the recipe's)")
+                    help="LEVELS:NORMAL_POWER:PLANE[:RANGE_SIGMA], repeatable (default: --recipe's, else 1:32:0.01)")
+    ap.add_argument("--recipe", type=Path, default=None,
+                    help="score the filter this recipe's [capture] truth_filter names first (the one its models "
+                         "trained on), then any --filter")
     ap.add_argument("--renders", type=Path, default=Path("runs/filtered_truth_renders"))
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
@@ -99,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     from diviewer.metrics import mse, psnr_error, tonemap
     from diviewer.scene.loader import load_recorded_scene
 
-    filters = a.filter or [TruthFilter()]
+    filters = recipe_filters(a.recipe) + (a.filter or []) or [TruthFilter()]
     record = json.loads(a.eval.read_text())
     ev = EvalFrames(a.evalset or Path(record["evalset"]))
     scene = load_recorded_scene(ev.manifest, ev.root / "manifest.json", "render it with the scene it was made with")
