@@ -40,7 +40,15 @@ docs/architecture.md). Frames with area lights still take two passes: their scen
 
 FILTER_FRAME_SECONDS = 0.06
 """`diviewer data filter-truth` of one 228x128 frame, one level, its read and write included: 407 of Sponza's 64-spp
-frames in 21 s on the Intel 2-core beside a capture (2026-12-02, runs/ab/filt64); a level more costs as much again."""
+frames in 21 s on the Intel 2-core beside a capture (2026-12-02, runs/ab/filt64); a level more costs as much again
+(`filter_levels`)."""
+
+
+def filter_levels(filt) -> int:
+    """A truth filter's cost in levels of `FILTER_FRAME_SECONDS`: its levels, and one more for a range term's guide
+    (one level of geometry alone). The filter alone on a 228x128 frame, the AMD EPYC 2-core (2026-12-04): 0.061 s at
+    one level, 0.116 at two, 0.190 at two with the range term (its per-tap weights add ~0.01 s a level)."""
+    return filt.levels + (1 if filt.range_sigma else 0)
 
 GL_SECONDS_PER_FRAME = {"cpu": 0.05, "cuda": 0.0}
 """The GL inputs of one 128x128 frame: +0.05 s on the 2-core CPU's llvmpipe (README, "Training on VXGI instead

@@ -243,8 +243,9 @@ def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tu
         out.append(Stage("refine", f"refine the capture to {refine_spp} spp ({refine_spp - cap.spp} more a frame)",
                          costs.refine_seconds(m.kind, scene, cap.frames, cap.width, cap.height, refine_spp - cap.spp)))
     if filt is not None:
-        out.append(Stage("filter", f"filter the truth's indirect light over each surface ({filt.levels} level(s))",
-                         cap.frames * filt.levels * costs.FILTER_FRAME_SECONDS))
+        ranged = ", a range term" if filt.range_sigma else ""
+        out.append(Stage("filter", f"filter the truth's indirect light over each surface ({filt.levels} level(s)"
+                                   f"{ranged})", cap.frames * costs.filter_levels(filt) * costs.FILTER_FRAME_SECONDS))
     out.append(Stage("check", "check every frame of the " + ("filtered " if filt else "") +
                      ("refined capture" if refine_spp else "capture"), 0.0))
     if given_evalset is not None:

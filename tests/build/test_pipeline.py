@@ -757,6 +757,11 @@ def test_a_recipe_that_filters_its_truth_plans_the_filter_after_the_refinement_a
     assert plan.truth_dir == plan.capture_dir and plan.data == tmp_path / "w" / "data_2spp_filtered"
     assert next(s for s in plan.stages if s.name == "filter").seconds == pytest.approx(
         8 * 2 * costs.FILTER_FRAME_SECONDS)
+    (tmp_path / "g.toml").write_text(_filtering(TINY_RECIPE, "{ levels = 2, range_sigma = 0.6 }"))
+    plan = make_plan("cornell", load_recipe(tmp_path / "g.toml"), tmp_path / "w", machine=CPU)
+    stage = next(s for s in plan.stages if s.name == "filter")  # the range term's guide: one level more
+    assert "a range term" in stage.title and stage.seconds == pytest.approx(8 * 3 * costs.FILTER_FRAME_SECONDS)
+    assert plan_key(plan)["truth_filter"] == {"levels": 2, "normal_power": 32.0, "plane": 0.01, "range_sigma": 0.6}
     (tmp_path / "bad.toml").write_text(_filtering(TINY_RECIPE, "{ levels = 0 }"))
     with pytest.raises(DiviewerError) as err:
         load_recipe(tmp_path / "bad.toml")
