@@ -8,7 +8,8 @@ distance from the pixel's tangent plane over its depth at 1/e for 0.01) as `divi
 - ``window_R_oO``: one dense (2R+1)^2 window, Gaussian taps (sigma R / 1.5); order 0 is the weighted mean, order 1 a
   weighted local linear fit in screen space (intercept at the pixel: no ramp bias where a surface ends);
 - ``guided_L_S``: the a-trous levels with a range term on the one-level filtered ``E`` as a guide (the relative
-  luminance difference over S: an edge of the light itself counts little), as joint bilateral filters do.
+  luminance difference over S: an edge of the light itself counts little), as joint bilateral filters do: since
+  2026-12-04 the recipe's filter with ``range_sigma = S`` (`TruthFilter`), the same figures to float rounding.
 
 The bias/noise split (``--split-frames``, the recipe's filter at 1-3 levels on the first pass): the filter applied
 to the set's 1024-spp truth, against it, is its bias (plus most of that truth's own noise, which it smooths away);
@@ -33,7 +34,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from filtered_truth_margin import render_passes  # noqa: E402  (this folder is on sys.path)
 
-LUM = np.array([0.2126, 0.7152, 0.0722], np.float32)
 POWER, PLANE = 32.0, 0.01
 """The geometry's weights, as the recipe's filter (`sponza_filtered128.toml`)."""
 
@@ -87,27 +87,6 @@ def window(e, geo, radius, order):
     return np.where(ok[..., None], coef[..., 0, :], e).astype(np.float32)
 
 
-def guided(e, geo, guide, levels, sigma_r):
-    """The recipe's a-trous levels with a range term: the guide's relative luminance difference over ``sigma_r``."""
-    from diviewer.data.truth_filter import KERNEL
-
-    hit = geo[0]
-    gl = np.maximum(guide @ LUM, 0.0)
-    out = e
-    offsets = [(a - 2, b - 2) for a in range(5) for b in range(5)]
-    for level in range(levels):
-        acc, wsum = np.zeros_like(out), np.zeros(hit.shape, np.float32)
-        for dy, dx, wq, at in taps(geo, offsets, 1 << level):
-            gq = at(gl)
-            rel = (gq - gl) / (sigma_r * 0.5 * (gq + gl) + 1e-4)
-            wq = KERNEL[dy + 2] * KERNEL[dx + 2] * wq * np.exp(-rel * rel)
-            acc += wq[..., None] * at(out)
-            wsum += wq
-        done = hit & (wsum > 0.0)
-        out = np.where(done[..., None], acc / np.maximum(wsum, 1e-30)[..., None], out)
-    return out
-
-
 VARIANTS = (["atrous_1", "atrous_2"] + [f"window_{r}_o{o}" for r in (2, 3, 4, 6) for o in (0, 1)]
             + [f"guided_{lv}_{s:g}" for lv in (2, 3, 4) for s in (0.15, 0.3, 0.6)])
 
@@ -115,20 +94,16 @@ VARIANTS = (["atrous_1", "atrous_2"] + [f"window_{r}_o{o}" for r in (2, 3, 4, 6)
 def filtered(name, pt, direct, f, fov):
     """The truth ``pt`` (its direct part ``direct``) with its indirect light filtered by the variant ``name``."""
     from diviewer.data.scales import floored_albedo
-    from diviewer.data.truth_filter import TruthFilter, filter_irradiance, filter_truth
+    from diviewer.data.truth_filter import TruthFilter, filter_truth
 
     kind, *arg = name.split("_")
-    if kind == "atrous":
-        return filter_truth(pt, direct, f["albedo"], f["normal"], f["depth"], fov, TruthFilter(int(arg[0]), POWER,
-                                                                                                 PLANE))
+    if kind in ("atrous", "guided"):
+        settings = TruthFilter(int(arg[0]), POWER, PLANE, float(arg[1]) if kind == "guided" else 0.0)
+        return filter_truth(pt, direct, f["albedo"], f["normal"], f["depth"], fov, settings)
     a = floored_albedo(np.asarray(f["albedo"], np.float32)).astype(np.float32)
     geo = geometry(f["normal"], f["depth"], fov)
     e = np.where(geo[0][..., None], (pt - direct) / a, 0.0).astype(np.float32)
-    if kind == "window":
-        out = window(e, geo, int(arg[0]), int(arg[1][1:]))
-    else:
-        guide = filter_irradiance(e, f["normal"], f["depth"], fov, TruthFilter(1, POWER, PLANE))
-        out = guided(e, geo, guide, int(arg[0]), float(arg[1]))
+    out = window(e, geo, int(arg[0]), int(arg[1][1:]))
     return np.where(geo[0][..., None], direct + a * out, pt)
 
 
