@@ -87,10 +87,11 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                     print(f"diviewer render: note: {note}", file=sys.stderr)
             # Known good before anything is written: an earlier render in --out stays as it was otherwise.
             _check_finite(scene, config, frame, (*BUFFERS, "neural", "vxgi", "vxgi_indirect"))
-            ev, metered = display_exposure(scene, frame, exposure)
+            ev, metered = display_exposure(scene, frame, exposure, tonemap)
             record = frame_record(scene, config, (width, height), seed=seed, split=split if seed is not None else None,
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
-                                  display={"exposure": ev, "tonemap": tonemap, **({"metered": metered} if metered else {})},
+                                  display={"exposure": ev, "tonemap": tonemap, **({"metered": metered} if metered else {}),
+                                           "clipped": clipped_shares(frame, ev, tonemap)},
                                   neural=neural_info,
                                   user_meshes=user_meshes, **({"vxgi": vxgi_info} if vxgi_info else {}))
             _write_render(out, frame, record, compositor, ev, tonemap)
@@ -106,17 +107,27 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     return record
 
 
-def display_exposure(scene: Scene, frame: dict[str, np.ndarray], exposure: float | None) -> tuple[float, str | None]:
+def display_exposure(scene: Scene, frame: dict[str, np.ndarray], exposure: float | None,
+                     tonemap: str = "aces") -> tuple[float, str | None]:
     """The PNGs' exposure (stops) and, where it was metered, the image it was metered on: ``exposure`` if given,
     else the scene file's, or for a scene that asks for auto exposure the viewer's meter
-    (`diviewer.exposure.metered_ev`) on the frame shown (the neural composite, else the direct light)."""
+    (`diviewer.exposure.metered_ev` with `SHOWN`, highlights kept for ``tonemap``) on the frame shown (the neural
+    composite, else the direct light)."""
     if exposure is not None:
         return exposure, None
-    from diviewer.exposure import still_ev
+    from diviewer.exposure import SHOWN, WHITE_POINTS, still_ev
 
     shown = "neural" if "neural" in frame else "direct"
-    ev, metered = still_ev(scene.exposure, scene.auto_exposure, frame[shown])
+    ev, metered = still_ev(scene.exposure, scene.auto_exposure, frame[shown], SHOWN, WHITE_POINTS[tonemap])
     return ev, (shown if metered else None)
+
+
+def clipped_shares(frame: dict[str, np.ndarray], ev: float, tonemap: str) -> dict[str, float]:
+    """Per radiance image of ``frame``, the share of its pixels its PNG shows as white (`clipped_share`)."""
+    from diviewer.exposure import WHITE_POINTS, clipped_share
+
+    return {name: round(clipped_share(frame[name], ev, WHITE_POINTS[tonemap]), 6)
+            for name in ("direct", "neural", "vxgi") if name in frame}
 
 
 def _vxgi_pass(ctx, renderer, vxgi, config, frame: dict):
@@ -214,6 +225,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
     """
     import time
 
+    from diviewer.exposure import WHITE_POINTS, clipped_share
     from diviewer.gl.context import headless_context
     from diviewer.gl.display import DisplayPass
     from diviewer.gl.shaders import ShaderCache
@@ -251,6 +263,7 @@ def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", s
         "rr_depth": ref.path_integrator(depth)["rr_depth"], "sampler": ref.SAMPLER,
         "seconds": {"load": round(t_load, 4), "full": round(t_full, 4)},  # full: both images
         "files": {n: f"{n}.exr" for n in images},
+        "clipped": round(clipped_share(full, float(ev), WHITE_POINTS[tonemap]), 6),  # at the PNGs' exposure
     }
     if noise_floor:
         t0 = time.perf_counter()

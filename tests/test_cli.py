@@ -58,7 +58,7 @@ def test_render_meters_the_exposure_of_a_scene_that_asks_for_it_and_records_it(g
     same for the same frame, recorded in frame.json (and a reference render from it takes it over); --exposure
     still wins; the scene's identity does not change."""
     from diviewer.scene import load_scene
-    from diviewer.exposure import metered_ev
+    from diviewer.exposure import SHOWN, metered_ev
 
     text = (ROOT / "assets" / "scenes" / "cornell.toml").read_text()
     auto = tmp_path / "auto.toml"
@@ -72,11 +72,14 @@ def test_render_meters_the_exposure_of_a_scene_that_asks_for_it_and_records_it(g
         assert main(["render", "--scene", str(auto), "--res", "48x32", "--seed", "3", "--out", str(tmp_path / name)]) == 0
         records.append(json.loads((tmp_path / name / "frame.json").read_text())["display"])
     direct = read_exr(tmp_path / "a" / "direct.exr")
-    assert records[0] == records[1] == {"exposure": round(metered_ev(direct), 4), "tonemap": "aces", "metered": "direct"}
+    clipped = records[0].pop("clipped")
+    assert records[0] == {"exposure": round(metered_ev(direct, SHOWN), 4), "tonemap": "aces", "metered": "direct"}
+    assert records[1].pop("clipped") == clipped and records[1] == records[0] and 0 <= clipped["direct"] <= 1
     assert records[0]["exposure"] != 0.0  # metered, not the file's 0 EV
     assert main(["render", "--scene", str(auto), "--res", "48x32", "--seed", "3", "--exposure", "-1",
                  "--out", str(tmp_path / "c")]) == 0
-    assert json.loads((tmp_path / "c" / "frame.json").read_text())["display"] == {"exposure": -1.0, "tonemap": "aces"}
+    fixed = json.loads((tmp_path / "c" / "frame.json").read_text())["display"]
+    assert fixed.pop("clipped").keys() == {"direct"} and fixed == {"exposure": -1.0, "tonemap": "aces"}
     assert main(["render", "--scene", str(plain), "--res", "48x32", "--seed", "3", "--out", str(tmp_path / "d")]) == 0
     assert json.loads((tmp_path / "d" / "frame.json").read_text())["display"]["exposure"] == 0.0
     bad = tmp_path / "bad.toml"

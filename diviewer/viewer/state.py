@@ -21,7 +21,7 @@ from diviewer.scene.picking import pick_object, pixel_ray
 from diviewer.scene.sampler import camera_on_path
 from diviewer.scene.ranges_check import out_of_range
 from diviewer.viewer.controls import Controller, make_controller
-from diviewer.exposure import AutoExposure
+from diviewer.exposure import SHOWN, WHITE_POINTS, AutoExposure
 from diviewer.viewer.stats import Stats
 from diviewer.viewer.view_modes import ViewMode, view_mode
 
@@ -53,7 +53,7 @@ class ViewerState:
         self.exposure = float(scene.exposure)
         self.auto_exposure = False
         """Meter the exposure from the shown frame each frame (``auto``), instead of the slider's."""
-        self.auto = AutoExposure()
+        self.auto = AutoExposure(SHOWN)
         self._ranges: tuple = (None, None, [])
         self.tonemap = DEFAULT_TONEMAP
         self.animate_light = False
@@ -347,7 +347,7 @@ class ViewerState:
 
     def meter(self, samples) -> float:
         """Auto exposure: feed one shown frame's radiance samples; the exposure follows (when on)."""
-        ev = self.auto.update(samples)
+        ev = self.auto.update(samples, WHITE_POINTS[self.tonemap])
         if self.auto_exposure and ev is not None:
             self.exposure = float(ev)
         return self.exposure
