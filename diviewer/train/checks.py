@@ -131,3 +131,15 @@ def refuse_departures(check: dict, reference: np.ndarray, fp16: bool, stored: st
                             f"differs from PyTorch by {check['max_rel_to_peak']:.2g} of peak "
                             f"({check['extremes_max_rel_to_peak']:.2g} on extreme buffers; tolerance "
                             f"{tolerance}); not written", path=out)
+
+
+def verification_line(check: dict, precision: str) -> str:
+    """The export's verification (``check``, as the card records it) in plain words, on one line."""
+    words = [f"verified the {precision} model against PyTorch on {check['frames']}: it differs by at most "
+             f"{check['max_rel_to_peak']:.2g} of the image's peak (PSNR {check['psnr_db']:.1f} dB)",
+             "extreme and broken inputs give the same finite and non-finite pixels"
+             if check["extremes_same_nonfinite"] else "extreme inputs differ in which pixels are finite"]
+    if "zero_light_max" in check:
+        words.append(f"no light gives black, twice the light twice the image (to "
+                     f"{check['twice_light_max_rel_to_peak']:.1g} of the peak)")
+    return "; ".join(words)

@@ -358,6 +358,21 @@ def _frame_of(rng, h=32, w=32):
     return _buffers(rng, 1, h, w)
 
 
+def test_export_speaks_plainly_and_raises_no_library_warnings(checkpoints, tmp_path):
+    """The user sees the verification in words (one line, the light checks in it) and no torch warnings."""
+    import warnings
+
+    lines = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        export(checkpoints["indirect"], tmp_path / "w.onnx", ExportSettings(), log=lines.append)
+    assert [str(w.message)[:80] for w in caught] == []
+    verified = [line for line in lines if line.startswith("verified the fp32 model against PyTorch")]
+    assert len(verified) == 1
+    assert "no light gives black, twice the light twice the image" in verified[0]
+    assert not any("zero light max" in line for line in lines)
+
+
 @pytest.mark.parametrize("fp16", [False, True])
 def test_encoding_2_is_black_without_light_and_linear_in_it(checkpoints, tmp_path, fp16):
     """In onnxruntime: zero light (no direct light, light scale 0) gives exactly 0; twice the light (direct x 2,
