@@ -62,7 +62,7 @@ def lineage(manifest: dict, path: Path | None = None) -> list[dict]:
         to = chain[k + 1].get("from_spp") if k + 1 < len(chain) else manifest.get("spp")
         steps.append(_reconstructed("refine", r, manifest.get("refined_from") if k + 1 == len(chain) else None,
                                     {"from_spp": r.get("from_spp"), "spp": to}))
-    if isinstance(a := manifest.get("direct_area"), dict):
+    if isinstance(a := manifest.get("direct_area"), dict) and "from_hash" in a:  # not a capture's own area light
         steps.append(_reconstructed("area-direct", a, manifest.get("direct_area_from"), {"samples": a.get("samples")}))
     if isinstance(t := manifest.get("truth_filter"), dict):
         steps.append(_reconstructed("filter-truth", t, manifest.get("truth_filter_from"),

@@ -131,6 +131,12 @@ def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_
     inv_z = np.where(hit, 1.0 / np.maximum(depth, 1e-6), 0.0).astype(np.float32)
     out = np.where(hit[..., None], e, 0.0).astype(np.float32)
     h, w = hit.shape
+    # The settings as the weights use them, each finite in float32 whatever the setting: a power beyond float32's
+    # largest weighs as that one does (a cosine below 1 to it is 0), a plane beyond 1e30 has no plane term left,
+    # a range term beyond 1e30 weighs every neighbour 1 (its relative difference is at most 2 / range_sigma).
+    power = np.float32(min(settings.normal_power, float(np.finfo(np.float32).max)))
+    inv_plane = np.float32(1.0 / settings.plane) if settings.plane < 1e30 else np.float32(0.0)
+    sigma = min(settings.range_sigma, 1e30)
     for level in range(settings.levels):
         step = 1 << level
         r = 2 * step
@@ -146,11 +152,11 @@ def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_
                 # A cosine in [0, 1] (stored normals are a little off unit length) raised to any finite power
                 # stays in [0, 1]: a weight never overflows, whatever normal_power is.
                 cos = np.clip(np.sum(n * nq, axis=-1), 0.0, 1.0)
-                d = np.abs(np.sum(n * (pq - pos), axis=-1)) * inv_z / settings.plane
-                wq = (ky * kx) * ph[y:y + h, x:x + w] * cos ** settings.normal_power * np.exp(-d * d)
+                d = np.abs(np.sum(n * (pq - pos), axis=-1)) * inv_z * inv_plane
+                wq = (ky * kx) * ph[y:y + h, x:x + w] * cos ** power * np.exp(-d * d)
                 if pg is not None:
                     gq = pg[y:y + h, x:x + w]
-                    rel = (gq - guide) / (settings.range_sigma * 0.5 * (gq + guide) + RANGE_FLOOR)
+                    rel = (gq - guide) / (sigma * 0.5 * (gq + guide) + RANGE_FLOOR)
                     wq = wq * np.exp(-rel * rel).astype(np.float32)
                 wq = np.where(np.isfinite(wq), wq, 0.0).astype(np.float32)  # a weight that cannot be had counts 0
                 acc += wq[..., None] * pe[y:y + h, x:x + w]
