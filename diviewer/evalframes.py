@@ -28,7 +28,6 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer import imageio
 from diviewer.data.dataset import ABSENT, FrameProblem, read_manifest  # noqa: F401 (ABSENT: eval's, re-exported)
 from diviewer.data.object_lists import share_object_lists
 from diviewer.errors import DiviewerError
@@ -328,14 +327,14 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None
         "storage": "per frame and channel group: float16 split into high and low bytes (uint8 .npy), LZMA zip",
         "ladder": "scores per frame and shape (diviewer.evaluate.score_frame on the full set's float32 frames); "
                   "its images are not stored", "full_frames": len(src.frames)}
-    out.mkdir(parents=True, exist_ok=True)
-    with imageio.atomic_path(out / COMPACT_FILE) as tmp:
-        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_LZMA) as z:
+    from diviewer.evalscore import strict_json
+    from diviewer.outputs import staged
+
+    with staged() as stage:  # both files or neither: an interrupted write leaves the folder as it was
+        with zipfile.ZipFile(stage(out / COMPACT_FILE), "w", compression=zipfile.ZIP_LZMA) as z:
             for name, blob in blobs.items():
                 z.writestr(name, blob)
-    from diviewer.evalscore import strict_json
-
-    imageio.write_text(out / "manifest.json", strict_json(share_object_lists(manifest)))
+        stage(out / "manifest.json").write_text(strict_json(share_object_lists(manifest)))
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     log(f"compact evaluation set: {len(chosen)} frames ({frames_per_split} per split of "
         f"{', '.join(splits)}) in {out}, {size / 2**20:.2f} MB")

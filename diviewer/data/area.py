@@ -72,7 +72,7 @@ def area_direct(src_dir: Path, out: Path, samples: int, log=print, partial: bool
             return "direct_area", {"samples": samples}
 
         try:
-            return derive_frames(src, frames, out, manifest, "area-direct", f"render ({samples}x{samples} samples per pixel)",
-                                 per_frame, log=log)
+            return derive_frames(src, frames, out, manifest, "area-direct",
+                                 f"render ({samples}x{samples} samples per pixel)", per_frame, log=log)
         finally:
             area.release()

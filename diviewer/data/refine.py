@@ -89,8 +89,9 @@ def derive_frames(src: Dataset, frames: list[dict], out: Path, manifest: dict, v
                   tally: str = "rendered", log=print) -> dict:
     """Write ``frames`` of ``src`` (`diviewer.data.lineage.verified_frames`') into ``out`` (a dataset of ``manifest``),
     each changed in place by ``per_frame(entry, arr) -> (sidecar key, record)``, the record added to its sidecar;
-    frames already there (and sound) are kept. Returns `summarize`'s summary with ``tally`` (the frames written now) and the seconds. What
-    `diviewer data area-direct` and `filter-truth` share; ``what`` says what each frame gets, in the log line."""
+    frames already there (and sound) are kept. Returns `summarize`'s summary with ``tally`` (the frames written now)
+    and the seconds. What `diviewer data area-direct` and `filter-truth` share; ``what`` says what each frame gets,
+    in the log line."""
     from diviewer.data.capture import open_or_create, summarize
 
     with run_lock(out, f"data {verb}"):
