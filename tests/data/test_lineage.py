@@ -129,3 +129,24 @@ def test_a_derived_dataset_records_its_chain_and_eval_refuses_such_a_set(tmp_pat
     assert err.value.field == "lineage" and str(src.root) in str(err.value)
     with pytest.raises(DiviewerError, match="filtered"):  # an older derived set: its record says it
         refuse_derived_evalset({"kind": "evalset", "truth_filter": {"levels": 1, "from_hash": "a"}}, f.root)
+
+
+@pytest.mark.mitsuba
+def test_a_chain_of_derivations_keeps_every_step(tmp_path, gl_context):
+    from diviewer.data.area import area_direct
+    from diviewer.data.refine import refine
+
+    src = tiny_capture(tmp_path / "src")
+    area_direct(src.root, tmp_path / "area", 2, **QUIET)
+    refine(tmp_path / "area", tmp_path / "refined", 8, **QUIET)
+    filter_dataset(tmp_path / "refined", tmp_path / "filtered", TruthFilter(), **QUIET)
+    area, refined, filtered = (Dataset(tmp_path / n) for n in ("area", "refined", "filtered"))
+    steps = filtered.manifest["lineage"]
+    assert [s["operation"] for s in steps] == ["area-direct", "refine", "filter-truth"]
+    assert [s["source"]["hash"] for s in steps] == [src.hash, area.hash, refined.hash]
+    assert [s["settings"] for s in steps] == [{"samples": 2}, {"spp": 8, "from_spp": 4},
+                                              {"levels": 1, "normal_power": 32.0, "plane": 0.01}]
+    assert filtered.check() == [] and {"direct_area", "refined", "truth_filter"} <= set(filtered.manifest)
+    # each step's records stay: an older reader, without the lineage, finds the same operations
+    older = {k: v for k, v in filtered.manifest.items() if k != "lineage"}
+    assert sorted(s["operation"] for s in lineage(older)) == sorted(s["operation"] for s in steps)
