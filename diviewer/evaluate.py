@@ -9,8 +9,9 @@ and the path tracer at each ladder count, per split. One tone map (the evaluatio
 for every row, and region metrics (the object's pixels, those of them without direct light: diviewer.evalscore)
 with the share of frames in which each model scores below direct light. Every split is scored at each of its
 shapes (centred crops, diviewer.evalframes); a model the runtime refuses at a shape is reported as refused.
-The frames' checksums are verified first; an incomplete set is refused unless ``partial`` (which names the
-frames scored). On a dataset split (``--data``) the tone map is the scene's too: the shipped evaluation
+The frames' checksums are verified first; a set changed after `diviewer evalset` rendered it (a step in its
+lineage: diviewer.data.lineage) is refused, and an incomplete one unless ``partial`` (which names the frames scored
+and those not). On a dataset split (``--data``) the tone map is the scene's too: the shipped evaluation
 set's exposure when it is of the same scene file, else the dataset's: fitted on its train split's GL direct
 light as training fits it (so a model trained on the dataset is scored at its own exposure).
 """
