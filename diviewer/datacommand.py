@@ -56,22 +56,29 @@ def _cmd_data_refine(args: argparse.Namespace) -> int:
     from diviewer.data.capture import parse_shard
     from diviewer.data.refine import refine
 
-    refine(args.dir, args.out, args.spp, parse_shard(args.shard), extras=args.extras)
+    refine(args.dir, args.out, args.spp, parse_shard(args.shard), extras=args.extras, partial=args.partial)
     return 0
 
 
 def _cmd_data_area_direct(args: argparse.Namespace) -> int:
     from diviewer.data.area import area_direct
 
-    area_direct(args.dir, args.out, args.samples)
+    area_direct(args.dir, args.out, args.samples, partial=args.partial)
     return 0
 
 
 def _cmd_data_filter_truth(args: argparse.Namespace) -> int:
     from diviewer.data.truth_filter import TruthFilter, filter_dataset
 
-    filter_dataset(args.dir, args.out, TruthFilter(args.levels, args.normal_power, args.plane, args.range_sigma))
+    filter_dataset(args.dir, args.out, TruthFilter(args.levels, args.normal_power, args.plane, args.range_sigma),
+                   partial=args.partial)
     return 0
+
+
+def _add_partial_arg(q) -> None:
+    q.add_argument("--partial", action="store_true",
+                   help="derive the present frames of an incomplete source (each still verified); without it an "
+                        "incomplete source is refused")
 
 
 def add_data_parsers(sub) -> None:
@@ -94,12 +101,14 @@ def add_data_parsers(sub) -> None:
     q.add_argument("--shard", default=None, help="k/n: refine every n-th frame starting at the k-th")
     q.add_argument("--extras", type=Path, default=None, help="a folder of extra samples rendered elsewhere "
                    "(tools/device_refine.py): refine only its frames, from them")
+    _add_partial_arg(q)
     q.set_defaults(func=_cmd_data_refine)
     q = data.add_parser("area-direct", help="re-render a dataset's GL direct light over each pixel's area into a new "
                                             "folder (supersampled, box-filtered; minutes; resumable)")
     q.add_argument("dir", type=Path)
     q.add_argument("--samples", type=int, default=4, help="samples per axis (default 4: 16 per pixel)")
     q.add_argument("--out", type=Path, required=True)
+    _add_partial_arg(q)
     q.set_defaults(func=_cmd_data_area_direct)
     q = data.add_parser("filter-truth", help="filter a path-traced dataset's indirect light over each surface into a new "
                                              "folder (seconds; resumable)")
@@ -112,4 +121,5 @@ def add_data_parsers(sub) -> None:
     q.add_argument("--range-sigma", type=float, default=0.0,
                    help="the range term: the relative difference of the light (filtered by one level) at which a "
                         "weight falls to 1/e (default 0: geometry alone)")
+    _add_partial_arg(q)
     q.set_defaults(func=_cmd_data_filter_truth)

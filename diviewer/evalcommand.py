@@ -57,8 +57,7 @@ def _cmd_evalset(args: argparse.Namespace) -> int:
     if args.compact is not None:
         from diviewer.evalframes import write_compact
 
-        n = 6 if args.frames_per_split is None else args.frames_per_split
-        write_compact(args.compact, args.out, frames_per_split=n, jobs=_jobs(args))
+        write_compact(args.compact, args.out, frames_per_split=args.frames_per_split, jobs=_jobs(args))
         return 0
     width, height = parse_resolution(args.res)
     try:
@@ -107,13 +106,14 @@ def add_eval_parsers(sub, add_variant_arg) -> None:
     p.add_argument("--scene", default="cornell", help=scene_help())
     p.add_argument("--out", type=Path, required=True, help="evaluation set folder (created, or resumed)")
     p.add_argument("--frames-per-split", type=int, default=None,
-                   help="frames in each split (default 24; with --compact 6 of each split, spread over its meshes)")
+                   help="frames in each split (default 24; with --compact 6 of each split, spread over its meshes, "
+                        "or the fewest a split has; more than a split has is refused)")
     p.add_argument("--res", default="128", help="the model's frame, N or WxH (square splits); default 128")
     p.add_argument("--window-widths", default=None,
                    help="widths of the window_shapes split at the same rows (default 4:3 and 16:9: 170,228 at 128)")
     p.add_argument("--compact", type=Path, default=None, metavar="FULL_DIR",
-                   help="write the compact set of the full evaluation set FULL_DIR into --out (what assets/evalsets "
-                        "ships) instead of rendering")
+                   help="write the compact set of the full evaluation set FULL_DIR into --out, a new folder (what "
+                        "assets/evalsets ships) instead of rendering; a set already there is never overwritten")
     p.add_argument("--spp", type=int, default=1024, help="samples per pixel of the ground truth (default 1024)")
     p.add_argument("--ladder", default=",".join(map(str, (1, 4, 16, 64, 256))),
                    help="lower sample counts for the equivalent spp (default 1,4,16,64,256)")

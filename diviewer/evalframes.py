@@ -28,8 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer import imageio
-from diviewer.data.dataset import FrameProblem, read_manifest
+from diviewer.data.dataset import ABSENT, FrameProblem, read_manifest  # noqa: F401 (ABSENT: eval's, re-exported)
 from diviewer.data.object_lists import share_object_lists
 from diviewer.errors import DiviewerError
 
@@ -37,10 +36,10 @@ COMPACT_FILE = "frames.zip"
 COMPACT_DTYPE = np.float16
 COMPACT_CHANNELS = ("depth", "normal", "albedo", "direct", "pt", "pt_b", "object")
 """Channels a compact set stores as images (those the full set has)."""
+COMPACT_FRAMES = 6
+"""Frames of each split a compact set keeps unless asked for another count."""
 DEFAULT_EVALSETS: Path | None = None
 """Where the shipped compact sets are; None: ``assets/evalsets`` (diviewer.paths: the checkout's or the wheel's)."""
-ABSENT = ("missing", "incomplete")
-"""Frame problems that mean 'not rendered yet' (eval --partial scores around them); any other is refused."""
 
 
 def default_evalset(scene_name: str) -> Path:
@@ -241,29 +240,47 @@ def compact_choice(entries: list[dict], n: int) -> list[int]:
     return sorted(chosen, key=order.__getitem__)
 
 
-def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=print, jobs: int = 1) -> dict:
-    """Write the compact set of a full evaluation set: ``frames_per_split`` frames of each split, spread over
-    its meshes (``compact_choice``).
+def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None, log=print, jobs: int = 1) -> dict:
+    """Write the compact set of a full evaluation set into a new folder: ``frames_per_split`` frames of each split
+    (None: `COMPACT_FRAMES`, or the fewest a split has where that is fewer), spread over its meshes
+    (``compact_choice``).
 
-    The chosen frames must be present and sound in the full set; the rest of it need not be complete.
+    Refused before any work: a folder that holds a set (or any dataset) already, never overwritten; more frames per
+    split than a split has; a full set whose frames were changed after `diviewer evalset` rendered them (a step in
+    its lineage). The chosen frames must be present and sound in the full set; the rest of it need not be complete.
     ``jobs``: processes the ladder's images are scored in (``evalscore.Scorer``).
     """
+    from diviewer.data.lineage import refuse_derived_evalset
     from diviewer.evalscore import Scorer, ladder_methods
     from diviewer.metrics import flat_mask
 
     src = EvalFrames(full_dir)
     if src.compact:
         raise DiviewerError("already a compact evaluation set; give the full set it came from", path=full_dir)
-    if frames_per_split < 1:
-        raise DiviewerError(f"must be at least 1, got {frames_per_split}", field="--frames-per-split")
+    refuse_derived_evalset(src.manifest, src.root)
     out = Path(out)
-    if out.resolve() == src.root.resolve():
+    if out.exists() and out.resolve() == src.root.resolve():
         raise DiviewerError("the compact set cannot be written into the full set it is made from", path=out)
-    if (out / "manifest.json").is_file() and "compact" not in read_manifest(out):
-        raise DiviewerError("a dataset that is not a compact evaluation set is already there; use another --out",
-                            path=out)
-    problems = {p.index: p.problem for p in src.problems()}
+    there = [name for name in ("manifest.json", COMPACT_FILE) if (out / name).exists()]
+    if there:
+        raise DiviewerError(f"{out} holds {' and '.join(there)} already (a set there is never overwritten); give a new "
+                            f"folder, or move that one away first", path=out, field="--out")
     splits = src.splits()
+    have = {split: sum(f["split"] == split for f in src.frames) for split in splits}
+    fewest = min(have.values())
+    if frames_per_split is None:
+        frames_per_split = min(COMPACT_FRAMES, fewest)
+        if frames_per_split < COMPACT_FRAMES:
+            log(f"{frames_per_split} frames per split: the fewest a split of {full_dir} has")
+    if isinstance(frames_per_split, bool) or not isinstance(frames_per_split, int) or frames_per_split < 1:
+        raise DiviewerError(f"must be a whole number of at least 1, got {frames_per_split!r}",
+                            field="--frames-per-split")
+    if frames_per_split > fewest:
+        short = ", ".join(f"{split} {n}" for split, n in have.items() if n < frames_per_split)
+        raise DiviewerError(f"{frames_per_split} frames per split asked for, but the full set's splits have fewer "
+                            f"({short}); ask for at most {fewest}", path=src.root / "manifest.json",
+                            field="--frames-per-split")
+    problems = {p.index: p.problem for p in src.problems()}
     names = [n for n, _ in src.manifest["channels"] if n in COMPACT_CHANNELS]
     ladder = ladder_methods(src)
     chosen, blobs = [], {}
@@ -305,18 +322,19 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int = 6, log=prin
                     frame_list=chosen)
     manifest["compact"] = {
         "from": str(src.root), "frames_per_split": frames_per_split, "file": COMPACT_FILE,
+        "per_split": {split: sum(e["split"] == split for e in chosen) for split in splits},
         "choice": "per split, the first frame of each distinct set of meshes in turn (compact_choice)",
         "storage": "per frame and channel group: float16 split into high and low bytes (uint8 .npy), LZMA zip",
         "ladder": "scores per frame and shape (diviewer.evaluate.score_frame on the full set's float32 frames); "
                   "its images are not stored", "full_frames": len(src.frames)}
-    out.mkdir(parents=True, exist_ok=True)
-    with imageio.atomic_path(out / COMPACT_FILE) as tmp:
-        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_LZMA) as z:
+    from diviewer.evalscore import strict_json
+    from diviewer.outputs import staged
+
+    with staged() as stage:  # both files or neither: an interrupted write leaves the folder as it was
+        with zipfile.ZipFile(stage(out / COMPACT_FILE), "w", compression=zipfile.ZIP_LZMA) as z:
             for name, blob in blobs.items():
                 z.writestr(name, blob)
-    from diviewer.evalscore import strict_json
-
-    imageio.write_text(out / "manifest.json", strict_json(share_object_lists(manifest)))
+        stage(out / "manifest.json").write_text(strict_json(share_object_lists(manifest)))
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     log(f"compact evaluation set: {len(chosen)} frames ({frames_per_split} per split of "
         f"{', '.join(splits)}) in {out}, {size / 2**20:.2f} MB")

@@ -9,8 +9,9 @@ and the path tracer at each ladder count, per split. One tone map (the evaluatio
 for every row, and region metrics (the object's pixels, those of them without direct light: diviewer.evalscore)
 with the share of frames in which each model scores below direct light. Every split is scored at each of its
 shapes (centred crops, diviewer.evalframes); a model the runtime refuses at a shape is reported as refused.
-The frames' checksums are verified first; an incomplete set is refused unless ``partial`` (which names the
-frames scored). On a dataset split (``--data``) the tone map is the scene's too: the shipped evaluation
+The frames' checksums are verified first; a set changed after `diviewer evalset` rendered it (a step in its
+lineage: diviewer.data.lineage) is refused, and an incomplete one unless ``partial`` (which names the frames scored
+and those not). On a dataset split (``--data``) the tone map is the scene's too: the shipped evaluation
 set's exposure when it is of the same scene file, else the dataset's: fitted on its train split's GL direct
 light as training fits it (so a model trained on the dataset is scored at its own exposure).
 """
@@ -26,6 +27,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.area import direct_samples
 from diviewer.data.dataset import Dataset
+from diviewer.data.lineage import refuse_derived_evalset
 from diviewer.errors import DiviewerError
 from diviewer.data.scales import light_scales
 from diviewer.evalframes import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
@@ -163,8 +165,10 @@ def _model_label(meta: dict, path: Path) -> str:
 
 
 def check_frames(ev: EvalFrames, partial: bool, log=print) -> list:
-    """The frames' problems after refusing what cannot be scored honestly: a corrupt frame always, an absent
-    one unless ``partial``."""
+    """The frames' problems after refusing what cannot be scored honestly: a set whose truth or inputs were changed
+    after `diviewer evalset` rendered them (a step in its lineage), a corrupt frame always, an absent one unless
+    ``partial``."""
+    refuse_derived_evalset(ev.manifest, ev.root)
     problems = ev.problems()
     bad = [p for p in problems if not p.problem.startswith(ABSENT)]
     if bad:
@@ -223,6 +227,8 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
         log(f"split {split} left out: {why}")
     splits = ev.splits()
     present = {s: ev.present(s, problems) for s in splits}
+    if partial:  # what was scored and what was not, never "every frame"
+        result.update(partial_record(ev, problems, present))
     progress = progress_bar(sum(len(present[s]) * len(sh) for s, sh in splits.items()), "eval", "frame")
     with Scorer(jobs) as scorer:
         _score_splits(ev, splits, present, result, models, images, exposure, ladder_spp, progress, partial, area,
@@ -233,6 +239,17 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
     if out is not None:
         imageio.write_text(out, strict_json(result))
     return result
+
+
+def partial_record(ev: EvalFrames, problems: list, present: dict[str, list[int]]) -> dict:
+    """An ``eval --partial`` result's account of its frames: ``frames`` in words, the indices scored and those not
+    (each with why)."""
+    scored = sorted(i for idx in present.values() for i in idx)
+    return {"frames": f"{'a partial set: ' if problems else ''}{len(scored)} of the set's {len(ev.frames)} frames "
+                      f"scored (--partial)" + (f", {len(problems)} absent" if problems else ""),
+            "frames_scored": scored,
+            "frames_not_scored": [{"index": p.index, "split": ev.entry(p.index)["split"], "problem": p.problem}
+                                  for p in problems]}
 
 
 def _score_splits(ev, splits, present, result, models, images, exposure, ladder_spp, progress, partial, area, scorer,
@@ -369,6 +386,10 @@ def format_tables(result: dict) -> list[str]:
              f"object / unlit = tone-mapped PSNR and SSIM over the moving object's pixels / those without direct "
              f"light; lit / shade = the same over the frame's pixels with / without direct light; < direct = share "
              f"of frames below direct light alone (whole frame / object / unlit / lit / shade)"]
+    if "frames_scored" in result:  # eval --partial: which frames the figures below are of
+        missing = result.get("frames_not_scored") or []
+        lines.append(f"frames: {result['frames']}" + (f"; not scored: {', '.join(str(r['index']) for r in missing)}"
+                                                      if missing else ""))
     for split, why in result.get("left_out", {}).items():
         lines.append(f"{split}: left out ({why})")
     for split, why in result.get("not_scored", {}).items():

@@ -425,6 +425,13 @@ def test_eval_refuses_corrupt_and_incomplete_sets_unless_partial(evalset, tmp_pa
     assert "unseen_objects" not in r["splits"] and "no frame" in r["not_scored"]["unseen_objects"]
     assert "unseen_objects: not scored" in printed
     assert r["splits"]["unseen_configs"]["frames_scored"] == [1] and "frames scored: 1" in printed
+    # the whole result names what it scored and what it did not, never "every frame"
+    assert "every frame" not in r["frames"] and r["frames"].startswith("a partial set: ")
+    assert 0 not in r["frames_scored"] and 1 in r["frames_scored"] and len(r["frames_scored"]) == len(
+        Dataset(part).frames) - 3
+    assert [(x["index"], x["split"]) for x in r["frames_not_scored"]] == [(0, "unseen_configs"), (2, "unseen_objects"),
+                                                                         (3, "unseen_objects")]
+    assert "frames: a partial set" in printed and "not scored: 0, 2, 3" in printed
 
 
 def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, monkeypatch, capsys):
@@ -451,8 +458,8 @@ def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, mo
     assert full > 4 and r["frames"] == f"a subset: 4 of the full set's {full} (1 per split at most)"
     assert EvalFrames(out).subset == f"every frame rendered ({full})"
     whole = tmp_path / "whole"  # stored compact, every frame kept (as the device-rendered Sponza set)
-    assert main(["evalset", "--compact", str(out), "--out", str(whole), "--frames-per-split", "100"]) == 0
-    assert EvalFrames(whole).subset == f"every frame: {full} of the full set's {full} (100 per split at most)"
+    assert main(["evalset", "--compact", str(out), "--out", str(whole), "--frames-per-split", "2"]) == 0
+    assert EvalFrames(whole).subset == f"every frame: {full} of the full set's {full} (2 per split at most)"
     # One frame per split: the compact set holds each split's first frame; scores match the full set's on it.
     single = tmp_path / "first"
     shutil.copytree(out, single)
@@ -503,6 +510,49 @@ def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, mo
         write_compact(compact, tmp_path / "again", log=quiet)
     with pytest.raises(DiviewerError, match="not ready"):
         write_compact(single, tmp_path / "two", frames_per_split=2, log=quiet)
+
+
+def test_a_compact_set_is_never_written_over_and_holds_the_count_it_took(evalset, tmp_path, capsys):
+    out, _ = evalset
+    compact = tmp_path / "compact"
+    assert main(["evalset", "--compact", str(out), "--out", str(compact), "--frames-per-split", "1"]) == 0
+    before = {p.name: p.read_bytes() for p in compact.iterdir()}
+    shipped = tmp_path / "shipped"  # a copy of the shipped set, written over as the folder it is
+    shutil.copytree(default_evalset("cornell"), shipped)
+    shipped_before = {p.name: p.read_bytes() for p in shipped.iterdir()}
+    capsys.readouterr()
+    for target in (compact, shipped, out):  # a compact set, the shipped one, the full set itself
+        assert main(["evalset", "--compact", str(out), "--out", str(target), "--frames-per-split", "2"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(target) in err[0], err
+    assert {p.name: p.read_bytes() for p in compact.iterdir()} == before
+    assert {p.name: p.read_bytes() for p in shipped.iterdir()} == shipped_before
+    # more frames per split than the full set's splits have: refused up front, nothing written
+    assert main(["evalset", "--compact", str(out), "--out", str(tmp_path / "more"), "--frames-per-split", "3"]) == 2
+    assert "at most 2" in capsys.readouterr().err and not (tmp_path / "more").exists()
+    assert EvalFrames(compact).manifest["compact"]["frames_per_split"] == 1
+    # asked for nothing: the default, capped at what each split has, and the manifest says the count taken
+    write_compact(out, tmp_path / "default", log=quiet)
+    m = EvalFrames(tmp_path / "default").manifest["compact"]
+    assert m["frames_per_split"] == 2 and set(m["per_split"].values()) == {2}
+
+
+def test_a_derived_evaluation_set_is_neither_a_source_nor_scored(evalset, tmp_path, capsys):
+    out, _ = evalset
+    model, _ = _models(tmp_path)
+    for command, extra in (("filter-truth", []), ("refine", ["--spp", "32"]), ("area-direct", ["--samples", "2"])):
+        assert main(["data", command, str(out), "--out", str(tmp_path / command), *extra]) == 2
+        assert "evaluation set" in capsys.readouterr().err and not (tmp_path / command).exists()
+    derived = tmp_path / "derived"  # as an older diviewer wrote a filtered copy of a set: the record, no lineage
+    shutil.copytree(out, derived)
+    m = json.loads((derived / "manifest.json").read_text())
+    m["truth_filter"], m["truth_filter_from"] = {"levels": 1, "from_hash": "a"}, str(out)
+    (derived / "manifest.json").write_text(json.dumps(m))
+    assert main(["eval", "--model", str(model), "--evalset", str(derived), "--out", str(tmp_path / "r.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "lineage" in err[0] and "filtered" in err[0] and not (tmp_path / "r.json").exists()
+    with pytest.raises(DiviewerError, match="lineage"):
+        write_compact(derived, tmp_path / "compact", log=quiet)
 
 
 def test_eval_refuses_a_capture_as_evalset_and_models_of_other_scenes(evalset, tmp_path):

@@ -10,6 +10,8 @@ point-sampled direct light becomes one a model of the area's direct light trains
 - A model trained on it records ``direct_samples`` on its card (`diviewer export`), and eval, bench, render and
   the viewer feed it the same light.
 - Resumable: frames already written (and sound) are kept; the source is never changed.
+- The source is verified first, as `diviewer data check` does, and an evaluation set refused
+  (`diviewer.data.lineage`); the manifest's ``lineage`` adds this step to the source's.
 """
 
 from __future__ import annotations
@@ -48,18 +50,19 @@ def area_manifest(src: Dataset, samples: int) -> dict:
     return m
 
 
-def area_direct(src_dir: Path, out: Path, samples: int, log=print) -> dict:
-    """Write ``src_dir``'s present frames with the area's direct light into ``out``; returns a summary."""
+def area_direct(src_dir: Path, out: Path, samples: int, log=print, partial: bool = False) -> dict:
+    """Write ``src_dir``'s frames (verified first; ``partial``: an incomplete source's present ones) with the area's
+    direct light into ``out``; returns a summary."""
+    from diviewer.data.lineage import derivation_source, verified_frames, with_step
     from diviewer.data.refine import derive_frames, source_scene
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
     from diviewer.scene.loader import config_from_dict
 
-    src = Dataset(src_dir)
-    if out.exists() and src.root.resolve() == out.resolve():  # before the manifest: a derived source says why not
-        raise DiviewerError(f"{src_dir} is both the source and the output", field="--out")
-    manifest = area_manifest(src, samples)
-    scene = source_scene(src, out, manifest, "derive")
+    src = derivation_source(src_dir, out, "area-direct")
+    manifest = with_step(src, area_manifest(src, samples), "area-direct", {"samples": samples})
+    frames = verified_frames(src, "area-direct", partial, log)
+    scene = source_scene(src, manifest, "derive")
     s = src.slices["direct"]
     with headless_context() as ctx:
         area = AreaDirect(ctx, scene, src.width, src.height, samples)
@@ -69,7 +72,7 @@ def area_direct(src_dir: Path, out: Path, samples: int, log=print) -> dict:
             return "direct_area", {"samples": samples}
 
         try:
-            return derive_frames(src, out, manifest, "area-direct", f"render ({samples}x{samples} samples per pixel)",
-                                 per_frame, log=log)
+            return derive_frames(src, frames, out, manifest, "area-direct",
+                                 f"render ({samples}x{samples} samples per pixel)", per_frame, log=log)
         finally:
             area.release()

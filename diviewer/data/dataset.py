@@ -41,6 +41,9 @@ IDENTITY = ("format", "format_version", "scene", "scene_hash", "resolution", "ch
 DERIVED = ("refined", "direct_area", "truth_filter")
 """Records of a dataset derived from another (`diviewer data refine`, `area-direct`, `filter-truth`): part of its
 identity."""
+ABSENT = ("missing", "incomplete")
+"""How `Dataset.check_frame`'s words for a frame not written yet begin (a partial run works around them); any other
+problem is a frame that is there and unsound."""
 
 
 def identity(manifest: dict) -> dict:

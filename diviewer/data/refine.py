@@ -19,6 +19,9 @@ becomes, frame by frame and across sessions, one whose truth is clean enough to 
   ``--shard k/n`` splits the work over processes or machines (`diviewer data merge` joins them).
 - Sample counts are the sampler's effective ones (`diviewer.reference.mitsuba.effective_spp`): the weights of
   the mean, and each frame's sidecar, use what was really taken.
+- The source is verified first, as `diviewer data check` does (every frame's checksum; an absent frame refused
+  unless ``partial``), and refused where it is an evaluation set or its truth was filtered (its lineage:
+  `diviewer.data.lineage`); the manifest's ``lineage`` adds this step to the source's.
 - A refined dataset refines again (256 spp to 512): its frames weigh by their own effective count (their sidecar's
   ``refined``: 64 + 195 for Sponza's 256), the new seeds derive from the count refined from, and the manifest's
   and each sidecar's ``refined`` keep the record before (``before``). `diviewer build` takes such a dataset, linked in
@@ -35,6 +38,7 @@ import numpy as np
 
 from diviewer.console import progress_bar
 from diviewer.data.dataset import Dataset, frame_name, sha256_file, write_frame
+from diviewer.data.lineage import derivation_source, verified_frames, with_step
 from diviewer.errors import DiviewerError
 from diviewer.locks import run_lock, shard_part
 
@@ -72,28 +76,27 @@ def refined_manifest(src: Dataset, spp: int) -> dict:
     return m
 
 
-def source_scene(src: Dataset, out: Path, manifest: dict, verb: str):
-    """The scene of a dataset being derived into ``out`` (refined, its direct light re-rendered), refusing an
-    output that is the source and a scene file changed since the capture."""
+def source_scene(src: Dataset, manifest: dict, verb: str):
+    """The scene of a dataset being derived (refined, its direct light re-rendered), refusing a scene file changed
+    since the capture."""
     from diviewer.scene.loader import load_recorded_scene
 
-    if out.exists() and src.root.resolve() == out.resolve():
-        raise DiviewerError(f"{src.root} is both the source and the output", field="--out")
     return load_recorded_scene(manifest, src.root / "manifest.json",
                                f"it has changed since the capture; {verb} it with the scene it was captured with")
 
 
-def derive_frames(src: Dataset, out: Path, manifest: dict, verb: str, what: str, per_frame, tally: str = "rendered",
-                  log=print) -> dict:
-    """Write ``src``'s present frames into ``out`` (a dataset of ``manifest``), each changed in place by
-    ``per_frame(entry, arr) -> (sidecar key, record)``, the record added to its sidecar; frames already there (and
-    sound) are kept. Returns `summarize`'s summary with ``tally`` (the frames written now) and the seconds. What
-    `diviewer data area-direct` and `filter-truth` share; ``what`` says what each frame gets, in the log line."""
+def derive_frames(src: Dataset, frames: list[dict], out: Path, manifest: dict, verb: str, what: str, per_frame,
+                  tally: str = "rendered", log=print) -> dict:
+    """Write ``frames`` of ``src`` (`diviewer.data.lineage.verified_frames`') into ``out`` (a dataset of ``manifest``),
+    each changed in place by ``per_frame(entry, arr) -> (sidecar key, record)``, the record added to its sidecar;
+    frames already there (and sound) are kept. Returns `summarize`'s summary with ``tally`` (the frames written now)
+    and the seconds. What `diviewer data area-direct` and `filter-truth` share; ``what`` says what each frame gets,
+    in the log line."""
     from diviewer.data.capture import open_or_create, summarize
 
     with run_lock(out, f"data {verb}"):
         ds = open_or_create(out, manifest)
-        present = [f for f in src.frames if src.check_frame(f["index"], False) is None]
+        present = frames
         todo = [f for f in present if ds.check_frame(f["index"]) is not None]
         log(f"{verb} {src.root} -> {out}: {len(present) - len(todo)} of {len(present)} present frames already "
             f"written, {len(todo)} to {what}")
@@ -118,17 +121,19 @@ def derive_frames(src: Dataset, out: Path, manifest: dict, verb: str, what: str,
 
 
 def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), log=print,
-           extras: Path | None = None) -> dict:
-    """Refine the present frames of ``src_dir`` (this shard's) to ``spp`` into ``out``; returns a summary. With
-    ``extras`` (a folder of extra samples rendered elsewhere: `diviewer.data.refine_extras`), only the frames it holds
-    are refined, from its samples, none rendered here."""
+           extras: Path | None = None, partial: bool = False) -> dict:
+    """Refine the frames of ``src_dir`` (this shard's) to ``spp`` into ``out``; returns a summary. The source is
+    verified first (`diviewer.data.lineage`; ``partial``: an incomplete one's present frames). With ``extras`` (a
+    folder of extra samples rendered elsewhere: `diviewer.data.refine_extras`), only the frames it holds are refined,
+    from its samples, none rendered here."""
     from diviewer.data.capture import FLOAT16_MAX, open_or_create, summarize
     from diviewer.reference import mitsuba as ref
     from diviewer.scene.loader import config_from_dict
 
-    src = Dataset(src_dir)
-    manifest = refined_manifest(src, spp)
-    scene = source_scene(src, out, manifest, "refine")
+    src = derivation_source(src_dir, out, "refine")
+    manifest = with_step(src, refined_manifest(src, spp), "refine", {"spp": spp, "from_spp": src.manifest.get("spp")})
+    frames = verified_frames(src, "refine", partial, log)
+    scene = source_scene(src, manifest, "refine")
     k, n = shard
     old = manifest["refined"]["from_spp"]
     variant = ref.select_variant()
@@ -136,7 +141,7 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
     width, height = src.width, src.height
     with run_lock(out, "data refine", shard_part(k, n)):
         ds = open_or_create(out, manifest)
-        mine = [f for f in src.frames if f["index"] % n == k - 1 and src.check_frame(f["index"], False) is None]
+        mine = [f for f in frames if f["index"] % n == k - 1]
         todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
         if extras is not None:
             held = extras_present(extras)

@@ -35,7 +35,8 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.console import progress_bar
-from diviewer.data.dataset import Dataset, frame_name, write_checked
+from diviewer.data.dataset import frame_name, write_checked
+from diviewer.data.lineage import derivation_source, verified_frames, with_step
 from diviewer.data.refine import CHANNELS, extras_problem, refine_seed, refined_manifest
 from diviewer.errors import DiviewerError
 
@@ -46,11 +47,11 @@ JOB_VERSION = 1
 def write_job(src_dir: Path, spp: int, first: int, stop: int, out: Path) -> int:
     """The job of refining ``src_dir`` to ``spp`` for its present frames with ``first <= index < stop``, written
     atomically to ``out``; returns the number of frames in it."""
-    src = Dataset(src_dir)
-    manifest = refined_manifest(src, spp)
+    src = derivation_source(src_dir, out, "refine")  # verified as `refine` will: a job for a refused source is none
+    manifest = with_step(src, refined_manifest(src, spp), "refine", {"spp": spp, "from_spp": src.manifest.get("spp")})
     manifest.pop("frame_list", None)
-    frames = [{"index": f["index"], "seed": f["seed"], "config": f["config"]} for f in src.frames
-              if first <= f["index"] < stop and src.check_frame(f["index"], False) is None]
+    frames = [{"index": f["index"], "seed": f["seed"], "config": f["config"]}
+              for f in verified_frames(src, "refine", partial=True, log=lambda *_: None) if first <= f["index"] < stop]
     if not frames:
         raise DiviewerError(f"no present frame with {first} <= index < {stop}", path=src.root, field="--frames")
     job = {"format": JOB_FORMAT, "format_version": JOB_VERSION, "source": str(src.root), "source_hash": src.hash,

@@ -26,7 +26,9 @@ is its noise and its bias together).
 
 The filtered dataset is written into a new folder, as `diviewer.data.refine` does: its manifest is the source's
 with a ``truth_filter`` record (the settings, the source's hash), part of the dataset's identity, and
-``truth_filter_from`` (its folder). Seconds for a whole capture; resumable; the source is never changed.
+``truth_filter_from`` (its folder), and its ``lineage`` adds this step to the source's. The source is verified first,
+as `diviewer data check` does, and an evaluation set refused (`diviewer.data.lineage`). Seconds for a whole capture;
+resumable; the source is never changed.
 """
 
 from __future__ import annotations
@@ -122,12 +124,19 @@ def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_
         one = TruthFilter(1, settings.normal_power, settings.plane)
         guide = np.nan_to_num(np.maximum(filter_irradiance(e, normal, depth, fov_y_deg, one) @ LUMINANCE, 0.0),
                               nan=0.0, posinf=0.0)  # a broken texel's guide: it gives nothing in any case
+        guide = guide.astype(np.float64)  # the range term's scale (range_sigma x light) overflows float32 first
     n = np.nan_to_num(normal.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
     hit = (depth > 0.0) & np.isfinite(depth) & np.all(np.isfinite(e), axis=-1) & np.any(n != 0.0, axis=-1)
     pos = view_positions(np.where(hit, depth, 0.0), fov_y_deg)
     inv_z = np.where(hit, 1.0 / np.maximum(depth, 1e-6), 0.0).astype(np.float32)
     out = np.where(hit[..., None], e, 0.0).astype(np.float32)
     h, w = hit.shape
+    # The settings as the weights use them, each finite in float32 whatever the setting: a power beyond float32's
+    # largest weighs as that one does (a cosine below 1 to it is 0), a plane beyond 1e30 has no plane term left,
+    # a range term beyond 1e30 weighs every neighbour 1 (its relative difference is at most 2 / range_sigma).
+    power = np.float32(min(settings.normal_power, float(np.finfo(np.float32).max)))
+    inv_plane = np.float32(1.0 / settings.plane) if settings.plane < 1e30 else np.float32(0.0)
+    sigma = min(settings.range_sigma, 1e30)
     for level in range(settings.levels):
         step = 1 << level
         r = 2 * step
@@ -140,13 +149,16 @@ def filter_irradiance(e: np.ndarray, normal: np.ndarray, depth: np.ndarray, fov_
             for b, kx in enumerate(KERNEL):
                 y, x = r + (a - 2) * step, r + (b - 2) * step
                 nq, pq = pn[y:y + h, x:x + w], pp[y:y + h, x:x + w]
-                cos = np.maximum(np.sum(n * nq, axis=-1), 0.0)
-                d = np.abs(np.sum(n * (pq - pos), axis=-1)) * inv_z / settings.plane
-                wq = (ky * kx) * ph[y:y + h, x:x + w] * cos ** settings.normal_power * np.exp(-d * d)
+                # A cosine in [0, 1] (stored normals are a little off unit length) raised to any finite power
+                # stays in [0, 1]: a weight never overflows, whatever normal_power is.
+                cos = np.clip(np.sum(n * nq, axis=-1), 0.0, 1.0)
+                d = np.abs(np.sum(n * (pq - pos), axis=-1)) * inv_z * inv_plane
+                wq = (ky * kx) * ph[y:y + h, x:x + w] * cos ** power * np.exp(-d * d)
                 if pg is not None:
                     gq = pg[y:y + h, x:x + w]
-                    rel = (gq - guide) / (settings.range_sigma * 0.5 * (gq + guide) + RANGE_FLOOR)
-                    wq = wq * np.exp(-rel * rel)
+                    rel = (gq - guide) / (sigma * 0.5 * (gq + guide) + RANGE_FLOOR)
+                    wq = wq * np.exp(-rel * rel).astype(np.float32)
+                wq = np.where(np.isfinite(wq), wq, 0.0).astype(np.float32)  # a weight that cannot be had counts 0
                 acc += wq[..., None] * pe[y:y + h, x:x + w]
                 wsum += wq
         done = hit & (wsum > 0.0)
@@ -184,28 +196,33 @@ def truth_filter_manifest(src, settings: TruthFilter) -> dict:
     return m
 
 
-def filter_dataset(src_dir: Path, out: Path, settings: TruthFilter = TruthFilter(), log=print) -> dict:
-    """Write ``src_dir``'s present frames with their truth filtered into ``out``; returns a summary (``filtered``:
-    the frames written now)."""
-    from diviewer.data.dataset import Dataset
+def filter_dataset(src_dir: Path, out: Path, settings: TruthFilter = TruthFilter(), log=print,
+                   partial: bool = False) -> dict:
+    """Write ``src_dir``'s frames (verified first; ``partial``: an incomplete source's present ones) with their truth
+    filtered into ``out``; returns a summary (``filtered``: the frames written now)."""
+    from diviewer.data.lineage import derivation_source, verified_frames, with_step
     from diviewer.data.refine import derive_frames, source_scene
     from diviewer.scene.loader import config_from_dict
 
     settings.check(options=True)
-    src = Dataset(src_dir)
-    if out.exists() and src.root.resolve() == out.resolve():  # before the manifest: a derived source says why not
-        raise DiviewerError(f"{src_dir} is both the source and the output", field="--out")
-    manifest = truth_filter_manifest(src, settings)
-    scene = source_scene(src, out, manifest, "filter")
+    src = derivation_source(src_dir, out, "filter-truth")
+    manifest = with_step(src, truth_filter_manifest(src, settings), "filter-truth", settings.record())
+    frames = verified_frames(src, "filter-truth", partial, log)
+    scene = source_scene(src, manifest, "filter")
     sl = src.slices
 
     def per_frame(f: dict, arr: np.ndarray) -> tuple[str, dict]:
         c = {k: arr[..., sl[k]].astype(np.float32) for k in ("pt", "pt_direct", "albedo", "normal", "depth")}
         fov = config_from_dict(scene, f["config"]).camera.fov
-        arr[..., sl["pt"]] = filter_truth(c["pt"], c["pt_direct"], c["albedo"], c["normal"], c["depth"][..., 0], fov,
-                                          settings).astype(arr.dtype)
+        pt = filter_truth(c["pt"], c["pt_direct"], c["albedo"], c["normal"], c["depth"][..., 0], fov,
+                          settings).astype(arr.dtype)
+        if not np.all(np.isfinite(pt)):  # never written: a frame of a dataset is finite (`diviewer data check`)
+            raise DiviewerError(f"frame {f['index']}: the filtered truth holds non-finite values (beyond "
+                                f"{arr.dtype}'s range?); nothing was written for it", path=src.path(f["index"]),
+                                field="pt")
+        arr[..., sl["pt"]] = pt
         return "truth_filter", settings.record()
 
     what = (f"filter ({settings.levels} level(s), normal power {settings.normal_power:g}, plane {settings.plane:g}"
             + (f", range {settings.range_sigma:g})" if settings.range_sigma else ")"))
-    return derive_frames(src, out, manifest, "filter-truth", what, per_frame, tally="filtered", log=log)
+    return derive_frames(src, frames, out, manifest, "filter-truth", what, per_frame, tally="filtered", log=log)
