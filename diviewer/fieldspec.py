@@ -16,6 +16,11 @@ from typing import Any
 
 from diviewer.errors import DiviewerError
 
+MAX_SIZE = 8192
+"""The largest frame side a setting or an option may ask for (a recipe's capture, `view --size`, `--res`): half of
+what every OpenGL 4.3 context guarantees (GL_MAX_TEXTURE_SIZE >= 16384), and one float32 RGBA buffer of 8192 x 8192
+is already 1 GiB."""
+
 
 class Invalid(ValueError):
     """A value a field refuses; the message says what the field takes (``sub``, ``value``: the nested field of a

@@ -15,12 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from diviewer.errors import DiviewerError
-from diviewer.fieldspec import Bool, Choice, Float, Floats, Int, Ints, Maybe, Table, Text, check_fields
+from diviewer.fieldspec import MAX_SIZE, Bool, Choice, Float, Floats, Int, Ints, Maybe, Table, Text, check_fields
 from diviewer.train.config import TRAIN_FIELDS
-
-MAX_SIZE = 8192
-"""The largest frame side a recipe (or an option) may ask for: half of OpenGL 4.5's guaranteed texture size, and a
-frame of 8192 x 8192 is already 1 GB per float32 RGBA buffer."""
 
 SEED = Int(0, 2**32 - 1)
 """A seed: numpy's seed streams take 32-bit seeds."""
