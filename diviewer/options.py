@@ -25,6 +25,7 @@ from diviewer.errors import DiviewerError
 from diviewer.fieldspec import MAX_SIZE, Float, Int, Ints, Invalid
 from diviewer.train.config import TRAIN_FIELDS
 from diviewer.train.recipe_fields import K, MAX_DEPTH, SEED, SPP, TRUTH_FILTER
+from diviewer.viewer.models import MIN_GI_SHARE
 from diviewer.viewer.scale import MAX_SCALE
 
 
@@ -76,7 +77,7 @@ class GIRes:
                 ratio = num / den
             except (ValueError, ZeroDivisionError):
                 ratio = math.nan
-            if not (math.isfinite(ratio) and 1 / 16 <= ratio <= 1):
+            if not (math.isfinite(ratio) and MIN_GI_SHARE <= ratio <= 1):
                 raise Invalid(f"must be {self.describe()}")
             return v
         try:
