@@ -1,7 +1,8 @@
 """Recipes: how a scene's model is made, as a TOML file (assets/recipes/NAME.toml, or any path).
 
-A recipe has up to six tables, each the fields of one settings dataclass, spelled as its field names, so
-that a field added to a dataclass works in recipes without this module changing:
+A recipe has up to six tables, each the fields of one settings dataclass, spelled as its field names, each field
+with a spec of what it accepts (`diviewer.train.recipe_fields`), checked with the rules between fields when the
+recipe is read:
 
 - ``[recipe]``: ``name`` (default: the file's stem), ``description``, ``scene`` (the scene it was made for);
 - ``[capture]``: `diviewer.data.capture.CaptureSettings` (frames, width, height, spp, split_fractions, ...), and
@@ -62,7 +63,7 @@ def shipped_recipes() -> list[str]:
 
 @dataclass(frozen=True)
 class Recipe:
-    """A parsed recipe file; each table as a dict of dataclass fields (values checked by building them)."""
+    """A parsed and checked recipe file; each table as a dict of dataclass fields, as the file gives them."""
 
     name: str
     """Its name ([recipe] name, else the file's stem)."""
@@ -200,15 +201,9 @@ def capture_settings(rec: Recipe, **overrides):
 
 
 def refine_from(rec: Recipe) -> int | None:
-    """The spp a build captures at before refining to the recipe's ``spp`` ([capture] refine_from), or None."""
-    n = rec.capture.get("refine_from")
-    if n is None:
-        return None
-    spp = capture_settings(rec).spp
-    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n < spp:
-        raise DiviewerError(f"must be a whole number of samples per pixel from 1 to below [capture] spp ({spp}), "
-                            f"got {n!r}", path=rec.path, field="capture.refine_from")
-    return n
+    """The spp a build captures at before refining to the recipe's ``spp`` ([capture] refine_from), or None (checked
+    below ``spp`` when the recipe was read)."""
+    return rec.capture.get("refine_from")
 
 
 def truth_filter(rec: Recipe):
