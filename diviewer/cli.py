@@ -13,17 +13,6 @@ from diviewer import __version__
 from diviewer.errors import DiviewerError
 from diviewer.outputs import ENVIRONMENT_ERRNOS, check_command_outputs, is_scratch
 
-# Numeric options by destination, the same rule in every subcommand: (lowest, highest or None).
-# Seeds seed numpy (0 <= seed < 2**32); counts are at least 1 unless 0 means "none".
-INT_OPTIONS = {
-    "seed": (0, 2**32 - 1), "pt_seed": (0, 2**32 - 2), "frames": (1, 1_000_000), "spp": (1, 1 << 20),
-    "max_depth": (2, 1024), "thumbs": (0, 1000), "verify_frames": (1, 1000), "K": (1, 4096), "epochs": (1, None),
-    "batch_size": (1, None), "ndf": (1, 4096), "max_steps": (1, None), "val_every": (1, None),
-    "save_every": (0, None), "num_workers": (0, 256), "max_frames": (1, None),
-}
-FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None)}
-
-
 def _cmd_render(args: argparse.Namespace) -> int:
     from diviewer.render import render_to_dir
 
@@ -293,31 +282,12 @@ def _add_bench_parser(sub) -> None:
     p.set_defaults(func=_cmd_bench)
 
 
-def _chosen_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
-    """The (sub)subparser that parsed ``args``: its actions know the option strings the user typed."""
-    parser = ap
-    for dest in ("command", "data_command"):
-        sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
-        if sub is None or getattr(args, dest, None) not in sub.choices:
-            break
-        parser = sub.choices[getattr(args, dest)]
-    return parser
-
-
 def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """One rule per option name across subcommands: numbers in range and finite, outputs writable."""
-    options = {a.dest: a.option_strings[0] if a.option_strings else a.dest
-               for a in _chosen_parser(ap, args)._actions}
-    for dest, (lo, hi) in INT_OPTIONS.items():
-        v = getattr(args, dest, None)
-        if dest in options and v is not None and not (v >= lo and (hi is None or v <= hi)):
-            rng = f"from {lo} to {hi}" if hi is not None else f"at least {lo}"
-            raise DiviewerError(f"must be {rng}, got {v}", field=options[dest])
-    for dest, (lo, hi) in FLOAT_OPTIONS.items():
-        v = getattr(args, dest, None)
-        if dest in options and v is not None and not (math.isfinite(v) and v >= lo and (hi is None or v <= hi)):
-            rng = f"from {lo} to {hi}" if hi is not None else f"at least {lo}"
-            raise DiviewerError(f"must be a finite number {rng}, got {v}", field=options[dest])
+    """Before any work: every numeric option in range and finite (`diviewer.options`), outputs writable."""
+    from diviewer.options import check_options as check_numbers, chosen_parser
+
+    check_numbers(ap, args)
+    options = {a.dest: a.option_strings[0] if a.option_strings else a.dest for a in chosen_parser(ap, args)._actions}
     check_command_outputs(args.command, args, options)
 
 

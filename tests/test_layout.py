@@ -17,7 +17,7 @@ MAX_LINES = 450
 LAYERS = {
     # 0: leaves every floor may use
     "errors": 0, "paths": 0, "provenance": 0, "console": 0, "timing": 0, "imageio": 0, "metrics": 0, "outputs": 0,
-    "locks": 0, "faults": 0, "exposure": 0,
+    "locks": 0, "faults": 0, "exposure": 0, "fieldspec": 0,
     # 1: scene data and math, the channel encoding
     "scene/": 1, "encoding": 1, "padding": 1,
     # 2: what draws or runs a frame: GL passes, the path tracer, the onnxruntime model, frame records
@@ -29,7 +29,7 @@ LAYERS = {
     # 5: the applications
     "viewer/": 5, "bench/": 5, "build/": 5,
     # 6: the command line
-    "cli": 6, "evalcommand": 6, "datacommand": 6, "__main__": 6,
+    "cli": 6, "evalcommand": 6, "datacommand": 6, "options": 6, "__main__": 6,
 }
 """Each unit (a subpackage, or a top-level module) and its floor: a unit imports only its own floor or lower."""
 

@@ -90,8 +90,8 @@ BAD = [  # (argv, needle): each refused before any work, nothing written
     ("baseline --data {t}/data --out {t}/lin2.json", "expected a .onnx file name"),  # was: the card over the model
     ("baseline --data {t}/data --out {t}/data/manifest.json", "expected a .onnx"),
     ("baseline --data {t}/data --out {t}/data/frames/x.onnx", "a frame of the dataset"),
-    ("baseline --data {t}/data --out {t}/m.onnx --max-frames 0", "--max-frames: must be at least 1"),
-    ("baseline --data {t}/data --out {t}/m.onnx --max-frames -3", "--max-frames: must be at least 1"),
+    ("baseline --data {t}/data --out {t}/m.onnx --max-frames 0", "--max-frames: must be a whole number from 1"),
+    ("baseline --data {t}/data --out {t}/m.onnx --max-frames -3", "--max-frames: must be a whole number from 1"),
     ("eval --model {t}/lin.onnx --data {t}/data --out {t}/lin.json", "is a model card"),
     ("eval --model {t}/lin.onnx --data {t}/data --out {t}/lin.onnx", "expected a .json"),
     ("eval --model {t}/lin.onnx --data {t}/data --out {t}/data/manifest.json", "the manifest of the dataset"),

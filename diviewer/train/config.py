@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from diviewer.errors import DiviewerError
+from diviewer.fieldspec import Bool, Choice, Float, Floats, Int, Maybe, Text, check_fields
 from diviewer.provenance import check_known_keys
 
 
@@ -186,69 +186,27 @@ class TrainConfig:
         def fail(name: str, message: str) -> None:
             raise DiviewerError(message, field=f"train.{name}")
 
-        for name in ("K", "epochs", "batch_size", "ndf", "val_every", "n_layers_D"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                fail(name, f"must be a positive integer, got {v!r}")
-        for name in ("num_workers", "save_every", "seed", "patience", "val_every_steps", "lr_decay_start"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                fail(name, f"must be an integer >= 0, got {v!r}")
-        if self.max_steps is not None and (isinstance(self.max_steps, bool) or not isinstance(self.max_steps, int)
-                                           or self.max_steps < 1):
-            fail("max_steps", f"must be a positive integer or None, got {self.max_steps!r}")
-        if self.train_frames is not None and (isinstance(self.train_frames, bool)
-                                              or not isinstance(self.train_frames, int) or self.train_frames < 1):
-            fail("train_frames", f"must be a positive integer or None, got {self.train_frames!r}")
-        for name in ("lr", *(("d_lr",) if self.d_lr is not None else ())):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                fail(name, f"must be a positive number, got {v!r}")
-        if isinstance(self.gan_weight, bool) or not (isinstance(self.gan_weight, (int, float))
-                                                     and math.isfinite(self.gan_weight) and self.gan_weight >= 0):
-            fail("gan_weight", f"must be a number >= 0, got {self.gan_weight!r}")
-        for name, choices in CHOICES.items():
-            if getattr(self, name) not in choices:
-                fail(name, f"must be one of {', '.join(choices)}, got {getattr(self, name)!r}")
-        for name in ("beta1", "beta2"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and 0.0 <= v < 1.0):
-                fail(name, f"must be in [0, 1), got {v!r}")
-        if not (isinstance(self.lambda_L1, (int, float)) and math.isfinite(self.lambda_L1) and self.lambda_L1 >= 0):
-            fail("lambda_L1", f"must be a number >= 0, got {self.lambda_L1!r}")
-        if not (isinstance(self.ssim_weight, (int, float)) and math.isfinite(self.ssim_weight) and self.ssim_weight >= 0):
-            fail("ssim_weight", f"must be a number >= 0, got {self.ssim_weight!r}")
+        # Each field as TRAIN_FIELDS declares it (type, range, names); then the rules between fields.
+        values = {name: getattr(self, name) for name in TRAIN_FIELDS}
+        for name, value in check_fields(values, TRAIN_FIELDS, "train").items():
+            object.__setattr__(self, name, value)
         if self.ssim_exposure != "scene" and not self.ssim_weight:
             fail("ssim_exposure", f"{self.ssim_exposure!r} needs the structure term (ssim_weight > 0)")
-        if not (isinstance(self.dropout, (int, float)) and 0.0 <= self.dropout < 1.0):
-            fail("dropout", f"must be in [0, 1), got {self.dropout!r}")
-        if self.target not in ("full", "indirect", "residual"):
-            fail("target", f"must be 'full', 'indirect' or 'residual', got {self.target!r}")
         if self.divide_albedo and self.target == "full":
             fail("divide_albedo", "only applies to targets 'indirect' and 'residual' (use --target indirect)")
         if self.recipe is not None and not (isinstance(self.recipe, dict)
                                             and all(isinstance(k, str) for k in self.recipe)):
             fail("recipe", f"must be a recipe record (a table of name, file, sha256, overrides), got {self.recipe!r}")
-        for name in ("light_scale", "world_inputs", "light_inputs", "output_gain"):
-            if not isinstance(getattr(self, name), bool):
-                fail(name, f"must be true or false, got {getattr(self, name)!r}")
         if self.world_inputs and not self.light_scale:
             fail("world_inputs", "needs light_scale (encoding 3 extends encoding 2)")
         if self.light_inputs and not self.world_inputs:
             fail("light_inputs", "needs world_inputs (encoding 4 extends encoding 3)")
         f = self.world_frequencies
-        if isinstance(f, bool) or not isinstance(f, int) or not 0 <= f <= MAX_FREQUENCIES:
-            fail("world_frequencies", f"must be an integer in [0, {MAX_FREQUENCIES}], got {f!r}")
         if f and not self.world_inputs:
             fail("world_frequencies", "needs world_inputs (the features are of the world position)")
-        if self.aspect_crops is not None:
-            a = self.aspect_crops
-            ok = (isinstance(a, (tuple, list)) and len(a) == 2
-                  and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
-                          for v in a) and a[0] <= a[1])
-            if not ok:
-                fail("aspect_crops", f"must be two positive numbers lo <= hi (width / height), got {a!r}")
-            object.__setattr__(self, "aspect_crops", (float(a[0]), float(a[1])))
+        a = self.aspect_crops
+        if a is not None and not a[0] <= a[1]:
+            fail("aspect_crops", f"must be two positive numbers lo <= hi (width / height), got {a!r}")
         cuda_n = self.device.startswith("cuda:") and self.device[5:].isdigit()
         if not (self.device in ("auto", "cpu", "cuda") or cuda_n):
             fail("device", f"must be auto, cpu, cuda or cuda:N, got {self.device!r}")
@@ -296,6 +254,29 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "lr_decay": ("none", "cosine"), "ssim_exposure": ("scene", "metered", "both"),
 }
 """The settings that take one of a few names (the network ones are `networks.UPSAMPLES`/`NORMS`)."""
+
+_STEPS = Int(0, 10**9)
+TRAIN_FIELDS: dict[str, Any] = {
+    "K": Int(1, 1024), "epochs": Int(1, 100_000), "batch_size": Int(1, 4096),
+    "lr": Float(0.0, 1.0, lo_open=True), "lr_decay": Choice(CHOICES["lr_decay"]), "lr_decay_start": _STEPS,
+    "beta1": Float(0.0, 1.0, hi_open=True), "beta2": Float(0.0, 1.0, hi_open=True), "lambda_L1": Float(0.0, 1e6),
+    "target": Choice(("full", "indirect", "residual")), "divide_albedo": Bool(), "seed": Int(0, 2**32 - 1),
+    "dropout": Float(0.0, 1.0, hi_open=True), "ndf": Int(1, 1024), "precision": Choice(CHOICES["precision"]),
+    "num_workers": Int(0, 256), "val_every": Int(1, 100_000), "save_every": _STEPS,
+    "max_steps": Maybe(Int(1, 10**9)), "device": Text(64), "gan_weight": Float(0.0, 1e6),
+    "gan_mode": Choice(CHOICES["gan_mode"]), "recon_loss": Choice(CHOICES["recon_loss"]),
+    "recon_space": Choice(CHOICES["recon_space"]), "ssim_weight": Float(0.0, 1e6),
+    "ssim_exposure": Choice(CHOICES["ssim_exposure"]), "n_layers_D": Int(1, 8), "norm_D": Choice(CHOICES["norm_D"]),
+    "d_lr": Maybe(Float(0.0, 1.0, lo_open=True)), "upsample": Choice(CHOICES["upsample"]),
+    "norm": Choice(CHOICES["norm"]), "train_frames": Maybe(Int(1, 10**8)), "patience": Int(0, 10**6),
+    "val_every_steps": _STEPS, "init_from": Maybe(Text()), "light_scale": Bool(), "world_inputs": Bool(),
+    "light_inputs": Bool(), "world_frequencies": Int(0, MAX_FREQUENCIES), "output_gain": Bool(),
+    "aspect_crops": Maybe(Floats(2, Float(0.0, 100.0, lo_open=True))),
+}
+"""What each setting accepts (`diviewer.fieldspec`): every field but ``data``, ``out`` and ``recipe``, checked when a
+TrainConfig is made (from a recipe, the command line or a checkpoint); the rules between fields follow in
+``__post_init__``. The bounds keep a run within memory and time: K and ndf up to 1024 (a U-Net's widest layer is 8 K
+channels), batches up to 4096 frames."""
 
 RESUME_FIXED: tuple[str, ...] = ("K", "batch_size", "lr", "lr_decay", "lr_decay_start", "beta1", "beta2",
                                  "lambda_L1", "target", "divide_albedo", "seed", "dropout", "ndf", "gan_weight",

@@ -1,7 +1,8 @@
 """Recipes: how a scene's model is made, as a TOML file (assets/recipes/NAME.toml, or any path).
 
-A recipe has up to six tables, each the fields of one settings dataclass, spelled as its field names, so
-that a field added to a dataclass works in recipes without this module changing:
+A recipe has up to six tables, each the fields of one settings dataclass, spelled as its field names, each field
+with a spec of what it accepts (`diviewer.train.recipe_fields`), checked with the rules between fields when the
+recipe is read:
 
 - ``[recipe]``: ``name`` (default: the file's stem), ``description``, ``scene`` (the scene it was made for);
 - ``[capture]``: `diviewer.data.capture.CaptureSettings` (frames, width, height, spp, split_fractions, ...), and
@@ -34,14 +35,13 @@ from typing import Any
 
 from diviewer.errors import DiviewerError
 from diviewer.paths import assets_dir
+from diviewer.train.recipe_fields import check_recipe_tables
 
 DEFAULT_RECIPE = "cornell"
 """The recipe `diviewer train` uses when none is given: the best measured one (the shipped cornell model's:
 transposed decoder, L1 alone, demodulated indirect target, cosine anneal), not the paper's (`paper`), which the
 README's ablations put about 10 dB behind at the same budget."""
 
-TABLES = ("recipe", "capture", "evalset", "train", "export", "ladder")
-"""The tables a recipe may hold."""
 CAPTURE_EXTRA = ("refine_from", "truth_filter")
 """[capture] keys that are not CaptureSettings fields: ``refine_from`` (spp of the capture `diviewer build` renders
 before refining it to ``spp``; absent: captured at ``spp``) and ``truth_filter`` (the filter `diviewer build` runs
@@ -49,12 +49,6 @@ over the truth before training; absent: trained on the truth as rendered)."""
 
 NOT_TRAIN = ("data", "out", "recipe")
 """TrainConfig fields a recipe cannot set: where this run reads and writes, and the recipe record itself."""
-
-LADDER_KEYS = {"K": "widths netG is trained at, one run each", "tolerance_db": "dB below the best K's tone-mapped "
-               "PSNR on the evaluation set that the shipped (smallest) K may be",
-               "max_mb": "the largest exported model (MB, 10^6 bytes) the pick may ship"}
-HEAD_KEYS = {"name": "the recipe's name (default: the file's stem)", "description": "one line: what it is",
-             "scene": "the scene it was made for (diviewer build's default --scene)"}
 
 
 def recipes_dir() -> Path:
@@ -69,7 +63,7 @@ def shipped_recipes() -> list[str]:
 
 @dataclass(frozen=True)
 class Recipe:
-    """A parsed recipe file; each table as a dict of dataclass fields (values checked by building them)."""
+    """A parsed and checked recipe file; each table as a dict of dataclass fields, as the file gives them."""
 
     name: str
     """Its name ([recipe] name, else the file's stem)."""
@@ -155,89 +149,44 @@ def resolve_recipe_path(recipe: str | Path) -> Path:
 
 
 def load_recipe(recipe: str | Path) -> Recipe:
-    """Read and check a recipe by shipped name or path: unknown tables and keys, and values its dataclasses
-    refuse, are errors naming the file and the field."""
+    """Read and check a recipe by shipped name or path: unknown tables and keys, a value of the wrong type or out of
+    range (`diviewer.train.recipe_fields`: each field's spec), and values the rules between fields or its dataclasses
+    refuse, are errors naming the file and ``table.field``, before anything runs."""
     path = resolve_recipe_path(recipe)
     blob = path.read_bytes()
     try:
         data = tomllib.loads(blob.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DiviewerError(f"not valid TOML: {exc}", path=path) from exc
-    for table, value in data.items():
-        if table not in TABLES:
-            raise DiviewerError(f"unknown table [{table}]; a recipe has {', '.join(f'[{t}]' for t in TABLES)}",
-                                path=path, field=table)
-        if not isinstance(value, dict):
-            raise DiviewerError(f"must be a table [{table}], got {value!r}", path=path, field=table)
-    head = _known(path, "recipe", data.get("recipe", {}), HEAD_KEYS)
-    for key in head:
-        if not isinstance(head[key], str):
-            raise DiviewerError(f"must be a string, got {head[key]!r}", path=path, field=f"recipe.{key}")
-    ladder = _known(path, "ladder", data.get("ladder", {}), LADDER_KEYS)
-    ks = ladder.get("K", [])
-    if not (isinstance(ks, list) and all(isinstance(k, int) and not isinstance(k, bool) and k >= 1 for k in ks)
-            and ks == sorted(set(ks))):
-        raise DiviewerError(f"must be a list of increasing positive widths, e.g. [8, 16, 32], got {ks!r}",
-                            path=path, field="ladder.K")
-    tol = ladder.get("tolerance_db", 0.5)
-    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or tol < 0:
-        raise DiviewerError(f"must be a number of dB >= 0, got {tol!r}", path=path, field="ladder.tolerance_db")
-    max_mb = ladder.get("max_mb")
-    if max_mb is not None and (isinstance(max_mb, bool) or not isinstance(max_mb, (int, float)) or not max_mb > 0):
-        raise DiviewerError(f"must be a positive number of megabytes, got {max_mb!r}", path=path,
-                            field="ladder.max_mb")
+    checked = check_recipe_tables(data, path, not_train=NOT_TRAIN)
+    head, ladder = checked.get("recipe", {}), checked.get("ladder", {})
     rec = Recipe(name=head.get("name", path.stem), path=path, sha256=hashlib.sha256(blob).hexdigest(),
                  description=head.get("description", ""), scene=head.get("scene"),
-                 capture=_fields(path, "capture", data.get("capture", {}), _capture_cls(), extra=CAPTURE_EXTRA),
-                 evalset=_fields(path, "evalset", data.get("evalset", {}), _evalset_cls()),
-                 train=_fields(path, "train", data.get("train", {}), _train_cls(), NOT_TRAIN),
-                 export=_fields(path, "export", data.get("export", {}), _export_cls()),
-                 ladder=tuple(ks), tolerance_db=float(tol),
-                 max_mb=None if max_mb is None else float(max_mb))
-    _check_values(rec)
+                 capture=_as_given(data.get("capture", {})), evalset=_as_given(data.get("evalset", {})),
+                 train=_as_given(data.get("train", {})), export=_as_given(data.get("export", {})),
+                 ladder=ladder.get("K", ()), tolerance_db=ladder.get("tolerance_db", 0.5),
+                 max_mb=ladder.get("max_mb"))
+    _build_settings(rec)
     return rec
 
 
-def _known(path: Path, table: str, values: dict, known: dict[str, str]) -> dict:
-    unknown = sorted(set(values) - set(known))
-    if unknown:
-        raise DiviewerError(f"unknown key '{unknown[0]}'; [{table}] takes {', '.join(sorted(known))}",
-                            path=path, field=f"{table}.{unknown[0]}")
-    return dict(values)
-
-
-def _fields(path: Path, table: str, values: dict, cls, exclude: tuple[str, ...] = (),
-            extra: tuple[str, ...] = ()) -> dict[str, Any]:
-    """``values`` checked against the fields of ``cls`` (less ``exclude``, plus ``extra``); TOML arrays become
-    tuples."""
-    known = ({f.name for f in dataclasses.fields(cls)} - set(exclude)) | set(extra)
-    unknown = sorted(set(values) - known)
-    if unknown:
-        why = " (set by the command, not the recipe)" if unknown[0] in exclude else ""
-        raise DiviewerError(f"unknown key '{unknown[0]}'{why}; [{table}] takes the fields of {cls.__name__}: "
-                            f"{', '.join(sorted(known))}", path=path, field=f"{table}.{unknown[0]}")
+def _as_given(values: dict) -> dict[str, Any]:
+    """A table's values as the file gives them (TOML arrays as tuples): the recipe's hashes are of these."""
     return {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
 
 
-def _check_values(rec: Recipe) -> None:
-    """Build each table's dataclass once so a bad value is refused when the recipe is read, not hours later."""
-    where = rec.path
-    try:
-        train_cfg(rec, data=".", out=".")
-    except DiviewerError as exc:
-        raise DiviewerError(str(exc), path=where) from None
-    except TypeError as exc:
-        raise DiviewerError(f"a value has the wrong type: {exc}", path=where, field="train") from None
-    try:
-        cap = capture_settings(rec)
-        refine_from(rec)
-        truth_filter(rec)
-        _evalset_cls()(**{**{"width": cap.width, "height": cap.height}, **rec.evalset}).check()
-        _export_cls()(**rec.export)
-    except DiviewerError as exc:
-        raise DiviewerError(str(exc), path=where) from None
-    except TypeError as exc:
-        raise DiviewerError(f"a value has the wrong type: {exc}", path=where) from None
+def _build_settings(rec: Recipe) -> None:
+    """Build each table's dataclass once: the rules between fields that live in them (an fp16 export with half
+    weights) refuse when the recipe is read, naming ``table.field``."""
+    for table, build in (("train", lambda: train_cfg(rec, data=".", out=".")), ("capture", lambda: truth_filter(rec)),
+                         ("capture", lambda: capture_settings(rec)), ("evalset", lambda: evalset_settings(rec)),
+                         ("export", lambda: export_settings(rec))):
+        try:
+            build()
+        except DiviewerError as exc:
+            field = exc.field if exc.field is None or "." in exc.field else f"{table}.{exc.field.lstrip('-')}"
+            text = str(exc).split(": ", 1)[-1] if exc.field else str(exc)
+            raise DiviewerError(text, path=rec.path, field=field or table) from None
 
 
 def train_cfg(rec: Recipe, overrides: dict[str, Any] | None = None, **fields):
@@ -252,15 +201,9 @@ def capture_settings(rec: Recipe, **overrides):
 
 
 def refine_from(rec: Recipe) -> int | None:
-    """The spp a build captures at before refining to the recipe's ``spp`` ([capture] refine_from), or None."""
-    n = rec.capture.get("refine_from")
-    if n is None:
-        return None
-    spp = capture_settings(rec).spp
-    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n < spp:
-        raise DiviewerError(f"must be a whole number of samples per pixel from 1 to below [capture] spp ({spp}), "
-                            f"got {n!r}", path=rec.path, field="capture.refine_from")
-    return n
+    """The spp a build captures at before refining to the recipe's ``spp`` ([capture] refine_from), or None (checked
+    below ``spp`` when the recipe was read)."""
+    return rec.capture.get("refine_from")
 
 
 def truth_filter(rec: Recipe):

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from diviewer.errors import DiviewerError
 from diviewer.paths import shipped_scenes
+from diviewer.fieldspec import MAX_SIZE
 from diviewer.viewer.scale import DEFAULT_FLOOR, MAX_SCALE
 
 
@@ -72,23 +73,17 @@ def run_view(args: argparse.Namespace) -> int:
     from diviewer.gl.neural import GISettings
     from diviewer.viewer.app import ViewerSettings, run_viewer
 
-    if args.frames is not None and args.frames < 1:
-        raise DiviewerError(f"--frames must be at least 1, got {args.frames}", field="--frames")
+    # Each option's own range was checked before (diviewer.options); here the rules between them.
     if args.window_screenshot is not None and args.frames is None:
         raise DiviewerError("--window-screenshot needs --frames (it saves the last frame's window)",
                             field="--window-screenshot")
     size = parse_resolution(args.size, "--size")
-    if args.target_fps < 0:
-        raise DiviewerError(f"--target-fps must be 0 (off) or more, got {args.target_fps}", field="--target-fps")
-    if not 0.0 < args.scale_floor <= 1.0:
-        raise DiviewerError(f"--scale-floor must be in (0, 1], got {args.scale_floor}", field="--scale-floor")
-    if not 1.0 <= args.scale_ceiling <= MAX_SCALE:
-        raise DiviewerError(f"--scale-ceiling must be in [1, {MAX_SCALE:g}], got {args.scale_ceiling}",
-                            field="--scale-ceiling")
-    if args.render_scale is not None:
-        from diviewer.viewer.settings import check_render_scale
-
-        check_render_scale(args.render_scale)
+    top = args.render_scale if args.render_scale is not None else args.scale_ceiling
+    if max(size) * top > MAX_SIZE:
+        option = "--render-scale" if args.render_scale is not None else "--scale-ceiling"
+        raise DiviewerError(f"{args.size} shaded at {top:g}x per side is {round(size[0] * top)}x"
+                            f"{round(size[1] * top)}, above {MAX_SIZE} a side; give a smaller --size or {option}",
+                            field="--size")
     if args.frames is not None and str(args.model).lower() not in ("auto", "none"):
         # Scripted mode: a model the user named and the viewer refuses is a user error (exit 2),
         # found before a window opens; interactively the panel says why and offers the others.

@@ -102,7 +102,7 @@ class GIControl:
             st.model_name = model.path.name
             st.model_meta = dict(model.meta)
             st.provider = model.provider
-        if message and spec not in (None, "auto", "none"):
+        if message and str(spec).lower() != "none":  # a named model refused, or none found for auto
             print(f"diviewer view: {message}", file=sys.stderr)
 
     def set_gi_res(self, spec: str) -> tuple[int, int]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from diviewer.errors import DiviewerError
@@ -41,23 +42,38 @@ def open_model(spec: str | Path | None, scene: Scene, provider: str | None = Non
         except DiviewerError as exc:
             return None, f"model refused: {exc}"
     candidates = model_candidates(scene)
-    if not candidates:
-        from diviewer.paths import models_dir
-
-        try:
-            where = models_dir()
-        except FileNotFoundError:
-            where = "assets/models"
-        return None, (f"no model for scene '{scene.name}' in {where} (train and export one: diviewer train, "
-                      f"diviewer export); showing direct light only")
     refusals = []
     for path in candidates:
         try:
             return NeuralGI(path, scene=scene, provider=provider), ""
         except DiviewerError as exc:
             refusals.append(str(exc))
-    return None, "no compatible model for this scene: " + "; ".join(refusals)
+    return None, no_model_message(scene, refusals)
 
+
+def no_model_message(scene: Scene, refusals: list[str] = ()) -> str:
+    """One line for ``--model auto`` without a model that fits: where it looked, that the view goes on without
+    neural GI, and what `diviewer build` would do for this scene."""
+    from diviewer.paths import models_dir, scenes_dir
+
+    try:
+        where = models_dir()
+    except FileNotFoundError:
+        where = Path("assets/models")
+    shipped = scene.path is not None and Path(scene.path).resolve() == (scenes_dir() / f"{scene.name}.toml").resolve()
+    found = (f"no model in {where} fits scene '{scene.name}' ({'; '.join(refusals)})" if refusals
+             else f"no model for scene '{scene.name}' in {where}")
+    if shipped:
+        build = f"`diviewer build --scene {scene.name}` captures, trains and ships one there as {scene.name}.onnx"
+    else:
+        stem = Path(scene.path).stem if scene.path is not None else scene.name
+        build = (f"`diviewer build --scene {scene.path or scene.name}` captures, trains and writes one to "
+                 f"runs/{stem}/{scene.name}.onnx; then view it with --model that file")
+    return f"{found}: showing direct light only, without neural GI; {build}"
+
+
+MIN_GI_SHARE = 1 / 16
+"""The smallest fraction of the window the GI may run at (``--gi-res``)."""
 
 GI_FRACTIONS = ("1/1", "1/2", "1/3", "1/4", "1/6", "1/8")
 """GI resolutions offered as fractions of the window's framebuffer (the panel's list, ``--gi-res``)."""
@@ -97,10 +113,12 @@ def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], 
     if "/" in spec:
         try:
             num, den = (float(x) for x in spec.split("/"))
-        except ValueError:
-            num = den = 0.0
-        if not (num > 0 and den > 0):
-            raise DiviewerError(f"GI resolution '{spec}' is not a fraction like 1/4", field="--gi-res")
+            share = num / den
+        except (ValueError, ZeroDivisionError):
+            share = math.nan
+        if not (math.isfinite(share) and MIN_GI_SHARE <= share <= 1.0):
+            raise DiviewerError(f"GI resolution '{spec}' is not a fraction of the window from 1/16 to 1 like 1/4",
+                                field="--gi-res")
         return tuple(snap(s * num / den) for s in window)
     from diviewer.frames import parse_resolution
 

@@ -132,7 +132,7 @@ def test_a_resume_keeps_the_checkpoints_settings_and_recipe_unless_one_is_given(
     ("[training]\nK = 4\n", "training"),
     ("[train]\nK = -1\n", "train.K"),
     ("[train]\nupsample = 'bilinear'\n", "train.upsample"),
-    ("[evalset]\nspp = 8\nladder = [16]\n", "--ladder"),
+    ("[evalset]\nspp = 8\nladder = [16]\n", "evalset.ladder"),
     ("[train\nK = 4\n", "not valid TOML"),
     ("[capture]\nspp = 64\nrefine_from = 64\n", "capture.refine_from"),
     ("[capture]\nspp = 64\nrefine_from = 0\n", "capture.refine_from"),
@@ -153,21 +153,30 @@ def test_unknown_recipe_names_list_the_shipped_ones():
         load_recipe("missing/recipe.toml")
 
 
-def test_a_new_trainconfig_field_works_in_a_recipe_without_the_loader_changing(tmp_path, monkeypatch):
-    """The loader takes TrainConfig's fields as they are: a field another change adds is a recipe key at once."""
+def test_every_settings_field_a_recipe_can_set_has_a_spec():
+    """Each table's keys are its dataclass's fields, each with a spec (type, range) in `recipe_fields`: a field added
+    to a dataclass without one fails here, rather than reaching a recipe unchecked."""
     import dataclasses
 
-    import diviewer.train.recipe as recipe_mod
+    from diviewer.data.capture import CaptureSettings
+    from diviewer.data.truth_filter import TruthFilter
+    from diviewer.evalset import EvalSetSettings
+    from diviewer.train import recipe_fields as rf
+    from diviewer.train.export import ExportSettings
+    from diviewer.train.recipe import CAPTURE_EXTRA, NOT_TRAIN
 
-    @dataclasses.dataclass(frozen=True)
-    class Wider(TrainConfig):
-        future_knob: float = 1.0
-        """A field added later."""
+    def names(cls):
+        return {f.name for f in dataclasses.fields(cls)}
 
-    monkeypatch.setattr(recipe_mod, "_train_cls", lambda: Wider)
-    path = tmp_path / "r.toml"
-    path.write_text("[train]\nK = 4\nfuture_knob = 0.25\n")
-    assert load_recipe(path).train == {"K": 4, "future_knob": 0.25}
+    assert set(rf.CAPTURE) == names(CaptureSettings) | set(CAPTURE_EXTRA)
+    assert set(rf.EVALSET) == names(EvalSetSettings)
+    assert set(rf.TRAIN_FIELDS) == names(TrainConfig) - set(NOT_TRAIN)
+    assert set(rf.EXPORT) == names(ExportSettings)
+    assert set(rf.TRUTH_FILTER) == names(TruthFilter)
+    for specs, obj in ((rf.CAPTURE, CaptureSettings()), (rf.EVALSET, EvalSetSettings()), (rf.EXPORT, ExportSettings()),
+                       (rf.TRUTH_FILTER, TruthFilter()), (rf.TRAIN_FIELDS, TrainConfig(data=".", out="."))):
+        for name in names(type(obj)) & set(specs):
+            specs[name].check(getattr(obj, name))  # every default is a value its own spec takes
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:

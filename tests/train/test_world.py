@@ -206,7 +206,7 @@ def test_fourier_features_of_the_world_position_train_export_and_run(tmp_path):
     assert y.shape == (32, 32, 3) and np.isfinite(y).all()
     with pytest.raises(DiviewerError, match="train.world_frequencies: needs world_inputs"):
         tiny(data, tmp_path / "r2", world_frequencies=2)
-    with pytest.raises(DiviewerError, match="train.world_frequencies: must be an integer in"):
+    with pytest.raises(DiviewerError, match="train.world_frequencies: must be a whole number from 0 to 12"):
         tiny(data, tmp_path / "r2", world_inputs=True, world_frequencies=13)
 
 
