@@ -55,7 +55,7 @@ class BuildState:
                 raise DiviewerError("not a build state file; use another --work", path=self.path, field="format")
             old_plan = old.get("plan", {})
             changed = sorted(k for k in set(plan_key) | set(old_plan)
-                             if not _same(k, old_plan.get(k), plan_key.get(k)))
+                             if not _same(k, old_plan.get(k), plan_key.get(k), self.path.parent))
             untrained = not any(_from_training(name) for name in old.get("stages", {}))
             if changed and set(changed) <= {*REPLANNABLE, *(BEFORE_TRAINING if untrained else ())}:
                 # the same capture and evaluation set with more (or fewer) widths, exported otherwise, or (before any
@@ -108,11 +108,17 @@ def _from_training(stage: str) -> bool:
     return stage.startswith(("train_k", "export_k")) or stage in LADDER_STAGES
 
 
-def _same(field: str, old: Any, new: Any) -> bool:
-    """Whether a field of the plan key is the same plan. The recipe is the same when what it asks for is: the
+def _same(field: str, old: Any, new: Any, root: Path = Path(".")) -> bool:
+    """Whether a field of the plan key is the same plan. The scene is the same when its identity is (its ``hash``;
+    its ``path`` from the work folder ``root`` may differ: a project moved with its scene); a key written before
+    named it by its absolute path, which is compared as then. The recipe is the same when what it asks for is: the
     sha256 of its values without ``[export]`` (an edited comment is the same recipe, and the export settings are
     the field ``export``). A key written before that compares the values with ``[export]``, and one older still
     the file's bytes, as each did then."""
+    if field == "scene" and isinstance(new, dict):
+        if isinstance(old, dict):
+            return old.get("hash") == new.get("hash")
+        return old == os.path.normpath(os.path.join(os.path.abspath(root.resolve()), str(new.get("path"))))
     if field == "recipe" and isinstance(old, dict) and isinstance(new, dict):
         if "model_sha256" in old:  # the export settings are a field of their own
             return (old.get("name"), old["model_sha256"]) == (new.get("name"), new.get("model_sha256"))
