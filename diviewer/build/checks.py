@@ -33,9 +33,9 @@ def check_device(device: str | None, field: str = "--device", path: Path | None 
         return
     if importlib.util.find_spec("torch") is None:
         raise DiviewerError("training needs torch: pip install 'diviewer[train]'", path=path, field=field)
-    import torch
+    from diviewer.train.distributed import cuda_device_count
 
-    count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    count = cuda_device_count()
     if count == 0:
         raise DiviewerError(f"{device} asked for, but torch sees no CUDA device here; use --device cpu or auto",
                             path=path, field=field)

@@ -15,13 +15,13 @@ from typing import Any, Callable
 from diviewer import imageio
 from diviewer.build.pace import measured_pace, missing_link
 from diviewer.build.plan import RUN_ONLY, Plan, describe
+from diviewer.build.scores import QUALITY, evalset_psnr_tm, evalset_scores
 from diviewer.build.state import BuildState
 from diviewer.data.dataset import sha256_file
 from diviewer.console import progress_bar
 from diviewer.errors import DiviewerError
 
 STATE_FILE = "build.json"
-QUALITY = ("psnr", "ssim", "psnr_tm", "ssim_tm")
 
 
 class BuildInterrupted(Exception):
@@ -298,14 +298,6 @@ PICK_MEASURE = "evalset_psnr_tm"
 whose own noise (~36 dB tone-mapped on cornell) caps what it can tell apart; models near that floor read alike."""
 
 
-def evalset_psnr_tm(splits: dict[str, dict]) -> float:
-    """The mean tone-mapped PSNR over every frame of an evaluation set: the splits' means weighted by their frames."""
-    scored = [(s["psnr_tm"], s["frames"]) for s in splits.values() if s.get("psnr_tm") is not None]
-    if not scored or not sum(n for _, n in scored):
-        raise DiviewerError("the evaluation set scored no frames for the ladder's pick")
-    return sum(p * n for p, n in scored) / sum(n for _, n in scored)
-
-
 def pick_within(rows: list[dict], tolerance_db: float, max_mb: float | None, recipe: Path | None = None):
     """The bench's rule over the Ks whose model file is at most ``max_mb`` MB (all where None): ``rows`` hold each
     K's ``K``, ``bytes`` and ``evalset_psnr_tm``. Returns `smallest_sufficient_k`'s pick and the Ks over the cap; an
@@ -324,8 +316,6 @@ def pick_within(rows: list[dict], tolerance_db: float, max_mb: float | None, rec
 def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     """The bench's rule: the smallest K whose tone-mapped PSNR on the evaluation set is within the recipe's
     tolerance of the best K's (`PICK_MEASURE`), of the Ks within the recipe's ``max_mb`` (`pick_within`)."""
-    from diviewer.build.replace import evalset_scores
-
     stages = state.data["stages"]
     ev = json.loads((plan.work / "evalset_eval.json").read_text())
     rows = []

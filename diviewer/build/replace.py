@@ -13,22 +13,12 @@ REPLACED = "replaced"
 """The work folder's subfolder where the files a ship replaced are kept (one folder per ship, by time)."""
 
 
-def evalset_scores(ev: dict, key: str) -> dict[str, dict]:
-    """One model's per-split means and frame counts in a `diviewer eval --evalset` record ``ev`` (``key``: the
-    model file's stem), as the ladder's rows hold them."""
-    from diviewer.build.pipeline import QUALITY
-
-    return {s: {**{q: r["methods"][key][q]["mean"] for q in QUALITY if q in r["methods"][key]},
-                "frames": r["frames"]}
-            for s, r in ev["splits"].items() if key in r["methods"]}
-
-
 def score_replaced(plan, old: Path, log) -> float:
     """The model file ``old`` scored on the build's evaluation set as each K of the ladder is (`evaluate_evalset`,
     then `evalset_psnr_tm`); an error naming it where it cannot be (another scene's model, not a model)."""
     import json
 
-    from diviewer.build.pipeline import evalset_psnr_tm
+    from diviewer.build.scores import evalset_psnr_tm, evalset_scores
     from diviewer.evalscore import default_jobs
     from diviewer.evaluate import evaluate_evalset
     from diviewer.outputs import building
