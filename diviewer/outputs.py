@@ -90,9 +90,10 @@ def _build_state(folder: Path) -> dict | None:
 
 
 def _build_outputs(state: dict) -> set[str]:
-    """Every output a build's state records (paths relative to its work folder, or absolute)."""
+    """Every output a build's state records, and every file its ship stages wrote (paths relative to its work
+    folder, or absolute)."""
     stages = state.get("stages")
-    found = set()
+    found = set(state["shipped"]) if isinstance(state.get("shipped"), dict) else set()
     for rec in (stages.values() if isinstance(stages, dict) else ()):
         outputs = rec.get("outputs") if isinstance(rec, dict) else None
         found |= set(outputs) if isinstance(outputs, dict) else set()

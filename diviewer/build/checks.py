@@ -76,17 +76,17 @@ def shipped_file(plan) -> Path | None:
 
 
 def own_ship(plan, dst: Path) -> bool:
-    """Whether ``dst`` is this build's own shipped model: the one its state records, unchanged since."""
-    from diviewer.build.state import _output_key
+    """Whether ``dst`` is a model this build shipped (its state's ship record, or `SHIPPED`), unchanged since."""
+    from diviewer.build.state import SHIPPED, _output_key
     from diviewer.data.dataset import sha256_file
 
-    state = plan.work / "build.json"
     try:
-        rec = json.loads(state.read_text())["stages"]["ship"]
-        digest = rec["outputs"][_output_key(dst, plan.work)]
-    except (OSError, ValueError, KeyError, TypeError):
+        data = json.loads((plan.work / "build.json").read_text())
+        recorded = {**data.get(SHIPPED, {}), **data.get("stages", {}).get("ship", {}).get("outputs", {})}
+    except (OSError, ValueError, AttributeError, TypeError):
         return False
-    return dst.is_file() and sha256_file(dst) == digest
+    digest = recorded.get(_output_key(dst, plan.work))
+    return digest is not None and dst.is_file() and sha256_file(dst) == digest
 
 
 def replaced_model(plan) -> Path | None:

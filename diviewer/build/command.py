@@ -118,6 +118,10 @@ def run_build_command(args: argparse.Namespace) -> int:
         if args.stop_after is not None:
             after = names[names.index(args.stop_after) + 1:]
             print(f"--stop-after {args.stop_after}: a run stops there" + (f"; not run: {', '.join(after)}" if after else ""))
+        from diviewer.locks import holder
+
+        if (running := holder(work)) is not None:
+            print(f"a run of this command would refuse the work folder now: another run is writing there: {running}")
         if refusal is not None:
             print("dry run: nothing was done; a run of this command would refuse the work folder (below)")
             raise refusal

@@ -67,6 +67,7 @@ class BuildState:
                 if "export" in changed:
                     self.export_change = (old_plan["export"], plan_key["export"])
                 redo = lambda name: name in LADDER_STAGES or ("export" in changed and name.startswith("export_k"))
+                _keep_shipped(old, old.get("stages", {}).get("ship"))
                 old["stages"] = {name: rec for name, rec in old.get("stages", {}).items() if not redo(name)}
             elif changed:
                 raise DiviewerError(f"this work folder holds a build of another plan (differs in {', '.join(changed)});"
@@ -97,10 +98,23 @@ class BuildState:
             "seconds": None if seconds is None else round(seconds, 1),
             "outputs": {_output_key(Path(p), root): sha256_file(Path(p)) for p in outputs},
             "result": result or {}}
+        if stage == "ship":
+            _keep_shipped(self.data, self.data["stages"][stage])
         self.save()
 
     def save(self) -> None:
         imageio.write_text(self.path, json.dumps(self.data, indent=1, sort_keys=True, default=str) + "\n")
+
+
+SHIPPED = "shipped"
+"""The state's record of every file a ship stage of this build wrote (relative key -> sha256), kept when the ship
+runs again: the build's own model there is replaced without a word, anyone else's only as --ship allows."""
+
+
+def _keep_shipped(data: dict[str, Any], ship: dict[str, Any] | None) -> None:
+    """Add the outputs of the ship record ``ship`` to ``data``'s `SHIPPED` record."""
+    if isinstance(ship, dict) and isinstance(ship.get("outputs"), dict):
+        data.setdefault(SHIPPED, {}).update(ship["outputs"])
 
 
 def _from_training(stage: str) -> bool:
