@@ -39,8 +39,13 @@ BUILD_FILES = (BUILD_STATE, "ladder.json", "evalset_eval.json", "replaced_eval.j
 models/ folder, never written by another command."""
 SHIPPED_SUFFIXES = ("_ladder_curves.png", "_ladder.json", "_curves.png", "_metrics.csv")
 """Files shipped beside a model NAME.onnx as NAME<suffix> (diviewer build's ship stage, tools/ship_model.py)."""
-OWNED_FILES = {"run": RUN_FILES, "build": BUILD_FILES}
-"""Each folder kind's own files by name: the one table `owner` (and so every writer's check) reads."""
+DATASET_FILES = ("manifest.json", "frames", "thumbs")
+"""A dataset's own files and folders (diviewer capture, data): everything under ``frames`` and ``thumbs``."""
+OWNED_FILES = {"dataset": DATASET_FILES, "evalset": (*DATASET_FILES, "summary.json", "frames.zip"),
+               "run": RUN_FILES, "build": BUILD_FILES}
+"""Each folder kind's own files by name (a folder named: all it holds): the one table `owner` (and so every
+writer's check) reads. An evaluation set's ``frames.zip`` is a compact set's frames (`diviewer evalset
+--compact`)."""
 CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth")
 MANIFEST_BYTES = 1 << 28
 """Manifests larger than this are not parsed to tell a dataset from an evaluation set (both are protected)."""
@@ -172,7 +177,7 @@ def owner(path: str | Path) -> tuple[str, str] | None:
         if not (folder / "manifest.json").is_file():
             continue
         kind = folder_kind(folder)
-        if inside[0] in ("manifest.json", "frames", "thumbs") or (kind == "evalset" and inside == ("summary.json",)):
+        if inside[0] in OWNED_FILES[kind] and (len(inside) == 1 or inside[0] in ("frames", "thumbs")):
             what = {"manifest.json": "the manifest", "summary.json": "the summary"}.get(inside[0], "a frame")
             return kind, f"{what} of the {_KIND_NAMES[kind]} {_shown(folder, path)}"
     kind = folder_kind(path.parent)
