@@ -43,7 +43,7 @@ def plan_key(plan: Plan) -> dict[str, Any]:
         "capture": dataclasses.asdict(plan.capture), "evalset": dataclasses.asdict(plan.evalset),
         **({"refine_spp": plan.refine_spp} if plan.refine_spp is not None else {}),  # absent: every build before it
         **({"truth_filter": plan.truth_filter.record()} if plan.truth_filter is not None else {}),  # absent: as before
-        **({"given_evalset": str(plan.given_evalset.resolve())} if plan.given_evalset is not None else {}),
+        **({"given_evalset": evalset_key(plan.given_evalset, plan.work)} if plan.given_evalset is not None else {}),
         "train": {k: v for k, v in plan.train.items() if k not in RUN_ONLY}, "ks": list(plan.ks)}, default=str))
 
 
@@ -53,6 +53,13 @@ def scene_key(path: Path, work: Path) -> dict[str, str]:
     from diviewer.scene.loader import load_scene
 
     return {"hash": load_scene(path).file_hash, "path": os.path.relpath(path.resolve(), Path(work).resolve())}
+
+
+def evalset_key(path: Path, work: Path) -> dict[str, str]:
+    """An evaluation set made before (``--evalset``) by identity (its manifest's sha256) and by its path from the
+    work folder, as `scene_key` names the scene."""
+    return {"manifest_sha256": sha256_file(path / "manifest.json"),
+            "path": os.path.relpath(path.resolve(), Path(work).resolve())}
 
 
 def finished_stages(plan: Plan) -> set[str]:

@@ -117,21 +117,25 @@ def _keep_shipped(data: dict[str, Any], ship: dict[str, Any] | None) -> None:
         data.setdefault(SHIPPED, {}).update(ship["outputs"])
 
 
+IDENTITY = {"scene": "hash", "given_evalset": "manifest_sha256"}
+"""Plan fields named by identity (the member compared) and by their path from the work folder."""
+
+
 def _from_training(stage: str) -> bool:
     """Whether a stage depends on the training settings: a K's training or export, or what reads every K."""
     return stage.startswith(("train_k", "export_k")) or stage in LADDER_STAGES
 
 
 def _same(field: str, old: Any, new: Any, root: Path = Path(".")) -> bool:
-    """Whether a field of the plan key is the same plan. The scene is the same when its identity is (its ``hash``;
-    its ``path`` from the work folder ``root`` may differ: a project moved with its scene); a key written before
-    named it by its absolute path, which is compared as then. The recipe is the same when what it asks for is: the
+    """Whether a field of the plan key is the same plan. The scene, and an evaluation set made before, are the same
+    when their identity is (`IDENTITY`; the ``path`` from the work folder ``root`` may differ: a project moved with
+    them); a key written before named them by their absolute path, which is compared as then. The recipe is the same when what it asks for is: the
     sha256 of its values without ``[export]`` (an edited comment is the same recipe, and the export settings are
     the field ``export``). A key written before that compares the values with ``[export]``, and one older still
     the file's bytes, as each did then."""
-    if field == "scene" and isinstance(new, dict):
+    if field in IDENTITY and isinstance(new, dict):
         if isinstance(old, dict):
-            return old.get("hash") == new.get("hash")
+            return old.get(IDENTITY[field]) == new.get(IDENTITY[field])
         return old == os.path.normpath(os.path.join(os.path.abspath(root.resolve()), str(new.get("path"))))
     if field == "recipe" and isinstance(old, dict) and isinstance(new, dict):
         if "model_sha256" in old:  # the export settings are a field of their own

@@ -133,3 +133,22 @@ def test_a_build_stopped_by_sigterm_or_ctrl_c_names_the_stage_and_the_command_th
     assert last == (f"diviewer build: stopped in stage capture ({said}); resume with: diviewer build --scene cornell "
                     f"--recipe {recipe} --ks 2 --work {work}"), last
     assert signal.getsignal(signal.SIGTERM) == before and holder(work) is None
+
+
+def test_an_evaluation_set_made_before_is_the_same_when_moved_with_the_project(tmp_path):
+    """--evalset's key: its manifest's sha256 and its path from the work folder; a key of the version before (its
+    absolute path) is the same while that path is the set's."""
+    from diviewer.build.state import _same
+
+    (tmp_path / "proj" / "evalset").mkdir(parents=True)
+    (tmp_path / "proj" / "evalset" / "manifest.json").write_text('{"kind": "evalset"}')
+    key = pipeline.evalset_key(tmp_path / "proj" / "evalset", tmp_path / "proj" / "w")
+    assert key["path"] == os.path.join("..", "evalset")
+    shutil.move(tmp_path / "proj", tmp_path / "moved")
+    work = tmp_path / "moved" / "w"
+    moved = pipeline.evalset_key(tmp_path / "moved" / "evalset", work)
+    assert _same("given_evalset", key, moved, work)
+    assert _same("given_evalset", str((tmp_path / "moved" / "evalset").resolve()), moved, work)
+    assert not _same("given_evalset", str(tmp_path / "proj" / "evalset"), moved, work)
+    (tmp_path / "moved" / "evalset" / "manifest.json").write_text('{"kind": "evalset", "other": 1}')
+    assert not _same("given_evalset", key, pipeline.evalset_key(tmp_path / "moved" / "evalset", work), work)

@@ -549,7 +549,7 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
     kept = next((work2 / "replaced").iterdir())
     assert (kept / "tiny.onnx").read_bytes() == shipped and (kept / "tiny_ladder.json").is_file()
     replaced = json.loads((work2 / "build.json").read_text())["stages"]["ship"]["result"]["replaced"]
-    assert replaced["evalset_psnr_tm"] == pytest.approx(old_score) and replaced["kept_in"] == str(kept)
+    assert replaced["evalset_psnr_tm"] == pytest.approx(old_score, abs=1e-3) and replaced["kept_in"] == str(kept)
     assert main(argv3) == 0, "its own model now: shipped again without a comparison"
     assert "ship: done before" in capsys.readouterr().out
 
