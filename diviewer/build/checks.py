@@ -45,11 +45,24 @@ def check_device(device: str | None, field: str = "--device", path: Path | None 
 
 
 def check_folders(work: Path, ship: Path) -> None:
-    """The work folder is a build's (or new) and writable; the ship folder a folder that can be written."""
-    from diviewer.outputs import check_output_dir
+    """The work folder is a build's (or new) and writable; the ship folder a folder that can be written, and none
+    of another command's (a dataset, a training run, another build's work folder) nor inside a dataset."""
+    import os
+
+    from diviewer.outputs import FOLDER_WRITERS, _KIND_NAMES, _a, check_output_dir, folder_kind
 
     check_output_dir(work, "--work", writes="build")
     check_output_dir(ship, "--ship")
+    if os.path.abspath(ship) == os.path.abspath(work):
+        return
+    kind = folder_kind(ship) if Path(ship).is_dir() else None
+    inside = next((p for p in Path(os.path.abspath(ship)).parents if (p / "manifest.json").is_file()), None)
+    if kind is not None:
+        raise DiviewerError(f"{ship} is {_a(_KIND_NAMES[kind])} ({FOLDER_WRITERS[kind]} wrote it); ship into a "
+                            f"folder of models, or leave --ship out to ship into the work folder", field="--ship")
+    if inside is not None:
+        raise DiviewerError(f"{ship} lies inside the {_KIND_NAMES[folder_kind(inside)]} {inside}; give a folder "
+                            f"outside it", field="--ship")
 
 
 def check_splits(capture, path: Path | None = None) -> None:

@@ -271,6 +271,10 @@ def _set_aside_if_begun_otherwise(cfg, run: Path, log) -> None:
     last = run / "last.ckpt"
     diff = changed_settings(cfg, load_checkpoint(last, mmap=True)) if last.is_file() else []
     if diff:
+        from diviewer.locks import run_lock
+
+        with run_lock(run, "train", option="--work"):  # a run training there now is never moved from under it
+            pass
         kept = run.with_name(f"{run.name}_before_{time.strftime('%Y%m%d_%H%M%S', time.gmtime())}")
         run.rename(kept)
         log(f"{run}: begun under other training settings ({'; '.join(diff)}); kept as {kept.name}, and trained "

@@ -94,6 +94,15 @@ def test_folders_that_cannot_hold_a_build_are_refused(tmp_path, capsys, recipe):
     evalset = ROOT / "assets" / "evalsets" / "cornell"
     line = _refused([*base, "--work", str(evalset)], capsys, tmp_path)
     assert "--work" in line and "is an evaluation set" in line
+    line = _refused([*base, "--work", str(tmp_path / "w"), "--ship", str(evalset)], capsys, tmp_path)
+    assert "--ship" in line and "is an evaluation set" in line
+    line = _refused([*base, "--work", str(tmp_path / "w"), "--ship", str(evalset / "models")], capsys, tmp_path)
+    assert "--ship" in line and "lies inside the evaluation set" in line
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "build.json").write_text(json.dumps({"format": "diviewer-build", "plan": {}, "stages": {}}))
+    line = _refused([*base, "--work", str(tmp_path / "w"), "--ship", str(other)], capsys, tmp_path)
+    assert "--ship" in line and "is a build work folder (diviewer build wrote it)" in line
 
 
 @pytest.mark.parametrize("keep", [0, 3])
