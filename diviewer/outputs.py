@@ -78,8 +78,9 @@ def folder_kind(folder: str | Path) -> str | None:
 
 
 def _build_state(folder: Path) -> dict | None:
-    """The build state file in ``folder`` (parsed), or None where there is none. A state file that cannot be read
-    still marks a build's folder (an empty record): protected all the same."""
+    """The build state file in ``folder`` (parsed), or None where there is none (a build.json of another format is
+    not one). A state file that cannot be read or parsed still marks a build's folder (an empty record): protected
+    all the same, as a damaged manifest marks a dataset."""
     state = folder / BUILD_STATE
     try:
         if not state.is_file():
@@ -89,9 +90,7 @@ def _build_state(folder: Path) -> dict | None:
         data = json.loads(state.read_text())
     except (OSError, ValueError, UnicodeDecodeError):
         return {}
-    if not isinstance(data, dict):
-        return {}
-    return data if data.get("format", "diviewer-build") == "diviewer-build" else None
+    return data if isinstance(data, dict) and data.get("format") == "diviewer-build" else None
 
 
 def _build_outputs(state: dict) -> set[str]:

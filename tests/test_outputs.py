@@ -44,6 +44,10 @@ def files(tmp_path_factory):
     (t / "old.ckpt").write_bytes(b"x")
     (t / "notes.json").write_text("{}")
     make_build_folder(t / "w", t / "lin.onnx")
+    (t / "js").mkdir()
+    (t / "js" / "build.json").write_text('{"name": "another tool\'s build file"}')
+    (t / "damaged").mkdir()
+    (t / "damaged" / "build.json").write_text('{"format": "diviewer-build", "stag')
     return t
 
 
@@ -93,7 +97,8 @@ def test_each_folder_is_known_by_whose_it_is(files):
                                         ("w/scores.txt", "build"), ("w/.diviewer.lock", "lock"),
                                         ("w/mine.json", None), ("w/new.json", None),
                                         ("lin_ladder.json", "build"), ("lin_metrics.csv", "build"),
-                                        ("other_ladder.json", None)])
+                                        ("other_ladder.json", None), ("js/build.json", None),
+                                        ("js/ladder.json", None), ("damaged/build.json", "build")])
 def test_owner_names_other_commands_files(files, name, kind):
     found = owner(files / name)
     assert (found[0] if found else None) == kind
