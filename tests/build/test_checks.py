@@ -152,3 +152,39 @@ def test_an_evaluation_set_made_before_is_the_same_when_moved_with_the_project(t
     assert not _same("given_evalset", str(tmp_path / "proj" / "evalset"), moved, work)
     (tmp_path / "moved" / "evalset" / "manifest.json").write_text('{"kind": "evalset", "other": 1}')
     assert not _same("given_evalset", key, pipeline.evalset_key(tmp_path / "moved" / "evalset", work), work)
+
+
+@pytest.mark.slow
+def test_a_build_sent_sigterm_while_it_captures_says_where_it_stopped_and_resumes(gl_context, tmp_path):
+    """`kill -TERM` on a real build (a subprocess, capturing the tiny scene): one line naming the stage and the
+    command that resumes, exit 130, its lock released; that command then goes on with the frames kept."""
+    import subprocess
+    import sys
+
+    scene, recipe = write_tiny_scene(tmp_path), tmp_path / "recipe.toml"
+    recipe.write_text(TINY_RECIPE.replace("frames = 8", "frames = 40"))
+    work = tmp_path / "w"
+    argv = ["build", "--scene", str(scene), "--recipe", str(recipe), "--work", str(work), "--ks", "2",
+            "--stop-after", "capture"]
+    proc = subprocess.Popen([sys.executable, "-m", "diviewer", *argv], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and proc.poll() is None:
+            if len(list((work / "data" / "frames").glob("*.json"))) >= 2:
+                proc.send_signal(signal.SIGTERM)
+                break
+            time.sleep(0.02)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, (out, err)
+    last = out.strip().splitlines()[-1]
+    assert last.startswith("diviewer build: stopped in stage capture (SIGTERM); resume with: diviewer build ")
+    assert f"--work {work}" in last and "Traceback" not in err
+    assert holder(work) is None and holder(work / "data") is None
+    kept = len(list((work / "data" / "frames").glob("*.json")))
+    assert 2 <= kept < 40
+    assert main(argv) == 0
+    assert len(list((work / "data" / "frames").glob("*.json"))) == 40
