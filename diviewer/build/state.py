@@ -121,6 +121,15 @@ IDENTITY = {"scene": "hash", "given_evalset": "manifest_sha256"}
 """Plan fields named by identity (the member compared) and by their path from the work folder."""
 
 
+def _captured_scene(root: Path) -> str | None:
+    """The scene identity the work folder's capture (``root``/data) records, or None where there is none."""
+    try:
+        data = json.loads((root / "data" / "manifest.json").read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    return data.get("scene_hash") if isinstance(data, dict) else None
+
+
 def _from_training(stage: str) -> bool:
     """Whether a stage depends on the training settings: a K's training or export, or what reads every K."""
     return stage.startswith(("train_k", "export_k")) or stage in LADDER_STAGES
@@ -129,14 +138,18 @@ def _from_training(stage: str) -> bool:
 def _same(field: str, old: Any, new: Any, root: Path = Path(".")) -> bool:
     """Whether a field of the plan key is the same plan. The scene, and an evaluation set made before, are the same
     when their identity is (`IDENTITY`; the ``path`` from the work folder ``root`` may differ: a project moved with
-    them); a key written before named them by their absolute path, which is compared as then. The recipe is the same when what it asks for is: the
+    them); a key written before named them by their absolute path, which is compared as then, or, for the scene of a
+    project moved since, by the identity its capture records. The recipe is the same when what it asks for is: the
     sha256 of its values without ``[export]`` (an edited comment is the same recipe, and the export settings are
     the field ``export``). A key written before that compares the values with ``[export]``, and one older still
     the file's bytes, as each did then."""
     if field in IDENTITY and isinstance(new, dict):
         if isinstance(old, dict):
             return old.get(IDENTITY[field]) == new.get(IDENTITY[field])
-        return old == os.path.normpath(os.path.join(os.path.abspath(root.resolve()), str(new.get("path"))))
+        if old == os.path.normpath(os.path.join(os.path.abspath(root.resolve()), str(new.get("path")))):
+            return True
+        # a project moved before the scene was keyed by identity: the capture in it records the scene's
+        return field == "scene" and new.get("hash") is not None and _captured_scene(root) == new["hash"]
     if field == "recipe" and isinstance(old, dict) and isinstance(new, dict):
         if "model_sha256" in old:  # the export settings are a field of their own
             return (old.get("name"), old["model_sha256"]) == (new.get("name"), new.get("model_sha256"))

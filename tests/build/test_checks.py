@@ -93,6 +93,14 @@ def test_a_project_moved_with_its_scene_resumes_and_an_old_state_still_reads(tmp
                                                        "plan": elsewhere}))
     with pytest.raises(DiviewerError, match="another plan .*scene"):
         pipeline.finished_stages(moved)
+    # ... unless the capture in the work folder records this scene's identity: the project moved, state and all
+    (moved.work / "data" / "manifest.json").write_text(json.dumps({"scene_hash": pipeline.plan_key(moved)["scene"][
+        "hash"]}))
+    assert pipeline.finished_stages(moved) == set(), "the same plan, its capture's manifest since changed"
+    (moved.work / "data" / "manifest.json").write_text(json.dumps({"scene_hash": "0" * 64}))
+    with pytest.raises(DiviewerError, match="another plan .*scene"):
+        pipeline.finished_stages(moved)
+    (moved.work / "data" / "manifest.json").write_text("{}")
     # the scene edited: another build
     (moved.work / "build.json").write_text(json.dumps({**json.loads((moved.work / "build.json").read_text()),
                                                        "plan": pipeline.plan_key(moved)}))
