@@ -89,7 +89,7 @@ def shipped_file(plan) -> Path | None:
 
 
 def own_ship(plan, dst: Path) -> bool:
-    """Whether ``dst`` is a model this build shipped (its state's ship record, or `SHIPPED`), unchanged since."""
+    """Whether ``dst`` is a file this build shipped (its state's ship record, or `SHIPPED`), unchanged since."""
     from diviewer.build.state import SHIPPED, _output_key
     from diviewer.data.dataset import sha256_file
 

@@ -365,8 +365,9 @@ def _ship(plan: Plan, state: BuildState, log, command: str, replace_worse: bool 
     the ONNX metadata alike), its curves, metrics and the ladder record. A model there that this build did not
     ship is scored first and replaced only where the new one scores at least as well (or ``replace_worse``), its
     files kept in WORK/replaced."""
-    from diviewer.build.checks import replaced_model
+    from diviewer.build.checks import own_ship, replaced_model
     from diviewer.build.replace import check_not_worse, keep_replaced
+    from diviewer.outputs import SHIPPED_SUFFIXES
 
     if plan.ship is None:
         return [], {"to": None}
@@ -377,10 +378,10 @@ def _ship(plan: Plan, state: BuildState, log, command: str, replace_worse: bool 
     if old is not None:
         row = next(r for r in ladder["rows"] if r["K"] == k)
         replaced = check_not_worse(plan, old, k, row["evalset_psnr_tm"], replace_worse, log)
-        kept = keep_replaced(plan, [dst, dst.with_suffix(".json"),
-                                    *(plan.ship / f"{name}{s}" for s in ("_curves.png", "_metrics.csv",
-                                                                         "_ladder.json", "_ladder_curves.png"))], log)
-        replaced["kept_in"] = None if kept is None else str(kept)
+    targets = [dst, dst.with_suffix(".json"), *(plan.ship / f"{name}{s}" for s in SHIPPED_SUFFIXES)]
+    kept = keep_replaced(plan, [p for p in targets if p.is_file() and not own_ship(plan, p)], log)
+    if kept is not None:
+        replaced = {**(replaced or {}), "kept_in": str(kept)}
     card = json.loads(plan.model(k).with_suffix(".json").read_text())
     card["ladder"] = {"chosen_K": k, "why": ladder["rule"], "file": f"{name}_ladder.json",
                       "curves": f"{name}_ladder_curves.png"}
