@@ -135,7 +135,8 @@ def run_build_command(args: argparse.Namespace) -> int:
         with interrupts_raise():
             run_build(plan, rebuild_command(args), stop_after=args.stop_after, replace_worse=args.replace_worse)
     except BuildInterrupted as exc:
-        print(f"diviewer build: stopped in {exc}; resume with: {resume_command(args)}")
+        where = f" in stage {exc.stage}" if exc.stage else ""
+        print(f"diviewer build: stopped{where} ({exc}); resume with: {resume_command(args)}")
         return 130
     return 0
 

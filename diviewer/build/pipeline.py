@@ -27,6 +27,11 @@ STATE_FILE = "build.json"
 class BuildInterrupted(Exception):
     """A stage stopped before its end (Ctrl-C, SIGTERM): the build stops, and resumes when run again."""
 
+    def __init__(self, why: str, stage: str | None = None):
+        super().__init__(why)
+        self.stage = stage
+        """The stage it stopped in (None: before the first)."""
+
 
 def plan_key(plan: Plan) -> dict[str, Any]:
     """What a work folder's build is: a different key is another build, refused in the same folder."""
@@ -106,6 +111,7 @@ def _run(plan: Plan, command: str, log, stop_after: str | None, replace_worse: b
         log(f"the recipe's [export] changed ({edits}): every K trained keeps its run; the export, the evaluation, "
             f"the pick and the ship run again")
     bar = progress_bar(max(1, round(plan.seconds)), "build (estimated seconds of work)", "s")
+    stage = None
     try:
         for i, stage in enumerate(plan.stages, 1):
             rec = state.done(stage.name, plan.work)
@@ -115,19 +121,18 @@ def _run(plan: Plan, command: str, log, stop_after: str | None, replace_worse: b
                 log(f"[{i}/{len(plan.stages)}] {stage.name}: {stage.title}")
                 t0 = time.perf_counter()
                 kind, _, k = stage.name.partition("_k")
-                try:
-                    outputs, result = STAGES[kind](plan, state, log, k=int(k) if k else None, command=command,
-                                                   replace_worse=replace_worse)
-                except KeyboardInterrupt:
-                    raise BuildInterrupted(f"stage {stage.name} (interrupted)") from None
-                except BuildInterrupted as exc:
-                    raise BuildInterrupted(f"stage {stage.name} ({exc})") from None
+                outputs, result = STAGES[kind](plan, state, log, k=int(k) if k else None, command=command,
+                                               replace_worse=replace_worse)
                 state.finish(stage.name, plan.work, outputs, result, time.perf_counter() - t0)
             bar.update(round(stage.seconds))
             if stage.name == stop_after and i < len(plan.stages):
                 log(f"stopped after {stage.name} as asked (--stop-after); the same command without it goes on "
                     f"from {plan.stages[i].name}")
                 return None
+    except KeyboardInterrupt:
+        raise BuildInterrupted("interrupted", stage and stage.name) from None
+    except BuildInterrupted as exc:
+        raise BuildInterrupted(str(exc), exc.stage or (stage and stage.name)) from None
     finally:
         bar.close()
     ladder = state.data["stages"]["pick"]["result"]
