@@ -74,6 +74,12 @@ def _owner_text(path: Path) -> str:
     return f"{what}, pid {info['pid']} on host {info.get('host', '?')} since {info.get('started', '?')}"
 
 
+def holder(folder: str | Path, part: str | None = None) -> str | None:
+    """Who holds ``folder``'s lock now (its command, pid, host and start), or None where no live run does."""
+    path = lock_path(Path(folder), part)
+    return _owner_text(path) if _held(path) else None
+
+
 def _refuse(folder: Path, other: Path, option: str) -> DiviewerError:
     return DiviewerError(f"another run is writing here: {_owner_text(other)}; wait for it to end or give another "
                          f"{option} (its lock: {other.name})", path=folder, field=option)

@@ -8,6 +8,7 @@ import math
 import os
 import tempfile
 from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 
 from diviewer.errors import DiviewerError
@@ -28,16 +29,31 @@ def _writable_from(path: Path, option: str, folder: Path | None = None) -> None:
 
 # What each command's folder holds, by the file that marks it, and the command that writes it.
 FOLDER_WRITERS = {"dataset": "diviewer capture", "evalset": "diviewer evalset", "run": "diviewer train",
-                  "render": "diviewer render"}
+                  "render": "diviewer render", "build": "diviewer build"}
 RUN_FILES = ("last.ckpt", "best.ckpt", "metrics.csv", "curves.png")
 """A training run's own files (diviewer train): never written by another command."""
+BUILD_STATE = "build.json"
+"""The file that marks a build's work folder (diviewer build's state: format ``diviewer-build``)."""
+BUILD_FILES = (BUILD_STATE, "ladder.json", "evalset_eval.json", "replaced_eval.json")
+"""A build's own files in its work folder; with every output its state records (`_build_outputs`) and its
+models/ folder, never written by another command."""
+SHIPPED_SUFFIXES = ("_ladder_curves.png", "_ladder.json", "_curves.png", "_metrics.csv")
+"""Files shipped beside a model NAME.onnx as NAME<suffix> (diviewer build's ship stage, tools/ship_model.py)."""
+DATASET_FILES = ("manifest.json", "frames", "thumbs")
+"""A dataset's own files and folders (diviewer capture, data): everything under ``frames`` and ``thumbs``."""
+OWNED_FILES = {"dataset": DATASET_FILES, "evalset": (*DATASET_FILES, "summary.json", "frames.zip"),
+               "run": RUN_FILES, "build": BUILD_FILES}
+"""Each folder kind's own files by name (a folder named: all it holds): the one table `owner` (and so every
+writer's check) reads. An evaluation set's ``frames.zip`` is a compact set's frames (`diviewer evalset
+--compact`)."""
 CHECKPOINT_SUFFIXES = (".ckpt", ".pt", ".pth")
 MANIFEST_BYTES = 1 << 28
 """Manifests larger than this are not parsed to tell a dataset from an evaluation set (both are protected)."""
 
 
 def folder_kind(folder: str | Path) -> str | None:
-    """Whose folder ``folder`` is: 'dataset', 'evalset', 'run' (training), 'render', or None (nobody's)."""
+    """Whose folder ``folder`` is: 'dataset', 'evalset', 'run' (training), 'render', 'build' (a build's work
+    folder, by its state file), or None (nobody's)."""
     folder = Path(folder)
     manifest = folder / "manifest.json"
     try:
@@ -50,12 +66,71 @@ def folder_kind(folder: str | Path) -> str | None:
                 except (ValueError, UnicodeDecodeError):
                     pass  # a damaged manifest still marks a dataset: protected all the same
             return "evalset" if kind == "evalset" else "dataset"
+        if _build_state(folder) is not None:
+            return "build"
         if any((folder / name).is_file() for name in RUN_FILES[:3]):
             return "run"
         if (folder / "frame.json").is_file() and any(folder.glob("*.exr")):
             return "render"
     except OSError:
         return None
+    return None
+
+
+def _build_state(folder: Path) -> dict | None:
+    """The build state file in ``folder`` (parsed), or None where there is none (a build.json of another format is
+    not one). A state file that cannot be read or parsed still marks a build's folder (an empty record): protected
+    all the same, as a damaged manifest marks a dataset."""
+    state = folder / BUILD_STATE
+    try:
+        if not state.is_file():
+            return None
+        if state.stat().st_size >= MANIFEST_BYTES:
+            return {}
+        data = json.loads(state.read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return {}
+    return data if isinstance(data, dict) and data.get("format") == "diviewer-build" else None
+
+
+def _build_outputs(state: dict) -> set[str]:
+    """Every output a build's state records, and every file its ship stages wrote (paths relative to its work
+    folder, or absolute)."""
+    stages = state.get("stages")
+    found = set(state["shipped"]) if isinstance(state.get("shipped"), dict) else set()
+    for rec in (stages.values() if isinstance(stages, dict) else ()):
+        outputs = rec.get("outputs") if isinstance(rec, dict) else None
+        found |= set(outputs) if isinstance(outputs, dict) else set()
+    return found
+
+
+_BUILDING: ContextVar[tuple[str, ...]] = ContextVar("diviewer_building", default=())
+"""The work folders of the builds this process runs (`building`): their own stages write their own files."""
+
+
+@contextmanager
+def building(work: str | Path):
+    """Within the block, ``work``'s build (holding its lock) writes its own files: they are not another command's."""
+    token = _BUILDING.set((*_BUILDING.get(), os.path.abspath(work), os.path.realpath(work)))
+    try:
+        yield
+    finally:
+        _BUILDING.reset(token)
+
+
+def _build_owner(path: Path) -> str | None:
+    """What of a build ``path`` is, where it is one of a build's files (`BUILD_FILES`, its models/, or an output its
+    state records, at any depth of its work folder): a description naming the build's folder, else None."""
+    parts = path.absolute().parts
+    for depth in range(1, len(parts)):
+        folder = Path(*parts[:-depth])
+        state = _build_state(folder)
+        if state is None or str(folder) in _BUILDING.get() or os.path.realpath(folder) in _BUILDING.get():
+            continue
+        inside = parts[len(parts) - depth:]
+        recorded = "/".join(inside) in _build_outputs(state) or str(path.absolute()) in _build_outputs(state)
+        if recorded or (depth == 1 and inside[0] in BUILD_FILES) or (depth == 2 and inside[0] == "models"):
+            return f"a file of the build {_shown(folder, path)} ({FOLDER_WRITERS['build']} wrote it)"
     return None
 
 
@@ -74,10 +149,20 @@ def _is_model_card(path: Path) -> bool:
 def owner(path: str | Path) -> tuple[str, str] | None:
     """What another command made at ``path`` (existing, or a name inside such a folder): (kind, description).
 
-    Kinds: 'model', 'checkpoint', 'dataset', 'evalset', 'run', 'render'. None: nobody's file, free to write.
+    Kinds: 'model', 'checkpoint', 'dataset', 'evalset', 'run', 'render', 'build' (a build's state, ladder record,
+    scores and models, and what ships beside a model), 'lock'. None: nobody's file, free to write.
     """
     path = Path(path)
     suffix = path.suffix.lower()
+    if path.name.startswith(".diviewer") and path.name.endswith(".lock"):
+        return "lock", "a run's lock file"
+    built = _build_owner(path)
+    if built is not None:
+        return "build", built
+    for tail in SHIPPED_SUFFIXES:
+        if path.name.endswith(tail) and len(path.name) > len(tail) and \
+                path.with_name(path.name[:-len(tail)] + ".onnx").is_file():
+            return "build", f"a file shipped with the model {path.with_name(path.name[:-len(tail)] + '.onnx')}"
     if suffix == ".onnx" and path.exists():
         return "model", "a model"
     if suffix == ".json" and _is_model_card(path):
@@ -91,11 +176,11 @@ def owner(path: str | Path) -> tuple[str, str] | None:
         if not (folder / "manifest.json").is_file():
             continue
         kind = folder_kind(folder)
-        if inside[0] in ("manifest.json", "frames", "thumbs") or (kind == "evalset" and inside == ("summary.json",)):
+        if inside[0] in OWNED_FILES[kind] and (len(inside) == 1 or inside[0] in ("frames", "thumbs")):
             what = {"manifest.json": "the manifest", "summary.json": "the summary"}.get(inside[0], "a frame")
             return kind, f"{what} of the {_KIND_NAMES[kind]} {_shown(folder, path)}"
     kind = folder_kind(path.parent)
-    if kind == "run" and path.name in RUN_FILES:
+    if kind == "run" and path.name in OWNED_FILES["run"]:
         return "run", f"a file of the training run {path.parent}"
     if kind == "render" and path.exists() and suffix in (".exr", ".png", ".json"):
         return "render", f"a file of the render {path.parent}"
@@ -138,7 +223,7 @@ def _shown(folder: Path, path: Path) -> str:
 
 
 _KIND_NAMES = {"dataset": "dataset", "evalset": "evaluation set", "run": "training run folder",
-               "render": "render folder"}
+               "render": "render folder", "build": "build work folder"}
 
 
 def check_output_file(path: str | Path, option: str = "--out", protect: tuple = (), suffix: str | tuple | None = None,

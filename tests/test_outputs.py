@@ -43,21 +43,62 @@ def files(tmp_path_factory):
     assert main(["baseline", "--data", str(t / "data"), "--out", str(t / "lin.onnx")]) == 0
     (t / "old.ckpt").write_bytes(b"x")
     (t / "notes.json").write_text("{}")
+    make_build_folder(t / "w", t / "lin.onnx")
+    (t / "js").mkdir()
+    (t / "js" / "build.json").write_text('{"name": "another tool\'s build file"}')
+    (t / "damaged").mkdir()
+    (t / "damaged" / "build.json").write_text('{"format": "diviewer-build", "stag')
     return t
+
+
+def make_build_folder(w: Path, model: Path) -> None:
+    """A build's work folder as `diviewer build` leaves it: its state, ladder record and scores, a K's model with its
+    card and test scores, the chosen model shipped into the folder with what ships beside it (recorded in the
+    state), and a file of the user's."""
+    import shutil
+
+    from diviewer.build.state import BuildState
+
+    (w / "models").mkdir(parents=True)
+    for name in ("ladder.json", "evalset_eval.json"):
+        (w / name).write_text("{}")
+    shutil.copyfile(model, w / "models" / "x_k8.onnx")
+    shutil.copyfile(model.with_suffix(".json"), w / "models" / "x_k8.json")
+    (w / "models" / "x_k8_test.json").write_text("{}")
+    shutil.copyfile(model, w / "x.onnx")
+    shutil.copyfile(model.with_suffix(".json"), w / "x.json")
+    for name in ("x_ladder.json", "x_curves.png", "x_metrics.csv", "x_ladder_curves.png", "scores.txt"):
+        (w / name).write_text("{}")
+    state = BuildState(w / "build.json", {"scene": "x"})
+    state.finish("pick", w, [w / "ladder.json"])
+    state.finish("ship", w, [w / "x.onnx", w / "x.json", w / "x_ladder.json", w / "scores.txt"])
+    (w / "mine.json").write_text("{}")
 
 
 def test_each_folder_is_known_by_whose_it_is(files):
     assert folder_kind(files / "data") == "dataset" and folder_kind(files / "es") == "evalset"
     assert folder_kind(files / "run") == "run" and folder_kind(files) is None
+    assert folder_kind(files / "w") == "build" and folder_kind(files / "w" / "models") is None
 
 
 @pytest.mark.parametrize("name, kind", [("lin.onnx", "model"), ("lin.json", "model"), ("old.ckpt", "checkpoint"),
                                         ("data/manifest.json", "dataset"), ("data/frames/000000.npy", "dataset"),
                                         ("data/frames/new.json", "dataset"), ("es/frames/000001.json", "evalset"),
                                         ("es/summary.json", "evalset"), ("data/summary.json", None),
+                                        ("es/frames.zip", "evalset"), ("data/frames.zip", None),
                                         ("run/last.ckpt", "checkpoint"), ("run/metrics.csv", "run"),
                                         ("run/curves.png", "run"), ("notes.json", None), ("new.json", None),
-                                        ("data/report.json", None)])
+                                        ("data/report.json", None),
+                                        # a build's work folder: its own files, what it recorded, what it shipped
+                                        ("w/build.json", "build"), ("w/ladder.json", "build"),
+                                        ("w/evalset_eval.json", "build"), ("w/replaced_eval.json", "build"),
+                                        ("w/models/x_k8_test.json", "build"), ("w/models/new.onnx", "build"),
+                                        ("w/x.onnx", "build"), ("w/x_ladder_curves.png", "build"),
+                                        ("w/scores.txt", "build"), ("w/.diviewer.lock", "lock"),
+                                        ("w/mine.json", None), ("w/new.json", None),
+                                        ("lin_ladder.json", "build"), ("lin_metrics.csv", "build"),
+                                        ("other_ladder.json", None), ("js/build.json", None),
+                                        ("js/ladder.json", None), ("damaged/build.json", "build")])
 def test_owner_names_other_commands_files(files, name, kind):
     found = owner(files / name)
     assert (found[0] if found else None) == kind
@@ -114,6 +155,26 @@ BAD = [  # (argv, needle): each refused before any work, nothing written
     ("train --data {t}/data --out {t}/data", "is a dataset"),
     ("train --data {t}/data --out {t}/es/sub", "lies inside the evaluation set"),
     ("data merge {t}/data --out {t}/run", "is a training run folder"),
+    # a build's state and ladder record, and every other file it owns, by each writer that names a file
+    ("eval --model {t}/lin.onnx --data {t}/data --out {t}/w/build.json", "a file of the build"),
+    ("eval --model {t}/lin.onnx --data {t}/data --out {t}/w/ladder.json", "a file of the build"),
+    ("eval --model {t}/lin.onnx --data {t}/data --out {t}/w/models/x_k8_test.json", "a file of the build"),
+    ("bench --quick --json {t}/w/build.json", "a file of the build"),
+    ("bench --quick --json {t}/w/ladder.json", "a file of the build"),
+    ("bench --quick --json {t}/w/x_ladder.json", "a file of the build"),
+    ("bench --quick --plot {t}/w/x_curves.png", "shipped with the model"),
+    ("view --frames 1 --stats {t}/w/build.json", "a file of the build"),
+    ("view --frames 1 --stats {t}/w/ladder.json", "a file of the build"),
+    ("view --frames 1 --screenshot {t}/w/build.png", "build.json is a file of the build"),
+    ("view --frames 1 --screenshot {t}/w/ladder.png", "ladder.json is a file of the build"),
+    ("view --frames 1 --screenshot {t}/w/x_ladder_curves.png", "shipped with the model"),
+    ("export {t}/old.ckpt --out {t}/w/build.onnx", "build.json is a file of the build"),
+    ("export {t}/old.ckpt --out {t}/w/x.onnx", "x.onnx is a file of the build"),
+    ("baseline --data {t}/data --out {t}/w/build.onnx", "build.json is a file of the build"),
+    ("baseline --data {t}/data --out {t}/w/ladder.onnx", "ladder.json is a file of the build"),
+    ("baseline --data {t}/data --out {t}/w/models/x_k8.onnx", "a file of the build"),
+    ("capture --frames 2 --res 16 --out {t}/w", "is a build work folder"),
+    ("train --data {t}/data --out {t}/w", "is a build work folder"),
 ]
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import shlex
 from pathlib import Path
 
@@ -22,9 +23,14 @@ def add_build_parser(subparsers) -> argparse.ArgumentParser:
                         "recipe where one is shipped, else cornell's, the best measured)")
     p.add_argument("--work", type=Path, default=None,
                    help="folder of the data, evaluation set, runs, models and the state file (default runs/SCENE)")
-    p.add_argument("--ship", type=Path, default=None,
-                   help="folder the chosen model goes to as SCENE.onnx with its card (default: assets/models for a "
-                        "shipped scene, else the work folder)")
+    p.add_argument("--ship", type=Path, default=None, metavar="DIR",
+                   help="folder the chosen model goes to as SCENE.onnx with its card (default: the work folder, for "
+                        "every scene). A model file there is replaced only with --ship, after both models are scored "
+                        "on the same evaluation set: one that scores better is kept (and the build refused) unless "
+                        "--replace-worse; the replaced files are kept in WORK/replaced. To rebuild a shipped model "
+                        "in place: --ship assets/models")
+    p.add_argument("--replace-worse", action="store_true",
+                   help="with --ship: replace the model there even where it scores better than the new one")
     p.add_argument("--budget", type=float, default=None, metavar="HOURS",
                    help="scale the recipe's frames and steps (never up) so the estimate fits in HOURS on this machine")
     p.add_argument("--evalset", type=Path, default=None, metavar="DIR",
@@ -32,7 +38,7 @@ def add_build_parser(subparsers) -> argparse.ArgumentParser:
                         "assets/evalsets/SCENE) instead of rendering the recipe's: the evaluation-set stage then "
                         "only checks it")
     p.add_argument("--ks", type=int, nargs="+", default=None, metavar="K",
-                   help="the widths to train instead of the recipe's ladder")
+                   help="the widths to train instead of the recipe's ladder (each 1 to 256)")
     p.add_argument("--device", default=None, help="training device: auto (default: CUDA where present), cpu, cuda:N")
     p.add_argument("--stop-after", default=None, metavar="STAGE",
                    help="stop once this stage of the plan is done (capture, refine, filter, check, evalset, "
@@ -65,9 +71,9 @@ def rebuild_command(args: argparse.Namespace) -> str:
 
 def run_build_command(args: argparse.Namespace) -> int:
     """`diviewer build`: the plan, printed (--dry-run) or run."""
+    from diviewer.build.checks import check_device, check_folders, check_ks, check_replacement, check_splits
     from diviewer.build.plan import describe, make_plan
     from diviewer.errors import DiviewerError
-    from diviewer.paths import models_dir, scenes_dir
     from diviewer.train.recipe import load_recipe
 
     if args.scene is None and args.recipe is None:
@@ -77,15 +83,22 @@ def run_build_command(args: argparse.Namespace) -> int:
         raise DiviewerError("the recipe names no scene ([recipe] scene); give --scene", path=recipe.path,
                             field="recipe.scene")
     scene = args.scene = str(args.scene or recipe.scene)
-    shipped = Path(scene).suffix != ".toml" and (scenes_dir() / f"{scene}.toml").is_file()
     work = args.work or Path("runs") / Path(scene).stem
-    ship = args.ship or (models_dir() if shipped else work)
+    ship = args.ship or work  # a model elsewhere is replaced only where --ship names its folder
+    if args.replace_worse and args.ship is None:
+        raise DiviewerError("--replace-worse applies to a model replaced in the folder --ship names; give --ship DIR",
+                            field="--replace-worse")
     overrides = {"device": args.device} if args.device else None
-    if args.ks and any(k < 1 for k in args.ks):
-        raise DiviewerError(f"widths must be positive, got {args.ks}", field="--ks")
+    if args.ks:
+        check_ks(args.ks)
+    check_folders(work, ship)
+    device = args.device or recipe.train.get("device")
+    check_device(device, "--device" if args.device else "train.device", None if args.device else recipe.path)
     plan = make_plan(scene, recipe, work, ship=ship, budget_hours=args.budget,
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
                      evalset_dir=args.evalset)
+    check_splits(plan.capture, recipe.path)
+    replacing = check_replacement(plan, args.ship is not None, args.replace_worse)
     names = [s.name for s in plan.stages]
     if args.stop_after is not None and args.stop_after not in names:
         raise DiviewerError(f"'{args.stop_after}' is not a stage of this build's plan ({', '.join(names)})",
@@ -100,11 +113,15 @@ def run_build_command(args: argparse.Namespace) -> int:
         except DiviewerError as exc:  # the work folder holds another plan's build: the run would stop there
             done, refusal = set(), exc
         for line in [*describe(plan, done, {p.stage: p.left for p in paces if p.left is not None}),
-                     *(p.line for p in paces)]:
+                     *(p.line for p in paces), *([replacing] if replacing else [])]:
             print(line)
         if args.stop_after is not None:
             after = names[names.index(args.stop_after) + 1:]
             print(f"--stop-after {args.stop_after}: a run stops there" + (f"; not run: {', '.join(after)}" if after else ""))
+        from diviewer.locks import holder
+
+        if (running := holder(work)) is not None:
+            print(f"a run of this command would refuse the work folder now: another run is writing there: {running}")
         if refusal is not None:
             print("dry run: nothing was done; a run of this command would refuse the work folder (below)")
             raise refusal
@@ -112,9 +129,55 @@ def run_build_command(args: argparse.Namespace) -> int:
         return 0
     from diviewer.build.pipeline import BuildInterrupted, run_build
 
+    if replacing:
+        print(replacing)
     try:
-        run_build(plan, rebuild_command(args), stop_after=args.stop_after)
+        with interrupts_raise():
+            run_build(plan, rebuild_command(args), stop_after=args.stop_after, replace_worse=args.replace_worse)
     except BuildInterrupted as exc:
-        print(f"diviewer build: stopped ({exc}); run the same command again to resume")
+        where = f" in stage {exc.stage}" if exc.stage else ""
+        print(f"diviewer build: stopped{where} ({exc}); resume with: {resume_command(args)}")
         return 130
     return 0
+
+
+def resume_command(args: argparse.Namespace) -> str:
+    """The command line that resumes this build: the rebuild command with the folders and the run's options."""
+    words = shlex.split(rebuild_command(args))
+    for option, value in (("--work", args.work), ("--ship", args.ship), ("--device", args.device)):
+        if value is not None:
+            words += [option, str(value)]
+    if args.replace_worse:
+        words.append("--replace-worse")
+    return shlex.join(words)
+
+
+@contextlib.contextmanager
+def interrupts_raise():
+    """SIGTERM raises `BuildInterrupted` within the block, as Ctrl-C raises KeyboardInterrupt, so that a build ended
+    politely says where it stopped and how to resume (a training stage saves its last.ckpt first, by its own
+    handler); the former handler comes back after. A process forked meanwhile (the scoring's workers) dies of it as
+    before."""
+    import os
+    import signal
+    import threading
+
+    from diviewer.build.pipeline import BuildInterrupted
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pid, before = os.getpid(), signal.getsignal(signal.SIGTERM)
+
+    def stop(signum, _frame):
+        if os.getpid() != pid:
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
+        raise BuildInterrupted(signal.Signals(signum).name)
+
+    signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import time
 from pathlib import Path
@@ -14,17 +15,22 @@ from typing import Any, Callable
 from diviewer import imageio
 from diviewer.build.pace import measured_pace, missing_link
 from diviewer.build.plan import RUN_ONLY, Plan, describe
+from diviewer.build.scores import QUALITY, evalset_psnr_tm, evalset_scores
 from diviewer.build.state import BuildState
 from diviewer.data.dataset import sha256_file
 from diviewer.console import progress_bar
 from diviewer.errors import DiviewerError
 
 STATE_FILE = "build.json"
-QUALITY = ("psnr", "ssim", "psnr_tm", "ssim_tm")
 
 
 class BuildInterrupted(Exception):
-    """A stage stopped before its end (Ctrl-C inside a training run): the build stops, and resumes when run again."""
+    """A stage stopped before its end (Ctrl-C, SIGTERM): the build stops, and resumes when run again."""
+
+    def __init__(self, why: str, stage: str | None = None):
+        super().__init__(why)
+        self.stage = stage
+        """The stage it stopped in (None: before the first)."""
 
 
 def plan_key(plan: Plan) -> dict[str, Any]:
@@ -35,15 +41,30 @@ def plan_key(plan: Plan) -> dict[str, Any]:
     from diviewer.train.recipe import export_settings
 
     return json.loads(json.dumps({
-        "scene": str(resolve_scene_path(plan.scene).resolve()),
+        "scene": scene_key(resolve_scene_path(plan.scene), plan.work),
         "recipe": {"name": plan.recipe.name, "sha256": plan.recipe.sha256,
                    "content_sha256": plan.recipe.content_sha256(), "model_sha256": plan.recipe.model_sha256()},
         "export": dataclasses.asdict(export_settings(plan.recipe)),
         "capture": dataclasses.asdict(plan.capture), "evalset": dataclasses.asdict(plan.evalset),
         **({"refine_spp": plan.refine_spp} if plan.refine_spp is not None else {}),  # absent: every build before it
         **({"truth_filter": plan.truth_filter.record()} if plan.truth_filter is not None else {}),  # absent: as before
-        **({"given_evalset": str(plan.given_evalset.resolve())} if plan.given_evalset is not None else {}),
+        **({"given_evalset": evalset_key(plan.given_evalset, plan.work)} if plan.given_evalset is not None else {}),
         "train": {k: v for k, v in plan.train.items() if k not in RUN_ONLY}, "ks": list(plan.ks)}, default=str))
+
+
+def scene_key(path: Path, work: Path) -> dict[str, str]:
+    """A build's scene by identity (`diviewer.scene.identity`: its file and every file it loads) and by its path
+    from the work folder, so that a project moved with its scene is the same build (`BuildState`)."""
+    from diviewer.scene.loader import load_scene
+
+    return {"hash": load_scene(path).file_hash, "path": os.path.relpath(path.resolve(), Path(work).resolve())}
+
+
+def evalset_key(path: Path, work: Path) -> dict[str, str]:
+    """An evaluation set made before (``--evalset``) by identity (its manifest's sha256) and by its path from the
+    work folder, as `scene_key` names the scene."""
+    return {"manifest_sha256": sha256_file(path / "manifest.json"),
+            "path": os.path.relpath(path.resolve(), Path(work).resolve())}
 
 
 def finished_stages(plan: Plan) -> set[str]:
@@ -58,14 +79,22 @@ def finished_stages(plan: Plan) -> set[str]:
 
 
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print,
-              stop_after: str | None = None) -> dict[str, Any] | None:
-    """Run (or resume) every stage of ``plan``, or those up to the stage named ``stop_after``; returns the ladder
-    record with the chosen K, or None when it stopped before the pick."""
+              stop_after: str | None = None, replace_worse: bool = False) -> dict[str, Any] | None:
+    """Run (or resume) every stage of ``plan``, or those up to the stage named ``stop_after``, holding the work
+    folder's lock (a second build there is refused at once); returns the ladder record with the chosen K, or None
+    when it stopped before the pick. ``replace_worse``: the ship replaces a model that scores better."""
+    from diviewer.locks import run_lock
+    from diviewer.outputs import building
+
+    with run_lock(plan.work, "build", option="--work"), building(plan.work):
+        return _run(plan, command, log, stop_after, replace_worse)
+
+
+def _run(plan: Plan, command: str, log, stop_after: str | None, replace_worse: bool) -> dict[str, Any] | None:
     for line in [*describe(plan), *(p.line for p in measured_pace(plan))]:
         log(line)
     if stop_after is not None:
         log(f"stops after {stop_after} (--stop-after)")
-    plan.work.mkdir(parents=True, exist_ok=True)
     state = BuildState(plan.work / STATE_FILE, plan_key(plan), save_upgrade=True)
     if state.ladder_change is not None:
         was, now = state.ladder_change
@@ -82,6 +111,7 @@ def run_build(plan: Plan, command: str, log: Callable[[str], None] = print,
         log(f"the recipe's [export] changed ({edits}): every K trained keeps its run; the export, the evaluation, "
             f"the pick and the ship run again")
     bar = progress_bar(max(1, round(plan.seconds)), "build (estimated seconds of work)", "s")
+    stage = None
     try:
         for i, stage in enumerate(plan.stages, 1):
             rec = state.done(stage.name, plan.work)
@@ -91,13 +121,18 @@ def run_build(plan: Plan, command: str, log: Callable[[str], None] = print,
                 log(f"[{i}/{len(plan.stages)}] {stage.name}: {stage.title}")
                 t0 = time.perf_counter()
                 kind, _, k = stage.name.partition("_k")
-                outputs, result = STAGES[kind](plan, state, log, k=int(k) if k else None, command=command)
+                outputs, result = STAGES[kind](plan, state, log, k=int(k) if k else None, command=command,
+                                               replace_worse=replace_worse)
                 state.finish(stage.name, plan.work, outputs, result, time.perf_counter() - t0)
             bar.update(round(stage.seconds))
             if stage.name == stop_after and i < len(plan.stages):
                 log(f"stopped after {stage.name} as asked (--stop-after); the same command without it goes on "
                     f"from {plan.stages[i].name}")
                 return None
+    except KeyboardInterrupt:
+        raise BuildInterrupted("interrupted", stage and stage.name) from None
+    except BuildInterrupted as exc:
+        raise BuildInterrupted(str(exc), exc.stage or (stage and stage.name)) from None
     finally:
         bar.close()
     ladder = state.data["stages"]["pick"]["result"]
@@ -186,7 +221,10 @@ def _evalset(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]
 
     if plan.given_evalset is not None:
         return _given_evalset(plan, log)
-    summary = build_evalset(plan.scene, plan.evalset_dir, plan.evalset, log=log, jobs=default_jobs())
+    from diviewer.locks import run_lock
+
+    with run_lock(plan.evalset_dir, "evalset", option="--work"):  # as `diviewer evalset` into it
+        summary = build_evalset(plan.scene, plan.evalset_dir, plan.evalset, log=log, jobs=default_jobs())
     if summary["present"] != summary["planned"]:
         raise BuildInterrupted(f"evaluation set: {summary['present']} of {summary['planned']} frames")
     return [plan.evalset_dir / "manifest.json", plan.evalset_dir / "summary.json"], {"frames": summary["present"]}
@@ -209,13 +247,15 @@ def _given_evalset(plan: Plan, log) -> tuple[list[Path], dict]:
 
 
 def _train(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path], dict]:
+    from diviewer.locks import run_lock
     from diviewer.train.config import TrainConfig
     from diviewer.train.trainer import train
 
     cfg = TrainConfig(**plan.train_fields(k))
     out = plan.run_dir(k)
     _set_aside_if_begun_otherwise(cfg, out, log)
-    result = train(cfg, resume=(out / "last.ckpt").is_file(), log=log)
+    with run_lock(out, "train", option="--work"):  # the lock `diviewer train --out` takes: one run per folder
+        result = train(cfg, resume=(out / "last.ckpt").is_file(), log=log)
     n_train = min(state.data["stages"]["check"]["result"]["frames"]["train"], cfg.train_frames or math.inf)
     planned = cfg.epochs * math.ceil(n_train / cfg.batch_size)
     planned = min(planned, cfg.max_steps) if cfg.max_steps else planned
@@ -236,6 +276,10 @@ def _set_aside_if_begun_otherwise(cfg, run: Path, log) -> None:
     last = run / "last.ckpt"
     diff = changed_settings(cfg, load_checkpoint(last, mmap=True)) if last.is_file() else []
     if diff:
+        from diviewer.locks import run_lock
+
+        with run_lock(run, "train", option="--work"):  # a run training there now is never moved from under it
+            pass
         kept = run.with_name(f"{run.name}_before_{time.strftime('%Y%m%d_%H%M%S', time.gmtime())}")
         run.rename(kept)
         log(f"{run}: begun under other training settings ({'; '.join(diff)}); kept as {kept.name}, and trained "
@@ -270,14 +314,6 @@ PICK_MEASURE = "evalset_psnr_tm"
 whose own noise (~36 dB tone-mapped on cornell) caps what it can tell apart; models near that floor read alike."""
 
 
-def evalset_psnr_tm(splits: dict[str, dict]) -> float:
-    """The mean tone-mapped PSNR over every frame of an evaluation set: the splits' means weighted by their frames."""
-    scored = [(s["psnr_tm"], s["frames"]) for s in splits.values() if s.get("psnr_tm") is not None]
-    if not scored or not sum(n for _, n in scored):
-        raise DiviewerError("the evaluation set scored no frames for the ladder's pick")
-    return sum(p * n for p, n in scored) / sum(n for _, n in scored)
-
-
 def pick_within(rows: list[dict], tolerance_db: float, max_mb: float | None, recipe: Path | None = None):
     """The bench's rule over the Ks whose model file is at most ``max_mb`` MB (all where None): ``rows`` hold each
     K's ``K``, ``bytes`` and ``evalset_psnr_tm``. Returns `smallest_sufficient_k`'s pick and the Ks over the cap; an
@@ -300,10 +336,7 @@ def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     ev = json.loads((plan.work / "evalset_eval.json").read_text())
     rows = []
     for k in plan.ks:
-        key = plan.model(k).stem
-        splits = {s: {**{q: r["methods"][key][q]["mean"] for q in QUALITY if q in r["methods"][key]},
-                      "frames": r["frames"]}
-                  for s, r in ev["splits"].items() if key in r["methods"]}
+        splits = evalset_scores(ev, plan.model(k).stem)
         rows.append({"K": k, "steps": stages[f"train_k{k}"]["result"]["step"],
                      "bytes": plan.model(k).stat().st_size,
                      "test_split": stages[f"export_k{k}"]["result"]["test_split"],
@@ -331,14 +364,29 @@ def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     return [out], record
 
 
-def _ship(plan: Plan, state: BuildState, log, command: str, **_) -> tuple[list[Path], dict]:
+def _ship(plan: Plan, state: BuildState, log, command: str, replace_worse: bool = False, **_) -> tuple[list[Path],
+                                                                                                      dict]:
     """The chosen model as SCENE.onnx with its card (the ladder and the rebuild command added, in the JSON and in
-    the ONNX metadata alike), its curves, metrics and the ladder record."""
+    the ONNX metadata alike), its curves, metrics and the ladder record. A model there that this build did not
+    ship is scored first and replaced only where the new one scores at least as well (or ``replace_worse``), its
+    files kept in WORK/replaced."""
+    from diviewer.build.checks import own_ship, replaced_model
+    from diviewer.build.replace import check_not_worse, keep_replaced
+    from diviewer.outputs import SHIPPED_SUFFIXES
+
     if plan.ship is None:
         return [], {"to": None}
     ladder = state.data["stages"]["pick"]["result"]
     k, name = ladder["chosen_K"], plan.scene_name
     dst = plan.ship / f"{name}.onnx"
+    replaced, old = None, replaced_model(plan)
+    if old is not None:
+        row = next(r for r in ladder["rows"] if r["K"] == k)
+        replaced = check_not_worse(plan, old, k, row["evalset_psnr_tm"], replace_worse, log)
+    targets = [dst, dst.with_suffix(".json"), *(plan.ship / f"{name}{s}" for s in SHIPPED_SUFFIXES)]
+    kept = keep_replaced(plan, [p for p in targets if p.is_file() and not own_ship(plan, p)], log)
+    if kept is not None:
+        replaced = {**(replaced or {}), "kept_in": str(kept)}
     card = json.loads(plan.model(k).with_suffix(".json").read_text())
     card["ladder"] = {"chosen_K": k, "why": ladder["rule"], "file": f"{name}_ladder.json",
                       "curves": f"{name}_ladder_curves.png"}
@@ -355,7 +403,8 @@ def _ship(plan: Plan, state: BuildState, log, command: str, **_) -> tuple[list[P
             outputs.append(plan.ship / f"{name}{suffix}")
     log(f"shipped K={k} as {dst} ({', '.join(p.name for p in outputs[1:])})")
     return outputs, {"to": str(plan.ship), "model": str(dst), "K": k,
-                     "ladder_sha256": sha256_file(plan.work / "ladder.json")}
+                     "ladder_sha256": sha256_file(plan.work / "ladder.json"),
+                     **({"replaced": replaced} if replaced else {})}
 
 
 STAGES = {"capture": _capture, "refine": _refine, "filter": _filter, "check": _check, "evalset": _evalset,

@@ -55,7 +55,7 @@ class BuildState:
                 raise DiviewerError("not a build state file; use another --work", path=self.path, field="format")
             old_plan = old.get("plan", {})
             changed = sorted(k for k in set(plan_key) | set(old_plan)
-                             if not _same(k, old_plan.get(k), plan_key.get(k)))
+                             if not _same(k, old_plan.get(k), plan_key.get(k), self.path.parent))
             untrained = not any(_from_training(name) for name in old.get("stages", {}))
             if changed and set(changed) <= {*REPLANNABLE, *(BEFORE_TRAINING if untrained else ())}:
                 # the same capture and evaluation set with more (or fewer) widths, exported otherwise, or (before any
@@ -67,6 +67,7 @@ class BuildState:
                 if "export" in changed:
                     self.export_change = (old_plan["export"], plan_key["export"])
                 redo = lambda name: name in LADDER_STAGES or ("export" in changed and name.startswith("export_k"))
+                _keep_shipped(old, old.get("stages", {}).get("ship"))
                 old["stages"] = {name: rec for name, rec in old.get("stages", {}).items() if not redo(name)}
             elif changed:
                 raise DiviewerError(f"this work folder holds a build of another plan (differs in {', '.join(changed)});"
@@ -97,10 +98,36 @@ class BuildState:
             "seconds": None if seconds is None else round(seconds, 1),
             "outputs": {_output_key(Path(p), root): sha256_file(Path(p)) for p in outputs},
             "result": result or {}}
+        if stage == "ship":
+            _keep_shipped(self.data, self.data["stages"][stage])
         self.save()
 
     def save(self) -> None:
         imageio.write_text(self.path, json.dumps(self.data, indent=1, sort_keys=True, default=str) + "\n")
+
+
+SHIPPED = "shipped"
+"""The state's record of every file a ship stage of this build wrote (relative key -> sha256), kept when the ship
+runs again: the build's own model there is replaced without a word, anyone else's only as --ship allows."""
+
+
+def _keep_shipped(data: dict[str, Any], ship: dict[str, Any] | None) -> None:
+    """Add the outputs of the ship record ``ship`` to ``data``'s `SHIPPED` record."""
+    if isinstance(ship, dict) and isinstance(ship.get("outputs"), dict):
+        data.setdefault(SHIPPED, {}).update(ship["outputs"])
+
+
+IDENTITY = {"scene": "hash", "given_evalset": "manifest_sha256"}
+"""Plan fields named by identity (the member compared) and by their path from the work folder."""
+
+
+def _captured_scene(root: Path) -> str | None:
+    """The scene identity the work folder's capture (``root``/data) records, or None where there is none."""
+    try:
+        data = json.loads((root / "data" / "manifest.json").read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    return data.get("scene_hash") if isinstance(data, dict) else None
 
 
 def _from_training(stage: str) -> bool:
@@ -108,11 +135,21 @@ def _from_training(stage: str) -> bool:
     return stage.startswith(("train_k", "export_k")) or stage in LADDER_STAGES
 
 
-def _same(field: str, old: Any, new: Any) -> bool:
-    """Whether a field of the plan key is the same plan. The recipe is the same when what it asks for is: the
+def _same(field: str, old: Any, new: Any, root: Path = Path(".")) -> bool:
+    """Whether a field of the plan key is the same plan. The scene, and an evaluation set made before, are the same
+    when their identity is (`IDENTITY`; the ``path`` from the work folder ``root`` may differ: a project moved with
+    them); a key written before named them by their absolute path, which is compared as then, or, for the scene of a
+    project moved since, by the identity its capture records. The recipe is the same when what it asks for is: the
     sha256 of its values without ``[export]`` (an edited comment is the same recipe, and the export settings are
     the field ``export``). A key written before that compares the values with ``[export]``, and one older still
     the file's bytes, as each did then."""
+    if field in IDENTITY and isinstance(new, dict):
+        if isinstance(old, dict):
+            return old.get(IDENTITY[field]) == new.get(IDENTITY[field])
+        if old == os.path.normpath(os.path.join(os.path.abspath(root.resolve()), str(new.get("path")))):
+            return True
+        # a project moved before the scene was keyed by identity: the capture in it records the scene's
+        return field == "scene" and new.get("hash") is not None and _captured_scene(root) == new["hash"]
     if field == "recipe" and isinstance(old, dict) and isinstance(new, dict):
         if "model_sha256" in old:  # the export settings are a field of their own
             return (old.get("name"), old["model_sha256"]) == (new.get("name"), new.get("model_sha256"))

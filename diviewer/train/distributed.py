@@ -32,6 +32,13 @@ class Dist:
         return self.rank == 0
 
 
+def cuda_device_count() -> int:
+    """The CUDA devices torch sees here (0 where CUDA is not available)."""
+    import torch
+
+    return torch.cuda.device_count() if torch.cuda.is_available() else 0
+
+
 def setup(cfg: TrainConfig) -> Dist:
     """Pick the device; under torchrun (WORLD_SIZE > 1) join the process group (NCCL on GPUs, else gloo)."""
     import torch

@@ -529,6 +529,30 @@ def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
     ladder2 = json.loads((ship2 / "tiny_ladder.json").read_text())
     assert set(ladder2["rows"][0]["evalset"]) == set(ladder["rows"][0]["evalset"])
     assert json.loads((ship2 / "tiny.json").read_text())["rebuild"].endswith(f"--evalset {work / 'evalset'}")
+    # The second build shipped to the first's folder: the model there is the first build's, not its own. It is scored
+    # on the same evaluation set by the ladder's own code (the first ladder's figure for that model), and replaced
+    # only where the new one scores at least as well, or with --replace-worse; the replaced files are kept.
+    old_score, new_score = by_k[ladder["chosen_K"]], ladder2["rows"][0]["evalset_psnr_tm"]
+    argv3 = [*argv2[:argv2.index("--ship") + 1], str(ship), *argv2[argv2.index("--ship") + 2:]]
+    shipped = (ship / "tiny.onnx").read_bytes()
+    rc = main(argv3)
+    out, err = capsys.readouterr()
+    assert f"the new K = 2 scores {new_score:.2f} dB against {old_score:.2f} dB" in out, out
+    if new_score < old_score:
+        assert rc == 2 and "scores worse than the one it would replace" in err and "nothing replaced" in err
+        assert (ship / "tiny.onnx").read_bytes() == shipped and (work2 / "models" / "tiny_k2.onnx").is_file()
+        assert main([*argv3, "--replace-worse"]) == 0
+        capsys.readouterr()
+    else:
+        assert rc == 0
+    assert (ship / "tiny.onnx").read_bytes() != shipped
+    kept = next((work2 / "replaced").iterdir())
+    assert (kept / "tiny.onnx").read_bytes() == shipped and (kept / "tiny_ladder.json").is_file()
+    replaced = json.loads((work2 / "build.json").read_text())["stages"]["ship"]["result"]["replaced"]
+    assert replaced["evalset_psnr_tm"] == pytest.approx(old_score, abs=1e-3) and replaced["kept_in"] == str(kept)
+    assert main(argv3) == 0, "its own model now: shipped again without a comparison"
+    assert "ship: done before" in capsys.readouterr().out
+
     cornell_set = Path(__file__).resolve().parents[2] / "assets" / "evalsets" / "cornell"
     assert main([*argv2[:-1], str(cornell_set), "--dry-run"]) == 2
     err = capsys.readouterr().err

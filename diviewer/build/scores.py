@@ -1,0 +1,24 @@
+"""How a build scores a model on its evaluation set: the ladder's rows, its pick, and the model a ship replaces all
+read these."""
+
+from __future__ import annotations
+
+from diviewer.errors import DiviewerError
+
+QUALITY = ("psnr", "ssim", "psnr_tm", "ssim_tm")
+
+
+def evalset_scores(ev: dict, key: str) -> dict[str, dict]:
+    """One model's per-split means and frame counts in a `diviewer eval --evalset` record ``ev`` (``key``: the
+    model file's stem), as the ladder's rows hold them."""
+    return {s: {**{q: r["methods"][key][q]["mean"] for q in QUALITY if q in r["methods"][key]},
+                "frames": r["frames"]}
+            for s, r in ev["splits"].items() if key in r["methods"]}
+
+
+def evalset_psnr_tm(splits: dict[str, dict]) -> float:
+    """The mean tone-mapped PSNR over every frame of an evaluation set: the splits' means weighted by their frames."""
+    scored = [(s["psnr_tm"], s["frames"]) for s in splits.values() if s.get("psnr_tm") is not None]
+    if not scored or not sum(n for _, n in scored):
+        raise DiviewerError("the evaluation set scored no frames for the ladder's pick")
+    return sum(p * n for p, n in scored) / sum(n for _, n in scored)
