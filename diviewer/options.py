@@ -24,7 +24,7 @@ from typing import Any
 from diviewer.errors import DiviewerError
 from diviewer.fieldspec import MAX_SIZE, Float, Int, Ints, Invalid
 from diviewer.train.config import TRAIN_FIELDS
-from diviewer.train.recipe_fields import K, MAX_DEPTH, SEED, SPP, TRUTH_FILTER
+from diviewer.train.recipe_fields import K, MAX_DEPTH, MAX_LADDER_K, SEED, SPP, TRUTH_FILTER
 from diviewer.viewer.models import MIN_GI_SHARE
 from diviewer.viewer.scale import MAX_SCALE
 
@@ -173,7 +173,7 @@ _VIEW = {"target_fps": Float(0.0, 1000.0), "render_scale": Float(0.0, MAX_SCALE,
          "scale_floor": Float(0.0, 1.0, lo_open=True), "scale_ceiling": Float(1.0, MAX_SCALE)}
 _BENCH = {"warmup": Int(0, 10_000), "untrained_k": K, "gi_steps": Int(1, 16), "eval_frames": Int(1, 100_000),
           "pt_frames": Int(1, 10_000), "vxgi_grids": Int(16, 256, power_of_two=True)}
-_OTHERS = {"budget": Float(0.0, 100_000.0, lo_open=True), "ks": K, "frames_per_split": Int(1, 100_000),
+_OTHERS = {"budget": Float(0.0, 100_000.0, lo_open=True), "ks": Int(1, MAX_LADDER_K), "frames_per_split": Int(1, 100_000),
            "ladder": Numbers(Ints(SPP, max_len=64, increasing=True)),
            "window_widths": Numbers(Ints(Int(16, MAX_SIZE), max_len=64, distinct=True)),
            "aspect_crops": Crops(), **TRUTH_FILTER}

@@ -8,10 +8,7 @@ import json
 from pathlib import Path
 
 from diviewer.errors import DiviewerError
-
-MAX_K = 256
-"""The widest K a build trains: the generator's weights, and the memory its training allocates, grow as K
-squared; the paper's ladder (assets/recipes/paper.toml) stops at 128."""
+from diviewer.train.recipe_fields import MAX_LADDER_K as MAX_K
 
 
 def check_ks(ks, field: str = "--ks", path: Path | None = None) -> None:

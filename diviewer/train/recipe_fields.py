@@ -26,6 +26,9 @@ MAX_DEPTH = Int(2, 1024)
 """A path length limit (2: direct light only)."""
 K = Int(1, 1024)
 """A generator base width."""
+MAX_LADDER_K = 256
+"""The widest K a build's ladder trains (a recipe's ``ladder.K``, ``build --ks``): the generator's weights, and the
+memory its training allocates, grow as K squared; the paper's ladder (assets/recipes/paper.toml) stops at 128."""
 
 TRUTH_FILTER = {
     "levels": Int(1, 5), "normal_power": Float(0.0, 1024.0), "plane": Float(1e-6, 1e3),
@@ -56,7 +59,7 @@ EXPORT = {"fp16": Bool(), "half_weights": Bool(), "int8_weights": Bool(), "verif
           "layout": Choice(("NHWC", "NCHW"))}
 """[export]: ExportSettings' fields."""
 
-LADDER = {"K": Ints(K, min_len=0, max_len=16, increasing=True), "tolerance_db": Float(0.0, 100.0),
+LADDER = {"K": Ints(Int(1, MAX_LADDER_K), min_len=0, max_len=16, increasing=True), "tolerance_db": Float(0.0, 100.0),
           "max_mb": Float(0.0, 1e6, lo_open=True)}
 """[ladder]: the widths `diviewer build` trains, the pick's tolerance in dB, the largest model it ships (MB)."""
 

@@ -59,8 +59,8 @@ def _refused(argv: list[str], capsys, tmp_path: Path) -> str:
 
 
 @pytest.mark.parametrize("extra, needle", [
-    (["--ks", "100000"], "--ks: each K must be a whole number from 1 to 256, got 100000"),
-    (["--ks", "4", "0"], "--ks: each K must be a whole number from 1 to 256, got 0"),
+    (["--ks", "100000"], "--ks: must be a whole number from 1 to 256, got 100000"),
+    (["--ks", "4", "0"], "--ks: must be a whole number from 1 to 256, got 0"),
     (["--device", "cuda:x"], "--device: must be auto, cpu, cuda or cuda:N, got 'cuda:x'"),
     (["--device", "tpu"], "--device: must be auto, cpu, cuda or cuda:N"),
     (["--replace-worse"], "--replace-worse: --replace-worse applies to a model replaced in the folder --ship names"),
@@ -120,7 +120,7 @@ def test_split_fractions_that_leave_no_test_frame_are_refused_before_the_capture
     recipe.write_text(TINY_RECIPE.replace("split_fractions = [0.5, 0.25, 0.25]", "split_fractions = [0.9, 0.1, 0.0]"))
     line = _refused(["build", "--scene", "cornell", "--recipe", str(recipe), "--work", str(tmp_path / "w")],
                     capsys, tmp_path)
-    assert "capture.split_fractions" in line and "'test': 0" in line and "r.toml" in line, line
+    assert "capture.split_fractions" in line and "0 test" in line and "r.toml" in line, line
 
 
 def test_a_build_without_ship_ships_into_its_work_folder_even_for_a_shipped_scene(tmp_path, monkeypatch, capsys,
