@@ -21,7 +21,7 @@ from diviewer.scene import camera as cam
 from diviewer.scene import gltf_draco
 from diviewer.scene.gltf_check import Doc, is_int
 from diviewer.scene.gltf_container import data_uri, read_document
-from diviewer.scene.gltf_material import DRACO, _toml_key, apply_uv_transform, check_extensions, material as _material
+from diviewer.scene.gltf_material import DRACO, apply_uv_transform, check_extensions, material as _material
 from diviewer.scene.model import Material, Mesh, Object
 from diviewer.scene.reads import note_read, note_warning, recording_reads, recording_warnings
 from diviewer.scene.textures import _frozen, file_key as _file_key, load_texture  # noqa: F401 (load_texture: re-exported)
@@ -255,7 +255,6 @@ def _parse(d: Doc, base: Path, glb_bin: bytes | None = None):
     parsed = [_material(d, reader.buffers, i, n, base) for i, n in enumerate(mat_names)]
     materials = {n: m for n, (m, _) in zip(mat_names, parsed)}
     default_mat = None
-    unmaterialled = 0
     meshes: dict[str, Mesh] = {}
     prim_keys: list[list[tuple[str, str]]] = []  # per glTF mesh: (mesh key, material name) per primitive
     mesh_names: set = set()
@@ -276,17 +275,12 @@ def _parse(d: Doc, base: Path, glb_bin: bytes | None = None):
                 default_mat = default_mat or _unique(DEFAULT_MATERIAL, names, DEFAULT_MATERIAL)
                 materials.setdefault(default_mat, Material(default_mat, albedo=DEFAULT_ALBEDO))
                 mat = default_mat
-                unmaterialled += 1
             mname = m.get("name") if isinstance(m.get("name"), str) else f"mesh{mi_}"
             key = _unique(mname + (f".{pi}" if len(prims) > 1 else ""), mesh_names, f"mesh{mi_}")
             meshes[key] = Mesh(key, _frozen(v), _frozen(n), _frozen(faces), None if uv is None else _frozen(uv),
                                source=f"{d.file}#{where}")
             keys.append((key, mat))
         prim_keys.append(keys)
-    if unmaterialled:
-        note_warning(f"{d.file}: {unmaterialled} primitive(s) have no material: they get '{default_mat}', glTF's "
-                     f"default, albedo {DEFAULT_ALBEDO[0]:g} (white, reflecting all light); give them one in the scene "
-                     f"file with [materials.{_toml_key(default_mat)}] albedo = [0.8, 0.8, 0.8]")
     return meshes, materials, _place(d, meshes, prim_keys)
 
 

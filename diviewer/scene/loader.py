@@ -13,7 +13,7 @@ from diviewer.errors import DiviewerError
 from diviewer.paths import scenes_dir
 from diviewer.scene import gltf, shapes
 from diviewer.scene.identity import scene_identity
-from diviewer.scene.reads import SceneWarning, recording_reads, recording_warnings
+from diviewer.scene.reads import SceneWarning, note_warning, recording_reads, recording_warnings
 from diviewer.scene.model import Camera, DirectionalLight, FrameConfig, Material, Object, PointLight, Scene
 from diviewer.scene.scene_ranges import parse_ranges as _ranges
 from diviewer.scene.toml_table import FLOAT32_MAX, _entries, _f32, _Table  # noqa: F401 (FLOAT32_MAX: re-exported)
@@ -101,6 +101,11 @@ def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
         meshes, materials, objects = gltf.load_gltf(base / g.str("file"), path=path, field="gltf.file")
         g.finish()
 
+    if gltf.DEFAULT_MATERIAL in materials and gltf.DEFAULT_MATERIAL not in root.table("materials").data:
+        users = sum(o.material == gltf.DEFAULT_MATERIAL for o in objects)
+        note_warning(f"{path}: gltf.file: {users} placed mesh(es) of the glTF have no material: they get "
+                     f"'{gltf.DEFAULT_MATERIAL}', glTF's default, albedo {gltf.DEFAULT_ALBEDO[0]:g} (white, reflecting "
+                     f"all light); give them one with [materials.{gltf.DEFAULT_MATERIAL}] albedo = [0.8, 0.8, 0.8]")
     for key, t in _entries(root.table("materials"), lambda k: None):
         # A glTF material of the same name is overridden: the keys given replace its values, the rest stay.
         materials[key] = _material(key, t, base, path, materials.get(key))
