@@ -104,8 +104,8 @@ def open_cells(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings()):
     labels, count = ndimage.label(np.pad(free, 1, constant_values=True))
     outside = int(labels[0, 0, 0])
     labels = labels[1:-1, 1:-1, 1:-1]
-    open_ = free.copy()
     centre = lo + (np.indices(tuple(dims)).transpose(1, 2, 3, 0) + 0.5) * size
+    open_ = free & np.all(centre <= hi, axis=-1)  # the grid's last cells may reach past the bounds
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     for k in range(1, count + 1):
         if k == outside:
