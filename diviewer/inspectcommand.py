@@ -73,7 +73,8 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
         if path is not None:
             _check_new_file(path, option, suffix)
     scene = load_any(args.scene)
-    report = survey(scene, OpenSpaceSettings(cells=args.cells))
+    bare = Path(args.scene).suffix.lower() in GLTF_SUFFIXES  # no camera of the author's to start from
+    report = survey(scene, OpenSpaceSettings(cells=args.cells), near=None if bare else scene.default.camera.position)
     skeleton = None
     if args.write_toml is not None:
         skeleton = _skeleton(scene, report, args.write_toml)

@@ -175,6 +175,8 @@ def _attributes(d: Doc, reader: _Reader, prim: dict, where: str):
     from its accessors or, compressed, from its KHR_draco_mesh_compression data."""
     attrs = d.table(prim, "attributes", f"{where}.attributes")
     draco = d.table(prim, "extensions", f"{where}.extensions").get(DRACO)
+    if draco is not None and DRACO not in d.doc.get("extensionsRequired", []) and not gltf_draco.available():
+        draco = None  # not required: the accessors hold an uncompressed copy, read below
     if draco is not None:
         decoded, faces = gltf_draco.decode(d, reader.buffers, draco, where)
         names = set(attrs) | set(decoded)

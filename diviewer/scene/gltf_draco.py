@@ -10,6 +10,15 @@ from diviewer.scene.gltf_container import view_bytes
 EXTRA = "draco"
 
 
+def available() -> bool:
+    """Whether DracoPy can be imported."""
+    try:
+        import DracoPy  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def require_dracopy(d: Doc, field: str):
     """The DracoPy module, or an error naming the extension, the field and the extra that installs it."""
     try:

@@ -4,12 +4,14 @@ The open space is found on a grid over the scene's bounds (`OpenSpaceSettings.ce
 cell is occupied where a surface passes (points sampled on every placed triangle), open where it is not occupied
 and not inside a solid (a pocket of cells the outside cannot reach is a room when rays
 from it meet front faces, the inside of a closed object when they meet back faces). The suggested camera region is
-the largest box of open cells, spanning their centres (so half a cell from any surface); the suggested camera stands at its corner farthest from the scene's centre and looks
+the largest box of open cells (no side more than eight times another; where the scene file has a camera, in
+the open space connected to it), spanning their centres (so half a cell from any surface); the suggested camera stands at its corner farthest from the scene's centre and looks
 at that centre.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +36,9 @@ class OpenSpaceSettings:
     """Cap on the sampled surface points (a large scene samples more sparsely)."""
     seed: int = 0
     """Seed of the surface sampling: the same scene gives the same suggestion."""
+    max_aspect: float = 8.0
+    """The camera region's longest side is at most this many times its shortest: a room, not a corridor or a
+    slab along a wall (the largest box by volume alone is often one)."""
 
 
 def world_triangles(scene: Scene, config=None) -> tuple[np.ndarray, list[str]]:
@@ -126,8 +131,9 @@ def open_cells(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings()):
     return open_, lo, size
 
 
-def largest_box(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """(first, last) cell indices of the largest axis-aligned box of True cells, or None when there is none."""
+def largest_box(mask: np.ndarray, max_aspect: float = math.inf) -> tuple[np.ndarray, np.ndarray] | None:
+    """(first, last) cell indices of the largest axis-aligned box of True cells whose longest side is at most
+    ``max_aspect`` times its shortest, or None when there is none."""
     nx, ny, nz = mask.shape
     best, found = 0, None
     for x0 in range(nx):
@@ -144,7 +150,11 @@ def largest_box(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
                     run = np.where(cols[:, z], run + 1, 0)
                     better = run > longest
                     longest, end = np.where(better, run, longest), np.where(better, z, end)
-                vol = (x1 - x0 + 1) * (np.arange(len(cols)) + 1) * longest
+                a, b = x1 - x0 + 1, np.arange(len(cols)) + 1
+                side = np.minimum(a, b)
+                longest = np.minimum(longest, np.floor(max_aspect * side)).astype(int)  # a shorter run is open too
+                fits = np.maximum(a, b) <= max_aspect * np.minimum(side, np.maximum(longest, 1))
+                vol = np.where(fits, a * b * longest, 0)
                 k = int(np.argmax(vol))
                 if vol[k] > best:
                     best = int(vol[k])
@@ -152,12 +162,19 @@ def largest_box(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     return found
 
 
-def suggest_camera(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings()) -> dict:
-    """A camera and a camera region (``[ranges.camera] region``) in the scene's largest open box."""
+def suggest_camera(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings(), near=None) -> dict:
+    """A camera and a camera region (``[ranges.camera] region``) in the scene's largest open box; with ``near`` (a
+    point: the scene file's camera) in the open space connected to it, where the scene's author stands."""
+    from scipy import ndimage
+
     lo, hi = scene.bounds()
     centre, diag = (lo + hi) / 2.0, float(np.linalg.norm(hi - lo))
     mask, origin, size = open_cells(scene, settings)
-    box = largest_box(mask)
+    at = None if near is None else np.floor((np.asarray(near, np.float64) - origin) / size).astype(int)
+    if at is not None and np.all(at >= 0) and np.all(at < mask.shape) and mask[tuple(at)]:
+        labels, _ = ndimage.label(mask)
+        mask = labels == labels[tuple(at)]
+    box = largest_box(mask, settings.max_aspect)
     if box is None:  # no open space inside the bounds: stand outside, in front (+z) and above
         position = centre + np.array([0.0, 0.25, 1.0]) * diag
         region = (position - 0.1 * diag, position + 0.1 * diag)
@@ -185,8 +202,9 @@ def _r(v):
     return [float(f"{float(x):.4g}") for x in v]
 
 
-def survey(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings()) -> dict:
-    """The scene's bounds, triangles, materials, textures, lights, emitters, warnings and a suggested camera."""
+def survey(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings(), near=None) -> dict:
+    """The scene's bounds, triangles, materials, textures, lights, emitters, warnings and a suggested camera
+    (``near``: see `suggest_camera`)."""
     from diviewer.scene.gltf import DEFAULT_MATERIAL
 
     lo, hi = scene.bounds()
@@ -217,4 +235,4 @@ def survey(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings()) -> d
             "materials": materials, "textures": textures, "lights": lights,
             "emissive": {"area_m2": _r(sum(emit.values())), "materials": {k: _r(v) for k, v in emit.items()}},
             "ambient": _r(scene.ambient), "warnings": list(scene.warnings),
-            "suggested": suggest_camera(scene, settings)}
+            "suggested": suggest_camera(scene, settings, near)}

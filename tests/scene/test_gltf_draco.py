@@ -56,3 +56,12 @@ def test_corrupt_draco_data_is_named(tmp_path):
     blob = blob[:start] + b"\x07" * (len(blob) - start)
     with pytest.raises(DiviewerError, match=r"meshes\[1\]\.primitives\[0\]\.extensions\.KHR_draco.*does not decode"):
         load_scene(write_scene(tmp_path, doc=doc, blob=blob))
+
+
+def test_draco_not_required_falls_back_to_the_uncompressed_copy_without_dracopy(tmp_path, monkeypatch):
+    doc, blob, v, f = _draco_doc()
+    doc["accessors"][4]["bufferView"], doc["accessors"][5]["bufferView"] = 4, 5  # the copy exporters keep
+    doc["extensionsRequired"] = []
+    monkeypatch.setitem(sys.modules, "DracoPy", None)
+    box = load_scene(write_scene(tmp_path, doc=doc, blob=blob)).meshes["box"]
+    assert np.array_equal(box.vertices, v) and np.array_equal(box.faces, f.astype(np.uint32))

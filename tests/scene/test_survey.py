@@ -4,6 +4,7 @@ the walls and off the pedestal, a suggested camera there, and the largest open b
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -45,25 +46,28 @@ def test_suggested_camera_region_is_inside_the_room_and_clear_of_the_pedestal(re
     assert np.linalg.norm(np.subtract(cam["target"], cam["position"])) > 1.0
 
 
-def _brute(mask: np.ndarray) -> int:
+def _brute(mask: np.ndarray, max_aspect: float) -> int:
     best = 0
     ranges = [list(itertools.combinations_with_replacement(range(n), 2)) for n in mask.shape]
     for (x0, x1), (y0, y1), (z0, z1) in itertools.product(*ranges):
-        if mask[x0:x1 + 1, y0:y1 + 1, z0:z1 + 1].all():
+        sides = (x1 - x0 + 1, y1 - y0 + 1, z1 - z0 + 1)
+        if max(sides) <= max_aspect * min(sides) and mask[x0:x1 + 1, y0:y1 + 1, z0:z1 + 1].all():
             best = max(best, (x1 - x0 + 1) * (y1 - y0 + 1) * (z1 - z0 + 1))
     return best
 
 
 @settings(max_examples=60, deadline=None)
-@given(arrays(bool, st.tuples(st.integers(1, 4), st.integers(1, 4), st.integers(1, 5))))
-def test_largest_box_is_the_largest_all_open_box(mask):
-    got = largest_box(mask)
+@given(arrays(bool, st.tuples(st.integers(1, 4), st.integers(1, 4), st.integers(1, 5))),
+       st.sampled_from([math.inf, 1.0, 2.0]))
+def test_largest_box_is_the_largest_all_open_box(mask, max_aspect):
+    got = largest_box(mask, max_aspect)
     if got is None:
         assert not mask.any()
         return
     first, last = got
     assert mask[first[0]:last[0] + 1, first[1]:last[1] + 1, first[2]:last[2] + 1].all()
-    assert int(np.prod(last - first + 1)) == _brute(mask)
+    assert int(np.prod(last - first + 1)) == _brute(mask, max_aspect)
+    assert max(last - first + 1) <= max_aspect * min(last - first + 1)
 
 
 def test_a_solid_inside_is_not_open_space_and_the_room_is(tmp_path):
