@@ -82,3 +82,15 @@ def test_a_solid_inside_is_not_open_space_and_the_room_is(tmp_path):
     assert at((1.0, 1.0, 1.0)) is False  # the block's inside: rays from it meet back faces
     assert at((-1.0, 2.0, -1.0)) is True  # the room's air
     assert at((0.0, 0.5, 0.0)) is False  # the pedestal's inside (a smaller pocket)
+
+
+def test_the_region_is_found_where_the_scene_camera_stands(tmp_path):
+    from diviewer.scene.survey import suggest_camera
+
+    wall = ('\n[meshes.partition]\nshape = "box"\nsize = [0.2, 3.0, 4.0]\n'
+            '\n[[objects]]\nname = "partition"\nmesh = "partition"\nmaterial = "wall"\nposition = [1.0, 1.5, 0.0]\n')
+    scene = load_scene(write_room(tmp_path, wall))  # a big room x < 0.9 and a small one x > 1.1
+    anywhere = suggest_camera(scene)["camera_region"]["region"]
+    assert anywhere[1][0] < 0.9  # the largest box: in the big room
+    here = suggest_camera(scene, near=(1.6, 1.5, 0.0))["camera_region"]["region"]
+    assert here[0][0] > 1.1 and here[1][0] < 2.0  # in the small room, where the camera is
