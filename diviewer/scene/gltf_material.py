@@ -137,7 +137,7 @@ def material(d: Doc, buffers: list[bytes], i: int, name: str, base: Path) -> tup
         mean = rgb.reshape(-1, 3).mean(axis=0) * emission
         note_warning(f"{d.file}: {field}: material '{name}' glows by a texture ({src}), which diviewer does not "
                      f"render (emission is one colour per material): its emission is left out. To make it glow "
-                     f"evenly, set [materials.{_toml_key(name)}] emission = [{', '.join(f'{x:.4g}' for x in mean)}] "
+                     f"evenly, set [materials.{toml_key(name)}] emission = [{', '.join(f'{x:.4g}' for x in mean)}] "
                      f"(the texture's mean times emissiveFactor)")
         emission = np.zeros(3)
     if not np.all(np.isfinite(emission)) or emission.max() > 3.0e38:
@@ -147,7 +147,7 @@ def material(d: Doc, buffers: list[bytes], i: int, name: str, base: Path) -> tup
                     double_sided=d.flag(m, "doubleSided", f"{where}.doubleSided", False)), transform
 
 
-def _toml_key(name: str) -> str:
+def toml_key(name: str) -> str:
     """A material name as a TOML table key: bare where TOML allows, else quoted."""
     bare = name and all(c.isascii() and (c.isalnum() or c in "-_") for c in name)
     return name if bare else '"' + name.replace("\\", "\\\\").replace('"', '\\"') + '"'

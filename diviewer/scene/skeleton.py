@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 
 from diviewer.scene.gltf import DEFAULT_MATERIAL
-from diviewer.scene.gltf_material import _toml_key
+from diviewer.scene.gltf_material import toml_key
 from diviewer.scene.model import DirectionalLight, Scene
 
 
@@ -60,7 +60,7 @@ def skeleton_toml(scene: Scene, report: dict, toml_path: Path) -> str:
             out += [f"[materials.{DEFAULT_MATERIAL}]  # meshes without a material (glTF's default is albedo 1.0)",
                     "albedo = [0.8, 0.8, 0.8]"]
             continue
-        out += [f"# [materials.{_toml_key(name)}]", f"# albedo = {_v(m.albedo)}", f"# emission = {_v(m.emission)}"]
+        out += [f"# [materials.{toml_key(name)}]", f"# albedo = {_v(m.albedo)}", f"# emission = {_v(m.emission)}"]
     out.append("")
     lights = list(scene.default.lights)
     for light in lights:

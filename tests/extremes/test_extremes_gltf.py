@@ -304,3 +304,25 @@ def test_mutations_reach_both_outcomes(tmp_path):
         doc = find(mutated_documents(), lambda d: want_refusal == isinstance(
             load_mutated(tmp_path / f"f{next(_counter)}", d), DiviewerError), settings=settings(max_examples=200))
         json.dumps(doc)  # a plain JSON document
+
+
+@settings(max_examples=60, deadline=timedelta(seconds=LIMIT_S))
+@given(cut=st.integers(0, 10_000), flip=st.integers(0, 10_000), byte=st.integers(0, 255))
+def test_truncated_or_corrupted_glb_loads_soundly_or_is_refused(tmp_path_factory, cut, flip, byte):
+    """Any prefix of a valid .glb, with any one byte changed, loads or ends in one DiviewerError naming it."""
+    from gltf_doc import glb_bytes, scene_toml
+
+    folder = tmp_path_factory.mktemp("glb")
+    doc, blob = gltf_document()
+    data = bytearray(glb_bytes(doc, blob))
+    if data:
+        data[flip % len(data)] = byte
+    data = bytes(data[:len(data) - cut % (len(data) + 1)])
+    write_scene(folder)
+    (folder / "x.glb").write_bytes(data)
+    (folder / "scene.toml").write_text(scene_toml("x.glb"))
+    with time_limit():
+        try:
+            load_scene(folder / "scene.toml")
+        except DiviewerError as exc:
+            assert "x.glb" in str(exc), str(exc)
