@@ -50,7 +50,8 @@ class _Reader:
             if uri is None and i == 0 and glb_bin is not None:
                 data, what = glb_bin, f"{doc.file}'s BIN chunk"  # a .glb's own buffer has no uri
             elif uri is None:
-                raise doc.err(f"{field}.uri", "the buffer has no 'uri' and is not the first buffer of a .glb")
+                raise doc.err(f"{field}.uri", "the buffer has no 'uri' (only the first buffer of a .glb, its BIN chunk, "
+                                              "may have none, and only where the .glb has a BIN chunk)")
             elif isinstance(uri, str) and uri.startswith("data:"):
                 data, what = data_uri(uri, doc, f"{field}.uri", "buffer"), "the embedded buffer"
             else:

@@ -16,7 +16,8 @@ def parse_ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
     """The ranges table of a scene file, checked against its default configuration and meshes."""
     lights, objects, camera = {}, {}, None
     known_lights = {l.name for l in default.lights}
-    for key, r in _entries(t.table("lights"), lambda k: None if k in known_lights else f"no light named '{k}'"):
+    for key, r in _entries(t.table("lights"), lambda k: None if k in known_lights else
+                           f"no light named '{k}'; lights: {', '.join(sorted(known_lights)) or 'none'}"):
         angle = _interval(r, "angle", (0.0, 0.0))
         inten = _interval(r, "intensity", (1.0, 1.0), lo=0.0)
         if inten[0] <= 0.0:
@@ -28,7 +29,8 @@ def parse_ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
         lights[key] = LightRange(axis=_axis(r, "axis", (0.0, 1.0, 0.0)), angle=angle, intensity=inten,
                                  position=_light_box(r, light, angle, default, meshes))
     known_objects = {o.name for o in default.objects}
-    for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else f"no object named '{k}'"):
+    for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else
+                           f"no object named '{k}'; objects: {', '.join(sorted(known_objects))}"):
         train, test = r.strs("train_meshes"), r.strs("test_meshes")
         for field_name, lst in (("train_meshes", train), ("test_meshes", test)):
             for m in lst:

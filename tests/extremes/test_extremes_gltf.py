@@ -129,7 +129,7 @@ CASES = {
     "embedded_buffer_base64": (_set("buffers.0.uri", "data:application/octet-stream;base64,A@A"), "buffers[0].uri",
                                "malformed"),
     "embedded_buffer_not_base64": (_set("buffers.0.uri", "data:text/plain,abc"), "buffers[0].uri", "base64 data URI"),
-    "buffer_without_uri": (lambda d: d["buffers"][0].pop("uri"), "buffers[0].uri", "not the first buffer of a .glb"),
+    "buffer_without_uri": (lambda d: d["buffers"][0].pop("uri"), "buffers[0].uri", "only the first buffer of a .glb"),
     "remote_image": (_set("images.0.uri", "https://example.com/tex.png"), "images[0].uri", "relative file"),
     "missing_buffer_file": (_set("buffers.0.uri", "nope.bin"), "buffers[0].uri", "not found"),
     "extension_required": (_set("extensionsRequired", ["EXT_meshopt_compression"]), "extensionsRequired",

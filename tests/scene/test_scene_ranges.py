@@ -73,3 +73,8 @@ def test_unknown_key_lists_the_allowed_keys(tmp_path):
         load_scene(write_room(tmp_path, "\n[ranges.lights.lamp]\nregion = [[0, 1, 0], [1, 2, 1]]\n"))
     msg = str(info.value)
     assert "ranges.lights.lamp.region: unknown key 'region'; allowed keys: angle, axis, intensity, position" in msg
+
+
+def test_a_range_for_an_unknown_light_lists_the_lights(tmp_path):
+    with pytest.raises(DiviewerError, match=r"ranges\.lights\.lamb: no light named 'lamb'; lights: lamp"):
+        load_scene(write_room(tmp_path, "\n[ranges.lights.lamb]\nintensity = [0.5, 2.0]\n"))
