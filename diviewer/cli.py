@@ -155,6 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     from diviewer.build.command import add_build_parser
     from diviewer.datacommand import add_data_parsers
     from diviewer.evalcommand import add_eval_parsers
+    from diviewer.inspectcommand import add_inspect_parser
     from diviewer.train.cli import add_train_parser
     from diviewer.viewer.command import add_view_parser
 
@@ -168,6 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_baseline_parser(sub)
     _add_bench_parser(sub)
     add_data_parsers(sub)
+    add_inspect_parser(sub)
     return ap
 
 
@@ -291,9 +293,27 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None
     check_command_outputs(args.command, args, options)
 
 
+def _say_scene_warnings(command: str) -> None:
+    """Print a scene load's warnings (an unhonoured glTF extension, a default material) as one line each."""
+    import warnings
+
+    from diviewer.scene.reads import SceneWarning
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, SceneWarning):
+            print(f"diviewer {command}: warning: {message}", file=sys.stderr)
+        else:
+            shown(message, category, filename, lineno, file, line)
+    warnings.showwarning = show
+    warnings.simplefilter("always", SceneWarning)  # each load says them (a second scene may share a glTF)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
+    _say_scene_warnings(args.command)
     try:
         check_options(ap, args)
         if getattr(args, "variant", None):

@@ -112,3 +112,41 @@ def write_scene(folder: Path, doc: dict | None = None, blob: bytes | None = None
     Image.fromarray(checker_rgba() if image is None else image).save(folder / "tex.png")
     (folder / "scene.toml").write_text(toml)
     return folder / "scene.toml"
+
+
+def glb_bytes(doc: dict, blob: bytes | None) -> bytes:
+    """A .glb container: the 12-byte header, the JSON chunk (space-padded) and the BIN chunk (zero-padded), the
+    document's first buffer made the BIN chunk (its uri dropped)."""
+    import struct
+
+    doc = json.loads(json.dumps(doc))
+    if blob is not None:
+        doc["buffers"][0].pop("uri", None)
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    out = struct.pack("<II", len(text), 0x4E4F534A) + text
+    if blob is not None:
+        blob = blob + b"\0" * (-len(blob) % 4)
+        out += struct.pack("<II", len(blob), 0x004E4942) + blob
+    return b"glTF" + struct.pack("<II", 2, 12 + len(out)) + out
+
+
+def data_uri(data: bytes, mime: str = "application/octet-stream") -> str:
+    import base64
+
+    return f"data:{mime};base64," + base64.b64encode(data).decode()
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    import io
+
+    from PIL import Image
+
+    out = io.BytesIO()
+    Image.fromarray(image).save(out, format="PNG")
+    return out.getvalue()
+
+
+def scene_toml(gltf_file: str, extra: str = "") -> str:
+    """SCENE_TOML importing ``gltf_file`` instead of tiny.gltf, with ``extra`` appended."""
+    return SCENE_TOML.replace('file = "tiny.gltf"', f'file = "{gltf_file}"') + extra

@@ -30,6 +30,7 @@ LAYERS = {
     "viewer/": 5, "bench/": 5, "build/": 5,
     # 6: the command line
     "cli": 6, "evalcommand": 6, "datacommand": 6, "options": 6, "__main__": 6,
+    "inspectcommand": 6,
 }
 """Each unit (a subpackage, or a top-level module) and its floor: a unit imports only its own floor or lower."""
 

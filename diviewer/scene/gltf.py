@@ -1,50 +1,68 @@
-"""glTF 2.0 scenes (.gltf + .bin + images) as mesh, material and object libraries.
+"""glTF 2.0 scenes as downloaded (.gltf with files or data URIs, .glb) as mesh, material and object libraries.
 
-A scene file imports one with ``[gltf] file = "..."``: each primitive becomes a Mesh, each glTF material a
-diffuse Material (base colour factor and texture, ``alphaMode: MASK`` with its ``alphaCutoff``, ``doubleSided``),
-and each node that places a mesh an Object with the node's world pose, so instanced meshes stay instanced.
-Metallic, roughness, normal maps and ``BLEND`` transparency are not modelled (the renderers are diffuse):
-a BLEND material is drawn opaque. The document is validated, never trusted (diviewer/scene/gltf_check.py):
-indices, types, transforms and the node graph (a cycle is refused). Files are parsed once per process and
-cached by the path, mtime and size of the .gltf and of every file it reads.
+A scene file imports one with ``[gltf] file = "scene.gltf"`` or ``"scene.glb"``: each primitive becomes a Mesh, each
+glTF material a diffuse Material (diviewer/scene/gltf_material.py: base colour factor and texture, ``alphaMode: MASK``
+with its ``alphaCutoff``, ``doubleSided``, emission, the extensions read), and each node that places a mesh an Object
+with the node's world pose, so instanced meshes stay instanced. Metallic, roughness, normal maps and ``BLEND``
+transparency are not modelled (the renderers are diffuse): a BLEND material is drawn opaque. A primitive without a
+material gets ``gltf_default`` (glTF's default: white, albedo 1.0), with a warning. The document is validated,
+never trusted (diviewer/scene/gltf_check.py): indices, types, transforms and the node graph (a cycle is refused).
+Files are parsed once per process and cached by the path, mtime and size of the glTF and of every file it reads.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.scene import camera as cam
+from diviewer.scene import gltf_draco
 from diviewer.scene.gltf_check import Doc, is_int
+from diviewer.scene.gltf_container import data_uri, read_document
+from diviewer.scene.gltf_material import DRACO, apply_uv_transform, check_extensions, material as _material
 from diviewer.scene.model import Material, Mesh, Object
-from diviewer.scene.reads import note_read, recording_reads
-from diviewer.scene.textures import _frozen, file_key as _file_key, load_texture
+from diviewer.scene.reads import note_read, note_warning, recording_reads, recording_warnings
+from diviewer.scene.textures import _frozen, file_key as _file_key, load_texture  # noqa: F401 (load_texture: re-exported)
+
+DEFAULT_MATERIAL = "gltf_default"
+"""The material of primitives that name none: glTF's default (white, albedo 1.0); ``[materials.gltf_default]`` in
+the scene file overrides it."""
+DEFAULT_ALBEDO = (1.0, 1.0, 1.0)
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 FLOAT = (5126,)
 UNSIGNED = (5121, 5123, 5125)
-_gltf_cache: dict[tuple, tuple[tuple[dict, dict, list], tuple[Path, ...], tuple]] = {}
+_gltf_cache: dict[tuple, tuple[tuple[dict, dict, list], tuple[Path, ...], tuple, tuple[str, ...]]] = {}
 
 
 class _Reader:
     """Accessors of one glTF file, read straight from its buffers with numpy, every offset checked."""
 
-    def __init__(self, doc: Doc, base: Path):
+    def __init__(self, doc: Doc, base: Path, glb_bin: bytes | None = None):
         self.d, self.file = doc, doc.file
         self.buffers = []
         for i, b in enumerate(doc.array("buffers")):
-            bin_path = doc.uri(b, base, f"buffers[{i}].uri", "buffer")
-            if not bin_path.is_file():
-                raise doc.err(f"buffers[{i}].uri", f"buffer file not found: {bin_path}")
-            note_read(bin_path)
-            data = bin_path.read_bytes()
-            length = doc.int(b, "byteLength", f"buffers[{i}].byteLength")
+            field = f"buffers[{i}]"
+            uri = b.get("uri")
+            if uri is None and i == 0 and glb_bin is not None:
+                data, what = glb_bin, f"{doc.file}'s BIN chunk"  # a .glb's own buffer has no uri
+            elif uri is None:
+                raise doc.err(f"{field}.uri", "the buffer has no 'uri' (only the first buffer of a .glb, its BIN chunk, "
+                                              "may have none, and only where the .glb has a BIN chunk)")
+            elif isinstance(uri, str) and uri.startswith("data:"):
+                data, what = data_uri(uri, doc, f"{field}.uri", "buffer"), "the embedded buffer"
+            else:
+                bin_path = doc.uri(b, base, f"{field}.uri", "buffer")
+                if not bin_path.is_file():
+                    raise doc.err(f"{field}.uri", f"buffer file not found: {bin_path}")
+                note_read(bin_path)
+                data, what = bin_path.read_bytes(), str(bin_path)
+            length = doc.int(b, "byteLength", f"{field}.byteLength")
             if len(data) < length:
-                raise doc.err(f"buffers[{i}]", f"{bin_path} has {len(data)} bytes, the file declares {length}")
+                raise doc.err(field, f"{what} has {len(data)} bytes, the file declares {length}")
             self.buffers.append(data)
 
     def accessor(self, index, field: str, types: tuple, components: tuple, normalized: tuple = ()) -> np.ndarray:
@@ -107,51 +125,6 @@ def _pose(m: np.ndarray):
     return pose if np.allclose(cam.trs(*pose), m, atol=1e-5 * max(1.0, float(np.abs(m).max()))) else None
 
 
-ALPHA_MODES = ("OPAQUE", "MASK", "BLEND")
-
-
-def _material(d: Doc, i: int, name: str, base: Path) -> Material:
-    m = d.array("materials")[i]
-    where = f"materials[{i}]"
-    pbr = d.table(m, "pbrMetallicRoughness", f"{where}.pbrMetallicRoughness")
-    factor = d.nums(pbr, "baseColorFactor", 4, f"{where}.pbrMetallicRoughness.baseColorFactor",
-                    (1.0, 1.0, 1.0, 1.0), lo=0.0, hi=1.0)
-    texture = alpha = None
-    source = ""
-    if "baseColorTexture" in pbr:
-        field = f"{where}.pbrMetallicRoughness.baseColorTexture"
-        ref = d.table(pbr, "baseColorTexture", field)
-        if d.int(ref, "texCoord", f"{field}.texCoord", 0) != 0:
-            raise d.err(f"{field}.texCoord", "only TEXCOORD_0 is read; bake the texture onto the first uv set")
-        tex = d.get("textures", ref.get("index"), f"{field}.index")
-        t_field = f"textures[{ref['index']}]"
-        if "sampler" in tex:
-            d.index("samplers", tex["sampler"], f"{t_field}.sampler")
-        if "source" not in tex:
-            raise d.err(f"{t_field}.source", "the texture has no image (an extension's image is not supported)")
-        image = d.get("images", tex["source"], f"{t_field}.source")
-        file = d.uri(image, base, f"images[{tex['source']}].uri", "image")
-        source = str(file)
-        texture, alpha = load_texture(file, path=d.file, field=f"{where} ({name}).baseColorTexture")
-    mode = m.get("alphaMode", "OPAQUE")
-    if mode not in ALPHA_MODES:
-        raise d.err(f"{where}.alphaMode", f"{mode!r} is not one of {', '.join(ALPHA_MODES)}")
-    cutoff = d.num(m, "alphaCutoff", f"{where}.alphaCutoff", 0.5, lo=0.0, hi=1.0)
-    if mode == "MASK":
-        if alpha is None:
-            alpha = np.full(texture.shape[:2] if texture is not None else (1, 1), 1.0, np.float32)
-            if texture is None:
-                texture = np.ones((1, 1, 3), np.float32)
-        if factor[3] != 1.0:
-            alpha = _frozen(alpha * factor[3])
-    else:
-        alpha = None  # OPAQUE ignores alpha; BLEND is drawn opaque (no transparency in these renderers)
-    emission = d.nums(m, "emissiveFactor", 3, f"{where}.emissiveFactor", (0.0, 0.0, 0.0), lo=0.0)
-    return Material(name, albedo=factor[:3], emission=emission, texture=texture, texture_source=source, alpha=alpha,
-                    alpha_cutoff=cutoff if mode == "MASK" else 0.5,
-                    double_sided=d.flag(m, "doubleSided", f"{where}.doubleSided", False))
-
-
 def _unique(name, taken: set, default: str) -> str:
     out = name = name if isinstance(name, str) and name else default
     k = 1
@@ -175,7 +148,10 @@ def _stamp(deps) -> tuple:
 
 
 def load_gltf(file: Path, *, path=None, field: str = "gltf.file") -> tuple[dict[str, Mesh], dict[str, Material], list[Object]]:
-    """Meshes (one per primitive), materials and placed objects of a .gltf file; cached per file.
+    """Meshes (one per primitive), materials and placed objects of a .gltf or .glb file; cached per file.
+
+    What the load could not take as the file says (an extension not honoured, primitives without a material) is
+    noted as warnings (diviewer.scene.reads.note_warning), again on a cache hit.
 
     Raises:
         DiviewerError: a missing or malformed file, buffer or texture, or an invalid document, naming the
@@ -185,17 +161,39 @@ def load_gltf(file: Path, *, path=None, field: str = "gltf.file") -> tuple[dict[
     key = _file_key(file, "glTF", path, field)
     cached = _gltf_cache.get(key)
     if cached is None or _stamp(cached[1]) != cached[2]:
-        try:
-            doc = json.loads(file.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
-            raise DiviewerError(f"not a glTF JSON file: {type(exc).__name__}: {str(exc)[:200]}",
-                                path=path, field=field) from exc
-        with recording_reads() as deps:
-            parsed = _parse(Doc(doc, file), file.parent)
-        cached = _gltf_cache[key] = (parsed, tuple(deps), _stamp(deps))
-    (meshes, materials, objects), deps, _ = cached
+        doc, glb_bin = read_document(file, path=path, field=field)
+        with recording_reads() as deps, recording_warnings() as said:
+            parsed = _parse(Doc(doc, file), file.parent, glb_bin)
+        cached = _gltf_cache[key] = (parsed, tuple(deps), _stamp(deps), tuple(said))
+    (meshes, materials, objects), deps, _, said = cached
     note_read(*deps)  # buffers and textures, also when the parse came from the cache
+    note_warning(*said)
     return dict(meshes), dict(materials), list(objects)
+
+
+def _attributes(d: Doc, reader: _Reader, prim: dict, where: str):
+    """(attribute names, a getter of one as a (count, width) array, the indices or None) of a primitive, read
+    from its accessors or, compressed, from its KHR_draco_mesh_compression data."""
+    attrs = d.table(prim, "attributes", f"{where}.attributes")
+    draco = d.table(prim, "extensions", f"{where}.extensions").get(DRACO)
+    if draco is not None and DRACO not in d.doc.get("extensionsRequired", []) and not gltf_draco.available():
+        draco = None  # not required: the accessors hold an uncompressed copy, read below
+    if draco is not None:
+        decoded, faces = gltf_draco.decode(d, reader.buffers, draco, where)
+        names = set(attrs) | set(decoded)
+
+        def get(name, types, components, normalized=()):
+            if name in decoded:
+                return decoded[name].astype(np.float64 if name != "POSITION" else np.float32)
+            return reader.accessor(attrs[name], f"{where}.attributes.{name}", types, components, normalized)
+        return names, get, faces.ravel()
+    idx = None
+    if "indices" in prim:
+        idx = reader.accessor(prim["indices"], f"{where}.indices", ("SCALAR",), UNSIGNED).ravel()
+
+    def get(name, types, components, normalized=()):
+        return reader.accessor(attrs[name], f"{where}.attributes.{name}", types, components, normalized)
+    return set(attrs), get, idx
 
 
 def _primitive(d: Doc, reader: _Reader, prim, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
@@ -204,17 +202,18 @@ def _primitive(d: Doc, reader: _Reader, prim, where: str) -> tuple[np.ndarray, n
         raise d.err(where, f"expected a JSON object, got {type(prim).__name__}")
     if prim.get("mode", 4) != 4:
         raise d.err(f"{where}.mode", "only triangle primitives (mode 4) are supported")
-    attrs = d.table(prim, "attributes", f"{where}.attributes")
-    if "POSITION" not in attrs:
+    names, get, idx = _attributes(d, reader, prim, where)
+    if "POSITION" not in names:
         raise d.err(f"{where}.attributes", "primitive has no POSITION")
-    v = reader.accessor(attrs["POSITION"], f"{where}.attributes.POSITION", ("VEC3",), FLOAT)
+    v = get("POSITION", ("VEC3",), FLOAT)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise d.err(f"{where}.attributes.POSITION", f"expected 3 numbers a vertex, got {v.shape[1:]}")
     if not np.all(np.isfinite(v)):
         raise d.err(f"{where}.attributes.POSITION", "non-finite (NaN or infinite) positions")
-    if "indices" in prim:
-        idx = reader.accessor(prim["indices"], f"{where}.indices", ("SCALAR",), UNSIGNED).ravel()
+    if idx is not None:
         if len(idx) % 3:
             raise d.err(f"{where}.indices", f"{len(idx)} indices is not a whole number of triangles")
-        if len(idx) and int(idx.max()) >= len(v):
+        if len(idx) and (int(idx.max()) >= len(v) or int(idx.min()) < 0):
             raise d.err(f"{where}.indices", f"index {int(idx.max())} is out of range ({len(v)} vertices)")
         faces = idx.reshape(-1, 3).astype(np.uint32)
     else:
@@ -229,15 +228,15 @@ def _primitive(d: Doc, reader: _Reader, prim, where: str) -> tuple[np.ndarray, n
     if np.all(np.linalg.norm(fn, axis=1) / 2 <= 1e-12 * extent * extent):
         raise d.err(where, f"all {len(faces)} triangles have zero area; clean the mesh")
 
-    def per_vertex(name: str, types, components, normalized=()):
-        a = reader.accessor(attrs[name], f"{where}.attributes.{name}", types, components, normalized).astype(np.float64)
-        if len(a) != len(v) or not np.all(np.isfinite(a)):
-            raise d.err(f"{where}.attributes.{name}", f"expected {len(v)} finite values (one per POSITION), "
-                                                      f"got {len(a)}{'' if np.all(np.isfinite(a)) else ' with NaN/Inf'}")
+    def per_vertex(name: str, width: int, types, components, normalized=()):
+        a = get(name, types, components, normalized).astype(np.float64)
+        if a.ndim != 2 or a.shape[1] != width or len(a) != len(v) or not np.all(np.isfinite(a)):
+            raise d.err(f"{where}.attributes.{name}", f"expected {len(v)} finite {width}-vectors (one per POSITION), "
+                                                      f"got {a.shape}{'' if np.all(np.isfinite(a)) else ' with NaN/Inf'}")
         return a
 
-    if "NORMAL" in attrs:
-        n = per_vertex("NORMAL", ("VEC3",), FLOAT)
+    if "NORMAL" in names:
+        n = per_vertex("NORMAL", 3, ("VEC3",), FLOAT)
     else:  # area-weighted vertex normals (glTF says flat; smooth is what the eye expects here)
         n = np.zeros((len(v), 3))
         for k in range(3):
@@ -245,17 +244,19 @@ def _primitive(d: Doc, reader: _Reader, prim, where: str) -> tuple[np.ndarray, n
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     n = np.where(norm > 1e-12, n / np.maximum(norm, 1e-30), (0.0, 1.0, 0.0))
     uv = None
-    if "TEXCOORD_0" in attrs:
-        t = per_vertex("TEXCOORD_0", ("VEC2",), FLOAT, normalized=(5121, 5123))
+    if "TEXCOORD_0" in names:
+        t = per_vertex("TEXCOORD_0", 2, ("VEC2",), FLOAT, normalized=(5121, 5123))
         uv = np.stack([t[:, 0], 1.0 - t[:, 1]], axis=1).astype(np.float32)  # glTF's v = 0 is the image's top row
     return v.astype(np.float32), n.astype(np.float32), faces, uv
 
 
-def _parse(d: Doc, base: Path):
-    reader = _Reader(d, base)
+def _parse(d: Doc, base: Path, glb_bin: bytes | None = None):
+    check_extensions(d)
+    reader = _Reader(d, base, glb_bin)
     names: set = set()
     mat_names = [_unique(m.get("name"), names, f"material{i}") for i, m in enumerate(d.array("materials"))]
-    materials = {n: _material(d, i, n, base) for i, n in enumerate(mat_names)}
+    parsed = [_material(d, reader.buffers, i, n, base) for i, n in enumerate(mat_names)]
+    materials = {n: m for n, (m, _) in zip(mat_names, parsed)}
     default_mat = None
     meshes: dict[str, Mesh] = {}
     prim_keys: list[list[tuple[str, str]]] = []  # per glTF mesh: (mesh key, material name) per primitive
@@ -268,16 +269,19 @@ def _parse(d: Doc, base: Path):
         for pi, prim in enumerate(prims):
             where = f"meshes[{mi_}].primitives[{pi}]"
             v, n, faces, uv = _primitive(d, reader, prim, where)
+            if "material" in prim:
+                k = d.index("materials", prim["material"], f"{where}.material")
+                mat, transform = mat_names[k], parsed[k][1]
+                if uv is not None and transform is not None:
+                    uv = apply_uv_transform(uv, transform)  # each primitive is a mesh of its own: its uvs can move
+            else:
+                default_mat = default_mat or _unique(DEFAULT_MATERIAL, names, DEFAULT_MATERIAL)
+                materials.setdefault(default_mat, Material(default_mat, albedo=DEFAULT_ALBEDO))
+                mat = default_mat
             mname = m.get("name") if isinstance(m.get("name"), str) else f"mesh{mi_}"
             key = _unique(mname + (f".{pi}" if len(prims) > 1 else ""), mesh_names, f"mesh{mi_}")
             meshes[key] = Mesh(key, _frozen(v), _frozen(n), _frozen(faces), None if uv is None else _frozen(uv),
                                source=f"{d.file}#{where}")
-            if "material" in prim:
-                mat = mat_names[d.index("materials", prim["material"], f"{where}.material")]
-            else:
-                default_mat = default_mat or _unique("gltf_default", names, "gltf_default")
-                materials.setdefault(default_mat, Material(default_mat, albedo=(1.0, 1.0, 1.0)))
-                mat = default_mat
             keys.append((key, mat))
         prim_keys.append(keys)
     return meshes, materials, _place(d, meshes, prim_keys)

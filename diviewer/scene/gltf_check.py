@@ -42,10 +42,6 @@ class Doc:
             raise self.err("", f"a glTF document is a JSON object, got {type(doc).__name__}")
         self.doc = doc
         self._arrays: dict[str, list] = {}
-        required = doc.get("extensionsRequired", [])
-        if required:
-            raise self.err("extensionsRequired", f"extensions {required} are required by the file and not supported "
-                                                 f"by diviewer; export the scene without them")
 
     def err(self, field: str, msg: str) -> DiviewerError:
         return DiviewerError(msg, path=self.file, field=field or None)
@@ -116,13 +112,11 @@ class Doc:
         return [self.index(kind, x, f"{field}[{k}]") for k, x in enumerate(v)]
 
     def uri(self, obj: dict, base: Path, field: str, what: str) -> Path:
-        """A relative file URI, percent-decoded (``my%20texture.png``), as a path next to the glTF file."""
+        """A relative file URI, percent-decoded (``my%20texture.png``), as a path next to the glTF file (the caller
+        reads ``data:`` URIs and a .glb's buffer views itself)."""
         uri = obj.get("uri")
         if not isinstance(uri, str) or not uri:
-            raise self.err(field, f"the {what} has no 'uri' (embedded data is not supported: "
-                                  f"write it as a file next to the .gltf)")
-        if uri.startswith("data:"):
-            raise self.err(field, f"embedded (data:) {what}s are not supported; write it as a file next to the .gltf")
+            raise self.err(field, f"the {what} has no 'uri' (a file name, a data: URI or, in a .glb, a bufferView)")
         parts = urlsplit(uri)
         if parts.scheme and len(parts.scheme) > 1:  # one letter: a Windows drive
             raise self.err(field, f"only relative file URIs are supported, got {uri!r}")

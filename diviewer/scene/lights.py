@@ -24,6 +24,15 @@ def rotate_light(light, axis, angle: float, centre):
     return dataclasses.replace(light, position=tuple(map(float, p)))
 
 
+def box_sweep(box, phase: float) -> tuple[float, float, float]:
+    """A point on a closed curve through a light's position box (``LightRange.position``) at ``phase`` radians: each
+    axis swings between its min and max at its own rate (1, 2 and 3 turns a period), so the curve stays inside
+    the box and crosses most of it. The viewer's light animation uses it for a point light with a box."""
+    lo, hi = np.asarray(box[0], np.float64), np.asarray(box[1], np.float64)
+    swing = 0.5 - 0.5 * np.cos(np.array([1.0, 2.0, 3.0]) * phase)
+    return tuple(map(float, lo + (hi - lo) * swing))
+
+
 def power_field(light) -> str:
     """The field that holds a light's power: a sun's irradiance, a point light's intensity."""
     return "irradiance" if isinstance(light, DirectionalLight) else "intensity"

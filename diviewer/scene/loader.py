@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import tomllib
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ from diviewer.errors import DiviewerError
 from diviewer.paths import scenes_dir
 from diviewer.scene import gltf, shapes
 from diviewer.scene.identity import scene_identity
-from diviewer.scene.reads import recording_reads
+from diviewer.scene.reads import SceneWarning, note_warning, recording_reads, recording_warnings
 from diviewer.scene.model import Camera, DirectionalLight, FrameConfig, Material, Object, PointLight, Scene
 from diviewer.scene.scene_ranges import parse_ranges as _ranges
 from diviewer.scene.toml_table import FLOAT32_MAX, _entries, _f32, _Table  # noqa: F401 (FLOAT32_MAX: re-exported)
@@ -66,6 +67,16 @@ def load_recorded_scene(manifest: dict, where: Path, refusal: str) -> Scene:
 
 
 def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") -> Scene:
+    """A Scene from a scene file's parsed TOML (``path``: the file, for messages and relative paths); what it
+    could not take as written is kept in ``Scene.warnings`` and said as SceneWarnings."""
+    with recording_warnings() as said:
+        scene = _parse_scene(data, path, file_hash)
+    for message in said:
+        warnings.warn(message, SceneWarning, stacklevel=3)
+    return dataclasses.replace(scene, warnings=tuple(said))
+
+
+def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
     root = _Table(data, path, "")
     base = path.parent if path is not None else Path.cwd()
 
@@ -90,8 +101,14 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
         meshes, materials, objects = gltf.load_gltf(base / g.str("file"), path=path, field="gltf.file")
         g.finish()
 
-    for key, t in _entries(root.table("materials"), _not_in_gltf(materials, "material")):
-        materials[key] = _material(key, t, base, path)
+    if gltf.DEFAULT_MATERIAL in materials and gltf.DEFAULT_MATERIAL not in root.table("materials").data:
+        users = sum(o.material == gltf.DEFAULT_MATERIAL for o in objects)
+        note_warning(f"{path}: gltf.file: {users} placed mesh(es) of the glTF have no material: they get "
+                     f"'{gltf.DEFAULT_MATERIAL}', glTF's default, albedo {gltf.DEFAULT_ALBEDO[0]:g} (white, reflecting "
+                     f"all light); give them one with [materials.{gltf.DEFAULT_MATERIAL}] albedo = [0.8, 0.8, 0.8]")
+    for key, t in _entries(root.table("materials"), lambda k: None):
+        # A glTF material of the same name is overridden: the keys given replace its values, the rest stay.
+        materials[key] = _material(key, t, base, path, materials.get(key))
 
     for key, t in _entries(root.table("meshes"), _not_in_gltf(meshes, "mesh")):
         if t.has("file") == t.has("shape"):
@@ -129,25 +146,34 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
                  shadow_size=int(shadow_size))
 
 
-def _material(key: str, t: _Table, base: Path, path: Path | None) -> Material:
-    """One [materials.KEY] table: albedo, emission, an optional texture and its alpha cut-out, double_sided."""
-    texture, alpha, tex_src = None, None, ""
+def _material(key: str, t: _Table, base: Path, path: Path | None, over: Material | None = None) -> Material:
+    """One [materials.KEY] table: albedo, emission, an optional texture and its alpha cut-out, double_sided.
+    ``over``: the glTF material of that name, whose values stand where the table gives none."""
+    if over is None:
+        over = Material(key, double_sided=True)  # a scene file's own material: both faces by default
+        texture, alpha, tex_src, cutoff = None, None, "", 0.5
+    else:
+        texture, alpha, tex_src, cutoff = over.texture, over.alpha, over.texture_source, over.alpha_cutoff
     if t.has("texture"):
         tex_path = base / t.str("texture")
         texture, alpha = gltf.load_texture(tex_path, path=path, field=t._field("texture"))
-        tex_src = str(tex_path)
-    cutoff = 0.5
+        tex_src, cutoff = str(tex_path), 0.5
+        alpha_kept = False
+    else:
+        t.raw("texture")  # an allowed key all the same
+        alpha_kept = over.is_masked  # a glTF material's own cut-out stays unless its texture is replaced
     if t.has("alpha_cutoff"):
         # Alpha-tested: the texture's alpha channel is the cut-out mask (as glTF's alphaMode MASK).
         cutoff = t.num("alpha_cutoff", lo=0.0, hi=1.0)
         if alpha is None:
             raise t.err("alpha_cutoff", "needs a 'texture' with an alpha channel (the cut-out mask)")
     else:
-        alpha = None
-    return Material(key, albedo=t.vec("albedo", 3, (0.8, 0.8, 0.8), lo=0.0, hi=1.0),
-                    emission=t.vec("emission", 3, (0.0, 0.0, 0.0), lo=0.0),
+        t.raw("alpha_cutoff")
+        alpha = alpha if alpha_kept else None
+    return Material(key, albedo=t.vec("albedo", 3, over.albedo, lo=0.0, hi=1.0),
+                    emission=t.vec("emission", 3, over.emission, lo=0.0),
                     texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff,
-                    double_sided=t.bool("double_sided", True))
+                    double_sided=t.bool("double_sided", over.double_sided))
 
 
 def _objects(root: _Table, path: Path | None, meshes: dict, materials: dict, names: set[str]) -> list[Object]:

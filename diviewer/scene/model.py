@@ -149,6 +149,8 @@ class LightRange:
     """Rotation range in degrees."""
     intensity: tuple[float, float] = (1.0, 1.0)
     """Multiplier of the light's irradiance/intensity, drawn log-uniformly."""
+    position: tuple[Vec3, Vec3] | None = None
+    """A point light's box (min, max) of positions, drawn uniformly in place of the rotation; None: rotate."""
 
 
 @dataclass(frozen=True)
@@ -314,6 +316,10 @@ class Scene:
     """Texels per side of a directional light's shadow map in the rasterizer (``[scene] shadow_size``): what the
     GL direct light's shadows are resolved to, and so how close they come to the path tracer's exact ones."""
 
+    warnings: tuple[str, ...] = ()
+    """What the load could not take as the files say (an unhonoured glTF extension, a default material), one
+    sentence each; the CLI prints them, `diviewer inspect` lists them."""
+
     _bounds_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     """bounds() per objects tuple: the viewer asks every frame, and only a moved object changes it."""
 
@@ -331,10 +337,15 @@ class Scene:
         return cached.copy()
 
     def _objects_bounds(self, objects) -> np.ndarray:
-        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for o in objects:
-            b = self.meshes[o.mesh].bounds
-            corners = np.array([[b[i, 0], b[j, 1], b[k, 2], 1.0] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-            w = (o.matrix() @ corners.T).T[:, :3]
-            lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
-        return np.stack([lo, hi])
+        return objects_bounds(self.meshes, objects)
+
+
+def objects_bounds(meshes: dict, objects) -> np.ndarray:
+    """(2, 3) world-space box of placed objects (each mesh's box corners, transformed)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for o in objects:
+        b = meshes[o.mesh].bounds
+        corners = np.array([[b[i, 0], b[j, 1], b[k, 2], 1.0] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        w = (o.matrix() @ corners.T).T[:, :3]
+        lo, hi = np.minimum(lo, w.min(axis=0)), np.maximum(hi, w.max(axis=0))
+    return np.stack([lo, hi])

@@ -26,6 +26,11 @@ def pixel_ray(camera: Camera, x: float, y: float, width: int, height: int) -> tu
 
 def _ray_triangles(origin: np.ndarray, d: np.ndarray, tri: np.ndarray) -> float:
     """Nearest positive ray parameter hitting any triangle of ``tri`` (M, 3, 3), or inf (Moller-Trumbore)."""
+    return ray_triangles_hit(origin, d, tri)[0]
+
+
+def ray_triangles_hit(origin: np.ndarray, d: np.ndarray, tri: np.ndarray) -> tuple[float, int]:
+    """(nearest positive ray parameter, index of the triangle hit) over ``tri`` (M, 3, 3), or (inf, -1)."""
     v0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     p = np.cross(d, e2)
     det = np.einsum("ij,ij->i", e1, p)
@@ -37,7 +42,10 @@ def _ray_triangles(origin: np.ndarray, d: np.ndarray, tri: np.ndarray) -> float:
     v = (q @ d) * inv
     t = np.einsum("ij,ij->i", e2, q) * inv
     hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-6)
-    return float(t[hit].min()) if hit.any() else math.inf
+    if not hit.any():
+        return math.inf, -1
+    k = int(np.argmin(np.where(hit, t, np.inf)))
+    return float(t[k]), k
 
 
 def _ray_box(origin: np.ndarray, d: np.ndarray, box: np.ndarray) -> bool:

@@ -130,7 +130,12 @@ def light_reasons(light, default, r: LightRange | None, centre) -> list[str]:
     out = []
     n, n0 = float(np.linalg.norm(v)), float(np.linalg.norm(v0))
     tilt = _angle(v, axis) - _angle(v0, axis)  # rotating about the axis keeps the angle to it
-    if abs(tilt) > ANGLE_TOL or abs(n - n0) > REL_TOL * max(n0, 1.0):
+    if r.position is not None:  # a point light drawn from a box of positions
+        size = float(np.linalg.norm(np.subtract(r.position[1], r.position[0])))
+        if not box_contains(r.position, light.position, margin=REL_TOL * max(size, 1.0)):
+            out.append(f"{name} at {_fmt(light.position)} is outside its trained box "
+                       f"{_fmt(r.position[0])}-{_fmt(r.position[1])}")
+    elif abs(tilt) > ANGLE_TOL or abs(n - n0) > REL_TOL * max(n0, 1.0):
         what = "direction" if isinstance(light, DirectionalLight) else "position"
         out.append(f"{name}'s {what} leaves its trained sweep about {_fmt(axis)} (tilted {tilt:+.0f} deg)")
     else:

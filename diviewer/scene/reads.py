@@ -26,3 +26,29 @@ def note_read(*files: Path) -> None:
     files_read = _reads.get()
     if files_read is not None:
         files_read.extend(Path(f) for f in files)
+
+
+class SceneWarning(UserWarning):
+    """Something a scene load did not take as the file says, but could go on without (an unhonoured glTF
+    extension, a default material): the CLI prints it as one ``warning:`` line."""
+
+
+_warnings: contextvars.ContextVar[list | None] = contextvars.ContextVar("diviewer_scene_warnings", default=None)
+
+
+@contextlib.contextmanager
+def recording_warnings():
+    """Collect the warnings a scene load notes (`note_warning`) into the yielded list (the Scene keeps them)."""
+    found: list[str] = []
+    token = _warnings.set(found)
+    try:
+        yield found
+    finally:
+        _warnings.reset(token)
+
+
+def note_warning(*messages: str) -> None:
+    """Record warnings of a scene load (no-op outside `recording_warnings`); each is said once per load."""
+    found = _warnings.get()
+    if found is not None:
+        found.extend(m for m in messages if m not in found)

@@ -107,7 +107,11 @@ def sample_config(scene: Scene, seed: int, split: str = "train", camera: str = "
             continue
         angle = float(rng.uniform(*r.angle))
         scale = float(math.exp(rng.uniform(math.log(r.intensity[0]), math.log(r.intensity[1]))))
-        lights.append(scale_light(rotate_light(light, r.axis, angle, centre), scale))
+        if r.position is not None:  # a point light anywhere in its box (drawn only where a box is given)
+            moved = dataclasses.replace(light, position=tuple(map(float, _uniform_in(rng, r.position))))
+        else:
+            moved = rotate_light(light, r.axis, angle, centre)
+        lights.append(scale_light(moved, scale))
 
     objects = []
     for obj in config.objects:

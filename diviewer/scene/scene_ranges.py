@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from diviewer.scene.model import (
-    Camera, CameraRange, CameraRegion, FrameConfig, LightRange, ObjectRange, Ranges, box_intersection, box_volume,
+    Camera, CameraRange, CameraRegion, FrameConfig, LightRange, ObjectRange, PointLight, Ranges, box_intersection,
+    box_volume, objects_bounds,
 )
 from diviewer.scene.toml_table import _entries, _f32, _Table
 
@@ -15,7 +16,8 @@ def parse_ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
     """The ranges table of a scene file, checked against its default configuration and meshes."""
     lights, objects, camera = {}, {}, None
     known_lights = {l.name for l in default.lights}
-    for key, r in _entries(t.table("lights"), lambda k: None if k in known_lights else f"no light named '{k}'"):
+    for key, r in _entries(t.table("lights"), lambda k: None if k in known_lights else
+                           f"no light named '{k}'; lights: {', '.join(sorted(known_lights)) or 'none'}"):
         angle = _interval(r, "angle", (0.0, 0.0))
         inten = _interval(r, "intensity", (1.0, 1.0), lo=0.0)
         if inten[0] <= 0.0:
@@ -24,9 +26,11 @@ def parse_ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
         peak = max(light.color) * getattr(light, "irradiance", getattr(light, "intensity", 1.0)) * inten[1]
         if not _f32(peak):
             raise r.err("intensity", f"the brightest drawn light ({peak:.3g}) is outside float32's range (+-3.4e38)")
-        lights[key] = LightRange(axis=_axis(r, "axis", (0.0, 1.0, 0.0)), angle=angle, intensity=inten)
+        lights[key] = LightRange(axis=_axis(r, "axis", (0.0, 1.0, 0.0)), angle=angle, intensity=inten,
+                                 position=_light_box(r, light, angle, default, meshes))
     known_objects = {o.name for o in default.objects}
-    for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else f"no object named '{k}'"):
+    for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else
+                           f"no object named '{k}'; objects: {', '.join(sorted(known_objects))}"):
         train, test = r.strs("train_meshes"), r.strs("test_meshes")
         for field_name, lst in (("train_meshes", train), ("test_meshes", test)):
             for m in lst:
@@ -102,6 +106,29 @@ def _box(r: _Table, key: str, value=None) -> tuple:
         raise r.err(key, "expected [[min x, y, z], [max x, y, z]]")
     if not all(a < b for a, b in zip(*box)):
         raise r.err(key, f"each min must be below its max, got {[list(box[0]), list(box[1])]}")
+    return box
+
+
+def _light_box(r: _Table, light, angle, default: FrameConfig, meshes):
+    """A point light's ``position`` box: inside the scene's bounds, and instead of a rotation; None if not given."""
+    if not r.has("position"):
+        r.raw("position")
+        return None
+    if not isinstance(light, PointLight):
+        raise r.err("position", f"light '{light.name}' is a sun (directional): it has no position; vary its "
+                                f"direction with axis and angle")
+    if angle != (0.0, 0.0) or r.has("axis"):
+        raise r.err("position", "a point light either moves in a 'position' box or turns with 'axis' and 'angle', "
+                                "not both")
+    box = r.vecs("position", 3)  # min == max on an axis is allowed: a lamp that slides along the ceiling
+    if len(box) != 2 or not all(a <= b for a, b in zip(*box)):
+        raise r.err("position", f"expected [[min x, y, z], [max x, y, z]] with each min <= its max, got "
+                                f"{[list(x) for x in box]}")
+    lo, hi = objects_bounds(meshes, default.objects)
+    if not (np.all(np.asarray(box[0]) >= lo) and np.all(np.asarray(box[1]) <= hi)):
+        raise r.err("position", f"the box {[list(box[0]), list(box[1])]} leaves the scene's bounds "
+                                f"{[round(float(x), 4) for x in lo]} to {[round(float(x), 4) for x in hi]}: a light "
+                                f"outside would sit beyond the walls; keep it inside (diviewer inspect shows the bounds)")
     return box
 
 

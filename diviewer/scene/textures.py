@@ -85,29 +85,46 @@ def load_texture(file: Path, *, path=None, field: str = "") -> tuple[np.ndarray,
         DiviewerError: the file is missing, not a readable image or larger than `MAX_TEXTURE_SIDE`,
             naming the file and ``field``.
     """
-    from PIL import Image
-
     file = Path(file)
     key = file_key(file, "texture", path, field)
     if key not in _cache:
-        try:
-            with Image.open(file) as im:
-                w, h = im.size
-                if max(w, h) > MAX_TEXTURE_SIDE:
-                    raise _too_large(file, w, h, path, field)
-                im.load()
-                rgb, alpha = decode(im, file, path=path, field=field)
-        except DiviewerError:
-            raise
-        except Image.DecompressionBombError as exc:
-            raise DiviewerError(f"texture {file} is larger than {MAX_TEXTURE_SIDE} px on a side ({exc}); downscale it",
-                                path=path, field=field) from exc
-        except Exception as exc:  # Pillow raises several types for truncated or foreign files
-            raise DiviewerError(f"cannot read texture {file}: {exc}", path=path, field=field) from exc
-        if rgb.size == 0:
-            raise DiviewerError(f"texture {file} has no pixels", path=path, field=field)
-        _cache[key] = (_frozen(rgb), None if alpha is None else _frozen(alpha.astype(np.float32)))
+        _cache[key] = _decoded(file, file, path, field)
     return _cache[key]
+
+
+def load_texture_bytes(data: bytes, label: str, *, path=None, field: str = "") -> tuple[np.ndarray, np.ndarray | None]:
+    """An image held in memory (a glTF's embedded data URI or buffer view) as `load_texture` reads a file;
+    ``label`` names it in errors. Cached by its content."""
+    import hashlib
+    import io
+
+    key = ("bytes", hashlib.sha256(data).hexdigest())
+    if key not in _cache:
+        _cache[key] = _decoded(io.BytesIO(data), label, path, field)
+    return _cache[key]
+
+
+def _decoded(source, file, path, field: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """Open ``source`` (a path or a file object; ``file`` names it) with Pillow and decode it, within the size cap."""
+    from PIL import Image
+
+    try:
+        with Image.open(source) as im:
+            w, h = im.size
+            if max(w, h) > MAX_TEXTURE_SIDE:
+                raise _too_large(file, w, h, path, field)
+            im.load()
+            rgb, alpha = decode(im, file, path=path, field=field)
+    except DiviewerError:
+        raise
+    except Image.DecompressionBombError as exc:
+        raise DiviewerError(f"texture {file} is larger than {MAX_TEXTURE_SIDE} px on a side ({exc}); downscale it",
+                            path=path, field=field) from exc
+    except Exception as exc:  # Pillow raises several types for truncated or foreign files
+        raise DiviewerError(f"cannot read texture {file}: {exc}", path=path, field=field) from exc
+    if rgb.size == 0:
+        raise DiviewerError(f"texture {file} has no pixels", path=path, field=field)
+    return _frozen(rgb), None if alpha is None else _frozen(alpha.astype(np.float32))
 
 
 def _too_large(file: Path, w: int, h: int, path, field: str) -> DiviewerError:

@@ -106,7 +106,10 @@ class _Table:
     def finish(self) -> None:
         unknown = sorted(set(self.data) - self.used)
         if unknown:
-            raise self.err(unknown[0], f"unknown key '{unknown[0]}'" + (f" (and {unknown[1:]})" if unknown[1:] else ""))
+            # Every getter marks its key as read, present or not: what was read is what this table allows.
+            allowed = sorted(self.used)
+            raise self.err(unknown[0], f"unknown key '{unknown[0]}'" + (f" (and {unknown[1:]})" if unknown[1:] else "")
+                           + (f"; allowed keys: {', '.join(allowed)}" if allowed else "; this table takes no keys"))
 
 
 def _entries(tab: _Table, problem):

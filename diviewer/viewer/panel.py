@@ -253,8 +253,9 @@ class Panel:
             st.toggle_animation()
         r = st.scene.ranges.lights.get(light.name)
         if r is not None:
-            self._wrapped(f"trained range: {r.angle[0]:g}..{r.angle[1]:g} deg about {tuple(r.axis)}, "
-                          f"x{r.intensity[0]:g}..{r.intensity[1]:g}", DIM)
+            where = (f"in the box {tuple(r.position[0])}..{tuple(r.position[1])}" if r.position is not None
+                     else f"{r.angle[0]:g}..{r.angle[1]:g} deg about {tuple(r.axis)}")
+            self._wrapped(f"trained range: {where}, x{r.intensity[0]:g}..{r.intensity[1]:g}", DIM)
 
     def _panel_camera(self) -> None:
         st = self.state

@@ -15,7 +15,7 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.gl.display import DEFAULT_TONEMAP, tonemap_code
-from diviewer.scene.lights import angles_to_vector, power_field, rotate_light, vector_to_angles
+from diviewer.scene.lights import angles_to_vector, box_sweep, power_field, rotate_light, vector_to_angles
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
 from diviewer.scene.picking import pick_object, pixel_ray
 from diviewer.scene.sampler import camera_on_path
@@ -284,6 +284,9 @@ class ViewerState:
         out = []
         for light in self.config.lights:
             r = self.scene.ranges.lights.get(light.name)
+            if r is not None and r.position is not None:  # a point light moving in its box, never through walls
+                out.append(dataclasses.replace(light, position=box_sweep(r.position, phase)))
+                continue
             if r is not None and r.angle[1] > r.angle[0]:
                 lo, hi = r.angle
                 angle = 0.5 * (lo + hi) + 0.5 * (hi - lo) * math.sin(phase)

@@ -124,10 +124,23 @@ CASES = {
                           "baseColorFactor", "[0.0, 1.0]"),
     "emission_negative": (_set("materials.1.emissiveFactor", [-1, 0, 0]), "materials[1].emissiveFactor", ">= 0.0"),
     "tex_coord_1": (_set("materials.0.pbrMetallicRoughness.baseColorTexture.texCoord", 1), "texCoord", "TEXCOORD_0"),
-    "embedded_buffer": (_set("buffers.0.uri", "data:application/octet-stream;base64,AAAA"), "buffers[0].uri", "embedded"),
+    "embedded_buffer_short": (_set("buffers.0.uri", "data:application/octet-stream;base64,AAAA"), "buffers[0]",
+                              "embedded buffer has 3 bytes"),
+    "embedded_buffer_base64": (_set("buffers.0.uri", "data:application/octet-stream;base64,A@A"), "buffers[0].uri",
+                               "malformed"),
+    "embedded_buffer_not_base64": (_set("buffers.0.uri", "data:text/plain,abc"), "buffers[0].uri", "base64 data URI"),
+    "buffer_without_uri": (lambda d: d["buffers"][0].pop("uri"), "buffers[0].uri", "only the first buffer of a .glb"),
     "remote_image": (_set("images.0.uri", "https://example.com/tex.png"), "images[0].uri", "relative file"),
     "missing_buffer_file": (_set("buffers.0.uri", "nope.bin"), "buffers[0].uri", "not found"),
-    "extension_required": (_set("extensionsRequired", ["KHR_draco_mesh_compression"]), "extensionsRequired", "draco"),
+    "extension_required": (_set("extensionsRequired", ["EXT_meshopt_compression"]), "extensionsRequired",
+                           "does not read: EXT_meshopt_compression"),
+    "extensions_not_names": (_set("extensionsUsed", "KHR_lights_punctual"), "extensionsUsed", "array of extension"),
+    "texture_transform_uv_set": (_set("materials.0.pbrMetallicRoughness.baseColorTexture.extensions",
+                                      {"KHR_texture_transform": {"texCoord": 1}}), "KHR_texture_transform.texCoord",
+                                 "TEXCOORD_0"),
+    "emissive_strength_negative": (lambda d: d["materials"][1].update(
+        emissiveFactor=[1, 1, 1], extensions={"KHR_materials_emissive_strength": {"emissiveStrength": -2}}),
+        "emissiveStrength", ">= 0.0"),
     "nodes_not_array": (_set("nodes", {"a": 1}), "nodes", "expected an array"),
     "node_not_object": (_set("nodes.2", 3), "nodes[2]", "JSON object"),
     "primitives_empty": (_set("meshes.1.primitives", []), "meshes[1].primitives", "non-empty"),
@@ -147,7 +160,7 @@ def test_document_that_is_not_an_object_is_refused(tmp_path):
     with pytest.raises(DiviewerError, match="JSON object"):
         load_scene(path)
     (tmp_path / "tiny.gltf").write_text("[" * 100000)  # deeper than json's recursion limit
-    with pytest.raises(DiviewerError, match="not a glTF JSON file"):
+    with pytest.raises(DiviewerError, match="neither a glTF JSON file"):
         load_scene(path)
 
 
@@ -291,3 +304,25 @@ def test_mutations_reach_both_outcomes(tmp_path):
         doc = find(mutated_documents(), lambda d: want_refusal == isinstance(
             load_mutated(tmp_path / f"f{next(_counter)}", d), DiviewerError), settings=settings(max_examples=200))
         json.dumps(doc)  # a plain JSON document
+
+
+@settings(max_examples=60, deadline=timedelta(seconds=LIMIT_S))
+@given(cut=st.integers(0, 10_000), flip=st.integers(0, 10_000), byte=st.integers(0, 255))
+def test_truncated_or_corrupted_glb_loads_soundly_or_is_refused(tmp_path_factory, cut, flip, byte):
+    """Any prefix of a valid .glb, with any one byte changed, loads or ends in one DiviewerError naming it."""
+    from gltf_doc import glb_bytes, scene_toml
+
+    folder = tmp_path_factory.mktemp("glb")
+    doc, blob = gltf_document()
+    data = bytearray(glb_bytes(doc, blob))
+    if data:
+        data[flip % len(data)] = byte
+    data = bytes(data[:len(data) - cut % (len(data) + 1)])
+    write_scene(folder)
+    (folder / "x.glb").write_bytes(data)
+    (folder / "scene.toml").write_text(scene_toml("x.glb"))
+    with time_limit():
+        try:
+            load_scene(folder / "scene.toml")
+        except DiviewerError as exc:
+            assert "x.glb" in str(exc), str(exc)

@@ -60,3 +60,15 @@ def test_light_params_give_suns_directions_and_point_lights_positions_in_the_wor
                 {"type": "point", "position": [1.0, 3.0, -9.0], "intensity": 70.0}]
     np.testing.assert_array_equal(light_params(as_dicts, (0.0, 1.0, 0.0), (2.0, 4.0, 2.0)), got)
     assert light_params([], (0, 0, 0), (1, 1, 1)).shape == (0,)
+
+
+def test_box_sweep_stays_in_the_box_and_crosses_it():
+    import numpy as np
+
+    from diviewer.scene.lights import box_sweep
+
+    box = ((-1.0, 2.0, -0.5), (1.0, 2.0, 0.5))  # flat in y: a lamp sliding along a ceiling
+    p = np.array([box_sweep(box, t) for t in np.linspace(0.0, 2 * np.pi, 200)])
+    assert np.all(p >= np.array(box[0]) - 1e-12) and np.all(p <= np.array(box[1]) + 1e-12)
+    assert np.allclose(p.min(axis=0), box[0], atol=1e-3) and np.allclose(p.max(axis=0), box[1], atol=1e-3)
+    assert np.allclose(box_sweep(box, 0.0), box_sweep(box, 2 * np.pi))  # a closed curve: the animation loops

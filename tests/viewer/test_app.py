@@ -149,6 +149,17 @@ def test_animation_step_turns_the_light_within_its_range(state, cornell):
     assert not state.animate_light
 
 
+def test_animation_moves_a_point_light_within_its_position_box(tmp_path):
+    from room_doc import write_room
+
+    room = load_scene(write_room(tmp_path, "\n[ranges.lights.lamp]\nposition = [[-1.5, 2.0, -1.5], [1.5, 2.8, 1.5]]\n"))
+    st = ViewerState(room)
+    assert st.toggle_animation()
+    p = np.array([st.step(0.25).lights[0].position for _ in range(40)])
+    assert np.all(p >= (-1.5, 2.0, -1.5)) and np.all(p <= (1.5, 2.8, 1.5))  # never through the walls
+    assert np.all(np.ptp(p, axis=0) > 0.3)
+
+
 def test_camera_path_plays(state):
     atrium = ViewerState(load_scene("atrium"))
     assert atrium.toggle_path()
