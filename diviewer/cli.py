@@ -21,12 +21,18 @@ INT_OPTIONS = {
     "batch_size": (1, None), "ndf": (1, 4096), "max_steps": (1, None), "val_every": (1, None),
     "save_every": (0, None), "num_workers": (0, 256), "max_frames": (1, None),
 }
-FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None)}
+FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None), "fps": (1e-3, 1000.0)}
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
     from diviewer.render import render_to_dir
 
+    if args.path is not None:
+        return _render_path(args)
+    for flag, given in (("--frames", args.frames), ("--fps", args.fps), ("--video", args.video),
+                        ("--compare", args.compare), ("--exr", args.exr)):
+        if given:
+            raise DiviewerError("renders the frames of a camera path: give --path FILE", field=flag)
     if args.reference:
         from diviewer.render import check_reference
 
@@ -38,6 +44,24 @@ def _cmd_render(args: argparse.Namespace) -> int:
     print(f"rendered {record['scene']} at {w}x{h} into {args.out}")
     if args.reference:
         _render_reference(args)
+    return 0
+
+
+def _render_path(args: argparse.Namespace) -> int:
+    from diviewer.render_path import render_path
+
+    for flag, given in (("--seed", args.seed is not None), ("--config", args.config), ("--reference", args.reference),
+                        ("--vxgi", args.vxgi), ("--noise-floor", args.noise_floor)):
+        if given:
+            raise DiviewerError("does not apply to --path (the path gives each frame; --compare adds the reference)",
+                                field=flag)
+    done = render_path(args.scene, args.path, args.out, frames=args.frames, fps=args.fps, res=args.res,
+                       video=args.video, compare=args.compare, spp=args.spp, exr=args.exr, model=args.model,
+                       provider=args.provider, exposure=args.exposure, tonemap=args.tonemap,
+                       max_depth=args.max_depth, pt_seed=args.pt_seed)
+    w, h = done["resolution"]
+    print(f"rendered {len(done['times'])} frames of {args.path} at {w}x{h} into {args.out}"
+          + (f", video {args.video}" if args.video else ""))
     return 0
 
 
@@ -199,6 +223,14 @@ def _add_render_parser(sub) -> None:
     p.add_argument("--model", type=Path, default=None, help="an ONNX model (diviewer export): also write neural.exr")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"), help="onnxruntime provider")
     _add_reference_args(p)
+    g = p.add_argument_group("camera path (docs/paths.md)")
+    g.add_argument("--path", type=Path, default=None, help="render every frame of a camera path file (resumable)")
+    g.add_argument("--frames", type=int, default=None, help="frames evenly from the path's first key to its last")
+    g.add_argument("--fps", type=float, default=None, help="frames per second of the path (default 30)")
+    g.add_argument("--video", type=Path, default=None, help="also write the frames as an mp4 (H.264)")
+    g.add_argument("--compare", default=None, help="methods side by side, labelled: direct,neural,reference "
+                   "(neural needs --model; reference is Mitsuba at --spp, from the 'train' extra)")
+    g.add_argument("--exr", action="store_true", help="also write each method's linear image as EXR")
     g = p.add_argument_group("voxel cone tracing")
     g.add_argument("--vxgi", action="store_true", help="also render VXGI: vxgi.exr and vxgi_indirect.exr")
     g.add_argument("--vxgi-res", type=int, default=64, help="voxels per side of the VXGI grid (32, 64, 128; default 64)")
