@@ -60,6 +60,14 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--shadow-bands", action=argparse.BooleanOptionalAction, default=True,
                    help="once a moving sun rests, draw its full shadow map in bands over the next frames, the moving "
                         "map shown meanwhile (default; no stalled frame), or whole at the first frame it rests")
+    p.add_argument("--path", type=Path, default=None,
+                   help="play this camera path file from the first frame (P plays it again; docs/paths.md)")
+    p.add_argument("--record-path", type=Path, default=None,
+                   help="record the camera path from the first frame to the last into this JSON file (Ctrl+R "
+                        "records by hand)")
+    p.add_argument("--fixed-step", type=float, default=None,
+                   help="advance animations, paths and recordings by this many seconds a frame instead of the clock "
+                        "(reproducible runs: a recording then replays frame for frame)")
     p.add_argument("--stats", type=Path, default=None,
                    help="with --frames: write per-stage times, fps and the resolutions as JSON here")
     p.set_defaults(func=run_view)
@@ -78,6 +86,7 @@ def run_view(args: argparse.Namespace) -> int:
         raise DiviewerError("--window-screenshot needs --frames (it saves the last frame's window)",
                             field="--window-screenshot")
     size = parse_resolution(args.size, "--size")
+    _check_paths(args)
     if args.target_fps < 0:
         raise DiviewerError(f"--target-fps must be 0 (off) or more, got {args.target_fps}", field="--target-fps")
     if not 0.0 < args.scale_floor <= 1.0:
@@ -104,7 +113,9 @@ def run_view(args: argparse.Namespace) -> int:
                               scale_ceiling=args.scale_ceiling,
                               auto_exposure=args.auto_exposure, back_faces=args.back_faces,
                               rest_in_bands=args.shadow_bands,
-                              gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
+                              gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined),
+                              path=str(args.path) if args.path else None, fixed_step=args.fixed_step,
+                              record_path=str(args.record_path) if args.record_path else None)
     script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else []
     if args.camera_moving:
         script.append((0, _play_camera_path))
@@ -119,8 +130,26 @@ def run_view(args: argparse.Namespace) -> int:
         print(f"viewer: {summary['frames']} frames at {vw}x{vh} (shaded at {rw}x{rh}, scale "
               f"{summary['render_scale']:.2f}), GI {gw}x{gh}, "
               f"{summary['stages_ms']['frame']:.1f} ms/frame"
-              + "".join(f", saved {p}" for p in (args.screenshot, args.window_screenshot) if p))
+              + "".join(f", saved {p}" for p in (args.screenshot, args.window_screenshot, args.record_path) if p))
     return 0
+
+
+def _check_paths(args: argparse.Namespace) -> None:
+    """--path read and checked against the scene, --record-path writable, --fixed-step positive: before a window
+    opens."""
+    import math
+
+    from diviewer.outputs import check_output_file
+
+    if args.fixed_step is not None and not (math.isfinite(args.fixed_step) and 0.0 < args.fixed_step <= 10.0):
+        raise DiviewerError(f"must be a number of seconds in (0, 10], got {args.fixed_step}", field="--fixed-step")
+    if args.record_path is not None:
+        check_output_file(args.record_path, "--record-path", protect=(args.path,), suffix=".json")
+    if args.path is not None:
+        from diviewer.scene import load_scene
+        from diviewer.scene.camera_path import read_path
+
+        read_path(args.path, load_scene(args.scene))
 
 
 def _play_camera_path(viewer) -> None:
