@@ -136,6 +136,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
              "vxgi_grids": tuple(args.vxgi_grids) if args.vxgi_grids is not None else None,
              "vxgi_trace_scale": args.vxgi_trace_scale}
     settings = dataclasses.replace(settings, **{k: v for k, v in given.items() if v is not None})
+    if args.path is not None:
+        from diviewer.bench.path import check_path_options, run_path_bench
+
+        check_path_options(args)
+        run_path_bench(settings, args.path, json_out=args.json)
+        return 0
     run_bench(settings, json_out=args.json, plot_out=args.plot)
     return 0
 
@@ -319,6 +325,8 @@ def _add_bench_parser(sub) -> None:
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
     p.add_argument("--timing", default=None, choices=("auto", "query", "sync"),
                    help="GL stages: timer queries (auto where supported) or wall clock around glFinish")
+    p.add_argument("--path", type=Path, default=None, help="time a camera path file frame by frame (per stage, "
+                   "median and p95) and its temporal stability against the path tracer (docs/paths.md)")
     p.add_argument("--json", type=Path, default=None, help="write the results as strict JSON")
     p.add_argument("--plot", type=Path, default=None, help="write the speed/accuracy plot (PNG)")
     p.add_argument("--quick", action="store_true", help="a few frames at 32x32 (seconds): the test suite's run")
