@@ -67,7 +67,7 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
                         "records by hand)")
     p.add_argument("--fixed-step", type=float, default=None,
                    help="advance animations, paths and recordings by this many seconds a frame instead of the clock "
-                        "(reproducible runs: a recording then replays frame for frame)")
+                        "(reproducible runs: a recording then replays frame for frame, with a fixed --render-scale)")
     p.add_argument("--stats", type=Path, default=None,
                    help="with --frames: write per-stage times, fps and the resolutions as JSON here")
     p.set_defaults(func=run_view)

@@ -313,8 +313,9 @@ class ViewerState:
         """Start recording the frames as a camera path, or stop and write it; returns the panel's message."""
         from diviewer.viewer.recording import Recorder
 
-        if self.recorder is None:
+        if self.recorder is None:  # --record-path takes the first recording; later ones get free names
             self.recorder = Recorder(self.base_scene, self.record_file, exact=self.exact_recording)
+            self.record_file = None
             self.message = "recording the camera path (Ctrl+R stops)"
         else:
             self.message = self.stop_recording()

@@ -99,8 +99,9 @@ def test_p_plays_the_loaded_path_else_the_scene_walk(atrium, tmp_path):
 
 def _view(*args, timeout=240):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    # a fixed render scale: dynamic resolution follows the wall clock, which no two runs share
     return subprocess.run([sys.executable, "-m", "diviewer", "view", "--size", "64x48", "--model", "none",
-                           "--no-vsync", *map(str, args)], capture_output=True, text=True, timeout=timeout, env=env,
+                           "--no-vsync", "--render-scale", "1", *map(str, args)], capture_output=True, text=True, timeout=timeout, env=env,
                           cwd=ROOT)
 
 
@@ -132,3 +133,18 @@ def test_record_then_replay_in_the_window_draws_the_same_frames(display, tmp_pat
     assert bad.returncode == 2 and "v99.json: version:" in bad.stderr
     bad = _view("--scene", "atrium", "--frames", "1", "--record-path", tmp_path / "walk.txt")
     assert bad.returncode == 2 and "--record-path" in bad.stderr
+
+
+def test_a_second_recording_does_not_overwrite_the_first(atrium, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    state = ViewerState(atrium)
+    state.begin(record=tmp_path / "first.json")
+    state.step(0.1)
+    state.toggle_recording()
+    first = (tmp_path / "first.json").read_text()
+    state.toggle_recording()
+    state.fly(forward=1.0)
+    state.step(0.1)
+    assert "diviewer_atrium_path.json" in state.toggle_recording()
+    assert (tmp_path / "first.json").read_text() == first and (tmp_path / "diviewer_atrium_path.json").is_file()
+    assert state.stop_recording() == ""  # nothing in progress: nothing written
