@@ -21,7 +21,8 @@ INT_OPTIONS = {
     "batch_size": (1, None), "ndf": (1, 4096), "max_steps": (1, None), "val_every": (1, None),
     "save_every": (0, None), "num_workers": (0, 256), "max_frames": (1, None),
 }
-FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None), "fps": (1e-3, 1000.0)}
+FLOAT_OPTIONS = {"exposure": (-40.0, 40.0), "lr": (0.0, None), "lambda_L1": (0.0, None), "fps": (1e-3, 1000.0),
+                 "fixed_step": (1e-6, 10.0)}
 
 
 def _cmd_render(args: argparse.Namespace) -> int:

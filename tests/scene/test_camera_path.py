@@ -89,9 +89,12 @@ def test_slerp_of_directions_and_rotations():
     np.testing.assert_allclose(slerp_rotation((0, 0, 350), (0, 0, 10), 0.5), (0, 0, 0), atol=1e-9)
 
 
-def test_the_scene_walk_is_the_samplers_path(atrium):
+@pytest.mark.parametrize("closed", [False, True])
+def test_the_scene_walk_is_the_samplers_path(atrium, closed):
+    walk = dataclasses.replace(atrium.ranges.camera, closed=closed)
+    atrium = dataclasses.replace(atrium, ranges=dataclasses.replace(atrium.ranges, camera=walk))
     path = scene_camera_path(atrium)
-    assert path is not None and path.scene_hash == atrium.file_hash
+    assert path is not None and path.scene_hash == atrium.file_hash and path.closed == closed
     for s in np.linspace(0.0, 1.0, 37):
         got = path.camera_at(path.start + s * path.duration)
         want = camera_on_path(atrium, float(s))

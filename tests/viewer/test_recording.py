@@ -148,3 +148,17 @@ def test_a_second_recording_does_not_overwrite_the_first(atrium, tmp_path, monke
     assert "diviewer_atrium_path.json" in state.toggle_recording()
     assert (tmp_path / "first.json").read_text() == first and (tmp_path / "diviewer_atrium_path.json").is_file()
     assert state.stop_recording() == ""  # nothing in progress: nothing written
+
+
+def test_view_refuses_bad_paths_and_steps_before_a_window(atrium, tmp_path, capsys):
+    from diviewer.cli import main
+    from diviewer.scene.camera_path import scene_camera_path, write_path
+
+    write_path(tmp_path / "walk.json", scene_camera_path(atrium))
+    for args, words in ((["--scene", "cornell", "--path", tmp_path / "walk.json"], ("walk.json: scene_hash:",)),
+                        (["--fixed-step", "0"], ("--fixed-step",)),
+                        (["--record-path", tmp_path / "walk.json", "--path", tmp_path / "walk.json"],
+                         ("--record-path",))):
+        assert main(["view", "--frames", "1", "--model", "none", *map(str, args)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and all(w in err for w in words), err
