@@ -147,3 +147,16 @@ def test_reference_without_mitsuba_names_the_extra(path_file, tmp_path, capsys, 
     monkeypatch.setattr(builtins, "__import__", no_mitsuba)
     assert _render(path_file, tmp_path / "o", "--compare", "direct,reference") == 2
     _one_line_error(capsys, "mitsuba", "train")
+
+
+def test_compare_with_the_neural_image(ctx, path_file, tmp_path):
+    from diviewer.paths import models_dir
+
+    out = tmp_path / "nn"
+    assert _render(path_file, out, "--frames", 2, "--model", models_dir() / "cornell.onnx",
+                   "--compare", "direct,neural") == 0
+    im = read_png(out / "frames" / "000000.png")
+    assert im.shape == (30 + 14, 80, 3)
+    assert np.abs(im[14:, :40].astype(int) - im[14:, 40:]).mean() > 1.0  # the GI differs from the direct light
+    record = json.loads((out / "frames" / "000000.json").read_text())
+    assert record["neural"]["K"] and record["methods"] == ["direct", "neural"]

@@ -297,7 +297,9 @@ class ViewerState:
         """Load a camera path file recorded in this scene and play it from its start."""
         self.path, self.scene = read_path(file, self.scene)
         self.path_file, self.path_time, self.play_path, self._path_started = str(file), 0.0, True, False
-        self.scene_revision += 1  # mesh files the path's objects wear
+        if self.path.user_meshes:  # mesh files the path's objects wear: uploaded at the next frame
+            self.user_meshes.update(self.path.user_meshes)
+            self.scene_revision += 1
         return self.path
 
     def begin(self, path=None, record=None, exact: bool = False) -> None:
