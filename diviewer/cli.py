@@ -16,6 +16,12 @@ from diviewer.outputs import ENVIRONMENT_ERRNOS, check_command_outputs, is_scrat
 def _cmd_render(args: argparse.Namespace) -> int:
     from diviewer.render import render_to_dir
 
+    if args.path is not None:
+        return _render_path(args)
+    for flag, given in (("--frames", args.frames), ("--fps", args.fps), ("--video", args.video),
+                        ("--compare", args.compare), ("--exr", args.exr)):
+        if given:
+            raise DiviewerError("renders the frames of a camera path: give --path FILE", field=flag)
     if args.reference:
         from diviewer.render import check_reference
 
@@ -27,6 +33,24 @@ def _cmd_render(args: argparse.Namespace) -> int:
     print(f"rendered {record['scene']} at {w}x{h} into {args.out}")
     if args.reference:
         _render_reference(args)
+    return 0
+
+
+def _render_path(args: argparse.Namespace) -> int:
+    from diviewer.render_path import render_path
+
+    for flag, given in (("--seed", args.seed is not None), ("--config", args.config), ("--reference", args.reference),
+                        ("--vxgi", args.vxgi), ("--noise-floor", args.noise_floor)):
+        if given:
+            raise DiviewerError("does not apply to --path (the path gives each frame; --compare adds the reference)",
+                                field=flag)
+    done = render_path(args.scene, args.path, args.out, frames=args.frames, fps=args.fps, res=args.res,
+                       video=args.video, compare=args.compare, spp=args.spp, exr=args.exr, model=args.model,
+                       provider=args.provider, exposure=args.exposure, tonemap=args.tonemap,
+                       max_depth=args.max_depth, pt_seed=args.pt_seed)
+    w, h = done["resolution"]
+    print(f"rendered {len(done['times'])} frames of {args.path} at {w}x{h} into {args.out}"
+          + (f", video {args.video}" if args.video else ""))
     return 0
 
 
@@ -101,6 +125,12 @@ def _cmd_bench(args: argparse.Namespace) -> int:
              "vxgi_grids": tuple(args.vxgi_grids) if args.vxgi_grids is not None else None,
              "vxgi_trace_scale": args.vxgi_trace_scale}
     settings = dataclasses.replace(settings, **{k: v for k, v in given.items() if v is not None})
+    if args.path is not None:
+        from diviewer.bench.path import check_path_options, run_path_bench
+
+        check_path_options(args)
+        run_path_bench(settings, args.path, json_out=args.json)
+        return 0
     run_bench(settings, json_out=args.json, plot_out=args.plot)
     return 0
 
@@ -190,6 +220,14 @@ def _add_render_parser(sub) -> None:
     p.add_argument("--model", type=Path, default=None, help="an ONNX model (diviewer export): also write neural.exr")
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"), help="onnxruntime provider")
     _add_reference_args(p)
+    g = p.add_argument_group("camera path (docs/paths.md)")
+    g.add_argument("--path", type=Path, default=None, help="render every frame of a camera path file (resumable)")
+    g.add_argument("--frames", type=int, default=None, help="frames evenly from the path's first key to its last")
+    g.add_argument("--fps", type=float, default=None, help="frames per second of the path (default 30)")
+    g.add_argument("--video", type=Path, default=None, help="also write the frames as an mp4 (H.264)")
+    g.add_argument("--compare", default=None, help="methods side by side, labelled: direct,neural,reference "
+                   "(neural needs --model; reference is Mitsuba at --spp, from the 'train' extra)")
+    g.add_argument("--exr", action="store_true", help="also write each method's linear image as EXR")
     g = p.add_argument_group("voxel cone tracing")
     g.add_argument("--vxgi", action="store_true", help="also render VXGI: vxgi.exr and vxgi_indirect.exr")
     g.add_argument("--vxgi-res", type=int, default=64, help="voxels per side of the VXGI grid (32, 64, 128; default 64)")
@@ -278,6 +316,8 @@ def _add_bench_parser(sub) -> None:
     p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"))
     p.add_argument("--timing", default=None, choices=("auto", "query", "sync"),
                    help="GL stages: timer queries (auto where supported) or wall clock around glFinish")
+    p.add_argument("--path", type=Path, default=None, help="time a camera path file frame by frame (per stage, "
+                   "median and p95) and its temporal stability against the path tracer (docs/paths.md)")
     p.add_argument("--json", type=Path, default=None, help="write the results as strict JSON")
     p.add_argument("--plot", type=Path, default=None, help="write the speed/accuracy plot (PNG)")
     p.add_argument("--quick", action="store_true", help="a few frames at 32x32 (seconds): the test suite's run")

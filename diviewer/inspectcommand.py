@@ -67,8 +67,6 @@ def write_new(path: Path, text: str) -> None:
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from diviewer.scene.survey import OpenSpaceSettings, survey
 
-    if not 4 <= args.cells <= 128:
-        raise DiviewerError(f"must be a whole number from 4 to 128, got {args.cells}", field="--cells")
     for path, option, suffix in ((args.json, "--json", ".json"), (args.write_toml, "--write-toml", ".toml")):
         if path is not None:
             _check_new_file(path, option, suffix)

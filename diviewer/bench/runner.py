@@ -96,6 +96,7 @@ class GlBench:
             if i >= warmup:
                 frames.append(dict(self.timer.times))
                 totals.append(ms)
+        self.per_frame = [{"frame": ms, **f} for f, ms in zip(frames, totals)]  # the last run's, frame by frame
         return timing_summary(frames, totals)
 
     def time_direct(self, configs, warmup: int) -> dict:
@@ -336,8 +337,9 @@ def calibration(settings, scene, ctx, width: int, height: int, mode: str) -> tup
     return inputs, f"GL inputs of {settings.calib_frames} training configurations"
 
 
-def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log) -> dict | None:
-    """Frame-to-frame change of each method along a smooth sequence against the path tracer's (Mitsuba needed)."""
+def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log, seq=None) -> dict | None:
+    """Frame-to-frame change of each method along a smooth sequence (``seq``, default `temporal_configs`) against
+    the path tracer's (Mitsuba needed)."""
     from diviewer.bench.frontier import temporal_stability
     from diviewer.encoding import fit_exposure
     from diviewer.metrics import tonemap
@@ -351,7 +353,7 @@ def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log) 
         notes.append(f"no temporal stability: {exc}")
         return None
     res = ds.bench_frames()[1][0] if ds is not None else settings.resolutions[0]
-    seq = temporal_configs(scene, settings.temporal_frames)
+    seq = temporal_configs(scene, settings.temporal_frames) if seq is None else seq
     log(f"temporal stability: {len(seq)} frames at {res}x{res}, reference {settings.temporal_spp} spp")
     gb = GlBench(ctx, scene, res, res, mode)
     try:

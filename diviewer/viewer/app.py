@@ -11,10 +11,9 @@ hold ``--target-fps``); the neural pass reduces them to the GI resolution (``gi_
 count at the window's shape, or a fraction of the shading size), runs the network (optionally one frame
 behind, on a worker thread), and upsamples its indirect light over the direct light; the display pass
 draws the view mode's image into the window (bilinear where it is upscaled), and the panel goes on top.
-Nothing here imports torch. The rooms: window.py (size, scale, letterbox), input.py (key table), panel.py,
-screenshots.py, sources.py (the view modes' textures), models.py (which model), gi.py (the model's neural
-pass and the GI resolution policy), script.py (scripted runs), report.py (the run's summary and stats
-JSON), state.py (what is shown, no GL), scale.py (dynamic resolution), exposure.py and meter.py (auto exposure).
+Nothing here imports torch. The rooms: window.py, input.py (key table), panel.py, screenshots.py, sources.py (the
+view modes' textures), models.py, gi.py (the neural pass, the GI resolution), script.py, report.py (summary, stats
+JSON), state.py (no GL), recording.py (camera paths), scale.py (dynamic resolution), meter.py (auto exposure).
 """
 
 from __future__ import annotations
@@ -81,6 +80,7 @@ class Viewer:
         self.gl_renderer = describe(self.ctx)
         self.state = ViewerState(scene, controller=settings.controller)
         self.state.show_panel = settings.panel
+        self.state.begin(settings.path, settings.record_path, exact=settings.fixed_step is not None)
         self.shaders = ShaderCache(self.ctx)
         self.timer = stage_timer(self.ctx, deferred=True)  # read after the swap: timing does not stall the frame
         """One timer for every stage of a frame: renderer passes, neural pass, inference, display, panel."""
@@ -89,8 +89,7 @@ class Viewer:
         self.scaler = ScaleController(scale_settings(settings))
         self.view_size = (fb_w, fb_h)
         """The window's framebuffer size the image is shown at (the renderer's is this times the scale)."""
-        self.drawn_scale = self.scaler.scale
-        """The render scale of the frame drawn last."""
+        self.drawn_scale = self.scaler.scale  # the render scale of the frame drawn last
         self.renderer = r = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
                                      self.shaders, timer=self.timer, back_faces=settings.back_faces)
         r.moving_shadow_size, r.rest_in_bands = settings.moving_shadow_size, settings.rest_in_bands
@@ -293,7 +292,8 @@ class Viewer:
 
         glfw, imgui, st = self.glfw, self.imgui, self.state
         start = time.perf_counter()
-        dt = min(start - self._last_frame_start, 0.25) if self._last_frame_start is not None else 1.0 / 60.0
+        dt = self.settings.fixed_step or (min(start - self._last_frame_start, 0.25)
+                                          if self._last_frame_start is not None else 1.0 / 60.0)
         frame_ms = (start - self._last_frame_start) * 1e3 if self._last_frame_start is not None else 0.0
         self._last_frame_start = start
         glfw.poll_events()
@@ -375,6 +375,7 @@ class Viewer:
             self.ctx.release()
         finally:
             self.window.close()
+            self.state.message = self.state.stop_recording() or self.state.message  # also when the window closes
 
 
 def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None = None, frames: int | None = None,
@@ -390,17 +391,16 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
         screenshot: save the last frame's view (PNG + frame JSON) here on exit.
         size, vsync, provider: window size, vsync and execution provider, when ``settings`` is not given.
         settings: everything else (render settings, the reference's, the camera controller).
-        script: actions applied before given frames: ``(frame, callable(viewer))``,
-            ``(frame, name, kwargs)`` or ``{"frame": i, "action": name, **kwargs}``; names are Viewer
-            actions (resize, screenshot, window_screenshot, set_model, set_vsync, pick_window_point) or
-            ViewerState methods (set_view_mode, set_light_direction, fly, drag, ...).
+        script: actions applied before given frames: ``(frame, callable(viewer))``, ``(frame, name, kwargs)`` or
+            ``{"frame": i, "action": name, **kwargs}``; names are Viewer actions (script.SCRIPT_ACTIONS) or
+            ViewerState methods (set_view_mode, set_light_direction, fly, drag, toggle_recording, ...).
         stats: write the per-stage times of every frame drawn (median, p95, mean ms), the frame rate, the
             window, shading and GI resolutions, the render scales, how the stages were timed and whether the
             frames were inside the model's training ranges, as JSON, here.
 
     Returns:
-        A summary: frames drawn, GI size, model, screenshots, view modes drawn, the reasons of those
-        that could not be, mean stage times, and the GL error state before shutdown.
+        A summary: frames drawn, GI size, model, screenshots, view modes drawn, the reasons of those that could
+        not be, mean stage times, and the GL error state before shutdown.
     """
     from diviewer.scene import load_scene
     from diviewer.viewer.report import run_summary, write_stats

@@ -61,6 +61,14 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--shadow-bands", action=argparse.BooleanOptionalAction, default=True,
                    help="once a moving sun rests, draw its full shadow map in bands over the next frames, the moving "
                         "map shown meanwhile (default; no stalled frame), or whole at the first frame it rests")
+    p.add_argument("--path", type=Path, default=None,
+                   help="play this camera path file from the first frame (P plays it again; docs/paths.md)")
+    p.add_argument("--record-path", type=Path, default=None,
+                   help="record the camera path from the first frame to the last into this JSON file (Ctrl+R "
+                        "records by hand)")
+    p.add_argument("--fixed-step", type=float, default=None,
+                   help="advance animations, paths and recordings by this many seconds a frame instead of the clock "
+                        "(reproducible runs: a recording then replays frame for frame, with a fixed --render-scale)")
     p.add_argument("--stats", type=Path, default=None,
                    help="with --frames: write per-stage times, fps and the resolutions as JSON here")
     p.set_defaults(func=run_view)
@@ -84,6 +92,7 @@ def run_view(args: argparse.Namespace) -> int:
         raise DiviewerError(f"{args.size} shaded at {top:g}x per side is {round(size[0] * top)}x"
                             f"{round(size[1] * top)}, above {MAX_SIZE} a side; give a smaller --size or {option}",
                             field="--size")
+    _check_paths(args)
     if args.frames is not None and str(args.model).lower() not in ("auto", "none"):
         # Scripted mode: a model the user named and the viewer refuses is a user error (exit 2),
         # found before a window opens; interactively the panel says why and offers the others.
@@ -99,7 +108,9 @@ def run_view(args: argparse.Namespace) -> int:
                               scale_ceiling=args.scale_ceiling,
                               auto_exposure=args.auto_exposure, back_faces=args.back_faces,
                               rest_in_bands=args.shadow_bands,
-                              gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined))
+                              gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined),
+                              path=str(args.path) if args.path else None, fixed_step=args.fixed_step,
+                              record_path=str(args.record_path) if args.record_path else None)
     script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else []
     if args.camera_moving:
         script.append((0, _play_camera_path))
@@ -114,8 +125,22 @@ def run_view(args: argparse.Namespace) -> int:
         print(f"viewer: {summary['frames']} frames at {vw}x{vh} (shaded at {rw}x{rh}, scale "
               f"{summary['render_scale']:.2f}), GI {gw}x{gh}, "
               f"{summary['stages_ms']['frame']:.1f} ms/frame"
-              + "".join(f", saved {p}" for p in (args.screenshot, args.window_screenshot) if p))
+              + "".join(f", saved {p}" for p in (args.screenshot, args.window_screenshot, args.record_path) if p))
     return 0
+
+
+def _check_paths(args: argparse.Namespace) -> None:
+    """--path read and checked against the scene, --record-path writable: before a window opens (--fixed-step is
+    the CLI's FLOAT_OPTIONS)."""
+    from diviewer.outputs import check_output_file
+
+    if args.record_path is not None:
+        check_output_file(args.record_path, "--record-path", protect=(args.path,), suffix=".json")
+    if args.path is not None:
+        from diviewer.scene import load_scene
+        from diviewer.scene.camera_path import read_path
+
+        read_path(args.path, load_scene(args.scene))
 
 
 def _play_camera_path(viewer) -> None:

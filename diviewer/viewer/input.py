@@ -70,7 +70,10 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("arrow keys", "light azimuth (left/right) and elevation (up/down)", ("LEFT", "RIGHT", "UP", "DOWN"),
             _turn_light, repeat=True),
     Binding("L", "animate the light", ("L",), lambda i, _: i.state.toggle_animation()),
-    Binding("P", "play the scene's camera path", ("P",), lambda i, _: i.state.toggle_path()),
+    Binding("P", "play the camera path (the --path file, else the scene's own walk)", ("P",),
+            lambda i, _: i.state.toggle_path()),
+    Binding("Ctrl+R", "record the camera path / stop and save it as JSON", ("Ctrl+R",),
+            lambda i, _: i.state.toggle_recording()),
     Binding("Tab", "select the next object", ("TAB",), _next_object),
     Binding("1 ... 0", "view modes: " + ", ".join(f"{m.key} {m.name}" for m in VIEW_MODES if m.key)),
     *(Binding(m.key, m.label, (m.key,), lambda i, _, name=m.name: i.state.set_view_mode(name), listed=False)

@@ -282,10 +282,19 @@ class Panel:
             if changed:
                 c.distance = dist
                 st._sync_camera()
-        if st.scene.ranges.camera is not None:
+        path = st.playable_path()
+        if path is not None:
             changed, _ = imgui.checkbox("play camera path (P)", st.play_path)
             if changed:
                 st.toggle_path()
+            imgui.same_line()
+            self._wrapped(f"{Path(st.path_file).name if st.path is not None else 'the scene walk'}: "
+                          f"{len(path.keys)} keys, {path.duration:.1f} s", DIM)
+        if imgui.button("stop recording (Ctrl+R)" if st.recorder is not None else "record path (Ctrl+R)"):
+            st.toggle_recording()
+        if st.recorder is not None:
+            imgui.same_line()
+            self._wrapped(f"recording: {len(st.recorder.keys)} frames, {st.recorder.time:.1f} s", WARN)
         p, t = st.config.camera.position, st.config.camera.target
         self._wrapped(f"position ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f})  "
                       f"target ({t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f})", DIM)

@@ -84,3 +84,9 @@ class ViewerSettings:
     reference_max_size: int = 512
     """Longest side of the path-traced reference (it is scaled to the view)."""
     title: str = "diviewer"
+    path: str | None = None
+    """A camera path file to play from the first frame (``--path``)."""
+    record_path: str | None = None
+    """Record the camera path from the first frame to the last into this file (``--record-path``)."""
+    fixed_step: float | None = None
+    """Seconds each frame advances the clock (animations, paths, recordings) instead of the wall clock's."""

@@ -18,7 +18,7 @@ from diviewer.gl.display import DEFAULT_TONEMAP, tonemap_code
 from diviewer.scene.lights import angles_to_vector, box_sweep, power_field, rotate_light, vector_to_angles
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
 from diviewer.scene.picking import pick_object, pixel_ray
-from diviewer.scene.sampler import camera_on_path
+from diviewer.scene.camera_path import CameraPath, read_path, scene_camera_path
 from diviewer.scene.ranges_check import out_of_range
 from diviewer.viewer.controls import Controller, make_controller
 from diviewer.exposure import SHOWN, WHITE_POINTS, AutoExposure
@@ -62,8 +62,18 @@ class ViewerState:
         """Seconds for one sweep of the light across its range and back."""
         self.play_path = False
         self.path_time = 0.0
-        self.path_period = 30.0
-        """Seconds to play the camera path once."""
+        """Seconds into the path being played (`playable_path`)."""
+        self._path_started = False
+        self.path: CameraPath | None = None
+        """A camera path loaded from a file (`load_path`); None: P plays the scene file's own walk."""
+        self.path_file: str | None = None
+        self._scene_path = scene_camera_path(scene)
+        self.recorder = None
+        """The recording in progress (a `diviewer.viewer.recording.Recorder`), or None."""
+        self.record_file: str | None = None
+        """Where recordings go (``--record-path``); None: a free diviewer_<scene>_path.json."""
+        self.exact_recording = False
+        """Keep every frame of a recording (a fixed time step: a replay then draws each frame exactly)."""
         self.model_name: str | None = None
         """The model requested: a file name in the models folder, a path, or None for no model."""
         self.model_meta: dict | None = None
@@ -273,10 +283,53 @@ class ViewerState:
         self.animate_light = not self.animate_light
         return self.animate_light
 
+    def playable_path(self) -> CameraPath | None:
+        """What P plays: the loaded path, else the scene file's own walk (None: neither)."""
+        return self.path if self.path is not None else self._scene_path
+
     def toggle_path(self) -> bool:
-        """Play or stop the scene's camera path (scenes without one have nothing to play)."""
-        self.play_path = not self.play_path and self.scene.ranges.camera is not None
+        """Play or stop the camera path (`playable_path`; scenes without one have nothing to play)."""
+        self.play_path = not self.play_path and self.playable_path() is not None
+        self._path_started = False
         return self.play_path
+
+    def load_path(self, file: str | Path) -> CameraPath:
+        """Load a camera path file recorded in this scene and play it from its start."""
+        self.path, self.scene = read_path(file, self.scene)
+        self.path_file, self.path_time, self.play_path, self._path_started = str(file), 0.0, True, False
+        if self.path.user_meshes:  # mesh files the path's objects wear: uploaded at the next frame
+            self.user_meshes.update(self.path.user_meshes)
+            self.scene_revision += 1
+        return self.path
+
+    def begin(self, path=None, record=None, exact: bool = False) -> None:
+        """A session's start: play a path file, record from the first frame into ``record`` (a file), keep every
+        frame of recordings (``exact``: the viewer runs a fixed time step)."""
+        self.exact_recording, self.record_file = exact, (str(record) if record is not None else None)
+        if path is not None:
+            self.load_path(path)
+        if record is not None:
+            self.toggle_recording()
+
+    def toggle_recording(self) -> str:
+        """Start recording the frames as a camera path, or stop and write it; returns the panel's message."""
+        from diviewer.viewer.recording import Recorder
+
+        if self.recorder is None:  # --record-path takes the first recording; later ones get free names
+            self.recorder = Recorder(self.base_scene, self.record_file, exact=self.exact_recording)
+            self.record_file = None
+            self.message = "recording the camera path (Ctrl+R stops)"
+        else:
+            self.message = self.stop_recording()
+        return self.message
+
+    def stop_recording(self) -> str:
+        """Write the recording in progress, if any (atomically); returns what was written."""
+        rec, self.recorder = self.recorder, None
+        if rec is None:
+            return ""
+        file = rec.write(self.scene, self.user_meshes)
+        return f"recorded {len(rec.keys)} frames, {rec.time:.1f} s, to {file}" if file else "nothing recorded"
 
     def _animated_lights(self) -> tuple:
         """Each light turned about its range axis: swept across the range angle, or all round without one."""
@@ -304,13 +357,18 @@ class ViewerState:
         if self.animate_light and self.config.lights:
             self.light_time += dt
             self._set(dataclasses.replace(self.config, lights=self._animated_lights()))
-        if self.play_path and self.scene.ranges.camera is not None:
-            self.path_time += dt
-            u = self.path_time / self.path_period
-            s = u % 1.0 if self.scene.ranges.camera.closed else 1.0 - abs(u % 2.0 - 1.0)
-            camera = camera_on_path(self.scene, s)
-            self.controller = make_controller(self.controller.kind, camera, self.scene_centre())
-            self._sync_camera()
+        path = self.playable_path()
+        if self.play_path and path is not None:
+            self.path_time += dt if self._path_started else 0.0
+            self._path_started = True
+            t = path.wrap(path.start + self.path_time)
+            # A loaded path also sets lights and objects; the scene's walk only the camera.
+            config = path.config_at(t, self.config) if path is self.path else \
+                dataclasses.replace(self.config, camera=path.camera_at(t))
+            self.controller = make_controller(self.controller.kind, config.camera, self.scene_centre())
+            self._set(config)  # the path's camera exactly (the controller takes over from it when the user flies)
+        if self.recorder is not None:
+            self.recorder.add(dt, self.config)
         return self.config
 
     # --- display ---------------------------------------------------------------------------------
