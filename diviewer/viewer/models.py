@@ -123,10 +123,10 @@ def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], 
     from diviewer.frames import parse_resolution
 
     try:
-        w, h = parse_resolution(spec)
-    except (DiviewerError, ValueError) as exc:
+        w, h = parse_resolution(spec, "")
+    except DiviewerError as exc:
         raise DiviewerError(f"GI resolution '{spec}': use 'model', a fraction of the window (1/2, 1/4, 1/6) "
-                            f"or WxH", field="--gi-res") from exc
+                            f"or WxH ({exc})", field="--gi-res") from exc
     if not pads and (w % m or h % m):
         near = lambda s: f"{m}" if s < m else f"{s // m * m} or {(s // m + 1) * m}"
         raise DiviewerError(f"GI resolution {w}x{h} is not a multiple of the model's stride {m} "

@@ -40,11 +40,14 @@ def test_view_refuses_a_gi_resolution_beyond_the_gl_limits(ctx):
     gi = GIControl(ctx, renderer, SimpleNamespace(), "model", GISettings())
     model = SimpleNamespace(resolution=(64, 64), multiple=16, shape_note=lambda w, h: "")
     mw, _ = max_render_size(ctx)
-    # beyond the context's limits (a fraction of the window can ask for any size), and within them but too large
-    # to allocate (llvmpipe: no float RGBA target of 2 GiB or more)
-    for spec in (f"{mw // 64 + 1}/1", "11600x11600"):
-        with pytest.raises(DiviewerError, match="--gi-res: .*(larger than this GL context allows|too large for)"):
-            gi._size_for(model, spec, (64, 64))
+    # a fraction above the window (refused as a fraction: at most 1/1), beyond the context's limits, and within
+    # them but too large to allocate (llvmpipe: no float RGBA target of 2 GiB or more)
+    with pytest.raises(DiviewerError, match="--gi-res: .*not a fraction of the window from 1/16 to 1"):
+        gi._size_for(model, f"{mw // 64 + 1}/1", (64, 64))
+    with pytest.raises(DiviewerError, match=r"--gi-res: .*(WxH with 1 <= N <= \d+, got|larger than this GL context)"):
+        gi._size_for(model, f"{mw + 1}x64", (64, 64))
+    with pytest.raises(DiviewerError, match="--gi-res: .*(larger than this GL context allows|too large for)"):
+        gi._size_for(model, "11600x11600", (64, 64))
     assert gi._size_for(model, "1/2", (64, 64)) == (32, 32)
     assert ctx.error == "GL_NO_ERROR"
 
