@@ -25,7 +25,7 @@ from diviewer.errors import DiviewerError
 from diviewer.fieldspec import MAX_SIZE, Float, Int, Ints, Invalid
 from diviewer.train.config import TRAIN_FIELDS
 from diviewer.train.recipe_fields import K, MAX_DEPTH, MAX_LADDER_K, SEED, SPP, TRUTH_FILTER
-from diviewer.viewer.models import MIN_GI_SHARE
+from diviewer.viewer.models import MIN_GI_SHARE, gi_share
 from diviewer.viewer.scale import MAX_SCALE
 
 
@@ -72,11 +72,7 @@ class GIRes:
         if text == "model":
             return v
         if "/" in text:
-            try:
-                num, den = (float(x) for x in text.split("/"))
-                ratio = num / den
-            except (ValueError, ZeroDivisionError):
-                ratio = math.nan
+            ratio = gi_share(text)
             if not (math.isfinite(ratio) and MIN_GI_SHARE <= ratio <= 1):
                 raise Invalid(f"must be {self.describe()}")
             return v

@@ -92,6 +92,15 @@ def runtime_pads(model) -> bool:
     return True
 
 
+def gi_share(spec: str) -> float:
+    """The share of the window a GI resolution ``N/D`` asks for (NaN where it is not a fraction)."""
+    try:
+        num, den = (float(x) for x in str(spec).split("/"))
+        return num / den
+    except (ValueError, ZeroDivisionError):
+        return math.nan
+
+
 def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], multiple: int,
                   pads: bool = False, shape: tuple[int, int] | None = None) -> tuple[int, int]:
     """The GI resolution ``spec`` asks for, for a model of stride ``multiple`` trained at ``trained``.
@@ -111,15 +120,11 @@ def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], 
         rows = int(trained[1])
         return snap(rows * sw / max(sh, 1)), rows
     if "/" in spec:
-        try:
-            num, den = (float(x) for x in spec.split("/"))
-            share = num / den
-        except (ValueError, ZeroDivisionError):
-            share = math.nan
+        share = gi_share(spec)
         if not (math.isfinite(share) and MIN_GI_SHARE <= share <= 1.0):
             raise DiviewerError(f"GI resolution '{spec}' is not a fraction of the window from 1/16 to 1 like 1/4",
                                 field="--gi-res")
-        return tuple(snap(s * num / den) for s in window)
+        return tuple(snap(s * share) for s in window)
     from diviewer.frames import parse_resolution
 
     try:
