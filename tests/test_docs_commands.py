@@ -147,10 +147,20 @@ def test_the_walkthrough_covers_every_step():
     assert any("--video" in a for a in commands)
 
 
-@pytest.mark.parametrize("page", DOCS)
-def test_the_toml_snippets_of_the_docs_parse(page):
-    for block in TOML_FENCE.findall((ROOT / page).read_text(encoding="utf-8")):
-        tomllib.loads(block)
+def test_the_scene_snippets_of_the_walkthrough_load_on_the_room(tmp_path):
+    """Each TOML block of docs/own-scene.md, under a [scene] that imports room.glb, loads (its fields and ranges as
+    the loader checks them), and each material it sets overrides one the room's objects wear."""
+    from diviewer.scene import load_scene
+
+    (tmp_path / "room.glb").write_bytes(room_glb())
+    blocks = TOML_FENCE.findall((ROOT / "docs/own-scene.md").read_text(encoding="utf-8"))
+    assert blocks
+    for i, block in enumerate(blocks):
+        path = tmp_path / f"snippet{i}.toml"
+        path.write_text('[scene]\nname = "room"\n[gltf]\nfile = "room.glb"\n' + block)
+        scene = load_scene(path)
+        worn = {o.material for o in scene.default.objects}
+        assert set(tomllib.loads(block).get("materials", {})) <= worn, (block, worn)
 
 
 @pytest.mark.slow
