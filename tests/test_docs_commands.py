@@ -3,11 +3,11 @@
 Every line of a ```bash / ```sh / ```console / ```shell block of DOCS that starts with ``diviewer `` (after an
 optional ``$ ``) runs as ``python -m diviewer`` in a folder holding a small procedural glTF room, ``room.glb``
 (the scene docs/own-scene.md is written for; other scenes a page names become it). Sizes shrink (``--res``,
-``--size``, ``--frames``, ``--spp``); ``view`` runs a few frames in a window (the display fixture: Xvfb in CI);
-``build`` runs with ``--dry-run`` (a real build takes hours). The commands that take minutes to hours and have no
-dry run (PARSE_ONLY), and a path-traced reference where Mitsuba is not installed, are only parsed. The model the
-build would write is stood in for by a hand-built one of the room (tests/onnx_models.py), so ``view`` and
-``render --model`` run on it. Each command must exit 0.
+``--size``, ``--frames``, ``--spp``); ``view`` runs a few frames in a window (the display fixture: Xvfb in CI;
+without a display it is only parsed); ``build`` runs with ``--dry-run`` (a real build takes hours). The commands
+that take minutes to hours and have no dry run (PARSE_ONLY), and a path-traced reference where Mitsuba is not
+installed, are only parsed. The model the build would write is stood in for by a hand-built one of the room
+(tests/onnx_models.py), so ``view`` and ``render --model`` run on it. Each command must exit 0.
 """
 
 from __future__ import annotations
@@ -125,7 +125,8 @@ def _run(argv: list[str], folder: Path) -> None:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     r = subprocess.run([sys.executable, "-m", "diviewer", *argv], cwd=folder, env=env, capture_output=True,
                        text=True, timeout=300)
-    assert r.returncode == 0, f"`diviewer {shlex.join(argv)}` exit {r.returncode}:\n{r.stdout[-2000:]}{r.stderr[-2000:]}"
+    said = r.stdout[-2000:] + r.stderr[-2000:]
+    assert r.returncode == 0, f"`diviewer {shlex.join(argv)}` exit {r.returncode}:\n{said}"
 
 
 def test_the_extraction_reads_fences_prompts_continuations_and_comments():
@@ -164,10 +165,15 @@ def test_the_scene_snippets_of_the_walkthrough_load_on_the_room(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_commands_of_the_docs_run(tmp_path, display):  # noqa: F811 (the imported fixture)
+def test_the_commands_of_the_docs_run(tmp_path, request):
     """Every command of each page, in the page's order, on the room in a folder of its own; a page without an
-    inspect that writes room.toml gets it written first. (README.md's commands are inline: none runs here until it
-    has a shell block.)"""
+    inspect that writes room.toml gets it written first. Without a display (and without DIVIEWER_REQUIRE_GL, where
+    that fails) the window commands are only parsed."""
+    try:
+        request.getfixturevalue("display")
+        windows = True
+    except pytest.skip.Exception:
+        windows = False
     ran = 0
     for page in DOCS:
         commands = [shrink(argv) for argv in doc_commands((ROOT / page).read_text(encoding="utf-8"))]
@@ -179,11 +185,12 @@ def test_the_commands_of_the_docs_run(tmp_path, display):  # noqa: F811 (the imp
         if not any(a[0] == "inspect" and "--write-toml" in a for a in commands):
             _run(["inspect", "--scene", "room.glb", "--write-toml", "room.toml"], folder)
         for argv in commands:
-            if argv[0] in PARSE_ONLY or ("--reference" in argv and not HAS_MITSUBA):
+            if (argv[0] in PARSE_ONLY or ("--reference" in argv and not HAS_MITSUBA)
+                    or (argv[0] == "view" and not windows)):
                 _parses(argv)
                 continue
             if MODEL in argv and not (folder / MODEL).exists():
                 _stand_in_model(folder)
             _run(argv, folder)
             ran += 1
-    assert ran >= 8, ran
+    assert ran >= (8 if windows else 5), ran
