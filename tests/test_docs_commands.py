@@ -112,6 +112,18 @@ def _stand_in_model(folder: Path) -> None:
     direct_times(folder / MODEL, meta=base_meta(scene_hash=scene.file_hash, scene=scene.name))
 
 
+def _recorded_without_a_window(argv: list[str], folder: Path) -> None:
+    """What ``view --record-path F`` of a still camera writes, for the commands after it when no window can open:
+    two keys, a second apart, at the scene file's camera."""
+    from diviewer.scene import load_scene
+    from diviewer.scene.camera_path import CameraPath, PathKey, write_path
+
+    scene = load_scene(folder / argv[argv.index("--scene") + 1])
+    keys = tuple(PathKey(time=t, camera=scene.default.camera) for t in (0.0, 1.0))
+    write_path(folder / argv[argv.index("--record-path") + 1],
+               CameraPath(keys=keys, scene=scene.name, scene_hash=scene.file_hash))
+
+
 def _parses(argv: list[str]) -> None:
     from diviewer.cli import build_parser
 
@@ -188,6 +200,8 @@ def test_the_commands_of_the_docs_run(tmp_path, request):
             if (argv[0] in PARSE_ONLY or ("--reference" in argv and not HAS_MITSUBA)
                     or (argv[0] == "view" and not windows)):
                 _parses(argv)
+                if argv[0] == "view" and "--record-path" in argv:
+                    _recorded_without_a_window(argv, folder)
                 continue
             if MODEL in argv and not (folder / MODEL).exists():
                 _stand_in_model(folder)
