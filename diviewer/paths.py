@@ -39,6 +39,12 @@ def models_dir() -> Path:
     return assets_dir() / "models"
 
 
+def default_work_dir(scene: str | Path) -> Path:
+    """Where `diviewer build` works and ships by default for ``scene`` (a shipped name or a scene file):
+    runs/<the file's stem>, under the current folder."""
+    return Path("runs") / Path(str(scene)).stem
+
+
 def scene_help(default: str | None = None) -> str:
     """--scene's help: the shipped scenes as the assets folder has them (not a list kept by hand)."""
     tail = f" (default {default})" if default else ""

@@ -74,6 +74,7 @@ def run_build_command(args: argparse.Namespace) -> int:
     from diviewer.build.checks import check_device, check_folders, check_ks, check_replacement, check_splits
     from diviewer.build.plan import describe, make_plan
     from diviewer.errors import DiviewerError
+    from diviewer.paths import default_work_dir
     from diviewer.train.recipe import load_recipe
 
     if args.scene is None and args.recipe is None:
@@ -83,7 +84,7 @@ def run_build_command(args: argparse.Namespace) -> int:
         raise DiviewerError("the recipe names no scene ([recipe] scene); give --scene", path=recipe.path,
                             field="recipe.scene")
     scene = args.scene = str(args.scene or recipe.scene)
-    work = args.work or Path("runs") / Path(scene).stem
+    work = args.work or default_work_dir(scene)
     ship = args.ship or work  # a model elsewhere is replaced only where --ship names its folder
     if args.replace_worse and args.ship is None:
         raise DiviewerError("--replace-worse applies to a model replaced in the folder --ship names; give --ship DIR",

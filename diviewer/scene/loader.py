@@ -106,6 +106,7 @@ def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
         note_warning(f"{path}: gltf.file: {users} placed mesh(es) of the glTF have no material: they get "
                      f"'{gltf.DEFAULT_MATERIAL}', glTF's default, albedo {gltf.DEFAULT_ALBEDO[0]:g} (white, reflecting "
                      f"all light); give them one with [materials.{gltf.DEFAULT_MATERIAL}] albedo = [0.8, 0.8, 0.8]")
+    from_gltf = set(materials) if root.has("gltf") else None
     for key, t in _entries(root.table("materials"), lambda k: None):
         # A glTF material of the same name is overridden: the keys given replace its values, the rest stay.
         materials[key] = _material(key, t, base, path, materials.get(key))
@@ -128,6 +129,8 @@ def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
     objects += _objects(root, path, meshes, materials, {o.name for o in objects})
     if not objects:
         raise DiviewerError("a scene needs at least one object ([[objects]] or [gltf])", path=path, field="objects")
+    if from_gltf is not None:
+        _unused_overrides(root, path, from_gltf, {o.material for o in objects})
 
     lights = []
     raw_lights = root.raw("lights", [])
@@ -144,6 +147,16 @@ def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
     return Scene(name=name, path=path, file_hash=file_hash, meshes=meshes, materials=materials, default=default,
                  ranges=ranges, exposure=exposure, auto_exposure=auto_exposure, ambient=ambient,
                  shadow_size=int(shadow_size))
+
+
+def _unused_overrides(root: _Table, path: Path | None, from_gltf: set[str], used: set[str]) -> None:
+    """A [materials.NAME] of a glTF scene that names no glTF material and that no object uses is most likely a
+    misspelt override: said as a warning, with the glTF's material names."""
+    for key in root.table("materials").data:
+        if key not in from_gltf and key not in used:
+            names = ", ".join(sorted(n for n in from_gltf if n in used)) or "none"
+            note_warning(f"{path}: materials.{key}: no glTF material is named '{key}' and no object uses it, so it "
+                         f"changes nothing; the glTF's materials in use: {names}")
 
 
 def _material(key: str, t: _Table, base: Path, path: Path | None, over: Material | None = None) -> Material:

@@ -10,14 +10,18 @@ from diviewer.scene.model import Scene
 
 
 def model_candidates(scene: Scene) -> list[Path]:
-    """The shipped models named for this scene: assets/models/<scene>*.onnx."""
-    from diviewer.paths import models_dir
+    """The models ``--model auto`` tries, in order: the shipped ones named for this scene
+    (assets/models/<scene>*.onnx), then the one `diviewer build` writes by default (runs/<file stem>/<scene>.onnx
+    under the current folder)."""
+    from diviewer.paths import default_work_dir, models_dir
 
     try:
         folder = models_dir()
+        shipped = sorted(folder.glob(f"{scene.name}*.onnx")) if folder.is_dir() else []
     except FileNotFoundError:
-        return []
-    return sorted(folder.glob(f"{scene.name}*.onnx")) if folder.is_dir() else []
+        shipped = []
+    built = default_work_dir(scene.path if scene.path is not None else scene.name) / f"{scene.name}.onnx"
+    return shipped + ([built] if built.is_file() else [])
 
 
 def open_model(spec: str | Path | None, scene: Scene, provider: str | None = None):
@@ -54,21 +58,18 @@ def open_model(spec: str | Path | None, scene: Scene, provider: str | None = Non
 def no_model_message(scene: Scene, refusals: list[str] = ()) -> str:
     """One line for ``--model auto`` without a model that fits: where it looked, that the view goes on without
     neural GI, and what `diviewer build` would do for this scene."""
-    from diviewer.paths import models_dir, scenes_dir
+    from diviewer.paths import default_work_dir, models_dir, scenes_dir
 
     try:
         where = models_dir()
     except FileNotFoundError:
         where = Path("assets/models")
-    shipped = scene.path is not None and Path(scene.path).resolve() == (scenes_dir() / f"{scene.name}.toml").resolve()
-    found = (f"no model in {where} fits scene '{scene.name}' ({'; '.join(refusals)})" if refusals
-             else f"no model for scene '{scene.name}' in {where}")
-    if shipped:
-        build = f"`diviewer build --scene {scene.name}` captures, trains and ships one there as {scene.name}.onnx"
-    else:
-        stem = Path(scene.path).stem if scene.path is not None else scene.name
-        build = (f"`diviewer build --scene {scene.path or scene.name}` captures, trains and writes one to "
-                 f"runs/{stem}/{scene.name}.onnx; then view it with --model that file")
+    shipped = scene.path is None or Path(scene.path).resolve() == (scenes_dir() / f"{scene.name}.toml").resolve()
+    spec = scene.name if shipped else scene.path
+    built = default_work_dir(spec) / f"{scene.name}.onnx"
+    found = (f"no model in {where} or {built} fits scene '{scene.name}' ({'; '.join(refusals)})" if refusals
+             else f"no model for scene '{scene.name}' in {where} or {built}")
+    build = f"`diviewer build --scene {spec}` captures, trains and writes one to {built}, where --model auto finds it"
     return f"{found}: showing direct light only, without neural GI; {build}"
 
 

@@ -100,3 +100,13 @@ def test_toml_overrides_a_gltf_material_by_name_keeping_what_it_does_not_give(tm
     assert scene.file_hash != plain.file_hash  # the override is part of what the scene looks like
     with pytest.raises(DiviewerError, match=r"materials\.stone\.glow: unknown key 'glow'; allowed keys: .*albedo"):
         _load(tmp_path / "c", toml=SCENE_TOML + "\n[materials.stone]\nglow = 1\n")
+
+
+def test_a_misspelt_override_that_changes_nothing_is_named_in_a_warning(tmp_path):
+    """[materials.NAME] for a name no glTF material has and no object uses overrides nothing: said, with the names
+    the glTF's objects do use; a used override says nothing."""
+    with pytest.warns(SceneWarning, match=r"materials\.ston: no glTF material is named 'ston' .*in use: .*stone"):
+        scene = _load(tmp_path / "a", toml=SCENE_TOML + "\n[materials.ston]\nalbedo = [0.5, 0.5, 0.5]\n")
+    assert any("materials.ston" in w for w in scene.warnings)
+    scene = _load(tmp_path / "b", toml=SCENE_TOML + "\n[materials.stone]\nalbedo = [0.5, 0.5, 0.5]\n")
+    assert not any("changes nothing" in w for w in scene.warnings)

@@ -43,6 +43,23 @@ def test_auto_for_a_scene_file_of_ones_own_names_where_build_writes_it(no_models
     assert f"runs/mine/{scene.name}.onnx" in message and "--model" in message
 
 
+def test_auto_finds_the_model_a_build_wrote_into_its_default_work_folder(no_models, tmp_path, monkeypatch):
+    """`diviewer build --scene mine.toml` writes runs/mine/<name>.onnx; `view --model auto` run from the same
+    folder takes it."""
+    import shutil
+
+    own = tmp_path / "mine.toml"
+    own.write_text((paths.scenes_dir() / "cornell.toml").read_text())
+    scene = load_scene(own)
+    monkeypatch.chdir(tmp_path)
+    built = tmp_path / "runs" / "mine" / f"{scene.name}.onnx"
+    built.parent.mkdir(parents=True)
+    shutil.copy(paths.assets_dir() / "models" / "cornell.onnx", built)
+    model, message = open_model("auto", scene)
+    assert model is not None and message == ""
+    assert model.path.resolve() == built.resolve()
+
+
 def test_auto_with_only_models_that_refuse_gives_their_reasons(no_models):
     (no_models / "cornell_broken.onnx").write_bytes(b"not onnx")
     model, message = open_model("auto", load_scene("cornell"))
