@@ -70,7 +70,13 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     for path, option, suffix in ((args.json, "--json", ".json"), (args.write_toml, "--write-toml", ".toml")):
         if path is not None:
             _check_new_file(path, option, suffix)
-    scene = load_any(args.scene)
+    import warnings
+
+    from diviewer.scene.reads import SceneWarning
+
+    with warnings.catch_warnings():  # the report lists the load's warnings: not said twice
+        warnings.simplefilter("ignore", SceneWarning)
+        scene = load_any(args.scene)
     bare = Path(args.scene).suffix.lower() in GLTF_SUFFIXES  # no camera of the author's to start from
     report = survey(scene, OpenSpaceSettings(cells=args.cells), near=None if bare else scene.default.camera.position)
     skeleton = None
@@ -84,7 +90,9 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
         print(f"wrote {args.json}")
     if skeleton is not None:
         write_new(args.write_toml, skeleton)
-        print(f"wrote {args.write_toml}: check it, then: diviewer view --scene {args.write_toml}")
+        print(f"wrote {args.write_toml}: check its materials, light and camera region (docs/own-scene.md), then: "
+              f"diviewer render --scene {args.write_toml} --out check; diviewer build --scene {args.write_toml} "
+              f"--dry-run")
     return 0
 
 
