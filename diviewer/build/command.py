@@ -94,9 +94,13 @@ def run_build_command(args: argparse.Namespace) -> int:
     check_folders(work, ship)
     device = args.device or recipe.train.get("device")
     check_device(device, "--device" if args.device else "train.device", None if args.device else recipe.path)
+    from diviewer.build.calibrate import plan_basis
+
+    make_plan(scene, recipe, work, ship=ship, ks=tuple(sorted(set(args.ks))) if args.ks else None,
+              train_overrides=overrides, evalset_dir=args.evalset)  # every input checked before the scene is timed
     plan = make_plan(scene, recipe, work, ship=ship, budget_hours=args.budget,
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
-                     evalset_dir=args.evalset)
+                     evalset_dir=args.evalset, basis=plan_basis(scene, recipe, work))
     check_splits(plan.capture, recipe.path)
     replacing = check_replacement(plan, args.ship is not None, args.replace_worse)
     names = [s.name for s in plan.stages]
