@@ -111,10 +111,10 @@ def time_scene(scene, width: int, height: int, spp: int, max_depth: int) -> dict
                                                                                                 * spp, 3)}
 
 
-def calibrate(scene_path: Path, scene_name: str, capture, work: Path, log=print) -> dict | None:
+def calibrate(scene_path: Path, scene_name: str, capture, work: Path, log=print, keep: bool = True) -> dict | None:
     """This scene's frame timed on this machine at the capture's resolution (`time_scene`), from the work folder's
     cache where its key (scene identity, machine, resolution, spp) matches, else measured now and kept there
-    (atomically). None, with a line saying why, where the scene cannot be timed here (no Mitsuba, no GL)."""
+    (atomically; ``keep`` False: where the folder is not there yet, as a dry run leaves it). None, with a line saying why, where the scene cannot be timed here (no Mitsuba, no GL)."""
     from diviewer.scene.loader import load_scene
 
     scene = load_scene(scene_path)
@@ -135,11 +135,13 @@ def calibrate(scene_path: Path, scene_name: str, capture, work: Path, log=print)
             f"{constants_source(scene_name)}")
         return None
     record = {"key": key, **measured, "seconds": round(time.perf_counter() - t0, 2)}
-    Path(work).mkdir(parents=True, exist_ok=True)
-    imageio.write_text(cache, json.dumps(record, indent=1, sort_keys=True) + "\n")
+    kept = keep or Path(work).is_dir()
+    if kept:
+        Path(work).mkdir(parents=True, exist_ok=True)
+        imageio.write_text(cache, json.dumps(record, indent=1, sort_keys=True) + "\n")
     log(f"costs: timed {scene_name} here at {capture.width}x{capture.height} in {record['seconds']:.1f} s: "
         f"GL {measured['gl_seconds']:.3f} s a frame, path tracing {measured['pt_frame_seconds']:.2f} s a frame "
-        f"at {capture.spp} spp (kept in {cache})")
+        f"at {capture.spp} spp ({f'kept in {cache}' if kept else 'kept nowhere: the work folder is not there'})")
     return record
 
 
@@ -177,7 +179,7 @@ def previous_actuals(work: Path, scene_hash: str) -> dict | None:
     return data.get("stages") or None
 
 
-def plan_basis(scene: str, recipe, work: Path, log=print) -> CostBasis:
+def plan_basis(scene: str, recipe, work: Path, log=print, keep: bool = True) -> CostBasis:
     """The cost basis of a build of ``scene`` with ``recipe`` in ``work``, before it is planned: this scene timed
     here at the recipe's capture resolution (`calibrate`), and a previous build's actuals in ``work``."""
     from diviewer.scene.loader import load_scene, resolve_scene_path
@@ -186,5 +188,5 @@ def plan_basis(scene: str, recipe, work: Path, log=print) -> CostBasis:
     path = resolve_scene_path(scene)
     loaded = load_scene(path)
     capture = capture_settings(recipe)
-    return basis(loaded.name, capture, calibrate(path, loaded.name, capture, work, log),
+    return basis(loaded.name, capture, calibrate(path, loaded.name, capture, work, log, keep),
                  previous_actuals(work, loaded.file_hash))

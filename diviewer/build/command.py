@@ -100,7 +100,7 @@ def run_build_command(args: argparse.Namespace) -> int:
               train_overrides=overrides, evalset_dir=args.evalset)  # every input checked before the scene is timed
     plan = make_plan(scene, recipe, work, ship=ship, budget_hours=args.budget,
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
-                     evalset_dir=args.evalset, basis=plan_basis(scene, recipe, work))
+                     evalset_dir=args.evalset, basis=plan_basis(scene, recipe, work, keep=not args.dry_run))
     check_splits(plan.capture, recipe.path)
     replacing = check_replacement(plan, args.ship is not None, args.replace_worse)
     names = [s.name for s in plan.stages]

@@ -150,6 +150,16 @@ def _run(plan: Plan, command: str, log, stop_after: str | None, replace_worse: b
     ladder = state.data["stages"]["pick"]["result"]
     where = state.data["stages"]["ship"]["result"].get("model")
     log(f"built {plan.scene_name}: K={ladder['chosen_K']} ({ladder['rule']})" + (f"; shipped {where}" if where else ""))
+    try:
+        from diviewer.build.summary import summary_lines
+        from diviewer.train.report import read_metrics
+
+        k = ladder["chosen_K"]
+        for line in summary_lines(json.loads((plan.work / "evalset_eval.json").read_text()), plan.model(k).stem,
+                                  ladder["rows"], plan.recipe.tolerance_db, read_metrics(plan.run_dir(k) / "metrics.csv")):
+            log(line)
+    except (OSError, ValueError, KeyError) as exc:  # the model is built; only its summary could not be read
+        log(f"(no summary: {type(exc).__name__}: {exc})")
     return ladder
 
 
