@@ -98,9 +98,10 @@ def run_build_command(args: argparse.Namespace) -> int:
 
     make_plan(scene, recipe, work, ship=ship, ks=tuple(sorted(set(args.ks))) if args.ks else None,
               train_overrides=overrides, evalset_dir=args.evalset)  # every input checked before the scene is timed
+    # the timing is kept in a work folder already there: a refused command leaves nothing behind
     plan = make_plan(scene, recipe, work, ship=ship, budget_hours=args.budget,
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
-                     evalset_dir=args.evalset, basis=plan_basis(scene, recipe, work, keep=not args.dry_run))
+                     evalset_dir=args.evalset, basis=plan_basis(scene, recipe, work, keep=False))
     check_splits(plan.capture, recipe.path)
     replacing = check_replacement(plan, args.ship is not None, args.replace_worse)
     names = [s.name for s in plan.stages]
