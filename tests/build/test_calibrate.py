@@ -85,3 +85,25 @@ def test_the_evaluation_sets_counts_agree_between_plan_render_and_score(tmp_path
     assert f"= {len(rendered)} rendered at {ev.render_width}x{ev.height}, {scored} crops scored" in title
     share = next(s.seconds for s in plan.stages if s.name == "evalset") / (3 * 3600)
     assert share <= 0.2 + 1e-9  # docs/build.md: at most a fifth of the budget
+
+
+def test_the_build_reports_plan_against_actual_and_the_next_plan_costs_from_it(tmp_path):
+    from types import SimpleNamespace
+
+    from diviewer.build.actuals import keep_actuals
+    from diviewer.build.calibrate import plan_basis
+
+    scene, recipe, work = write_tiny_scene(tmp_path), _recipe(tmp_path), tmp_path / "w"
+    work.mkdir()
+    plan = make_plan(str(scene), recipe, work, machine=CPU)
+    planned = {s.name: s.seconds for s in plan.stages}
+    state = SimpleNamespace(data={"stages": {"export_k2": {"done": True, "seconds": 3 * planned["export_k2"]}}})
+    lines = []
+    rows = keep_actuals(plan, state, lines.append)
+    assert rows["export_k2"]["ratio"] == pytest.approx(3.0) and (work / ACTUALS_FILE).is_file()
+    assert lines[0] == "plan against actual:" and "3.00x; cost from the training constants" in lines[1]
+    b = plan_basis(str(scene), recipe, work, log=lines.append, keep=False)
+    assert b.of("export_k2")[0] == pytest.approx(3.0) and b.of("export_k4")[0] == 1.0
+    again = make_plan(str(scene), recipe, work, machine=CPU, basis=b)
+    assert next(s for s in again.stages if s.name == "export_k2").seconds == pytest.approx(3 * planned["export_k2"])
+    assert "costs of export_k2: a previous build's actuals in this work folder" in "\n".join(describe(again))
