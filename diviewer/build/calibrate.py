@@ -114,7 +114,8 @@ def time_scene(scene, width: int, height: int, spp: int, max_depth: int) -> dict
 def calibrate(scene_path: Path, scene_name: str, capture, work: Path, log=print, keep: bool = True) -> dict | None:
     """This scene's frame timed on this machine at the capture's resolution (`time_scene`), from the work folder's
     cache where its key (scene identity, machine, resolution, spp) matches, else measured now and kept there
-    (atomically; ``keep`` False: where the folder is not there yet, as a dry run leaves it). None, with a line saying why, where the scene cannot be timed here (no Mitsuba, no GL)."""
+    (atomically; ``keep`` False: not kept, `keep_calibration` keeps it once the command is accepted; a fresh
+    record then has ``unkept`` set). None, with a line saying why, where the scene cannot be timed here (no Mitsuba, no GL)."""
     from diviewer.scene.loader import load_scene
 
     scene = load_scene(scene_path)
@@ -135,14 +136,21 @@ def calibrate(scene_path: Path, scene_name: str, capture, work: Path, log=print,
             f"{constants_source(scene_name)}")
         return None
     record = {"key": key, **measured, "seconds": round(time.perf_counter() - t0, 2)}
-    kept = keep or Path(work).is_dir()
-    if kept:
-        Path(work).mkdir(parents=True, exist_ok=True)
-        imageio.write_text(cache, json.dumps(record, indent=1, sort_keys=True) + "\n")
     log(f"costs: timed {scene_name} here at {capture.width}x{capture.height} in {record['seconds']:.1f} s: "
         f"GL {measured['gl_seconds']:.3f} s a frame, path tracing {measured['pt_frame_seconds']:.2f} s a frame "
-        f"at {capture.spp} spp ({f'kept in {cache}' if kept else 'kept nowhere: the work folder is not there'})")
+        f"at {capture.spp} spp")
+    record["unkept"] = True
+    if keep:
+        keep_calibration(work, record)
     return record
+
+
+def keep_calibration(work: Path, record: dict | None) -> None:
+    """Keep a fresh calibration ``record`` in ``work`` (`CALIBRATION_FILE`, atomically), creating the folder."""
+    if record is None or not record.pop("unkept", False):
+        return
+    Path(work).mkdir(parents=True, exist_ok=True)
+    imageio.write_text(Path(work) / CALIBRATION_FILE, json.dumps(record, indent=1, sort_keys=True) + "\n")
 
 
 def basis(scene_name: str, capture, calibration: dict | None, actuals: dict | None) -> CostBasis:
@@ -179,14 +187,15 @@ def previous_actuals(work: Path, scene_hash: str) -> dict | None:
     return data.get("stages") or None
 
 
-def plan_basis(scene: str, recipe, work: Path, log=print, keep: bool = True) -> CostBasis:
+def plan_basis(scene: str, recipe, work: Path, log=print, keep: bool = True) -> tuple[CostBasis, dict | None]:
     """The cost basis of a build of ``scene`` with ``recipe`` in ``work``, before it is planned: this scene timed
-    here at the recipe's capture resolution (`calibrate`), and a previous build's actuals in ``work``."""
+    here at the recipe's capture resolution (`calibrate`), and a previous build's actuals in ``work``; and the
+    calibration record (for `keep_calibration` where ``keep`` is False)."""
     from diviewer.scene.loader import load_scene, resolve_scene_path
     from diviewer.train.recipe import capture_settings
 
     path = resolve_scene_path(scene)
     loaded = load_scene(path)
     capture = capture_settings(recipe)
-    return basis(loaded.name, capture, calibrate(path, loaded.name, capture, work, log, keep),
-                 previous_actuals(work, loaded.file_hash))
+    record = calibrate(path, loaded.name, capture, work, log, keep)
+    return basis(loaded.name, capture, record, previous_actuals(work, loaded.file_hash)), record

@@ -82,14 +82,18 @@ def finished_stages(plan: Plan) -> set[str]:
 
 
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print,
-              stop_after: str | None = None, replace_worse: bool = False) -> dict[str, Any] | None:
+              stop_after: str | None = None, replace_worse: bool = False, timing: dict | None = None
+              ) -> dict[str, Any] | None:
     """Run (or resume) every stage of ``plan``, or those up to the stage named ``stop_after``, holding the work
     folder's lock (a second build there is refused at once); returns the ladder record with the chosen K, or None
     when it stopped before the pick. ``replace_worse``: the ship replaces a model that scores better."""
     from diviewer.locks import run_lock
     from diviewer.outputs import building
 
+    from diviewer.build.calibrate import keep_calibration
+
     with run_lock(plan.work, "build", option="--work"), building(plan.work):
+        keep_calibration(plan.work, timing)  # the scene's timing (`plan_basis`), kept for the next plan
         return _run(plan, command, log, stop_after, replace_worse)
 
 

@@ -102,7 +102,7 @@ def test_the_build_reports_plan_against_actual_and_the_next_plan_costs_from_it(t
     rows = keep_actuals(plan, state, lines.append)
     assert rows["export_k2"]["ratio"] == pytest.approx(3.0) and (work / ACTUALS_FILE).is_file()
     assert lines[0] == "plan against actual:" and "3.00x; cost from the training constants" in lines[1]
-    b = plan_basis(str(scene), recipe, work, log=lines.append, keep=False)
+    b, _ = plan_basis(str(scene), recipe, work, log=lines.append, keep=False)
     assert b.of("export_k2")[0] == pytest.approx(3.0) and b.of("export_k4")[0] == 1.0
     again = make_plan(str(scene), recipe, work, machine=CPU, basis=b)
     assert next(s for s in again.stages if s.name == "export_k2").seconds == pytest.approx(3 * planned["export_k2"])
