@@ -5,6 +5,8 @@ from __future__ import annotations
 import io
 import re
 
+import pytest
+
 from diviewer.console import progress_bar
 
 
@@ -70,3 +72,22 @@ def test_progress_on_a_terminal_redraws_in_place():
     bar.update(2)
     bar.close()
     assert "\r" in term.getvalue() and "2/2" in term.getvalue()
+
+
+@pytest.mark.mitsuba
+@pytest.mark.gl
+def test_a_resumed_capture_in_a_log_starts_at_the_frames_done_and_says_what_its_figures_are(gl_context, tmp_path,
+                                                                                             capsys):
+    from diviewer.data.capture import CaptureSettings, capture
+
+    tiny = dict(width=32, height=32, spp=2, max_depth=3, thumbs=0)
+    out = tmp_path / "cap"
+    capture("cornell", out, CaptureSettings(frames=3, seed=1, **tiny), log=lambda *_: None)
+    (out / "frames" / "000002.npy").unlink()  # one frame lost: the resumed capture renders it alone
+    capsys.readouterr()
+    capture("cornell", out, CaptureSettings(frames=3, seed=1, **tiny), log=lambda *_: None)
+    err = capsys.readouterr().err  # not a terminal
+    assert "\x1b[" not in err and "\r" not in err
+    lines = [line for line in err.splitlines() if line.startswith("capture:")]
+    assert lines[0].startswith("capture: 67% 2/3 frames"), err
+    assert lines[-1].startswith("capture: 100% 3/3 frames") and re.search(r"path tracing [\d.]+ s a frame", lines[-1])
