@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 from diviewer import imageio
-from diviewer.build.calibrate import ACTUALS_FILE, machine_key
+from diviewer.build.calibrate import ACTUALS_FILE, actuals_key
 from diviewer.build.plan import Plan, hms
 
 
@@ -65,8 +65,9 @@ def keep_actuals(plan: Plan, state, log) -> dict:
         log(f"  {name:<12} planned {hms(r['planned_seconds']):>9}, took {hms(r['actual_seconds']):>9} "
             f"({r['ratio']:.2f}x; cost from {r['source']})")
     from diviewer.scene.loader import load_scene
+    from diviewer.train.recipe import capture_settings
 
-    record = {"scene_hash": load_scene(plan.scene).file_hash, "machine": machine_key(), "stages": rows}
+    record = {"key": actuals_key(load_scene(plan.scene).file_hash, capture_settings(plan.recipe)), "stages": rows}
     imageio.write_text(plan.work / ACTUALS_FILE, json.dumps(record, indent=1, sort_keys=True) + "\n")
     log(f"  (kept in {plan.work / ACTUALS_FILE}: the next plan in this folder costs these stages from them)")
     return rows

@@ -175,14 +175,21 @@ def basis(scene_name: str, capture, calibration: dict | None, actuals: dict | No
     return CostBasis(factors, sources, constants_source(scene_name))
 
 
-def previous_actuals(work: Path, scene_hash: str) -> dict | None:
-    """The actual costs a build of this scene on this machine kept in ``work`` (`ACTUALS_FILE`), per stage; None
-    where there are none or they are of another scene or machine."""
+def actuals_key(scene_hash: str, capture) -> dict:
+    """What a build's actual costs are of: the scene, this machine, and the capture's resolution and spp (a stage's
+    fixed costs weigh otherwise at another)."""
+    return {"scene_hash": scene_hash, "machine": machine_key(), "width": capture.width, "height": capture.height,
+            "spp": capture.spp}
+
+
+def previous_actuals(work: Path, scene_hash: str, capture) -> dict | None:
+    """The actual costs a build of this scene on this machine at this capture's resolution and spp kept in ``work``
+    (`ACTUALS_FILE`), per stage; None where there are none or they are of another (`actuals_key`)."""
     try:
         data = json.loads((Path(work) / ACTUALS_FILE).read_text())
     except (OSError, ValueError):
         return None
-    if data.get("scene_hash") != scene_hash or data.get("machine") != machine_key():
+    if data.get("key") != actuals_key(scene_hash, capture):
         return None
     return data.get("stages") or None
 
@@ -198,4 +205,4 @@ def plan_basis(scene: str, recipe, work: Path, log=print, keep: bool = True) -> 
     loaded = load_scene(path)
     capture = capture_settings(recipe)
     record = calibrate(path, loaded.name, capture, work, log, keep)
-    return basis(loaded.name, capture, record, previous_actuals(work, loaded.file_hash)), record
+    return basis(loaded.name, capture, record, previous_actuals(work, loaded.file_hash, capture)), record

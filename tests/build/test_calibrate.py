@@ -59,12 +59,13 @@ def test_a_previous_builds_actuals_cost_the_next_plan(tmp_path):
     b = basis("tiny", cap, None, actuals)
     assert b.of("capture")[0] == 3.0 and "a previous build's actuals" in b.of("capture")[1]
     assert b.of("train_k2")[0] == 0.5 and b.of("train_k4")[0] == 1.0
-    from diviewer.build.calibrate import previous_actuals
+    from diviewer.build.calibrate import actuals_key, previous_actuals
 
-    (tmp_path / ACTUALS_FILE).write_text(json.dumps({"scene_hash": "abc", "machine": machine_key(),
-                                                     "stages": actuals}))
-    assert previous_actuals(tmp_path, "abc") == actuals
-    assert previous_actuals(tmp_path, "another scene") is None
+    (tmp_path / ACTUALS_FILE).write_text(json.dumps({"key": actuals_key("abc", cap), "stages": actuals}))
+    assert previous_actuals(tmp_path, "abc", cap) == actuals
+    assert previous_actuals(tmp_path, "another scene", cap) is None
+    assert previous_actuals(tmp_path, "abc", SimpleNamespace(width=64, height=32, spp=2)) is None  # another size
+    assert actuals_key("abc", cap)["machine"] == machine_key()
 
 
 def test_the_evaluation_sets_counts_agree_between_plan_render_and_score(tmp_path):
