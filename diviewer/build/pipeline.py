@@ -373,7 +373,8 @@ def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     capped = "" if cap is None else (f", of the Ks whose model is at most {cap:g} MB (the recipe's max_mb; over it: "
                                      f"{', '.join(f'K = {k}' for k in over) or 'none'})")
     record = {"scene": plan.scene_name, "chosen_K": pick["K"], "measure": PICK_MEASURE, "max_mb": cap,
-              "rule": f"smallest K whose tone-mapped PSNR over the evaluation set ({frames} frames scored, "
+              "rule": f"smallest K whose tone-mapped PSNR over the evaluation set ({frames} frames scored: "
+                      f"{stages['evalset']['result'].get('frames', '?')} rendered, window_shapes at each width; "
                       f"{ev['reference_spp']} spp) is within {tol} dB of the best K's ({pick['best_psnr']:.2f} dB)"
                       + capped,
               "recipe": plan.recipe.record(plan.overrides), "scale": plan.scale, "machine": vars(plan.machine),
