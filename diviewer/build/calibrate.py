@@ -42,14 +42,17 @@ class CostBasis:
         for key in (stage, stage.partition("_k")[0]):
             if key in self.factors:
                 return self.factors[key], self.sources[key]
-        if stage.partition("_k")[0] in ("train", "export"):
+        if stage.partition("_k")[0] == "train":
             return 1.0, TRAIN_SOURCE
+        if stage.partition("_k")[0] == "export":
+            return 1.0, EXPORT_SOURCE
         return 1.0, self.default
 
 
 TRAIN_SOURCE = "the training constants in diviewer/build/costs.py (Sponza's ladder on a 2-core CPU, an H100)"
 """Where a training's cost comes from without a previous build's actuals: it depends on the resolution and K, not
 on the scene."""
+EXPORT_SOURCE = "an allowance, not a measurement (EXPORT_EVAL_ALLOWANCE in diviewer/build/costs.py)"
 
 
 def machine_key() -> dict:
