@@ -66,15 +66,18 @@ def suggestions(ev: dict, key: str, ladder_rows: list[dict], tolerance_db: float
         if base is not None and splits.get(split) is not None and base - splits[split] > SPLIT_GAP_DB:
             out.append(f"ranges that cover {what}: {split} scores {base - splits[split]:.1f} dB below the "
                        f"unseen configurations (widen [ranges] in the scene file where you fly, and build again)")
-    if still_improving(curve):
+    rising = still_improving(curve)
+    if rising:
         out.append("more steps: the validation PSNR still rose over the last quarter of the training")
     if larger_k_helps(ladder_rows, tolerance_db):
         top = max(r["K"] for r in ladder_rows)
         out.append(f"a larger K: K={top} beats the next smaller by more than the {tolerance_db} dB tolerance "
                    f"(try --ks {top} {2 * top})")
     if not out:
-        out.append("more frames: the training had levelled off, the ladder had stopped climbing and no held-out "
-                   "split lags; a larger capture (a larger --budget) is what is left")
+        curve_says = "the training had levelled off" if rising is False else (
+            "the training had too few validations to tell whether it still improved")
+        out.append(f"more frames: {curve_says}, the ladder had stopped climbing and no held-out split lags; a larger "
+                   f"capture (a larger --budget) is what is left")
     return out
 
 

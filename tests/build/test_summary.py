@@ -56,3 +56,9 @@ def test_a_training_still_rising_asks_for_more_steps_and_a_climbing_ladder_for_a
 def test_with_nothing_else_lagging_it_asks_for_more_frames():
     s = suggestions(_ev(moved=38.5), "s_k8", LADDER_FLAT, 0.5, LEVEL)
     assert s == [s[0]] and s[0].startswith("more frames")
+
+
+def test_a_curve_too_short_to_read_is_not_called_levelled_off():
+    s = suggestions(_ev(moved=38.5), "s_k8", LADDER_FLAT, 0.5, LEVEL[:2])
+    assert s[0].startswith("more frames: the training had too few validations to tell")
+    assert "levelled off" in suggestions(_ev(moved=38.5), "s_k8", LADDER_FLAT, 0.5, LEVEL)[0]
