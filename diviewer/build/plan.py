@@ -2,7 +2,8 @@
 
 A recipe (assets/recipes/*.toml) gives the capture, the evaluation set, the training and the K ladder;
 ``--budget HOURS`` scales the frames and the steps together (the recipe's proportions kept) until the
-estimate fits, from the costs measured on this project's machines (`diviewer.build.costs`).
+estimate fits, from the costs measured on this project's machines (`diviewer.build.costs`) scaled to the
+scene as timed here or as a previous build took (`diviewer.build.calibrate`); each stage names its source.
 """
 
 from __future__ import annotations
