@@ -371,7 +371,8 @@ def _fit_scale(cap, train, ev, ks, scene, m, budget: float, given_evalset: Path 
     smallest = _total(*scaled(cap, train, s_min), ev, ks, scene, m, given_evalset, refine_spp)
     if smallest > budget:
         raise DiviewerError(f"{budget / 3600:.2f} h is below the smallest plan this recipe allows on this machine "
-                            f"({smallest / 3600:.2f} h at {MIN_FRAMES} frames and {MIN_STEPS} steps per K); give "
+                            f"({smallest / 3600:.2f} h at {MIN_FRAMES} frames and {MIN_STEPS} steps per K; the "
+                            f"capture costed from {m[1].of('capture')[1]}); give "
                             f"more hours, fewer K (--ks) or a lighter recipe", field="--budget")
     lo, hi = s_min, 1.0
     for _ in range(40):
