@@ -388,7 +388,7 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
             f"samples per pixel per frame, {truth.variant})")
         if todo:
             _render_frames_gl(ctx, scene, ds, todo, _stored_shape(settings), truth, describe(ctx), log,
-                              label="evalset")
+                              label="evalset", done=len(ds.indices()) if n == 1 else 0)
     summary = {"planned": len(plan), "present": len(ds.indices()), "seconds": round(time.perf_counter() - t0, 1)}
     if summary["present"] == len(plan):
         result = _scores(out, todo, log, jobs)

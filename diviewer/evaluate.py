@@ -377,15 +377,10 @@ def _cell(m: dict, key: str, fmt: str) -> str:
 
 def format_tables(result: dict) -> list[str]:
     """The per-split tables for people."""
-    lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; tm = tone-mapped at "
-             f"exposure {result['tonemap_exposure']:.3g} (the scene's); FLIP-HDR on linear radiance, FLIP-LDR on "
-             f"tone-mapped; eq. spp from PSNR tm; checker = high-frequency power over flat, shadow-edge-free regions "
-             f"/ the reference's; stride = the pattern locked to the pixel grid (period 8) in the shade, RMS % of "
-             f"the irradiance, mean over frames (a path-traced truth reads its scene's own, ~1-2 %); bias = summed "
-             f"radiance / the reference's - 1 (indirect: minus GL direct light); "
-             f"object / unlit = tone-mapped PSNR and SSIM over the moving object's pixels / those without direct "
-             f"light; lit / shade = the same over the frame's pixels with / without direct light; < direct = share "
-             f"of frames below direct light alone (whole frame / object / unlit / lit / shade)"]
+    lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; tm = tone-mapped at exposure "
+             f"{result['tonemap_exposure']:.3g} (the scene's); eq. spp: the path tracer's samples that score as well",
+             "object / unlit / lit / shade: PSNR tm / SSIM tm over those pixels; < direct: share of frames below direct "
+             "light alone; every column: docs/accuracy.md (\"Reading eval's tables\")"]
     if "frames_scored" in result:  # eval --partial: which frames the figures below are of
         missing = result.get("frames_not_scored") or []
         lines.append(f"frames: {result['frames']}" + (f"; not scored: {', '.join(str(r['index']) for r in missing)}"

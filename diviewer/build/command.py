@@ -95,9 +95,15 @@ def run_build_command(args: argparse.Namespace) -> int:
     check_folders(work, ship)
     device = args.device or recipe.train.get("device")
     check_device(device, "--device" if args.device else "train.device", None if args.device else recipe.path)
+    from diviewer.build.calibrate import keep_calibration, plan_basis  # noqa: F401 (keep_calibration: dry run)
+
+    make_plan(scene, recipe, work, ship=ship, ks=tuple(sorted(set(args.ks))) if args.ks else None,
+              train_overrides=overrides, evalset_dir=args.evalset)  # every input checked before the scene is timed
+    # the timing is kept once the command is accepted: a refused one leaves nothing behind
+    cost_basis, timing = plan_basis(scene, recipe, work, keep=False)
     plan = make_plan(scene, recipe, work, ship=ship, budget_hours=args.budget,
                      ks=tuple(sorted(set(args.ks))) if args.ks else None, train_overrides=overrides,
-                     evalset_dir=args.evalset)
+                     evalset_dir=args.evalset, basis=cost_basis)
     check_splits(plan.capture, recipe.path)
     replacing = check_replacement(plan, args.ship is not None, args.replace_worse)
     names = [s.name for s in plan.stages]
@@ -126,7 +132,9 @@ def run_build_command(args: argparse.Namespace) -> int:
         if refusal is not None:
             print("dry run: nothing was done; a run of this command would refuse the work folder (below)")
             raise refusal
-        print(f"dry run: nothing was done; run it without --dry-run ({rebuild_command(args)})")
+        if work.is_dir() and running is None:  # a dry run makes no folder, nor writes beside a run
+            keep_calibration(work, timing)
+        print(f"dry run: nothing was done but timing the scene; run it without --dry-run ({rebuild_command(args)})")
         return 0
     from diviewer.build.pipeline import BuildInterrupted, run_build
 
@@ -134,7 +142,8 @@ def run_build_command(args: argparse.Namespace) -> int:
         print(replacing)
     try:
         with interrupts_raise():
-            run_build(plan, rebuild_command(args), stop_after=args.stop_after, replace_worse=args.replace_worse)
+            run_build(plan, rebuild_command(args), stop_after=args.stop_after, replace_worse=args.replace_worse,
+                      timing=timing)
     except BuildInterrupted as exc:
         where = f" in stage {exc.stage}" if exc.stage else ""
         print(f"diviewer build: stopped{where} ({exc}); resume with: {resume_command(args)}")

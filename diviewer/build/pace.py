@@ -175,7 +175,7 @@ def capture_pace(plan: Plan) -> Pace | None:
     planned = plan.stages[0].seconds / plan.capture.frames
     per, words = _pace(seconds, left, "median of GL + path tracing, ")
     return Pace("capture", f"capture so far: {count} of {plan.capture.frames} frames in {where}, {words} (the plan "
-                f"assumes {planned:.1f} s, from the costs measured in diviewer/build/costs.py)", left * per)
+                f"assumes {planned:.1f} s, from {plan.stages[0].source})", left * per)
 
 
 def _pace(seconds: list[float], left: int, what: str = "median, ") -> tuple[float, str]:

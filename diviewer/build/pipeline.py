@@ -8,17 +8,20 @@ import json
 import math
 import os
 import shutil
+import sys
 import time
 from pathlib import Path
 from typing import Any, Callable
 
 from diviewer import imageio
+from diviewer.build.actuals import keep_actuals
 from diviewer.build.pace import measured_pace, missing_link
 from diviewer.build.plan import RUN_ONLY, Plan, describe
 from diviewer.build.scores import QUALITY, evalset_psnr_tm, evalset_scores
+from diviewer.build.shipfiles import write_ladder_curves, write_model_card  # noqa: F401 (tools/ladder_record.py)
 from diviewer.build.state import BuildState
 from diviewer.data.dataset import sha256_file
-from diviewer.console import progress_bar
+from diviewer.console import overall, progress_bar
 from diviewer.errors import DiviewerError
 
 STATE_FILE = "build.json"
@@ -79,14 +82,18 @@ def finished_stages(plan: Plan) -> set[str]:
 
 
 def run_build(plan: Plan, command: str, log: Callable[[str], None] = print,
-              stop_after: str | None = None, replace_worse: bool = False) -> dict[str, Any] | None:
+              stop_after: str | None = None, replace_worse: bool = False, timing: dict | None = None
+              ) -> dict[str, Any] | None:
     """Run (or resume) every stage of ``plan``, or those up to the stage named ``stop_after``, holding the work
     folder's lock (a second build there is refused at once); returns the ladder record with the chosen K, or None
     when it stopped before the pick. ``replace_worse``: the ship replaces a model that scores better."""
     from diviewer.locks import run_lock
     from diviewer.outputs import building
 
+    from diviewer.build.calibrate import keep_calibration
+
     with run_lock(plan.work, "build", option="--work"), building(plan.work):
+        keep_calibration(plan.work, timing)  # the scene's timing (`plan_basis`), kept for the next plan
         return _run(plan, command, log, stop_after, replace_worse)
 
 
@@ -110,34 +117,53 @@ def _run(plan: Plan, command: str, log, stop_after: str | None, replace_worse: b
         edits = ", ".join(f"{k} {was.get(k)} -> {now.get(k)}" for k in sorted(now) if was.get(k) != now.get(k))
         log(f"the recipe's [export] changed ({edits}): every K trained keeps its run; the export, the evaluation, "
             f"the pick and the ship run again")
-    bar = progress_bar(max(1, round(plan.seconds)), "build (estimated seconds of work)", "s")
-    stage = None
+    finished = {s.name for s in plan.stages if (rec := state.done(s.name, plan.work)) and not _stale(s.name, rec, plan)}
+    tty = sys.stderr.isatty()  # in a log, each stage's own lines carry the build's overall percentage (`overall`)
+    bar = progress_bar(max(1, round(plan.seconds)), "build (estimated seconds of work)", "s",
+                       initial=round(sum(s.seconds for s in plan.stages if s.name in finished))) if tty else None
+    stage, done_s = None, 0.0
     try:
         for i, stage in enumerate(plan.stages, 1):
-            rec = state.done(stage.name, plan.work)
-            if rec is not None and not _stale(stage.name, rec, plan):
+            if stage.name in finished:
                 log(f"[{i}/{len(plan.stages)}] {stage.name}: done before, outputs checked; skipped")
             else:
-                log(f"[{i}/{len(plan.stages)}] {stage.name}: {stage.title}")
+                log(f"[{i}/{len(plan.stages)}] {stage.name}: {stage.title} (build {done_s / max(plan.seconds, 1):.0%} "
+                    f"done)")
                 t0 = time.perf_counter()
                 kind, _, k = stage.name.partition("_k")
-                outputs, result = STAGES[kind](plan, state, log, k=int(k) if k else None, command=command,
-                                               replace_worse=replace_worse)
+                with overall(plan.seconds, done_s, stage.seconds):
+                    outputs, result = STAGES[kind](plan, state, log, k=int(k) if k else None, command=command,
+                                                   replace_worse=replace_worse)
                 state.finish(stage.name, plan.work, outputs, result, time.perf_counter() - t0)
-            bar.update(round(stage.seconds))
+                if bar is not None:
+                    bar.update(round(stage.seconds))
+            done_s += stage.seconds
             if stage.name == stop_after and i < len(plan.stages):
                 log(f"stopped after {stage.name} as asked (--stop-after); the same command without it goes on "
                     f"from {plan.stages[i].name}")
+                keep_actuals(plan, state, log)
                 return None
     except KeyboardInterrupt:
         raise BuildInterrupted("interrupted", stage and stage.name) from None
     except BuildInterrupted as exc:
         raise BuildInterrupted(str(exc), exc.stage or (stage and stage.name)) from None
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
+    keep_actuals(plan, state, log)
     ladder = state.data["stages"]["pick"]["result"]
     where = state.data["stages"]["ship"]["result"].get("model")
     log(f"built {plan.scene_name}: K={ladder['chosen_K']} ({ladder['rule']})" + (f"; shipped {where}" if where else ""))
+    try:
+        from diviewer.build.summary import summary_lines
+        from diviewer.train.report import read_metrics
+
+        k = ladder["chosen_K"]
+        for line in summary_lines(json.loads((plan.work / "evalset_eval.json").read_text()), plan.model(k).stem,
+                                  ladder["rows"], plan.recipe.tolerance_db, read_metrics(plan.run_dir(k) / "metrics.csv")):
+            log(line)
+    except (OSError, ValueError, KeyError) as exc:  # the model is built; only its summary could not be read
+        log(f"(no summary: {type(exc).__name__}: {exc})")
     return ladder
 
 
@@ -347,7 +373,8 @@ def _pick(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
     capped = "" if cap is None else (f", of the Ks whose model is at most {cap:g} MB (the recipe's max_mb; over it: "
                                      f"{', '.join(f'K = {k}' for k in over) or 'none'})")
     record = {"scene": plan.scene_name, "chosen_K": pick["K"], "measure": PICK_MEASURE, "max_mb": cap,
-              "rule": f"smallest K whose tone-mapped PSNR over the evaluation set ({frames} frames scored, "
+              "rule": f"smallest K whose tone-mapped PSNR over the evaluation set ({frames} frames scored: "
+                      f"{stages['evalset']['result'].get('frames', '?')} rendered, window_shapes at each width; "
                       f"{ev['reference_spp']} spp) is within {tol} dB of the best K's ({pick['best_psnr']:.2f} dB)"
                       + capped,
               "recipe": plan.recipe.record(plan.overrides), "scale": plan.scale, "machine": vars(plan.machine),
@@ -411,29 +438,3 @@ STAGES = {"capture": _capture, "refine": _refine, "filter": _filter, "check": _c
           "train": _train, "export": _export, "evaluate": _evaluate, "pick": _pick, "ship": _ship}
 """Each stage kind's function: (plan, state, log, k=K of a per-K stage, command=the rebuild command) ->
 (outputs whose sha256 the state records, a result record)."""
-
-
-def write_ladder_curves(ladder: dict, runs: dict[int, Path], path: Path) -> None:
-    """SCENE_ladder_curves.png: every K of the ladder record ``ladder`` on one figure, from each K's metrics.csv
-    (``runs``: K -> its run folder, or the metrics.csv itself as kept beside a shipped model), labelled with the K
-    and its model's size."""
-    from diviewer.train.report import draw_ladder_curves, read_metrics
-
-    size = {r["K"]: r["bytes"] for r in ladder["rows"]}
-    draw_ladder_curves({f"K = {k} ({size[k] / 1e6:.1f} MB)" if k in size else f"K = {k}":
-                        read_metrics(run if run.is_file() else run / "metrics.csv")
-                        for k, run in sorted(runs.items())}, path)
-
-
-def write_model_card(src: Path, dst: Path, card: dict) -> None:
-    """Write ``src``'s model to ``dst`` with ``card`` as its metadata and beside it as dst.json, so the two agree."""
-    import onnx
-
-    from diviewer.outputs import dumps, staged
-    from diviewer.runtime import META_KEY
-
-    model = onnx.load(str(src))
-    onnx.helper.set_model_props(model, {META_KEY: dumps(card, sort_keys=True)})
-    with staged() as stage:  # the model and its card land together, or neither does
-        onnx.save(model, str(stage(dst)))
-        imageio.write_text(stage(dst.with_suffix(".json")), dumps(card, indent=2, sort_keys=True))

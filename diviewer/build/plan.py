@@ -2,7 +2,8 @@
 
 A recipe (assets/recipes/*.toml) gives the capture, the evaluation set, the training and the K ladder;
 ``--budget HOURS`` scales the frames and the steps together (the recipe's proportions kept) until the
-estimate fits, from the costs measured on this project's machines (`diviewer.build.costs`).
+estimate fits, from the costs measured on this project's machines (`diviewer.build.costs`) scaled to the
+scene as timed here or as a previous build took (`diviewer.build.calibrate`); each stage names its source.
 """
 
 from __future__ import annotations
@@ -38,6 +39,10 @@ class Stage:
     """What it does, in words."""
     seconds: float
     """Its estimated time on this machine."""
+    source: str = "the constants in diviewer/build/costs.py"
+    """Where its cost comes from (`diviewer.build.calibrate.CostBasis`)."""
+    factor: float = 1.0
+    """Its cost against the constants' (the measured ratio its source gives)."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +84,8 @@ class Plan:
     truth_filter: Any = None
     """The `diviewer.data.truth_filter.TruthFilter` run over the truth before training; None: trained on it as
     rendered."""
+    evalset_counts: Any = None
+    """The evaluation set's `EvalCounts`: its splits, the frames it renders and the crops it scores."""
 
     @property
     def seconds(self) -> float:
@@ -158,9 +165,10 @@ def scaled(capture, train: dict[str, Any], s: float) -> tuple[Any, dict[str, Any
 
 def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_hours: float | None = None,
               ks: tuple[int, ...] | None = None, train_overrides: dict[str, Any] | None = None,
-              machine: costs.Machine | None = None, evalset_dir: Path | None = None) -> Plan:
+              machine: costs.Machine | None = None, evalset_dir: Path | None = None, basis=None) -> Plan:
     """The build's plan: the recipe's stages, sized to ``budget_hours`` if given; ``evalset_dir``: score on that
-    evaluation set instead of rendering the recipe's (its settings then come from its manifest)."""
+    evaluation set instead of rendering the recipe's (its settings then come from its manifest); ``basis``: where
+    each stage's cost comes from (`diviewer.build.calibrate.CostBasis`; None: the constants)."""
     from diviewer.scene.loader import resolve_scene_path
     from diviewer.train.recipe import capture_settings, evalset_settings, refine_from, truth_filter
 
@@ -174,6 +182,10 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
     from diviewer.build.checks import check_ks
 
     machine = machine or costs.detect_machine()
+    if basis is None:
+        from diviewer.build.calibrate import CostBasis, constants_source
+
+        basis = CostBasis(default=constants_source(scene_name))
     check_ks(ks or recipe.ks(), *(("--ks", None) if ks else ("ladder.K", recipe.path)))
     ks = tuple(ks) if ks else recipe.ks()
     train = {**recipe.train, **(train_overrides or {})}
@@ -184,23 +196,51 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
         capture = dataclasses.replace(capture, spp=low)
     if evalset_dir is not None:
         evalset = given_evalset_settings(Path(evalset_dir), evalset, scene)
+    counts = EvalCounts.of(path, evalset)
+    m = (machine, basis, counts)
     s = 1.0
     if budget_hours is not None:
         if not (math.isfinite(budget_hours) and budget_hours > 0):
             raise DiviewerError(f"must be a positive number of hours, got {budget_hours}", field="--budget")
         budget = budget_hours * 3600
         if evalset_dir is None:
-            evalset = _fit_evalset(evalset, scene_name, machine, budget * EVALSET_SHARE)
-        s = _fit_scale(capture, train, evalset, ks, scene_name, machine, budget, evalset_dir, refine_spp)
+            evalset = _fit_evalset(evalset, scene_name, m, budget * EVALSET_SHARE)
+        s = _fit_scale(capture, train, evalset, ks, scene_name, m, budget, evalset_dir, refine_spp)
         capture, train = scaled(capture, train, s)
     overrides = {k: v for k, v in train.items() if recipe.train.get(k) != v and k not in ("K", *RUN_ONLY)}
     filt = truth_filter(recipe)
-    stages = _stages(scene_name, machine, capture, train, evalset, ks, evalset_dir, refine_spp, filt)
+    stages = _stages(scene_name, m, capture, train, evalset, ks, evalset_dir, refine_spp, filt)
     return Plan(scene=str(scene), scene_name=scene_name, recipe=recipe, capture=capture, evalset=evalset,
                 train={k: v for k, v in train.items() if k != "K"}, ks=ks, steps=planned_steps(capture, train),
                 scale=s, machine=machine, work=Path(work), ship=ship, stages=stages, overrides=overrides,
                 given_evalset=None if evalset_dir is None else Path(evalset_dir), refine_spp=refine_spp,
-                truth_filter=filt)
+                truth_filter=filt, evalset_counts=counts)
+
+
+@dataclass(frozen=True)
+class EvalCounts:
+    """An evaluation set's frames as the plan, the render and the scoring count them: ``splits`` splits of
+    ``frames_per_split`` frames are rendered (at the widest crop, ``render_width``), and each frame is scored once
+    per crop of its split (the window_shapes split at each window width)."""
+
+    splits: int
+    crops: int
+    """Crops scored over one frame of every split."""
+    render_width: int
+
+    @classmethod
+    def of(cls, scene_path: Path, evalset) -> "EvalCounts":
+        from diviewer.evalset import plan_splits
+        from diviewer.scene.loader import load_scene
+
+        splits, _ = plan_splits(load_scene(scene_path), evalset)
+        return cls(len(splits), sum(len(s["shapes"]) for s in splits.values()), evalset.render_width)
+
+    def rendered(self, per_split: int) -> int:
+        return self.splits * per_split
+
+    def scored(self, per_split: int) -> int:
+        return self.crops * per_split
 
 
 def given_evalset_settings(path: Path, recipe_settings, scene: str):
@@ -255,12 +295,24 @@ def check_evalset_scene(ev, scene, given_as: str) -> None:
                             f"--evalset out", path=ev.root / "manifest.json", field="scene_hash")
 
 
-def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tuple[int, ...],
+def _stages(scene: str, mbc, cap, train: dict[str, Any], ev, ks: tuple[int, ...],
             given_evalset: Path | None = None, refine_spp: int | None = None, filt=None) -> tuple[Stage, ...]:
+    """The plan's stages, each costed from the constants times its basis's factor (``mbc``: the machine, the
+    `CostBasis` and the `EvalCounts`)."""
+    m, basis, counts = mbc
+    stages = _stages_from_constants(scene, m, cap, train, ev, ks, given_evalset, refine_spp, filt, counts)
+    out = []
+    for s in stages:
+        factor, source = basis.of(s.name)
+        out.append(dataclasses.replace(s, seconds=s.seconds * factor, source=source, factor=factor))
+    return tuple(out)
+
+
+def _stages_from_constants(scene, m, cap, train, ev, ks, given_evalset, refine_spp, filt, counts):
     steps = planned_steps(cap, train)
     gan = train.get("gan_weight", 1.0) > 0
     batch = train.get("batch_size", 4)
-    frames = 2 * ev.frames_per_split
+    frames = counts.rendered(ev.frames_per_split)
     area = f", direct light over {cap.direct_samples}x{cap.direct_samples}" if cap.direct_samples > 1 else ""
     out = [Stage("capture", f"capture {cap.frames} frames at {cap.width}x{cap.height}, {cap.spp} spp{area}",
                  costs.capture_seconds(m.kind, scene, cap.frames, cap.width, cap.height, cap.spp,
@@ -278,9 +330,11 @@ def _stages(scene: str, m: costs.Machine, cap, train: dict[str, Any], ev, ks: tu
         out.append(Stage("evalset", f"evaluation set made before: {given_evalset} ({ev.frames_per_split} frames per "
                                     f"split, {ev.spp} spp; checked, not rendered)", 0.0))
     else:
-        out.append(Stage("evalset", f"evaluation set: {frames} frames, {ev.spp} spp twice, ladder "
-                                    f"{'/'.join(map(str, ev.ladder))}",
-                         costs.evalset_seconds(m.kind, scene, frames, ev.width, ev.height, ev.spp, tuple(ev.ladder))))
+        out.append(Stage("evalset", f"evaluation set: {counts.splits} splits x {ev.frames_per_split} frames = {frames}"
+                                    f" rendered at {counts.render_width}x{ev.height}, {counts.scored(ev.frames_per_split)}"
+                                    f" crops scored; {ev.spp} spp twice, ladder {'/'.join(map(str, ev.ladder))}",
+                         costs.evalset_seconds(m.kind, scene, frames, counts.render_width, ev.height, ev.spp,
+                                               tuple(ev.ladder))))
     for k in ks:
         out.append(Stage(f"train_k{k}", f"train K={k}: {steps} steps of batch {batch}",
                          steps * costs.train_step_seconds(m.kind, k, batch, cap.width, cap.height, gan,
@@ -297,10 +351,12 @@ def _total(cap, train, ev, ks, scene, m, given_evalset=None, refine_spp=None) ->
     return sum(s.seconds for s in _stages(scene, m, cap, train, ev, ks, given_evalset, refine_spp))
 
 
-def _fit_evalset(ev, scene: str, m: costs.Machine, seconds: float):
+def _fit_evalset(ev, scene: str, mbc, seconds: float):
     """Fewer evaluation frames per split until they fit in ``seconds`` (never below MIN_EVALSET_FRAMES)."""
+    m, basis, counts = mbc
     n = ev.frames_per_split
-    per = costs.evalset_seconds(m.kind, scene, 2, ev.width, ev.height, ev.spp, tuple(ev.ladder))
+    per = costs.evalset_seconds(m.kind, scene, counts.splits, counts.render_width, ev.height, ev.spp,
+                                tuple(ev.ladder)) * basis.of("evalset")[0]
     fit = max(min(n, MIN_EVALSET_FRAMES), min(n, int(seconds // per)))
     return dataclasses.replace(ev, frames_per_split=fit)
 
@@ -315,7 +371,8 @@ def _fit_scale(cap, train, ev, ks, scene, m, budget: float, given_evalset: Path 
     smallest = _total(*scaled(cap, train, s_min), ev, ks, scene, m, given_evalset, refine_spp)
     if smallest > budget:
         raise DiviewerError(f"{budget / 3600:.2f} h is below the smallest plan this recipe allows on this machine "
-                            f"({smallest / 3600:.2f} h at {MIN_FRAMES} frames and {MIN_STEPS} steps per K); give "
+                            f"({smallest / 3600:.2f} h at {MIN_FRAMES} frames and {MIN_STEPS} steps per K; the "
+                            f"capture costed from {m[1].of('capture')[1]}); give "
                             f"more hours, fewer K (--ks) or a lighter recipe", field="--budget")
     lo, hi = s_min, 1.0
     for _ in range(40):
@@ -347,8 +404,20 @@ def describe(plan: Plan, done: set[str] = frozenset(), left_here: dict[str, floa
         lines.append(f"  {i:2d}. {s.name:<12} {'done' if s.name in done else hms(s.seconds):>9}  {s.title}")
     left = sum(s.seconds for s in plan.stages if s.name not in done)
     lines.append(f"estimated total: {hms(plan.seconds)}" + (f", {hms(left)} left (stages done in {plan.work} are "
-                                                             f"skipped)" if done else "")
-                 + " (from the costs in diviewer/build/costs.py)")
+                                                             f"skipped)" if done else ""))
+    by_source: dict[str, list[str]] = {}
+    for s in plan.stages:
+        if s.seconds > 0:
+            by_source.setdefault(s.source, []).append(s.name)
+    for source, names in by_source.items():
+        lines.append(f"  costs of {', '.join(names)}: {source}")
+    ev = next((s for s in plan.stages if s.name == "evalset"), None)
+    if ev is not None and ev.seconds > 0 and plan.seconds > 0:
+        share = ev.seconds / plan.seconds
+        over = (f", above the {EVALSET_SHARE:.0%} a budget gives it: {MIN_EVALSET_FRAMES} frames per split is the "
+                f"fewest a build renders" if plan.evalset.frames_per_split <= MIN_EVALSET_FRAMES
+                and share > EVALSET_SHARE + 0.005 else "")
+        lines.append(f"  the evaluation set is {share:.0%} of the estimate{over}")
     under_way = [s for s in plan.stages if s.name not in done and s.name in (left_here or {})]
     if under_way:
         here = sum(left_here.get(s.name, s.seconds) for s in plan.stages if s.name not in done)

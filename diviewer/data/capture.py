@@ -243,7 +243,7 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
             f"{len(todo)} to render at {settings.width}x{settings.height}, {gt_text}")
         t0 = time.perf_counter()
         if todo:
-            _render_frames(scene, ds, todo, settings, log)
+            _render_frames(scene, ds, todo, settings, log, done=len(mine) - len(todo))
         summary = summarize(ds)
         summary["seconds"] = round(time.perf_counter() - t0, 2)
         summary["rendered"] = len(todo)
@@ -294,17 +294,18 @@ def _check_size(settings: CaptureSettings) -> None:
         check_render_size(ctx, settings.width, settings.height, "--res")
 
 
-def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: CaptureSettings, log) -> None:
+def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: CaptureSettings, log, done: int = 0) -> None:
     from diviewer.gl.context import describe, headless_context
 
     gt = PathTracedGT(scene, settings) if settings.gt == "pt" else VXGIGT(settings)
     with headless_context() as ctx:
-        _render_frames_gl(ctx, scene, ds, todo, settings, gt, describe(ctx), log)
+        _render_frames_gl(ctx, scene, ds, todo, settings, gt, describe(ctx), log, done=done)
 
 
 def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings, gt, gl_name: str,
-                      log, label: str = "capture") -> None:
-    """Render and write ``todo``: GL buffers plus ``gt(config, frame entry)``, stored in the manifest's channels.
+                      log, label: str = "capture", done: int = 0) -> None:
+    """Render and write ``todo``: GL buffers plus ``gt(config, frame entry)``, stored in the manifest's channels;
+    the progress starts at ``done`` frames rendered before (a resumed capture).
 
     Shared with the evaluation set (diviewer.evalset), whose ground truth adds channels; ``settings``
     needs ``width``, ``height``, ``dtype`` and ``thumbs``.
@@ -327,7 +328,7 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
         gt.attach(ctx, renderer)
     splits = dict.fromkeys(f["split"] for f in ds.frames)  # in order of first appearance
     thumbs = {i for s in splits for i in [f["index"] for f in ds.frames if f["split"] == s][:settings.thumbs]}
-    progress = progress_bar(len(todo), label, "frame")
+    progress = progress_bar(done + len(todo), label, "frame", initial=done)
     try:
         for f in todo:
             config = config_from_dict(scene, f["config"])
@@ -358,7 +359,9 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
                        compositor.to_ldr(planes["pt"] - planes["pt_direct"], ev)]
                 imageio.write_png(ds.root / "thumbs" / f"{frame_name(f['index'])}_{f['split']}.png",
                                   np.concatenate(row, axis=1))
-            progress.set_postfix_str(f"gt {t2 - t1:.1f}s/frame ({gt.variant})", refresh=False)
+            what = "path tracing" if getattr(settings, "gt", "pt") == "pt" else "VXGI truth"  # the evaluation set's truth is traced
+            progress.set_postfix_str(f"{what} {t2 - t1:.1f} s a frame ({gt.variant}), GL {t1 - t0:.2f} s",
+                                     refresh=False)
             progress.update()
     finally:
         progress.close()

@@ -247,7 +247,7 @@ def _epochs(run: Run, nets: Nets, st: TrainState, total: int, horizon: int) -> N
     from diviewer.train.step import set_learning_rate, train_step
 
     cfg, dev, train_arr, say = run.cfg, run.dev, run.train_arr, run.say
-    progress = progress_bar(total - st.step, "train", "step") if dev.main else None
+    progress = progress_bar(total, "train", "step", initial=st.step) if dev.main else None
     stop = {"stop": False}
     restore_handlers = distributed.install_stop_handlers(stop, say)
     nets.netG.train()

@@ -78,7 +78,9 @@ def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, cap
     assert not work.exists()
     assert main(["build", "--recipe", "sponza", "--dry-run", "--work", str(work)]) == 0  # the recipe's scene
     out = capsys.readouterr().out
-    assert out.startswith("build sponza (sponza) with recipe sponza") and "train_k32" in out
+    assert out.splitlines()[1].startswith("build sponza (sponza) with recipe sponza") and "train_k32" in out
+    assert out.startswith(("costs: timed sponza here at 228x128", "costs: sponza could not be timed here"))
+    assert not work.exists()  # the timing is kept only in a folder already there
     assert main(["build", "--recipe", "paper", "--dry-run"]) == 2  # the paper's recipe names no scene
     assert "recipe.scene" in capsys.readouterr().err
 
@@ -160,9 +162,12 @@ def test_the_estimate_follows_the_measured_costs():
     px = 228 * 128 / (128 * 128)  # the rendering's pixels: the whole frame
     # cornell's 4,800 train frames at batch 4, 40 epochs: the 48,000 steps the shipped model took
     assert steps == 48000
-    # the measured set, made in two passes, at the one pass's share (diviewer.reference.split_path)
+    # the measured set (48 frames), made in two passes, at the one pass's share (diviewer.reference.split_path), for
+    # the frames the set renders now: every split cornell has (4) times the recipe's 24 frames per split
     cornell = costs.EVALSET_MEASURED["cornell"]
-    assert est["evalset"] == pytest.approx(cornell["seconds"] * px * costs.ONE_PASS_SHARE, rel=1e-3)
+    frames = plan.evalset_counts.rendered(plan.evalset.frames_per_split)
+    assert frames == 4 * 24 and plan.evalset_counts.render_width == 228
+    assert est["evalset"] == pytest.approx(cornell["seconds"] * px * costs.ONE_PASS_SHARE * frames / 48, rel=1e-3)
     # each scene's sets at its own measured ratio: Sponza's, measured in one pass, is its time a frame
     sponza = costs.EVALSET_MEASURED["sponza"]
     ladder = tuple(sponza["ladder"])
