@@ -134,7 +134,7 @@ def run_build_command(args: argparse.Namespace) -> int:
             raise refusal
         if work.is_dir() and running is None:  # a dry run makes no folder, nor writes beside a run
             keep_calibration(work, timing)
-        print(f"dry run: nothing was done but timing the scene; run it without --dry-run ({rebuild_command(args)})")
+        print(f"dry run: nothing was done but timing the scene; run it without --dry-run ({resume_command(args)})")
         return 0
     from diviewer.build.pipeline import BuildInterrupted, run_build
 

@@ -75,6 +75,7 @@ def test_dry_run_prints_the_plan_and_its_estimate_and_does_nothing(tmp_path, cap
         assert f" {stage} " in out, stage
     assert "recipe cornell" in out and "estimated total:" in out and "capture 6000 frames at 228x128, 64 spp" in out
     assert "dry run: nothing was done" in out
+    assert f"(diviewer build --scene cornell --work {work})" in out  # the command to run names the folders given
     assert not work.exists()
     assert main(["build", "--recipe", "sponza", "--dry-run", "--work", str(work)]) == 0  # the recipe's scene
     out = capsys.readouterr().out
