@@ -182,6 +182,14 @@ class Renderer:
                 run(frame)
         return self.textures
 
+    @property
+    def shadows_pending(self) -> bool:
+        """Whether a sun's map is not yet the one drawn at rest (the moving map, or the full one still drawn in
+        bands): the next frames draw it."""
+        full = self.settings.shadow_size
+        return any(m is not None and (m.get("size") not in (None, full) or m.get("footprint"))
+                   for m in self.shadow_pass.maps.values())
+
     def ensure_direct(self) -> moderngl.Texture:
         """The direct-light target of the last frame, running the direct pass if ``render`` deferred it."""
         if self.direct_pending:

@@ -30,6 +30,11 @@ from diviewer.viewer.models import model_candidates
 from diviewer.viewer.settings import BACKGROUND, ViewerSettings, check_render_scale, scale_settings
 from diviewer.viewer.view_modes import Unavailable, view_mode
 
+from diviewer.viewer.session import run_viewer
+
+STILL_WAIT_S = 1.0 / 120.0
+"""How long a still view's frame waits for an input event before presenting the same image again."""
+
 __all__ = ["BACKGROUND", "Viewer", "ViewerSettings", "run_viewer"]
 
 
@@ -74,6 +79,7 @@ class Viewer:
         from diviewer.viewer.meter import Meter
         from diviewer.viewer.scale import ScaleController, render_size
         from diviewer.viewer.state import ViewerState
+        from diviewer.viewer.still import StillTracker
 
         imgui, settings = self.imgui, self.settings
         self.ctx = create_context("window")
@@ -90,6 +96,9 @@ class Viewer:
         self.view_size = (fb_w, fb_h)
         """The window's framebuffer size the image is shown at (the renderer's is this times the scale)."""
         self.drawn_scale = self.scaler.scale  # the render scale of the frame drawn last
+        self.still = StillTracker(settings.still)
+        """The motion state of each frame (moving, refining, still: still.py)."""
+        self._shown: tuple[list[Image], list[str]] | None = None  # the last drawn frame's images, for a still one
         self.renderer = r = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
                                      self.shaders, timer=self.timer, back_faces=settings.back_faces)
         r.moving_shadow_size, r.rest_in_bands = settings.moving_shadow_size, settings.rest_in_bands
@@ -162,22 +171,45 @@ class Viewer:
     def set_model(self, spec: str | Path | None) -> None:
         """Load a model (path, ``auto`` or ``none``); without one the viewer shows direct light and says why."""
         self.gi.release()
+        self._shown = None
         self._follow_window()
         self.gi.load(spec)
 
-    def _follow_window(self) -> None:
-        """Size the renderer to the window's framebuffer times the render scale (the GI follows)."""
+    def _follow_window(self, scale: float | None = None) -> None:
+        """Size the renderer to the window's framebuffer times ``scale`` (default: the controller's; the GI
+        follows)."""
         from diviewer.viewer.scale import render_size
 
         fb_w, fb_h = self.window.fb_size
         if fb_w <= 0 or fb_h <= 0:
             return
-        want = render_size((fb_w, fb_h), self.scaler.scale)
+        scale = self.scaler.scale if scale is None else scale
+        want = render_size((fb_w, fb_h), scale)
         if want != self.render_size or (fb_w, fb_h) != self.view_size:
             self.view_size = (fb_w, fb_h)
             self.renderer.resize(*want)
             self.gi.follow_window(self.view_size)
-        self.drawn_scale = self.scaler.scale
+            self._shown = None
+        self.drawn_scale = scale
+
+    @property
+    def refined_scale(self) -> float:
+        """The scale a still view is refined at: 1, or the dynamic-resolution ceiling above 1 (supersampled); a
+        fixed render scale stays."""
+        s = self.scaler
+        return max(1.0, s.settings.ceiling) if s.enabled else s.scale
+
+    def _still_key(self) -> tuple:
+        """What decides the image (``StillTracker``'s key): the frame, the meshes, the window, the view mode, the
+        model, the GI and dynamic-resolution settings."""
+        st = self.state
+        return (st.config, st.scene_revision, tuple(self.window.fb_size), st.view_mode, st.compare, st.model_name,
+                self.gi.settings, self.gi.size, self.scaler.settings, self._pending_model)
+
+    def _can_rest(self) -> bool:
+        """Whether a refined view may be presented without drawing: no shadow map still drawn in bands, no
+        progressive reference on screen."""
+        return not self.renderer.shadows_pending and not any(m.name == "reference" for m in self.state.modes_shown())
 
     def set_render_scale(self, scale: float) -> float:
         """Fix the render scale (0 < scale <= 2, above 1 supersampled; dynamic resolution turns off); applied at
@@ -296,7 +328,10 @@ class Viewer:
                                           if self._last_frame_start is not None else 1.0 / 60.0)
         frame_ms = (start - self._last_frame_start) * 1e3 if self._last_frame_start is not None else 0.0
         self._last_frame_start = start
-        glfw.poll_events()
+        if self.still.state == "still":
+            glfw.wait_events_timeout(STILL_WAIT_S)  # nothing to draw: wait for an event (or the next frame)
+        else:
+            glfw.poll_events()
         if self.window.should_close():
             return False
         fb_w, fb_h = self.window.fb_size
@@ -309,13 +344,18 @@ class Viewer:
         self.input.held_keys(dt)
         st.step(dt)
         self._sync_scene()
-        if frame_ms > 0:
+        last = self.still.state
+        if frame_ms > 0 and last == "moving":  # refined frames' times would pull the dynamic scale down
             self.scaler.update(frame_ms, self.drawn_scale)  # the last frame's time, at the scale it was drawn at
-        self._follow_window()
+        phase = self.still.update(self._still_key(), self._can_rest() and self._shown is not None)
+        if phase == "moving" and last != "moving":
+            self.scaler.resume()  # back at its scale; the first frames there reallocate targets
+        self._follow_window(self.scaler.scale if phase == "moving" else self.refined_scale)
         self.timer.reset()
-        # The direct pass is deferred: the neural pass computes the direct light inline where it can,
-        # and whatever else reads the buffer (a view mode, VXGI) runs the pass first.
-        self.renderer.render(st.config, direct=False)
+        if phase != "still":
+            # The direct pass is deferred: the neural pass computes the direct light inline where it can,
+            # and whatever else reads the buffer (a view mode, VXGI) runs the pass first.
+            self.renderer.render(st.config, direct=False)
         if not any(m.name == "reference" for m in st.modes_shown()):
             self.reference.pause()
         screen = self.ctx.screen
@@ -323,7 +363,10 @@ class Viewer:
         screen.use()
         screen.clear(*BACKGROUND, 1.0, viewport=(0, 0, fb_w, fb_h))
         rect = self.view_rect()
-        images, notes = self._images(FrameImages(self))
+        if phase == "still" and self._shown is not None:
+            images, notes = self._shown  # the refined frame's images, unchanged since
+        else:
+            images, notes = self._shown = self._images(FrameImages(self))
         if st.auto_exposure and images[0].kind == "radiance":
             st.meter(self.meter.read(images[0].texture))
         with self.timer.stage("composite", gpu=True):
@@ -376,74 +419,3 @@ class Viewer:
         finally:
             self.window.close()
             self.state.message = self.state.stop_recording() or self.state.message  # also when the window closes
-
-
-def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None = None, frames: int | None = None,
-               screenshot: str | Path | None = None, script=None, size: tuple[int, int] = (768, 768),
-               vsync: bool = True, provider: str | None = None, settings: ViewerSettings | None = None,
-               stats: str | Path | None = None) -> dict:
-    """Open the viewer on a scene and run it until the window closes, or for ``frames`` frames.
-
-    Args:
-        scene: a shipped scene name, a .toml path or a loaded Scene.
-        model: a model path, ``"auto"`` (None means the same) or ``"none"``.
-        frames: render this many frames, then exit (scripted mode).
-        screenshot: save the last frame's view (PNG + frame JSON) here on exit.
-        size, vsync, provider: window size, vsync and execution provider, when ``settings`` is not given.
-        settings: everything else (render settings, the reference's, the camera controller).
-        script: actions applied before given frames: ``(frame, callable(viewer))``, ``(frame, name, kwargs)`` or
-            ``{"frame": i, "action": name, **kwargs}``; names are Viewer actions (script.SCRIPT_ACTIONS) or
-            ViewerState methods (set_view_mode, set_light_direction, fly, drag, toggle_recording, ...).
-        stats: write the per-stage times of every frame drawn (median, p95, mean ms), the frame rate, the
-            window, shading and GI resolutions, the render scales, how the stages were timed and whether the
-            frames were inside the model's training ranges, as JSON, here.
-
-    Returns:
-        A summary: frames drawn, GI size, model, screenshots, view modes drawn, the reasons of those that could
-        not be, mean stage times, and the GL error state before shutdown.
-    """
-    from diviewer.scene import load_scene
-    from diviewer.viewer.report import run_summary, write_stats
-    from diviewer.viewer.script import apply_action, normalise_script
-    from diviewer.viewer.sources import FrameImages
-
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene)
-    settings = settings or ViewerSettings(size=(int(size[0]), int(size[1])), vsync=vsync)
-    changes = {"model": str(model)} if model is not None else {}
-    if provider is not None:
-        changes["provider"] = provider
-    settings = dataclasses.replace(settings, **changes)
-    if settings.provider:
-        import onnxruntime as ort
-
-        from diviewer.runtime import choose_providers
-
-        choose_providers(ort.get_available_providers(), settings.provider)  # before a window opens
-    steps = normalise_script(script)
-    viewer = Viewer(scene, settings)
-    summary: dict = {}
-    per_frame: list[dict[str, float]] = []
-    shown: list[tuple[float, int]] = []  # per frame: its render scale, how many reasons it was out of range
-    try:
-        while frames is None or viewer.frame_index < frames:
-            for action in steps.get(viewer.frame_index, ()):
-                apply_action(viewer, action)
-            drawn = viewer.frame_index
-            if not viewer.frame():
-                break
-            if stats is not None and viewer.frame_index > drawn:
-                per_frame.append(viewer.state.stats.last())
-                shown.append((viewer.render_scale, len(viewer.state.out_of_range())))
-        if screenshot is not None:
-            if viewer.frame_index == 0:
-                viewer.frame()
-            # The state is the last frame's: save its view now.
-            viewer._save_view(Path(screenshot).with_suffix(".png"), viewer._images(FrameImages(viewer))[0])
-        summary = run_summary(viewer)
-        if stats is not None:
-            summary["stats"] = write_stats(Path(stats), viewer, per_frame, shown)
-    finally:
-        viewer.close()
-    return summary
-

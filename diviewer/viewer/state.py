@@ -133,6 +133,27 @@ class ViewerState:
         self.controller = make_controller(self.controller.kind, self.scene.default.camera, self.scene_centre())
         return self._sync_camera()
 
+    def scene_bounds(self) -> np.ndarray:
+        """The box (2, 3: min, max corners) around the current frame's objects."""
+        return np.asarray(self.scene.bounds(self.config), np.float64)
+
+    def overview_camera(self, elevation: float = 35.0) -> FrameConfig:
+        """Put the camera outside the scene's box, above it at ``elevation`` degrees on the side it looks from,
+        looking at the box's centre, far enough that the box's bounding sphere fills the view's height."""
+        lo, hi = self.scene_bounds()
+        c, r = 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+        cam = self.config.camera
+        back = np.asarray(cam.position, np.float64) - np.asarray(cam.target, np.float64)
+        back[1] = 0.0
+        n = float(np.linalg.norm(back))
+        back = back / n if n > 1e-9 else np.array([0.0, 0.0, 1.0])
+        e = math.radians(elevation)
+        d = 1.05 * r / math.sin(math.radians(cam.fov) / 2.0)
+        eye = c + d * (math.cos(e) * back + np.array([0.0, math.sin(e), 0.0]))
+        self.play_path = False
+        return self.set_camera(dataclasses.replace(cam, position=tuple(map(float, eye)), target=tuple(map(float, c)),
+                                                   up=(0.0, 1.0, 0.0), far=max(cam.far, 2.0 * (d + r))))
+
     def set_camera(self, camera) -> FrameConfig:
         self.controller = make_controller(self.controller.kind, camera, self.scene_centre())
         return self._sync_camera()
