@@ -13,7 +13,7 @@ behind, on a worker thread), and upsamples its indirect light over the direct li
 draws the view mode's image into the window (bilinear where it is upscaled), and the panel goes on top.
 Nothing here imports torch. The rooms: window.py, input.py (key table), panel.py, screenshots.py, sources.py (the
 view modes' textures), models.py, gi.py (the neural pass, the GI resolution), script.py, report.py (summary, stats
-JSON), state.py (no GL), recording.py (camera paths), scale.py (dynamic resolution), meter.py (auto exposure).
+JSON), state.py (no GL), recording.py (camera paths), scale.py (dynamic resolution), still.py (a still view refined), meter.py (auto exposure).
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import moderngl
 from diviewer.gl.display import Image, Look, depth_range
 from diviewer.scene.model import Scene
 from diviewer.viewer.models import model_candidates
+from diviewer.viewer.still import can_rest, still_key
 from diviewer.viewer.settings import BACKGROUND, ViewerSettings, check_render_scale, scale_settings
 from diviewer.viewer.view_modes import Unavailable, view_mode
 
@@ -99,6 +100,12 @@ class Viewer:
         self.still = StillTracker(settings.still)
         """The motion state of each frame (moving, refining, still: still.py)."""
         self._shown: tuple[list[Image], list[str]] | None = None  # the last drawn frame's images, for a still one
+        self.temporal = None
+        """The temporal upsampler (gl/temporal.py) with ``--temporal on``, else None."""
+        if settings.temporal:
+            from diviewer.gl.temporal import TemporalPass
+
+            self.temporal = TemporalPass(self.ctx, self.shaders)
         self.renderer = r = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
                                      self.shaders, timer=self.timer, back_faces=settings.back_faces)
         r.moving_shadow_size, r.rest_in_bands = settings.moving_shadow_size, settings.rest_in_bands
@@ -199,17 +206,15 @@ class Viewer:
         s = self.scaler
         return max(1.0, s.settings.ceiling) if s.enabled else s.scale
 
-    def _still_key(self) -> tuple:
-        """What decides the image (``StillTracker``'s key): the frame, the meshes, the window, the view mode, the
-        model, the GI and dynamic-resolution settings."""
-        st = self.state
-        return (st.config, st.scene_revision, tuple(self.window.fb_size), st.view_mode, st.compare, st.model_name,
-                self.gi.settings, self.gi.size, self.scaler.settings, self._pending_model)
-
-    def _can_rest(self) -> bool:
-        """Whether a refined view may be presented without drawing: no shadow map still drawn in bands, no
-        progressive reference on screen."""
-        return not self.renderer.shadows_pending and not any(m.name == "reference" for m in self.state.modes_shown())
+    def _temporal_on(self, phase: str) -> bool:
+        """Whether this frame goes through the temporal upsampler: the final view mode, while moving (a still
+        view is refined at full scale instead), or at a fixed render scale (it then refines the still view)."""
+        on = self.temporal is not None and self.state.view_mode == "final"
+        on = on and (phase == "moving" or not self.scaler.enabled)
+        self.renderer.jitter = self.temporal.jitter() if on else (0.0, 0.0)
+        if not on and self.temporal is not None:
+            self.temporal.reset()
+        return on
 
     def set_render_scale(self, scale: float) -> float:
         """Fix the render scale (0 < scale <= 2, above 1 supersampled; dynamic resolution turns off); applied at
@@ -347,11 +352,12 @@ class Viewer:
         last = self.still.state
         if frame_ms > 0 and last == "moving":  # refined frames' times would pull the dynamic scale down
             self.scaler.update(frame_ms, self.drawn_scale)  # the last frame's time, at the scale it was drawn at
-        phase = self.still.update(self._still_key(), self._can_rest() and self._shown is not None)
+        phase = self.still.update(still_key(self), can_rest(self) and self._shown is not None)
         if phase == "moving" and last != "moving":
             self.scaler.resume()  # back at its scale; the first frames there reallocate targets
         self._follow_window(self.scaler.scale if phase == "moving" else self.refined_scale)
         self.timer.reset()
+        temporal = phase != "still" and self._temporal_on(phase)
         if phase != "still":
             # The direct pass is deferred: the neural pass computes the direct light inline where it can,
             # and whatever else reads the buffer (a view mode, VXGI) runs the pass first.
@@ -366,7 +372,13 @@ class Viewer:
         if phase == "still" and self._shown is not None:
             images, notes = self._shown  # the refined frame's images, unchanged since
         else:
-            images, notes = self._shown = self._images(FrameImages(self))
+            images, notes = self._images(FrameImages(self))
+            if temporal and images[0].kind == "radiance" and not images[0].flip:
+                r = self.renderer
+                with self.timer.stage("temporal", gpu=True):
+                    images[0] = Image(self.temporal.resolve(images[0].texture, r.textures["depth"], self.view_size,
+                                                            r.jitter, r.frame_view.view, r.frame_view.proj))
+            self._shown = (images, notes)
         if st.auto_exposure and images[0].kind == "radiance":
             st.meter(self.meter.read(images[0].texture))
         with self.timer.stage("composite", gpu=True):
@@ -410,6 +422,8 @@ class Viewer:
             self.meter.release()
             self.upscale.release()
             self.display.release()
+            if self.temporal is not None:
+                self.temporal.release()
             if self.vxgi is not None:
                 self.vxgi.release()
             self.timer.release()

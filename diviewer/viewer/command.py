@@ -52,6 +52,9 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
                    help="while nothing changes (camera, lights, objects, window, view mode, model), draw the view at "
                         "scale 1 (or --scale-ceiling above 1), then show it without drawing again (default); "
                         "--no-refine-still keeps every frame at the dynamic scale")
+    p.add_argument("--temporal", default="off", choices=("on", "off"),
+                   help="temporal upsampling of the final image (Halton-jittered frames reprojected, clamped and "
+                        "accumulated at the window's size; default off: docs/viewer.md has its measurement)")
     p.add_argument("--auto-exposure", action=argparse.BooleanOptionalAction, default=None,
                    help="start with the exposure metered from the frame, or not (the panel toggles it; default: as "
                         "the scene file's [scene] auto_exposure says, on for sponza)")
@@ -113,6 +116,7 @@ def run_view(args: argparse.Namespace) -> int:
                               scale_ceiling=args.scale_ceiling,
                               auto_exposure=args.auto_exposure, back_faces=args.back_faces,
                               rest_in_bands=args.shadow_bands, still=StillSettings(refine=args.refine_still),
+                              temporal=args.temporal == "on",
                               gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined),
                               path=str(args.path) if args.path else None, fixed_step=args.fixed_step,
                               record_path=str(args.record_path) if args.record_path else None)

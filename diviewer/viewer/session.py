@@ -72,8 +72,9 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
         if screenshot is not None:
             if viewer.frame_index == 0:
                 viewer.frame()
-            # The state is the last frame's: save its view now.
-            viewer._save_view(Path(screenshot).with_suffix(".png"), viewer._images(FrameImages(viewer))[0])
+            # The state is the last frame's: save the images it showed (the temporal upsampler's, where it ran).
+            shown = viewer._shown[0] if viewer._shown is not None else viewer._images(FrameImages(viewer))[0]
+            viewer._save_view(Path(screenshot).with_suffix(".png"), shown)
         summary = run_summary(viewer)
         if stats is not None:
             summary["stats"] = write_stats(Path(stats), viewer, per_frame, shown)

@@ -93,3 +93,6 @@ class ViewerSettings:
     """Seconds each frame advances the clock (animations, paths, recordings) instead of the wall clock's."""
     still: StillSettings = field(default_factory=StillSettings)
     """A view that stops changing is drawn at scale 1 (or the ceiling above 1), then presented without drawing."""
+    temporal: bool = False
+    """Temporal upsampling of the final image while it moves (jittered frames accumulated at the window's size,
+    gl/temporal.py); a still view is refined at full scale either way."""

@@ -20,6 +20,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+TEMPORAL_REST_FRAMES = 32
+"""Frames the temporal upsampler accumulates on a still view at a fixed render scale before it is presented without
+drawing (four rounds of its 8-phase jitter)."""
+
 MOTION_STATES = ("moving", "refining", "still")
 """The states a frame is drawn in, in the order a view comes to rest."""
 
@@ -75,3 +79,20 @@ class StillTracker:
     def invalidate(self) -> None:
         """Draw the next frame as moving (something outside the key changed: targets reallocated, a reload)."""
         self._first = True
+
+
+def still_key(viewer) -> tuple:  # viewer: a viewer.app.Viewer
+    """What decides the image (``StillTracker``'s key): the frame, the meshes, the window, the view mode, the
+    model, the GI and dynamic-resolution settings."""
+    st = viewer.state
+    return (st.config, st.scene_revision, tuple(viewer.window.fb_size), st.view_mode, st.compare, st.model_name,
+            viewer.gi.settings, viewer.gi.size, viewer.scaler.settings, viewer._pending_model)
+
+
+def can_rest(viewer) -> bool:
+    """Whether a refined view may be presented without drawing: no shadow map still drawn in bands, no
+    progressive reference on screen, the temporal history (where it refines the view) full."""
+    t = viewer.temporal
+    accumulating = t is not None and not viewer.scaler.enabled and t.frames < TEMPORAL_REST_FRAMES
+    return not (viewer.renderer.shadows_pending or accumulating
+                or any(m.name == "reference" for m in viewer.state.modes_shown()))

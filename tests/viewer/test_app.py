@@ -1013,8 +1013,12 @@ def _dynamic_session(tmp_path: Path) -> None:
 
     scales = {}
     script = [(f, lambda v, f=f: scales.setdefault(f, (v.render_scale, v.render_size))) for f in (0, 5, 20, 29)]
+    from diviewer.viewer.still import StillSettings
+
+    # A still view is refined at scale 1 (test_still.py); without refining, every frame is drawn at the dynamic scale.
     summary = run_viewer("cornell", frames=30, script=script, stats=tmp_path / "stats.json",
-                         settings=_settings(size=(128, 96), target_fps=10000.0, scale_floor=0.5))
+                         settings=_settings(size=(128, 96), target_fps=10000.0, scale_floor=0.5,
+                                            still=StillSettings(refine=False)))
     assert summary["gl_error"] == "GL_NO_ERROR"
     # 10,000 fps cannot be held: after its first measurement (2 settling frames + 6) the scale drops to the floor.
     assert scales[0] == (1.0, (128, 96)) and scales[5] == (1.0, (128, 96))
