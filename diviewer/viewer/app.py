@@ -31,12 +31,10 @@ from diviewer.viewer.still import can_rest, still_key
 from diviewer.viewer.settings import BACKGROUND, ViewerSettings, check_render_scale, scale_settings
 from diviewer.viewer.view_modes import Unavailable, view_mode
 
-from diviewer.viewer.session import run_viewer
-
 STILL_WAIT_S = 1.0 / 120.0
 """How long a still view's frame waits for an input event before presenting the same image again."""
 
-__all__ = ["BACKGROUND", "Viewer", "ViewerSettings", "run_viewer"]
+__all__ = ["BACKGROUND", "Viewer", "ViewerSettings"]
 
 
 class Viewer:

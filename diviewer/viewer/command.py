@@ -86,7 +86,8 @@ def run_view(args: argparse.Namespace) -> int:
     """Open the viewer as the arguments say; with ``--frames``, print one line of what it did."""
     from diviewer.frames import parse_resolution
     from diviewer.gl.neural import GISettings
-    from diviewer.viewer.app import ViewerSettings, run_viewer
+    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.settings import ViewerSettings
     from diviewer.viewer.still import StillSettings
 
     # Each option's own range was checked before (diviewer.options); here the rules between them.

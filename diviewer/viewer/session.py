@@ -7,6 +7,7 @@ import dataclasses
 from pathlib import Path
 
 from diviewer.scene.model import Scene
+from diviewer.viewer.app import Viewer
 from diviewer.viewer.settings import ViewerSettings
 
 
@@ -53,8 +54,6 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
 
         choose_providers(ort.get_available_providers(), settings.provider)  # before a window opens
     steps = normalise_script(script)
-    from diviewer.viewer.app import Viewer
-
     viewer = Viewer(scene, settings)
     summary: dict = {}
     per_frame: list[dict[str, float]] = []
@@ -73,8 +72,8 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
             if viewer.frame_index == 0:
                 viewer.frame()
             # The state is the last frame's: save the images it showed (the temporal upsampler's, where it ran).
-            shown = viewer._shown[0] if viewer._shown is not None else viewer._images(FrameImages(viewer))[0]
-            viewer._save_view(Path(screenshot).with_suffix(".png"), shown)
+            last = viewer._shown[0] if viewer._shown is not None else viewer._images(FrameImages(viewer))[0]
+            viewer._save_view(Path(screenshot).with_suffix(".png"), last)
         summary = run_summary(viewer)
         if stats is not None:
             summary["stats"] = write_stats(Path(stats), viewer, per_frame, shown)

@@ -20,7 +20,7 @@ from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scen
 from diviewer.scene.picking import pick_object, pixel_ray
 from diviewer.scene.camera_path import CameraPath, read_path, scene_camera_path
 from diviewer.scene.ranges_check import out_of_range
-from diviewer.viewer.controls import Controller, make_controller
+from diviewer.viewer.controls import Controller, make_controller, overview
 from diviewer.exposure import SHOWN, WHITE_POINTS, AutoExposure
 from diviewer.viewer.stats import Stats
 from diviewer.viewer.view_modes import ViewMode, view_mode
@@ -137,22 +137,10 @@ class ViewerState:
         """The box (2, 3: min, max corners) around the current frame's objects."""
         return np.asarray(self.scene.bounds(self.config), np.float64)
 
-    def overview_camera(self, elevation: float = 35.0) -> FrameConfig:
-        """Put the camera outside the scene's box, above it at ``elevation`` degrees on the side it looks from,
-        looking at the box's centre, far enough that the box's bounding sphere fills the view's height."""
-        lo, hi = self.scene_bounds()
-        c, r = 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
-        cam = self.config.camera
-        back = np.asarray(cam.position, np.float64) - np.asarray(cam.target, np.float64)
-        back[1] = 0.0
-        n = float(np.linalg.norm(back))
-        back = back / n if n > 1e-9 else np.array([0.0, 0.0, 1.0])
-        e = math.radians(elevation)
-        d = 1.05 * r / math.sin(math.radians(cam.fov) / 2.0)
-        eye = c + d * (math.cos(e) * back + np.array([0.0, math.sin(e), 0.0]))
+    def overview_camera(self) -> FrameConfig:
+        """The camera above the scene's box on the side it looks from, at its centre (``controls.overview``)."""
         self.play_path = False
-        return self.set_camera(dataclasses.replace(cam, position=tuple(map(float, eye)), target=tuple(map(float, c)),
-                                                   up=(0.0, 1.0, 0.0), far=max(cam.far, 2.0 * (d + r))))
+        return self.set_camera(overview(self.config.camera, self.scene_bounds()))
 
     def set_camera(self, camera) -> FrameConfig:
         self.controller = make_controller(self.controller.kind, camera, self.scene_centre())
