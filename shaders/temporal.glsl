@@ -1,7 +1,7 @@
 // Temporal upsampling (Karis 2014; AMD FSR 2): the radiance of a jittered frame at the shading resolution,
 // accumulated at the window's resolution into a history reprojected by the G-buffer's depth, the history clamped
-// to the current frame's 3x3 neighbourhood (YCoCg box) and dropped where the reprojected depth disagrees
-// (disocclusion).
+// to the current frame's 3x3 neighbourhood (YCoCg box) and dropped where the reprojected depth lies outside the
+// neighbourhood's depths (disocclusion).
 #if defined VERTEX_SHADER
 #include "fullscreen.glsl"
 #elif defined FRAGMENT_SHADER
@@ -43,11 +43,16 @@ void main() {
     float z = texelFetch(u_depth, i, 0).r;
     float w = exp(-0.5 * dot(d, d) / (u_sigma * u_sigma));
     vec3 lo = vec3(1e30), hi = vec3(-1e30);
+    float z_lo = 1e30, z_hi = 0.0;
     for (int y = -1; y <= 1; ++y) {
         for (int x = -1; x <= 1; ++x) {
-            vec3 c = to_ycocg(texelFetch(u_current, clamp(i + ivec2(x, y), ivec2(0), size - 1), 0).rgb);
+            ivec2 q = clamp(i + ivec2(x, y), ivec2(0), size - 1);
+            vec3 c = to_ycocg(texelFetch(u_current, q, 0).rgb);
             lo = min(lo, c);
             hi = max(hi, c);
+            float zq = texelFetch(u_depth, q, 0).r;
+            z_lo = min(z_lo, zq);
+            z_hi = max(z_hi, zq);
         }
     }
     // This pixel's point (sky: its direction) in view space, then in the history's clip and view spaces.
@@ -61,9 +66,12 @@ void main() {
             && all(lessThanEqual(prev_uv, vec2(1.0)))) {
         vec4 h = texture(u_history, prev_uv);
         float hz = texture(u_history_depth, prev_uv).r;
-        float expected = z > 0.0 ? -(m_prev_view * pv).z : 0.0;
-        bool same = (z > 0.0) == (hz > 0.0)
-                    && (z <= 0.0 || abs(hz - expected) <= u_depth_tolerance * max(expected, 1e-6));
+        // Disoccluded where the history's depth, moved back by this point's own depth change, lies outside the
+        // depths of the current 3x3 neighbourhood: an edge's samples alternate between its two sides (the nearest
+        // sample changes with the jitter), which is not a disocclusion.
+        float change = z > 0.0 ? -(m_prev_view * pv).z - z : 0.0;
+        float back = hz - change;
+        bool same = back >= z_lo * (1.0 - u_depth_tolerance) - 1e-6 && back <= z_hi * (1.0 + u_depth_tolerance) + 1e-6;
         if (same) {
             hist = from_ycocg(clamp(to_ycocg(h.rgb), lo, hi));
             weight = min(h.a, u_max_weight);

@@ -26,14 +26,23 @@ class TemporalSettings:
     """How jittered frames are accumulated."""
 
     phases: int = 8
-    """Length of the Halton(2, 3) jitter sequence before it repeats."""
+    """Length of the Halton(2, 3) jitter sequence at scale 1; at scale ``s`` it is ``phases / s^2`` (FSR 2's rule:
+    as many samples per window pixel at every scale)."""
     max_weight: float = 15.0
-    """The history's weight is capped here, in units of one sample at a pixel's centre (the current frame's share
-    is then at least 1/16): the longer, the smoother and the slower to follow a change inside the colour box."""
+    """While the view moves, the history's weight is capped here, in units of one sample at a pixel's centre (the
+    current frame's share is then at least 1/16): the longer, the smoother and the slower to follow a change inside
+    the colour box. At rest it is capped at ``rest_cycles`` cycles of the sequence (an average of them)."""
+    rest_cycles: int = 2
+    """Cycles of the jitter sequence a resting view averages (and accumulates before it counts as converged)."""
     sigma: float = 0.47
     """Width (window pixels) of the Gaussian that weights the current sample by its distance to the pixel."""
     depth_tolerance: float = 0.05
     """Relative depth mismatch at which the reprojected history is dropped (disocclusion)."""
+
+
+def jitter_phases(settings: TemporalSettings, scale: float) -> int:
+    """The jitter sequence's length for frames drawn at ``scale`` of the window's size per side."""
+    return max(settings.phases, round(settings.phases / max(scale, 1e-3) ** 2))
 
 
 def jitter_offset(frame: int, phases: int) -> tuple[float, float]:
@@ -56,10 +65,19 @@ class TemporalPass:
         self._index = 0
         self.frames = 0
         """Frames accumulated since the history was last dropped."""
+        self.phases = settings.phases
+        """The jitter sequence's length at the scale of the last frame asked for (``jitter``)."""
 
-    def jitter(self) -> tuple[float, float]:
-        """The offset the next frame's G-buffer is drawn with (``Renderer.jitter``)."""
-        return jitter_offset(self._index, self.settings.phases)
+    def jitter(self, scale: float = 1.0) -> tuple[float, float]:
+        """The offset the next frame's G-buffer, drawn at ``scale`` of the window's size, is drawn with
+        (``Renderer.jitter``)."""
+        self.phases = jitter_phases(self.settings, scale)
+        return jitter_offset(self._index, self.phases)
+
+    @property
+    def converged(self) -> bool:
+        """Whether a resting view has accumulated its ``rest_cycles`` cycles of the jitter sequence."""
+        return self.frames >= self.settings.rest_cycles * self.phases
 
     def reset(self) -> None:
         """Drop the history (the next resolve shows the current frame alone)."""
@@ -81,9 +99,11 @@ class TemporalPass:
         self.reset()
 
     def resolve(self, current: moderngl.Texture, depth: moderngl.Texture, size: tuple[int, int],
-                jitter: tuple[float, float], view: np.ndarray, proj: np.ndarray) -> moderngl.Texture:
+                jitter: tuple[float, float], view: np.ndarray, proj: np.ndarray, resting: bool = False
+                ) -> moderngl.Texture:
         """Blend ``current`` (drawn with ``jitter``, its linear ``depth``) into the history at ``size``; returns
-        the new history's radiance (rgb; alpha: its weight). ``view``, ``proj``: the frame's, unjittered."""
+        the new history's radiance (rgb; alpha: its weight). ``view``, ``proj``: the frame's, unjittered;
+        ``resting``: nothing changed since the last frame (the history's weight may grow to an average)."""
         self._ensure(size)
         out_color, out_depth, fbo = self._targets[self._index % 2]
         hist_color, hist_depth, _ = self._targets[(self._index + 1) % 2]
@@ -93,11 +113,12 @@ class TemporalPass:
         prev_view, prev_proj = (self._prev[0], self._prev[1]) if has else (view, proj)
         for unit, tex in enumerate((current, depth, hist_color, hist_depth)):
             tex.use(location=unit)
+        cap = s.rest_cycles * self.phases if resting else s.max_weight
         for name, value in (("u_current", 0), ("u_depth", 1), ("u_history", 2), ("u_history_depth", 3),
                             ("u_jitter", tuple(map(float, jitter))),
                             ("u_inv_focal", (1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1]))),
                             ("m_reproj", prev_proj @ prev_view @ inv_view), ("m_prev_view", prev_view @ inv_view),
-                            ("u_has_history", has), ("u_max_weight", float(s.max_weight)),
+                            ("u_has_history", has), ("u_max_weight", float(cap)),
                             ("u_sigma", float(s.sigma)), ("u_depth_tolerance", float(s.depth_tolerance))):
             set_uniform(prog, name, value)
         fbo.use()

@@ -209,7 +209,7 @@ class Viewer:
         view is refined at full scale instead), or at a fixed render scale (it then refines the still view)."""
         on = self.temporal is not None and self.state.view_mode == "final"
         on = on and (phase == "moving" or not self.scaler.enabled)
-        self.renderer.jitter = self.temporal.jitter() if on else (0.0, 0.0)
+        self.renderer.jitter = self.temporal.jitter(self.render_size[0] / self.view_size[0]) if on else (0.0, 0.0)
         if not on and self.temporal is not None:
             self.temporal.reset()
         return on
@@ -375,7 +375,8 @@ class Viewer:
                 r = self.renderer
                 with self.timer.stage("temporal", gpu=True):
                     images[0] = Image(self.temporal.resolve(images[0].texture, r.textures["depth"], self.view_size,
-                                                            r.jitter, r.frame_view.view, r.frame_view.proj))
+                                                            r.jitter, r.frame_view.view, r.frame_view.proj,
+                                                            resting=phase != "moving"))
             self._shown = (images, notes)
         if st.auto_exposure and images[0].kind == "radiance":
             st.meter(self.meter.read(images[0].texture))

@@ -20,10 +20,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-TEMPORAL_REST_FRAMES = 32
-"""Frames the temporal upsampler accumulates on a still view at a fixed render scale before it is presented without
-drawing (four rounds of its 8-phase jitter)."""
-
 MOTION_STATES = ("moving", "refining", "still")
 """The states a frame is drawn in, in the order a view comes to rest."""
 
@@ -93,6 +89,6 @@ def can_rest(viewer) -> bool:
     """Whether a refined view may be presented without drawing: no shadow map still drawn in bands, no
     progressive reference on screen, the temporal history (where it refines the view) full."""
     t = viewer.temporal
-    accumulating = t is not None and not viewer.scaler.enabled and t.frames < TEMPORAL_REST_FRAMES
+    accumulating = t is not None and not viewer.scaler.enabled and not t.converged
     return not (viewer.renderer.shadows_pending or accumulating
                 or any(m.name == "reference" for m in viewer.state.modes_shown()))
