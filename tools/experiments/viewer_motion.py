@@ -2,14 +2,15 @@
 dynamic resolution.
 
 Usage: xvfb-run -a python tools/experiments/viewer_motion.py [--scene cornell] [--size 384] [--frames 60]
-           [--fixed-step 0.0333] [--scale 0.4] [--arms scale1,plain,temporal,dynamic,dynamic_temporal] --out OUT.json
+           [--fixed-step 0.0333] [--scale 0.4] [--arms scale1,scale2,plain,temporal,dynamic,dynamic_temporal] --out OUT.json
 
 Each arm is one scripted `diviewer view` run with the light animated from the first frame and ``--fixed-step``
 (the frame count drives the motion, so frame i shows the same state in every arm) that saves every frame's view
 (PNG, tone-mapped as shown). ``scale1`` is ``--render-scale 1`` (the reference); ``plain`` and ``temporal`` draw at
 ``--scale`` fixed, upscaled bilinearly or by the temporal upsampler; ``dynamic`` and ``dynamic_temporal`` are the
-default dynamic resolution (its scale follows this machine's clock). Each frame is scored by display PSNR (8-bit
-PNGs) against the ``scale1`` frame of the same index. Measures only; needs a display (Xvfb) and GL.
+default dynamic resolution (its scale follows this machine's clock); ``scale2`` (``--render-scale 2``, each pixel the
+mean of 2x2) is the anti-aliased frame. Each frame is scored by display PSNR (8-bit PNGs) against the ``scale1``
+frame of the same index, and against the ``scale2`` one where that arm runs. Measures only; needs a display (Xvfb) and GL.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from diviewer.metrics import psnr
 from diviewer.viewer.session import run_viewer
 from diviewer.viewer.settings import ViewerSettings
 
-ARMS = {"scale1": {"render_scale": 1.0}, "plain": {}, "temporal": {"temporal": True},
+ARMS = {"scale1": {"render_scale": 1.0}, "scale2": {"render_scale": 2.0}, "plain": {}, "temporal": {"temporal": True},
         "dynamic": {"render_scale": None}, "dynamic_temporal": {"render_scale": None, "temporal": True}}
 
 
@@ -50,32 +51,37 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--fixed-step", type=float, default=1.0 / 30.0)
     ap.add_argument("--scale", type=float, default=0.4)
-    ap.add_argument("--arms", default="scale1,plain,temporal,dynamic,dynamic_temporal")
+    ap.add_argument("--arms", default="scale1,scale2,plain,temporal,dynamic,dynamic_temporal")
     ap.add_argument("--warmup", type=int, default=8, help="frames left out of the 'settled' summary")
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)
     arms = ["scale1"] + [a for a in args.arms.split(",") if a != "scale1"]
+    refs = [a for a in ("scale1", "scale2") if a in arms]
     record = {"command": "python tools/experiments/viewer_motion.py " + " ".join(sys.argv[1:] if argv is None else argv),
               "scene": args.scene, "window": [args.size, args.size], "frames": args.frames,
               "fixed_step": args.fixed_step, "scale": args.scale, "motion": "light animated (--light-moving)",
-              "metric": "display PSNR (8-bit tone-mapped PNG) against the --render-scale 1 frame of the same index",
+              "metric": "display PSNR (8-bit tone-mapped PNG) against the --render-scale 1 (vs_scale1) and 2 "
+                        "(vs_scale2) frames of the same index",
               "arms": {}}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         for arm in arms:
             record["arms"][arm] = run_arm(args.scene, arm, args.size, args.frames, args.fixed_step, args.scale, folder)
-        ref = [read_png(folder / f"scale1_{i:04d}.png") / 255.0 for i in range(args.frames)]
-        for arm in arms[1:]:
-            values = [psnr(read_png(folder / f"{arm}_{i:04d}.png") / 255.0, ref[i]) for i in range(args.frames)]
-            v = np.array(values)
-            settled = v[args.warmup:]
-            record["arms"][arm].update(
-                psnr=[round(float(x), 3) for x in values],
-                summary={"min": float(v.min()), "median": float(np.median(v)), "mean": float(v.mean()),
-                         "settled_min": float(settled.min()), "settled_median": float(np.median(settled)),
-                         "frames_at_least_38db": int((v >= 38.0).sum())})
-            print(f"{arm:18s} min {v.min():6.2f}  median {np.median(v):6.2f}  settled min {settled.min():6.2f}  "
-                  f">= 38 dB: {(v >= 38.0).sum()}/{len(v)}")
+        for ref_arm in refs:
+            ref = [read_png(folder / f"{ref_arm}_{i:04d}.png") / 255.0 for i in range(args.frames)]
+            for arm in arms:
+                if arm == ref_arm:
+                    continue
+                values = [psnr(read_png(folder / f"{arm}_{i:04d}.png") / 255.0, ref[i]) for i in range(args.frames)]
+                v = np.array(values)
+                settled = v[args.warmup:]
+                record["arms"][arm][f"vs_{ref_arm}"] = {
+                    "psnr": [round(float(x), 3) for x in values],
+                    "min": float(v.min()), "median": float(np.median(v)), "mean": float(v.mean()),
+                    "settled_min": float(settled.min()), "settled_median": float(np.median(settled)),
+                    "frames_at_least_38db": int((v >= 38.0).sum())}
+                print(f"{arm:18s} vs {ref_arm}: min {v.min():6.2f}  median {np.median(v):6.2f}  "
+                      f"settled min {settled.min():6.2f}  >= 38 dB: {(v >= 38.0).sum()}/{len(v)}")
     record["gl_renderer"] = record["arms"]["scale1"]["gl_renderer"]
     write_text(args.out, json.dumps(record, indent=1))
     return 0
