@@ -17,8 +17,9 @@ uniform vec2 u_inv_focal;      // 1 / proj[0][0], 1 / proj[1][1]: view-space x, 
 uniform mat4 m_reproj;         // this frame's view space -> the history's clip space
 uniform mat4 m_prev_view;      // this frame's view space -> the history's view space
 uniform bool u_has_history;
-uniform float u_max_weight;    // the history's weight is capped here: the current frame's share >= 1 / (this + 1)
+uniform float u_max_weight;    // cap of the history's weight (units: one sample at a pixel's centre)
 uniform float u_sigma;         // the current sample's weight: a Gaussian of its distance, in window pixels
+uniform float u_gamma;          // variance clipping: the colour box is the mean +- this many standard deviations
 uniform float u_depth_tolerance;  // relative depth mismatch that rejects the history
 
 layout(location = 0) out vec4 out_color;
@@ -42,7 +43,7 @@ void main() {
     vec3 cur = texelFetch(u_current, i, 0).rgb;
     float z = texelFetch(u_depth, i, 0).r;
     float w = exp(-0.5 * dot(d, d) / (u_sigma * u_sigma));
-    vec3 lo = vec3(1e30), hi = vec3(-1e30);
+    vec3 lo = vec3(1e30), hi = vec3(-1e30), m1 = vec3(0.0), m2 = vec3(0.0);
     float z_lo = 1e30, z_hi = 0.0;
     for (int y = -1; y <= 1; ++y) {
         for (int x = -1; x <= 1; ++x) {
@@ -50,11 +51,18 @@ void main() {
             vec3 c = to_ycocg(texelFetch(u_current, q, 0).rgb);
             lo = min(lo, c);
             hi = max(hi, c);
+            m1 += c;
+            m2 += c * c;
             float zq = texelFetch(u_depth, q, 0).r;
             z_lo = min(z_lo, zq);
             z_hi = max(z_hi, zq);
         }
     }
+    // Variance clipping (Salvi 2016): the box narrowed to the mean +- gamma standard deviations.
+    m1 /= 9.0;
+    vec3 sd = sqrt(max(m2 / 9.0 - m1 * m1, 0.0));
+    lo = max(lo, m1 - u_gamma * sd);
+    hi = min(hi, m1 + u_gamma * sd);
     // This pixel's point (sky: its direction) in view space, then in the history's clip and view spaces.
     vec2 ndc = v_uv * 2.0 - 1.0;
     vec4 pv = z > 0.0 ? vec4(ndc * u_inv_focal * z, -z, 1.0) : vec4(ndc * u_inv_focal, -1.0, 0.0);

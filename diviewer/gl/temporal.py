@@ -28,14 +28,20 @@ class TemporalSettings:
     phases: int = 8
     """Length of the Halton(2, 3) jitter sequence at scale 1; at scale ``s`` it is ``phases / s^2`` (FSR 2's rule:
     as many samples per window pixel at every scale)."""
-    max_weight: float = 15.0
-    """While the view moves, the history's weight is capped here, in units of one sample at a pixel's centre (the
-    current frame's share is then at least 1/16): the longer, the smoother and the slower to follow a change inside
-    the colour box. At rest it is capped at ``rest_cycles`` cycles of the sequence (an average of them)."""
+    max_weight: float = 1.0
+    """While the view moves, the history's weight is capped at this many frames' worth (``max_weight * s^2`` in units
+    of one sample at a pixel's centre, a frame at scale ``s`` adding about ``s^2``): the longer, the smoother and
+    the slower to follow a change inside the colour box (cornell, light moving, scale 0.4: 1 scored best of 1, 2 and
+    4, docs/viewer.md). At rest it is capped at ``rest_cycles`` cycles of the
+    sequence (an average of them)."""
     rest_cycles: int = 2
     """Cycles of the jitter sequence a resting view averages (and accumulates before it counts as converged)."""
     sigma: float = 0.47
     """Width (window pixels) of the Gaussian that weights the current sample by its distance to the pixel."""
+    gamma: float = 1.0
+    """Variance clipping (Salvi 2016): the neighbourhood's colour box is narrowed to its mean +- this many standard
+    deviations (within its min and max) before the history is clamped to it; a resting view clamps to the min and
+    max alone (nothing changes there but the jitter)."""
     depth_tolerance: float = 0.05
     """Relative depth mismatch at which the reprojected history is dropped (disocclusion)."""
 
@@ -113,13 +119,15 @@ class TemporalPass:
         prev_view, prev_proj = (self._prev[0], self._prev[1]) if has else (view, proj)
         for unit, tex in enumerate((current, depth, hist_color, hist_depth)):
             tex.use(location=unit)
-        cap = s.rest_cycles * self.phases if resting else s.max_weight
+        # A frame at scale s adds about s^2 of weight per window pixel: the cap in motion counts frames, not samples.
+        scale = min(current.width / size[0], 1.0)
+        cap = s.rest_cycles * self.phases if resting else s.max_weight * scale * scale
         for name, value in (("u_current", 0), ("u_depth", 1), ("u_history", 2), ("u_history_depth", 3),
                             ("u_jitter", tuple(map(float, jitter))),
                             ("u_inv_focal", (1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1]))),
                             ("m_reproj", prev_proj @ prev_view @ inv_view), ("m_prev_view", prev_view @ inv_view),
                             ("u_has_history", has), ("u_max_weight", float(cap)),
-                            ("u_sigma", float(s.sigma)), ("u_depth_tolerance", float(s.depth_tolerance))):
+                            ("u_sigma", float(s.sigma)), ("u_gamma", 1e6 if resting else float(s.gamma)), ("u_depth_tolerance", float(s.depth_tolerance))):
             set_uniform(prog, name, value)
         fbo.use()
         fbo.viewport = (0, 0, *size)

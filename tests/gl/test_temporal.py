@@ -99,8 +99,10 @@ def test_a_static_view_converges_to_the_supersampled_frame(ctx):
               "frame_1": psnr(shade(frame_1), shade(truth)), "taa_full": psnr(shade(taa_full), shade(truth)),
               "taa_full_vs_1": psnr(shade(taa_full), shade(frame_1)),
               "settled": psnr(shade(taa_half), shade(taa_half_later))}
-    print(scores)
-    assert scores["taa_half"] >= scores["plain_half"] + 2.0, scores
-    assert scores["taa_full"] >= scores["frame_1"] - 1.0, scores
+    # Measured (llvmpipe): plain 23.4 dB, accumulated at half size 32.2, the scale-1 frame 26.9, accumulated at full
+    # size 39.3 from the 4x4 supersampled frame; 27.2 between the accumulated and the scale-1 frame (its aliased
+    # edges: the direct light's geometry and shadow edges, 64 px wide); 51.9 between 64 and 72 frames.
+    assert scores["taa_half"] >= scores["plain_half"] + 5.0, scores
+    assert scores["taa_full"] >= scores["frame_1"] + 6.0, scores
     assert scores["taa_full_vs_1"] >= 25.0, scores
-    assert scores["settled"] >= 40.0, scores
+    assert scores["settled"] >= 45.0, scores
