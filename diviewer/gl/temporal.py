@@ -127,7 +127,8 @@ class TemporalPass:
                             ("u_inv_focal", (1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1]))),
                             ("m_reproj", prev_proj @ prev_view @ inv_view), ("m_prev_view", prev_view @ inv_view),
                             ("u_has_history", has), ("u_max_weight", float(cap)),
-                            ("u_sigma", float(s.sigma)), ("u_gamma", 1e6 if resting else float(s.gamma)), ("u_depth_tolerance", float(s.depth_tolerance))):
+                            ("u_sigma", float(s.sigma)), ("u_gamma", 1e6 if resting else float(s.gamma)),
+                            ("u_depth_tolerance", float(s.depth_tolerance))):
             set_uniform(prog, name, value)
         fbo.use()
         fbo.viewport = (0, 0, *size)

@@ -13,7 +13,8 @@ behind, on a worker thread), and upsamples its indirect light over the direct li
 draws the view mode's image into the window (bilinear where it is upscaled), and the panel goes on top.
 Nothing here imports torch. The rooms: window.py, input.py (key table), panel.py, screenshots.py, sources.py (the
 view modes' textures), models.py, gi.py (the neural pass, the GI resolution), script.py, report.py (summary, stats
-JSON), state.py (no GL), recording.py (camera paths), scale.py (dynamic resolution), still.py (a still view refined), meter.py (auto exposure).
+JSON), state.py (no GL), recording.py (camera paths), scale.py (dynamic resolution), still.py (a still view
+refined), meter.py (auto exposure).
 """
 
 from __future__ import annotations
