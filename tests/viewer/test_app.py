@@ -1175,10 +1175,10 @@ def test_back_faces_flag_reaches_the_viewer_settings(monkeypatch):
     """`diviewer view --back-faces` opens the viewer with the single-sided materials' back faces drawn; without
     it they are culled."""
     from diviewer.cli import main
-    from diviewer.viewer import app
+    from diviewer.viewer import session
 
     opened = []
-    monkeypatch.setattr(app, "run_viewer", lambda scene, **kw: opened.append(kw["settings"]) or {})
+    monkeypatch.setattr(session, "run_viewer", lambda scene, **kw: opened.append(kw["settings"]) or {})
     for flag in ([], ["--back-faces"]):
         assert main(["view", "--scene", "atrium", "--model", "none", *flag]) == 0
     assert [s.back_faces for s in opened] == [False, True]

@@ -76,10 +76,13 @@ def _converge_session(tmp_path: Path) -> None:
 
     # The camera moves for 24 frames against a frame rate the machine cannot hold: the scale drops to the floor;
     # then the view stays still for 60 frames.
+    # Then it moves again: the very next frame is drawn at the scale the controller held.
     fly = [(i, "fly", {"forward": 0.02, "dt": 1.0 / 60}) for i in range(24)]
     scales = []
-    script = fly + [(23, lambda v: scales.append(v.render_scale))]
-    run_viewer("cornell", frames=84, screenshot=tmp_path / "dynamic.png", script=script, stats=tmp_path / "s.json",
+    script = fly + [(23, lambda v: scales.append(v.render_scale)),
+                    (83, "screenshot", {"path": tmp_path / "dynamic.png"}), (84, lambda v: scales.append(v.render_scale)), (84, "look", {"dx": 3.0, "dy": 0.0}),
+                    (85, lambda v: scales.append(v.render_scale))]
+    run_viewer("cornell", frames=86, script=script, stats=tmp_path / "s.json",
                settings=_settings(model="auto", target_fps=1000.0, scale_floor=0.4))
     run_viewer("cornell", frames=26, screenshot=tmp_path / "full.png", script=fly,
                settings=_settings(model="auto", render_scale=1.0))
@@ -93,8 +96,10 @@ def test_a_still_view_converges_to_the_scale_1_frame(display, tmp_path):
     from diviewer.metrics import psnr
 
     _in_window_process(_converge_session, tmp_path)
-    assert json.loads((tmp_path / "scales.json").read_text())[0] < 0.75, "the motion did not lower the scale"
+    moving, still, moved = json.loads((tmp_path / "scales.json").read_text())
+    assert moving < 0.75, "the motion did not lower the scale"
+    assert still == 1.0 and moved == moving, "a still view is refined at 1, motion returns to the controller's scale"
     a, b = _png(tmp_path / "dynamic.png") / 255.0, _png(tmp_path / "full.png") / 255.0
     assert psnr(a, b) >= 45.0
     motion = json.loads((tmp_path / "s.json").read_text())["motion"]
-    assert motion["state"] == "still" and motion["frames"]["still"] >= 50 and motion["frames"]["refining"] >= 1
+    assert motion["state"] == "moving" and motion["frames"]["still"] >= 50 and motion["frames"]["refining"] >= 1
