@@ -75,12 +75,12 @@ def _converge_session(tmp_path: Path) -> None:
     from diviewer.viewer.session import run_viewer
 
     # The camera moves for 24 frames against a frame rate the machine cannot hold: the scale drops to the floor;
-    # then the view stays still for 60 frames.
-    # Then it moves again: the very next frame is drawn at the scale the controller held.
+    # then the view stays still for 60 frames; then it moves again: that frame is drawn at the controller's scale.
     fly = [(i, "fly", {"forward": 0.02, "dt": 1.0 / 60}) for i in range(24)]
     scales = []
     script = fly + [(23, lambda v: scales.append(v.render_scale)),
-                    (83, "screenshot", {"path": tmp_path / "dynamic.png"}), (84, lambda v: scales.append(v.render_scale)), (84, "look", {"dx": 3.0, "dy": 0.0}),
+                    (83, "screenshot", {"path": tmp_path / "dynamic.png"}),
+                    (84, lambda v: scales.append(v.render_scale)), (84, "look", {"dx": 3.0, "dy": 0.0}),
                     (85, lambda v: scales.append(v.render_scale))]
     run_viewer("cornell", frames=86, script=script, stats=tmp_path / "s.json",
                settings=_settings(model="auto", target_fps=1000.0, scale_floor=0.4))
