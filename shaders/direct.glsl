@@ -12,6 +12,7 @@ const float PI = 3.14159265358979;
 
 uniform mat4 m_inv_view;          // camera to world
 uniform vec2 u_tan_half_fov;      // (tan(fov_y / 2) * aspect, tan(fov_y / 2))
+uniform vec2 u_jitter;            // the G-buffer's jitter (pixels): pixel centre c shows what lies at c - u_jitter
 
 uniform vec3 u_light_color;       // colour * irradiance (directional) or colour * intensity (point)
 uniform vec3 u_light_dir;         // directional: the direction the light travels, world space
@@ -118,7 +119,7 @@ void light_at(vec3 p, out vec3 l, out vec3 e) {
 // linear depth (> 0: a surface), view-space normal, albedo. Zero where the surface faces away.
 #if defined DIRECTIONAL || defined POINT_LIGHT
 vec3 light_term(vec2 pixel, vec2 size, float depth, vec3 n_view, vec3 albedo) {
-    vec2 ndc = (pixel / size) * 2.0 - 1.0;
+    vec2 ndc = ((pixel - u_jitter) / size) * 2.0 - 1.0;
     vec3 p_view = depth * vec3(ndc * u_tan_half_fov, -1.0);
     vec3 p = (m_inv_view * vec4(p_view, 1.0)).xyz;
     vec3 n = normalize(mat3(m_inv_view) * n_view);

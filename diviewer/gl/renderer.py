@@ -88,6 +88,10 @@ class Renderer:
         self.rest_in_bands = False
         """At rest after a move, a sun's full map is drawn in bands over the next frames, each band as many texels as
         the moving map, the moving map shown meanwhile (gl/shadow_pass.py; the viewer's); else whole at once."""
+        self.jitter = (0.0, 0.0)
+        """Sub-pixel offset (pixels, x right, y up) of the G-buffer's image (``camera.jittered``; temporal
+        upsampling's): pixel centre ``c`` shows what lies at ``c - jitter``. Lighting passes reconstruct positions
+        through pixel centres, at the jittered depth."""
         self.shadow_pass = ShadowPass(self)
         """The shadow maps: drawn, kept, and this frame's lookups (``shadow_pass.maps``)."""
         self.passes = (("shadows", self.shadow_pass.run), ("gbuffer", self._gbuffer_pass),
@@ -182,6 +186,14 @@ class Renderer:
                 run(frame)
         return self.textures
 
+    @property
+    def shadows_pending(self) -> bool:
+        """Whether a sun's map is not yet the one drawn at rest (the moving map, or the full one still drawn in
+        bands): the next frames draw it."""
+        full = self.settings.shadow_size
+        return any(m is not None and (m.get("size") not in (None, full) or m.get("footprint"))
+                   for m in self.shadow_pass.maps.values())
+
     def ensure_direct(self) -> moderngl.Texture:
         """The direct-light target of the last frame, running the direct pass if ``render`` deferred it."""
         if self.direct_pending:
@@ -203,6 +215,7 @@ class Renderer:
         t = math.tan(math.radians(config.camera.fov) / 2.0)
         set_uniform(prog, "m_inv_view", cam.view_to_world(view))
         set_uniform(prog, "u_tan_half_fov", (t * self.width / self.height, t))
+        set_uniform(prog, "u_jitter", tuple(map(float, self.jitter)))
         self.set_light_uniforms(prog, light, self.shadow_pass.maps.get(light.name))
 
     def _draw_list(self, config: FrameConfig) -> tuple:
@@ -267,6 +280,8 @@ class Renderer:
 
     def _gbuffer_pass(self, frame: "FrameView") -> None:
         ctx, config, view, proj = self.ctx, frame.config, frame.view, frame.proj
+        if self.jitter != (0.0, 0.0):
+            proj = cam.jittered(proj, self.jitter, self.width, self.height)
         emissive = self.emissive
         if not emissive and not self._emission_zero:
             self._emission_fbo.clear(0.0, 0.0, 0.0, 0.0)

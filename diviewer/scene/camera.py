@@ -44,6 +44,26 @@ def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.
     return matrix44.create_perspective_projection(fov_y_deg, aspect, near, far, dtype=_F64).T
 
 
+def jittered(proj: np.ndarray, offset: tuple[float, float], width: int, height: int) -> np.ndarray:
+    """``proj`` with its image moved by ``offset`` pixels (x right, y up) of a ``width`` x ``height`` target: the
+    pixel centred at ``c`` then shows what lay at ``c - offset`` (temporal upsampling's sub-pixel jitter)."""
+    out = np.array(proj, np.float64)
+    # clip.w = -z_view: adding -2 dx / width to row 0's z column moves NDC x by +2 dx / width, whatever the depth.
+    out[0, 2] -= 2.0 * offset[0] / width
+    out[1, 2] -= 2.0 * offset[1] / height
+    return out
+
+
+def halton(index: int, base: int) -> float:
+    """The ``index``-th (from 1) element of the radical-inverse sequence in ``base``, in [0, 1)."""
+    f, r, i = 1.0, 0.0, int(index)
+    while i > 0:
+        f /= base
+        r += f * (i % base)
+        i //= base
+    return r
+
+
 def orthographic(half_w: float, half_h: float, near: float, far: float) -> np.ndarray:
     """OpenGL orthographic projection of the box [-half_w, half_w] x [-half_h, half_h] x [-near, -far]."""
     return matrix44.create_orthogonal_projection(-half_w, half_w, -half_h, half_h, near, far, dtype=_F64).T

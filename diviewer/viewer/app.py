@@ -13,7 +13,8 @@ behind, on a worker thread), and upsamples its indirect light over the direct li
 draws the view mode's image into the window (bilinear where it is upscaled), and the panel goes on top.
 Nothing here imports torch. The rooms: window.py, input.py (key table), panel.py, screenshots.py, sources.py (the
 view modes' textures), models.py, gi.py (the neural pass, the GI resolution), script.py, report.py (summary, stats
-JSON), state.py (no GL), recording.py (camera paths), scale.py (dynamic resolution), meter.py (auto exposure).
+JSON), state.py (no GL), recording.py (camera paths), scale.py (dynamic resolution), still.py (a still view
+refined), meter.py (auto exposure).
 """
 
 from __future__ import annotations
@@ -27,10 +28,14 @@ import moderngl
 from diviewer.gl.display import Image, Look, depth_range
 from diviewer.scene.model import Scene
 from diviewer.viewer.models import model_candidates
+from diviewer.viewer.still import can_rest, still_key
 from diviewer.viewer.settings import BACKGROUND, ViewerSettings, check_render_scale, scale_settings
 from diviewer.viewer.view_modes import Unavailable, view_mode
 
-__all__ = ["BACKGROUND", "Viewer", "ViewerSettings", "run_viewer"]
+STILL_WAIT_S = 1.0 / 120.0
+"""How long a still view's frame waits for an input event before presenting the same image again."""
+
+__all__ = ["BACKGROUND", "Viewer", "ViewerSettings"]
 
 
 class Viewer:
@@ -74,6 +79,7 @@ class Viewer:
         from diviewer.viewer.meter import Meter
         from diviewer.viewer.scale import ScaleController, render_size
         from diviewer.viewer.state import ViewerState
+        from diviewer.viewer.still import StillTracker
 
         imgui, settings = self.imgui, self.settings
         self.ctx = create_context("window")
@@ -90,6 +96,15 @@ class Viewer:
         self.view_size = (fb_w, fb_h)
         """The window's framebuffer size the image is shown at (the renderer's is this times the scale)."""
         self.drawn_scale = self.scaler.scale  # the render scale of the frame drawn last
+        self.still = StillTracker(settings.still)
+        """The motion state of each frame (moving, refining, still: still.py)."""
+        self._shown: tuple[list[Image], list[str]] | None = None  # the last drawn frame's images, for a still one
+        self.temporal = None
+        """The temporal upsampler (gl/temporal.py) with ``--temporal on``, else None."""
+        if settings.temporal:
+            from diviewer.gl.temporal import TemporalPass
+
+            self.temporal = TemporalPass(self.ctx, self.shaders)
         self.renderer = r = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
                                      self.shaders, timer=self.timer, back_faces=settings.back_faces)
         r.moving_shadow_size, r.rest_in_bands = settings.moving_shadow_size, settings.rest_in_bands
@@ -162,22 +177,43 @@ class Viewer:
     def set_model(self, spec: str | Path | None) -> None:
         """Load a model (path, ``auto`` or ``none``); without one the viewer shows direct light and says why."""
         self.gi.release()
+        self._shown = None
         self._follow_window()
         self.gi.load(spec)
 
-    def _follow_window(self) -> None:
-        """Size the renderer to the window's framebuffer times the render scale (the GI follows)."""
+    def _follow_window(self, scale: float | None = None) -> None:
+        """Size the renderer to the window's framebuffer times ``scale`` (default: the controller's; the GI
+        follows)."""
         from diviewer.viewer.scale import render_size
 
         fb_w, fb_h = self.window.fb_size
         if fb_w <= 0 or fb_h <= 0:
             return
-        want = render_size((fb_w, fb_h), self.scaler.scale)
+        scale = self.scaler.scale if scale is None else scale
+        want = render_size((fb_w, fb_h), scale)
         if want != self.render_size or (fb_w, fb_h) != self.view_size:
             self.view_size = (fb_w, fb_h)
             self.renderer.resize(*want)
             self.gi.follow_window(self.view_size)
-        self.drawn_scale = self.scaler.scale
+            self._shown = None
+        self.drawn_scale = scale
+
+    @property
+    def refined_scale(self) -> float:
+        """The scale a still view is refined at: 1, or the dynamic-resolution ceiling above 1 (supersampled); a
+        fixed render scale stays."""
+        s = self.scaler
+        return max(1.0, s.settings.ceiling) if s.enabled else s.scale
+
+    def _temporal_on(self, phase: str) -> bool:
+        """Whether this frame goes through the temporal upsampler: the final view mode, while moving (a still
+        view is refined at full scale instead), or at a fixed render scale (it then refines the still view)."""
+        on = self.temporal is not None and self.state.view_mode == "final"
+        on = on and (phase == "moving" or not self.scaler.enabled)
+        self.renderer.jitter = self.temporal.jitter(self.render_size[0] / self.view_size[0]) if on else (0.0, 0.0)
+        if not on and self.temporal is not None:
+            self.temporal.reset()
+        return on
 
     def set_render_scale(self, scale: float) -> float:
         """Fix the render scale (0 < scale <= 2, above 1 supersampled; dynamic resolution turns off); applied at
@@ -296,7 +332,10 @@ class Viewer:
                                           if self._last_frame_start is not None else 1.0 / 60.0)
         frame_ms = (start - self._last_frame_start) * 1e3 if self._last_frame_start is not None else 0.0
         self._last_frame_start = start
-        glfw.poll_events()
+        if self.still.state == "still":
+            glfw.wait_events_timeout(STILL_WAIT_S)  # nothing to draw: wait for an event (or the next frame)
+        else:
+            glfw.poll_events()
         if self.window.should_close():
             return False
         fb_w, fb_h = self.window.fb_size
@@ -309,13 +348,19 @@ class Viewer:
         self.input.held_keys(dt)
         st.step(dt)
         self._sync_scene()
-        if frame_ms > 0:
+        last = self.still.state
+        if frame_ms > 0 and last == "moving":  # refined frames' times would pull the dynamic scale down
             self.scaler.update(frame_ms, self.drawn_scale)  # the last frame's time, at the scale it was drawn at
-        self._follow_window()
+        phase = self.still.update(still_key(self), can_rest(self) and self._shown is not None)
+        if phase == "moving" and last != "moving":
+            self.scaler.resume()  # back at its scale; the first frames there reallocate targets
+        self._follow_window(self.scaler.scale if phase == "moving" else self.refined_scale)
         self.timer.reset()
-        # The direct pass is deferred: the neural pass computes the direct light inline where it can,
-        # and whatever else reads the buffer (a view mode, VXGI) runs the pass first.
-        self.renderer.render(st.config, direct=False)
+        temporal = phase != "still" and self._temporal_on(phase)
+        if phase != "still":
+            # The direct pass is deferred: the neural pass computes the direct light inline where it can,
+            # and whatever else reads the buffer (a view mode, VXGI) runs the pass first.
+            self.renderer.render(st.config, direct=False)
         if not any(m.name == "reference" for m in st.modes_shown()):
             self.reference.pause()
         screen = self.ctx.screen
@@ -323,7 +368,17 @@ class Viewer:
         screen.use()
         screen.clear(*BACKGROUND, 1.0, viewport=(0, 0, fb_w, fb_h))
         rect = self.view_rect()
-        images, notes = self._images(FrameImages(self))
+        if phase == "still" and self._shown is not None:
+            images, notes = self._shown  # the refined frame's images, unchanged since
+        else:
+            images, notes = self._images(FrameImages(self))
+            if temporal and images[0].kind == "radiance" and not images[0].flip:
+                r = self.renderer
+                with self.timer.stage("temporal", gpu=True):
+                    images[0] = Image(self.temporal.resolve(images[0].texture, r.textures["depth"], self.view_size,
+                                                            r.jitter, r.frame_view.view, r.frame_view.proj,
+                                                            resting=phase != "moving"))
+            self._shown = (images, notes)
         if st.auto_exposure and images[0].kind == "radiance":
             st.meter(self.meter.read(images[0].texture))
         with self.timer.stage("composite", gpu=True):
@@ -367,6 +422,8 @@ class Viewer:
             self.meter.release()
             self.upscale.release()
             self.display.release()
+            if self.temporal is not None:
+                self.temporal.release()
             if self.vxgi is not None:
                 self.vxgi.release()
             self.timer.release()
@@ -376,74 +433,3 @@ class Viewer:
         finally:
             self.window.close()
             self.state.message = self.state.stop_recording() or self.state.message  # also when the window closes
-
-
-def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None = None, frames: int | None = None,
-               screenshot: str | Path | None = None, script=None, size: tuple[int, int] = (768, 768),
-               vsync: bool = True, provider: str | None = None, settings: ViewerSettings | None = None,
-               stats: str | Path | None = None) -> dict:
-    """Open the viewer on a scene and run it until the window closes, or for ``frames`` frames.
-
-    Args:
-        scene: a shipped scene name, a .toml path or a loaded Scene.
-        model: a model path, ``"auto"`` (None means the same) or ``"none"``.
-        frames: render this many frames, then exit (scripted mode).
-        screenshot: save the last frame's view (PNG + frame JSON) here on exit.
-        size, vsync, provider: window size, vsync and execution provider, when ``settings`` is not given.
-        settings: everything else (render settings, the reference's, the camera controller).
-        script: actions applied before given frames: ``(frame, callable(viewer))``, ``(frame, name, kwargs)`` or
-            ``{"frame": i, "action": name, **kwargs}``; names are Viewer actions (script.SCRIPT_ACTIONS) or
-            ViewerState methods (set_view_mode, set_light_direction, fly, drag, toggle_recording, ...).
-        stats: write the per-stage times of every frame drawn (median, p95, mean ms), the frame rate, the
-            window, shading and GI resolutions, the render scales, how the stages were timed and whether the
-            frames were inside the model's training ranges, as JSON, here.
-
-    Returns:
-        A summary: frames drawn, GI size, model, screenshots, view modes drawn, the reasons of those that could
-        not be, mean stage times, and the GL error state before shutdown.
-    """
-    from diviewer.scene import load_scene
-    from diviewer.viewer.report import run_summary, write_stats
-    from diviewer.viewer.script import apply_action, normalise_script
-    from diviewer.viewer.sources import FrameImages
-
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene)
-    settings = settings or ViewerSettings(size=(int(size[0]), int(size[1])), vsync=vsync)
-    changes = {"model": str(model)} if model is not None else {}
-    if provider is not None:
-        changes["provider"] = provider
-    settings = dataclasses.replace(settings, **changes)
-    if settings.provider:
-        import onnxruntime as ort
-
-        from diviewer.runtime import choose_providers
-
-        choose_providers(ort.get_available_providers(), settings.provider)  # before a window opens
-    steps = normalise_script(script)
-    viewer = Viewer(scene, settings)
-    summary: dict = {}
-    per_frame: list[dict[str, float]] = []
-    shown: list[tuple[float, int]] = []  # per frame: its render scale, how many reasons it was out of range
-    try:
-        while frames is None or viewer.frame_index < frames:
-            for action in steps.get(viewer.frame_index, ()):
-                apply_action(viewer, action)
-            drawn = viewer.frame_index
-            if not viewer.frame():
-                break
-            if stats is not None and viewer.frame_index > drawn:
-                per_frame.append(viewer.state.stats.last())
-                shown.append((viewer.render_scale, len(viewer.state.out_of_range())))
-        if screenshot is not None:
-            if viewer.frame_index == 0:
-                viewer.frame()
-            # The state is the last frame's: save its view now.
-            viewer._save_view(Path(screenshot).with_suffix(".png"), viewer._images(FrameImages(viewer))[0])
-        summary = run_summary(viewer)
-        if stats is not None:
-            summary["stats"] = write_stats(Path(stats), viewer, per_frame, shown)
-    finally:
-        viewer.close()
-    return summary
-

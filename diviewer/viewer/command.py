@@ -48,6 +48,13 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--scale-ceiling", type=float, default=1.0,
                    help=f"highest render scale --target-fps goes to (1 to {MAX_SCALE:g}; default 1; above 1 it "
                         "supersamples where the frame rate allows)")
+    p.add_argument("--refine-still", action=argparse.BooleanOptionalAction, default=True,
+                   help="while nothing changes (camera, lights, objects, window, view mode, model), draw the view at "
+                        "scale 1 (or --scale-ceiling above 1), then show it without drawing again (default); "
+                        "--no-refine-still keeps every frame at the dynamic scale")
+    p.add_argument("--temporal", default="off", choices=("on", "off"),
+                   help="temporal upsampling of the final image (Halton-jittered frames reprojected, clamped and "
+                        "accumulated at the window's size; default off: docs/viewer.md has its measurement)")
     p.add_argument("--auto-exposure", action=argparse.BooleanOptionalAction, default=None,
                    help="start with the exposure metered from the frame, or not (the panel toggles it; default: as "
                         "the scene file's [scene] auto_exposure says, on for sponza)")
@@ -79,7 +86,9 @@ def run_view(args: argparse.Namespace) -> int:
     """Open the viewer as the arguments say; with ``--frames``, print one line of what it did."""
     from diviewer.frames import parse_resolution
     from diviewer.gl.neural import GISettings
-    from diviewer.viewer.app import ViewerSettings, run_viewer
+    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.settings import ViewerSettings
+    from diviewer.viewer.still import StillSettings
 
     # Each option's own range was checked before (diviewer.options); here the rules between them.
     if args.window_screenshot is not None and args.frames is None:
@@ -107,7 +116,8 @@ def run_view(args: argparse.Namespace) -> int:
                               render_scale=args.render_scale, scale_floor=args.scale_floor,
                               scale_ceiling=args.scale_ceiling,
                               auto_exposure=args.auto_exposure, back_faces=args.back_faces,
-                              rest_in_bands=args.shadow_bands,
+                              rest_in_bands=args.shadow_bands, still=StillSettings(refine=args.refine_still),
+                              temporal=args.temporal == "on",
                               gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined),
                               path=str(args.path) if args.path else None, fixed_step=args.fixed_step,
                               record_path=str(args.record_path) if args.record_path else None)

@@ -7,6 +7,7 @@ keeps the view.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -181,3 +182,19 @@ def make_controller(kind: str, camera: Camera, centre=None) -> Controller:
     if kind == "orbit":
         return OrbitController.from_camera(camera, centre)
     raise ValueError(f"unknown camera controller {kind!r} (fly, orbit)")
+
+
+def overview(camera: Camera, bounds, elevation: float = 35.0) -> Camera:
+    """``camera`` moved outside the box ``bounds`` (2, 3), above it at ``elevation`` degrees on the side it looks
+    from, looking at the box's centre, far enough that the box's bounding sphere fills the view's height."""
+    lo, hi = np.asarray(bounds, np.float64)
+    c, r = 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+    back = np.asarray(camera.position, np.float64) - np.asarray(camera.target, np.float64)
+    back[1] = 0.0
+    n = float(np.linalg.norm(back))
+    back = back / n if n > 1e-9 else np.array([0.0, 0.0, 1.0])
+    e = math.radians(elevation)
+    d = 1.05 * r / math.sin(math.radians(camera.fov) / 2.0)
+    eye = c + d * (math.cos(e) * back + np.array([0.0, math.sin(e), 0.0]))
+    return dataclasses.replace(camera, position=tuple(map(float, eye)), target=tuple(map(float, c)),
+                               up=(0.0, 1.0, 0.0), far=max(camera.far, 2.0 * (d + r)))

@@ -66,6 +66,8 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("mouse wheel", "flying speed (fly) / zoom (orbit)"),
     Binding("C", "switch fly / orbit camera", ("C",), lambda i, _: i.state.toggle_controller()),
     Binding("R", "reset the camera", ("R",), lambda i, _: i.state.reset_camera()),
+    Binding("O", "overview: the camera above the scene's box, looking at its centre", ("O",),
+            lambda i, _: i.state.overview_camera()),
     Binding("Shift+R", "reset the whole frame (lights, objects, camera)", ("Shift+R",), lambda i, _: i.state.reset()),
     Binding("arrow keys", "light azimuth (left/right) and elevation (up/down)", ("LEFT", "RIGHT", "UP", "DOWN"),
             _turn_light, repeat=True),

@@ -138,3 +138,19 @@ def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], 
         raise DiviewerError(f"GI resolution {w}x{h} is not a multiple of the model's stride {m} "
                             f"(width {near(w)}, height {near(h)})", field="--gi-res")
     return w, h
+
+
+def meta_lines(meta: dict) -> list[tuple[str, str]]:
+    """The model card as (key, value) rows for the panel."""
+    rows = []
+    for key in ("scene", "K", "levels", "resolution", "multiple", "target", "precision", "epoch", "dataset_hash"):
+        if key in meta:
+            v = meta[key]
+            rows.append((key, f"{v[:12]}..." if key.endswith("hash") and isinstance(v, str) else str(v)))
+    for key, v in meta.items():
+        if isinstance(v, dict) and any(w in key for w in ("val", "metric")):
+            for k2, v2 in v.items():
+                rows.append((f"{key}.{k2}", f"{v2:.4g}" if isinstance(v2, float) else str(v2)))
+        elif key.startswith("val") and not isinstance(v, (dict, list)):
+            rows.append((key, f"{v:.4g}" if isinstance(v, float) else str(v)))
+    return rows

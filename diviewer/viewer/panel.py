@@ -17,7 +17,7 @@ from diviewer.exposure import ExposureSettings
 from diviewer.gl.display import TONEMAPS
 from diviewer.scene.model import DirectionalLight
 from diviewer.viewer.input import SHORTCUTS
-from diviewer.viewer.models import GI_FRACTIONS
+from diviewer.viewer.models import GI_FRACTIONS, meta_lines
 from diviewer.viewer.scale import MAX_SCALE
 from diviewer.viewer.state import ViewerState
 from diviewer.viewer.stats import STAGES
@@ -28,6 +28,10 @@ WARN = (1.0, 0.75, 0.3, 1.0)
 DIM = (0.6, 0.6, 0.6, 1.0)
 EXPOSURE_RANGE = ExposureSettings().limits
 """The exposure slider's range (stops): the auto exposure's, so a metered exposure always sits on the slider."""
+
+
+def _xyz(v) -> str:
+    return "(" + ", ".join(f"{x:.2f}" for x in v) + ")"
 
 
 class PanelActions(Protocol):
@@ -48,6 +52,8 @@ class PanelActions(Protocol):
     unavailable: dict[str, str]
     """View modes that could not be drawn, and why."""
     gl_renderer: str
+    still: Any
+    """``viewer.still.StillTracker``: the motion state and its frame counts."""
     shot_path: str
     timer_sync: bool
     timing_method: str
@@ -58,22 +64,6 @@ class PanelActions(Protocol):
     def set_timing(self, on: bool) -> None: ...
     def set_vsync(self, on: bool) -> None: ...
     def screenshot(self, path: str | Path) -> Path: ...
-
-
-def meta_lines(meta: dict) -> list[tuple[str, str]]:
-    """The model card as (key, value) rows for the panel."""
-    rows = []
-    for key in ("scene", "K", "levels", "resolution", "multiple", "target", "precision", "epoch", "dataset_hash"):
-        if key in meta:
-            v = meta[key]
-            rows.append((key, f"{v[:12]}..." if key.endswith("hash") and isinstance(v, str) else str(v)))
-    for key, v in meta.items():
-        if isinstance(v, dict) and any(w in key for w in ("val", "metric")):
-            for k2, v2 in v.items():
-                rows.append((f"{key}.{k2}", f"{v2:.4g}" if isinstance(v2, float) else str(v2)))
-        elif key.startswith("val") and not isinstance(v, (dict, list)):
-            rows.append((key, f"{v:.4g}" if isinstance(v, float) else str(v)))
-    return rows
 
 
 class Panel:
@@ -128,7 +118,7 @@ class Panel:
             gw, gh = self.actions.gi_size
             rw, rh = self.actions.render_size
             imgui.text(f"{st.scene.name}  {rw}x{rh} (scale {self.actions.render_scale:.2f})  GI {gw}x{gh}  "
-                       f"{st.stats.fps:5.1f} fps")
+                       f"{st.stats.fps:5.1f} fps  {self.actions.still.state}")
             reasons = st.out_of_range()
             if reasons:
                 self._wrapped("outside what the model was trained on: " + "; ".join(reasons), WARN)
@@ -268,6 +258,11 @@ class Panel:
         imgui.same_line()
         if imgui.button("reset (R)"):
             st.reset_camera()
+        imgui.same_line()
+        if imgui.button("overview (O)"):
+            st.overview_camera()
+        lo, hi = st.scene_bounds()
+        imgui.text(f"at {_xyz(st.config.camera.position)}; scene {_xyz(lo)} .. {_xyz(hi)}")
         changed, fov = imgui.slider_float("fov", st.config.camera.fov, 5.0, 150.0, "%.1f deg")
         if changed:
             st.set_fov(fov)
@@ -391,6 +386,7 @@ class Panel:
         st = self.state
         s = st.stats
         imgui.text(f"frame {s.mean('frame'):6.2f} ms  ({s.fps:.1f} fps, vsync {'on' if self.actions.window.vsync else 'off'})")
+        imgui.text("frames " + ", ".join(f"{k} {n}" for k, n in self.actions.still.counts.items()))
         series = s.series("frame")
         if len(series) > 1:
             imgui.plot_lines("##frame", series, overlay_text="frame ms (last 5 s)", scale_min=0.0,

@@ -25,6 +25,7 @@ def run_summary(viewer) -> dict:
         "render_scale": viewer.render_scale,
         "out_of_range": list(st.out_of_range()),
         "shadow_renders": viewer.renderer.shadow_renders,
+        "motion": motion(viewer),
         "window_size": viewer.window.size,
         "model": st.model_name,
         "model_message": st.model_message,
@@ -37,6 +38,12 @@ def run_summary(viewer) -> dict:
         "gl_error": viewer.ctx.error,
         "gl_renderer": viewer.gl_renderer,
     }
+
+
+def motion(viewer) -> dict:
+    """The motion state of the last frame (moving, refining, still: ``viewer.still``) and the frames in each."""
+    return {"state": viewer.still.state, "frames": dict(viewer.still.counts), "refine": viewer.still.settings.refine,
+            "refined_scale": viewer.refined_scale}
 
 
 def _settled(frames: list[dict[str, float]], scales: np.ndarray) -> dict:
@@ -71,6 +78,7 @@ def write_stats(path: Path, viewer, per_frame: list[dict[str, float]],
         "render_scales": {"min": float(scales.min()), "median": float(np.median(scales)), "max": float(scales.max()),
                           "changes": int(np.count_nonzero(np.diff(scales)))},
         "at_final_scale": _settled(frames, scales),
+        "motion": motion(viewer),
         "target_fps": scaler.settings.target_fps if scaler.enabled else None,
         "scale_floor": scaler.settings.floor,
         "scale_ceiling": scaler.settings.ceiling,

@@ -103,6 +103,11 @@ class ScaleController:
         self._restart(dataclasses.replace(s, target_fps=max(float(fps), 0.0), start=max(self.scale, s.floor)))
         return self.settings.target_fps
 
+    def resume(self) -> None:
+        """Go on from the current scale after frames drawn at another (a refined still view): the next
+        ``settle`` frames, which reallocate targets, are not measured; the samples at this scale stay."""
+        self._skip = self.settings.settle
+
     @property
     def enabled(self) -> bool:
         return self.settings.target_fps > 0

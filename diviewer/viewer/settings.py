@@ -10,6 +10,7 @@ from diviewer.gl.renderer import RenderSettings
 from diviewer.gl.shadow_fit import MOVING_SHADOW_SIZE
 from diviewer.reference.progressive import ReferenceSettings
 from diviewer.viewer.scale import DEFAULT_FLOOR, MAX_SCALE
+from diviewer.viewer.still import StillSettings
 
 BACKGROUND = (0.08, 0.08, 0.09)
 """Colour of the bars around the GI image when the window's aspect ratio differs."""
@@ -90,3 +91,8 @@ class ViewerSettings:
     """Record the camera path from the first frame to the last into this file (``--record-path``)."""
     fixed_step: float | None = None
     """Seconds each frame advances the clock (animations, paths, recordings) instead of the wall clock's."""
+    still: StillSettings = field(default_factory=StillSettings)
+    """A view that stops changing is drawn at scale 1 (or the ceiling above 1), then presented without drawing."""
+    temporal: bool = False
+    """Temporal upsampling of the final image while it moves (jittered frames accumulated at the window's size,
+    gl/temporal.py); a still view is refined at full scale either way."""

@@ -20,7 +20,7 @@ from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scen
 from diviewer.scene.picking import pick_object, pixel_ray
 from diviewer.scene.camera_path import CameraPath, read_path, scene_camera_path
 from diviewer.scene.ranges_check import out_of_range
-from diviewer.viewer.controls import Controller, make_controller
+from diviewer.viewer.controls import Controller, make_controller, overview
 from diviewer.exposure import SHOWN, WHITE_POINTS, AutoExposure
 from diviewer.viewer.stats import Stats
 from diviewer.viewer.view_modes import ViewMode, view_mode
@@ -132,6 +132,15 @@ class ViewerState:
         self.play_path = False
         self.controller = make_controller(self.controller.kind, self.scene.default.camera, self.scene_centre())
         return self._sync_camera()
+
+    def scene_bounds(self) -> np.ndarray:
+        """The box (2, 3: min, max corners) around the current frame's objects."""
+        return np.asarray(self.scene.bounds(self.config), np.float64)
+
+    def overview_camera(self) -> FrameConfig:
+        """The camera above the scene's box on the side it looks from, at its centre (``controls.overview``)."""
+        self.play_path = False
+        return self.set_camera(overview(self.config.camera, self.scene_bounds()))
 
     def set_camera(self, camera) -> FrameConfig:
         self.controller = make_controller(self.controller.kind, camera, self.scene_centre())

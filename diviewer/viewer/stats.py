@@ -10,7 +10,7 @@ import numpy as np
 from diviewer.timing import percentiles
 
 STAGES = ("shadows", "gbuffer", "direct", "readback", "inference", "inference_wait", "upload", "upsample",
-          "composite")
+          "temporal", "composite")
 """Per-frame stages the stats record, in pipeline order (ms each)."""
 
 
