@@ -146,11 +146,26 @@ def _is_model_card(path: Path) -> bool:
     return False
 
 
+CAMERA_PATH_FORMAT = "diviewer-camera-path"
+"""The ``format`` of a camera-path file (`diviewer.scene.camera_path`): a recorded flight, never written over."""
+
+
+def _is_camera_path(path: Path) -> bool:
+    try:
+        if path.is_file() and path.stat().st_size < MANIFEST_BYTES:
+            data = json.loads(path.read_text())
+            return isinstance(data, dict) and data.get("format") == CAMERA_PATH_FORMAT
+    except (OSError, ValueError, UnicodeDecodeError):
+        pass
+    return False
+
+
 def owner(path: str | Path) -> tuple[str, str] | None:
     """What another command made at ``path`` (existing, or a name inside such a folder): (kind, description).
 
-    Kinds: 'model', 'checkpoint', 'dataset', 'evalset', 'run', 'render', 'build' (a build's state, ladder record,
-    scores and models, and what ships beside a model), 'lock'. None: nobody's file, free to write.
+    Kinds: 'model', 'checkpoint', 'path' (a camera path), 'dataset', 'evalset', 'run', 'render', 'build' (a build's
+    state, ladder record, scores and models, and what ships beside a model), 'lock'. None: nobody's file, free to
+    write.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -169,6 +184,8 @@ def owner(path: str | Path) -> tuple[str, str] | None:
         return "model", "a model card"
     if suffix in CHECKPOINT_SUFFIXES and path.exists():
         return "checkpoint", "a checkpoint"
+    if suffix == ".json" and _is_camera_path(path):
+        return "path", "a recorded camera path"
     parts = path.absolute().parts
     for depth in range(1, len(parts)):  # the dataset or evaluation set this lies in, at any depth
         folder = Path(*parts[:-depth])

@@ -31,10 +31,11 @@ import numpy as np
 from pyrr import matrix33, quaternion
 
 from diviewer.errors import DiviewerError
+from diviewer.outputs import CAMERA_PATH_FORMAT
 from diviewer.scene import camera as cam
 from diviewer.scene.model import Camera, DirectionalLight, FrameConfig, Scene
 
-FORMAT = "diviewer-camera-path"
+FORMAT = CAMERA_PATH_FORMAT
 VERSION = 1
 """The path file's version; another is refused."""
 DEFAULT_FPS = 30.0

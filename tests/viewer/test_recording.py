@@ -158,7 +158,10 @@ def test_view_refuses_bad_paths_and_steps_before_a_window(atrium, tmp_path, caps
     for args, words in ((["--scene", "cornell", "--path", tmp_path / "walk.json"], ("walk.json: scene_hash:",)),
                         (["--fixed-step", "0"], ("--fixed-step",)),
                         (["--record-path", tmp_path / "walk.json", "--path", tmp_path / "walk.json"],
-                         ("--record-path",))):
+                         ("--record-path",)),
+                        # a flight recorded before is never written over, even when nothing plays it
+                        (["--scene", "atrium", "--record-path", tmp_path / "walk.json"],
+                         ("--record-path", "a recorded camera path"))):
         assert main(["view", "--frames", "1", "--model", "none", *map(str, args)]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and all(w in err for w in words), err
