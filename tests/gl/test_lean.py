@@ -1,0 +1,113 @@
+"""The lean path (the generator alone in onnxruntime, the encoding in pack.glsl, the decoding in decode.glsl) gives the
+self-contained graph's radiance on GL frames of both shipped scenes, with the shipped models."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from diviewer.lean import lean_model
+from diviewer.runtime import NeuralGI
+
+pytest.importorskip("onnx")
+
+TOLERANCE = 1e-3
+"""Largest |lean - graph| over the frame's peak radiance (export's fp16 tolerance is 1e-2; measured: ~1e-5)."""
+
+SIZES = ((48, 48, (48, 48)), (64, 48, (40, 30)))  # render size, GI size (the second pads to the stride)
+
+
+@pytest.fixture(scope="module", params=["cornell", "sponza"])
+def models(request):
+    from diviewer.scene import load_scene
+
+    scene = load_scene(request.param)
+    graph = NeuralGI(f"assets/models/{request.param}.onnx", scene=scene)
+    lean, why = lean_model(graph)
+    assert lean is not None, why
+    return scene, graph, lean
+
+
+def _frames(ctx, scene, graph, lean, w, h, gi, configs, edit=None):
+    """Both paths' GI-resolution radiance and composited frames of ``configs`` (``edit(renderer)`` after each
+    render: buffers written by hand)."""
+    from diviewer.gl.neural import NeuralPass
+    from diviewer.gl.renderer import Renderer
+
+    renderer = Renderer(ctx, scene, w, h)
+    passes = [NeuralPass(ctx, renderer, m, gi) for m in (graph, lean)]
+    out = []
+    try:
+        for config in configs:
+            renderer.render(config)
+            if edit is not None:
+                edit(renderer)
+            pair = []
+            for p in passes:
+                p.run(**p.inputs_for(scene, config))
+                final = p.composite()
+                pair.append((p.image(), np.frombuffer(final.read(), np.float16).reshape(h, w, 4)[..., :3]))
+            out.append(pair)
+    finally:
+        for p in passes:
+            p.release()
+        renderer.release()
+    return out
+
+
+def _close(a, b, tol=TOLERANCE):
+    assert np.array_equal(np.isfinite(a), np.isfinite(b))
+    ok = np.isfinite(a)
+    peak = max(float(np.max(np.abs(a[ok]), initial=0.0)), 1e-6)
+    err = float(np.max(np.abs(a[ok] - b[ok].astype(np.float32)), initial=0.0))
+    assert err <= tol * peak, f"{err / peak:.3g} of the peak {peak:.3g}"
+
+
+@pytest.mark.parametrize("w, h, gi", SIZES)
+def test_lean_equals_graph_on_gl_frames(ctx, models, w, h, gi):
+    from diviewer.scene import sample_config
+
+    scene, graph, lean = models
+    configs = [scene.default, sample_config(scene, 3, "test"), sample_config(scene, 11, "train")]
+    for (img_g, fin_g), (img_l, fin_l) in _frames(ctx, scene, graph, lean, w, h, gi, configs):
+        assert img_g.max() > 0.0
+        _close(img_g, img_l)
+        _close(fin_g.astype(np.float32), fin_l, tol=2e-3)  # half-float frames: one fp16 step on top
+
+
+def test_lean_model_keeps_the_graph_checks(models):
+    """The lean model is the graph model's metadata and sizes, and its generator is the bare one's operators."""
+    _, graph, lean = models
+    assert lean.meta is graph.meta and lean.multiple == graph.multiple and lean.edge_guard == graph.edge_guard
+    ops = {n.op_type for n in __import__("onnx").load_from_string(
+        lean.generator._model_bytes if hasattr(lean.generator, "_model_bytes") else b"").graph.node} \
+        if hasattr(lean.generator, "_model_bytes") else set()
+    assert ops <= {"Conv", "ConvTranspose", "Relu", "LeakyRelu", "Concat", "Tanh", "Cast"}
+    assert [i.name for i in lean.generator.get_inputs()] == ["encoded"]
+    assert lean.generator.get_inputs()[0].shape[1] == lean.enc.input_planes
+
+
+EXTREMES = {
+    "background": lambda r: r.textures["depth"].write(np.zeros(r.textures["depth"].size[::-1], "f4").tobytes()),
+    "nan_direct": lambda r: _poke(r, "direct", np.nan),
+    "inf_direct": lambda r: _poke(r, "direct", np.inf),
+    "nan_normal": lambda r: _poke(r, "normal", np.nan),
+    "inf_depth": lambda r: _poke(r, "depth", np.inf),
+    "nan_depth": lambda r: _poke(r, "depth", np.nan),
+    "nan_albedo": lambda r: _poke(r, "albedo", np.nan),
+}
+
+
+def _poke(renderer, name: str, value: float) -> None:
+    """Every 7th texel of a buffer set to ``value`` (the rest as rendered)."""
+    tex = renderer.textures[name]
+    a = np.frombuffer(tex.read(), np.float32).reshape(tex.height, tex.width, -1).copy()
+    a.reshape(-1, a.shape[-1])[::7] = value
+    tex.write(a.tobytes())
+
+
+@pytest.mark.parametrize("case", sorted(EXTREMES))
+def test_lean_sanitises_like_the_graph(ctx, models, case):
+    scene, graph, lean = models
+    (img_g, _), (img_l, _) = _frames(ctx, scene, graph, lean, 32, 32, (32, 32), [scene.default], EXTREMES[case])[0]
+    _close(img_g, img_l)
