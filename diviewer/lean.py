@@ -151,6 +151,8 @@ class LeanModel:
         if len(shape) != 4 or shape[1].dim_value != self.planes:
             raise LeanUnsupported(f"the generator takes {shape[1].dim_value if len(shape) > 1 else '?'} planes, "
                                   f"encoding version {self.enc.version} makes {self.planes}")
+        self.generator_ops = frozenset(n.op_type for n in sub.graph.node)
+        """The operators of the generator's subgraph (a subset of GENERATOR_OPS)."""
         self.generator = ort.InferenceSession(sub.SerializeToString(), sess_options=graph.session_options,
                                               providers=providers or graph.session.get_providers())
         self.timer = StageTimer()

@@ -34,7 +34,9 @@ void main() {
 #endif
     c += vec3(data[base + IN_DIRECT], data[base + IN_DIRECT + 1], data[base + IN_DIRECT + 2]);
 #endif
-    imageStore(u_radiance, t, vec4(mix(c, vec3(0.0), lessThan(c, vec3(0.0))), 1.0));
+    for (int k = 0; k < 3; ++k)  // a NaN kept (a comparison with NaN may read true here)
+        if (!isnan(c[k]) && c[k] < 0.0) c[k] = 0.0;
+    imageStore(u_radiance, t, vec4(c, 1.0));
 }
 
 #endif
