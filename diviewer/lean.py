@@ -269,13 +269,21 @@ def lean_model(graph, check: bool = True):
     """``graph`` (a NeuralGI)'s lean model and "" or, where it has none, None and the reason. With ``check`` the lean
     model must give the graph's radiance on the probe frame (`diviewer.runtime.probe_frame`) to PROBE_TOLERANCE of
     its peak (a frame with background and albedo under the floor, so constants the graph holds are compared)."""
-    from diviewer.runtime import NeuralGI, probe_frame
-
     if getattr(graph, "lean", False):
         return graph, ""
+    if "_lean_model" not in graph.__dict__:  # cut once per loaded model (a pass is rebuilt on each resize)
+        graph.__dict__["_lean_model"] = _lean_model(graph, check)
+    return graph.__dict__["_lean_model"]
+
+
+def _lean_model(graph, check: bool):
+    from diviewer.runtime import NeuralGI, probe_frame
+
+    from diviewer.errors import DiviewerError
+
     try:
         lean = LeanModel(graph)
-    except LeanUnsupported as exc:
+    except (LeanUnsupported, DiviewerError, KeyError) as exc:  # a model without a generator or its record
         return None, f"{graph.path.name}: no lean path ({exc}); the graph runs"
     if check:
         w, h = (min(int(d), 64) for d in graph.resolution)
@@ -286,7 +294,7 @@ def lean_model(graph, check: bool = True):
         frame = probe_frame(h, w)[0]
         frame[: h // 4, :, 4:7] = 0.01  # albedo under the composition's floor
         frame[h // 2:, : w // 4, 0] = 0.0  # background
-        want, got = graph.run(frame, **extra), lean.run(frame, **extra)
+        want, got = graph.run(frame, timer=StageTimer(), **extra), lean.run(frame, timer=StageTimer(), **extra)
         err = float(np.max(np.abs(want - got))) / max(float(np.max(want)), 1e-6)
         if not err <= PROBE_TOLERANCE:
             return None, (f"{graph.path.name}: no lean path (it differs from the graph by {err:.2g} of the probe "

@@ -61,6 +61,9 @@ class GISettings:
     """Joint bilateral upsample: exponent of the cosine between the pixel's and the texel's normals."""
     pipelined: bool = False
     """Run the network on a worker thread, one frame behind (the frame shows the previous frame's GI)."""
+    lean: bool = True
+    """Run a model's lean path where it has one (`diviewer.lean`: the generator alone in onnxruntime, its encoding
+    and decoding in shaders; equal to the graph's radiance to 1e-3 of the frame's peak); False: its whole graph."""
 
 
 class NeuralPass:
@@ -75,6 +78,15 @@ class NeuralPass:
 
     def __init__(self, ctx: moderngl.Context, renderer: Renderer, model, gi_size: tuple[int, int] | None = None,
                  settings: GISettings = GISettings(), timer: StageTimer | None = None):
+        self.path_note = ""
+        """Why a model runs its graph although ``settings.lean`` asks for its lean path, or empty."""
+        if settings.lean and not getattr(model, "lean", False):
+            from diviewer.lean import lean_model
+
+            lean, self.path_note = lean_model(model)
+            model = lean if lean is not None else model
+        elif not settings.lean and getattr(model, "lean", False):
+            model = model.graph
         self.ctx, self.renderer, self.model, self.settings = ctx, renderer, model, settings
         self.timer = timer or renderer.timer
         if settings.downsample not in DOWNSAMPLES:
@@ -134,6 +146,11 @@ class NeuralPass:
         if self.lean is not None:
             self.ssbos[self.shown_slot].read_into(self._packed[self.shown_slot])
         return self._packed[self.shown_slot]
+
+    @property
+    def inference_path(self) -> str:
+        """"lean" (the generator alone, `diviewer.lean`) or "graph" (the model's self-contained graph)."""
+        return "lean" if self.lean is not None else "graph"
 
     @property
     def pipelined(self) -> bool:

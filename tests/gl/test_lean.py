@@ -31,11 +31,12 @@ def models(request):
 def _frames(ctx, scene, graph, lean, w, h, gi, configs, edit=None, scale=None):
     """Both paths' GI-resolution radiance and composited frames of ``configs`` (``edit(renderer)`` after each
     render: buffers written by hand; ``scale``: the light scale fed instead of the frame's)."""
-    from diviewer.gl.neural import NeuralPass
+    from diviewer.gl.neural import GISettings, NeuralPass
     from diviewer.gl.renderer import Renderer
 
     renderer = Renderer(ctx, scene, w, h)
-    passes = [NeuralPass(ctx, renderer, m, gi) for m in (graph, lean)]
+    passes = [NeuralPass(ctx, renderer, graph, gi, GISettings(lean=lean_path)) for lean_path in (False, True)]
+    assert [p.inference_path for p in passes] == ["graph", "lean"] and passes[1].model is lean
     out = []
     try:
         for config in configs:
@@ -120,3 +121,23 @@ def test_lean_at_zero_and_huge_light(ctx, models, scale):
     scene, graph, lean = models
     (img_g, _), (img_l, _) = _frames(ctx, scene, graph, lean, 32, 32, (32, 32), [scene.default], scale=scale)[0]
     _close(img_g, img_l)
+
+
+def test_a_model_without_a_generator_runs_its_graph_and_says_why(ctx, tmp_path):
+    """A graph with no generator to cut (a toy model): the pass runs the graph, its note says why."""
+    from onnx_models import base_meta, direct_times
+    from scenes import facing_plane
+
+    from diviewer.gl.neural import NeuralPass
+    from diviewer.gl.renderer import Renderer
+
+    scene = facing_plane()
+    model = NeuralGI(direct_times(tmp_path / "m.onnx", meta=base_meta(scene_hash=scene.file_hash)), scene=scene)
+    renderer = Renderer(ctx, scene, 16, 16)
+    p = NeuralPass(ctx, renderer, model, (16, 16))
+    try:
+        assert p.inference_path == "graph" and p.model is model
+        assert "no lean path" in p.path_note and "m.onnx" in p.path_note
+    finally:
+        p.release()
+        renderer.release()
