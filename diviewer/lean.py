@@ -20,7 +20,6 @@ import math
 
 import numpy as np
 
-from diviewer.data.scales import ALBEDO_FLOOR
 from diviewer.encoding import Encoding
 from diviewer.padding import crop_slice, pad_camera_params, pad_nhwc, padded_size
 from diviewer.timing import StageTimer
@@ -35,6 +34,31 @@ PROBE_TOLERANCE = 1e-3
 (measured: ~1e-6 on the shipped models; the fp16 tolerance of export is 1e-2)."""
 
 TINY, HUGE = 1e-30, 1e38  # as the exported graph's (diviewer.train.graph): a sign and a Where without Sign/Where
+
+
+def _constant(model, name: str) -> float | None:
+    """The scalar value of a graph tensor made by a Constant node or held as an initializer, or None."""
+    from onnx import numpy_helper
+
+    for t in model.graph.initializer:
+        if t.name == name:
+            return float(numpy_helper.to_array(t).reshape(-1)[0])
+    for n in model.graph.node:
+        if n.op_type == "Constant" and n.output[0] == name:
+            return float(numpy_helper.to_array(n.attribute[0].t).reshape(-1)[0])
+    return None
+
+
+def albedo_floor(model) -> float:
+    """The composition's albedo floor, in encoded albedo (2 floor - 1), as the graph holds it: the lower bound of
+    the one Clip without an upper bound applied to a Slice (the encoded albedo's). Raises LeanUnsupported."""
+    producer = {o: n for n in model.graph.node for o in n.output}
+    found = [n for n in model.graph.node if n.op_type == "Clip" and len(n.input) >= 2
+             and (len(n.input) == 2 or n.input[2] == "") and getattr(producer.get(n.input[0]), "op_type", "") == "Slice"]
+    value = _constant(model, found[0].input[1]) if len(found) == 1 else None
+    if value is None:
+        raise LeanUnsupported(f"the graph's albedo floor is not found ({len(found)} candidate clips)")
+    return value
 
 
 class LeanUnsupported(Exception):
@@ -145,7 +169,8 @@ class LeanModel:
         self.enc = Encoding.from_dict(graph.meta["encoding"])
         if self.enc.version < 2:
             raise LeanUnsupported(f"encoding version {self.enc.version} (the cut is made for versions 2 to 4)")
-        sub = generator_subgraph(onnx.load(str(graph.path)))
+        model = onnx.load(str(graph.path))
+        sub = generator_subgraph(model)
         self.planes = self.enc.input_planes
         shape = sub.graph.input[0].type.tensor_type.shape.dim
         if len(shape) != 4 or shape[1].dim_value != self.planes:
@@ -158,6 +183,8 @@ class LeanModel:
         self.timer = StageTimer()
         self.target, self.divide_albedo = graph.meta["target"], bool(graph.meta["divide_albedo"])
         self.log_r = np.float32(math.log1p(self.enc.radiance_max))
+        self.floor_lo = np.float32(albedo_floor(model)) if self.target != "full" and self.divide_albedo else None
+        """The albedo floor of the composition in encoded albedo, read from the graph (None: no floor)."""
         self.out_scale = (0.5 if self.target != "full" and self.divide_albedo else 1.0) / self.enc.output().exposure
         self.nonfinite_inputs = self.nonfinite_outputs = 0
 
@@ -240,7 +267,7 @@ class LeanModel:
             if self.divide_albedo:
                 albedo = np.where(np.isnan(x[..., 4:7]), f(0.0), x[..., 4:7])
                 e = np.clip(albedo * f(2.0) - f(1.0), -1, 1)
-                pred = pred * (np.maximum(e, f(2.0 * ALBEDO_FLOOR - 1.0)) + f(1.0))
+                pred = pred * (np.maximum(e, self.floor_lo) + f(1.0))
             out = x[..., 7:10] + pred
         return np.where(out < 0, f(0.0), out)  # NaN stays NaN, as the graph's Relu and the runtime's clamp
 

@@ -8,7 +8,6 @@ import moderngl
 import numpy as np
 
 from diviewer.gl.resources import set_uniform
-from diviewer.lean import ALBEDO_FLOOR
 
 
 class LeanIO:
@@ -65,7 +64,8 @@ class LeanIO:
         set_uniform(prog, "u_pad", self.pad)
         set_uniform(prog, "u_out_k", float(k["out_k"]))
         set_uniform(prog, "u_log_r", float(self.model.log_r))
-        set_uniform(prog, "u_floor_lo", 2.0 * ALBEDO_FLOOR - 1.0)
+        if self.model.floor_lo is not None:
+            set_uniform(prog, "u_floor_lo", float(self.model.floor_lo))
         w, h = texture.size
         prog.run((w + 7) // 8, (h + 7) // 8, 1)
         self.ctx.memory_barrier()
