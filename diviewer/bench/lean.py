@@ -1,7 +1,9 @@
 """The inference paths against a bare generator, in one run: each model's lean path (the generator alone,
 `diviewer.lean`) and its self-contained graph, each as a ratio to an untrained U-Net of the same K and levels at the
 same size, timed in the viewer's GL frame (`diviewer.bench.runner.GlBench.time_model`) in interleaved rounds, so a
-busy machine slows all three alike.
+busy machine slows all alike. Two bare generators: one at the frame's size (``bare``, as `diviewer bench` times it)
+and one padded as the model pads the frame (``bare_padded``: a model trained on random-width crops gets its column
+guard, `diviewer.padding.EDGE_GUARD`, which at 128x128 doubles the network's input to 256x128).
 
 Usage: python -m diviewer.bench.lean --scene cornell --res 128 --frames 30 --rounds 3 --json out.json [MODEL ...]
 """
@@ -22,7 +24,7 @@ def _inference(timing: dict) -> float:
 
 def run_paths(scene_name: str, models: list[str], res: int, frames: int, warmup: int, rounds: int,
               provider: str | None = None, log=print) -> dict:
-    """Per model: the lean and graph path's median inference ms per round and their ratio to the bare generator's
+    """Per model: the lean and graph path's median inference ms per round and their ratios to both bare generators'
     of the same round; the median of the rounds' ratios."""
     import onnx
 
@@ -31,6 +33,7 @@ def run_paths(scene_name: str, models: list[str], res: int, frames: int, warmup:
     from diviewer.bench.runner import GlBench, gl_timing_mode
     from diviewer.gl.context import headless_context
     from diviewer.lean import lean_model
+    from diviewer.padding import padded_size
     from diviewer.runtime import NeuralGI
     from diviewer.scene import load_scene, sample_config
 
@@ -50,28 +53,36 @@ def run_paths(scene_name: str, models: list[str], res: int, frames: int, warmup:
                 bare_path = Path(tmp) / f"bare_K{net.meta['K']}.onnx"
                 onnx.save(untrained_generator(int(net.meta["K"]), int(net.meta["levels"]), scene, res), str(bare_path))
                 bare = NeuralGI(bare_path, scene=scene, provider=provider)
+                padded = NeuralGI(bare_path, scene=scene, provider=provider, guard=net.edge_guard)
+                m = net.multiple
                 row = {"model": str(net.path), "K": net.meta["K"], "levels": net.meta["levels"],
+                       "edge_guard": net.edge_guard, "network_input": [padded_size(res, m, net.edge_guard),
+                                                                       padded_size(res, m)],
+                       "bare_input": [padded_size(res, bare.multiple), padded_size(res, bare.multiple)],
                        "input_planes": lean.planes if lean else None, "lean_note": why or None,
-                       "bare": [], "lean": [], "graph": []}
+                       "bare": [], "bare_padded": [], "lean": [], "graph": []}
                 for r in range(rounds):
                     row["bare"].append(_inference(gb.time_model(bare, configs, warmup, lean=False)))
+                    row["bare_padded"].append(_inference(gb.time_model(padded, configs, warmup, lean=False)))
                     if lean is not None:
                         row["lean"].append(_inference(gb.time_model(net, configs, warmup, lean=True)))
                     row["graph"].append(_inference(gb.time_model(net, configs, warmup, lean=False)))
-                    log(f"{net.path.name} round {r + 1}: bare {row['bare'][-1]:.2f} ms, lean "
+                    log(f"{net.path.name} round {r + 1}: bare {row['bare'][-1]:.2f} ms, padded "
+                        f"{row['bare_padded'][-1]:.2f}, lean "
                         f"{row['lean'][-1] if row['lean'] else float('nan'):.2f}, graph {row['graph'][-1]:.2f}")
                 for path in ("lean", "graph"):
-                    ratios = [t / b for t, b in zip(row[path], row["bare"])]
-                    row[f"{path}_ratio"] = statistics.median(ratios) if ratios else None
-                    row[f"{path}_ratios"] = ratios
+                    for ref in ("bare", "bare_padded"):
+                        ratios = [t / b for t, b in zip(row[path], row[ref])]
+                        row[f"{path}_over_{ref}"] = statistics.median(ratios) if ratios else None
                 out.append(row)
-                del bare
+                del bare, padded
         finally:
             gb.release()
     return {"benchmark": "diviewer.bench.lean", "scene": scene.name, "resolution": [res, res], "frames": frames,
             "warmup": warmup, "rounds": rounds, "environment": env,
-            "measure": "median inference ms of the timed frames (onnxruntime's run alone), per round; ratio = path / "
-                       "bare generator of the same K and levels in the same round; *_ratio: median over rounds",
+            "measure": "median inference ms of the timed frames (onnxruntime's run alone), per round; <path>_over_<bare>: "
+                       "the median over rounds of path / bare generator of the same K and levels in the same round "
+                       "(bare: at the frame's size; bare_padded: padded as the model pads the frame)",
             "rows": out}
 
 
@@ -91,8 +102,10 @@ def main(argv: list[str] | None = None) -> int:
     result["seconds"] = time.perf_counter() - t0
     result["command"] = "python -m diviewer.bench.lean " + " ".join(sys.argv[1:] if argv is None else argv)
     for r in result["rows"]:
-        print(f"{Path(r['model']).name} K={r['K']}: lean {r['lean_ratio'] or float('nan'):.2f} x bare, "
-              f"graph {r['graph_ratio']:.2f} x bare")
+        nan = float("nan")
+        print(f"{Path(r['model']).name} K={r['K']} (network input {r['network_input'][0]}x{r['network_input'][1]}): "
+              f"lean {r['lean_over_bare'] or nan:.2f} x bare, {r['lean_over_bare_padded'] or nan:.2f} x bare padded; "
+              f"graph {r['graph_over_bare']:.2f} x bare, {r['graph_over_bare_padded']:.2f} x bare padded")
     if args.json is not None:
         from diviewer import imageio
         from diviewer.evaluate import strict_json
