@@ -5,7 +5,7 @@ and lights) and computes the per-pixel work around the generator (netG) as dozen
 guard, the encoding, the world-space and light planes, the decoding and the composition with the direct light
 (`diviewer.train.graph.LeanGI`). ``LeanModel`` cuts, at load time, the generator's subgraph out of that graph
 (from the encoded input tensor, the first convolution's input, to netG's raw tanh output) and does the per-pixel
-work elsewhere: on the GPU in ``pack.glsl`` (encoding, with LEAN defined) and ``decode.glsl`` (decoding and
+work elsewhere: on the GPU in ``encode.glsl`` (after ``pack.glsl``) and ``decode.glsl`` (decoding and
 composition), or on the CPU in numpy (``run``, for callers with buffers in memory and for the check at load).
 Shipped models keep working unchanged: the file is not rewritten.
 

@@ -8,9 +8,7 @@
 // gl/neural.py injects it from diviewer.encoding.INPUT_CHANNELS as defines (IN_CHANNELS, the total,
 // IN_<NAME>, where each buffer starts, and IN_<NAME>_N, its component count, checked below). The direct
 // light is read from the direct pass's target or, with INLINE_DIRECT, computed (direct_inline.glsl).
-// With LEAN (a model's lean path, diviewer.lean) it runs over the network's padded input (u_padded, the frame
-// at u_pad, edge texels repeated as the runtime pads) and also writes the encoded input, float32 NCHW, into
-// binding 1 (lean_encode.glsl).
+// For a model's lean path (diviewer.lean) encode.glsl then encodes what it wrote.
 #if defined COMPUTE_SHADER
 
 #if !defined IN_CHANNELS || !defined IN_DEPTH || !defined IN_NORMAL || !defined IN_ALBEDO || !defined IN_DIRECT
@@ -74,19 +72,6 @@ void put_raw(int base, float z, vec3 n, vec3 a, vec3 d) {
     data[base + IN_DIRECT] = d.r; data[base + IN_DIRECT + 1] = d.g; data[base + IN_DIRECT + 2] = d.b;
 }
 
-#if defined LEAN
-#include "lean_encode.glsl"
-
-void main() {
-    ivec2 P = ivec2(gl_GlobalInvocationID.xy);  // padded texel, row top first
-    if (P.x >= u_padded.x || P.y >= u_padded.y) return;
-    ivec2 f = clamp(P - u_pad, ivec2(0), u_size - 1);  // the frame's texel it repeats, row top first
-    float z; vec3 n, a, d;
-    gather(ivec2(f.x, u_size.y - 1 - f.y), z, n, a, d);
-    if (P - u_pad == f) put_raw((f.y * u_size.x + f.x) * IN_CHANNELS, z, n, a, d);
-    encode(P, z, n, a, d);
-}
-#else
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= u_size.x || p.y >= u_size.y) return;
@@ -94,6 +79,5 @@ void main() {
     gather(p, z, n, a, d);
     put_raw(((u_size.y - 1 - p.y) * u_size.x + p.x) * IN_CHANNELS, z, n, a, d);
 }
-#endif
 
 #endif

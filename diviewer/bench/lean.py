@@ -18,7 +18,16 @@ import time
 from pathlib import Path
 
 
-def _inference(timing: dict) -> float:
+STAGES = ("readback", "inference", "upload", "upsample")
+"""The neural pass's stages recorded per path: the lean path moves the encoding into the pack (``readback``) and
+the decoding into a dispatch timed with the ``upload``."""
+
+
+def _inference(timing: dict, into: dict | None = None) -> float:
+    if into is not None:
+        for k in STAGES:
+            into.setdefault(k, []).append(timing["stages"].get(k, {}).get("median"))
+        into.setdefault("frame", []).append(timing["frame"]["median"])
     return timing["stages"]["inference"]["median"]
 
 
@@ -60,13 +69,16 @@ def run_paths(scene_name: str, models: list[str], res: int, frames: int, warmup:
                                                                        padded_size(res, m)],
                        "bare_input": [padded_size(res, bare.multiple), padded_size(res, bare.multiple)],
                        "input_planes": lean.planes if lean else None, "lean_note": why or None,
-                       "bare": [], "bare_padded": [], "lean": [], "graph": []}
+                       "bare": [], "bare_padded": [], "lean": [], "graph": [],
+                       "stages": {"lean": {}, "graph": {}}}
                 for r in range(rounds):
                     row["bare"].append(_inference(gb.time_model(bare, configs, warmup, lean=False)))
                     row["bare_padded"].append(_inference(gb.time_model(padded, configs, warmup, lean=False)))
                     if lean is not None:
-                        row["lean"].append(_inference(gb.time_model(net, configs, warmup, lean=True)))
-                    row["graph"].append(_inference(gb.time_model(net, configs, warmup, lean=False)))
+                        row["lean"].append(_inference(gb.time_model(net, configs, warmup, lean=True),
+                                                      row["stages"]["lean"]))
+                    row["graph"].append(_inference(gb.time_model(net, configs, warmup, lean=False),
+                                                   row["stages"]["graph"]))
                     log(f"{net.path.name} round {r + 1}: bare {row['bare'][-1]:.2f} ms, padded "
                         f"{row['bare_padded'][-1]:.2f}, lean "
                         f"{row['lean'][-1] if row['lean'] else float('nan'):.2f}, graph {row['graph'][-1]:.2f}")
@@ -82,7 +94,8 @@ def run_paths(scene_name: str, models: list[str], res: int, frames: int, warmup:
             "warmup": warmup, "rounds": rounds, "environment": env,
             "measure": "median inference ms of the timed frames (onnxruntime's run alone), per round; <path>_over_<bare>: "
                        "the median over rounds of path / bare generator of the same K and levels in the same round "
-                       "(bare: at the frame's size; bare_padded: padded as the model pads the frame)",
+                       "(bare: at the frame's size; bare_padded: padded as the model pads the frame); stages: each path's "
+                       "median stage and frame ms per round",
             "rows": out}
 
 

@@ -1,6 +1,7 @@
-"""The GL side of a model's lean path (`diviewer.lean`): pack.glsl with LEAN encodes the network's input on the GPU
-(one read-back of the encoded, padded tensor), onnxruntime runs the generator alone, decode.glsl decodes its raw
-output into the radiance texture the rest of the neural pass reads (`diviewer.gl.neural.NeuralPass`)."""
+"""The GL side of a model's lean path (`diviewer.lean`): encode.glsl encodes the inputs pack.glsl wrote into the
+network's padded input on the GPU (one read-back, of the encoded tensor), onnxruntime runs the generator alone,
+decode.glsl decodes its raw output into the radiance texture the rest of the neural pass reads
+(`diviewer.gl.neural.NeuralPass`)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from diviewer.gl.resources import set_uniform
 
 
 class LeanIO:
-    """The encoded inputs (two slots, as the pass's raw inputs), the raw output's buffer and the decode program."""
+    """The encoded inputs (two slots, as the pass's raw inputs), the raw output's buffer, the encode and decode
+    programs."""
 
     def __init__(self, ctx: moderngl.Context, shaders, model, gi_size: tuple[int, int], pack_defines: dict):
         self.ctx, self.model = ctx, model
@@ -19,8 +21,9 @@ class LeanIO:
         (pw, ph), self.pad = model.padding(w, h)
         self.padded = (pw, ph)
         enc = model.enc
-        self.defines = {"LEAN": 1, **({"WORLD": 1} if enc.world_inputs else {}),
-                        **({"LIGHTS": model.light_count} if enc.light_inputs else {})}
+        defines = dict(pack_defines, **({"WORLD": 1} if enc.world_inputs else {}),
+                       **({"LIGHTS": model.light_count} if enc.light_inputs else {}))
+        self.encode_program = shaders.compute("encode.glsl", defines)
         self.encoded = [np.empty((1, model.planes, ph, pw), np.float32) for _ in range(2)]
         self.buffers = [ctx.buffer(reserve=self.encoded[0].nbytes) for _ in range(2)]
         self.raw = ctx.buffer(reserve=3 * ph * pw * 4)
@@ -33,11 +36,13 @@ class LeanIO:
         """The frame's constants (`diviewer.lean.LeanModel.constants`) for the slot it is packed into."""
         self.constants[slot] = self.model.constants(width, height, light_scale, camera, light)
 
-    def pack(self, prog, slot: int) -> None:
-        """Bind the slot's encoded buffer and set the encoding's uniforms; run over the padded size."""
-        k, enc = self.constants[slot], self.model.enc
+    def encode(self, slot: int, packed: moderngl.Buffer, gi_size: tuple[int, int]) -> None:
+        """Encode the slot's raw inputs (``packed``, written by pack.glsl) over the padded size; read them back."""
+        k, enc, prog = self.constants[slot], self.model.enc, self.encode_program
+        packed.bind_to_storage_buffer(0)
         self.buffers[slot].bind_to_storage_buffer(1)
-        for name, value in (("u_padded", self.padded), ("u_pad", self.pad), ("u_in_k", float(k["in_k"])),
+        for name, value in (("u_size", gi_size), ("u_padded", self.padded), ("u_pad", self.pad),
+                            ("u_in_k", float(k["in_k"])),
                             ("u_depth_inv", float(np.float32(1.0 / enc.depth_scale))),
                             ("u_radiance_max", float(enc.radiance_max)), ("u_log_r", float(self.model.log_r))):
             set_uniform(prog, name, value)

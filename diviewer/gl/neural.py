@@ -8,9 +8,10 @@ full-resolution image (direct light at full resolution + upsampled indirect ligh
 ``pipelined`` the network runs on a worker thread one frame behind: frame N's inputs are packed and
 handed over while frame N-1's output is composited, so GL and onnxruntime overlap.
 
-A lean model (`diviewer.lean.LeanModel`) runs its generator alone: the pack also encodes the network's input
-(read back instead of the raw buffers) and a decode pass turns the generator's raw output into the same
-radiance texture (`diviewer.gl.lean`); the ``upload`` stage then holds the upload and the decode's dispatch.
+A lean model (`diviewer.lean.LeanModel`) runs its generator alone: an encode pass turns the packed inputs into the
+network's padded input (read back instead of the raw buffers) and a decode pass turns the generator's raw output into the same
+radiance texture (`diviewer.gl.lean`); the ``readback`` stage then holds the encode pass, the ``upload`` stage
+the upload and the decode's dispatch.
 """
 
 from __future__ import annotations
@@ -118,8 +119,7 @@ class NeuralPass:
         if getattr(model, "lean", False):
             from diviewer.gl.lean import LeanIO
 
-            self.lean = LeanIO(ctx, renderer.shaders, model, (w, h), self._pack_defines)
-            self._pack_defines.update(self.lean.defines)
+            self.lean = LeanIO(ctx, renderer.shaders, model, (w, h), PACK_DEFINES)
         self.texture = ctx.texture((w, h), 4 if self.lean else 3, dtype="f4")  # the decode pass writes rgba32f
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
@@ -205,9 +205,10 @@ class NeuralPass:
         set_uniform(prog, "u_size", (w, h))
         set_uniform(prog, "u_src_size", (r.width, r.height))
         self.ssbos[slot].bind_to_storage_buffer(0)
-        if self.lean is not None:  # it runs over the padded size and reads back the encoded input
-            return self.lean.pack(prog, slot)
         prog.run((w + 7) // 8, (h + 7) // 8, 1)
+        if self.lean is not None:  # encoded on the GPU: the encoded input is what comes back
+            self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+            return self.lean.encode(slot, self.ssbos[slot], self.gi_size)
         self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
         self.ssbos[slot].read_into(self._packed[slot])
 

@@ -3,9 +3,16 @@
 // (-1 off the surfaces), the normal, 2 albedo - 1, the direct light exposed by u_in_k (the frame's light scale
 // folded in) as sign(c) log(1 + |c|) / log(1 + radiance_max); with WORLD the world position and normal from the
 // padded camera (diviewer.scene.camera.camera_params); with LIGHTS the lights' parameters over the surfaces.
-// Float32 NCHW into binding 1, planes of u_padded.x * u_padded.y. Included by pack.glsl with LEAN.
+// Reads the raw inputs pack.glsl wrote (binding 0, NHWC rows top first, IN_* offsets) over the network's padded
+// input (u_padded, the frame at u_pad, edge texels repeated as the runtime pads them) and writes float32 NCHW into
+// binding 1, planes of u_padded.x * u_padded.y.
+#if defined COMPUTE_SHADER
 
+layout(local_size_x = 8, local_size_y = 8) in;
+
+layout(std430, binding = 0) readonly buffer Packed { float data[]; };
 layout(std430, binding = 1) writeonly buffer Encoded { float enc[]; };
+uniform ivec2 u_size;           // the GI size (the raw inputs')
 uniform ivec2 u_padded;         // the network's input size (the GI size padded to its stride)
 uniform ivec2 u_pad;            // where the frame starts in it (left, top)
 uniform float u_in_k;           // exposure / light scale (0 for no light)
@@ -62,3 +69,16 @@ void encode(ivec2 P, float z, vec3 n, vec3 a, vec3 d) {
     for (int k = 0; k < 3 * LIGHTS; ++k) put(16 + k, at, u_light[k] * geo);
 #endif
 }
+
+void main() {
+    ivec2 P = ivec2(gl_GlobalInvocationID.xy);  // padded texel, row top first
+    if (P.x >= u_padded.x || P.y >= u_padded.y) return;
+    ivec2 f = clamp(P - u_pad, ivec2(0), u_size - 1);  // the frame's texel it repeats, row top first
+    int base = (f.y * u_size.x + f.x) * IN_CHANNELS;
+    vec3 n = vec3(data[base + IN_NORMAL], data[base + IN_NORMAL + 1], data[base + IN_NORMAL + 2]);
+    vec3 a = vec3(data[base + IN_ALBEDO], data[base + IN_ALBEDO + 1], data[base + IN_ALBEDO + 2]);
+    vec3 d = vec3(data[base + IN_DIRECT], data[base + IN_DIRECT + 1], data[base + IN_DIRECT + 2]);
+    encode(P, data[base + IN_DEPTH], n, a, d);
+}
+
+#endif
