@@ -9,9 +9,9 @@ work elsewhere: on the GPU in ``encode.glsl`` (after ``pack.glsl``) and ``decode
 composition), or on the CPU in numpy (``run``, for callers with buffers in memory and for the check at load).
 Shipped models keep working unchanged: the file is not rewritten.
 
-``lean_model(net)`` returns the lean model, or None and the reason it cannot (a graph whose generator cannot be
-found, fp16 precision, or a lean run that differs from the graph's on the probe frame): the caller then runs the
-graph (``NeuralGI``) and says why.
+``lean_model(net)`` returns the lean model, or None and the reason it cannot (fp16 precision, encoding version 1, a
+cut that holds other operators, or a lean run that differs from the graph's on the probe frame): the caller then runs
+the graph (``NeuralGI``) and says why. A graph with no generator at all (a linear baseline) runs as it is, unremarked.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ casts and scales, pixel shuffles): anything else means the cut missed the genera
 
 PROBE_TOLERANCE = 1e-3
 """The largest difference, relative to the probe frame's peak radiance, between the lean and the graph path at load
-(measured: ~1e-6 on the shipped models; the fp16 tolerance of export is 1e-2)."""
+(measured: 0 on the shipped models, the same float32 operations; the fp16 tolerance of export is 1e-2)."""
 
 TINY, HUGE = 1e-30, 1e38  # as the exported graph's (diviewer.train.graph): a sign and a Where without Sign/Where
 
@@ -65,6 +65,10 @@ class LeanUnsupported(Exception):
     """Why a model has no lean path (the caller runs its graph)."""
 
 
+class NoGenerator(LeanUnsupported):
+    """The graph has no generator to cut out (a linear baseline, a test's toy graph): nothing to say about it."""
+
+
 def generator_subgraph(model):
     """The generator's subgraph of a self-contained model (an onnx ModelProto): float32 (N, planes, H, W) encoded
     input ``encoded`` -> float32 (N, 3, H, W) raw tanh output ``raw``. Raises LeanUnsupported."""
@@ -74,7 +78,7 @@ def generator_subgraph(model):
     convs = [n for n in g.node if n.op_type == "Conv"]
     tanhs = [n for n in g.node if n.op_type == "Tanh"]
     if not convs or len(tanhs) != 1:
-        raise LeanUnsupported(f"the graph has {len(convs)} convolutions and {len(tanhs)} tanh: no generator found")
+        raise NoGenerator(f"the graph has {len(convs)} convolutions and {len(tanhs)} tanh: no generator found")
     encoded, raw = convs[0].input[0], tanhs[0].output[0]
     sub = _cut(model, encoded, raw)
     ops = {n.op_type for n in sub.graph.node} - GENERATOR_OPS
@@ -164,13 +168,13 @@ class LeanModel:
         import onnxruntime as ort
 
         self.graph = graph
+        model = onnx.load(str(graph.path))
+        sub = generator_subgraph(model)
         if graph.meta.get("precision") != "fp32":
             raise LeanUnsupported(f"a {graph.meta.get('precision')}-precision model (only fp32 graphs are cut)")
         self.enc = Encoding.from_dict(graph.meta["encoding"])
         if self.enc.version < 2:
             raise LeanUnsupported(f"encoding version {self.enc.version} (the cut is made for versions 2 to 4)")
-        model = onnx.load(str(graph.path))
-        sub = generator_subgraph(model)
         self.planes = self.enc.input_planes
         shape = sub.graph.input[0].type.tensor_type.shape.dim
         if len(shape) != 4 or shape[1].dim_value != self.planes:
@@ -310,6 +314,8 @@ def _lean_model(graph, check: bool):
 
     try:
         lean = LeanModel(graph)
+    except NoGenerator:  # nothing to make lean: the graph runs, with nothing to explain
+        return None, ""
     except (LeanUnsupported, DiviewerError, KeyError) as exc:  # a model without a generator or its record
         return None, f"{graph.path.name}: no lean path ({exc}); the graph runs"
     if check:

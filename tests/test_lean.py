@@ -29,13 +29,24 @@ def test_the_cut_is_the_generator_and_the_floor_the_trainers(name):
     assert albedo_floor(model) == pytest.approx(2 * ALBEDO_FLOOR - 1, abs=1e-7)
 
 
-def test_a_graph_without_a_generator_is_refused_with_its_reason(tmp_path):
+def test_a_graph_without_a_generator_runs_unremarked(tmp_path):
     from onnx_models import direct_times
 
     with pytest.raises(LeanUnsupported, match="no generator"):
         generator_subgraph(onnx.load(str(direct_times(tmp_path / "m.onnx"))))
-    lean, why = lean_model(NeuralGI(direct_times(tmp_path / "m.onnx")))
-    assert lean is None and "no lean path" in why and "the graph runs" in why
+    assert lean_model(NeuralGI(direct_times(tmp_path / "m.onnx"))) == (None, "")
+
+
+def test_a_generator_that_cannot_be_cut_says_why(tmp_path):
+    """An encoding-1 generator (bench's untrained U-Net): no lean path, and the reason names the file."""
+    from diviewer.bench.onnx_tools import untrained_generator
+    from scenes import facing_plane
+
+    path = tmp_path / "u.onnx"
+    onnx.save(untrained_generator(8, 2, facing_plane(), 16), str(path))
+    lean, why = lean_model(NeuralGI(path))
+    assert lean is None and why == "u.onnx: no lean path (encoding version 1 (the cut is made for versions 2 to 4)); " \
+        "the graph runs"
 
 
 def test_the_lean_model_is_cut_once_per_loaded_model():

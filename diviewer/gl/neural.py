@@ -64,7 +64,7 @@ class GISettings:
     """Run the network on a worker thread, one frame behind (the frame shows the previous frame's GI)."""
     lean: bool = True
     """Run a model's lean path where it has one (`diviewer.lean`: the generator alone in onnxruntime, its encoding
-    and decoding in shaders; equal to the graph's radiance to 1e-3 of the frame's peak); False: its whole graph."""
+    and decoding in shaders; equal to the graph's radiance to 1e-4 of the frame's peak, tests/gl/test_lean.py); False: its whole graph."""
 
 
 class NeuralPass:

@@ -13,7 +13,7 @@ from diviewer.train.checks import extreme_frame
 
 pytest.importorskip("onnx")
 
-TOLERANCE = 1e-3  # of the frame's peak finite radiance (export's fp16 tolerance: 1e-2)
+TOLERANCE = 1e-5  # of the frame's peak finite radiance (export's fp16 tolerance: 1e-2; numpy and onnxruntime agree)
 
 
 @pytest.fixture(scope="module", params=["cornell", "sponza"])

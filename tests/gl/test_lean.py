@@ -11,8 +11,9 @@ from diviewer.runtime import NeuralGI
 
 pytest.importorskip("onnx")
 
-TOLERANCE = 1e-3
-"""Largest |lean - graph| over the frame's peak radiance (export's fp16 tolerance is 1e-2; measured: ~1e-5)."""
+TOLERANCE = 1e-4
+"""Largest |lean - graph| over the frame's peak radiance (export's fp16 tolerance is 1e-2; measured on llvmpipe:
+2e-6 on the frames, 4e-7 on the broken buffers; the margin is for GPUs' approximate exp and log)."""
 
 SIZES = ((48, 48, (48, 48)), (64, 48, (40, 30)))  # render size, GI size (the second pads to the stride)
 
@@ -123,21 +124,25 @@ def test_lean_at_zero_and_huge_light(ctx, models, scale):
     _close(img_g, img_l)
 
 
-def test_a_model_without_a_generator_runs_its_graph_and_says_why(ctx, tmp_path):
-    """A graph with no generator to cut (a toy model): the pass runs the graph, its note says why."""
-    from onnx_models import base_meta, direct_times
+def test_a_generator_without_a_lean_path_runs_its_graph_and_says_why(ctx, tmp_path):
+    """An encoding-1 generator (bench's untrained U-Net): the pass runs its graph, its note says why."""
+    import onnx
     from scenes import facing_plane
 
+    from diviewer.bench.onnx_tools import untrained_generator
     from diviewer.gl.neural import NeuralPass
     from diviewer.gl.renderer import Renderer
 
     scene = facing_plane()
-    model = NeuralGI(direct_times(tmp_path / "m.onnx", meta=base_meta(scene_hash=scene.file_hash)), scene=scene)
+    onnx.save(untrained_generator(8, 2, scene, 16), str(tmp_path / "u.onnx"))
+    model = NeuralGI(tmp_path / "u.onnx", scene=scene)
     renderer = Renderer(ctx, scene, 16, 16)
     p = NeuralPass(ctx, renderer, model, (16, 16))
     try:
         assert p.inference_path == "graph" and p.model is model
-        assert "no lean path" in p.path_note and "m.onnx" in p.path_note
+        assert "no lean path" in p.path_note and "u.onnx" in p.path_note
+        p.run()
+        assert np.isfinite(p.image()).all()
     finally:
         p.release()
         renderer.release()
