@@ -134,7 +134,7 @@ def _cut(model, encoded: str, raw: str):
 
 
 def world_planes_np(depth, normal, cams, center, half) -> np.ndarray:
-    """numpy twin of `diviewer.train.world.world_planes` (and of pack.glsl's): (N, 1, H, W) finite depth, (N, 3, H,
+    """numpy twin of `diviewer.train.world.world_planes` (and of encode.glsl's): (N, 1, H, W) finite depth, (N, 3, H,
     W) view normal, (N, 20) cameras -> (N, 6, H, W) encoded world position and normal, 0 off the surfaces."""
     n, _, h, w = depth.shape
     f = np.float32
