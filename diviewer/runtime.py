@@ -196,6 +196,8 @@ class NeuralGI:
         if not spin:
             opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
         providers = choose_providers(ort.get_available_providers(), provider)
+        self.session_options = opts
+        """The session's options (`diviewer.lean` builds the generator's session with them)."""
         try:
             self.session = ort.InferenceSession(str(self.path), sess_options=opts, providers=providers)
         except Exception as exc:

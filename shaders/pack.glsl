@@ -8,6 +8,7 @@
 // gl/neural.py injects it from diviewer.encoding.INPUT_CHANNELS as defines (IN_CHANNELS, the total,
 // IN_<NAME>, where each buffer starts, and IN_<NAME>_N, its component count, checked below). The direct
 // light is read from the direct pass's target or, with INLINE_DIRECT, computed (direct_inline.glsl).
+// For a model's lean path (diviewer.lean) encode.glsl then encodes what it wrote.
 #if defined COMPUTE_SHADER
 
 #if !defined IN_CHANNELS || !defined IN_DEPTH || !defined IN_NORMAL || !defined IN_ALBEDO || !defined IN_DIRECT
@@ -29,17 +30,15 @@ layout(std430, binding = 0) writeonly buffer Packed { float data[]; };
 
 #include "direct_inline.glsl"
 
-void main() {
-    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    if (p.x >= u_size.x || p.y >= u_size.y) return;
-    int base = ((u_size.y - 1 - p.y) * u_size.x + p.x) * IN_CHANNELS;
+// The GI texel p's buffers (p.y bottom first).
+void gather(ivec2 p, out float z, out vec3 n, out vec3 a, out vec3 d) {
     vec2 scale = vec2(u_src_size) / vec2(u_size);
     ivec2 q = clamp(ivec2((vec2(p) + 0.5) * scale), ivec2(0), u_src_size - 1);
     vec2 src = vec2(u_src_size);
-    float z = texelFetch(u_depth, q, 0).r;
-    vec3 n = texelFetch(u_normal, q, 0).xyz;
-    vec3 a = texelFetch(u_albedo, q, 0).rgb;
-    vec3 d = direct_at(q, src, z, n, a);
+    z = texelFetch(u_depth, q, 0).r;
+    n = texelFetch(u_normal, q, 0).xyz;
+    a = texelFetch(u_albedo, q, 0).rgb;
+    d = direct_at(q, src, z, n, a);
 #if defined AREA || defined AREA_DIRECT
     // Pixels whose centres lie in [p, p + 1) * scale; none when the GI is finer than the G-buffer.
     ivec2 lo = ivec2(ceil(vec2(p) * scale - 0.5));
@@ -64,10 +63,21 @@ void main() {
         d = sd / count;
     }
 #endif
+}
+
+void put_raw(int base, float z, vec3 n, vec3 a, vec3 d) {
     data[base + IN_DEPTH] = z;
     data[base + IN_NORMAL] = n.x; data[base + IN_NORMAL + 1] = n.y; data[base + IN_NORMAL + 2] = n.z;
     data[base + IN_ALBEDO] = a.r; data[base + IN_ALBEDO + 1] = a.g; data[base + IN_ALBEDO + 2] = a.b;
     data[base + IN_DIRECT] = d.r; data[base + IN_DIRECT + 1] = d.g; data[base + IN_DIRECT + 2] = d.b;
+}
+
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x >= u_size.x || p.y >= u_size.y) return;
+    float z; vec3 n, a, d;
+    gather(p, z, n, a, d);
+    put_raw(((u_size.y - 1 - p.y) * u_size.x + p.x) * IN_CHANNELS, z, n, a, d);
 }
 
 #endif

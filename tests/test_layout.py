@@ -21,7 +21,7 @@ LAYERS = {
     # 1: scene data and math, the channel encoding
     "scene/": 1, "encoding": 1, "padding": 1,
     # 2: what draws or runs a frame: GL passes, the path tracer, the onnxruntime model, frame records
-    "gl/": 2, "reference/": 2, "runtime": 2, "frames": 2, "weights": 2,
+    "gl/": 2, "reference/": 2, "runtime": 2, "lean": 2, "frames": 2, "weights": 2,
     # 3: datasets and single renders
     "data/": 3, "render": 3, "render_path": 3,
     # 4: training and evaluation

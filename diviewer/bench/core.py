@@ -57,6 +57,9 @@ class BenchSettings:
     """onnxruntime provider (cpu, cuda, tensorrt); default the best available."""
     timing: str = "auto"
     """GL stage timing: auto (timer queries where supported), query, or sync (wall clock around glFinish)."""
+    paths: tuple[str, ...] = ("lean", "graph")
+    """Inference paths each model is timed on: ``lean`` (the generator alone, its encoding and decoding in shaders,
+    `diviewer.lean`; where a model has none, a note says why) and ``graph`` (the self-contained graph)."""
 
     def check(self) -> None:
         if self.frames < 1 or self.warmup < 0 or self.pt_frames < 1 or self.temporal_frames < 2:
@@ -71,6 +74,8 @@ class BenchSettings:
                                 field="temporal_max_spp")
         for g in self.vxgi_grids:
             self.vxgi(g).validate()
+        if not self.paths or set(self.paths) - {"lean", "graph"}:
+            raise DiviewerError(f"paths must be lean and/or graph, got {self.paths}", field="paths")
         if self.timing not in ("auto", "query", "sync"):
             raise DiviewerError(f"--timing must be auto, query or sync, got {self.timing}", field="--timing")
 
@@ -212,7 +217,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
             log(f"timing at {res}x{res} ({settings.warmup} warm-up + {settings.frames} frames per row, GL: {mode})")
             gb = GlBench(ctx, scene, res, res, mode)
             try:
-                rows += _rows_at(res, gb, settings, scene, configs, variants, net_of, tmp)
+                rows += _rows_at(res, gb, settings, scene, configs, variants, net_of, tmp, notes)
             finally:
                 gb.release()
         accuracy = _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log)
@@ -235,12 +240,13 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
 
 
 def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, variants: list[dict], net_of,
-             tmp: Path) -> list[dict]:
+             tmp: Path, notes: list[str]) -> list[dict]:
     """The timed rows at one square resolution: direct light, VXGI per grid, each model variant at each GI step
-    it allows, and the untrained generators of the cost curve."""
+    it allows on each inference path (`BenchSettings.paths`), and the untrained generators of the cost curve."""
     import onnx
 
     from diviewer.bench.onnx_tools import generator_flops, network_inputs, untrained_generator
+    from diviewer.lean import lean_model
     from diviewer.padding import padded_size
     from diviewer.runtime import NeuralGI
 
@@ -255,13 +261,19 @@ def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, varian
         net = net_of(v)
         steps = [1] + ([s for s in settings.gi_steps if v["precision"] == v["meta"]["precision"]]
                        if v["kind"] == "neural" else [])
-        for step in steps:
+        paths = [p for p in settings.paths if p == "graph" or v["kind"] == "neural"]
+        if "lean" in paths and lean_model(net)[0] is None:
+            paths.remove("lean")
+            note = lean_model(net)[1]
+            notes.extend([note] if note not in notes else [])
+        for step, path in [(s, p) for s in steps for p in paths]:
             if res % step:  # the runtime pads any GI size to the model's stride
                 continue
-            row = _row(v["kind"], _label(v, step), res, res // step,
-                       gb.time_model(net, configs, settings.warmup, step))
+            label = _label(v, step) + (f" {path}" if v["kind"] == "neural" else "")
+            row = _row(v["kind"], label, res, res // step,
+                       gb.time_model(net, configs, settings.warmup, step, lean=path == "lean"))
             row.update(model=v["source"], precision=v["precision"], provider=net.provider, edge_guard=net.edge_guard,
-                       K=v["meta"].get("K"), levels=v["meta"].get("levels"), step=step,
+                       K=v["meta"].get("K"), levels=v["meta"].get("levels"), step=step, inference_path=path,
                        accuracy_key=f"{v['path']}|{step}", converted_from=v.get("converted_from"),
                        calibration=v.get("calibration"))
             if v["kind"] == "neural":
@@ -277,7 +289,8 @@ def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, varian
         path = tmp / f"untrained_K{K}_{res}.onnx"
         onnx.save(untrained_generator(K, levels, scene, res), str(path))
         net = NeuralGI(path, scene=scene, provider=settings.provider)
-        row = _row("untrained", f"untrained K={K} fp32", res, res, gb.time_model(net, configs, settings.warmup))
+        row = _row("untrained", f"untrained K={K} fp32", res, res,
+                   gb.time_model(net, configs, settings.warmup, lean=False))
         row.update(K=K, levels=levels, precision="fp32", provider=net.provider, untrained=True, step=1,
                    flops=generator_flops(K, levels, res, res)["flops"])
         rows.append(row)
@@ -288,8 +301,8 @@ def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, varian
 
 def bare_ratio_lines(rows: list[dict]) -> list[str]:
     """Each model's inference time over a bare (untrained) generator's of the same K at the same size, in
-    the same run: what the model's graph costs beyond its convolutions (issue 28: <= 1.2). Also recorded
-    in the rows (``bare_ratio``)."""
+    the same run, on each inference path: what the model's graph (or its lean path's generator) costs beyond
+    the bare convolutions. Also recorded in the rows (``bare_ratio``)."""
     def inference(r):
         return r["timing"]["stages"].get("inference", {}).get("median")
 

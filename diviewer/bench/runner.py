@@ -102,11 +102,12 @@ class GlBench:
     def time_direct(self, configs, warmup: int) -> dict:
         return self.run(configs, warmup, lambda c: (self.renderer.textures["direct"], False))
 
-    def time_model(self, net, configs, warmup: int, step: int = 1) -> dict:
+    def time_model(self, net, configs, warmup: int, step: int = 1, lean: bool = True) -> dict:
         """The viewer's neural frame: pack at the GI resolution (frame / step), infer, upload, the joint
         bilateral upsample over the frame's direct light (diviewer.gl.neural), composite; the direct light
-        computed inline as the viewer does where the frame allows (NeuralPass.inline_direct)."""
-        neural = self.neural_pass(net, step)
+        computed inline as the viewer does where the frame allows (NeuralPass.inline_direct); on the model's
+        lean path where it has one and ``lean`` (GISettings.lean)."""
+        neural = self.neural_pass(net, step, lean)
         try:
             def frame(config):
                 neural.run(**neural.inputs_for(self.scene, config))
@@ -147,10 +148,11 @@ class GlBench:
             vx.release()
             self.timer.reset()
 
-    def neural_pass(self, net, step: int = 1):
-        from diviewer.gl.neural import NeuralPass
+    def neural_pass(self, net, step: int = 1, lean: bool = True):
+        from diviewer.gl.neural import GISettings, NeuralPass
 
-        return NeuralPass(self.ctx, self.renderer, net, gi_size=(self.width // step, self.height // step))
+        return NeuralPass(self.ctx, self.renderer, net, gi_size=(self.width // step, self.height // step),
+                          settings=GISettings(lean=lean))
 
     def buffers(self, config) -> np.ndarray:
         """The model input of one configuration at this resolution, (1, H, W, 10) (for calibration)."""

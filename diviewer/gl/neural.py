@@ -7,6 +7,11 @@ packing it into the model's NHWC input; ``upsample.glsl`` turns the network's ou
 full-resolution image (direct light at full resolution + upsampled indirect light). With
 ``pipelined`` the network runs on a worker thread one frame behind: frame N's inputs are packed and
 handed over while frame N-1's output is composited, so GL and onnxruntime overlap.
+
+A lean model (`diviewer.lean.LeanModel`) runs its generator alone: an encode pass turns the packed inputs into the
+network's padded input (read back instead of the raw buffers) and a decode pass turns the generator's raw output into the same
+radiance texture (`diviewer.gl.lean`); the ``readback`` stage then holds the encode pass, the ``upload`` stage
+the upload and the decode's dispatch.
 """
 
 from __future__ import annotations
@@ -57,6 +62,9 @@ class GISettings:
     """Joint bilateral upsample: exponent of the cosine between the pixel's and the texel's normals."""
     pipelined: bool = False
     """Run the network on a worker thread, one frame behind (the frame shows the previous frame's GI)."""
+    lean: bool = True
+    """Run a model's lean path where it has one (`diviewer.lean`: the generator alone in onnxruntime, its encoding
+    and decoding in shaders; equal to the graph's radiance to 1e-4 of the frame's peak, tests/gl/test_lean.py); False: its whole graph."""
 
 
 class NeuralPass:
@@ -71,6 +79,15 @@ class NeuralPass:
 
     def __init__(self, ctx: moderngl.Context, renderer: Renderer, model, gi_size: tuple[int, int] | None = None,
                  settings: GISettings = GISettings(), timer: StageTimer | None = None):
+        self.path_note = ""
+        """Why a model runs its graph although ``settings.lean`` asks for its lean path, or empty."""
+        if settings.lean and not getattr(model, "lean", False):
+            from diviewer.lean import lean_model
+
+            lean, self.path_note = lean_model(model)
+            model = lean if lean is not None else model
+        elif not settings.lean and getattr(model, "lean", False):
+            model = model.graph
         self.ctx, self.renderer, self.model, self.settings = ctx, renderer, model, settings
         self.timer = timer or renderer.timer
         if settings.downsample not in DOWNSAMPLES:
@@ -97,7 +114,13 @@ class NeuralPass:
         self._slot = 0
         self.shown_slot = 0
         """The slot whose inputs the current ``texture`` was predicted from."""
-        self.texture = ctx.texture((w, h), 3, dtype="f4")
+        self.lean = None
+        """The lean path's buffers and decode pass (`diviewer.gl.lean.LeanIO`), for a lean model."""
+        if getattr(model, "lean", False):
+            from diviewer.gl.lean import LeanIO
+
+            self.lean = LeanIO(ctx, renderer.shaders, model, (w, h), PACK_DEFINES)
+        self.texture = ctx.texture((w, h), 4 if self.lean else 3, dtype="f4")  # the decode pass writes rgba32f
         self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.texture.repeat_x = self.texture.repeat_y = False
         self.guides = [ctx.texture((w, h), 4, dtype="f4") for _ in range(2)]
@@ -109,7 +132,8 @@ class NeuralPass:
         self.output: np.ndarray | None = None
         self.timings: dict[str, float] = {}
         """The last frame's stage times (ms), also added to ``timer``."""
-        self.copies = {"download_bytes": self._packed[0].nbytes, "upload_bytes": 0}
+        self.copies = {"download_bytes": (self.lean.encoded[0] if self.lean else self._packed[0]).nbytes,
+                       "upload_bytes": 0}
         self.latency_ms = 0.0
         """How old the shown GI is when composited: from its inputs' read-back to its upload (ms)."""
         self._worker: ThreadPoolExecutor | None = None
@@ -117,8 +141,16 @@ class NeuralPass:
 
     @property
     def packed(self) -> np.ndarray:
-        """The inputs (1, H, W, 10) the shown prediction was made from, as the network read them."""
+        """The inputs (1, H, W, 10) the shown prediction was made from, as the network read them (a lean model's
+        are read back from the GPU here, on demand)."""
+        if self.lean is not None:
+            self.ssbos[self.shown_slot].read_into(self._packed[self.shown_slot])
         return self._packed[self.shown_slot]
+
+    @property
+    def inference_path(self) -> str:
+        """"lean" (the generator alone, `diviewer.lean`) or "graph" (the model's self-contained graph)."""
+        return "lean" if self.lean is not None else "graph"
 
     @property
     def pipelined(self) -> bool:
@@ -174,6 +206,9 @@ class NeuralPass:
         set_uniform(prog, "u_src_size", (r.width, r.height))
         self.ssbos[slot].bind_to_storage_buffer(0)
         prog.run((w + 7) // 8, (h + 7) // 8, 1)
+        if self.lean is not None:  # encoded on the GPU: the encoded input is what comes back
+            self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+            return self.lean.encode(slot, self.ssbos[slot], self.gi_size)
         self.ctx.memory_barrier(moderngl.BUFFER_UPDATE_BARRIER_BIT)
         self.ssbos[slot].read_into(self._packed[slot])
 
@@ -181,6 +216,9 @@ class NeuralPass:
         """Run the model on a slot's inputs (on the worker thread when pipelined); its own timer, its wall ms."""
         t0 = time.perf_counter()
         # encoding 3's camera and 4's lights (runtimes of other models take neither)
+        if self.lean is not None:
+            y = self.model.run_generator(self.lean.encoded[slot], timer=StageTimer())
+            return y, (time.perf_counter() - t0) * 1e3
         extra = {k: v for k, v in (("camera", camera), ("light", light)) if v is not None}
         y = self.model.run(self._packed[slot], timer=StageTimer(), light_scale=light_scale, **extra)
         return y, (time.perf_counter() - t0) * 1e3
@@ -201,6 +239,8 @@ class NeuralPass:
         self._defines = self._direct_defines()  # may run the direct pass: before this pass's stages
         before = {k: self.timer.times.get(k, 0.0) for k in STAGES}
         slot = self._slot
+        if self.lean is not None:
+            self.lean.set_frame(slot, *self.gi_size, light_scale, camera, light)
         with self.timer.stage("readback"):
             self._pack(slot)
         t_inputs = time.perf_counter()
@@ -229,7 +269,10 @@ class NeuralPass:
 
     def _show(self, y: np.ndarray, slot: int, t_inputs: float) -> None:
         with self.timer.stage("upload"):
-            self.texture.write(y)  # (1, H, W, 3) float32, contiguous: uploaded as is
+            if self.lean is not None:
+                self.lean.show(y, slot, self.ssbos[slot], self.texture)
+            else:
+                self.texture.write(y)  # (1, H, W, 3) float32, contiguous: uploaded as is
         self.output, self.shown_slot = y, slot
         self.copies["upload_bytes"] = y.nbytes
         self.latency_ms = (time.perf_counter() - t_inputs) * 1e3
@@ -238,6 +281,9 @@ class NeuralPass:
         """The last output as (H, W, 3) float32 linear radiance, top row first."""
         if self.output is None:
             raise RuntimeError("NeuralPass.run has not been called")
+        if self.lean is not None:  # the decoded radiance, read back from the GPU on demand
+            w, h = self.gi_size
+            return np.frombuffer(self.texture.read(), np.float32).reshape(h, w, 4)[..., :3].copy()
         return self.output[0]
 
     # --- the full-resolution frame ----------------------------------------------------------------
@@ -300,6 +346,8 @@ class NeuralPass:
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
+        if self.lean is not None:
+            self.lean.release()
         for b in (*self.ssbos, *self.guides):
             b.release()
         self.texture.release()

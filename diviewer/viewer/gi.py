@@ -77,6 +77,7 @@ class GIControl:
 
         size = self._size_for(model, self.gi_res, self.render_size)
         self.neural = NeuralPass(self.ctx, self.renderer, model, size, self.settings)
+        self.note = "; ".join(n for n in (self.note, self.neural.path_note) if n)  # a model without a lean path
         self.state.gi_res = self.gi_res
 
     def _rebuild(self) -> None:
