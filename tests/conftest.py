@@ -5,19 +5,31 @@ from __future__ import annotations
 
 import importlib.util
 import os
+from pathlib import Path
 
 import pytest
 
+ROOT = Path(__file__).resolve().parents[1]
 REQUIRE_GL = os.environ.get("DIVIEWER_REQUIRE_GL", "") not in ("", "0")
 MARK_BY_FIXTURE = {"ctx": "gl", "gl_context": "gl", "display": "window"}
 """A test that asks for one of these fixtures gets the mark: ``pytest -m "not gl"`` runs without any context."""
 NO_MITSUBA = importlib.util.find_spec("mitsuba") is None
 
 
+QUICK_LEFT_OUT = ("tests/train/", "tests/extremes/", "tests/bench/", "tests/build/test_pipeline.py",
+                  "tests/test_faults.py", "tests/viewer/test_recording.py")
+"""Folders and files the quick loop leaves out besides what its marks say: training (torch), the extremes suite
+(``-m extremes``), the benchmark, and the modules that run whole pipelines or many subprocesses."""
+SLOW_MARKS = ("slow", "gl", "window", "mitsuba")
+
+
 def pytest_collection_modifyitems(items):
     for item in items:
         for mark in sorted({MARK_BY_FIXTURE[f] for f in item.fixturenames if f in MARK_BY_FIXTURE}):
             item.add_marker(mark)
+        where = Path(str(item.fspath)).relative_to(ROOT).as_posix()
+        if not any(item.get_closest_marker(m) for m in SLOW_MARKS) and not where.startswith(QUICK_LEFT_OUT):
+            item.add_marker("quick")
         if NO_MITSUBA and item.get_closest_marker("mitsuba"):
             item.add_marker(pytest.mark.skip(reason="needs mitsuba (pip install 'diviewer[train]')"))
 
