@@ -65,7 +65,7 @@ def test_every_copy_of_the_channel_layout_follows_the_encoding() -> None:
                             **{f"IN_{n.upper()}_N": c for n, c in INPUT_CHANNELS}}
     # The shader indexes only through those defines: no channel offset or count written as a number.
     shader = (shaders_dir() / "pack.glsl").read_text()
-    indices = re.findall(r"data\[([^\]]*)\]", shader.split("void main()")[1])
+    indices = re.findall(r"data\[([^\]]*)\]", shader.split("float data[]; };")[1])
     assert indices and all(re.fullmatch(r"base \+ IN_[A-Z]+( \+ [12])?", i) for i in indices), indices
     assert "* IN_CHANNELS" in shader and not re.search(r"\*\s*\d+;", shader)
     # The CPU packing and the export read by name from the same table.
