@@ -103,7 +103,7 @@ def parse_splits(text: str) -> tuple[float, float, float]:
 
 
 def _cmd_baseline(args: argparse.Namespace) -> int:
-    from diviewer.baseline import build_baseline
+    from diviewer.evaluation.baseline import build_baseline
 
     build_baseline(args.data, args.out, split=args.split, max_frames=args.max_frames)
     return 0

@@ -25,7 +25,7 @@ LAYERS = {
     # 3: datasets and single renders
     "data/": 3, "render": 3, "render_path": 3,
     # 4: training and evaluation
-    "train/": 4, "evalset": 4, "evaluate": 4, "evalframes": 4, "evalscore": 4, "baseline": 4, "truthmargin": 4,
+    "train/": 4, "evaluation/": 4,
     # 5: the applications
     "viewer/": 5, "bench/": 5, "build/": 5,
     # 6: the command line

@@ -142,7 +142,7 @@ def test_equivalent_spp_from_psnr_and_non_monotone_ladders():
 def test_equivalent_spp_is_read_per_metric_and_ssim_as_its_error():
     """`equivalent` reads every metric of EQUIVALENT_BY off the ladder; SSIM through 1 - SSIM, so a model whose SSIM
     lies between two rungs gets a count between them, and a perfect one none."""
-    from diviewer.evalscore import EQUIVALENT_BY, equivalent
+    from diviewer.evaluation.scoring import EQUIVALENT_BY, equivalent
 
     ladder_spp = [1, 4, 16, 64, 256]
     row = lambda p, q, f: {"psnr_tm": {"mean": p}, "psnr": {"mean": p + 20}, "flip_ldr": {"mean": f},  # noqa: E731
@@ -156,7 +156,7 @@ def test_equivalent_spp_is_read_per_metric_and_ssim_as_its_error():
 
 
 def test_pooled_bias_is_the_signed_relative_error_of_the_summed_radiance():
-    from diviewer.evaluate import aggregate, pooled_bias, score_frame
+    from diviewer.evaluation.evaluate import aggregate, pooled_bias, score_frame
 
     rng = np.random.default_rng(3)
     truths = [rng.uniform(0.01, 0.3, (16, 16, 3)) for _ in range(3)]
@@ -210,7 +210,7 @@ def test_masked_ssim_known_answers():
 
 
 def test_regions_and_below_direct_share_on_a_synthetic_frame():
-    from diviewer.evalscore import below_direct, regions, score_frame_regions
+    from diviewer.evaluation.scoring import below_direct, regions, score_frame_regions
 
     direct = np.zeros((16, 16, 3))
     direct[:8] = 0.5  # the top half is lit
@@ -278,7 +278,7 @@ def test_stride_pattern_reads_a_grid_locked_pattern_and_not_texture_or_noise():
 
 
 def test_stride_pattern_is_scored_in_the_shade_and_pooled_per_split():
-    from diviewer.evalscore import PER_FRAME_KEYS, aggregate, score_frame_regions
+    from diviewer.evaluation.scoring import PER_FRAME_KEYS, aggregate, score_frame_regions
 
     image, albedo, depth, (yy, xx) = _textured_frame()
     direct = np.zeros_like(image)
@@ -298,7 +298,7 @@ def test_stride_pattern_is_scored_in_the_shade_and_pooled_per_split():
 
 
 def test_per_frame_keeps_each_frame_with_its_index_or_nothing_when_rows_are_missing():
-    from diviewer.evalscore import PER_FRAME_KEYS, per_frame
+    from diviewer.evaluation.scoring import PER_FRAME_KEYS, per_frame
 
     rows = [{k: float(i) for k in (*PER_FRAME_KEYS, "mse")} for i in range(3)]
     kept = per_frame([4, 7, 9], rows)

@@ -48,7 +48,7 @@ def split_scores(ev: dict, method: str, path: Path) -> dict:
         # a region the split has none of (no moving object in the scene) is scored None: left out
         out[name] = {q: round(row[q]["mean"], 3) for q in SCORES
                      if isinstance(row.get(q), dict) and row[q]["mean"] is not None}
-        if row.get("truth_margin"):  # its training truth over its error (diviewer.truthmargin)
+        if row.get("truth_margin"):  # its training truth over its error (diviewer.evaluation.truthmargin)
             out[name]["truth_margin"] = {k: v if not isinstance(v, float) else round(v, 2)
                                          for k, v in row["truth_margin"].items()}
     return out

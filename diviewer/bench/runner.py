@@ -218,9 +218,9 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
         ``{"frames", "ladder_spp", "methods": {key: aggregate}}`` with ``direct``, ``noise_floor`` and
         ``pt_spp<n>`` beside the models; each aggregate carries its ``equivalent_spp``.
     """
-    from diviewer.evalframes import crop_frame, split_key
-    from diviewer.evalscore import aggregate, equivalent, ladder_methods, score_frame
-    from diviewer.evaluate import area_direct_of, model_input, run_model
+    from diviewer.evaluation.frames import crop_frame, split_key
+    from diviewer.evaluation.scoring import aggregate, equivalent, ladder_methods, score_frame
+    from diviewer.evaluation.evaluate import area_direct_of, model_input, run_model
     from diviewer.metrics import flat_mask
     from diviewer.scene.loader import config_from_dict
 

@@ -306,7 +306,7 @@ def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings
                       log, label: str = "capture") -> None:
     """Render and write ``todo``: GL buffers plus ``gt(config, frame entry)``, stored in the manifest's channels.
 
-    Shared with the evaluation set (diviewer.evalset), whose ground truth adds channels; ``settings``
+    Shared with the evaluation set (diviewer.evaluation.evalset), whose ground truth adds channels; ``settings``
     needs ``width``, ``height``, ``dtype`` and ``thumbs``.
     """
     from diviewer.gl.display import DisplayPass

@@ -59,7 +59,7 @@ import numpy as np
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, read_manifest
 from diviewer.data.evalset_format import EVAL_SPLITS, KIND, is_evalset, load_evalset  # noqa: F401 (re-exported)
 from diviewer.errors import DiviewerError
-from diviewer.evalframes import crop
+from diviewer.evaluation.frames import crop
 from diviewer.provenance import versions
 from diviewer.scene import FrameConfig, Scene, load_scene, sample_config
 
@@ -345,7 +345,7 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
     """Render the frames of the evaluation set that are not complete yet (resumable); returns a summary.
 
     Frames are rendered split-interleaved (``render_order``). When every frame is present, the noise
-    floor and Mitsuba's own error at each ladder count are scored per split (diviewer.evaluate) and
+    floor and Mitsuba's own error at each ladder count are scored per split (diviewer.evaluation.evaluate) and
     written to ``summary.json``. ``shard`` (k, n) renders only the frames whose index is k - 1 modulo n,
     as ``diviewer capture --shard`` does: shards run side by side into one folder (start one first, so
     that the manifest and its fitted exposure are written once), and whichever finds every frame present
@@ -401,7 +401,7 @@ def _scores(out: Path, rendered: list[dict], log, jobs: int) -> dict:
     """The complete set's scores (noise floor and ladder per split): ``summary.json`` as written before where this run
     rendered nothing and it is newer than the manifest and every frame (a minute of two cores on Sponza's 72
     frames at each resume of a chain), else scored again and written."""
-    from diviewer.evaluate import evaluate_evalset
+    from diviewer.evaluation.evaluate import evaluate_evalset
 
     path = out / "summary.json"
     if not rendered and path.is_file():

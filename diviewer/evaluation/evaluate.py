@@ -2,13 +2,13 @@
 
 Every method is scored against the path-traced image (`pt`) with the same metrics as training's
 validation: MSE, PSNR (peak 1) and SSIM on linear radiance, and the same on the tone-mapped image
-(diviewer.metrics.tonemap). On an evaluation set (diviewer.evalset) also: HDR-FLIP on linear radiance,
+(diviewer.metrics.tonemap). On an evaluation set (diviewer.evaluation.evalset) also: HDR-FLIP on linear radiance,
 LDR-FLIP on the tone-mapped images, the checkerboard ratio over flat regions, and the equivalent sample
 count; beside the models, direct light alone, the noise floor (a second seed at the reference's spp)
 and the path tracer at each ladder count, per split. One tone map (the evaluation set's exposure)
-for every row, and region metrics (the object's pixels, those of them without direct light: diviewer.evalscore)
+for every row, and region metrics (the object's pixels, those of them without direct light: diviewer.evaluation.scoring)
 with the share of frames in which each model scores below direct light. Every split is scored at each of its
-shapes (centred crops, diviewer.evalframes); a model the runtime refuses at a shape is reported as refused.
+shapes (centred crops, diviewer.evaluation.frames); a model the runtime refuses at a shape is reported as refused.
 The frames' checksums are verified first; a set changed after `diviewer evalset` rendered it (a step in its
 lineage: diviewer.data.lineage) is refused, and an incomplete one unless ``partial`` (which names the frames scored
 and those not). On a dataset split (``--data``) the tone map is the scene's too: the shipped evaluation
@@ -30,14 +30,14 @@ from diviewer.data.dataset import Dataset
 from diviewer.data.lineage import refuse_derived_evalset
 from diviewer.errors import DiviewerError
 from diviewer.data.scales import light_scales
-from diviewer.evalframes import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
-from diviewer.evalscore import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer, aggregate, below_direct, done,
+from diviewer.evaluation.frames import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
+from diviewer.evaluation.scoring import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer, aggregate, below_direct, done,
                                 equivalent, ladder_methods, per_frame, pooled_bias, score, score_frame,
                                 strict_json)
 from diviewer.metrics import flat_mask
 from diviewer.outputs import check_output_file, write_json
 from diviewer.runtime import NeuralGI, pack_buffers
-from diviewer.truthmargin import FILTERED_MARGIN, MARGIN_DB, model_truth_spp, truth_margin
+from diviewer.evaluation.truthmargin import FILTERED_MARGIN, MARGIN_DB, model_truth_spp, truth_margin
 
 SSIM_MIN = 11
 """SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
@@ -190,7 +190,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
                      out: Path | None = None, log=print, partial: bool = False, jobs: int = 1) -> dict:
     """Score models, direct light, the noise floor and the path-tracer ladder on an evaluation set, per split
     and shape, with region metrics; ``evalset_dir`` None: the shipped compact set of the models' scene.
-    ``jobs``: processes the images are scored in (``evalscore.Scorer``); the models run here."""
+    ``jobs``: processes the images are scored in (``scoring.Scorer``); the models run here."""
     from diviewer.console import progress_bar
 
     nets = [NeuralGI(p, provider=provider) for p in model_paths]

@@ -1,4 +1,4 @@
-"""An evaluation set's frames for scoring, from a full set (diviewer.evalset) or a compact one, checked first.
+"""An evaluation set's frames for scoring, from a full set (diviewer.evaluation.evalset) or a compact one, checked first.
 
 The compact set is what the repository ships (``assets/evalsets/<scene>/``, the default of ``eval`` and
 ``bench``): a few frames of every split of a full set, written by ``diviewer evalset --compact`` (``compact_choice``:
@@ -14,7 +14,7 @@ spread over the split's meshes, so a split of several unseen objects keeps each 
 
 Stored images: the GL inputs, the >= 1024-spp truth ``pt``, the second-seed render ``pt_b`` (noise floor) and
 the object mask. The ladder (1 to 256 spp) is stored as its per-frame scores, computed with
-``diviewer.evaluate.score_frame`` on the full set's float32 frames at export, per shape: its images are only
+``diviewer.evaluation.evaluate.score_frame`` on the full set's float32 frames at export, per shape: its images are only
 ever compared with ``pt``, and as noise they would not compress (each rung costs as much as ``pt``;
 cornell's 24 frames with the ladder's images would be ~10 MB, without ~4 MB).
 """
@@ -248,10 +248,10 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None
     Refused before any work: a folder that holds a set (or any dataset) already, never overwritten; more frames per
     split than a split has; a full set whose frames were changed after `diviewer evalset` rendered them (a step in
     its lineage). The chosen frames must be present and sound in the full set; the rest of it need not be complete.
-    ``jobs``: processes the ladder's images are scored in (``evalscore.Scorer``).
+    ``jobs``: processes the ladder's images are scored in (``scoring.Scorer``).
     """
     from diviewer.data.lineage import refuse_derived_evalset
-    from diviewer.evalscore import Scorer, ladder_methods
+    from diviewer.evaluation.scoring import Scorer, ladder_methods
     from diviewer.metrics import flat_mask
 
     src = EvalFrames(full_dir)
@@ -325,9 +325,9 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None
         "per_split": {split: sum(e["split"] == split for e in chosen) for split in splits},
         "choice": "per split, the first frame of each distinct set of meshes in turn (compact_choice)",
         "storage": "per frame and channel group: float16 split into high and low bytes (uint8 .npy), LZMA zip",
-        "ladder": "scores per frame and shape (diviewer.evaluate.score_frame on the full set's float32 frames); "
+        "ladder": "scores per frame and shape (diviewer.evaluation.evaluate.score_frame on the full set's float32 frames); "
                   "its images are not stored", "full_frames": len(src.frames)}
-    from diviewer.evalscore import strict_json
+    from diviewer.evaluation.scoring import strict_json
     from diviewer.outputs import staged
 
     with staged() as stage:  # both files or neither: an interrupted write leaves the folder as it was

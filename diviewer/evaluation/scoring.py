@@ -228,7 +228,7 @@ def equivalent(summary: dict, ladder_spp: list[int], ladder: list[dict]) -> dict
 
 
 def ladder_methods(ev) -> dict[str, str]:
-    """The path tracer's rows an evaluation set (diviewer.evalframes.EvalFrames) holds: method -> channel."""
+    """The path tracer's rows an evaluation set (diviewer.evaluation.frames.EvalFrames) holds: method -> channel."""
     info = ev.info
     return {f"pt_spp{int(n)}": ch for n, ch in zip(info["ladder_spp"], info["ladder_channels"])}
 

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from diviewer.baseline import FEATURES, KIND, build_baseline, fit, predict
+from diviewer.evaluation.baseline import FEATURES, KIND, build_baseline, fit, predict
 from diviewer.cli import main
 from diviewer.data.capture import open_or_create
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, Dataset, write_frame
@@ -73,7 +73,7 @@ def test_fit_is_least_squares_under_noise(tmp_path):
     r = fit(ds, log=quiet)
     assert r["train_rmse"] == pytest.approx(0.05, rel=0.1)  # what is left is the noise
     # the same solution as numpy's least squares on the stacked design matrix
-    from diviewer.baseline import features
+    from diviewer.evaluation.baseline import features
 
     frames = [ds.load(i) for i in ds.indices("train")]
     for c in range(3):

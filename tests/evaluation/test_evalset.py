@@ -17,10 +17,10 @@ from diviewer.cli import main
 from diviewer.data.capture import CaptureSettings, plan_frames
 from diviewer.data.dataset import Dataset
 from diviewer.errors import DiviewerError
-from diviewer.evalframes import EvalFrames, crop, default_evalset, write_compact
-from diviewer.evalscore import Scorer
-from diviewer.evaluate import evaluate_evalset
-from diviewer.evalset import (EVAL_SPLITS, EvalSetSettings, build_evalset, configs_apart, plan_evalset,
+from diviewer.evaluation.frames import EvalFrames, crop, default_evalset, write_compact
+from diviewer.evaluation.scoring import Scorer
+from diviewer.evaluation.evaluate import evaluate_evalset
+from diviewer.evaluation.evalset import (EVAL_SPLITS, EvalSetSettings, build_evalset, configs_apart, plan_evalset,
                               plan_splits)
 from diviewer.scene import load_scene, sample_config
 from diviewer.scene.sampler import in_test_stretch, path_parameter
@@ -264,7 +264,7 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
         assert sum(r["sum"] for r in rows) / sum(r["sum_ref"] for r in rows) - 1 == pytest.approx(methods["twice"]["bias"])
         assert np.mean([r["psnr_tm"] for r in rows]) == pytest.approx(methods["twice"]["psnr_tm"]["mean"])
         assert len(methods["direct"]["per_frame"]) == len(rows) and "per_frame" not in methods["pt_spp1"]
-    # each model's training truth over its error (diviewer.truthmargin), as the tool reads it from the frames
+    # each model's training truth over its error (diviewer.evaluation.truthmargin), as the tool reads it from the frames
     from tool_modules import load_tool
 
     tool, read = load_tool("experiments/truth_margin"), {}
@@ -288,10 +288,10 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
 def test_the_filtered_truths_margin_is_read_from_passes_traced_again_and_resumes(evalset, tmp_path):
     """tools/experiments/filtered_truth_margin.py: each frame traced again in passes (kept, extended when more are
     asked, never traced twice), the truth at 1, 2, ... passes raw and filtered, each margin over the model as
-    `diviewer.truthmargin` takes it; on the box's flat walls the filtered truth is the closer of the two."""
+    `diviewer.evaluation.truthmargin` takes it; on the box's flat walls the filtered truth is the closer of the two."""
     from diviewer.data.truth_filter import TruthFilter, filter_truth
     from diviewer.metrics import mse, psnr_error, tonemap
-    from diviewer.truthmargin import margin_db
+    from diviewer.evaluation.truthmargin import margin_db
     from tool_modules import load_tool
 
     out, _ = evalset
@@ -312,7 +312,7 @@ def test_the_filtered_truths_margin_is_read_from_passes_traced_again_and_resumes
     only = json.loads((tmp_path / "only.json").read_text())["splits"]["moved_camera"]["per_truth"]
     assert set(only) == {"4_raw", "4_filtered_1_32_0.01"}
     # the filter a recipe trains on, first (tools/sponza_chain.sh scores each build's so); a recipe without one refused
-    recipes = Path(__file__).parents[1] / "assets" / "recipes"
+    recipes = Path(__file__).parents[2] / "assets" / "recipes"
     argv_recipe = argv + ["--passes", "2", "--counts", "2", "--out", str(tmp_path / "recipe.json"),
                           "--filter", "1:32:0.01"]
     assert tool.main(argv_recipe + ["--recipe", str(recipes / "sponza_filtered128.toml")]) == 0
@@ -448,7 +448,7 @@ def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, mo
     configs = {f["index"]: f["config"] for f in EvalFrames(out).frames}
     assert all(f["config"] == configs[f["index"]] for f in ev.frames)
     assert not (compact / "frames").exists() and main(["data", "check", str(compact)]) == 0
-    monkeypatch.setattr("diviewer.evalframes.DEFAULT_EVALSETS", tmp_path / "evalsets")
+    monkeypatch.setattr("diviewer.evaluation.frames.DEFAULT_EVALSETS", tmp_path / "evalsets")
     assert default_evalset("cornell") == compact
     res = tmp_path / "c.json"
     assert main(["eval", "--model", str(model), "--out", str(res)]) == 0  # no --evalset: the compact set
@@ -499,7 +499,7 @@ def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, mo
     assert "frame 2: checksum" in capsys.readouterr().err
     assert main(["data", "check", str(compact)]) == 1
     # eval --data of this scene takes the scene's tone map from its evaluation set, never from a model
-    from diviewer.evaluate import scene_exposure
+    from diviewer.evaluation.evaluate import scene_exposure
 
     frames = [np.full((4, 4, 3), 2.0)]
     assert scene_exposure("cornell", ev.manifest["scene_hash"], frames)[0] == ev.exposure

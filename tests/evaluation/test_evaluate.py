@@ -1,4 +1,4 @@
-"""diviewer.evaluate.area_direct_of: the area direct light of a set made from (or restamped to) a scene file outside
+"""diviewer.evaluation.evaluate.area_direct_of: the area direct light of a set made from (or restamped to) a scene file outside
 assets/ is rendered from that file."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from diviewer.errors import DiviewerError
-from diviewer.evaluate import area_direct_of
+from diviewer.evaluation.evaluate import area_direct_of
 from diviewer.scene import load_scene
 
-ASSETS = Path(__file__).resolve().parents[1] / "assets" / "scenes"
+ASSETS = Path(__file__).resolve().parents[2] / "assets" / "scenes"
 
 
 def _set(tmp_path: Path, scene_file: Path | None, scene_hash: str) -> SimpleNamespace:

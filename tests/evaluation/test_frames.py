@@ -1,8 +1,8 @@
-"""diviewer.evalframes.compact_choice: which frames of a split the compact set keeps."""
+"""diviewer.evaluation.frames.compact_choice: which frames of a split the compact set keeps."""
 
 from __future__ import annotations
 
-from diviewer.evalframes import compact_choice, frame_meshes
+from diviewer.evaluation.frames import compact_choice, frame_meshes
 
 WALLS = [{"mesh": "floor"}, {"mesh": "wall_back"}]
 

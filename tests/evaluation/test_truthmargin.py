@@ -1,4 +1,4 @@
-"""diviewer.truthmargin: a training truth's margin over a model's error, frame by frame (the tool that reports every
+"""diviewer.evaluation.truthmargin: a training truth's margin over a model's error, frame by frame (the tool that reports every
 rung, and `diviewer eval`'s own figure on an evaluation set, are tested in test_metrics.py and test_evalset.py)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from diviewer import truthmargin as tm
+from diviewer.evaluation import truthmargin as tm
 
 
 def test_truth_margin_takes_the_truths_noise_out_of_both_errors_before_the_margin():

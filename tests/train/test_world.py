@@ -250,7 +250,7 @@ def test_a_run_trains_on_light_inputs_and_the_runtime_feeds_them(tmp_path):
     graph with the frames' lights as its fourth input, and the runtime needs them and reads them."""
     from train.test_trainer import quiet, tiny
 
-    from diviewer.evaluate import evaluate
+    from diviewer.evaluation.evaluate import evaluate
     from diviewer.runtime import NeuralGI
     from diviewer.scene.lights import light_params
     from diviewer.train.export import export
@@ -303,7 +303,7 @@ def cornell_world_model(tmp_path_factory):
 
 
 def test_eval_scores_a_world_model_on_a_dataset(cornell_world_model, tmp_path):
-    from diviewer.evaluate import evaluate
+    from diviewer.evaluation.evaluate import evaluate
 
     data, model = cornell_world_model
     summary = evaluate(model, data, split="val", out=tmp_path / "e.json", log=lambda *_: None)

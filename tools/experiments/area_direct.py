@@ -29,10 +29,10 @@ from pathlib import Path
 
 def score(models: list[Path], area_models: set[str], factor: int, evalset: Path | None) -> dict:
     from diviewer.data.scales import light_scales
-    from diviewer.evalframes import EvalFrames, crop_frame, default_evalset, split_key
-    from diviewer.evalscore import aggregate, score_frame_regions
+    from diviewer.evaluation.frames import EvalFrames, crop_frame, default_evalset, split_key
+    from diviewer.evaluation.scoring import aggregate, score_frame_regions
     from diviewer.metrics import flat_mask
-    from diviewer.evaluate import run_model, stored_inputs
+    from diviewer.evaluation.evaluate import run_model, stored_inputs
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
     from diviewer.runtime import NeuralGI

@@ -34,7 +34,7 @@ def main() -> int:
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
 
-    from diviewer.evaluate import score
+    from diviewer.evaluation.evaluate import score
     from diviewer.frames import parse_resolution
     from diviewer.gl.context import headless_context
     from diviewer.gl.renderer import Renderer

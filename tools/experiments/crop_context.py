@@ -65,8 +65,8 @@ def _summary(rows: list[dict], sq_alone: np.ndarray, sq_of_full: np.ndarray, fra
 def measure(net, ev, idx: list[int], area: dict, width: int) -> dict:
     """One model at one centred width over the split's frames (the module doc's three scores)."""
     from diviewer.data.scales import light_scales
-    from diviewer.evalframes import crop, crop_frame
-    from diviewer.evaluate import model_input, run_model, stored_inputs
+    from diviewer.evaluation.frames import crop, crop_frame
+    from diviewer.evaluation.evaluate import model_input, run_model, stored_inputs
     from diviewer.metrics import tonemap
 
     scales = dict(zip(idx, light_scales(ev, idx))) if net.light_scaled else {}
@@ -96,8 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--guard", type=int, default=None, help="the runtime's column guard (default: the model's)")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
-    from diviewer.evalframes import EvalFrames
-    from diviewer.evaluate import area_direct_of
+    from diviewer.evaluation.frames import EvalFrames
+    from diviewer.evaluation.evaluate import area_direct_of
     from diviewer.runtime import NeuralGI
 
     ev = EvalFrames(a.evalset)

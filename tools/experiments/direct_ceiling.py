@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer.data.dataset import Dataset
-from diviewer.evaluate import area_direct_of, scene_exposure
+from diviewer.evaluation.evaluate import area_direct_of, scene_exposure
 from diviewer.metrics import tonemap
 
 
@@ -53,8 +53,8 @@ def evalset_ceiling(root: Path, cache: Path, spp: int, supersample: list[int] | 
     with the stored GL direct light and, per ``supersample`` factor, with it rendered supersampled (its sun's shadow
     map ``shadow_size`` texels a side; None: the scene file's)."""
     from diviewer.gl.renderer import RenderSettings
-    from diviewer.evalframes import EvalFrames, crop_frame, split_key
-    from diviewer.evalscore import regions
+    from diviewer.evaluation.frames import EvalFrames, crop_frame, split_key
+    from diviewer.evaluation.scoring import regions
     from diviewer.metrics import masked_psnr
     from diviewer.reference.mitsuba import render_direct
     from diviewer.scene import load_scene

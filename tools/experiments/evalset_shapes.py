@@ -7,7 +7,7 @@ Usage: python tools/experiments/evalset_shapes.py --evalset FULL --out COPY --sp
        python tools/experiments/evalset_shapes.py geometry --evalset COPY --model M [--out G.json]
 
 A full evaluation set renders every frame at its manifest's resolution and scores each split on centred crops of
-its shapes' widths (`diviewer.evalframes.crop`), so a split scored at 128 columns has its 4:3 and 16:9 frames stored
+its shapes' widths (`diviewer.evaluation.frames.crop`), so a split scored at 128 columns has its 4:3 and 16:9 frames stored
 already: the same camera's narrower frames at the same vertical field of view, as a window of that shape shows it.
 The set's own window-shapes split is at the scene camera only, where cornell's box fills the middle 170 of 228
 columns (docs/generalisation.md); this scores the held-out cameras and the unseen objects in wide windows too.
@@ -30,8 +30,8 @@ import numpy as np
 
 from diviewer.data.scales import light_scales
 from diviewer.errors import DiviewerError
-from diviewer.evalframes import EvalFrames, crop, crop_frame, split_key
-from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
+from diviewer.evaluation.frames import EvalFrames, crop, crop_frame, split_key
+from diviewer.evaluation.evaluate import area_direct_of, model_input, run_model, stored_inputs
 from diviewer.metrics import psnr, tonemap
 from diviewer.runtime import NeuralGI
 

@@ -96,8 +96,8 @@ def wait_for_evalset(evalset: Path) -> None:
 def score_vxgi_itself(a: argparse.Namespace, eval_result: dict) -> dict:
     """The VXGI ground truth itself against the path tracer, per split of the evaluation set: what the VXGI-trained
     model was taught, re-rendered (GL, the VXGI dataset's settings) for the set's configurations."""
-    from diviewer.evalset import load_evalset
-    from diviewer.evaluate import aggregate, equivalent, score_frame
+    from diviewer.evaluation.evalset import load_evalset
+    from diviewer.evaluation.evaluate import aggregate, equivalent, score_frame
     from diviewer.gl.context import headless_context
     from diviewer.gl.renderer import Renderer
     from diviewer.gl.vxgi import VXGIPass, VXGISettings

@@ -25,7 +25,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None, help="write the figures as JSON")
     args = ap.parse_args()
 
-    from diviewer.evalframes import EvalFrames
+    from diviewer.evaluation.frames import EvalFrames
     from diviewer.exposure import LUMA, ExposureSettings, metered_ev
 
     ev = EvalFrames(args.evalset)

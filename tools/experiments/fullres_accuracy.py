@@ -47,7 +47,7 @@ def main() -> None:
     a = ap.parse_args()
 
     from diviewer import metrics
-    from diviewer.evaluate import score
+    from diviewer.evaluation.evaluate import score
     from diviewer.gl.context import describe, headless_context
     from diviewer.gl.neural import GISettings, NeuralPass
     from diviewer.gl.renderer import Renderer

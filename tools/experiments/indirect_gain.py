@@ -26,8 +26,8 @@ import numpy as np
 def score_gains(net, ev, area: dict, gains: list[float]) -> dict:
     """Per split key: mean tone-mapped SSIM and PSNR at each gain and the median indirect ratio."""
     from diviewer.data.scales import light_scales
-    from diviewer.evalframes import crop_frame, split_key
-    from diviewer.evaluate import model_input, run_model, stored_inputs
+    from diviewer.evaluation.frames import crop_frame, split_key
+    from diviewer.evaluation.evaluate import model_input, run_model, stored_inputs
     from diviewer.metrics import psnr, ssim, tonemap
 
     shapes = ev.splits()
@@ -68,8 +68,8 @@ def main(argv: list[str] | None = None) -> int:
                                                                   "1, 1.1, 1.2, 1.3, 1.5)")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
-    from diviewer.evalframes import EvalFrames
-    from diviewer.evaluate import area_direct_of
+    from diviewer.evaluation.frames import EvalFrames
+    from diviewer.evaluation.evaluate import area_direct_of
     from diviewer.runtime import NeuralGI
 
     ev = EvalFrames(a.evalset)

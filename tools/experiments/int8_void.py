@@ -34,8 +34,8 @@ def main() -> None:
     from diviewer.bench import onnx_tools
     from diviewer.bench.runner import calibration
     from diviewer.data.scales import light_scales
-    from diviewer.evalframes import EvalFrames, crop_frame, default_evalset
-    from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
+    from diviewer.evaluation.frames import EvalFrames, crop_frame, default_evalset
+    from diviewer.evaluation.evaluate import area_direct_of, model_input, run_model, stored_inputs
     from diviewer.gl.context import headless_context
     from diviewer.metrics import tonemap
     from diviewer.runtime import NeuralGI, read_metadata

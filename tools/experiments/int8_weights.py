@@ -66,8 +66,8 @@ def folded(path: Path, source: Path) -> dict:
 def departures(source: Path, path: Path, scene: str) -> dict:
     """max |variant - source| / max |source| per frame of the scene's compact evaluation set (stored inputs)."""
     from diviewer.data.scales import light_scales
-    from diviewer.evalframes import EvalFrames, default_evalset
-    from diviewer.evaluate import run_model, stored_inputs
+    from diviewer.evaluation.frames import EvalFrames, default_evalset
+    from diviewer.evaluation.evaluate import run_model, stored_inputs
     from diviewer.runtime import NeuralGI
 
     a, b = NeuralGI(source), NeuralGI(path)

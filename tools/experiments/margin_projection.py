@@ -18,7 +18,7 @@ import json
 import sys
 from pathlib import Path
 
-from diviewer.truthmargin import margin_db, projected_mse, summarize
+from diviewer.evaluation.truthmargin import margin_db, projected_mse, summarize
 
 
 def project(record: dict, spps: list[int], better: list[float]) -> dict:

@@ -45,7 +45,7 @@ def optima(indirect: np.ndarray, exposure: float, radiance_max: float = 1e5) -> 
 
 def frame_record(full: np.ndarray, direct: np.ndarray, exposure_tm: float, exposure_enc: float) -> dict:
     """``full``, ``direct``: (R, H, W, 3), the renders of one frame. See the module docstring."""
-    from diviewer.evalscore import LUMINANCE
+    from diviewer.evaluation.scoring import LUMINANCE
     from diviewer.metrics import psnr, tonemap
 
     opt = optima(full - direct, exposure_enc)

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.evalframes import EvalFrames, crop_frame
-from diviewer.evalscore import LUMINANCE
+from diviewer.evaluation.frames import EvalFrames, crop_frame
+from diviewer.evaluation.scoring import LUMINANCE
 from unlit_fit import REGIONS, frame_regions  # this folder
 
 

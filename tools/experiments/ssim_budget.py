@@ -93,8 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
     from diviewer.data.scales import light_scales
-    from diviewer.evalframes import EvalFrames, crop_frame, split_key
-    from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
+    from diviewer.evaluation.frames import EvalFrames, crop_frame, split_key
+    from diviewer.evaluation.evaluate import area_direct_of, model_input, run_model, stored_inputs
     from diviewer.runtime import NeuralGI
 
     ev = EvalFrames(a.evalset)

@@ -24,7 +24,7 @@ def target_range(ds, indices: list[int]) -> dict:
     """The exposed target's luminance percentiles over ``indices`` (a light-scaled, albedo-divided indirect target,
     encoding 2 and later), their encoded values, the exposure and the output gain fitted on the same frames."""
     from diviewer.encoding import Encoding, encode_radiance
-    from diviewer.evalscore import LUMINANCE
+    from diviewer.evaluation.scoring import LUMINANCE
     from diviewer.train.config import TrainConfig
     from diviewer.train.targets import exposed_targets, fit_encoding, fit_output_gain
     from diviewer.data.scales import light_scales

@@ -126,9 +126,9 @@ def bias_and_noise(f, fov, pt, direct, exposure, levels=(1, 2, 3)):
 def score_split(ev, record, model_key, key, split_shape, idx, passes, split_frames):
     """One split and window shape: per frame, the model's error, the set's own noise, each variant's margin at
     1 and 2 passes; and the bias/noise split on the first ``split_frames`` frames."""
-    from diviewer.evalframes import crop, crop_frame
+    from diviewer.evaluation.frames import crop, crop_frame
     from diviewer.metrics import mse, psnr_error, tonemap
-    from diviewer.truthmargin import margin_db, summarize
+    from diviewer.evaluation.truthmargin import margin_db, summarize
 
     model = {r["index"]: psnr_error(r["psnr_tm"]) for r in record["splits"][key]["methods"][model_key]["per_frame"]}
     rows = []
@@ -160,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--split-frames", type=int, default=5, help="frames a split given the bias/noise split")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
-    from diviewer.evalframes import EvalFrames, split_key
+    from diviewer.evaluation.frames import EvalFrames, split_key
     from diviewer.scene.loader import load_recorded_scene
 
     record = json.loads(a.eval.read_text())

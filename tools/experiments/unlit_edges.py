@@ -3,7 +3,7 @@
 
 Usage: python tools/experiments/unlit_edges.py --model M [--model M ...] [--evalset DIR] [--out OUT.json]
 
-The region is `diviewer.evalscore.regions`' ``object_unlit`` (the object's mask, GL direct light below the
+The region is `diviewer.evaluation.scoring.regions`' ``object_unlit`` (the object's mask, GL direct light below the
 threshold), tone-mapped as `diviewer eval` does. A pixel is *interior* when its eight neighbours are in the
 region too, else *edge*: there the path tracer's box-filtered pixel mixes lit and unlit surfaces, or object and
 wall, where the G-buffer point-samples one of them. For each model, the evaluation set's second-seed image
@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from diviewer.data.scales import light_scales
-from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
-from diviewer.evalframes import EvalFrames, crop_frame, default_evalset
-from diviewer.evalscore import regions
+from diviewer.evaluation.evaluate import area_direct_of, model_input, run_model, stored_inputs
+from diviewer.evaluation.frames import EvalFrames, crop_frame, default_evalset
+from diviewer.evaluation.scoring import regions
 from diviewer.metrics import tonemap
 from diviewer.runtime import NeuralGI
 

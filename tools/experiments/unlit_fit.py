@@ -3,8 +3,8 @@ capture's frames, per split (train / val / test) and region, against the capture
 
 Usage: python tools/experiments/unlit_fit.py --data CAPTURE --model M [--model M ...] [--frames N] [--out OUT.json]
 
-The evaluation set's region metrics (`diviewer.evalscore.regions`) need an object mask, which captures do not
-store: it is rendered again here with GL for each frame (`diviewer.evalset.object_mask`, the evaluation set's own
+The evaluation set's region metrics (`diviewer.evaluation.scoring.regions`) need an object mask, which captures do not
+store: it is rendered again here with GL for each frame (`diviewer.evaluation.evalset.object_mask`, the evaluation set's own
 function). The bias of a region is sum(model) / sum(truth) - 1 over its pixels in all scored frames: the truth's
 Monte-Carlo noise averages out of a sum, so a 64-spp truth gives the bias without a denoised reference (its PSNR
 would not: it is capped by the truth's noise, and is not reported). ``--frames`` frames per split, evenly spaced
@@ -22,10 +22,10 @@ import numpy as np
 
 from diviewer.data.dataset import Dataset
 from diviewer.data.scales import dataset_scene, light_scales
-from diviewer.evalframes import EvalFrames, default_evalset
-from diviewer.evalscore import LUMINANCE, UNLIT, regions
-from diviewer.evalset import movable_objects, object_mask
-from diviewer.evaluate import run_model, stored_inputs
+from diviewer.evaluation.frames import EvalFrames, default_evalset
+from diviewer.evaluation.scoring import LUMINANCE, UNLIT, regions
+from diviewer.evaluation.evalset import movable_objects, object_mask
+from diviewer.evaluation.evaluate import run_model, stored_inputs
 from diviewer.gl.context import headless_context
 from diviewer.gl.renderer import Renderer
 from diviewer.runtime import NeuralGI

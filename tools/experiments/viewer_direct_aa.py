@@ -29,7 +29,7 @@ from scale_accuracy import STREAM  # noqa: E402
 
 def measure(models: list[Path], cache: Path, size: int, frames: int, samples: int, exposure: float) -> dict:
     from diviewer.bench.runner import read_final
-    from diviewer.evaluate import score
+    from diviewer.evaluation.evaluate import score
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
     from diviewer.gl.neural import NeuralPass

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.evalframes import EvalFrames, crop_frame
-from diviewer.evalscore import regions
+from diviewer.evaluation.frames import EvalFrames, crop_frame
+from diviewer.evaluation.scoring import regions
 from diviewer.gl.context import headless_context
 from diviewer.gl.renderer import Renderer
 from diviewer.gl.vxgi import VXGIPass, VXGISettings
