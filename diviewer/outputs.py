@@ -38,7 +38,7 @@ BUILD_FILES = (BUILD_STATE, "ladder.json", "evalset_eval.json", "replaced_eval.j
 """A build's own files in its work folder; with every output its state records (`_build_outputs`) and its
 models/ folder, never written by another command."""
 SHIPPED_SUFFIXES = ("_ladder_curves.png", "_ladder.json", "_curves.png", "_metrics.csv")
-"""Files shipped beside a model NAME.onnx as NAME<suffix> (diviewer build's ship stage, tools/ship_model.py)."""
+"""Files shipped beside a model NAME.onnx as NAME<suffix> (diviewer build's ship stage, `diviewer ship model`)."""
 DATASET_FILES = ("manifest.json", "frames", "thumbs")
 """A dataset's own files and folders (diviewer capture, data): everything under ``frames`` and ``thumbs``."""
 OWNED_FILES = {"dataset": DATASET_FILES, "evalset": (*DATASET_FILES, "summary.json", "frames.zip"),

@@ -1,32 +1,26 @@
-"""Record a `diviewer eval` of a shipped model in its card: say the full evaluation set's scores beside the compact
-set's (``evalset_compact``, written when it shipped), in the card and the ONNX metadata together, the weights
-untouched.
+"""`diviewer ship eval`: a `diviewer eval` of a shipped model recorded in its card: say the full evaluation set's
+scores beside the compact set's (``evalset_compact``, written when it shipped), in the card and the ONNX metadata
+together, the weights untouched::
 
-Usage: python tools/card_eval.py --eval docs/data/sponza_walk/eval_full_k8.json --model assets/models/sponza.onnx
-           [--method sponza] [--key evalset_full]
+    diviewer ship eval --eval docs/data/sponza_walk/eval_full_k8.json --model assets/models/sponza.onnx
+        [--method sponza] [--key evalset_full]
 
 ``--method`` is the model's name in the eval JSON (default: the model file's stem). The card takes the scores only
 if that method scored these weights: its ``checkpoint_sha256`` (`diviewer eval` records it since 2026-11-28) must be
 the card's; in an older JSON without it, the card of the model file the method names must carry the card's. The
-record keeps the per-split means a shipped card keeps (`ship_model.SCORES`), each split's frame count and the
+record keeps the per-split means a shipped card keeps (`diviewer.ship.model.SCORES`), each split's frame count and the
 evaluation set it was scored on.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from diviewer.build.pipeline import write_model_card  # noqa: E402
-from diviewer.errors import DiviewerError  # noqa: E402
-from diviewer.runtime import read_metadata  # noqa: E402
-from ship_model import split_scores  # noqa: E402
+from diviewer.build.pipeline import write_model_card
+from diviewer.errors import DiviewerError
+from diviewer.runtime import read_metadata
+from diviewer.ship.model import split_scores
 
 
 def scored_checkpoint(row: dict, eval_json: Path, method: str) -> str:
@@ -60,22 +54,3 @@ def record_eval(model: Path, eval_json: Path, key: str = "evalset_full", method:
                  "frames": {name: split.get("frames") for name, split in splits.items()}, "this_model": scores}
     write_model_card(model, model, card)
     return card
-
-
-def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--eval", type=Path, required=True, help="diviewer eval JSON that scored the model")
-    ap.add_argument("--model", type=Path, required=True, help="the shipped model (its card beside it)")
-    ap.add_argument("--method", default=None, help="the model's name in the JSON (default: the file's stem)")
-    ap.add_argument("--key", default="evalset_full", help="the card's field for the record (default evalset_full)")
-    a = ap.parse_args(argv)
-    card = record_eval(a.model, a.eval, a.key, a.method)
-    print(f"{a.model}: {a.key} recorded from {a.eval} ({', '.join(card[a.key]['this_model'])})")
-    return card
-
-
-if __name__ == "__main__":
-    try:
-        main()
-    except DiviewerError as exc:
-        sys.exit(f"card_eval: {exc}")

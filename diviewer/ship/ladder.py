@@ -1,8 +1,9 @@
-"""Write a scene's K-ladder record from two kinds of `diviewer eval` JSON, and put its verdict on the shipped card.
+"""`diviewer ship ladder`: a scene's K-ladder record written from two kinds of `diviewer eval` JSON, its verdict
+put on the shipped card::
 
-Usage: python tools/ladder_record.py --scene cornell --test-split TEST.json --evalset EVAL.json
-           --model K8=assets/models/cornell.onnx --model K16=runs/cornell/fly_eval/fly_k16_fp32.onnx
-           [--tolerance 0.5] [--ship assets/models] [--note TEXT]
+    diviewer ship ladder --scene cornell --test-split TEST.json --evalset EVAL.json
+        --model K8=assets/models/cornell.onnx --model K16=runs/cornell/fly_eval/fly_k16_fp32.onnx
+        [--tolerance 0.5] [--ship assets/models] [--note TEXT]
 
 EVAL.json: `diviewer eval --model ...` on the evaluation set (the rule's figure: tone-mapped PSNR over every
 frame of the set, >= 1024 spp); TEST.json: `diviewer eval --data CAPTURE --split test --model ...` (the capture's
@@ -16,21 +17,16 @@ records a ladder, it does not swap models).
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from diviewer import imageio  # noqa: E402
-from diviewer.bench.frontier import smallest_sufficient_k  # noqa: E402
-from diviewer.build.pipeline import PICK_MEASURE, QUALITY, evalset_psnr_tm, write_model_card  # noqa: E402
-from diviewer.errors import DiviewerError  # noqa: E402
+from diviewer import imageio
+from diviewer.bench.frontier import smallest_sufficient_k
+from diviewer.build.pipeline import PICK_MEASURE, QUALITY, evalset_psnr_tm, write_model_card
+from diviewer.errors import DiviewerError
 
 
-def _test_row(test: dict, model: Path) -> dict:
+def result_of(test: dict, model: Path) -> dict:
     """The `diviewer eval --data` result of ``model`` (its JSON holds one result per model)."""
     for r in test["results"]:
         if Path(r["model"]).resolve() == model.resolve():
@@ -41,7 +37,7 @@ def _test_row(test: dict, model: Path) -> dict:
 def ladder(scene: str, test: dict, ev: dict, models: dict[int, Path], tol: float) -> dict:
     rows = []
     for k, path in sorted(models.items()):
-        t = _test_row(test, path)
+        t = result_of(test, path)
         key = path.stem
         if any(key not in r["methods"] for r in ev["splits"].values()):
             raise DiviewerError(f"{key} is not among the evaluation set's methods", field="--evalset")
@@ -62,32 +58,21 @@ def ladder(scene: str, test: dict, ev: dict, models: dict[int, Path], tol: float
                     f"({pick['best_psnr']:.2f} dB)", "rows": rows}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", required=True)
-    ap.add_argument("--test-split", type=Path, required=True)
-    ap.add_argument("--evalset", type=Path, required=True)
-    ap.add_argument("--model", action="append", required=True, help="KN=PATH")
-    ap.add_argument("--tolerance", type=float, default=0.5)
-    ap.add_argument("--ship", type=Path)
-    ap.add_argument("--note", default="")
-    a = ap.parse_args()
-    models = {int(m.split("=", 1)[0].lstrip("Kk")): Path(m.split("=", 1)[1]) for m in a.model}
-    test = json.loads(a.test_split.read_text())
-    record = ladder(a.scene, test, json.loads(a.evalset.read_text()), models, a.tolerance)
-    record.update({"test_split_json": str(a.test_split), "evalset_json": str(a.evalset), "note": a.note})
-    text = json.dumps(record, indent=1) + "\n"
-    print(text)
-    if a.ship:
-        shipped = a.ship / f"{a.scene}.onnx"
+def record_ladder(scene: str, test_json: Path, evalset_json: Path, models: dict[int, Path], tol: float = 0.5,
+                  ship: Path | None = None, note: str = "") -> dict:
+    """The ladder record of ``models`` (K -> model) from the two eval JSONs; with ``ship``, SCENE_ladder.json written
+    there and the shipped SCENE.onnx's card given the verdict (refused where the chosen K is not the one shipped)."""
+    record = ladder(scene, json.loads(Path(test_json).read_text()), json.loads(Path(evalset_json).read_text()),
+                    models, tol)
+    record.update({"test_split_json": str(test_json), "evalset_json": str(evalset_json), "note": note})
+    if ship is not None:
+        shipped = ship / f"{scene}.onnx"
         card = json.loads(shipped.with_suffix(".json").read_text())
         if card["K"] != record["chosen_K"]:
-            raise SystemExit(f"the ladder chose K={record['chosen_K']}, {shipped} is K={card['K']}: ship that model first")
-        imageio.write_text(a.ship / f"{a.scene}_ladder.json", text)
-        card["ladder"] = {"chosen_K": record["chosen_K"], "why": record["rule"] + (f"; {a.note}" if a.note else ""),
-                          "file": f"{a.scene}_ladder.json"}
+            raise DiviewerError(f"the ladder chose K={record['chosen_K']}, the shipped model is K={card['K']}: ship "
+                                f"that model first (`diviewer ship model`)", path=shipped, field="K")
+        imageio.write_text(ship / f"{scene}_ladder.json", json.dumps(record, indent=1) + "\n")
+        card["ladder"] = {"chosen_K": record["chosen_K"], "why": record["rule"] + (f"; {note}" if note else ""),
+                          "file": f"{scene}_ladder.json"}
         write_model_card(shipped, shipped, card)
-
-
-if __name__ == "__main__":
-    main()
+    return record

@@ -1,11 +1,12 @@
-"""Ship an exported model as its scene's model (assets/models/SCENE.onnx), with what a shipped card carries beyond
-`diviewer export`'s: how it was made, its compact-set scores beside the model it replaces, the ladder's verdict and
-the rebuild command. `diviewer build` does the same at the end of a full build; this is for a model trained by hand.
+"""`diviewer ship model`: an exported model shipped as its scene's model (assets/models/SCENE.onnx), with what a
+shipped card carries beyond `diviewer export`'s: how it was made, its compact-set scores beside the model it
+replaces, the ladder's verdict and the rebuild command. `diviewer build` does the same at the end of a full build;
+this is for a model trained by hand::
 
-Usage: python tools/ship_model.py --model runs/cornell/fly_eval/fly_area4_k8_fp32.onnx --run runs/cornell/fly_area4_k8
-           --eval docs/data/compact/EVAL.json --command "diviewer capture ..." [--command ...] --note TEXT
-           --ladder-why TEXT [--ladder-file cornell_ladder.json] [--ship assets/models] [--previous-eval OLD.json]
-           [--ladder-run 8 runs/cornell/fly_k8 --ladder-run 16 ...]
+    diviewer ship model --model runs/cornell/fly_eval/fly_area4_k8_fp32.onnx --run runs/cornell/fly_area4_k8
+        --eval docs/data/compact/EVAL.json --command "diviewer capture ..." [--command ...] --note TEXT
+        --ladder-why TEXT [--ladder-file cornell_ladder.json] [--ship assets/models] [--previous-eval OLD.json]
+        [--ladder-run 8 runs/cornell/fly_k8 --ladder-run 16 ...]
 
 EVAL.json: `diviewer eval --model MODEL --model assets/models/SCENE.onnx --out EVAL.json` on the compact evaluation
 set (the card records the tone-mapped region scores of both, per split: ``evalset_compact``). A model that ships
@@ -19,18 +20,13 @@ shipped card's recipe must be the scene's recipe file (tests/train/test_recipe.p
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from diviewer import imageio  # noqa: E402
-from diviewer.build.pipeline import write_ladder_curves, write_model_card  # noqa: E402
-from diviewer.errors import DiviewerError  # noqa: E402
+from diviewer import imageio
+from diviewer.build.pipeline import write_ladder_curves, write_model_card
+from diviewer.errors import DiviewerError
 
 SCORES = ("psnr_tm", "ssim_tm", "psnr_tm_object", "psnr_tm_object_unlit", "ssim_tm_object_unlit", "psnr_tm_shade",
           "ssim_tm_shade", "stride_shade")
@@ -80,31 +76,3 @@ def ship(model: Path, run: Path, eval_json: Path, commands: list[str], note: str
             with imageio.atomic_path(dest / f"{scene}{suffix}") as tmp:
                 shutil.copyfile(run / name, tmp)
     return card
-
-
-def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--model", type=Path, required=True, help="an exported model (its card beside it)")
-    ap.add_argument("--run", type=Path, required=True, help="its training run (curves.png, metrics.csv)")
-    ap.add_argument("--eval", type=Path, required=True, help="diviewer eval JSON of it and the shipped model")
-    ap.add_argument("--previous-eval", type=Path, default=None,
-                    help="the shipped model's eval JSON on the same frames, where the scene file changes with this "
-                         "model (default: --eval holds both)")
-    ap.add_argument("--command", action="append", required=True, help="how it was made, one command each")
-    ap.add_argument("--note", required=True, help="what it is, in a sentence or two")
-    ap.add_argument("--ladder-why", required=True, help="why this K (the ladder's verdict)")
-    ap.add_argument("--ladder-file", default=None, help="the ladder record beside it (default SCENE_ladder.json)")
-    ap.add_argument("--ladder-run", nargs=2, action="append", default=[], metavar=("K", "RUN"),
-                    help="a K of the ladder and its training run (or the run's metrics.csv), once per K: their "
-                         "curves on one figure, SCENE_ladder_curves.png (the card's ladder.curves)")
-    ap.add_argument("--ship", type=Path, default=ROOT / "assets" / "models")
-    a = ap.parse_args(argv)
-    runs = {int(k): Path(run) for k, run in a.ladder_run}
-    card = ship(a.model, a.run, a.eval, a.command, a.note, a.ladder_why, a.ladder_file, a.ship, a.previous_eval,
-                runs)
-    print(f"shipped {a.model} as {a.ship / (card['scene'] + '.onnx')} (K={card['K']})")
-    return card
-
-
-if __name__ == "__main__":
-    main()

@@ -246,7 +246,7 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
             assert m["psnr_tm_object"] is not None and m["psnr_tm_object"]["frames"] >= 1
         assert methods["pt_spp1"]["equivalent_spp"]["psnr_tm"]["text"] == "1"
         assert methods["twice"]["psnr"] == methods["twice_1"]["psnr"]
-        # which weights each row scored (tools/card_eval.py checks it): the card's checkpoint, None without one
+        # which weights each row scored (`diviewer ship eval` checks it): the card's checkpoint, None without one
         assert methods["twice"]["checkpoint_sha256"] == "c" * 64 and methods["square"]["checkpoint_sha256"] is None
         assert methods["twice"]["edge_guard"] == 0  # the padding it ran with: no aspect crops recorded, no guard
         below = methods["twice"]["below_direct"]

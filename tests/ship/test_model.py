@@ -1,4 +1,5 @@
-"""tools/ship_model.py: an exported model becomes the scene's shipped one, its card and ONNX metadata alike."""
+"""diviewer.ship.model (`diviewer ship model`): an exported model becomes the scene's shipped one, its card and ONNX
+metadata alike."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from onnx_models import base_meta, direct_times
-from tool_modules import load_tool
+from diviewer.cli import main
 
 
 def _model(path: Path, factor: float) -> Path:
@@ -16,6 +17,13 @@ def _model(path: Path, factor: float) -> Path:
     direct_times(path, factor=factor, meta=meta)
     path.with_suffix(".json").write_text(json.dumps(meta))
     return path
+
+
+def _ship(argv: list[str], capsys=None) -> dict:
+    """`diviewer ship model ARGV`, and the card it wrote (read from the --ship folder's SCENE.json)."""
+    assert main(["ship", "model", *argv]) == 0
+    dest = Path(argv[argv.index("--ship") + 1])
+    return json.loads((dest / f"{base_meta()['scene']}.json").read_text())
 
 
 def _eval(path: Path, scores: dict[str, float]) -> Path:
@@ -30,7 +38,6 @@ def _eval(path: Path, scores: dict[str, float]) -> Path:
 def test_ship_writes_card_fields_and_files_and_replaces_the_shipped_model(tmp_path):
     from diviewer.runtime import read_metadata
 
-    tool = load_tool("ship_model")
     ship, run = tmp_path / "ship", tmp_path / "run"
     ship.mkdir()
     run.mkdir()
@@ -39,7 +46,7 @@ def test_ship_writes_card_fields_and_files_and_replaces_the_shipped_model(tmp_pa
     _model(ship / f"{scene}.onnx", 1.0)
     new = _model(tmp_path / "new_k8.onnx", 2.0)
     ev = _eval(tmp_path / "ev.json", {"new_k8": 35.0, scene: 33.0})
-    card = tool.main(["--model", str(new), "--run", str(run), "--eval", str(ev), "--command", "diviewer train ...",
+    card = _ship(["--model", str(new), "--run", str(run), "--eval", str(ev), "--command", "diviewer train ...",
                       "--note", "a test model", "--ladder-why", "K=16 within 0.2 dB", "--ship", str(ship)])
     shipped = ship / f"{scene}.onnx"
     assert json.loads(shipped.with_suffix(".json").read_text()) == card == read_metadata(shipped)
@@ -60,7 +67,6 @@ def test_ship_draws_the_ladders_curves_from_each_ks_run_sized_by_the_ladder_reco
 
     from diviewer.runtime import read_metadata
 
-    tool = load_tool("ship_model")
     ship = tmp_path / "ship"
     ship.mkdir()
     scene = base_meta()["scene"]
@@ -76,7 +82,7 @@ def test_ship_draws_the_ladders_curves_from_each_ks_run_sized_by_the_ladder_reco
                                                                     {"K": 8, "bytes": 2_700_000}]}))
     new = _model(tmp_path / "new_k8.onnx", 2.0)
     ev = _eval(tmp_path / "ev.json", {"new_k8": 35.0, scene: 33.0})
-    card = tool.main(["--model", str(new), "--run", str(tmp_path / "run_k8"), "--eval", str(ev), "--command", "c",
+    card = _ship(["--model", str(new), "--run", str(tmp_path / "run_k8"), "--eval", str(ev), "--command", "c",
                       "--note", "n", "--ladder-why", "w", "--ship", str(ship), *runs])
     assert card["ladder"]["curves"] == f"{scene}_ladder_curves.png" == read_metadata(ship / f"{scene}.onnx")[
         "ladder"]["curves"]
@@ -85,28 +91,26 @@ def test_ship_draws_the_ladders_curves_from_each_ks_run_sized_by_the_ladder_reco
     assert {(31, 119, 180), (255, 127, 14)} <= px  # a line for each K
 
 
-def test_a_model_missing_from_the_eval_json_is_refused_by_name(tmp_path):
-    from diviewer.errors import DiviewerError
-
-    tool = load_tool("ship_model")
+def test_a_model_missing_from_the_eval_json_is_refused_by_name(tmp_path, capsys):
     scene = base_meta()["scene"]
     new = _model(tmp_path / "new_k8.onnx", 2.0)
     ev = _eval(tmp_path / "ev.json", {scene: 33.0})
-    with pytest.raises(DiviewerError, match="no method 'new_k8'"):
-        tool.main(["--model", str(new), "--run", str(tmp_path), "--eval", str(ev), "--command", "c", "--note", "n",
-                   "--ladder-why", "w", "--ship", str(tmp_path)])
+    assert main(["ship", "model", "--model", str(new), "--run", str(tmp_path), "--eval", str(ev), "--command", "c",
+                 "--note", "n", "--ladder-why", "w", "--ship", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "diviewer ship: error:" in err and "no method 'new_k8'" in err and str(ev) in err
+    assert not (tmp_path / f"{scene}.onnx").exists()  # nothing shipped
 
 
 def test_a_scene_file_edited_with_the_model_takes_the_previous_models_scores_from_their_own_json(tmp_path):
     """--previous-eval: the new model scored on the restamped set, the shipped one on the set before it."""
-    tool = load_tool("ship_model")
     ship = tmp_path / "ship"
     ship.mkdir()
     scene = base_meta()["scene"]
     _model(ship / f"{scene}.onnx", 1.0)
     new = _model(tmp_path / "new_k8.onnx", 2.0)
     ev_new, ev_old = _eval(tmp_path / "new.json", {"new_k8": 36.0}), _eval(tmp_path / "old.json", {scene: 31.0})
-    card = tool.main(["--model", str(new), "--run", str(tmp_path), "--eval", str(ev_new), "--previous-eval",
+    card = _ship(["--model", str(new), "--run", str(tmp_path), "--eval", str(ev_new), "--previous-eval",
                       str(ev_old), "--command", "c", "--note", "n", "--ladder-why", "w", "--ship", str(ship)])
     compact = card["evalset_compact"]
     assert compact["this_model"]["moved_camera"]["psnr_tm"] == 36.0
