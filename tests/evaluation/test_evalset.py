@@ -8,7 +8,6 @@ import json
 import math
 import os
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -264,90 +263,13 @@ def test_eval_scores_every_split_shape_and_region_as_strict_json(evalset, tmp_pa
         assert sum(r["sum"] for r in rows) / sum(r["sum_ref"] for r in rows) - 1 == pytest.approx(methods["twice"]["bias"])
         assert np.mean([r["psnr_tm"] for r in rows]) == pytest.approx(methods["twice"]["psnr_tm"]["mean"])
         assert len(methods["direct"]["per_frame"]) == len(rows) and "per_frame" not in methods["pt_spp1"]
-    # each model's training truth over its error (diviewer.evaluation.truthmargin), as the tool reads it from the frames
-    from tool_modules import load_tool
-
-    tool, read = load_tool("experiments/truth_margin"), {}
-    for name in ("twice", "square"):
-        assert tool.main(["--eval", str(res), "--model-key", name, "--project", "8", "--out", str(tmp_path / name)]) == 0
-        read[name] = json.loads((tmp_path / name).read_text())["splits"]
+    # each model's training truth over its error (diviewer.evaluation.truthmargin): a rung of the ladder, or projected
     for key in SPLIT_KEYS:
         methods = r["splits"][key]["methods"]
-        for name, spp, rung, tool_key in (("twice", 4, "pt_spp4", "margin_pt_spp4"),
-                                          ("square", 8, "pt_spp4, projected to 8 spp", "margin_projected_spp8")):
-            got, want = methods[name]["truth_margin"], read[name][key]["per_rung"][tool_key]
-            assert (got["truth_spp"], got["from"]) == (spp, rung)
-            assert got["frames"] + got["unresolved"] == 2 and (got["frames"], got["unresolved"]) == (
-                want["frames"], want["unresolved"])
-            for k in ("median_db", "lowest_db", "share_at_least_6db"):
-                assert got[k] == pytest.approx(want[k], abs=1e-6), (key, name, k)
+        for name, spp, rung in (("twice", 4, "pt_spp4"), ("square", 8, "pt_spp4, projected to 8 spp")):
+            got = methods[name]["truth_margin"]
+            assert (got["truth_spp"], got["from"]) == (spp, rung) and got["frames"] + got["unresolved"] == 2
         assert "truth_margin" not in methods["direct"]
-
-
-@pytest.mark.slow
-def test_the_filtered_truths_margin_is_read_from_passes_traced_again_and_resumes(evalset, tmp_path):
-    """tools/experiments/filtered_truth_margin.py: each frame traced again in passes (kept, extended when more are
-    asked, never traced twice), the truth at 1, 2, ... passes raw and filtered, each margin over the model as
-    `diviewer.evaluation.truthmargin` takes it; on the box's flat walls the filtered truth is the closer of the two."""
-    from diviewer.data.truth_filter import TruthFilter, filter_truth
-    from diviewer.metrics import mse, psnr_error, tonemap
-    from diviewer.evaluation.truthmargin import margin_db
-    from tool_modules import load_tool
-
-    out, _ = evalset
-    model, _ = _models(tmp_path)
-    scores = tmp_path / "eval.json"
-    assert main(["eval", "--model", str(model), "--evalset", str(out), "--out", str(scores)]) == 0
-    tool, renders, res = load_tool("experiments/filtered_truth_margin"), tmp_path / "renders", tmp_path / "m.json"
-    argv = ["--eval", str(scores), "--model-key", "twice", "--evalset", str(out), "--pass-spp", "2",
-            "--renders", str(renders), "--out", str(res)]
-    assert tool.main(argv + ["--passes", "1"]) == 0
-    first = {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")}
-    assert len(first) == 8
-    assert tool.main(argv + ["--passes", "2"]) == 0  # extended: each file holds two passes now
-    second = {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")}
-    assert set(second) == set(first) and all(second[p] != first[p] for p in first)
-    assert tool.main(argv + ["--passes", "2", "--counts", "2", "--out", str(tmp_path / "only.json")]) == 0
-    assert {p: p.stat().st_mtime_ns for p in renders.glob("*.npz")} == second  # nothing left to trace
-    only = json.loads((tmp_path / "only.json").read_text())["splits"]["moved_camera"]["per_truth"]
-    assert set(only) == {"4_raw", "4_filtered_1_32_0.01"}
-    # the filter a recipe trains on, first (tools/sponza_chain.sh scores each build's so); a recipe without one refused
-    recipes = Path(__file__).parents[2] / "assets" / "recipes"
-    argv_recipe = argv + ["--passes", "2", "--counts", "2", "--out", str(tmp_path / "recipe.json"),
-                          "--filter", "1:32:0.01"]
-    assert tool.main(argv_recipe + ["--recipe", str(recipes / "sponza_filtered128.toml")]) == 0
-    got = json.loads((tmp_path / "recipe.json").read_text())
-    assert got["filters"][0] == {"levels": 2, "normal_power": 32.0, "plane": 0.01, "range_sigma": 0.6}
-    assert set(got["splits"]["moved_camera"]["per_truth"]) == {
-        "4_raw", "4_filtered_2_32_0.01_r0.6", "4_filtered_1_32_0.01"}
-    with pytest.raises(SystemExit, match=r"sponza_walk64\.toml: capture\.truth_filter: the recipe filters nothing"):
-        tool.main(argv_recipe + ["--recipe", str(recipes / "sponza_walk64.toml"), "--out", str(tmp_path / "no.json")])
-    assert not (tmp_path / "no.json").exists()
-    r = json.loads(res.read_text())
-    ev, closer = EvalFrames(out), []
-    for key in SPLIT_KEYS:
-        split = r["splits"][key]
-        assert set(split["per_truth"]) == {"2_raw", "2_filtered_1_32_0.01", "4_raw", "4_filtered_1_32_0.01"}
-        width = json.loads(scores.read_text())["splits"][key]["shape"][0]
-        for row in split["frames"]:
-            i = row["index"]
-            frame = {k: crop(v, width) for k, v in ev.load(i).items()}
-            passes = np.load(renders / f"{i:06d}_spp2.npz")
-            pt, direct = (crop(passes[c].mean(axis=0), width) for c in ("pt", "direct"))
-            truth = tonemap(frame["pt"], ev.exposure)
-            noise = mse(tonemap(frame["pt_b"], ev.exposure), truth) / 2
-            raw = mse(tonemap(pt, ev.exposure), truth)
-            filtered = mse(tonemap(filter_truth(pt, direct, frame["albedo"], frame["normal"], frame["depth"],
-                                                ev.entry(i)["config"]["camera"]["fov"], TruthFilter()),
-                                   ev.exposure), truth)
-            assert row["4_raw_mse"] == pytest.approx(raw, rel=1e-5)
-            assert row["4_filtered_1_32_0.01_mse"] == pytest.approx(filtered, rel=1e-5)
-            assert row["margin_4_raw"] == pytest.approx(margin_db(row["model_mse"], raw, noise))
-            assert row["truth_noise_mse"] == pytest.approx(noise) and row["model_mse"] == pytest.approx(
-                psnr_error(next(f["psnr_tm"] for f in json.loads(scores.read_text())["splits"][key]["methods"]
-                                ["twice"]["per_frame"] if f["index"] == i)))
-            closer.append(filtered < raw)
-    assert np.mean(closer) > 0.5
 
 
 @pytest.mark.slow
@@ -472,24 +394,6 @@ def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, mo
             a, b = r["splits"][key]["methods"][m], full["splits"][key]["methods"][m]
             assert a["psnr_tm"]["mean"] == pytest.approx(b["psnr_tm"]["mean"], abs=0.05), (key, m)
             assert a["ssim_tm"]["mean"] == pytest.approx(b["ssim_tm"]["mean"], abs=2e-3), (key, m)
-    # The truth-margin tool reads a compact set's stored ladder scores where the full set has the images: the same
-    # margins, rung by rung and projected, up to the compact set's float16 truth.
-    from tool_modules import load_tool
-
-    tool, margins = load_tool("experiments/truth_margin"), {}
-    (tmp_path / "full.json").write_text(json.dumps(full))
-    for name, scores in (("compact", res), ("full", tmp_path / "full.json")):
-        assert tool.main(["--eval", str(scores), "--model-key", "twice", "--project", "8",
-                          "--out", str(tmp_path / f"margin_{name}.json")]) == 0
-        margins[name] = json.loads((tmp_path / f"margin_{name}.json").read_text())["splits"]
-    for key in SPLIT_KEYS:
-        want = margins["full"][key]["per_rung"]
-        assert set(want) == {"margin_pt_spp1", "margin_pt_spp4", "margin_projected_spp8"}
-        for rung, w in want.items():
-            g = margins["compact"][key]["per_rung"][rung]
-            assert (g["frames"], g["unresolved"]) == (w["frames"], w["unresolved"]) and w["frames"] + w["unresolved"] == 1
-            if w["frames"]:
-                assert g["median_db"] == pytest.approx(w["median_db"], abs=0.05), (key, rung)
     # A changed byte in the compact set is refused, naming the frame.
     m = json.loads((compact / "manifest.json").read_text())
     m["frame_list"][1]["sha256"] = "0" * 64
@@ -587,78 +491,3 @@ def test_the_shipped_compact_sets_fit_the_repository_budget():
     """cornell and sponza together <= 10 MB (the device carries the whole tracked tree)."""
     total = sum(p.stat().st_size for d in SHIPPED.values() if d.is_dir() for p in d.iterdir())
     assert (SHIPPED["cornell"] / "manifest.json").is_file() and total <= 10 * 2**20, total
-
-
-@pytest.mark.slow
-def test_the_unlit_regions_frames_score_as_eval_scores_the_region(evalset, tmp_path):
-    """tools/experiments/unlit_edges.py: the per-frame PSNRs of the object's unlit pixels average to eval's region
-    figure, interior and edge split the region's pixels, and a model of 1.5 x the direct light is black there
-    (bias -1 where the truth has light and the direct light none)."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/unlit_edges")
-    out, _ = evalset
-    model, _ = _models(tmp_path)
-    res = tool.main(["--model", str(model), "--evalset", str(out), "--out", str(tmp_path / "edges.json")])
-    assert json.loads((tmp_path / "edges.json").read_text()) == json.loads(json.dumps(res))
-    full = evaluate_evalset([model], out, log=quiet)
-    scored = 0
-    for split, rows in res["splits"].items():
-        r = rows[str(model)]
-        if not r["frames"]:
-            continue
-        scored += 1
-        frames = r["per_frame"]
-        assert len(frames) == r["frames"] and sum(f["pixels"] for f in frames) == r["pixels_all"]
-        assert r["pixels_interior"] + r["pixels_edge"] == r["pixels_all"]
-        assert np.mean([f["psnr"] for f in frames]) == pytest.approx(r["per_frame_mean"])
-        (w, h), *more = EvalFrames(out).splits()[split]  # the tool scores a split at its first shape
-        key = f"{split}_{w}x{h}" if more else split
-        region = full["splits"][key]["methods"]["twice"]["psnr_tm_object_unlit"]["mean"]
-        assert r["per_frame_mean"] == pytest.approx(region, abs=1e-3), split
-        assert all(f["bias"] is None or -1.0 <= f["bias"] < -0.5 for f in frames), frames
-    assert scored, "the tiny set has unlit object pixels in some split"
-
-@pytest.mark.slow
-def test_a_shaped_copy_scores_other_splits_at_window_shapes_from_the_same_frames(evalset, tmp_path):
-    """tools/experiments/evalset_shapes.py: the held-out cameras at 22x16 and 28x16 from the stored 28-column frames,
-    hard-linked; a split at a shape the set scores already scores the same; bad widths, splits and compact sets are
-    refused by name."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/evalset_shapes")
-    out, _ = evalset
-    model, _ = _models(tmp_path)
-    copy = tmp_path / "wide"
-    tool.main(["--evalset", str(out), "--out", str(copy), "--split", "moved_camera", "--split", "window_shapes",
-               "--widths", "16,28"])
-    frame = next((copy / "frames").glob("*.npy"))
-    assert frame.stat().st_nlink >= 2  # linked, not copied
-    shaped = evaluate_evalset([model], copy, log=quiet)
-    assert set(shaped["splits"]) == {"moved_camera_16x16", "moved_camera_28x16", "window_shapes_16x16",
-                                     "window_shapes_28x16"}
-    full = evaluate_evalset([model], out, log=quiet)
-    for mine, theirs in (("moved_camera_16x16", "moved_camera"), ("window_shapes_28x16", "window_shapes_28x16")):
-        for m in ("twice", "direct", "noise_floor"):
-            assert shaped["splits"][mine]["methods"][m]["psnr_tm"] == full["splits"][theirs]["methods"][m]["psnr_tm"]
-    wide = shaped["splits"]["moved_camera_28x16"]
-    assert wide["shape"] == [28, 16] and wide["frames"] == full["splits"]["moved_camera"]["frames"]
-    # geometry: the whole frame as eval scores it, and the pixels that show geometry (cornell's box: every pixel
-    # of the scene camera's square crop)
-    geo = tool.geometry_scores(copy, model)["splits"]
-    for key, g in geo.items():
-        m = shaped["splits"][key]["methods"]
-        assert g["model_psnr_tm"] == pytest.approx(m["twice"]["psnr_tm"]["mean"], abs=1e-3), key
-        assert g["direct_psnr_tm"] == pytest.approx(m["direct"]["psnr_tm"]["mean"], abs=1e-3), key
-        assert 0.0 <= g["void_mean"] <= g["void_max"] <= 1.0
-    assert geo["window_shapes_16x16"]["void_max"] == 0.0
-    assert geo["window_shapes_16x16"]["model_psnr_tm_geometry"] == geo["window_shapes_16x16"]["model_psnr_tm"]
-    with pytest.raises(DiviewerError, match="--widths"):
-        tool.main(["--evalset", str(out), "--out", str(tmp_path / "w2"), "--split", "moved_camera", "--widths", "21"])
-    with pytest.raises(DiviewerError, match="no split 'nowhere'"):
-        tool.main(["--evalset", str(out), "--out", str(tmp_path / "w3"), "--split", "nowhere", "--widths", "28"])
-    compact = tmp_path / "compact"
-    write_compact(out, compact, frames_per_split=1, log=quiet)
-    with pytest.raises(DiviewerError, match="compact"):
-        tool.main(["--evalset", str(compact), "--out", str(tmp_path / "w4"), "--split", "moved_camera",
-                   "--widths", "28"])

@@ -74,32 +74,3 @@ def test_a_split_reads_its_truths_rung_or_projects_the_top_one():
     assert at512["share_at_least_6db"] == 1.0
     with pytest.raises(ValueError):  # rows of other frames: refused, not paired short
         tm.truth_margin(model[:2], noise, ladder, 64)
-
-
-def test_the_projection_tool_reads_a_margin_files_frames_for_a_cleaner_truth_and_a_better_model(tmp_path):
-    """tools/experiments/margin_projection.py: at the scored model's error (0 dB) it gives what truth_margin.py
-    projects; a model D dB better stands D dB closer to its truth where the truth's own noise is negligible; a
-    frame the truth cannot resolve is counted, not scored; a file without frames is refused."""
-    import json
-
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/margin_projection")
-    noise = 1e-7
-    frames = [{"truth_noise_mse": noise, "model_mse": m, "pt_spp256_mse": r} for m, r in
-              ((4e-4, 2e-5), (1e-3, 4e-5), (5e-8, 2e-5))]  # the third model's error below the truth's noise
-    record = {"ladder_spp": [64, 256], "splits": {"a": {"model": "k8", "frames": frames}}}
-    (tmp_path / "m.json").write_text(json.dumps(record))
-    out = tmp_path / "p.json"
-    assert tool.main(["--margin", str(tmp_path / "m.json"), "--project", "512", "--project", "1024",
-                      "--better-db", "0", "--better-db", "3", "--out", str(out)]) == 0
-    got = json.loads(out.read_text())["splits"]["a"]
-    want = [tm.margin_db(f["model_mse"], tm.projected_mse(f["pt_spp256_mse"], noise, 256, 512), noise)
-            for f in frames[:2]]
-    assert got["512/0"]["median_db"] == pytest.approx(float(np.median(want)))
-    assert (got["512/0"]["frames"], got["512/0"]["unresolved"]) == (2, 1)
-    assert got["512/3"]["median_db"] == pytest.approx(got["512/0"]["median_db"] - 3.0, abs=0.01)
-    assert got["1024/0"]["median_db"] == pytest.approx(got["512/0"]["median_db"] + 10 * math.log10(2), abs=0.01)
-    (tmp_path / "bad.json").write_text(json.dumps({"ladder_spp": [256], "splits": {"a": {"per_rung": {}}}}))
-    with pytest.raises(SystemExit, match="bad.json"):
-        tool.main(["--margin", str(tmp_path / "bad.json"), "--project", "512"])
