@@ -386,7 +386,7 @@ def _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log) -> d
 
 def _path_tracer_timing(settings, scene, ds, configs, notes, log, time_path_tracer) -> dict:
     try:
-        from diviewer.reference.mitsuba import _import_mitsuba, effective_spp
+        from diviewer.reference.mitsuba import effective_spp, import_mitsuba as _import_mitsuba
 
         _import_mitsuba()
     except DiviewerError as exc:

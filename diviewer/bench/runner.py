@@ -346,7 +346,7 @@ def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log, 
     from diviewer.runtime import pack_buffers
 
     try:
-        from diviewer.reference.mitsuba import MitsubaFrame, _import_mitsuba
+        from diviewer.reference.mitsuba import MitsubaFrame, import_mitsuba as _import_mitsuba
 
         _import_mitsuba()
     except DiviewerError as exc:

@@ -351,7 +351,7 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
     that the manifest and its fitted exposure are written once), and whichever finds every frame present
     scores the set (``jobs``: processes the scoring runs in).
     """
-    from diviewer.data.capture import _clean_stale, _render_frames_gl, open_or_create
+    from diviewer.data.capture import clean_stale, render_frames_gl, open_or_create
     from diviewer.gl.context import describe, headless_context
     from diviewer.render import check_reference
 
@@ -374,7 +374,7 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
         else:
             exposure = _fit_exposure(ctx, scene, plan, settings)
         ds = open_or_create(out, build_manifest(scene, settings, plan, exposure, ladder_spp))
-        _clean_stale(ds, {f["index"] for f in plan})
+        clean_stale(ds, {f["index"] for f in plan})
         k, n = shard
         todo = [f for f in render_order(ds.frames)
                 if f["index"] % n == k - 1 and ds.check_frame(f["index"]) is not None]
@@ -387,7 +387,7 @@ def build_evalset(scene_name: str | Path, out: Path, settings: EvalSetSettings =
             f"{settings.spp} spp twice + direct + ladder {'/'.join(map(str, settings.ladder))}: {per_frame} full "
             f"samples per pixel per frame, {truth.variant})")
         if todo:
-            _render_frames_gl(ctx, scene, ds, todo, _stored_shape(settings), truth, describe(ctx), log,
+            render_frames_gl(ctx, scene, ds, todo, _stored_shape(settings), truth, describe(ctx), log,
                               label="evalset")
     summary = {"planned": len(plan), "present": len(ds.indices()), "seconds": round(time.perf_counter() - t0, 1)}
     if summary["present"] == len(plan):

@@ -74,7 +74,7 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.renderer import Renderer
 from diviewer.gl.resources import set_uniform
-from diviewer.gl.vxgi_grid import VoxelGridPasses, _FragmentList
+from diviewer.gl.vxgi_grid import VoxelGridPasses, FragmentList
 from diviewer.scene import camera as cam
 from diviewer.scene.model import FrameConfig, Object
 from diviewer.timing import StageTimer
@@ -211,7 +211,7 @@ class VXGIPass(VoxelGridPasses):
         self._raster = ctx.renderbuffer((res, res), 1, dtype="f1")
         self._raster_fbo = ctx.framebuffer([self._raster])
         self._raster_fbo.color_mask = (False, False, False, False)
-        self._lists = {"static": _FragmentList(ctx, 4 * res * res), "dynamic": _FragmentList(ctx, res * res)}
+        self._lists = {"static": FragmentList(ctx, 4 * res * res), "dynamic": FragmentList(ctx, res * res)}
         self._keys: dict[str, object] = {}
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self.dirs, self.weights = cone_layout(settings.cones, settings.aperture)
