@@ -29,7 +29,7 @@ maps and its direct light; it adds diffuse indirect light (one bounce, or two):
 7. **composite** (vxgi_composite.glsl): ``vxgi = direct + albedo * indirect``; ``vxgi_indirect`` is
    ``albedo * indirect``, comparable with the path tracer's ``pt - pt_direct``.
 
-Accuracy on cornell (64x64, 4 frames, MSE against a 1024-spp path tracer, tools/experiments/vxgi_accuracy.py):
+Accuracy on cornell (64x64, 4 frames, MSE against a 1024-spp path tracer, vxgi_accuracy.py, docs/experiments.md):
 direct light alone 0.0167; defaults (trace_scale 2) at grids 32/64/128: one bounce 0.0049/0.0057/0.0057,
 two bounces 0.0033/0.0039/0.0038 (the coarse grid's extra leaking stands in for missing bounces). At
 64^3 and full trace resolution: isotropic without lod bias 0.0059, the defaults 0.0055.
