@@ -103,7 +103,7 @@ def parse_splits(text: str) -> tuple[float, float, float]:
 
 
 def _cmd_baseline(args: argparse.Namespace) -> int:
-    from diviewer.baseline import build_baseline
+    from diviewer.evaluation.baseline import build_baseline
 
     build_baseline(args.data, args.out, split=args.split, max_frames=args.max_frames)
     return 0
@@ -186,6 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
     from diviewer.datacommand import add_data_parsers
     from diviewer.evalcommand import add_eval_parsers
     from diviewer.inspectcommand import add_inspect_parser
+    from diviewer.ship.command import add_ship_parser
     from diviewer.train.cli import add_train_parser
     from diviewer.viewer.command import add_view_parser
 
@@ -195,6 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_train_parser(sub)
     add_view_parser(sub)
     add_build_parser(sub)
+    add_ship_parser(sub)
     add_eval_parsers(sub, _add_variant_arg)
     _add_baseline_parser(sub)
     _add_bench_parser(sub)

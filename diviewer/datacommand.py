@@ -15,7 +15,7 @@ def _cmd_data_check(args: argparse.Namespace) -> int:
     from diviewer.data.dataset import Dataset, read_manifest
 
     if "compact" in read_manifest(args.dir):  # a compact evaluation set: one zip, checksums in its manifest
-        from diviewer.evalframes import EvalFrames
+        from diviewer.evaluation.frames import EvalFrames
 
         ev = EvalFrames(args.dir)
         problems = ev.problems()

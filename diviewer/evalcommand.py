@@ -10,7 +10,7 @@ from diviewer.paths import scene_help
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from diviewer.evaluate import evaluate, evaluate_evalset, strict_json
+    from diviewer.evaluation.evaluate import evaluate, evaluate_evalset, strict_json
 
     if args.evalset is not None and args.data is not None:
         raise DiviewerError("give an evaluation set (--evalset DIR) or a dataset split (--data DIR), not both",
@@ -33,7 +33,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _jobs(args: argparse.Namespace) -> int:
-    from diviewer.evalscore import default_jobs
+    from diviewer.evaluation.scoring import default_jobs
 
     if args.jobs is None:
         return default_jobs()
@@ -50,12 +50,12 @@ def _add_jobs_arg(p) -> None:
 
 def _cmd_evalset(args: argparse.Namespace) -> int:
     from diviewer.data.capture import parse_shard
-    from diviewer.evalset import EvalSetSettings, build_evalset
+    from diviewer.evaluation.evalset import EvalSetSettings, build_evalset
     from diviewer.frames import parse_resolution
     from diviewer.locks import run_lock, shard_part
 
     if args.compact is not None:
-        from diviewer.evalframes import write_compact
+        from diviewer.evaluation.frames import write_compact
 
         write_compact(args.compact, args.out, frames_per_split=args.frames_per_split, jobs=_jobs(args))
         return 0

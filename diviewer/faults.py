@@ -14,7 +14,7 @@ ENVIRONMENT_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EACCES, errno.EPERM, err
                       errno.ENOTEMPTY, errno.EXDEV}
 
 
-def _nearest_existing(path: Path) -> Path:
+def nearest_existing(path: Path) -> Path:
     p = path
     while not p.exists() and p != p.parent:
         p = p.parent
@@ -55,7 +55,7 @@ FULL_BYTES = 1 << 20
 def disk_full(folder: Path) -> bool:
     """Whether the file system holding ``folder`` has (almost) no space or no inodes left."""
     try:
-        st = os.statvfs(_nearest_existing(folder))
+        st = os.statvfs(nearest_existing(folder))
     except OSError:
         return False
     return st.f_bavail * st.f_frsize < FULL_BYTES or (st.f_files > 0 and st.f_favail == 0)

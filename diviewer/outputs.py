@@ -12,7 +12,7 @@ from contextvars import ContextVar
 from pathlib import Path
 
 from diviewer.errors import DiviewerError
-from diviewer.faults import ENVIRONMENT_ERRNOS, _nearest_existing, disk_full, write_error  # noqa: F401 (re-exported)
+from diviewer.faults import ENVIRONMENT_ERRNOS, nearest_existing, disk_full, write_error  # noqa: F401 (re-exported)
 
 
 
@@ -20,7 +20,7 @@ from diviewer.faults import ENVIRONMENT_ERRNOS, _nearest_existing, disk_full, wr
 def _writable_from(path: Path, option: str, folder: Path | None = None) -> None:
     """The folders that would be created for ``path`` (inside ``folder``, default ``path`` itself: a folder
     to make) can be: the nearest existing one is a writable folder."""
-    anchor = _nearest_existing(folder if folder is not None else path)
+    anchor = nearest_existing(folder if folder is not None else path)
     if not anchor.is_dir():
         raise DiviewerError(f"{anchor} is a file, so {path} cannot be created under it", field=option)
     if not os.access(anchor, os.W_OK | os.X_OK):
@@ -38,7 +38,7 @@ BUILD_FILES = (BUILD_STATE, "ladder.json", "evalset_eval.json", "replaced_eval.j
 """A build's own files in its work folder; with every output its state records (`_build_outputs`) and its
 models/ folder, never written by another command."""
 SHIPPED_SUFFIXES = ("_ladder_curves.png", "_ladder.json", "_curves.png", "_metrics.csv")
-"""Files shipped beside a model NAME.onnx as NAME<suffix> (diviewer build's ship stage, tools/ship_model.py)."""
+"""Files shipped beside a model NAME.onnx as NAME<suffix> (diviewer build's ship stage, `diviewer ship model`)."""
 DATASET_FILES = ("manifest.json", "frames", "thumbs")
 """A dataset's own files and folders (diviewer capture, data): everything under ``frames`` and ``thumbs``."""
 OWNED_FILES = {"dataset": DATASET_FILES, "evalset": (*DATASET_FILES, "summary.json", "frames.zip"),
@@ -195,7 +195,7 @@ def owner(path: str | Path) -> tuple[str, str] | None:
         kind = folder_kind(folder)
         if inside[0] in OWNED_FILES[kind] and (len(inside) == 1 or inside[0] in ("frames", "thumbs")):
             what = {"manifest.json": "the manifest", "summary.json": "the summary"}.get(inside[0], "a frame")
-            return kind, f"{what} of the {_KIND_NAMES[kind]} {_shown(folder, path)}"
+            return kind, f"{what} of the {KIND_NAMES[kind]} {_shown(folder, path)}"
     kind = folder_kind(path.parent)
     if kind == "run" and path.name in OWNED_FILES["run"]:
         return "run", f"a file of the training run {path.parent}"
@@ -218,19 +218,19 @@ def check_output_dir(path: str | Path, option: str = "--out", writes: str | None
     if writes is not None:
         kind = folder_kind(path) if path.is_dir() else None
         if kind is not None and kind != writes:
-            raise DiviewerError(f"{path} is {_a(_KIND_NAMES[kind])} ({FOLDER_WRITERS[kind]} wrote it), not "
-                                f"{_a(_KIND_NAMES[writes])}; give another folder", field=option)
+            raise DiviewerError(f"{path} is {with_article(KIND_NAMES[kind])} ({FOLDER_WRITERS[kind]} wrote it), not "
+                                f"{with_article(KIND_NAMES[writes])}; give another folder", field=option)
         for parent in path.absolute().parents:
             if (parent / "manifest.json").is_file():
                 kind = folder_kind(parent)
-                raise DiviewerError(f"{path} lies inside the {_KIND_NAMES[kind]} {_shown(parent, path)}; give a "
+                raise DiviewerError(f"{path} lies inside the {KIND_NAMES[kind]} {_shown(parent, path)}; give a "
                                     f"folder outside it",
                                     field=option)
     _writable_from(path, option)
     return path
 
 
-def _a(noun: str) -> str:
+def with_article(noun: str) -> str:
     return ("an " if noun[0] in "aeiou" else "a ") + noun
 
 
@@ -239,7 +239,7 @@ def _shown(folder: Path, path: Path) -> str:
     return os.path.relpath(folder) if not path.is_absolute() else str(folder)
 
 
-_KIND_NAMES = {"dataset": "dataset", "evalset": "evaluation set", "run": "training run folder",
+KIND_NAMES = {"dataset": "dataset", "evalset": "evaluation set", "run": "training run folder",
                "render": "render folder", "build": "build work folder"}
 
 

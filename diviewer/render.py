@@ -86,7 +86,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                     neural_info["shape_note"] = note
                     print(f"diviewer render: note: {note}", file=sys.stderr)
             # Known good before anything is written: an earlier render in --out stays as it was otherwise.
-            _check_finite(scene, config, frame, (*BUFFERS, "neural", "vxgi", "vxgi_indirect"))
+            check_finite(scene, config, frame, (*BUFFERS, "neural", "vxgi", "vxgi_indirect"))
             ev, metered = display_exposure(scene, frame, exposure, tonemap)
             record = frame_record(scene, config, (width, height), seed=seed, split=split if seed is not None else None,
                                   gl_renderer=describe(ctx), render_settings=settings_dict(settings),
@@ -180,7 +180,7 @@ def model_pass(ctx, scene: Scene, renderer, net, config: FrameConfig, settings):
     return neural, area
 
 
-def _check_finite(scene: Scene, config: FrameConfig, frame: dict, names) -> None:
+def check_finite(scene: Scene, config: FrameConfig, frame: dict, names) -> None:
     """Refuse a frame with NaN/Inf in any buffer, naming the light or material that overflowed float32."""
     bad = [n for n in names if n in frame and not np.all(np.isfinite(frame[n]))]
     if not bad:
@@ -207,9 +207,9 @@ def check_reference(reference: str) -> None:
     """Fail early (before any GL work) when a reference renderer's extra is not installed."""
     if reference not in REFERENCES:
         raise DiviewerError(f"unknown reference '{reference}'; choose one of {', '.join(REFERENCES)}", field="--reference")
-    from diviewer.reference.mitsuba import _import_mitsuba
+    from diviewer.reference.mitsuba import import_mitsuba
 
-    _import_mitsuba()
+    import_mitsuba()
 
 
 def render_reference_to_dir(scene_name: str, out: Path, reference: str = "pt", spp: int = 256,

@@ -198,7 +198,7 @@ def _render_frames(scene, path, out: Path, todo: list[int], settings: dict, meth
 
 def _method_images(ctx, scene, renderer, net, config, methods, settings, render_settings) -> tuple[dict, dict]:
     """Each method's linear radiance image of ``config`` (the direct light always), and what the record says of them."""
-    from diviewer.render import _check_finite, model_pass
+    from diviewer.render import check_finite, model_pass
 
     frame = renderer.frame(config)
     images, info = {"direct": frame["direct"]}, {}
@@ -211,7 +211,7 @@ def _method_images(ctx, scene, renderer, net, config, methods, settings, render_
             neural.release()
             if area is not None:
                 area.release()
-    _check_finite(scene, config, images, tuple(images))
+    check_finite(scene, config, images, tuple(images))
     if "reference" in methods:
         from diviewer.reference import mitsuba as ref
 

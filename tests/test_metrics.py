@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -142,7 +140,7 @@ def test_equivalent_spp_from_psnr_and_non_monotone_ladders():
 def test_equivalent_spp_is_read_per_metric_and_ssim_as_its_error():
     """`equivalent` reads every metric of EQUIVALENT_BY off the ladder; SSIM through 1 - SSIM, so a model whose SSIM
     lies between two rungs gets a count between them, and a perfect one none."""
-    from diviewer.evalscore import EQUIVALENT_BY, equivalent
+    from diviewer.evaluation.scoring import EQUIVALENT_BY, equivalent
 
     ladder_spp = [1, 4, 16, 64, 256]
     row = lambda p, q, f: {"psnr_tm": {"mean": p}, "psnr": {"mean": p + 20}, "flip_ldr": {"mean": f},  # noqa: E731
@@ -156,7 +154,7 @@ def test_equivalent_spp_is_read_per_metric_and_ssim_as_its_error():
 
 
 def test_pooled_bias_is_the_signed_relative_error_of_the_summed_radiance():
-    from diviewer.evaluate import aggregate, pooled_bias, score_frame
+    from diviewer.evaluation.evaluate import aggregate, pooled_bias, score_frame
 
     rng = np.random.default_rng(3)
     truths = [rng.uniform(0.01, 0.3, (16, 16, 3)) for _ in range(3)]
@@ -210,7 +208,7 @@ def test_masked_ssim_known_answers():
 
 
 def test_regions_and_below_direct_share_on_a_synthetic_frame():
-    from diviewer.evalscore import below_direct, regions, score_frame_regions
+    from diviewer.evaluation.scoring import below_direct, regions, score_frame_regions
 
     direct = np.zeros((16, 16, 3))
     direct[:8] = 0.5  # the top half is lit
@@ -278,7 +276,7 @@ def test_stride_pattern_reads_a_grid_locked_pattern_and_not_texture_or_noise():
 
 
 def test_stride_pattern_is_scored_in_the_shade_and_pooled_per_split():
-    from diviewer.evalscore import PER_FRAME_KEYS, aggregate, score_frame_regions
+    from diviewer.evaluation.scoring import PER_FRAME_KEYS, aggregate, score_frame_regions
 
     image, albedo, depth, (yy, xx) = _textured_frame()
     direct = np.zeros_like(image)
@@ -298,135 +296,10 @@ def test_stride_pattern_is_scored_in_the_shade_and_pooled_per_split():
 
 
 def test_per_frame_keeps_each_frame_with_its_index_or_nothing_when_rows_are_missing():
-    from diviewer.evalscore import PER_FRAME_KEYS, per_frame
+    from diviewer.evaluation.scoring import PER_FRAME_KEYS, per_frame
 
     rows = [{k: float(i) for k in (*PER_FRAME_KEYS, "mse")} for i in range(3)]
     kept = per_frame([4, 7, 9], rows)
     assert [r["index"] for r in kept] == [4, 7, 9] and kept[1]["psnr_tm"] == 1.0
     assert "mse" not in kept[0] and set(kept[0]) == {"index", *PER_FRAME_KEYS}
     assert per_frame([4, 7, 9], rows[:2]) is None  # a model refused part-way: no pairing to guess
-
-
-def test_sun_dependence_scores_the_best_light_blind_output():
-    """tools/experiments/sun_dependence.py: angles spread over the range; a light-blind network's best output is
-    exact where the indirect light does not move with the light, and worse the more it moves."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/sun_dependence")
-    assert tool.angles(-40.0, 40.0, 5) == [-40.0, -20.0, 0.0, 20.0, 40.0] and tool.angles(-40.0, 40.0, 1) == [0.0]
-    rng = np.random.default_rng(0)
-    direct = rng.uniform(0.0, 1.0, (3, 8, 8, 3)).astype(np.float32)
-    indirect = rng.uniform(0.0, 0.5, (8, 8, 3)).astype(np.float32)
-    assert min(tool.blind_scores(direct + indirect, direct, 1.0)) > 100  # the direct light moves, not the rest: exact
-    moved = indirect * np.array([0.5, 1.0, 1.5], np.float32)[:, None, None, None]
-    little = tool.blind_scores(direct + indirect * np.array([0.9, 1.0, 1.1], np.float32)[:, None, None, None],
-                               direct, 1.0)
-    much = tool.blind_scores(direct + moved, direct, 1.0)
-    assert all(math.isfinite(s) for s in much) and little[0] > much[0] and little[2] > much[2]
-    assert much[1] > much[0] and much[1] > much[2]  # the middle angle is the mean's own
-
-
-def test_median_bias_puts_the_l1_optimum_below_the_mean_of_a_skewed_truth():
-    """tools/experiments/median_bias.py: on renders whose noise is right-skewed (rare bright samples) the median,
-    where L1 converges, is darker than the mean; the encoded mean is the mean where the encoding is linear and
-    darker where it is logarithmic; with no noise every optimum is the truth."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/median_bias")
-    rng = np.random.default_rng(1)
-    direct = np.full((32, 8, 8, 3), 0.2, np.float32)
-    indirect = rng.exponential(0.1, (32, 8, 8, 3)).astype(np.float32) ** 2  # heavy right tail
-    rec = tool.frame_record(direct + indirect, direct, 1.0, 1e-3)  # exposure 1e-3: the encoding's linear part
-    assert rec["median_ratio"] < 0.6 and rec["encoded_mean_ratio"] == pytest.approx(1.0, abs=1e-3)
-    assert rec["psnr_tm_encoded_mean"] > 60 > rec["psnr_tm_median"]
-    bright = tool.frame_record(direct + indirect, direct, 1.0, 1e4)  # deep in the log part: a geometric-like mean
-    assert bright["encoded_mean_ratio"] < 0.5  # a log-like mean of a heavy tail: as dark as the median here
-    flat = np.broadcast_to(indirect[:1], indirect.shape)
-    exact = tool.frame_record(direct + flat, direct, 1.0, 1e4)
-    assert exact["median_ratio"] == pytest.approx(1.0) and exact["encoded_mean_ratio"] == pytest.approx(1.0, rel=1e-5)
-
-
-def test_train_fit_pools_the_indirect_light_and_ranks_frames_by_the_truths():
-    """tools/experiments/train_fit.py: the pooled ratio weighs frames by their light; the brightest come first."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/train_fit")
-    rows = [(0.5 * b, b) for b in range(1, 13)] + [(3.0, 0.0)]  # half the light everywhere, one black truth
-    r = tool.ratios(rows)
-    assert r["pooled"] == pytest.approx((sum(0.5 * b for b in range(1, 13)) + 3.0) / sum(range(1, 13)))
-    assert r["brightest_10"][0] == 0.5 and len(r["brightest_10"]) == 10 and r["dimmest_10"][0] is None
-    # by the truth's direct share: deep shade at a quarter, the sunlit frames at the full light, a black truth left out
-    rows = [(0.25, 1.0), (0.5, 2.0), (3.0, 3.0), (4.0, 4.0), (9.0, 0.0)]
-    b = tool.by_direct_share(rows, [0.0, 0.01, 0.7, 1.0, 0.3])
-    assert b["0-0.05"] == {"frames": 2, "median_ratio": 0.25} and b["0.6-1"] == {"frames": 2, "median_ratio": 1.0}
-    assert b["0.05-0.6"] == {"frames": 0, "median_ratio": None}
-
-
-def test_ssim_budget_separates_the_level_from_the_shape():
-    """tools/experiments/ssim_budget.py: the box filter is a window mean; smoothing keeps a texture over a smooth
-    irradiance; a model right but for its level scores 1 once the level is fixed, and its ratio is the level."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/ssim_budget")
-    rng = np.random.default_rng(0)
-    x = rng.random((20, 24, 3))
-    f = tool.box_filter(x, 2)
-    assert f.shape == x.shape and f[10, 12] == pytest.approx(x[8:13, 10:15].mean(axis=(0, 1)))
-    albedo = 0.2 + 0.8 * rng.random((20, 24, 3))
-    irradiance = np.linspace(0.5, 1.5, 24)[None, :, None] * np.ones((20, 1, 3))
-    assert np.allclose(tool.smooth_indirect(irradiance * albedo, albedo, 0), irradiance * albedo)
-    direct = np.where(np.arange(24)[None, :, None] < 12, 0.0, 1.0) * albedo
-    truth = direct + irradiance * albedo + 0.05 * rng.random((20, 24, 3))
-    half = direct + 0.5 * (truth - direct)
-    b = tool.budget(half, direct, truth, albedo, exposure=1.0, radius=2)
-    assert b["indirect_ratio"] == pytest.approx(0.5) and b["ssim"] < 0.99
-    assert b["level_fixed"] == pytest.approx(1.0) and b["truth_smooth"] < b["level_fixed"]
-    assert b["psnr_tm_level_fixed"] > 100 > 40 > b["psnr_tm"]
-    assert b["level_fixed_smooth"] == pytest.approx(b["truth_smooth"])
-    assert "oracle" not in b  # no path-traced direct light stored: no oracle
-    # the oracle: the model's direct light plus the truth's exact indirect light; here the GL direct light misses a
-    # column of the path tracer's, which no indirect light can mend
-    pt_direct = direct.copy()
-    pt_direct[:, 11] = albedo[:, 11]
-    o = tool.budget(half, direct, truth + pt_direct - direct, albedo, 1.0, 2, truth_indirect=truth - direct)
-    assert o["psnr_tm_oracle"] < 40 and o["oracle"] < 1.0
-    # the truth's level is its exact indirect light's, not the truth minus the model's direct (the missed column)
-    assert o["indirect_ratio"] == pytest.approx(0.5)
-    exact = tool.budget(half, direct, truth, albedo, 1.0, 2, truth_indirect=truth - direct)
-    assert exact["oracle"] == pytest.approx(1.0) and exact["psnr_tm_oracle"] > 100
-
-
-def test_truth_margin_refuses_a_model_no_split_scores(tmp_path):
-    """truth_margin.py names what it cannot read, and writes nothing: a model key no split scores. (A compact set
-    it reads from its stored ladder scores: tests/test_evalset.py.)"""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/truth_margin")
-    compact = Path(__file__).resolve().parent.parent / "assets" / "evalsets" / "cornell"
-    record = tmp_path / "eval.json"
-    record.write_text(json.dumps({"evalset": str(compact), "ladder_spp": [64], "splits": {
-        "unseen_configs": {"methods": {"cornell": {"kind": "neural"}, "pt_spp64": {"kind": "reference"}}}}}))
-    out = tmp_path / "margin.json"
-    with pytest.raises(SystemExit, match="no split scores the model 'cornell_k16'; nothing written"):
-        tool.main(["--eval", str(record), "--model-key", "cornell_k16", "--out", str(out)])
-    assert not out.exists()
-
-
-def test_stride_phases_names_the_period_of_a_pattern():
-    """tools/experiments/stride_phases.py: a checkerboard is k = (4, 4), columns alternating (0, 4), a period of 4
-    columns (0, 2), each with the RMS it contributes; metrics.stride_phases gives the grid they are read from."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/stride_phases")
-    image, albedo, depth, (yy, xx) = _textured_frame()
-    checker = np.where((yy + xx) % 2 == 0, 1.1, 0.9)[..., None]
-    columns = (1 + 0.05 * np.cos(2 * np.pi * xx / 4))[..., None]
-    means, counts, noise = metrics.stride_phases(image * checker * columns, albedo, depth)
-    assert means.shape == counts.shape == (8, 8) and counts.sum() == depth.size and noise >= 0
-    found = {tuple(c["k"]): c for c in tool.components(means)}
-    assert list(found)[:2] == [(4, 4), (0, 2)]
-    assert found[(4, 4)]["rms"] == pytest.approx(0.1, abs=0.005)
-    assert found[(0, 2)]["rms"] == pytest.approx(0.05 / math.sqrt(2), abs=0.004)
-    assert found[(0, 2)]["period_cols"] == 4 and found[(0, 2)]["period_rows"] is None
-    stripes = np.where(xx % 2 == 0, 1.1, 0.9)[..., None]
-    assert tool.components(metrics.stride_phases(image * stripes, albedo, depth)[0])[0]["k"] == [0, 4]

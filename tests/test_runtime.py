@@ -358,35 +358,3 @@ def test_render_with_model_at_any_shape(gl_context, tmp_path, res):
         assert neural.shape == (h, w, 3) and np.all(np.isfinite(neural))
         if name == "toy":
             np.testing.assert_allclose(neural, 2 * read_exr(out / "direct.exr"), rtol=1e-6)
-
-
-def test_model_timing_times_each_model_at_each_size_and_records_it(tmp_path):
-    """tools/experiments/model_timing.py: every model at every size, interleaved, and the record written."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/model_timing")
-    a, b = tmp_path / "a.onnx", tmp_path / "b.onnx"
-    for p in (a, b):
-        direct_times(p, meta=base_meta())
-    out = tmp_path / "t.json"
-    result = tool.main([str(a), str(b), "--size", "16", "32", "--rounds", "2", "--runs", "1", "--out", str(out)])
-    assert json.loads(out.read_text())["times"] == {str(k): v for k, v in result["times"].items()}
-    for size in (16, 32):
-        rows = result["times"][size]
-        assert set(rows) == {str(a), str(b)}
-        for t in rows.values():
-            assert 0 < t["min_ms"] <= t["median_ms"] <= t["max_ms"]
-    env = result["environment"]
-    assert env["cpu"] and env["cpu_count"] >= 1 and "onnxruntime" in env["versions"]
-
-
-def test_model_timing_feeds_an_encoding_4_model_its_scenes_lights(tmp_path):
-    """A model that takes the lights (Sponza's, encoding 4) is timed with its scene's default frame's lights, as
-    the viewer feeds it, not refused for want of them."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/model_timing")
-    model = models_dir() / "sponza.onnx"
-    assert read_metadata(model)["encoding"]["version"] == 4
-    result = tool.main([str(model), "--size", "32", "--rounds", "1", "--runs", "1"])
-    assert result["times"][32][str(model)]["median_ms"] > 0

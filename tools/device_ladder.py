@@ -165,7 +165,7 @@ def main() -> int:
         log("no model exported")
         return 1
     # the ladder rule's figure (the capture's test split: the data stays on this machine) and the compact
-    # evaluation set shipped in assets/evalsets (tools/ladder_record.py takes both)
+    # evaluation set shipped in assets/evalsets (`diviewer ship ladder` takes both)
     subprocess.run(DV + ["eval", "--data", str(data), "--split", "test", *models, "--out", str(w / "test_split.json")])
     subprocess.run(DV + ["eval", *models, "--out", str(w / "eval_compact.json")])
     record["total_seconds"] = round(time.time() - t0, 1)

@@ -230,7 +230,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
         log(line)
     if json_out is not None:
         from diviewer import imageio
-        from diviewer.evaluate import strict_json
+        from diviewer.evaluation.evaluate import strict_json
 
         imageio.write_text(json_out, strict_json(result))
     if plot_out is not None:
@@ -347,8 +347,8 @@ def _row(kind: str, label: str, res: int, gi_res: int, timing: dict) -> dict:
 
 
 def _open_evalset(settings, scene, notes):
-    from diviewer.evalframes import EvalFrames, default_evalset
-    from diviewer.evaluate import check_frames
+    from diviewer.evaluation.frames import EvalFrames, default_evalset
+    from diviewer.evaluation.evaluate import check_frames
 
     path = Path(settings.evalset) if settings.evalset else default_evalset(scene.name)
     if not (path / "manifest.json").is_file():
@@ -399,7 +399,7 @@ def _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log) -> d
 
 def _path_tracer_timing(settings, scene, ds, configs, notes, log, time_path_tracer) -> dict:
     try:
-        from diviewer.reference.mitsuba import _import_mitsuba, effective_spp
+        from diviewer.reference.mitsuba import effective_spp, import_mitsuba as _import_mitsuba
 
         _import_mitsuba()
     except DiviewerError as exc:

@@ -1,7 +1,7 @@
 """The speed/accuracy logic of the benchmark, on plain tables (no GL, no models): equal-time quality of the path
 tracer, its time at equal error, the smallest sufficient K, and temporal stability.
 
-The equivalent sample count itself is diviewer.metrics.equivalent_spp (through diviewer.evaluate), not repeated here.
+The equivalent sample count itself is diviewer.metrics.equivalent_spp (through diviewer.evaluation.evaluate), not repeated here.
 """
 
 from __future__ import annotations

@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
               f"graph {r['graph_over_bare']:.2f} x bare, {r['graph_over_bare_padded']:.2f} x bare padded")
     if args.json is not None:
         from diviewer import imageio
-        from diviewer.evaluate import strict_json
+        from diviewer.evaluation.evaluate import strict_json
 
         imageio.write_text(args.json, strict_json(result))
     return 0

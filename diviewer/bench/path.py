@@ -74,7 +74,7 @@ def run_path_bench(settings, path_file: Path, json_out: Path | None = None, log=
         log(line)
     if json_out is not None:
         from diviewer import imageio
-        from diviewer.evaluate import strict_json
+        from diviewer.evaluation.evaluate import strict_json
 
         imageio.write_text(json_out, strict_json(result))
     return result

@@ -9,7 +9,7 @@ import platform
 from pathlib import Path
 
 from diviewer.bench.frontier import equal_error, equal_time, smallest_sufficient_k
-from diviewer.evaluate import EVAL_KEYS, EQUIVALENT_BY
+from diviewer.evaluation.evaluate import EVAL_KEYS, EQUIVALENT_BY
 from diviewer.metrics import psnr_error
 
 PAPER_CLAIMS = {"VXGI": 10.0, "path tracing": 100.0}

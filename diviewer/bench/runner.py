@@ -3,7 +3,7 @@ against the scene's evaluation set (torch-free).
 
 A method is timed as the viewer runs it: the renderer's passes, then its own stages, then the composite
 into an 8-bit frame; a warm-up, then one frame per configuration. The path tracer is timed by the wall
-clock around Mitsuba's render (scene loading excluded). Accuracy is scored by diviewer.evaluate on the
+clock around Mitsuba's render (scene loading excluded). Accuracy is scored by diviewer.evaluation.evaluate on the
 evaluation set's stored buffers, pooled over both of its splits.
 """
 
@@ -205,7 +205,7 @@ def read_final(tex) -> np.ndarray:
 def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, frames_per_split: int | None,
                   gl: GlBench | None = None, log=print, vxgi: dict | None = None) -> dict:
     """Every method's pooled metrics over the evaluation set's frames ``idx`` cropped to ``shape``
-    (diviewer.evalframes.EvalFrames.bench_frames: the scene-camera splits at the model's square).
+    (diviewer.evaluation.frames.EvalFrames.bench_frames: the scene-camera splits at the model's square).
 
     A model at its full resolution (step 1) is scored on its output for the stored buffers, as `diviewer eval`
     does; below it (step > 1) on the frame the viewer shows: the configuration rendered again by ``gl`` (at
@@ -220,9 +220,9 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
         ``{"frames", "ladder_spp", "methods": {key: aggregate}}`` with ``direct``, ``noise_floor`` and
         ``pt_spp<n>`` beside the models; each aggregate carries its ``equivalent_spp``.
     """
-    from diviewer.evalframes import crop_frame, split_key
-    from diviewer.evalscore import aggregate, equivalent, ladder_methods, score_frame
-    from diviewer.evaluate import area_direct_of, model_input, run_model
+    from diviewer.evaluation.frames import crop_frame, split_key
+    from diviewer.evaluation.scoring import aggregate, equivalent, ladder_methods, score_frame
+    from diviewer.evaluation.evaluate import area_direct_of, model_input, run_model
     from diviewer.metrics import flat_mask
     from diviewer.scene.loader import config_from_dict
 
@@ -348,7 +348,7 @@ def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log, 
     from diviewer.runtime import pack_buffers
 
     try:
-        from diviewer.reference.mitsuba import MitsubaFrame, _import_mitsuba
+        from diviewer.reference.mitsuba import MitsubaFrame, import_mitsuba as _import_mitsuba
 
         _import_mitsuba()
     except DiviewerError as exc:

@@ -46,7 +46,8 @@ def check_folders(work: Path, ship: Path) -> None:
     of another command's (a dataset, a training run, another build's work folder) nor inside a dataset."""
     import os
 
-    from diviewer.outputs import FOLDER_WRITERS, _KIND_NAMES, _a, check_output_dir, folder_kind
+    from diviewer.outputs import FOLDER_WRITERS, KIND_NAMES as _KIND_NAMES, check_output_dir, folder_kind
+    from diviewer.outputs import with_article as _a
 
     check_output_dir(work, "--work", writes="build")
     check_output_dir(ship, "--ship")

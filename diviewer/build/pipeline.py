@@ -18,7 +18,7 @@ from diviewer.build.actuals import keep_actuals
 from diviewer.build.pace import measured_pace, missing_link
 from diviewer.build.plan import RUN_ONLY, Plan, describe
 from diviewer.build.scores import QUALITY, evalset_psnr_tm, evalset_scores
-from diviewer.build.shipfiles import write_ladder_curves, write_model_card  # noqa: F401 (tools/ladder_record.py)
+from diviewer.build.shipfiles import write_ladder_curves, write_model_card  # noqa: F401 (diviewer.ship.ladder)
 from diviewer.build.state import BuildState
 from diviewer.data.dataset import sha256_file
 from diviewer.console import overall, progress_bar
@@ -242,8 +242,8 @@ def _check(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
 
 
 def _evalset(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
-    from diviewer.evalscore import default_jobs
-    from diviewer.evalset import build_evalset
+    from diviewer.evaluation.scoring import default_jobs
+    from diviewer.evaluation.evalset import build_evalset
 
     if plan.given_evalset is not None:
         return _given_evalset(plan, log)
@@ -259,8 +259,8 @@ def _evalset(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]
 def _given_evalset(plan: Plan, log) -> tuple[list[Path], dict]:
     """An evaluation set made before (``--evalset``): of this scene file, and every frame present and sound."""
     from diviewer.build.plan import check_evalset_scene
-    from diviewer.evalframes import EvalFrames
-    from diviewer.evaluate import check_frames
+    from diviewer.evaluation.frames import EvalFrames
+    from diviewer.evaluation.evaluate import check_frames
     from diviewer.scene.loader import load_scene
 
     ev = EvalFrames(plan.given_evalset)
@@ -313,7 +313,7 @@ def _set_aside_if_begun_otherwise(cfg, run: Path, log) -> None:
 
 
 def _export(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path], dict]:
-    from diviewer.evaluate import evaluate
+    from diviewer.evaluation.evaluate import evaluate
     from diviewer.train.export import export
     from diviewer.train.recipe import export_settings
 
@@ -326,8 +326,8 @@ def _export(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path]
 
 
 def _evaluate(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
-    from diviewer.evalscore import default_jobs
-    from diviewer.evaluate import evaluate_evalset
+    from diviewer.evaluation.scoring import default_jobs
+    from diviewer.evaluation.evaluate import evaluate_evalset
 
     out = plan.work / "evalset_eval.json"
     evaluate_evalset([plan.model(k) for k in plan.ks], plan.evalset_dir, out=out, log=log, jobs=default_jobs())

@@ -230,7 +230,7 @@ class EvalCounts:
 
     @classmethod
     def of(cls, scene_path: Path, evalset) -> "EvalCounts":
-        from diviewer.evalset import plan_splits
+        from diviewer.evaluation.evalset import plan_splits
         from diviewer.scene.loader import load_scene
 
         splits, _ = plan_splits(load_scene(scene_path), evalset)
@@ -247,7 +247,7 @@ def given_evalset_settings(path: Path, recipe_settings, scene: str):
     """The settings an evaluation set made before was rendered with (its manifest's), in the recipe's
     EvalSetSettings; a folder that is no evaluation set of ``scene`` (a name or a .toml path) is refused, before
     any stage runs."""
-    from diviewer.evalframes import EvalFrames
+    from diviewer.evaluation.frames import EvalFrames
     from diviewer.scene.loader import load_scene
 
     if not (path / "manifest.json").is_file():
@@ -277,7 +277,7 @@ def _absent(ev) -> list[int]:
         return [f["index"] for f in ev.frames if ev.ds.check_frame(f["index"], verify_checksum=False) is not None]
     import zipfile
 
-    from diviewer.evalframes import COMPACT_FILE
+    from diviewer.evaluation.frames import COMPACT_FILE
 
     try:
         with zipfile.ZipFile(ev.root / COMPACT_FILE) as z:

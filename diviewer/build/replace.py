@@ -19,8 +19,8 @@ def score_replaced(plan, old: Path, log) -> float:
     import json
 
     from diviewer.build.scores import evalset_psnr_tm, evalset_scores
-    from diviewer.evalscore import default_jobs
-    from diviewer.evaluate import evaluate_evalset
+    from diviewer.evaluation.scoring import default_jobs
+    from diviewer.evaluation.evaluate import evaluate_evalset
     from diviewer.outputs import building
 
     out = plan.work / "replaced_eval.json"

@@ -206,7 +206,7 @@ class VXGIGT:
             self.vx.release()
 
 
-def _clean_stale(ds: Dataset, mine: set[int]) -> None:
+def clean_stale(ds: Dataset, mine: set[int]) -> None:
     """Remove temporary files a killed run of this shard left (never another shard's)."""
     for p in (ds.root / "frames").glob(".*"):
         stem = p.name[1:].split(".")[0]
@@ -236,7 +236,7 @@ def capture(scene_name: str | Path, out: Path, settings: CaptureSettings, shard:
     with run_lock(out, "capture", shard_part(k, n)):  # a second run into this folder refuses at once
         ds = open_or_create(out, manifest)
         mine = [f for f in ds.frames if f["index"] % n == k - 1]
-        _clean_stale(ds, {f["index"] for f in mine})
+        clean_stale(ds, {f["index"] for f in mine})
         todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
         gt_text = f"{settings.spp} spp" if settings.gt == "pt" else f"VXGI {settings.vxgi_resolution}^3"
         log(f"capture {scene.name}: {len(mine) - len(todo)} of {len(mine)} frames of shard {k}/{n} already done, "
@@ -299,15 +299,15 @@ def _render_frames(scene: Scene, ds: Dataset, todo: list[dict], settings: Captur
 
     gt = PathTracedGT(scene, settings) if settings.gt == "pt" else VXGIGT(settings)
     with headless_context() as ctx:
-        _render_frames_gl(ctx, scene, ds, todo, settings, gt, describe(ctx), log, done=done)
+        render_frames_gl(ctx, scene, ds, todo, settings, gt, describe(ctx), log, done=done)
 
 
-def _render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings, gt, gl_name: str,
-                      log, label: str = "capture", done: int = 0) -> None:
+def render_frames_gl(ctx, scene: Scene, ds: Dataset, todo: list[dict], settings, gt, gl_name: str,
+                     log, label: str = "capture", done: int = 0) -> None:
     """Render and write ``todo``: GL buffers plus ``gt(config, frame entry)``, stored in the manifest's channels;
     the progress starts at ``done`` frames rendered before (a resumed capture).
 
-    Shared with the evaluation set (diviewer.evalset), whose ground truth adds channels; ``settings``
+    Shared with the evaluation set (diviewer.evaluation.evalset), whose ground truth adds channels; ``settings``
     needs ``width``, ``height``, ``dtype`` and ``thumbs``.
     """
     from diviewer.gl.display import DisplayPass

@@ -126,7 +126,7 @@ def _check_manifest(m: dict, path: Path) -> None:
     seen = set()
     for k, f in enumerate(frames):
         where = f"frame_list[{k}]"
-        # split: train/val/test in a capture, other names in an evaluation set (diviewer.evalset)
+        # split: train/val/test in a capture, other names in an evaluation set (diviewer.evaluation.evalset)
         if not (isinstance(f, dict) and _is_int(f.get("index")) and isinstance(f.get("split"), str) and f["split"]):
             raise DiviewerError(f"expected {{index: whole number, split: name}}, got {repr(f)[:80]}",
                                 path=path, field=where)

@@ -1,7 +1,7 @@
 """An evaluation set on disk: the manifest's kind, its splits, and the reader that refuses a training capture.
 
-Shared by `diviewer evalset` (diviewer/evalset.py, which writes one) and `diviewer eval`
-(diviewer/evaluate.py, which scores on one), so neither imports the other for it.
+Shared by `diviewer evalset` (diviewer/evaluation/evalset.py, which writes one) and `diviewer eval`
+(diviewer/evaluation/evaluate.py, which scores on one), so neither imports the other for it.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from diviewer.errors import DiviewerError
 KIND = "evalset"
 """The manifest's ``kind`` of an evaluation set (a training capture has none)."""
 EVAL_SPLITS = ("unseen_configs", "unseen_objects", "moved_camera", "window_shapes")
-"""Every split an evaluation set may have, in plan order (diviewer/evalset.py says what each holds)."""
+"""Every split an evaluation set may have, in plan order (diviewer/evaluation/evalset.py says what each holds)."""
 
 
 def is_evalset(ds: Dataset) -> bool:

@@ -29,7 +29,7 @@ maps and its direct light; it adds diffuse indirect light (one bounce, or two):
 7. **composite** (vxgi_composite.glsl): ``vxgi = direct + albedo * indirect``; ``vxgi_indirect`` is
    ``albedo * indirect``, comparable with the path tracer's ``pt - pt_direct``.
 
-Accuracy on cornell (64x64, 4 frames, MSE against a 1024-spp path tracer, tools/experiments/vxgi_accuracy.py):
+Accuracy on cornell (64x64, 4 frames, MSE against a 1024-spp path tracer, vxgi_accuracy.py, docs/experiments.md):
 direct light alone 0.0167; defaults (trace_scale 2) at grids 32/64/128: one bounce 0.0049/0.0057/0.0057,
 two bounces 0.0033/0.0039/0.0038 (the coarse grid's extra leaking stands in for missing bounces). At
 64^3 and full trace resolution: isotropic without lod bias 0.0059, the defaults 0.0055.
@@ -74,7 +74,7 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.renderer import Renderer
 from diviewer.gl.resources import set_uniform
-from diviewer.gl.vxgi_grid import VoxelGridPasses, _FragmentList
+from diviewer.gl.vxgi_grid import VoxelGridPasses, FragmentList
 from diviewer.scene import camera as cam
 from diviewer.scene.model import FrameConfig, Object
 from diviewer.timing import StageTimer
@@ -211,7 +211,7 @@ class VXGIPass(VoxelGridPasses):
         self._raster = ctx.renderbuffer((res, res), 1, dtype="f1")
         self._raster_fbo = ctx.framebuffer([self._raster])
         self._raster_fbo.color_mask = (False, False, False, False)
-        self._lists = {"static": _FragmentList(ctx, 4 * res * res), "dynamic": _FragmentList(ctx, res * res)}
+        self._lists = {"static": FragmentList(ctx, 4 * res * res), "dynamic": FragmentList(ctx, res * res)}
         self._keys: dict[str, object] = {}
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self.dirs, self.weights = cone_layout(settings.cones, settings.aperture)

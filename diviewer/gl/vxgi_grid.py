@@ -16,7 +16,7 @@ from diviewer.scene.model import DirectionalLight, FrameConfig, Object
 
 _FRAG_BYTES = 48  # three vec4 per voxel fragment
 
-class _FragmentList:
+class FragmentList:
     """A voxel fragment list on the GPU: a (count, capacity) header and the fragments."""
 
     def __init__(self, ctx: moderngl.Context, capacity: int):
@@ -41,7 +41,7 @@ class _FragmentList:
 class VoxelGridPasses:
     """Builds the voxel grid each frame that needs it (mixed into VXGIPass)."""
 
-    def _voxelize(self, lst: _FragmentList, objects: list[Object]) -> None:
+    def _voxelize(self, lst: FragmentList, objects: list[Object]) -> None:
         ctx = self.ctx
         self._per_fragment("CLEAR", [lst])  # empty the voxels the list's old fragments filled
         prog = self.shaders.program("vxgi_voxelize.glsl")

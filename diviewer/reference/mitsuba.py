@@ -36,7 +36,7 @@ import numpy as np
 
 from diviewer.errors import DiviewerError
 from diviewer.reference.variant import (  # noqa: F401 (re-exported: the variant is part of this API)
-    VARIANTS, VariantInfo, _current_variant, _import_mitsuba, find_libllvm, select_variant, variant_info,
+    VARIANTS, VariantInfo, current_variant, import_mitsuba, find_libllvm, select_variant, variant_info,
 )
 from diviewer.scene import camera as cam
 from diviewer.scene.model import DirectionalLight, FrameConfig, PointLight, Scene
@@ -138,8 +138,8 @@ def to_mitsuba_dict(scene: Scene, config: FrameConfig, width: int, height: int, 
     """
     if width < 1 or height < 1:
         raise ValueError(f"render size must be at least 1x1, got {width}x{height}")
-    mi = _import_mitsuba()
-    _current_variant(mi)
+    mi = import_mitsuba()
+    current_variant(mi)
     _check_supported(scene, config)
     c = config.camera
     out: dict = {
@@ -248,8 +248,8 @@ def effective_spp(spp: int) -> int:
     """The sample count the sampler really takes for ``spp`` (multijitter rounds some counts up)."""
     if int(spp) < 1:
         raise ValueError(f"spp must be >= 1, got {spp}")
-    mi = _import_mitsuba()
-    _current_variant(mi)
+    mi = import_mitsuba()
+    current_variant(mi)
     logger = mi.logger() if hasattr(mi, "logger") else mi.Thread.thread().logger()
     level = logger.log_level()
     logger.set_log_level(mi.LogLevel.Error)  # the rounding warning; the caller records the count instead
@@ -263,8 +263,8 @@ class MitsubaFrame:
     """One frame loaded into Mitsuba once, rendered any number of times (full, direct, AOVs, seeds)."""
 
     def __init__(self, scene: Scene, config: FrameConfig, width: int, height: int):
-        mi = _import_mitsuba()
-        self.variant = _current_variant(mi)
+        mi = import_mitsuba()
+        self.variant = current_variant(mi)
         self.scene, self.config, self.width, self.height = scene, config, width, height
         self.masked = has_masks(scene, config)
         t0 = time.perf_counter()
@@ -283,7 +283,7 @@ class MitsubaFrame:
         if (config.objects != old.objects or (c0.fov, c0.near, c0.far) != (c1.fov, c1.near, c1.far)
                 or [(type(a), a.name) for a in old.lights] != [(type(b), b.name) for b in config.lights]):
             return False
-        mi = _import_mitsuba()
+        mi = import_mitsuba()
         mi.set_variant(self.variant)
         _check_supported(self.scene, config)
         params = mi.traverse(self._mi_scene)
@@ -298,7 +298,7 @@ class MitsubaFrame:
         return True
 
     def _render(self, integrator: dict, spp: int, seed: int) -> np.ndarray:
-        mi = _import_mitsuba()
+        mi = import_mitsuba()
         mi.set_variant(self.variant)
         img = mi.render(self._mi_scene, integrator=mi.load_dict(integrator), spp=effective_spp(spp), seed=int(seed))
         return np.array(img, dtype=np.float32)
@@ -338,7 +338,7 @@ class MitsubaFrame:
     def _render_one_pass(self, spp: int, seed: int, max_depth: int) -> np.ndarray:
         from diviewer.reference import split_path
 
-        mi = _import_mitsuba()
+        mi = import_mitsuba()
         mi.set_variant(self.variant)
         return self._render(split_path.integrator_dict(mi, max_depth, DEFAULT_RR_DEPTH), spp, seed)
 
@@ -350,7 +350,7 @@ class MitsubaFrame:
         if self.masked:  # the aov integrator would stop at cut-out texels
             from diviewer.reference.aovs import trace_aovs
 
-            _import_mitsuba().set_variant(self.variant)
+            import_mitsuba().set_variant(self.variant)
             raw = trace_aovs(self._mi_scene, self.width, self.height, effective_spp(spp), seed)
         else:
             raw = self._render({"type": "aov", "aovs": AOV_CHANNELS}, spp, seed)
@@ -381,8 +381,8 @@ def load_frame(scene: Scene, config: FrameConfig, width: int, height: int) -> Mi
     scene (``MitsubaFrame.retarget``): the frame returned before then renders the new configuration.
     """
     global _cache
-    mi = _import_mitsuba()
-    key = (id(scene), config, width, height, _current_variant(mi))
+    mi = import_mitsuba()
+    key = (id(scene), config, width, height, current_variant(mi))
     if _cache is not None and _cache[0] == key and _cache[1].scene is scene:
         return _cache[1]
     if _cache is not None:

@@ -15,7 +15,7 @@ their later bounces, exactly. It is the same estimator as ``path`` / ``volpath``
 - Russian roulette from ``rr_depth`` on, as Mitsuba's (survival max(throughput), at most 0.95).
 Lights with area (emissive surfaces, the ``constant`` sky) need multiple importance sampling, which it does not do:
 `supports` says whether a frame can take it, and callers render those frames in two passes. Measured against the two
-passes on Sponza (`python tools/experiments/split_path_check.py`, docs/architecture.md): the same frame means within
+passes on Sponza (`split_path_check.py`, docs/architecture.md, docs/experiments.md): the same frame means within
 the seeds' spread, as noisy, and 45 % less time.
 """
 

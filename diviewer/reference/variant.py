@@ -53,7 +53,7 @@ class VariantInfo:
 _variant_info: VariantInfo | None = None
 
 
-def _import_mitsuba():
+def import_mitsuba():
     """The mitsuba module, or the project error naming the extra that installs it."""
     try:
         import mitsuba  # noqa: PLC0415 (heavy optional dependency, imported where needed)
@@ -120,7 +120,7 @@ def select_variant(prefer: str | None = None) -> str:
         The variant now set; ``variant_info()`` says which libLLVM and why.
     """
     global _variant_info, _llvm_result
-    mi = _import_mitsuba()
+    mi = import_mitsuba()
     source = "prefer" if prefer else "DIVIEWER_MITSUBA_VARIANT"
     prefer = prefer or os.environ.get("DIVIEWER_MITSUBA_VARIANT") or None
     if prefer is not None and prefer not in VARIANTS:
@@ -188,7 +188,7 @@ def _choose_llvm(mi) -> VariantInfo:
 
 def variant_info() -> VariantInfo:
     """The variant in use and why (chooses one with select_variant if none of ours is set)."""
-    mi = _import_mitsuba()
+    mi = import_mitsuba()
     v = mi.variant()
     if v not in VARIANTS:
         select_variant()
@@ -199,7 +199,7 @@ def variant_info() -> VariantInfo:
     return VariantInfo(v, lib, "set by the caller (mitsuba.set_variant)")
 
 
-def _current_variant(mi) -> str:
+def current_variant(mi) -> str:
     """The variant set now; chooses one (select_variant) if none of ours is set."""
     v = mi.variant()
     if v not in VARIANTS:

@@ -346,15 +346,15 @@ def read_path(file: str | Path, scene: Scene) -> tuple[CameraPath, Scene]:
     """A path file checked field by field against ``scene`` (refused with the file and the field named): its
     format and version, the scene's identity, finite numbers, at least one key, strictly increasing times.
     Returns the path and the scene with the mesh files the path's objects wear added."""
-    from diviewer.scene.loader import _camera, add_mesh_file, config_from_dict
-    from diviewer.scene.toml_table import _Table
+    from diviewer.scene.loader import camera_from_table, add_mesh_file, config_from_dict
+    from diviewer.scene.toml_table import TomlTable
 
     file = Path(file)
     try:
         data = json.loads(file.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise DiviewerError(f"cannot read the camera path: {exc}", path=file) from exc
-    t = _Table(data, file, "")
+    t = TomlTable(data, file, "")
     if t.raw("format") != FORMAT:
         raise t.err("format", f"expected \"{FORMAT}\", got {t.raw('format')!r}: not a camera path file")
     version = t.raw("version")
@@ -377,13 +377,13 @@ def read_path(file: str | Path, scene: Scene) -> tuple[CameraPath, Scene]:
     t.finish()
     keys, lights, objects = [], None, None
     for i, item in enumerate(raw):
-        k = _Table(item, file, f"keys[{i}]")
+        k = TomlTable(item, file, f"keys[{i}]")
         time = k.num("time")
         if keys and not time > keys[-1].time:
             raise k.err("time", f"times must increase from key to key: {time} follows {keys[-1].time}")
         if not k.has("camera"):
             raise k.err("camera", "missing required field")
-        camera = _camera(k.table("camera"))
+        camera = camera_from_table(k.table("camera"))
         lights = k.raw("lights", lights)
         objects = k.raw("objects", objects)
         config = _prefixed(lambda: config_from_dict(scene, {"camera": item["camera"], "lights": lights or [],

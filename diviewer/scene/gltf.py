@@ -24,7 +24,7 @@ from diviewer.scene.gltf_container import data_uri, read_document
 from diviewer.scene.gltf_material import DRACO, apply_uv_transform, check_extensions, material as _material
 from diviewer.scene.model import Material, Mesh, Object
 from diviewer.scene.reads import note_read, note_warning, recording_reads, recording_warnings
-from diviewer.scene.textures import _frozen, file_key as _file_key, load_texture  # noqa: F401 (load_texture: re-exported)
+from diviewer.scene.textures import frozen_array, file_key as _file_key, load_texture  # noqa: F401 (load_texture: re-exported)
 
 DEFAULT_MATERIAL = "gltf_default"
 """The material of primitives that name none: glTF's default (white, albedo 1.0); ``[materials.gltf_default]`` in
@@ -280,7 +280,7 @@ def _parse(d: Doc, base: Path, glb_bin: bytes | None = None):
                 mat = default_mat
             mname = m.get("name") if isinstance(m.get("name"), str) else f"mesh{mi_}"
             key = _unique(mname + (f".{pi}" if len(prims) > 1 else ""), mesh_names, f"mesh{mi_}")
-            meshes[key] = Mesh(key, _frozen(v), _frozen(n), _frozen(faces), None if uv is None else _frozen(uv),
+            meshes[key] = Mesh(key, frozen_array(v), frozen_array(n), frozen_array(faces), None if uv is None else frozen_array(uv),
                                source=f"{d.file}#{where}")
             keys.append((key, mat))
         prim_keys.append(keys)
@@ -331,8 +331,8 @@ def _place(d: Doc, meshes: dict, prim_keys: list) -> list[Object]:
                 nn = src.normals @ nm.T
                 nn /= np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-30)
                 faces = src.faces if np.linalg.det(world[:3, :3]) > 0 else src.faces[:, ::-1]
-                meshes[baked] = Mesh(baked, _frozen((src.vertices @ world[:3, :3].T + world[:3, 3]).astype(np.float32)),
-                                     _frozen(nn.astype(np.float32)), _frozen(faces), src.uvs, source=src.source)
+                meshes[baked] = Mesh(baked, frozen_array((src.vertices @ world[:3, :3].T + world[:3, 3]).astype(np.float32)),
+                                     frozen_array(nn.astype(np.float32)), frozen_array(faces), src.uvs, source=src.source)
                 objects.append(Object(name, baked, mat))
             else:
                 objects.append(Object(name, key, mat, position=pose[0], rotation=pose[1], scale=pose[2]))

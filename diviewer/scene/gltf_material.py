@@ -19,7 +19,7 @@ from diviewer.scene.gltf_check import Doc
 from diviewer.scene.gltf_container import data_uri, view_bytes
 from diviewer.scene.model import Material
 from diviewer.scene.reads import note_warning
-from diviewer.scene.textures import _frozen, load_texture, load_texture_bytes
+from diviewer.scene.textures import frozen_array, load_texture, load_texture_bytes
 
 DRACO = "KHR_draco_mesh_compression"
 HONOURED = ("KHR_texture_transform", "KHR_materials_emissive_strength", DRACO)
@@ -122,7 +122,7 @@ def material(d: Doc, buffers: list[bytes], i: int, name: str, base: Path) -> tup
             if texture is None:
                 texture = np.ones((1, 1, 3), np.float32)
         if factor[3] != 1.0:
-            alpha = _frozen(alpha * factor[3])
+            alpha = frozen_array(alpha * factor[3])
     else:
         alpha = None  # OPAQUE ignores alpha; BLEND is drawn opaque (no transparency in these renderers)
     emission = np.asarray(d.nums(m, "emissiveFactor", 3, f"{where}.emissiveFactor", (0.0, 0.0, 0.0), lo=0.0))

@@ -16,7 +16,7 @@ from diviewer.scene.identity import scene_identity
 from diviewer.scene.reads import SceneWarning, note_warning, recording_reads, recording_warnings
 from diviewer.scene.model import Camera, DirectionalLight, FrameConfig, Material, Object, PointLight, Scene
 from diviewer.scene.scene_ranges import parse_ranges as _ranges
-from diviewer.scene.toml_table import FLOAT32_MAX, _entries, _f32, _Table  # noqa: F401 (FLOAT32_MAX: re-exported)
+from diviewer.scene.toml_table import FLOAT32_MAX, entries, f32, TomlTable  # noqa: F401 (FLOAT32_MAX: re-exported)
 
 
 MAX_FAR_NEAR = 1e5
@@ -77,7 +77,7 @@ def parse_scene(data: dict, *, path: Path | None = None, file_hash: str = "") ->
 
 
 def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
-    root = _Table(data, path, "")
+    root = TomlTable(data, path, "")
     base = path.parent if path is not None else Path.cwd()
 
     head = root.table("scene")
@@ -90,7 +90,7 @@ def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
         raise head.err("shadow_size", f"expected a whole number of texels, got {shadow_size:g}")
     head.finish()
 
-    camera = _camera(root.table("camera"))
+    camera = camera_from_table(root.table("camera"))
 
     materials: dict[str, Material] = {}
     meshes = {}
@@ -107,11 +107,11 @@ def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
                      f"'{gltf.DEFAULT_MATERIAL}', glTF's default, albedo {gltf.DEFAULT_ALBEDO[0]:g} (white, reflecting "
                      f"all light); give them one with [materials.{gltf.DEFAULT_MATERIAL}] albedo = [0.8, 0.8, 0.8]")
     from_gltf = set(materials) if root.has("gltf") else None
-    for key, t in _entries(root.table("materials"), lambda k: None):
+    for key, t in entries(root.table("materials"), lambda k: None):
         # A glTF material of the same name is overridden: the keys given replace its values, the rest stay.
         materials[key] = _material(key, t, base, path, materials.get(key))
 
-    for key, t in _entries(root.table("meshes"), _not_in_gltf(meshes, "mesh")):
+    for key, t in entries(root.table("meshes"), _not_in_gltf(meshes, "mesh")):
         if t.has("file") == t.has("shape"):
             raise t.err("shape", "a mesh needs exactly one of 'shape' (procedural) or 'file'")
         if t.has("shape"):
@@ -137,7 +137,7 @@ def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
     if not isinstance(raw_lights, list):
         raise root.err("lights", "expected an array of tables ([[lights]])")
     for i, l in enumerate(raw_lights):
-        lights.append(_light(_Table(l, path, f"lights[{i}]"), i))
+        lights.append(_light(TomlTable(l, path, f"lights[{i}]"), i))
     if len({l.name for l in lights}) != len(lights):
         raise DiviewerError("light names must be unique", path=path, field="lights")
 
@@ -149,7 +149,7 @@ def _parse_scene(data: dict, path: Path | None, file_hash: str) -> Scene:
                  shadow_size=int(shadow_size))
 
 
-def _unused_overrides(root: _Table, path: Path | None, from_gltf: set[str], used: set[str]) -> None:
+def _unused_overrides(root: TomlTable, path: Path | None, from_gltf: set[str], used: set[str]) -> None:
     """A [materials.NAME] of a glTF scene that names no glTF material and that no object uses is most likely a
     misspelt override: said as a warning, with the glTF's material names."""
     for key in root.table("materials").data:
@@ -159,7 +159,7 @@ def _unused_overrides(root: _Table, path: Path | None, from_gltf: set[str], used
                          f"changes nothing; the glTF's materials in use: {names}")
 
 
-def _material(key: str, t: _Table, base: Path, path: Path | None, over: Material | None = None) -> Material:
+def _material(key: str, t: TomlTable, base: Path, path: Path | None, over: Material | None = None) -> Material:
     """One [materials.KEY] table: albedo, emission, an optional texture and its alpha cut-out, double_sided.
     ``over``: the glTF material of that name, whose values stand where the table gives none."""
     if over is None:
@@ -189,14 +189,14 @@ def _material(key: str, t: _Table, base: Path, path: Path | None, over: Material
                     double_sided=t.bool("double_sided", over.double_sided))
 
 
-def _objects(root: _Table, path: Path | None, meshes: dict, materials: dict, names: set[str]) -> list[Object]:
+def _objects(root: TomlTable, path: Path | None, meshes: dict, materials: dict, names: set[str]) -> list[Object]:
     """The [[objects]] array: each a mesh and a material by name, placed; names unique (``names``: those taken)."""
     objects = []
     raw_objects = root.raw("objects", [])
     if not isinstance(raw_objects, list):
         raise root.err("objects", "expected an array of tables ([[objects]])")
     for i, o in enumerate(raw_objects):
-        t = _Table(o, path, f"objects[{i}]")
+        t = TomlTable(o, path, f"objects[{i}]")
         oname = t.str("name", f"object{i}")
         if oname in names:
             raise t.err("name", f"duplicate object name '{oname}'")
@@ -218,11 +218,11 @@ def _objects(root: _Table, path: Path | None, meshes: dict, materials: dict, nam
 
 
 def _not_in_gltf(defined: dict, what: str):
-    """``_entries``' check for a name the glTF file already defined."""
+    """``entries``' check for a name the glTF file already defined."""
     return lambda key: f"{what} '{key}' is already defined by the glTF file" if key in defined else None
 
 
-def _camera(t: _Table) -> Camera:
+def camera_from_table(t: TomlTable) -> Camera:
     c = Camera(position=t.vec("position", 3, (0.0, 0.0, 5.0)), target=t.vec("target", 3, (0.0, 0.0, 0.0)),
                up=t.vec("up", 3, (0.0, 1.0, 0.0)), fov=t.num("fov", 45.0, lo=0.0, hi=180.0, lo_open=True, hi_open=True),
                near=t.num("near", 0.05, lo=0.0, lo_open=True), far=t.num("far", 100.0, lo=0.0, lo_open=True))
@@ -240,7 +240,7 @@ def _camera(t: _Table) -> Camera:
     return c
 
 
-def _light(t: _Table, i: int):
+def _light(t: TomlTable, i: int):
     kind = t.str("type", choices=("directional", "point"))
     name = t.str("name", f"light{i}")
     color = t.vec("color", 3, (1.0, 1.0, 1.0), lo=0.0)
@@ -255,7 +255,7 @@ def _light(t: _Table, i: int):
         light = PointLight(name, position=t.vec("position", 3), color=color, intensity=t.num("intensity", 1.0, lo=0.0))
         strength = ("intensity", light.intensity)
     # The shader multiplies colour by strength: the product must stay in float32 too.
-    if not _f32(max(color) * strength[1]):
+    if not f32(max(color) * strength[1]):
         raise t.err(strength[0], f"color x {strength[0]} = {max(color) * strength[1]:.3g} is outside float32's range "
                                  f"(+-3.4e38), in which it is rendered")
     t.finish()
@@ -285,17 +285,17 @@ def add_mesh_file(scene: Scene, path: str | Path, key: str | None = None) -> tup
 
 def config_from_dict(scene: Scene, data: dict, *, path=None) -> FrameConfig:
     """Rebuild a FrameConfig written by FrameConfig.to_dict, checked against the scene."""
-    t = _Table(data, path, "")
-    camera = _camera(t.table("camera"))
+    t = TomlTable(data, path, "")
+    camera = camera_from_table(t.table("camera"))
     for key in ("lights", "objects"):
         if not isinstance(t.data.get(key, []), list):
             raise t.err(key, f"expected a list of tables, got {t.data[key]!r}")
     lights = []
     for i, l in enumerate(t.raw("lights", [])):
-        lights.append(_light(_Table(l, path, f"lights[{i}]"), i))
+        lights.append(_light(TomlTable(l, path, f"lights[{i}]"), i))
     objects = []
     for i, o in enumerate(t.raw("objects", [])):
-        ot = _Table(o, path, f"objects[{i}]")
+        ot = TomlTable(o, path, f"objects[{i}]")
         mesh, mat = ot.str("mesh"), ot.str("material")
         if mesh not in scene.meshes:
             raise ot.err("mesh", f"scene '{scene.name}' has no mesh '{mesh}'")

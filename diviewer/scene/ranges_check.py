@@ -14,7 +14,7 @@ import numpy as np
 
 from diviewer.scene.model import (CameraRange, CameraRegion, DirectionalLight, FrameConfig, LightRange, ObjectRange,
                                   Scene, box_contains)
-from diviewer.scene.sampler import _catmull_rom, in_test_stretch
+from diviewer.scene.sampler import catmull_rom, in_test_stretch
 
 ANGLE_TOL = 0.5
 """Degrees of slack on every angle test (a panel slider or float round-off is not a new configuration)."""
@@ -75,8 +75,8 @@ def _path_points(path: CameraRange) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     """The path sampled densely: parameters, positions and unit view directions."""
     s = np.linspace(0.0, 1.0, PATH_SAMPLES)
     pos, tgt = np.asarray(path.positions, np.float64), np.asarray(path.targets, np.float64)
-    p = np.array([_catmull_rom(pos, float(u), path.closed) for u in s])
-    d = np.array([_catmull_rom(tgt, float(u), path.closed) for u in s]) - p
+    p = np.array([catmull_rom(pos, float(u), path.closed) for u in s])
+    d = np.array([catmull_rom(tgt, float(u), path.closed) for u in s]) - p
     return s, p, d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
 
 

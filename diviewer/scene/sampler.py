@@ -28,7 +28,7 @@ def matrix_to_euler_xyz(r: np.ndarray) -> tuple[float, float, float]:
     return (math.degrees(ax), math.degrees(ay), math.degrees(az))
 
 
-def _catmull_rom(points: np.ndarray, s: float, closed: bool) -> np.ndarray:
+def catmull_rom(points: np.ndarray, s: float, closed: bool) -> np.ndarray:
     """Point at parameter s in [0, 1] on a uniform Catmull-Rom spline through ``points``."""
     n = len(points)
     segments = n if closed else n - 1
@@ -48,8 +48,8 @@ def camera_on_path(scene: Scene, s: float):
     path = scene.ranges.camera
     if path is None:
         return scene.default.camera
-    pos = _catmull_rom(np.asarray(path.positions), s, path.closed)
-    tgt = _catmull_rom(np.asarray(path.targets), s, path.closed)
+    pos = catmull_rom(np.asarray(path.positions), s, path.closed)
+    tgt = catmull_rom(np.asarray(path.targets), s, path.closed)
     return dataclasses.replace(scene.default.camera, position=tuple(map(float, pos)), target=tuple(map(float, tgt)))
 
 

@@ -9,14 +9,14 @@ from diviewer.scene.model import (
     Camera, CameraRange, CameraRegion, FrameConfig, LightRange, ObjectRange, PointLight, Ranges, box_intersection,
     box_volume, objects_bounds,
 )
-from diviewer.scene.toml_table import _entries, _f32, _Table
+from diviewer.scene.toml_table import entries, f32, TomlTable
 
 
-def parse_ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
+def parse_ranges(t: TomlTable, default: FrameConfig, meshes) -> Ranges:
     """The ranges table of a scene file, checked against its default configuration and meshes."""
     lights, objects, camera = {}, {}, None
     known_lights = {l.name for l in default.lights}
-    for key, r in _entries(t.table("lights"), lambda k: None if k in known_lights else
+    for key, r in entries(t.table("lights"), lambda k: None if k in known_lights else
                            f"no light named '{k}'; lights: {', '.join(sorted(known_lights)) or 'none'}"):
         angle = _interval(r, "angle", (0.0, 0.0))
         inten = _interval(r, "intensity", (1.0, 1.0), lo=0.0)
@@ -24,12 +24,12 @@ def parse_ranges(t: _Table, default: FrameConfig, meshes) -> Ranges:
             raise r.err("intensity", "the intensity multiplier range must be positive (drawn log-uniformly)")
         light = next(l for l in default.lights if l.name == key)
         peak = max(light.color) * getattr(light, "irradiance", getattr(light, "intensity", 1.0)) * inten[1]
-        if not _f32(peak):
+        if not f32(peak):
             raise r.err("intensity", f"the brightest drawn light ({peak:.3g}) is outside float32's range (+-3.4e38)")
         lights[key] = LightRange(axis=_axis(r, "axis", (0.0, 1.0, 0.0)), angle=angle, intensity=inten,
                                  position=_light_box(r, light, angle, default, meshes))
     known_objects = {o.name for o in default.objects}
-    for key, r in _entries(t.table("objects"), lambda k: None if k in known_objects else
+    for key, r in entries(t.table("objects"), lambda k: None if k in known_objects else
                            f"no object named '{k}'; objects: {', '.join(sorted(known_objects))}"):
         train, test = r.strs("train_meshes"), r.strs("test_meshes")
         for field_name, lst in (("train_meshes", train), ("test_meshes", test)):
@@ -83,7 +83,7 @@ def train_length(stretches) -> float:
     return 1.0 - covered
 
 
-def _interval(r: _Table, key: str, default, lo=None) -> tuple[float, float]:
+def _interval(r: TomlTable, key: str, default, lo=None) -> tuple[float, float]:
     """A [min, max] pair with min <= max."""
     v = r.vec(key, 2, default, lo=lo)
     if v[0] > v[1]:
@@ -91,16 +91,16 @@ def _interval(r: _Table, key: str, default, lo=None) -> tuple[float, float]:
     return v
 
 
-def _axis(r: _Table, key: str, default) -> tuple:
+def _axis(r: TomlTable, key: str, default) -> tuple:
     v = r.vec(key, 3, default)
     if np.linalg.norm(v) < 1e-9:
         raise r.err(key, f"a rotation axis must be non-zero, got {list(v)}")
     return v
 
 
-def _box(r: _Table, key: str, value=None) -> tuple:
+def _box(r: TomlTable, key: str, value=None) -> tuple:
     """[[min x, y, z], [max x, y, z]] with min < max on every axis."""
-    sub = r if value is None else _Table({key: value}, r.path, r.where)
+    sub = r if value is None else TomlTable({key: value}, r.path, r.where)
     box = sub.vecs(key, 3)
     if len(box) != 2:
         raise r.err(key, "expected [[min x, y, z], [max x, y, z]]")
@@ -109,7 +109,7 @@ def _box(r: _Table, key: str, value=None) -> tuple:
     return box
 
 
-def _light_box(r: _Table, light, angle, default: FrameConfig, meshes):
+def _light_box(r: TomlTable, light, angle, default: FrameConfig, meshes):
     """A point light's ``position`` box: inside the scene's bounds, and instead of a rotation; None if not given."""
     if not r.has("position"):
         r.raw("position")
@@ -132,7 +132,7 @@ def _light_box(r: _Table, light, angle, default: FrameConfig, meshes):
     return box
 
 
-def _camera_region(r: _Table, camera: Camera) -> CameraRegion:
+def _camera_region(r: TomlTable, camera: Camera) -> CameraRegion:
     """A free camera's ranges: a box of positions, a jittered look-at target, a field-of-view range."""
     region = _box(r, "region")
     target = r.vec("target", 3, camera.target)

@@ -17,7 +17,7 @@ MAX_TEXTURE_SIDE = 4096
 _cache: dict[tuple, tuple[np.ndarray, np.ndarray | None]] = {}
 
 
-def _frozen(a: np.ndarray) -> np.ndarray:
+def frozen_array(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(a)
     a.setflags(write=False)  # shared by every scene that loads the same file
     return a
@@ -124,7 +124,7 @@ def _decoded(source, file, path, field: str) -> tuple[np.ndarray, np.ndarray | N
         raise DiviewerError(f"cannot read texture {file}: {exc}", path=path, field=field) from exc
     if rgb.size == 0:
         raise DiviewerError(f"texture {file} has no pixels", path=path, field=field)
-    return _frozen(rgb), None if alpha is None else _frozen(alpha.astype(np.float32))
+    return frozen_array(rgb), None if alpha is None else frozen_array(alpha.astype(np.float32))
 
 
 def _too_large(file: Path, w: int, h: int, path, field: str) -> DiviewerError:

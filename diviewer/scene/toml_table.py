@@ -11,11 +11,11 @@ from diviewer.errors import DiviewerError
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 """Every number ends up in float32 (GL uniforms, Mitsuba's rgb variants): larger ones are refused."""
 
-def _f32(v: float) -> bool:
+def f32(v: float) -> bool:
     return abs(v) <= FLOAT32_MAX
 
 
-class _Table:
+class TomlTable:
     """One TOML table being read: typed getters that name the file and field in every error."""
 
     def __init__(self, data, path, where: str):
@@ -61,7 +61,7 @@ class _Table:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise self.err(key, f"expected a finite number, got {v!r}")
         v = float(v)
-        if not _f32(v):
+        if not f32(v):
             raise self.err(key, f"{v:g} is outside float32's range (+-3.4e38), in which it is rendered")
         if lo is not None and (v < lo or (lo_open and v == lo)):
             raise self.err(key, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
@@ -76,7 +76,7 @@ class _Table:
         if (not isinstance(v, (list, tuple)) or len(v) != n
                 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
             raise self.err(key, f"expected {n} finite numbers, got {v!r}")
-        if not all(_f32(float(x)) for x in v):
+        if not all(f32(float(x)) for x in v):
             raise self.err(key, f"{v} is outside float32's range (+-3.4e38), in which it is rendered")
         if lo is not None and min(v) < lo:
             raise self.err(key, f"values must be >= {lo}, got {v}")
@@ -90,7 +90,7 @@ class _Table:
             raise self.err(key, "missing required field")
         if not isinstance(v, (list, tuple)):
             raise self.err(key, f"expected a list of {n}-vectors, got {v!r}")
-        sub = _Table({str(i): x for i, x in enumerate(v)}, self.path, self._field(key))
+        sub = TomlTable({str(i): x for i, x in enumerate(v)}, self.path, self._field(key))
         return tuple(sub.vec(str(i), n) for i in range(len(v)))
 
     def strs(self, key: str, default=()) -> tuple[str, ...]:
@@ -99,9 +99,9 @@ class _Table:
             raise self.err(key, f"expected a list of strings, got {v!r}")
         return tuple(v)
 
-    def table(self, key: str, default=None) -> "_Table":
+    def table(self, key: str, default=None) -> "TomlTable":
         v = self.raw(key, default if default is not None else {})
-        return _Table(v, self.path, self._field(key))
+        return TomlTable(v, self.path, self._field(key))
 
     def finish(self) -> None:
         unknown = sorted(set(self.data) - self.used)
@@ -112,7 +112,7 @@ class _Table:
                            + (f"; allowed keys: {', '.join(allowed)}" if allowed else "; this table takes no keys"))
 
 
-def _entries(tab: _Table, problem):
+def entries(tab: TomlTable, problem):
     """Each entry of a table of tables (``[materials]``, ``[ranges.lights]``, ...) as (key, its table),
     refusing a key for which ``problem(key)`` gives a reason; each entry, then the table, is checked for
     unknown keys once the caller has read it."""

@@ -10,7 +10,7 @@ recipe is read:
   ``spp`` with `diviewer data refine` (a model can train on the capture before the refinement ends), and
   ``truth_filter`` (optional, a table: `diviewer.data.truth_filter.TruthFilter`): train on the truth with its indirect
   light filtered over each surface (`diviewer data filter-truth`);
-- ``[evalset]``: `diviewer.evalset.EvalSetSettings` (frames_per_split, spp, ladder, ...; width and height
+- ``[evalset]``: `diviewer.evaluation.evalset.EvalSetSettings` (frames_per_split, spp, ladder, ...; width and height
   default to the capture's);
 - ``[train]``: `diviewer.train.config.TrainConfig`, every field but ``data``, ``out`` and ``recipe``;
 - ``[export]``: `diviewer.train.export.ExportSettings` (fp16, half_weights, verify_frames);
@@ -248,7 +248,7 @@ def _capture_cls():
 
 
 def _evalset_cls():
-    from diviewer.evalset import EvalSetSettings
+    from diviewer.evaluation.evalset import EvalSetSettings
 
     return EvalSetSettings
 

@@ -4,7 +4,7 @@
 that would fail after hours of capture or training is refused at once, naming the file and ``table.field``
 (`diviewer build --dry-run` reads the recipe first, so it refuses what the run would). The tables mirror their
 settings dataclasses (``[capture]`` `diviewer.data.capture.CaptureSettings`, ``[evalset]``
-`diviewer.evalset.EvalSetSettings`, ``[train]`` `diviewer.train.config.TrainConfig` (its own `TRAIN_FIELDS`),
+`diviewer.evaluation.evalset.EvalSetSettings`, ``[train]`` `diviewer.train.config.TrainConfig` (its own `TRAIN_FIELDS`),
 ``[export]`` `diviewer.train.export.ExportSettings`, ``[capture] truth_filter`` `diviewer.data.truth_filter.
 TruthFilter`); tests/train/test_recipe.py holds every field of those dataclasses to a spec here.
 """
@@ -129,7 +129,7 @@ _EVALSET_FIELDS = {"--frames-per-split/--res": "frames_per_split", "--window-wid
 
 
 def _check_evalset(ev: dict[str, Any], cap: dict[str, Any], path: Path) -> None:
-    from diviewer.evalset import EvalSetSettings
+    from diviewer.evaluation.evalset import EvalSetSettings
 
     spp = ev.get("spp", EvalSetSettings.spp)
     if "ladder" in ev and not ev["ladder"][-1] < spp:

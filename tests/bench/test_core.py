@@ -138,7 +138,7 @@ def tiny_bench_inputs(tmp_path_factory):
     import onnx
 
     from diviewer.bench.onnx_tools import get_meta, set_meta, untrained_generator
-    from diviewer.evalset import EvalSetSettings, build_evalset
+    from diviewer.evaluation.evalset import EvalSetSettings, build_evalset
     from diviewer.scene import load_scene
 
     root = tmp_path_factory.mktemp("bench")
@@ -269,12 +269,12 @@ def test_bench_accuracy_from_a_compact_set_matches_the_full_set(tiny_bench_input
     images score as the full set's frames do."""
     from diviewer.bench.core import BenchSettings, _open_evalset
     from diviewer.bench.runner import score_evalset
-    from diviewer.evalframes import EvalFrames, write_compact
+    from diviewer.evaluation.frames import EvalFrames, write_compact
     from diviewer.scene import load_scene
 
     root = tiny_bench_inputs
     write_compact(root / "es", tmp_path / "evalsets" / "cornell", frames_per_split=1, log=lambda *_: None)
-    monkeypatch.setattr("diviewer.evalframes.DEFAULT_EVALSETS", tmp_path / "evalsets")
+    monkeypatch.setattr("diviewer.evaluation.frames.DEFAULT_EVALSETS", tmp_path / "evalsets")
     notes: list[str] = []
     compact = _open_evalset(BenchSettings(), load_scene("cornell"), notes)  # no --evalset given
     assert compact is not None and compact.compact and notes == []

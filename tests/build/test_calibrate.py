@@ -72,7 +72,7 @@ def test_a_previous_builds_actuals_cost_the_next_plan(tmp_path):
 def test_the_evaluation_sets_counts_agree_between_plan_render_and_score(tmp_path):
     """The plan counts the frames the render plans (every split the scene has) and the crops the scoring scores
     (the window_shapes split at each window width), at the width it renders."""
-    from diviewer.evalset import plan_evalset, plan_splits
+    from diviewer.evaluation.evalset import plan_evalset, plan_splits
     from diviewer.scene.loader import load_scene
 
     plan = make_plan("cornell", load_recipe("cornell"), tmp_path / "w", machine=CPU, budget_hours=3)

@@ -804,7 +804,7 @@ def test_build_a_tiny_scene_on_a_filtered_truth(gl_context, tmp_path, capsys):
     back as the recipe's [capture] table (truth_filter included), and `diviewer eval` reports no margin read from
     the set's unfiltered ladder for it."""
     from diviewer.data.dataset import Dataset
-    from diviewer.truthmargin import FILTERED_MARGIN
+    from diviewer.evaluation.truthmargin import FILTERED_MARGIN
 
     scene, recipe = write_tiny_scene(tmp_path), tmp_path / "tinyrecipe.toml"
     recipe.write_text(_filtering(TINY_RECIPE).replace("K = [2, 4]", "K = [2]"))

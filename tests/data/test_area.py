@@ -104,7 +104,7 @@ def test_derived_dataset_has_the_area_light_and_every_other_channel_as_captured(
         area_direct(src, src, 2, **QUIET)
     assert main(["data", "area-direct", str(src), "--samples", "2", "--out", str(out)]) == 0
     # eval --data feeds a model the dataset's direct light: it must be the light the model was trained on
-    from diviewer.evaluate import evaluate
+    from diviewer.evaluation.evaluate import evaluate
     from onnx_models import base_meta, direct_times
 
     meta = {**base_meta(load_scene("cornell").file_hash, "cornell"), "multiple": 2}

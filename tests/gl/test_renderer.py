@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 
 import numpy as np
@@ -14,7 +13,6 @@ from diviewer.gl.renderer import Renderer, RenderSettings
 from diviewer.scene import camera as cam
 from diviewer.scene.model import Mesh
 from scenes import facing_plane
-from tool_modules import load_tool
 
 RES = 48
 
@@ -640,22 +638,6 @@ def test_single_sided_back_faces_leave_the_gbuffer_not_the_shadows(ctx):
     assert (frames["kept", "inside"]["depth"] > 0.0).all() and (frames["two-sided", "inside"]["depth"] > 0.0).all()
 
 
-def test_back_faces_probe_counts_the_pixels_culling_changes_per_material(ctx):
-    """tools/experiments/back_faces.py: the sheet seen from behind is what changes, and only its material counts."""
-    tool = load_tool("experiments/back_faces")
-    scene = facing_plane(distance=3.0, fov=70.0, extra_meshes={"sheet": {"shape": "plane", "size": 0.6}},
-                         extra_objects=[{"name": "sheet", "mesh": "sheet", "material": "occ", "position": [0, 0, -1.5],
-                                         "rotation": [-90.0, 0.0, 0.0]}])
-    scene = tool.with_sides(scene, {"occ", "m"})
-    configs = tool.cameras(scene, 5)
-    assert [name for name, _ in configs] == ["default"]  # no camera walk
-    out = tool.differences(ctx, scene, configs, 32, 24)
-    assert out["single_sided"] == ["m", "occ"] and out["pixels"] == 32 * 24
-    assert out["changed_pixels_per_material"]["m"] == 0  # the closed wall, seen from outside
-    sheet = out["changed_pixels_per_material"]["occ"]
-    assert 0 < sheet == round(out["changed_share_mean"] * out["pixels"]) < 0.2 * out["pixels"]
-
-
 def test_sponza_draws_opaque_front_to_back_then_masked_and_changes_no_pixel(ctx, sponza, monkeypatch):
     """The G-buffer pass draws the opaque pieces nearest first and the alpha-masked ones last; the buffers are
     bit for bit those of the list's order."""
@@ -681,72 +663,6 @@ def test_sponza_draws_opaque_front_to_back_then_masked_and_changes_no_pixel(ctx,
             np.testing.assert_array_equal(sorted_frame[buf], listed[buf], err_msg=buf)
     finally:
         r.release()
-
-
-# --- a simplified far mesh (tools/experiments/gbuffer_budget.py: measured for the G-buffer, not built) ----------
-
-def _grid(n: int, fold: bool = False) -> Mesh:
-    """A unit square of n x n quads (2 n^2 triangles) at z = 0, facing +z; ``fold``: the right half bent up to face
-    -x, the crease at x = 0.5 split (its vertices duplicated with each side's normal), uvs = (x, y)."""
-    xs = np.linspace(0.0, 1.0, n + 1)
-    x, y = np.meshgrid(xs, xs, indexing="xy")
-    verts = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
-    normals = np.tile([0.0, 0.0, 1.0], (x.size, 1))
-    i = np.arange(n)[None, :] + (n + 1) * np.arange(n)[:, None]
-    quads = np.stack([i, i + 1, i + n + 2, i + n + 1], axis=-1).reshape(-1, 4)
-    faces = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
-    if fold:
-        right = verts[:, 0] >= 0.5
-        # Duplicate the crease's right copies so the two sides keep their own normals.
-        crease = np.flatnonzero(np.isclose(verts[:, 0], 0.5))
-        dup = {int(v): len(verts) + k for k, v in enumerate(crease)}
-        verts = np.concatenate([verts, verts[crease]])
-        normals = np.concatenate([normals, normals[crease]])
-        right = np.concatenate([right, np.ones(len(crease), bool)])
-        on_right = verts[faces].mean(axis=1)[:, 0] > 0.5
-        faces[on_right] = np.vectorize(lambda v: dup.get(int(v), int(v)))(faces[on_right])
-        verts[right, 2] = verts[right, 0] - 0.5
-        verts[right, 0] = 0.5
-        normals[right] = [-1.0, 0.0, 0.0]
-    return Mesh("grid", verts.astype(np.float32), normals.astype(np.float32), faces.astype(np.uint32),
-                verts[:, :2].astype(np.float32))
-
-
-_FOOTPRINT = 1e-3
-"""A pixel's footprint per unit distance (a 1000-pixel frame of a ~53-degree field of view)."""
-
-
-def test_near_triangles_are_kept_exactly():
-    tool = load_tool("experiments/gbuffer_budget")
-    mesh = _grid(8)
-    out = tool.simplify(mesh, np.array([0.5, 0.5, 1.0]), _FOOTPRINT, 0.5)  # cells of 0.5 mm: below the 2 mm floor
-    assert len(out.faces) == len(mesh.faces)
-    np.testing.assert_array_equal(out.vertices[out.faces], mesh.vertices[mesh.faces])
-
-
-def test_far_grid_collapses_to_its_cells():
-    tool = load_tool("experiments/gbuffer_budget")
-    mesh = _grid(64)  # quads of 1/64 = 15.6 mm
-    # At 100 units a pixel is 0.1 units, so half a pixel is 50 mm: the level below it has cells of 2^5 = 32 mm,
-    # about 2 x 2 quads each.
-    out = tool.simplify(mesh, np.array([0.5, 0.5, 100.0]), _FOOTPRINT, 0.5)
-    assert 0 < len(out.faces) < len(mesh.faces) // 4
-    assert np.all(np.abs(out.vertices[:, 2]) < 1e-6)  # still flat
-    assert np.allclose(out.normals, [0.0, 0.0, 1.0])
-    assert out.vertices[:, :2].min() >= 0.0 and out.vertices[:, :2].max() <= 1.0  # cell means stay inside
-
-
-def test_creases_keep_the_fold_sharp():
-    tool = load_tool("experiments/gbuffer_budget")
-    mesh = _grid(64, fold=True)
-    eye = np.array([0.0, 0.5, 100.0])
-    loose = tool.simplify(mesh, eye, _FOOTPRINT, 2.0)
-    kept = tool.simplify(mesh, eye, _FOOTPRINT, 2.0, creases=True)
-    unit = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])
-    # With creases kept every normal is one of the two sides'; clustering across the fold averages some.
-    assert np.all(np.abs(kept.normals @ unit.T).max(axis=1) > 0.999)
-    assert np.any(np.abs(loose.normals @ unit.T).max(axis=1) < 0.99)
-    assert len(kept.faces) >= len(loose.faces)
 
 
 def test_the_renderer_takes_the_scenes_shadow_map_size_where_its_settings_name_none(ctx):
@@ -793,20 +709,6 @@ def test_a_directional_map_is_fitted_to_the_bounds_outline_not_their_sphere():
         assert (m @ np.append(centre + d, 1.0))[2] > (m @ np.append(centre, 1.0))[2]
     m, _, _ = fit_directional(bounds, [-0.35, -0.94, 0.0])  # the noon sun: 31 x 55 m of the sphere's 64 x 64
     assert sorted(np.round(2.0 / np.linalg.norm(m[:2, :3], axis=1))) == [31.0, 55.0]
-
-
-def test_shadow_cost_renders_one_map_a_moving_frame_and_none_a_still_one(ctx, tmp_path):
-    """tools/experiments/shadow_cost.py: with the sun turned every frame each frame renders its map; with it still,
-    the cached one serves; each size gets its row and the JSON holds them."""
-    tool = load_tool("experiments/shadow_cost")
-    out = tmp_path / "cost.json"
-    result = tool.main(["--scene", "cornell", "--sizes", "64,128", "--size", "16", "--frames", "2", "--rounds", "1",
-                        "--out", str(out)])
-    assert [r["shadow_size"] for r in result["rows"]] == [64, 128]
-    # 2 warm-up frames, then 2 moving (one map each) and 2 still (the map of the still sun once, then cached)
-    assert [r["maps_rendered"] for r in result["rows"]] == [5, 5]
-    assert all(r["moving_ms"] > 0 and r["still_ms"] > 0 for r in result["rows"])
-    assert json.loads(out.read_text())["rows"][0]["shadow_size"] == 64
 
 
 def test_a_moving_sun_renders_its_map_at_the_moving_size_and_the_full_one_when_it_rests(ctx):

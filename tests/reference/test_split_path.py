@@ -4,7 +4,6 @@ area lights keep the two passes."""
 
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pytest
@@ -44,16 +43,13 @@ def test_the_direct_light_is_the_two_passes_to_round_off(cornell):
     assert indirect.min() >= -1e-6 * full.max() and indirect.mean() > 0.05 * full.mean()
 
 
-def test_the_full_light_estimates_the_two_passes_image(cornell, tmp_path):
-    """tools/experiments/split_path_check.py on cornell's default frame: the frame means of full and indirect light
+def test_the_full_light_estimates_the_two_passes_image(cornell):
+    """On cornell's default frame the frame means of full and indirect light of the one pass and of the two passes
     agree within the seeds' spread (|z| well under 4), and per pixel the z scores are centred with unit spread."""
-    from tool_modules import load_tool
+    from oracles import split_path_compare, split_path_renders
 
-    check = load_tool("experiments/split_path_check")
-    out = tmp_path / "check.json"
-    assert check.main(["--scene", "cornell", "--res", "24x24", "--spp", "16", "--renders", "6", "--time-res", "none",
-                       "--out", str(out)]) == 0
-    row = json.loads(out.read_text())["frames"][0]
+    frame, seeds = ref.load_frame(cornell, cornell.default, 24, 24), range(1, 7)
+    row = split_path_compare(split_path_renders(frame, 16, seeds, True), split_path_renders(frame, 16, seeds, False))
     for name in ("full", "indirect"):
         r = row[name]
         assert abs(r["z"]) < 4 and abs(r["relative_difference"]) < 0.02, (name, r)

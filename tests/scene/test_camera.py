@@ -1,5 +1,5 @@
 """The camera conventions the renderers and the tools share: view rays, the view's inverse, and the world
-position a G-buffer's depth stands for (as direct.glsl and tools/experiments/world_inputs.py reconstruct it)."""
+position a G-buffer's depth stands for (as direct.glsl and tests/oracles.py reconstruct it)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from diviewer.scene import camera as cam
-from tool_modules import load_tool
+from oracles import world_buffers
 
 
 def test_view_to_world_inverts_the_view():
@@ -19,7 +19,6 @@ def test_view_to_world_inverts_the_view():
 def test_world_buffers_project_back_to_their_pixels(crop_xy):
     """A crop's reconstructed world points, projected with the full render's view and projection, land on the
     centres of the crop's pixels at their depths; world normals turned back by the view are the view normals."""
-    tool = load_tool("experiments/world_inputs")
     rng = np.random.default_rng(0)
     sw, sh, size = 228, 128, 128
     camera = {"position": [-0.4, 1.4, 3.9], "target": [0.2, 1.3, 0.4], "up": [0.0, 1.0, 0.0], "fov": 41.0}
@@ -27,7 +26,7 @@ def test_world_buffers_project_back_to_their_pixels(crop_xy):
     depth[:5] = 0.0  # background rows
     n_view = rng.normal(size=(size, size, 3))
     n_view /= np.linalg.norm(n_view, axis=-1, keepdims=True)
-    pos, n_world = tool.world_buffers(depth, n_view, camera, (sw, sh), crop_xy, np.zeros(3), 100.0)
+    pos, n_world = world_buffers(depth, n_view, camera, (sw, sh), crop_xy, np.zeros(3), 100.0)
     assert pos.shape == n_world.shape == (size, size, 3) and pos.dtype == np.float32
     assert not pos[:5].any() and not n_world[:5].any()
     p = pos[5:].astype(np.float64) * 100.0
@@ -44,11 +43,10 @@ def test_world_buffers_project_back_to_their_pixels(crop_xy):
 
 
 def test_world_buffers_clip_positions_outside_the_box():
-    tool = load_tool("experiments/world_inputs")
     camera = {"position": [0.0, 0.0, 5.0], "target": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0], "fov": 60.0}
     depth = np.full((4, 4), 50.0, np.float32)
     normal = np.tile(np.array([0.0, 0.0, 1.0], np.float32), (4, 4, 1))
-    pos, _ = tool.world_buffers(depth, normal, camera, (4, 4), (0, 0), np.zeros(3), 1.0)
+    pos, _ = world_buffers(depth, normal, camera, (4, 4), (0, 0), np.zeros(3), 1.0)
     assert pos.min() >= -1.0 and pos.max() <= 1.0 and (np.abs(pos) == 1.0).any()
 
 

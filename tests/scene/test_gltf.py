@@ -285,9 +285,7 @@ def test_gbuffer_and_path_tracer_agree_on_a_fine_checker_mask(ctx, tmp_path, tex
     the quad where they are smaller (one sample at the centre against the pixel's area)."""
     pytest.importorskip("mitsuba")
     from diviewer.reference import mitsuba as ref
-    from tool_modules import load_tool
-
-    alpha_agreement = load_tool("experiments/alpha_agreement")
+    from oracles import centre_depth
     ref.select_variant()
     scene, n = fine_mask_scene(tmp_path, texels), 64
     r = Renderer(ctx, scene, n, n, RenderSettings(shadows=False))
@@ -300,7 +298,7 @@ def test_gbuffer_and_path_tracer_agree_on_a_fine_checker_mask(ctx, tmp_path, tex
     gl_cover = np.isclose(g["depth"], -QUAD_Z, rtol=1e-3)
     assert not gl_cover[~quad].any()
     assert 0.4 < gl_cover[quad].mean() < 0.6, "the G-buffer cuts about half the quad away"
-    centre = alpha_agreement.centre_depth(scene, scene.default, n, n)
+    centre = centre_depth(scene, scene.default, n, n)
     assert np.array_equal(np.isclose(centre, -QUAD_Z, rtol=1e-3), gl_cover), "the same surface at every pixel centre"
     assert np.isclose(centre[quad & ~gl_cover], -WALL_Z, rtol=1e-3).all(), "through the holes both see the wall"
     mi_cover = ref.MitsubaFrame(scene, scene.default, n, n).aovs(16, 0)["albedo"].mean(-1)  # the quad's share

@@ -215,10 +215,10 @@ def test_bad_checkpoint_is_refused(tmp_path, capsys):
 def test_eval_of_the_exported_model_reproduces_training_validation(checkpoints, tmp_path, monkeypatch):
     """`diviewer eval` (onnxruntime, torch-free) scores the val split as training's validation did, where it
     tone-maps as training does: without the scene's shipped evaluation set, whose exposure it would take."""
-    from diviewer.evaluate import evaluate
+    from diviewer.evaluation.evaluate import evaluate
     from diviewer.train.checkpoint import load_checkpoint
 
-    monkeypatch.setattr("diviewer.evalframes.DEFAULT_EVALSETS", tmp_path / "no_evalsets")
+    monkeypatch.setattr("diviewer.evaluation.frames.DEFAULT_EVALSETS", tmp_path / "no_evalsets")
 
     out = tmp_path / "m.onnx"
     export(checkpoints["indirect"], out, log=quiet)

@@ -160,7 +160,7 @@ def test_every_settings_field_a_recipe_can_set_has_a_spec():
 
     from diviewer.data.capture import CaptureSettings
     from diviewer.data.truth_filter import TruthFilter
-    from diviewer.evalset import EvalSetSettings
+    from diviewer.evaluation.evalset import EvalSetSettings
     from diviewer.train import recipe_fields as rf
     from diviewer.train.export import ExportSettings
     from diviewer.train.recipe import CAPTURE_EXTRA, NOT_TRAIN

@@ -820,23 +820,6 @@ def test_encoding_2_training_needs_light(tmp_path):
     assert ds is not None
 
 
-def test_train_speed_times_each_variant_on_the_trainers_batches(data, tmp_path):
-    """tools/experiments/train_speed.py: the trainer's own steps timed per variant, warm-up apart; an unknown
-    variant is refused."""
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/train_speed")
-    cfg = tiny(data, tmp_path / "run")
-    out = tool.measure(cfg, steps=1, variants=["eager", "channels_last", "eager"], warmup=1, log=quiet)
-    assert [v["variant"] for v in out] == ["eager", "channels_last", "eager"]  # rounds, in turn
-    for v in out:
-        assert v["steps_timed"] == 1 and len(v["warmup_s"]) == 1 and v["median_ms"] > 0
-        assert [(s[0], *s[2:]) for s in v["shapes"]] == [(4, RES, RES)]  # the tiny run's batch, whole frames
-    assert not (tmp_path / "run" / "last.ckpt").exists()  # measured in memory: no checkpoint written
-    with pytest.raises(ValueError, match="unknown variant"):
-        tool.measure(cfg, steps=1, variants=["eager", "fast"], log=quiet)
-
-
 def test_output_gain_fits_the_targets_exposure_and_trains_exports_and_resumes(data, tmp_path):
     """--output-gain: the gain puts the 99th percentile of the train split's exposed target (indirect / albedo /
     light scale x exposure) at 1; the batches' encoded targets use it, export verifies the graph that decodes with
@@ -864,28 +847,6 @@ def test_output_gain_fits_the_targets_exposure_and_trains_exports_and_resumes(da
     assert card["encoding"]["output_gain"] == enc.output_gain and card["verification"]["max_rel_to_peak"] < 1e-4
     with pytest.raises(DiviewerError, match="output_gain"):
         train(tiny(data, out, **{**kw, "output_gain": False}, epochs=4), resume=True, log=quiet)
-
-
-def test_target_range_reports_the_trainers_target_and_the_gain_it_would_fit(data):
-    """tools/experiments/target_range.py: the gain is the trainer's (fit_encoding with --output-gain on the same
-    frames), the percentiles rise, and the encoded values are the encoding's curve of them."""
-    from tool_modules import load_tool
-
-    from diviewer.data.scales import light_scales
-    from diviewer.encoding import Encoding, encode_radiance
-    from diviewer.train.targets import fit_encoding
-
-    tool = load_tool("experiments/target_range")
-    ds = Dataset(data)
-    idx = ds.indices("train")
-    r = tool.target_range(ds, idx)
-    _, arr = ds.array("train", idx)
-    cfg = tiny(data, data, target="indirect", divide_albedo=True, output_gain=True)
-    enc = fit_encoding(ds, idx, arr, light_scales(ds, idx), output_of=cfg)
-    assert r["output_gain"] == pytest.approx(enc.output_gain) and r["exposure"] == pytest.approx(enc.exposure)
-    p = list(r["exposed"].values())
-    assert 0 < p[0] < p[1] < p[2]
-    np.testing.assert_allclose(list(r["encoded"].values()), encode_radiance(np.array(p), Encoding()), rtol=1e-5)
 
 
 def test_a_run_whose_target_lies_low_is_told_of_output_gain(data):

@@ -19,7 +19,7 @@ from diviewer.scene.loader import load_scene  # noqa: E402
 from diviewer.train.checkpoint import load_checkpoint  # noqa: E402
 from diviewer.padding import shift_camera_params  # noqa: E402
 from diviewer.train.world import light_planes, world_planes  # noqa: E402
-from tool_modules import load_tool  # noqa: E402
+from oracles import world_buffers  # noqa: E402
 
 CAMERA = {"position": [-0.4, 1.4, 3.9], "target": [0.2, 1.3, 0.4], "up": [0.0, 1.0, 0.0], "fov": 41.0}
 
@@ -37,10 +37,9 @@ def _params(**kw):
 
 @pytest.mark.parametrize("x0", [0, 50, 100])
 def test_world_planes_are_the_numpy_reconstruction(x0):
-    tool = load_tool("experiments/world_inputs")
     depth, normal = _buffers(np.random.default_rng(x0), 128, 128)
     center, half = np.array([0.0, 1.0, 0.0]), 1.2
-    pos, nrm = tool.world_buffers(depth, normal, CAMERA, (228, 128), (x0, 0), center, half)
+    pos, nrm = world_buffers(depth, normal, CAMERA, (228, 128), (x0, 0), center, half)
     p = torch.from_numpy(_params(width=128, height=128, x0=x0, source=(228, 128)))[None]
     got = world_planes(torch.from_numpy(depth)[None, None], torch.from_numpy(normal).permute(2, 0, 1)[None], p,
                        center, [half] * 3)[0].permute(1, 2, 0).numpy()
@@ -250,7 +249,7 @@ def test_a_run_trains_on_light_inputs_and_the_runtime_feeds_them(tmp_path):
     graph with the frames' lights as its fourth input, and the runtime needs them and reads them."""
     from train.test_trainer import quiet, tiny
 
-    from diviewer.evaluate import evaluate
+    from diviewer.evaluation.evaluate import evaluate
     from diviewer.runtime import NeuralGI
     from diviewer.scene.lights import light_params
     from diviewer.train.export import export
@@ -303,7 +302,7 @@ def cornell_world_model(tmp_path_factory):
 
 
 def test_eval_scores_a_world_model_on_a_dataset(cornell_world_model, tmp_path):
-    from diviewer.evaluate import evaluate
+    from diviewer.evaluation.evaluate import evaluate
 
     data, model = cornell_world_model
     summary = evaluate(model, data, split="val", out=tmp_path / "e.json", log=lambda *_: None)

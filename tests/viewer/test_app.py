@@ -933,10 +933,10 @@ def test_view_command_saves_the_window_itself(display, tmp_path):
 # --- dynamic resolution, the training-range flag, auto exposure -----------------------------------------------
 
 def _bilinear(img: np.ndarray, w: int, h: int) -> np.ndarray:
-    """GL's LINEAR magnification in numpy: the accuracy tool's own (tools/experiments/scale_accuracy.py)."""
-    from tool_modules import load_tool
+    """GL's LINEAR magnification in numpy (tests/oracles.py)."""
+    from oracles import bilinear
 
-    return load_tool("experiments/scale_accuracy").bilinear(img, w, h)
+    return bilinear(img, w, h)
 
 
 def _upscaled_offscreen(ctx, shot: Path) -> np.ndarray:
@@ -1106,31 +1106,6 @@ def test_a_scene_file_that_asks_for_auto_exposure_starts_with_it(display, tmp_pa
     assert json.loads((tmp_path / "scene.json").read_text())["auto_exposure"] is True
     assert json.loads((tmp_path / "off_on.json").read_text()) == [False]
     assert json.loads((tmp_path / "off.json").read_text())["exposure"] == 0.0
-
-
-def test_scale_accuracy_tool_scores_each_scale_against_full_resolution(tmp_path):
-    """tools/experiments/scale_accuracy.py renders the viewer's frame at each scale, upscales it to the window and scores
-    it against the scale-1 frame (a tiny window and model: the figures themselves are the lead's to measure)."""
-    pytest.importorskip("onnx")
-    from tool_modules import load_tool
-
-    tool = load_tool("experiments/scale_accuracy")
-    assert tool.parse_scales("0.5,0.75") == [1.0, 0.75, 0.5]
-    assert tool.parse_scales("2,1,0.5") == [1.0, 2.0, 0.5]
-    with pytest.raises(DiviewerError, match="render scale"):
-        tool.parse_scales("1,2.5")
-    model = _cornell_model(tmp_path / "cornell_k8.onnx")
-    out = tmp_path / "acc.json"
-    result = tool.main(["--model", str(model), "--size", "96x72", "--scales", "1,0.5", "--frames", "1",
-                        "--exposure", "1", "--out", str(out)])
-    assert json.loads(out.read_text())["summary"] == result["summary"]
-    assert result["render_sizes"] == {"1.0": [96, 72], "0.5": [48, 36]}
-    assert result["gi_sizes"] == {"1.0": [64, 48], "0.5": [64, 48]}  # the model's rows at the window's shape
-    for split in ("train", "test", "all"):
-        half = result["summary"][split]["0.5"]["vs_full"]
-        assert 10.0 < half["psnr_tm"] < 60.0 and 0.5 < half["ssim_tm"] < 1.0
-        assert result["summary"][split]["1.0"]["vs_full"]["psnr_tm"] is None
-        assert half is not None and result["summary"][split]["0.5"]["vs_truth"]["psnr_tm"] is None
 
 
 def _shape_session(tmp_path: Path) -> None:

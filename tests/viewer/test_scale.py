@@ -266,8 +266,8 @@ def test_runtime_pads_asks_the_runtime(ctx):
 def test_the_linear_filter_at_half_size_is_each_2x2_blocks_mean():
     """What --render-scale 2 shows: GL's linear filter sampling a texture at half its size lands halfway between
     four texels, so each window pixel is the mean of its 2x2 block (the numpy model the viewer tests use)."""
-    from tool_modules import load_tool
+    from oracles import bilinear
 
     img = np.random.default_rng(3).random((12, 10, 3)).astype(np.float32)
-    half = load_tool("experiments/scale_accuracy").bilinear(img, 5, 6)
+    half = bilinear(img, 5, 6)
     np.testing.assert_allclose(half, img.reshape(6, 2, 5, 2, 3).mean(axis=(1, 3)), rtol=1e-6, atol=1e-7)

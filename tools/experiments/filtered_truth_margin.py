@@ -7,7 +7,7 @@ Each frame of the set is path traced again as a capture traces it (`full_and_dir
 part from one pass), ``--passes`` times at ``--pass-spp`` under seeds of their own; the first 1, 2, 4, ... passes
 averaged are the truth at that many samples, filtered with the frame's G-buffer as stored in the set. Each is scored
 against the set's truth as `diviewer eval` scores (tone-mapped, the whole crop of each shape) and its margin over the
-model taken as `diviewer.truthmargin` takes it: the set's two 1024-spp renders give the reference's own noise, which
+model taken as `diviewer.evaluation.truthmargin` takes it: the set's two 1024-spp renders give the reference's own noise, which
 comes out of both errors; a filtered truth's error is then its noise and its bias together. The model's errors are
 its per-frame scores in a `diviewer eval` JSON of the same set.
 
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.truthmargin import MARGIN_DB, margin_db, summarize
+from diviewer.evaluation.truthmargin import MARGIN_DB, margin_db, summarize
 
 SEED_STREAM = 0xF117
 """Tag of the passes' seeds: pass p of a frame is ``SeedSequence([frame seed, SEED_STREAM, p])``."""
@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
     from diviewer.data.truth_filter import TruthFilter, filter_truth
-    from diviewer.evalframes import EvalFrames, crop, crop_frame, split_key
+    from diviewer.evaluation.frames import EvalFrames, crop, crop_frame, split_key
     from diviewer.metrics import mse, psnr_error, tonemap
     from diviewer.scene.loader import load_recorded_scene
 

@@ -48,9 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
     from diviewer.data.scales import light_scales
-    from diviewer.evalframes import EvalFrames, crop_frame, split_key
-    from diviewer.evalscore import ladder_methods, score
-    from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
+    from diviewer.evaluation.frames import EvalFrames, crop_frame, split_key
+    from diviewer.evaluation.scoring import ladder_methods, score
+    from diviewer.evaluation.evaluate import area_direct_of, model_input, run_model, stored_inputs
     from diviewer.exposure import ExposureSettings, still_ev
     from diviewer.runtime import NeuralGI
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from diviewer.data.dataset import read_manifest
-from diviewer.evalframes import default_evalset
+from diviewer.evaluation.frames import default_evalset
 from diviewer.gl.context import headless_context
 from diviewer.gl.renderer import Renderer, RenderSettings
 from diviewer.metrics import psnr, tonemap

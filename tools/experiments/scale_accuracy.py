@@ -68,7 +68,7 @@ def _truth(ref, scene, config, size, spp: int, seed: int, cache: Path | None, ke
 def measure(scene_name: str, model_path: Path, size: tuple[int, int], scales: list[float], frames: int, spp: int,
             gi_res: str = "model", exposure: float | None = None, log=print, truth_cache: Path | None = None) -> dict:
     """Scores of each scale's frame against the scale-1 frame (and the path tracer with ``spp``), per split."""
-    from diviewer.evaluate import score
+    from diviewer.evaluation.evaluate import score
     from diviewer.gl.context import describe, headless_context
     from diviewer.gl.neural import NeuralPass
     from diviewer.gl.renderer import Renderer

@@ -54,9 +54,9 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
 
     from diviewer.data.scales import light_scales
-    from diviewer.evalframes import EvalFrames, crop_frame, split_key
-    from diviewer.evalscore import regions
-    from diviewer.evaluate import area_direct_of, model_input, run_model, stored_inputs
+    from diviewer.evaluation.frames import EvalFrames, crop_frame, split_key
+    from diviewer.evaluation.scoring import regions
+    from diviewer.evaluation.evaluate import area_direct_of, model_input, run_model, stored_inputs
     from diviewer.metrics import stride_pattern, stride_phases
     from diviewer.runtime import NeuralGI
 

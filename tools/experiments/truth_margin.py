@@ -1,6 +1,6 @@
 """How far a path-traced truth of N spp stands above a model's error, frame by frame, at every rung of an evaluation
 set's ladder and at projected counts: issue 26's "the ground truth's noise floor must be at least 6 dB above the
-model's error". The method is `diviewer.truthmargin`'s (its docstring); `diviewer eval` reports the truth each model
+model's error". The method is `diviewer.evaluation.truthmargin`'s (its docstring); `diviewer eval` reports the truth each model
 trained on, this script every rung and projection of a `diviewer eval` JSON, read from the set's frames. On a compact
 set (which keeps its ladder's scores, not its images) each rung's error is its stored score against the full set's
 truth (float32, scored before the set was compacted), the truth's own noise read from its two renders as stored.
@@ -19,7 +19,7 @@ import json
 import sys
 from pathlib import Path
 
-from diviewer.truthmargin import MARGIN_DB, margin_db, projected_mse, summarize
+from diviewer.evaluation.truthmargin import MARGIN_DB, margin_db, projected_mse, summarize
 
 
 def model_name(methods: dict, key: str | None) -> str | None:
@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--project", type=int, action="append", default=[], help="a truth of this many spp, projected")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
-    from diviewer.evalframes import EvalFrames, crop_frame, split_key
+    from diviewer.evaluation.frames import EvalFrames, crop_frame, split_key
     from diviewer.metrics import mse, psnr_error, tonemap
 
     record = json.loads(a.eval.read_text())
