@@ -332,12 +332,7 @@ def test_the_data_the_docs_cite_is_laid_out_by_rows(capsys):
     assert status == 0, capsys.readouterr().out
 
 
-PRIVATE_ALLOWED = {
-    ("diviewer.bench.path", "diviewer.bench.core._model_paths"): "bench/ is being reworked beside this rule; "
-    "the name is made public there",
-    ("diviewer.build.checks", "diviewer.build.state._output_key"): "build/ is being reworked beside this rule; "
-    "the name is made public there",
-}
+PRIVATE_ALLOWED: dict[tuple[str, str], str] = {}
 """(module, name) pairs that still reach into another module's underscore names, each with why."""
 
 

@@ -95,7 +95,7 @@ def quick(settings: BenchSettings) -> BenchSettings:
     return dataclasses.replace(settings, **QUICK)
 
 
-def _model_paths(settings: BenchSettings, scene) -> list[Path]:
+def model_paths(settings: BenchSettings, scene) -> list[Path]:
     if settings.models:
         return [Path(m) for m in settings.models]
     from diviewer.paths import models_dir
@@ -198,7 +198,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
     ds = _open_evalset(settings, scene, notes)
     tmp_dir = tempfile.TemporaryDirectory(prefix="diviewer-bench-")
     tmp = Path(tmp_dir.name)
-    variants = _variants(_model_paths(settings, scene), tmp, notes, log)
+    variants = _variants(model_paths(settings, scene), tmp, notes, log)
     nets = {}
 
     def net_of(v):

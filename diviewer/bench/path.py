@@ -25,7 +25,7 @@ TEMPORAL_SPP = 16
 def run_path_bench(settings, path_file: Path, json_out: Path | None = None, log=print) -> dict:
     """Time ``path_file``'s frames in the scene of ``settings`` (a BenchSettings); write strict JSON if asked."""
     from diviewer.bench import report
-    from diviewer.bench.core import _model_paths
+    from diviewer.bench.core import model_paths
     from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_rows
     from diviewer.gl.context import headless_context
     from diviewer.runtime import NeuralGI
@@ -38,7 +38,7 @@ def run_path_bench(settings, path_file: Path, json_out: Path | None = None, log=
     path, scene = read_path(path_file, scene)
     times = frame_times(path, frames=settings.frames)
     configs = [path.config_at(t, scene.default) for t in times]
-    nets = {str(p): NeuralGI(p, scene=scene, provider=settings.provider) for p in _model_paths(settings, scene)}
+    nets = {str(p): NeuralGI(p, scene=scene, provider=settings.provider) for p in model_paths(settings, scene)}
     variants = [{"path": p, "name": Path(p).stem} for p in nets]
     notes: list[str] = [] if nets else ["no model for this scene: the direct light alone is timed"]
     rows = []

@@ -14,9 +14,9 @@ def frames_actual(folder) -> float | None:
     """A capture's or evaluation set's actual seconds as its frames' sidecars record them (GL + path tracing, summed
     over every frame, whichever run rendered it: a resumed stage counts all its runs); None where no frame is
     timed."""
-    from diviewer.build.pace import _frame_seconds
+    from diviewer.build.pace import frame_seconds
 
-    count, seconds = _frame_seconds(folder, lambda i: float(i["seconds"]["gl"]) + float(i["seconds"]["gt"]))
+    count, seconds = frame_seconds(folder, lambda i: float(i["seconds"]["gl"]) + float(i["seconds"]["gt"]))
     if not seconds:
         return None
     return sum(seconds) / len(seconds) * count  # frames of an older format timed as the others

@@ -88,7 +88,7 @@ def shipped_file(plan) -> Path | None:
 
 def own_ship(plan, dst: Path) -> bool:
     """Whether ``dst`` is a file this build shipped (its state's ship record, or `SHIPPED`), unchanged since."""
-    from diviewer.build.state import SHIPPED, _output_key
+    from diviewer.build.state import SHIPPED, output_key
     from diviewer.data.dataset import sha256_file
 
     try:
@@ -96,7 +96,7 @@ def own_ship(plan, dst: Path) -> bool:
         recorded = {**data.get(SHIPPED, {}), **data.get("stages", {}).get("ship", {}).get("outputs", {})}
     except (OSError, ValueError, AttributeError, TypeError):
         return False
-    digest = recorded.get(_output_key(dst, plan.work))
+    digest = recorded.get(output_key(dst, plan.work))
     return digest is not None and dst.is_file() and sha256_file(dst) == digest
 
 

@@ -125,7 +125,7 @@ PACE_FRAMES = 200
 """The capture's pace is the median of its last this many frames (the machine's pace now, not a day's mean)."""
 
 
-def _frame_seconds(folder: Path, seconds_of: Callable[[dict], float]) -> tuple[int, list[float]]:
+def frame_seconds(folder: Path, seconds_of: Callable[[dict], float]) -> tuple[int, list[float]]:
     """A dataset folder's frame count and each frame's seconds as its sidecar records them (``seconds_of``); frames
     being written, or of an older format, are counted and not timed."""
     frames = sorted((folder / "frames").glob("*.json")) if (folder / "manifest.json").is_file() else []
@@ -155,7 +155,7 @@ def capture_pace(plan: Plan) -> Pace | None:
     where = plan.capture_dir
     if (why := missing_link(plan)) is not None:
         return Pace("capture", f"capture: {where} {why}")
-    count, seconds = _frame_seconds(where, lambda info: float(info["seconds"]["gl"]) + float(info["seconds"]["gt"]))
+    count, seconds = frame_seconds(where, lambda info: float(info["seconds"]["gl"]) + float(info["seconds"]["gt"]))
     refined = _manifest(where).get("refined")
     left = plan.capture.frames - count
     refusal = capture_refusal(plan) if count and left <= 0 else None
@@ -195,7 +195,7 @@ def refine_pace(plan: Plan) -> Pace | None:
     stage = next((s for s in plan.stages if s.name == "refine"), None)
     if stage is None:
         return None
-    count, seconds = _frame_seconds(plan.truth_dir, lambda info: info["refined"]["seconds"])
+    count, seconds = frame_seconds(plan.truth_dir, lambda info: info["refined"]["seconds"])
     left = plan.capture.frames - count
     assumed = f"the plan assumes {stage.seconds / plan.capture.frames:.1f} s"
     if left <= 0:
@@ -225,7 +225,7 @@ def _capture_sample_seconds(plan: Plan) -> float | None:
 
     cuda = plan.machine.kind == "cuda"
 
-    def per_sample(info: dict) -> float:  # a ValueError or KeyError leaves the frame out (`_frame_seconds`)
+    def per_sample(info: dict) -> float:  # a ValueError or KeyError leaves the frame out (`frame_seconds`)
         r = info["refined"] if "refined" in info else None  # (a sidecar that is no object: a TypeError below)
         variant, seconds, spp = ((r["variant"], r["seconds"], r["extra_spp"]) if r else
                                  (info["variant"], info["seconds"]["gt"], plan.capture.spp))
@@ -233,5 +233,5 @@ def _capture_sample_seconds(plan: Plan) -> float | None:
             raise ValueError(f"path traced with {variant}")
         return float(seconds) / int(spp)
 
-    _, seconds = _frame_seconds(plan.capture_dir, per_sample)
+    _, seconds = frame_seconds(plan.capture_dir, per_sample)
     return statistics.median(seconds[-PACE_FRAMES:]) if seconds else None

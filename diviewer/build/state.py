@@ -96,7 +96,7 @@ class BuildState:
         self.data["stages"][stage] = {
             "done": True, "finished": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
             "seconds": None if seconds is None else round(seconds, 1),
-            "outputs": {_output_key(Path(p), root): sha256_file(Path(p)) for p in outputs},
+            "outputs": {output_key(Path(p), root): sha256_file(Path(p)) for p in outputs},
             "result": result or {}}
         if stage == "ship":
             _keep_shipped(self.data, self.data["stages"][stage])
@@ -161,7 +161,7 @@ def _same(field: str, old: Any, new: Any, root: Path = Path(".")) -> bool:
     return old == new
 
 
-def _output_key(path: Path, root: Path) -> str:
+def output_key(path: Path, root: Path) -> str:
     """How a stage's output is recorded, so that `BuildState.done` finds it from ``root`` whatever the working
     folder: relative to ``root`` where it lies under it as named (through a link too: a work folder whose ``data``
     links to another build's capture), else its absolute path (``root / absolute`` is that path)."""

@@ -11,7 +11,7 @@ test split, recorded beside it: its truth has the capture's spp, too noisy to pa
 docs/build.md). The rule is the bench's and `diviewer build`'s (`diviewer.bench.frontier.smallest_sufficient_k`
 on `diviewer.build.pipeline.evalset_psnr_tm`): the smallest K within the tolerance of the best. With --ship,
 SCENE_ladder.json is written there and the shipped SCENE.onnx's card (its JSON and its ONNX metadata alike,
-`diviewer.build.pipeline.write_model_card`) gets the verdict; the chosen K must be the one shipped (this tool
+`diviewer.build.shipfiles.write_model_card`) gets the verdict; the chosen K must be the one shipped (this tool
 records a ladder, it does not swap models).
 """
 
