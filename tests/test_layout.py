@@ -222,7 +222,7 @@ def test_the_circle_detector_finds_a_planted_circle(tmp_path):
 
 TESTS = Path(__file__).resolve().parent
 SUITES = {"extremes"}
-DOCS_TESTS = {"test_docs_commands.py", "test_results_page.py"}
+DOCS_TESTS = {"test_docs_commands.py", "test_docs_examples.py", "test_results_page.py"}
 """Tests of the docs, not of a module: the commands of the pages run (tests/test_docs_commands.py); the results page
 is what its data gives (tests/test_results_page.py, of tools/make_results.py)."""
 """Folders of tests/ that are suites across the package (run alone with their mark), not mirrors of a package."""
