@@ -177,8 +177,9 @@ def page(scenes: dict) -> str:
             "the same error divided by the row's.", ""]
     for name, s in scenes.items():
         b, rel = s["bench"], s["src"]["bench"]
-        out += [f"### {name}: {machine_of(b['environment'])}; {date_of(rel)}", "",
-                f"Data: [{rel}]({Path(rel).relative_to('docs').as_posix()}), {b['settings']['frames']} frames a row.", ""]
+        out += [f"### {name}", ""] + wrap(
+            f"Machine: {machine_of(b['environment'])}. Measured {date_of(rel)}, {b['settings']['frames']} frames a "
+            f"row. Data: [{rel}]({Path(rel).relative_to('docs').as_posix()}).") + [""]
         out += speed_table(b)
         out.append("")
     out += ["![error against frame time, cornell](../assets/figures/cornell_frontier.png)", "",
