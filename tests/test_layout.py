@@ -331,3 +331,44 @@ def test_the_data_the_docs_cite_is_laid_out_by_rows(capsys):
     folders = [str(root / "docs" / "data"), str(root / "assets" / "evalsets")]
     status = load_tool("relayout_json").main(["--check", *folders])
     assert status == 0, capsys.readouterr().out
+
+
+README_MAX_LINES, README_MAX_LINE, DOCS_MAX_LINES, DOCS_MAX_DATED_HEADINGS = 150, 300, 2500, 3
+"""The front page fits a screenful or three, the manual stays a manual: measured records live as JSON under docs/data
+(docs/results.md is generated from it) and in git's history, not as dated sections of the pages."""
+RECORD_WORDS = re.compile(r"\bissue \d+|\bsessions?\b|runs/`? lost|\blease[sd]?\b", re.I)
+DATED_HEADING = re.compile(r"^#{1,6} .*\b\d{4}-\d{2}-\d{2}\b", re.M)
+
+
+def _manual() -> list[Path]:
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def test_the_readme_is_a_front_page():
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    longest = max(lines, key=len)
+    assert len(lines) <= README_MAX_LINES, f"README.md has {len(lines)} lines, at most {README_MAX_LINES}"
+    assert len(longest) <= README_MAX_LINE, f"README.md's longest line is {len(longest)} characters: {longest[:80]}"
+
+
+def test_the_manual_stays_short_and_undated():
+    pages = sorted((ROOT / "docs").glob("*.md"))
+    total = sum(len(p.read_text(encoding="utf-8").splitlines()) for p in pages)
+    dated = [f"{p.relative_to(ROOT)}: {m.group(0)}" for p in pages
+             for m in DATED_HEADING.finditer(re.sub(r"```.*?```", "", p.read_text(encoding="utf-8"), flags=re.S))]
+    assert total <= DOCS_MAX_LINES, f"docs/*.md hold {total} lines, at most {DOCS_MAX_LINES}"
+    assert len(dated) <= DOCS_MAX_DATED_HEADINGS, "dated headings:\n" + "\n".join(dated)
+
+
+def test_the_manual_tells_no_records():
+    """Pages state current behaviour: no issue numbers, no work sessions or machine loans, no lost folders."""
+    found = [f"{p.relative_to(ROOT)}:{i}: {m.group(0)}" for p in _manual()
+             for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) for m in RECORD_WORDS.finditer(line)]
+    assert not found, "\n".join(found)
+
+
+def test_the_record_checks_catch_what_they_look_for():
+    assert RECORD_WORDS.findall("fixed in issue 26; the session of commit X; `runs/` lost; the lease ran out") == [
+        "issue 26", "session", "runs/` lost", "lease"]
+    assert not RECORD_WORDS.search("a released model; the issues a user can cause")
+    assert DATED_HEADING.findall("## The frame (2026-11-24)\ntext 2026-11-24\n## Speed\n") == ["## The frame (2026-11-24"]
