@@ -165,7 +165,7 @@ def page(scenes: dict) -> str:
         out += [f"### {name}", ""] + wrap(
                 f"`assets/models/{name}.onnx`: K = {card['K']}, {card['precision']} arithmetic on weights stored as "
                 f"{card['weights']}, {s['mb']:.1f} MB, trained at {card['resolution'][0]}x{card['resolution'][1]} "
-                f"for {card['steps']:,} steps (rebuild: `{card['rebuild']}`). Scored on the scene's full evaluation "
+                f"(the weights of step {card['steps']:,}; rebuild: `{card['rebuild']}`). Scored on the scene's full evaluation "
                 f"set at {ev['reference_spp']} spp ({s['src']['eval']}; `diviewer eval` records no machine in it).") + [""]
         out += split_table(s)
         out += ["", f"#### The K ladder of {name}", ""]
