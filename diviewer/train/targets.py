@@ -112,7 +112,7 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: n
 
         say(f"note: the target's 99th percentile is {1 / gain:.2g} at the direct light's exposure, "
             f"{float(encode_radiance(1 / gain / enc.exposure, enc)):.1e} of the network's range; --output-gain "
-            f"would encode it at its own exposure (x {gain:.3g}; docs/sponza.md, where the dark bias comes from)")
+            f"would encode it at its own exposure (x {gain:.3g}; docs/training.md, 'Radiance encoding')")
     return enc
 
 
