@@ -94,7 +94,11 @@ def headline(scenes: dict) -> list[str]:
                + " | ".join(f"**{db(s['psnr'])} dB**" for s in scenes.values()) + " |")
     out.append("| direct light alone, the same frames | "
                + " | ".join(f"{db(s['direct'])} dB" for s in scenes.values()) + " |")
-    out.append("| frame rate at 128x128 on a 2-core CPU, software GL | "
+    envs = [s["bench"]["environment"] for s in scenes.values()]
+    cores = "/".join(sorted({str(e["cpu_count"]) for e in envs}))
+    gl = "software GL" if all(e["gl_renderer"].startswith("llvmpipe") for e in envs) else "GL: " + ", ".join(
+        sorted({e["gl_renderer"] for e in envs}))
+    out.append(f"| frame rate at 128x128 on a {cores}-core CPU, {gl} | "
                + " | ".join(f"{s['row']['timing']['fps']:.0f} fps" for s in scenes.values()) + " |")
     out.append("| model: width K, weights, size | "
                + " | ".join(f"K = {s['card']['K']}, {s['card']['weights']}, {s['mb']:.1f} MB" for s in scenes.values())
