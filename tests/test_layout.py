@@ -288,12 +288,12 @@ def test_heading_slugs_follow_githubs_rule():
 
 
 def test_every_shell_script_parses():
-    """tools/*.sh and .ci/run parse (`bash -n`): the Sponza chain is edited while it runs (write a new file, then
+    """tools/*.sh, docs/examples/*.sh and .ci/run parse (`bash -n`): the Sponza chain is edited while it runs (write a new file, then
     `mv`), and a syntax error would surface only when the running chain reached it, sessions later."""
     import subprocess
 
     root = PACKAGE.parent
-    scripts = [*sorted((root / "tools").rglob("*.sh")), root / ".ci" / "run"]
+    scripts = [*sorted((root / "tools").rglob("*.sh")), *sorted((root / "docs").rglob("*.sh")), root / ".ci" / "run"]
     bad = {}
     for script in scripts:
         r = subprocess.run(["bash", "-n", str(script)], capture_output=True, text=True)
