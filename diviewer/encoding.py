@@ -74,7 +74,7 @@ from the depth and normal buffers and the frame's camera (its third input ``came
 4: as 3, plus where each of the scene's ``lights`` lights is: three numbers a light (a sun's direction, a point
 light's normalised position: `diviewer.scene.lights.light_params`) from the graph's fourth input ``light``,
 spread over the frame as constant planes. A network blind to them cannot tell which side of a scene the sun
-lights when the frame shows only shade (docs/sponza.md)."""
+lights when the frame shows only shade (docs/sponza.md at commit c48f1bc)."""
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 

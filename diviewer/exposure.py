@@ -38,7 +38,7 @@ class ExposureSettings:
     limits: tuple[float, float] = (-16.0, 16.0)
     """Range of the exposure (stops), as the panel's slider. Sponza's full evaluation set meters from +3.6 to +13.4
     stops (a gallery no sunlight reaches); at the +-8 of before, 35 of its 72 frames were held at +8, up to 5.4 stops
-    darker than metered, and its shade was not shown (docs/accuracy.md). 16 stops still keeps a frame lit only by
+    darker than metered, and its shade was not shown (docs/accuracy.md at commit c48f1bc). 16 stops still keeps a frame lit only by
     what is barely above ``floor`` from being blown up to middle grey."""
     floor: float = 1e-6
     """Samples darker than this are unlit (the void, the background) and not metered."""

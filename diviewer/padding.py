@@ -14,7 +14,7 @@ A ``guard`` asks for at least that many pixels of padding a side: a frame the st
 frame at a stride of 128: none) is padded to the next multiple instead. The runtime guards the columns of models
 trained on random-width crops (`EDGE_GUARD`, `edge_guard`): such a network has nearly always seen its frame's left
 and right edges with a wide band of replicated columns beside them, and run on a frame that fills the stride it
-loses 1-2 dB in the columns next to the edges (docs/sponza.md, "The frame's edge").
+loses 1-2 dB in the columns next to the edges (docs/sponza.md at commit c48f1bc, "The frame's edge").
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 
 EDGE_GUARD = 8
 """Columns of padding a side at least, for a network trained on random-width crops (`edge_guard`). Measured on
-Sponza's and cornell's shipped models (docs/sponza.md, "The frame's edge"): 128-wide frames lose 0.9-2.2 dB
+Sponza's and cornell's shipped models (docs/sponza.md at commit c48f1bc, "The frame's edge"): 128-wide frames lose 0.9-2.2 dB
 unguarded, 126-wide (1 a side) 0.7-1.6, 120-wide (4) 0.4-0.8; 130-wide (63 a side) 0.1-0.2, the context alone."""
 
 

@@ -2,7 +2,8 @@
 
 Every line of a ```bash / ```sh / ```console / ```shell block of DOCS that starts with ``diviewer `` (after an
 optional ``$ ``) runs as ``python -m diviewer`` in a folder holding a small procedural glTF room, ``room.glb``
-(the scene docs/own-scene.md is written for; other scenes a page names become it). Sizes shrink (``--res``,
+(the scene docs/own-scene.md is written for; other scenes a page names become it, a scene file `inspect` writes
+becomes room.toml). Sizes shrink (``--res``,
 ``--size``, ``--frames``, ``--spp``); ``view`` runs a few frames in a window (the display fixture: Xvfb in CI;
 without a display it is only parsed); ``build`` runs with ``--dry-run`` (a real build takes hours). The commands
 that take minutes to hours and have no dry run (PARSE_ONLY), and a path-traced reference where Mitsuba is not
@@ -27,7 +28,8 @@ from gltf_doc import _box, glb_bytes
 from viewer.test_app import display  # noqa: F401 (the fixture: an Xvfb display for the view commands)
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ("docs/own-scene.md", "README.md")
+DOCS = ("docs/own-scene.md", "README.md", "docs/viewer.md", "docs/paths.md", "docs/scene-files.md", "docs/build.md",
+        "docs/scaling.md", "docs/evaluation.md", "docs/speed.md", "docs/training.md")
 FENCE = re.compile(r"^```(?:bash|sh|console|shell)[ \t]*\n(.*?)^```", re.M | re.S)
 TOML_FENCE = re.compile(r"^```toml[ \t]*\n(.*?)^```", re.M | re.S)
 PARSE_ONLY = {"capture", "train", "evalset", "export", "baseline", "bench", "eval", "data"}
@@ -90,6 +92,8 @@ def shrink(argv: list[str]) -> list[str]:
             out[i + 1] = SHRINK[word]
         elif word == "--scene" and value not in ("room.glb", "room.toml"):
             out[i + 1] = "room.glb" if value.endswith((".glb", ".gltf")) else "room.toml"
+        elif word == "--write-toml":
+            out[i + 1] = "room.toml"
         elif word == "--model" and value.endswith(".onnx"):
             out[i + 1] = MODEL
     if out[0] == "view":
@@ -178,8 +182,8 @@ def test_the_scene_snippets_of_the_walkthrough_load_on_the_room(tmp_path):
 
 @pytest.mark.slow
 def test_the_commands_of_the_docs_run(tmp_path, request):
-    """Every command of each page, in the page's order, on the room in a folder of its own; a page without an
-    inspect that writes room.toml gets it written first. Without a display (and without DIVIEWER_REQUIRE_GL, where
+    """Every command of each page, in the page's order, on the room in a folder of its own, room.toml written
+    first. Without a display (and without DIVIEWER_REQUIRE_GL, where
     that fails) the window commands are only parsed."""
     try:
         request.getfixturevalue("display")
@@ -194,9 +198,12 @@ def test_the_commands_of_the_docs_run(tmp_path, request):
         folder = tmp_path / Path(page).stem
         folder.mkdir()
         (folder / "room.glb").write_bytes(room_glb())
-        if not any(a[0] == "inspect" and "--write-toml" in a for a in commands):
-            _run(["inspect", "--scene", "room.glb", "--write-toml", "room.toml"], folder)
+        # room.toml first: commands before the page's own inspect (a README's flight) fly it; the page's
+        # inspect --write-toml then writes it anew, as in the fresh folder the page is written for.
+        _run(["inspect", "--scene", "room.glb", "--write-toml", "room.toml"], folder)
         for argv in commands:
+            if argv[0] == "inspect" and "--write-toml" in argv:
+                (folder / argv[argv.index("--write-toml") + 1]).unlink(missing_ok=True)
             if (argv[0] in PARSE_ONLY or ("--reference" in argv and not HAS_MITSUBA)
                     or (argv[0] == "view" and not windows)):
                 _parses(argv)

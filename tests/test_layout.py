@@ -222,8 +222,9 @@ def test_the_circle_detector_finds_a_planted_circle(tmp_path):
 
 TESTS = Path(__file__).resolve().parent
 SUITES = {"extremes"}
-DOCS_TESTS = {"test_docs_commands.py"}
-"""Tests of the docs, not of a module: the commands of the pages run (tests/test_docs_commands.py)."""
+DOCS_TESTS = {"test_docs_commands.py", "test_docs_examples.py", "test_results_page.py"}
+"""Tests of the docs, not of a module: the commands of the pages run (tests/test_docs_commands.py); the results page
+is what its data gives (tests/test_results_page.py, of tools/make_results.py)."""
 """Folders of tests/ that are suites across the package (run alone with their mark), not mirrors of a package."""
 
 
@@ -287,12 +288,12 @@ def test_heading_slugs_follow_githubs_rule():
 
 
 def test_every_shell_script_parses():
-    """tools/*.sh and .ci/run parse (`bash -n`): the Sponza chain is edited while it runs (write a new file, then
+    """tools/*.sh, docs/examples/*.sh and .ci/run parse (`bash -n`): the Sponza chain is edited while it runs (write a new file, then
     `mv`), and a syntax error would surface only when the running chain reached it, sessions later."""
     import subprocess
 
     root = PACKAGE.parent
-    scripts = [*sorted((root / "tools").rglob("*.sh")), root / ".ci" / "run"]
+    scripts = [*sorted((root / "tools").rglob("*.sh")), *sorted((root / "docs").rglob("*.sh")), root / ".ci" / "run"]
     bad = {}
     for script in scripts:
         r = subprocess.run(["bash", "-n", str(script)], capture_output=True, text=True)
@@ -390,3 +391,44 @@ def test_no_test_imports_an_experiment():
                        and re.search(r"""load_tool\(\s*["']experiments/|tools[./]experiments[./]\w+ import""",
                                      p.read_text()))
     assert not offenders, offenders
+
+
+README_MAX_LINES, README_MAX_LINE, DOCS_MAX_LINES, DOCS_MAX_DATED_HEADINGS = 150, 300, 2500, 3
+"""The front page fits a screenful or three, the manual stays a manual: measured records live as JSON under docs/data
+(docs/results.md is generated from it) and in git's history, not as dated sections of the pages."""
+RECORD_WORDS = re.compile(r"\bissue \d+|\bsessions?\b|runs/`? lost|\blease[sd]?\b", re.I)
+DATED_HEADING = re.compile(r"^#{1,6} .*\b\d{4}-\d{2}-\d{2}\b", re.M)
+
+
+def _manual() -> list[Path]:
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def test_the_readme_is_a_front_page():
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    longest = max(lines, key=len)
+    assert len(lines) <= README_MAX_LINES, f"README.md has {len(lines)} lines, at most {README_MAX_LINES}"
+    assert len(longest) <= README_MAX_LINE, f"README.md's longest line is {len(longest)} characters: {longest[:80]}"
+
+
+def test_the_manual_stays_short_and_undated():
+    pages = sorted((ROOT / "docs").glob("*.md"))
+    total = sum(len(p.read_text(encoding="utf-8").splitlines()) for p in pages)
+    dated = [f"{p.relative_to(ROOT)}: {m.group(0)}" for p in pages
+             for m in DATED_HEADING.finditer(re.sub(r"```.*?```", "", p.read_text(encoding="utf-8"), flags=re.S))]
+    assert total <= DOCS_MAX_LINES, f"docs/*.md hold {total} lines, at most {DOCS_MAX_LINES}"
+    assert len(dated) <= DOCS_MAX_DATED_HEADINGS, "dated headings:\n" + "\n".join(dated)
+
+
+def test_the_manual_tells_no_records():
+    """Pages state current behaviour: no issue numbers, no work sessions or machine loans, no lost folders."""
+    found = [f"{p.relative_to(ROOT)}:{i}: {m.group(0)}" for p in _manual()
+             for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) for m in RECORD_WORDS.finditer(line)]
+    assert not found, "\n".join(found)
+
+
+def test_the_record_checks_catch_what_they_look_for():
+    assert RECORD_WORDS.findall("fixed in issue 26; the session of commit X; `runs/` lost; the lease ran out") == [
+        "issue 26", "session", "runs/` lost", "lease"]
+    assert not RECORD_WORDS.search("a released model; the issues a user can cause")
+    assert DATED_HEADING.findall("## The frame (2026-11-24)\ntext 2026-11-24\n## Speed\n") == ["## The frame (2026-11-24"]

@@ -63,7 +63,7 @@ that capture planned 1.5 s of GL a frame."""
 
 EVALSET_MEASURED = {
     # Cornell's evaluation set (24 + 24 frames, 1024 spp twice, ladder 1..256) took about 70 minutes on the 2-core
-    # CPU (issue 27), in two passes: several times what the capture figures predict (float32 frames, the
+    # CPU, in two passes: several times what the capture figures predict (float32 frames, the
     # direct-only render at 1024 spp of its area light, the exposure fit).
     "cornell": {"kind": "cpu", "frames": 48, "spp": 1024, "ladder": (1, 4, 16, 64, 256), "width": 128,
                 "height": 128, "seconds": 70 * 60, "one_pass": False},
@@ -82,7 +82,7 @@ SPONZA_LADDER_PIXELS = (72 + 227) / 2 * 128
 
 TRAIN_SECONDS_PER_STEP = {
     # 2-core Intel Xeon, one torch thread, float32, batch 4, no discriminator: Sponza's ladder on its 256-spp truth,
-    # 45,900 steps each, its training time alone (docs/sponza.md, "The ladder's first two rungs", 2026-12-02):
+    # 45,900 steps each, its training time alone (docs/sponza.md at commit c48f1bc, "The ladder's first two rungs", 2026-12-02):
     # K = 8 4,043 s and K = 16 5,186 s, brought to 128x128 from the crops' mean pixels. Planned before from the
     # cornell ladder's 3,544 and 5,911 s as if at 128x128, its 228x128 frames' crops counted whole: the plan read
     # K = 8 1 h 36 and K = 16 2 h 41 for Sponza's 1.1 and 1.4 h.

@@ -61,7 +61,7 @@ class CaptureSettings:
     """VXGI grid resolution (voxels per side) with gt = 'vxgi'."""
     direct_samples: int = 1
     """Samples per axis of the stored GL direct light (`diviewer.gl.area`): 1, each pixel's centre; above, the mean
-    over the pixel's area (4: 16 samples), as the path tracer's box filter sees a pixel (docs/generalisation.md)."""
+    over the pixel's area (4: 16 samples), as the path tracer's box filter sees a pixel (docs/generalisation.md at commit c48f1bc)."""
 
 
 def parse_shard(text: str | None) -> tuple[int, int]:

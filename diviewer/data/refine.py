@@ -5,7 +5,7 @@ with s' more samples under another seed and taking the weighted mean ``(s pt + s
 the mean of s + s' independent samples: the same estimate, statistically, as a capture at s + s' spp, for
 the cost of the s' samples only. So a dataset captured quickly at a low count (64 spp: trainable today)
 becomes, frame by frame and across sessions, one whose truth is clean enough to measure a model against
-(Sponza's 64-spp truth is 35-38 dB from a 1024-spp one, its 256-spp 41-43: docs/sponza.md).
+(Sponza's 64-spp truth is 35-38 dB from a 1024-spp one, its 256-spp 41-43: docs/sponza.md at commit c48f1bc).
 
 - The refined dataset is written into a new folder (the source stays as it was; trainings that used it keep
   resuming). Its manifest is the source's with ``spp`` (and ``settings.spp``) raised, a ``refined``

@@ -1,11 +1,11 @@
 """A path-traced truth's indirect light filtered over each surface: ``diviewer data filter-truth``.
 
 A capture's ground truth at s spp carries Monte-Carlo noise that falls only as 1 / s; Sponza's 256-spp truth stands
-a median 2.4-4.4 dB above the error of the model trained on it, where issue 26 asks for 6 (docs/sponza.md). Each
+a median 2.4-4.4 dB above the error of the model trained on it, where 6 dB is the aim (docs/sponza.md at commit c48f1bc). Each
 doubling of the samples buys 3 dB for the whole capture's time again. Filtering the truth's indirect light over the
 surface each pixel sees buys more for seconds: measured on the compact Sponza set against two 1024-spp renders
 (`tools/experiments/filtered_truth_margin.py`), one level of this filter raised the 256-spp truth's margin over the
-shipped model by 4.8-8.6 dB per split, bias included (docs/sponza.md, "A filtered truth").
+shipped model by 4.8-8.6 dB per split, bias included (docs/sponza.md at commit c48f1bc, "A filtered truth").
 
 The filter (an edge-avoiding a-trous wavelet pass, as in Dammertz et al. 2010, with geometry alone as its guide):
 - it filters the irradiance the network is trained on, ``E = (pt - pt_direct) / max(albedo, ALBEDO_FLOOR)``

@@ -380,7 +380,7 @@ def format_tables(result: dict) -> list[str]:
     lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; tm = tone-mapped at exposure "
              f"{result['tonemap_exposure']:.3g} (the scene's); eq. spp: the path tracer's samples that score as well",
              "object / unlit / lit / shade: PSNR tm / SSIM tm over those pixels; < direct: share of frames below direct "
-             "light alone; every column: docs/accuracy.md (\"Reading eval's tables\")"]
+             "light alone; every column: docs/evaluation.md (\"Reading diviewer eval's table\")"]
     if "frames_scored" in result:  # eval --partial: which frames the figures below are of
         missing = result.get("frames_not_scored") or []
         lines.append(f"frames: {result['frames']}" + (f"; not scored: {', '.join(str(r['index']) for r in missing)}"

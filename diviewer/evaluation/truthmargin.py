@@ -1,5 +1,5 @@
 """How far a model's training truth stands above its error, frame by frame on an evaluation set: a path-traced truth
-of N spp is noisy, and a network trained on it cannot be checked to an accuracy finer than that noise (issue 26: "the
+of N spp is noisy, and a network trained on it cannot be checked to an accuracy finer than that noise ("the
 ground truth's noise floor must be at least 6 dB above the model's error").
 
 `diviewer eval` scores a model and the set's ladder (``pt_spp64``, ``pt_spp256``, ...) against a truth that has noise

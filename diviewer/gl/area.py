@@ -4,7 +4,7 @@ box-filtered back to it, as the path tracer's box pixel filter sees a pixel.
 A G-buffer pixel holds the surface at its centre, so its direct light (shadow test and shading) is that point's;
 the truth of the same pixel is the mean over its area. At every silhouette, shadow edge and terminator the two
 differ by up to the whole pixel's light, and a network that adds indirect light to the point's direct light
-cannot know the share of the pixel that was lit (docs/generalisation.md: a perfect indirect-light network is
+cannot know the share of the pixel that was lit (docs/generalisation.md at commit c48f1bc: a perfect indirect-light network is
 capped at 37.5 dB with cornell's camera moved and 24-26 dB on the object's unlit pixels; over 4 x 4 samples, 50.8
 and 42 dB). Models trained on such a direct light (`diviewer data area-direct`) record ``direct_samples`` on
 their card, and every path that feeds them computes it the same way (this module at the model's resolution; the

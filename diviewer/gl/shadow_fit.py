@@ -48,7 +48,7 @@ def fit_directional(bounds: np.ndarray, direction) -> tuple[np.ndarray, float, f
     The map spends its texels on the bounds' own outline, not on their bounding sphere's square: Sponza's
     51 x 21 x 31 m bounds seen from the noon sun take 55 x 31 m of the map instead of 64 x 64 m. At one map size
     that gains its sunlit frames' direct light 0.3-0.5 dB against the path tracer; the map's size does the rest
-    (``[scene] shadow_size``, docs/sponza.md). The texels are then not square; a texel's larger side sets the
+    (``[scene] shadow_size``, docs/sponza.md at commit c48f1bc). The texels are then not square; a texel's larger side sets the
     lookup's biases."""
     b = np.asarray(bounds, dtype=np.float64)
     centre = b.mean(axis=0)

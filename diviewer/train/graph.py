@@ -3,7 +3,7 @@ reference it is verified against (training's own encode, netG, decode and compos
 
 The lean graph computes what training computes (`diviewer.encoding`, `diviewer.train.targets`) with few
 cheap operators, because onnxruntime's CPU kernels for Where, Sign and Cast of a whole frame cost as much as
-several convolution layers of a small U-Net (issue 28; measured per operator on 10 x 128 x 128 float32):
+several convolution layers of a small U-Net (measured per operator on 10 x 128 x 128 float32):
 
 - NaN is handled once, in an If: the common frame (finite everywhere) pays one sum; a frame with NaN or an
   infinite value takes the branch that makes NaN 0 and infinite depth 0, as the encoding treats them.

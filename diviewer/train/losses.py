@@ -21,7 +21,7 @@ Monte-Carlo estimate whose noise is heavy-tailed (rare, very bright "firefly" sa
   depends on the prediction only, never on the noisy target, so the minimiser is still the **mean**, while an
   error counts relative to the pixel's brightness, so shade weighs as much as sunlit walls. Its weakness: an
   overshoot costs at most ~1 a pixel however large, and in shade single bright samples dominate its gradient.
-  On Sponza (docs/sponza.md, "Where the dark bias comes from") the median, where L1 goes, is 27-53 % below the
+  On Sponza (docs/sponza.md at commit c48f1bc, "Where the dark bias comes from") the median, where L1 goes, is 27-53 % below the
   mean in deep shade at 64 spp, yet a relative-L2 model overshot dim frames 7-44x and L1 stayed the better loss.
 - "levels": the frame split into the means of its `LEVEL_POOL` x `LEVEL_POOL` blocks of linear radiance (compared on
   the encoded scale) and each pixel's departure from its block's mean (compared in linear radiance, weighed by the
@@ -44,7 +44,7 @@ sinusoid under noise of its own global variance, simulated). Meant for a clean t
 Where it tone-maps (``ssim_exposure``): at the scene's one exposure, as `diviewer eval` scores ("scene"); at each frame's
 metered exposure, as the viewer shows it ("metered": `metered_exposure_torch`, the viewer's meter read off the target's
 frame); or the mean of both terms ("both"). At the scene's exposure Sponza's shade lies ~9 stops under the sunlit
-floor, where the tone map's slope leaves the decoder's grid-locked pattern (docs/accuracy.md, "The stride pattern in
+floor, where the tone map's slope leaves the decoder's grid-locked pattern (docs/accuracy.md at commit c48f1bc, "The stride pattern in
 the shade") almost unseen; the meter lifts a shaded frame by up to 13 stops, as the viewer does.
 
 The trainer calls `LossConfig.reconstruction_loss` and `structure_loss`; `LossConfig` is the settings dataclass

@@ -112,7 +112,7 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: n
 
         say(f"note: the target's 99th percentile is {1 / gain:.2g} at the direct light's exposure, "
             f"{float(encode_radiance(1 / gain / enc.exposure, enc)):.1e} of the network's range; --output-gain "
-            f"would encode it at its own exposure (x {gain:.3g}; docs/sponza.md, where the dark bias comes from)")
+            f"would encode it at its own exposure (x {gain:.3g}; docs/training.md, 'Radiance encoding')")
     return enc
 
 
@@ -121,7 +121,7 @@ def fit_output_gain(ds: Dataset, train: np.ndarray, scales: np.ndarray | None, e
     """The gain that puts the 99th percentile of the train frames' exposed target luminance at 1 (`fit_exposure` on
     the targets as the trainer makes them: divided by the albedo and the light scale, times the exposure). Sponza's
     indirect light is ~1 % of its direct light: its target's 99th percentile is 0.14 at the direct light's
-    exposure, its median 0.0057, i.e. 5e-4 of the encoded range (docs/sponza.md; cornell's median: 0.107)."""
+    exposure, its median 0.0057, i.e. 5e-4 of the encoded range (docs/sponza.md at commit c48f1bc; cornell's median: 0.107)."""
     from diviewer.encoding import fit_exposure
 
     return float(fit_exposure(list(exposed_targets(ds, train, scales, enc, cfg, stride=4))))  # 1/16: bounded memory

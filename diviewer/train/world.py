@@ -1,6 +1,6 @@
 """World-space position and normal of each pixel, the inputs of encoding version 3, on torch tensors.
 
-Issue 25's ablation (docs/generalisation.md) gave a network these two planes beside the view-space buffers and
+The ablation of the world-space inputs (docs/generalisation.md at commit c48f1bc) gave a network these two planes beside the view-space buffers and
 it scored higher on held-out cameras and meshes, most of all on an object lit only by bounced light: a per-scene
 network can key its indirect light on where a surface is, as a radiance cache does. They are computed from what
 every frame already has, the depth and view-space normal buffers and the frame's camera

@@ -1,5 +1,5 @@
 """How far a path-traced truth stands above a model's error once its indirect light is filtered
-(`diviewer.data.truth_filter`), frame by frame on an evaluation set, beside the same truth unfiltered: issue 26's
+(`diviewer.data.truth_filter`), frame by frame on an evaluation set, beside the same truth unfiltered: the
 "the ground truth's noise floor must be at least 6 dB above the model's error", for a truth `diviewer data
 filter-truth` made.
 

@@ -4,7 +4,7 @@ Usage: python tools/experiments/metered_scores.py --model M.onnx [--model ...] [
            [--out OUT.json]
 
 `diviewer eval` tone-maps every frame of a scene at one exposure (the evaluation set's, fitted to its lit direct
-light), as issue 26 asks. A scene that asks for auto exposure (Sponza) is shown brighter in the viewer, the more so
+light), as the truth margin asks. A scene that asks for auto exposure (Sponza) is shown brighter in the viewer, the more so
 the less sunlight is in view (up to +13.5 stops on Sponza's full set; the meter's limit is +16): its shade is shown
 where the scene's one exposure leaves it dark, and what a network does there weighs more. Here each frame and shape of the evaluation set (the model given the
 inputs `diviewer eval` gives it) is tone-mapped with `diviewer.metrics.tonemap` at 2 ** ev, ev the exposure (stops)

@@ -1,5 +1,5 @@
 """How far a path-traced truth of N spp stands above a model's error, frame by frame, at every rung of an evaluation
-set's ladder and at projected counts: issue 26's "the ground truth's noise floor must be at least 6 dB above the
+set's ladder and at projected counts: "the ground truth's noise floor must be at least 6 dB above the
 model's error". The method is `diviewer.evaluation.truthmargin`'s (its docstring); `diviewer eval` reports the truth each model
 trained on, this script every rung and projection of a `diviewer eval` JSON, read from the set's frames. On a compact
 set (which keeps its ladder's scores, not its images) each rung's error is its stored score against the full set's
