@@ -86,7 +86,7 @@ def run_view(args: argparse.Namespace) -> int:
     """Open the viewer as the arguments say; with ``--frames``, print one line of what it did."""
     from diviewer.frames import parse_resolution
     from diviewer.gl.neural import GISettings
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
     from diviewer.viewer.settings import ViewerSettings
     from diviewer.viewer.still import StillSettings
 

@@ -558,7 +558,7 @@ def _same(shown: np.ndarray, expected: np.ndarray, what: str) -> None:
 
 def _scripted_session(tmp_path: Path) -> None:
     from diviewer.frames import load_frame_json
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
     from diviewer.reference.progressive import mitsuba_missing
 
     cornell = load_scene("cornell")
@@ -650,7 +650,7 @@ def test_scripted_session(display, tmp_path, ctx):
 
 
 def _resize_session(tmp_path: Path) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     sizes = {}
     script = [(1, "resize", {"width": 8, "height": 8}), (3, "resize", {"width": 1, "height": 1}),
@@ -678,7 +678,7 @@ def _cornell_model(path: Path, **meta_changes) -> Path:
 
 
 def _neural_session(tmp_path: Path) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     model = _cornell_model(tmp_path / "cornell_k8.onnx")
     shadows = []
@@ -731,7 +731,7 @@ def test_neural_gi_every_frame(display, tmp_path, ctx):
 
 
 def _readback_session(tmp_path: Path) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained size 64x48, stride 16
     script = [(0, lambda v: setattr(v.state, "show_panel", False))]
@@ -771,7 +771,7 @@ def test_window_shows_the_offscreen_frame_at_every_size(display, tmp_path, ctx):
 def _refused_session(tmp_path: Path) -> None:
     from onnx_models import base_meta, direct_times
 
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     path = direct_times(tmp_path / "other.onnx", meta=base_meta(scene_hash="f" * 64, scene="atrium"))
     summary = run_viewer("cornell", model=path, frames=2, settings=_settings())
@@ -789,7 +789,7 @@ def _input_session(tmp_path: Path) -> None:
     import glfw
     import trimesh
 
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     cornell = load_scene("cornell")
 
@@ -971,7 +971,7 @@ def _upscaled_offscreen(ctx, shot: Path) -> np.ndarray:
 
 
 def _scaled_session(tmp_path: Path, size: tuple[int, int], scale: float) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     model = _cornell_model(tmp_path / "cornell_k8.onnx")  # trained 64x48, stride 16
     script = [(0, lambda v: setattr(v.state, "show_panel", False)),
@@ -1009,7 +1009,7 @@ def test_fixed_render_scale_window_is_the_offscreen_render_resampled(display, tm
 
 
 def _dynamic_session(tmp_path: Path) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     scales = {}
     script = [(f, lambda v, f=f: scales.setdefault(f, (v.render_scale, v.render_size))) for f in (0, 5, 20, 29)]
@@ -1036,7 +1036,7 @@ def test_target_fps_lowers_the_scale_to_its_floor(display, tmp_path):
 
 
 def _range_session(tmp_path: Path) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     seen = {}
     script = [(2, lambda v: seen.setdefault("start", list(v.state.out_of_range()))),
@@ -1059,7 +1059,7 @@ def test_the_out_of_range_flag_turns_on_when_the_camera_leaves(display, tmp_path
 
 
 def _exposure_session(tmp_path: Path, out: str) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     evs = []
     script = [(f, lambda v: evs.append(v.state.exposure)) for f in range(1, 8)]
@@ -1085,7 +1085,7 @@ def test_auto_exposure_follows_the_frame_and_is_deterministic(display, tmp_path)
 
 
 def _scene_exposure_session(tmp_path: Path, out: str, choice) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     text = (Path(__file__).resolve().parents[2] / "assets" / "scenes" / "cornell.toml").read_text()
     scene = tmp_path / "auto.toml"
@@ -1109,7 +1109,7 @@ def test_a_scene_file_that_asks_for_auto_exposure_starts_with_it(display, tmp_pa
 
 
 def _shape_session(tmp_path: Path) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     # trained 64x48 with crops from 9:16 to 16:9 (a model trained on 64x48 alone would add a note that its GI is
     # extrapolated at 80x48: tests/viewer/test_scale.py), stride 16; the runtime pads any shape
@@ -1135,7 +1135,7 @@ def test_the_network_sees_the_window_shape(display, tmp_path):
 
 
 def _camera_path_session(tmp_path: Path) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
     from diviewer.viewer.command import _play_camera_path
 
     seen, back_faces = [], []
@@ -1150,7 +1150,7 @@ def test_back_faces_flag_reaches_the_viewer_settings(monkeypatch):
     """`diviewer view --back-faces` opens the viewer with the single-sided materials' back faces drawn; without
     it they are culled."""
     from diviewer.cli import main
-    from diviewer.viewer import session
+    from diviewer.viewer import run as session
 
     opened = []
     monkeypatch.setattr(session, "run_viewer", lambda scene, **kw: opened.append(kw["settings"]) or {})

@@ -72,7 +72,7 @@ def test_overview_camera_stands_outside_the_box_looking_at_its_centre():
 
 
 def _converge_session(tmp_path: Path) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     # The camera moves for 24 frames against a frame rate the machine cannot hold: the scale drops to the floor;
     # then the view stays still for 60 frames; then it moves again: that frame is drawn at the controller's scale.

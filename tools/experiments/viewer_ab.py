@@ -5,7 +5,7 @@ Usage: xvfb-run -a -s "-screen 0 1920x1200x24" python tools/experiments/viewer_a
            [--camera-moving] [--light-stops-at N] --out-dir DIR
 
 Arms, run in turn within each round (so the machine's drift falls on all of them), each a fresh viewer process
-(`diviewer.viewer.session.run_viewer`, the default settings but vsync off, the scene's shipped model):
+(`diviewer.viewer.run.run_viewer`, the default settings but vsync off, the scene's shipped model):
 
 - ``deferred``: the default: the GL stages' timer queries read once the frame is swapped
   (`diviewer.timing.StageTimer.collect`), the G-buffer flushed every `FLUSH_EVERY_DRAWS` draws;
@@ -42,7 +42,7 @@ ARMS = ("blocking", "deferred", "off", "noflush", "offflush", "nofootprint", "wh
 
 CHILD = """
 import sys
-from diviewer.viewer.session import run_viewer
+from diviewer.viewer.run import run_viewer
 from diviewer.viewer.settings import ViewerSettings
 from diviewer.frames import parse_resolution
 arm, scene, frames, size, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), parse_resolution(sys.argv[4]), sys.argv[5]

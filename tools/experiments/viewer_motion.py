@@ -29,7 +29,7 @@ import numpy as np
 from diviewer.imageio import read_png, write_text
 from diviewer.metrics import psnr
 from diviewer.outputs import dumps_rows
-from diviewer.viewer.session import run_viewer
+from diviewer.viewer.run import run_viewer
 from diviewer.viewer.settings import ViewerSettings
 
 ARMS = {"scale1": {"render_scale": 1.0}, "scale2": {"render_scale": 2.0}, "plain": {}, "temporal": {"temporal": True},

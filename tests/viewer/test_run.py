@@ -12,7 +12,7 @@ STEP = 0.05
 
 
 def _fixed_step_session(tmp_path: Path) -> None:
-    from diviewer.viewer.session import run_viewer
+    from diviewer.viewer.run import run_viewer
 
     for run, scale in (("a", 0.5), ("b", 0.5), ("full", 1.0)):
         script = [(0, lambda v: setattr(v.state, "animate_light", True))]

@@ -1,4 +1,4 @@
-"""A viewer session from start to end: ``run_viewer`` opens the window, applies a script, runs the frames, writes
+"""A viewer run from start to end: ``run_viewer`` opens the window, applies a script, runs the frames, writes
 the summary and the ``--stats`` JSON, and closes it."""
 
 from __future__ import annotations
