@@ -35,6 +35,9 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
                         "(1/2, 1/4, 1/6: snapped to the model's stride) or WxH (a multiple of the stride, else refused)")
     p.add_argument("--gi-downsample", default="nearest", choices=("nearest", "area"),
                    help="how the full-resolution buffers are reduced to the GI resolution (default nearest)")
+    p.add_argument("--lean", action=argparse.BooleanOptionalAction, default=True,
+                   help="run a model's lean path where it has one: the generator alone in onnxruntime, its encoding "
+                        "and decoding in shaders (default); --no-lean runs the whole self-contained graph")
     p.add_argument("--pipelined", action="store_true",
                    help="run inference one frame behind on a worker thread (GL and onnxruntime overlap)")
     p.add_argument("--target-fps", type=float, default=30.0,
@@ -118,7 +121,7 @@ def run_view(args: argparse.Namespace) -> int:
                               auto_exposure=args.auto_exposure, back_faces=args.back_faces,
                               rest_in_bands=args.shadow_bands, still=StillSettings(refine=args.refine_still),
                               temporal=args.temporal == "on",
-                              gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined),
+                              gi=GISettings(downsample=args.gi_downsample, pipelined=args.pipelined, lean=args.lean),
                               path=str(args.path) if args.path else None, fixed_step=args.fixed_step,
                               record_path=str(args.record_path) if args.record_path else None)
     script = [(0, lambda v: setattr(v.state, "animate_light", True))] if args.light_moving else []
