@@ -165,7 +165,8 @@ _TRAIN = {name: _T[name].spec if hasattr(_T[name], "spec") else _T[name] for nam
     "K", "epochs", "batch_size", "lr", "lr_decay_start", "lambda_L1", "ndf", "max_steps", "val_every", "save_every",
     "gan_weight", "ssim_weight", "n_layers_D", "d_lr", "train_frames", "patience", "world_frequencies",
     "val_every_steps", "num_workers")}
-_VIEW = {"fps": Float(1e-3, 1000.0, lo_open=True), "fixed_step": Float(1e-6, 10.0), "cells": Int(4, 128), "target_fps": Float(0.0, 1000.0), "render_scale": Float(0.0, MAX_SCALE, lo_open=True),
+_VIEW = {"fps": Float(1e-3, 1000.0, lo_open=True), "fixed_step": Float(1e-6, 10.0), "cells": Int(4, 128),
+         "tolerance": Float(0.0, 100.0), "target_fps": Float(0.0, 1000.0), "render_scale": Float(0.0, MAX_SCALE, lo_open=True),
          "scale_floor": Float(0.0, 1.0, lo_open=True), "scale_ceiling": Float(1.0, MAX_SCALE)}
 _BENCH = {"warmup": Int(0, 10_000), "untrained_k": K, "gi_steps": Int(1, 16), "eval_frames": Int(1, 100_000),
           "pt_frames": Int(1, 10_000), "vxgi_grids": Int(16, 256, power_of_two=True)}
@@ -189,6 +190,9 @@ TEXT_OPTIONS: dict[str, str] = {
     "recipe": "a shipped recipe's name or a .toml path", "device": "auto, cpu, cuda or cuda:N",
     "init_from": "a checkpoint", "stop_after": "a stage of the build's plan",
     "compare": "methods side by side: direct, neural, reference",
+    "commands": "a command that made the model", "note": "a sentence on the model", "ladder_why": "why this K",
+    "ladder_file": "a ladder record", "ladder_run": "a K and its training run", "method": "a row of eval's JSON",
+    "key": "a model's key in eval's JSON",
 }
 """Options that take text and no number (checked by the command that reads them)."""
 
@@ -243,9 +247,8 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace,
 def chosen_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
     """The (sub)subparser that parsed ``args``: its actions know the option strings the user typed."""
     parser = ap
-    for dest in ("command", "data_command"):
+    while True:
         sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
-        if sub is None or getattr(args, dest, None) not in sub.choices:
-            break
-        parser = sub.choices[getattr(args, dest)]
-    return parser
+        if sub is None or getattr(args, sub.dest, None) not in sub.choices:
+            return parser
+        parser = sub.choices[getattr(args, sub.dest)]

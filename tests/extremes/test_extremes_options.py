@@ -143,7 +143,8 @@ def _outside(spec):
 def test_any_value_outside_an_options_range_is_refused_and_any_inside_taken(words, action, data):
     spec = option_spec(words[0], action.dest)
     ap = AP
-    ns = argparse.Namespace(command=words[0], data_command=words[1] if len(words) > 1 else None)
+    ns = argparse.Namespace(command=words[0], data_command=words[1] if len(words) > 1 else None,
+                            ship_command=words[1] if len(words) > 1 else None)
     bad = data.draw(_outside(spec))
     setattr(ns, action.dest, [bad] if action.nargs in ("+", "*") else bad)
     with pytest.raises(cli.DiviewerError, match=action.option_strings[0]):
