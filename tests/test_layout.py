@@ -135,11 +135,26 @@ def test_viewer_bench_and_runtime_never_import_train():
     assert not _offenders({"viewer/", "bench/", "runtime"}, _is_unit("train/"))
 
 
+LONG_MODULES: dict[str, str] = {}
+"""Modules over `MAX_LINES` lines, each with why its concern is one: the length is a smell to explain, not a wall
+(a module split at the count rather than by concern leaves two halves sharing their privates)."""
+MAX_FUNCTION_LINES = 80
+
+
 @pytest.mark.parametrize("path", sorted(PACKAGE.rglob("*.py")), ids=lambda p: str(p.relative_to(PACKAGE)))
-def test_modules_stay_small(path):
+def test_a_long_module_says_why(path):
     lines = len(path.read_text().splitlines())
-    assert lines < MAX_LINES, (f"{path.relative_to(PACKAGE)} has {lines} lines; split it into rooms "
-                               "(see docs/architecture.md)")
+    name = path.relative_to(PACKAGE).as_posix()
+    assert lines < MAX_LINES or name in LONG_MODULES, (
+        f"{name} has {lines} lines: split it by concern (docs/architecture.md), or say in LONG_MODULES why its "
+        "concern is one")
+
+
+def test_functions_stay_readable():
+    long = [f"{p.relative_to(PACKAGE)}:{n.lineno} {n.name}: {n.end_lineno - n.lineno + 1} lines"
+            for p in sorted(PACKAGE.rglob("*.py")) for n in ast.walk(ast.parse(p.read_text()))
+            if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.end_lineno - n.lineno + 1 > MAX_FUNCTION_LINES]
+    assert not long, "functions over 80 lines:\n" + "\n".join(long)
 
 
 def _circles(graph: dict[str, set[str]]) -> list[list[str]]:

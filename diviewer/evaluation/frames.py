@@ -240,33 +240,20 @@ def compact_choice(entries: list[dict], n: int) -> list[int]:
     return sorted(chosen, key=order.__getitem__)
 
 
-def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None, log=print, jobs: int = 1) -> dict:
-    """Write the compact set of a full evaluation set into a new folder: ``frames_per_split`` frames of each split
-    (None: `COMPACT_FRAMES`, or the fewest a split has where that is fewer), spread over its meshes
-    (``compact_choice``).
-
-    Refused before any work: a folder that holds a set (or any dataset) already, never overwritten; more frames per
-    split than a split has; a full set whose frames were changed after `diviewer evalset` rendered them (a step in
-    its lineage). The chosen frames must be present and sound in the full set; the rest of it need not be complete.
-    ``jobs``: processes the ladder's images are scored in (``scoring.Scorer``).
-    """
+def _compact_request(src: "EvalFrames", full_dir: Path, out: Path, frames_per_split: int | None, log) -> int:
+    """`write_compact`'s refusals, before any work, and the frames per split it takes."""
     from diviewer.data.lineage import refuse_derived_evalset
-    from diviewer.evaluation.scoring import Scorer, ladder_methods
-    from diviewer.metrics import flat_mask
 
-    src = EvalFrames(full_dir)
     if src.compact:
         raise DiviewerError("already a compact evaluation set; give the full set it came from", path=full_dir)
     refuse_derived_evalset(src.manifest, src.root)
-    out = Path(out)
     if out.exists() and out.resolve() == src.root.resolve():
         raise DiviewerError("the compact set cannot be written into the full set it is made from", path=out)
     there = [name for name in ("manifest.json", COMPACT_FILE) if (out / name).exists()]
     if there:
         raise DiviewerError(f"{out} holds {' and '.join(there)} already (a set there is never overwritten); give a new "
                             f"folder, or move that one away first", path=out, field="--out")
-    splits = src.splits()
-    have = {split: sum(f["split"] == split for f in src.frames) for split in splits}
+    have = {split: sum(f["split"] == split for f in src.frames) for split in src.splits()}
     fewest = min(have.values())
     if frames_per_split is None:
         frames_per_split = min(COMPACT_FRAMES, fewest)
@@ -280,6 +267,26 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None
         raise DiviewerError(f"{frames_per_split} frames per split asked for, but the full set's splits have fewer "
                             f"({short}); ask for at most {fewest}", path=src.root / "manifest.json",
                             field="--frames-per-split")
+    return frames_per_split
+
+
+def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None, log=print, jobs: int = 1) -> dict:
+    """Write the compact set of a full evaluation set into a new folder: ``frames_per_split`` frames of each split
+    (None: `COMPACT_FRAMES`, or the fewest a split has where that is fewer), spread over its meshes
+    (``compact_choice``).
+
+    Refused before any work: a folder that holds a set (or any dataset) already, never overwritten; more frames per
+    split than a split has; a full set whose frames were changed after `diviewer evalset` rendered them (a step in
+    its lineage). The chosen frames must be present and sound in the full set; the rest of it need not be complete.
+    ``jobs``: processes the ladder's images are scored in (``scoring.Scorer``).
+    """
+    from diviewer.evaluation.scoring import Scorer, ladder_methods
+    from diviewer.metrics import flat_mask
+
+    src = EvalFrames(full_dir)
+    out = Path(out)
+    splits = src.splits()
+    frames_per_split = _compact_request(src, full_dir, out, frames_per_split, log)
     problems = {p.index: p.problem for p in src.problems()}
     names = [n for n, _ in src.manifest["channels"] if n in COMPACT_CHANNELS]
     ladder = ladder_methods(src)

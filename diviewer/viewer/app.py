@@ -326,7 +326,7 @@ class Viewer:
         """Poll events, advance, render and present one frame; False when the window should close."""
         from diviewer.viewer.sources import FrameImages
 
-        glfw, imgui, st = self.glfw, self.imgui, self.state
+        glfw, st = self.glfw, self.state
         start = time.perf_counter()
         dt = self.settings.fixed_step or (min(start - self._last_frame_start, 0.25)
                                           if self._last_frame_start is not None else 1.0 / 60.0)
@@ -371,19 +371,32 @@ class Viewer:
         if phase == "still" and self._shown is not None:
             images, notes = self._shown  # the refined frame's images, unchanged since
         else:
-            images, notes = self._images(FrameImages(self))
-            if temporal and images[0].kind == "radiance" and not images[0].flip:
-                r = self.renderer
-                with self.timer.stage("temporal", gpu=True):
-                    images[0] = Image(self.temporal.resolve(images[0].texture, r.textures["depth"], self.view_size,
-                                                            r.jitter, r.frame_view.view, r.frame_view.proj,
-                                                            resting=phase != "moving"))
+            images, notes = self._frame_images(FrameImages(self), temporal, resting=phase != "moving")
             self._shown = (images, notes)
         if st.auto_exposure and images[0].kind == "radiance":
             st.meter(self.meter.read(images[0].texture))
+        self._present(screen, (fb_w, fb_h), rect, images, notes)
+        st.stats.record(frame_ms or (time.perf_counter() - start) * 1e3, self.timer.collect(), now=start)
+        self.frame_index += 1
+        return True
+
+    def _frame_images(self, sources, temporal: bool, resting: bool) -> tuple[list[Image], list[str]]:
+        """This frame's images (`_images`), the first resolved by the temporal upsampler where it is on."""
+        images, notes = self._images(sources)
+        if temporal and images[0].kind == "radiance" and not images[0].flip:
+            r = self.renderer
+            with self.timer.stage("temporal", gpu=True):
+                images[0] = Image(self.temporal.resolve(images[0].texture, r.textures["depth"], self.view_size,
+                                                        r.jitter, r.frame_view.view, r.frame_view.proj,
+                                                        resting=resting))
+        return images, notes
+
+    def _present(self, screen, fb: tuple[int, int], rect, images: list[Image], notes: list[str]) -> None:
+        """The view drawn into the window, the panel over it, the screenshots asked for, and the swap."""
+        st, imgui = self.state, self.imgui
         with self.timer.stage("composite", gpu=True):
             self._draw_view(screen, rect, images)
-        screen.viewport = (0, 0, fb_w, fb_h)
+        screen.viewport = (0, 0, *fb)
         screen.use()
         with self.timer.stage("panel"):
             self.gui.new_frame()
@@ -400,9 +413,6 @@ class Viewer:
         while self.shots.pending:
             self._save_view(self.shots.pending.pop(0), images)
         self.window.swap()
-        st.stats.record(frame_ms or (time.perf_counter() - start) * 1e3, self.timer.collect(), now=start)
-        self.frame_index += 1
-        return True
 
     # --- shutdown ---------------------------------------------------------------------------------
     def close(self) -> None:
