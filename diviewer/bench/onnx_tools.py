@@ -285,7 +285,7 @@ CALIB_PERCENTILE = 99.5
 """int8 activation ranges: this percentile of each activation over the calibration frames. The shipped cornell model
 on its compact evaluation set, int8 against fp32, tone-mapped PSNR per split: min-max -4.9 to -8.6 dB; percentile
 99.999 -3.9 to -7.2, 99.99 -2.9 to -5.6, 99.9 -1.9 to -4.1, 99.5 -0.3 to -1.9, 99.0 -0.5 to -2.8
-(`python tools/int8_sweep.py`, docs/data/int8_calibration_cornell.json)."""
+(the int8 calibration sweep, docs/experiments.md)."""
 
 
 def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
