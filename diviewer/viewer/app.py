@@ -77,7 +77,7 @@ class Viewer:
         from diviewer.viewer.screenshots import Screenshots
         from diviewer.viewer.sources import ReferenceTexture, black_texture
         from diviewer.viewer.meter import Meter
-        from diviewer.viewer.scale import ScaleController, render_size
+        from diviewer.viewer.scale import ScaleController, moving_map_size, render_size
         from diviewer.viewer.state import ViewerState
         from diviewer.viewer.still import StillTracker
 
@@ -107,7 +107,8 @@ class Viewer:
             self.temporal = TemporalPass(self.ctx, self.shaders)
         self.renderer = r = Renderer(self.ctx, scene, *render_size(self.view_size, self.scaler.scale), settings.render,
                                      self.shaders, timer=self.timer, back_faces=settings.back_faces)
-        r.moving_shadow_size, r.rest_in_bands = settings.moving_shadow_size, settings.rest_in_bands
+        r.moving_shadow_size = moving_map_size(settings.moving_shadow_size, (r.width, r.height))
+        r.rest_in_bands = settings.rest_in_bands
         self.upscale = self.ctx.sampler(filter=(moderngl.LINEAR, moderngl.LINEAR), repeat_x=False, repeat_y=False)
         """Bound over the display's texture units where the image is upscaled to the window: bilinear."""
         self.meter = Meter(self.ctx, self.shaders)
@@ -184,7 +185,7 @@ class Viewer:
     def _follow_window(self, scale: float | None = None) -> None:
         """Size the renderer to the window's framebuffer times ``scale`` (default: the controller's; the GI
         follows)."""
-        from diviewer.viewer.scale import render_size
+        from diviewer.viewer.scale import moving_map_size, render_size
 
         fb_w, fb_h = self.window.fb_size
         if fb_w <= 0 or fb_h <= 0:
@@ -196,6 +197,7 @@ class Viewer:
             self.renderer.resize(*want)
             self.gi.follow_window(self.view_size)
             self._shown = None
+            self.renderer.moving_shadow_size = moving_map_size(self.settings.moving_shadow_size, want)
         self.drawn_scale = scale
 
     @property

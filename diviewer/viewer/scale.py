@@ -63,6 +63,18 @@ class ScaleSettings:
     """Scales are multiples of 1 / steps."""
 
 
+def moving_map_size(limit: int | None, shaded: tuple[int, int]) -> int | None:
+    """A moving sun's shadow-map size for a frame shaded at ``shaded``: the power of two at least twice its larger
+    side (two texels a shaded pixel across the view), at most ``limit`` (None: the map is never drawn smaller while
+    it moves). At rest the map is drawn at the scene's size, whatever this says."""
+    if limit is None:
+        return None
+    size = 256
+    while size < 2 * max(shaded) and size < limit:
+        size *= 2
+    return min(size, limit)
+
+
 def render_size(base: tuple[int, int], scale: float) -> tuple[int, int]:
     """The shading resolution at ``scale`` of ``base`` (at least 1x1)."""
     return tuple(max(1, round(s * scale)) for s in base)

@@ -271,3 +271,13 @@ def test_the_linear_filter_at_half_size_is_each_2x2_blocks_mean():
     img = np.random.default_rng(3).random((12, 10, 3)).astype(np.float32)
     half = bilinear(img, 5, 6)
     np.testing.assert_allclose(half, img.reshape(6, 2, 5, 2, 3).mean(axis=(1, 3)), rtol=1e-6, atol=1e-7)
+
+
+def test_a_moving_suns_map_follows_the_shaded_size_within_its_limit():
+    from diviewer.viewer.scale import moving_map_size
+
+    assert moving_map_size(2048, (307, 307)) == 1024  # two texels a shaded pixel: 614 -> the next power of two
+    assert moving_map_size(2048, (768, 768)) == 2048
+    assert moving_map_size(2048, (1536, 864)) == 2048  # never above the limit
+    assert moving_map_size(2048, (16, 16)) == 256  # never below 256
+    assert moving_map_size(None, (307, 307)) is None  # no moving size: the map keeps the scene's size
