@@ -679,6 +679,8 @@ def _cornell_model(path: Path, **meta_changes) -> Path:
 
 def _neural_session(tmp_path: Path) -> None:
     from diviewer.viewer.run import run_viewer
+    from diviewer.viewer.scale import moving_map_size
+    from diviewer.viewer.settings import ViewerSettings
 
     model = _cornell_model(tmp_path / "cornell_k8.onnx")
     shadows = []
@@ -695,7 +697,9 @@ def _neural_session(tmp_path: Path) -> None:
     summary = run_viewer("cornell", model=model, frames=10, script=script, settings=_settings(size=(128, 96)),
                          stats=tmp_path / "stats.json")
     assert summary["gl_error"] == "GL_NO_ERROR"
-    assert shadows == [(2048, True)]  # the viewer's shadow settings reach its renderer (ViewerSettings)
+    # the viewer's shadow settings reach its renderer (ViewerSettings): a moving sun's map follows the shaded size
+    # (128x96: 256 texels) within the settings' limit
+    assert shadows == [(moving_map_size(ViewerSettings().moving_shadow_size, (128, 96)), True)] == [(256, True)]
     assert summary["model"] == "cornell_k8.onnx" and summary["provider"] == "CPUExecutionProvider"
     assert summary["gi_size"] == (64, 48) and summary["render_size"] == (128, 96)
     assert summary["stages_ms"]["inference"] > 0.0 and summary["stages_ms"]["upload"] > 0.0
