@@ -23,7 +23,7 @@ LAYERS = {
     # 2: what draws or runs a frame: GL passes, the path tracer, the onnxruntime model, frame records
     "gl/": 2, "reference/": 2, "runtime": 2, "lean": 2, "frames": 2, "weights": 2,
     # 3: datasets and single renders
-    "data/": 3, "render": 3, "render_path": 3,
+    "data/": 3, "render": 3, "render_path": 3, "headless": 3,
     # 4: training and evaluation
     "train/": 4, "evaluation/": 4,
     # 5: the applications
