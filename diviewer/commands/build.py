@@ -7,7 +7,7 @@ import contextlib
 import shlex
 from pathlib import Path
 
-from diviewer.commands.common import add_number
+from diviewer.commands.common import add_number, add_scene
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -17,9 +17,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                       "train and export each K of the ladder, evaluate, pick the smallest sufficient K, ship",
         description="Build a scene's model with a recipe (assets/recipes/*.toml). Every stage resumes: run the same "
                     "command again after an interruption. Uses CUDA (Mitsuba cuda_ad_rgb, torch) where present.")
-    p.add_argument("--scene", default=None,
-                   help="a shipped scene's name (cornell, sponza, atrium) or a .toml path "
-                        "(default: the recipe's scene)")
+    add_scene(p, default=None, help="a shipped scene's name (cornell, sponza, atrium) or a .toml path "
+                                    "(default: the recipe's scene)")
     p.add_argument("--recipe", default=None, metavar="R",
                    help="a shipped recipe's name (cornell, sponza, paper) or a .toml file (default: the scene's own "
                         "recipe where one is shipped, else cornell's, the best measured)")

@@ -10,7 +10,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from diviewer.commands.common import add_json, add_number
+from diviewer.commands.common import add_json, add_number, add_scene
 from diviewer.errors import DiviewerError
 
 GLTF_SUFFIXES = (".gltf", ".glb")
@@ -20,8 +20,8 @@ def add_parser(sub) -> None:
     """`diviewer inspect`."""
     p = sub.add_parser("inspect", help="a scene's bounds, triangles, materials, textures, lights and emitters, a "
                                        "suggested camera and camera region; optionally a scene file to start from")
-    p.add_argument("--scene", required=True,
-                   help="a shipped scene's name, a scene file (.toml) or a glTF file (.gltf or .glb)")
+    add_scene(p, default=None, required=True,
+              help="a shipped scene's name, a scene file (.toml) or a glTF file (.gltf or .glb)")
     add_json(p, "also write the report as JSON to this file")
     p.add_argument("--write-toml", type=Path, default=None, metavar="FILE",
                    help="write a scene file importing the glTF with the suggested camera, camera region and a light "

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from diviewer.commands.common import add_number
+from diviewer.commands.common import add_model, add_number
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -19,7 +19,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="ship_command", required=True, metavar="ACTION")
     p.set_defaults(func=run)
     m = sub.add_parser("model", help="an exported model becomes its scene's shipped model (SCENE.onnx), with its card")
-    m.add_argument("--model", type=Path, required=True, help="an exported model (its card beside it)")
+    add_model(m, "an exported model (its card beside it)", required=True)
     m.add_argument("--run", type=Path, required=True, help="its training run (curves.png, metrics.csv)")
     m.add_argument("--eval", type=Path, required=True, help="diviewer eval JSON of it and the shipped model")
     m.add_argument("--previous-eval", type=Path, default=None,
@@ -36,7 +36,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     m.add_argument("--ship", type=Path, default=None, metavar="DIR", help="where it goes (default assets/models)")
     e = sub.add_parser("eval", help="record a `diviewer eval` of the shipped weights in the model's card")
     e.add_argument("--eval", type=Path, required=True, help="diviewer eval JSON that scored the model")
-    e.add_argument("--model", type=Path, required=True, help="the shipped model (its card beside it)")
+    add_model(e, "the shipped model (its card beside it)", required=True)
     e.add_argument("--method", default=None, help="the model's name in the JSON (default: the file's stem)")
     e.add_argument("--key", default="evalset_full", help="the card's field for the record (default evalset_full)")
     ld = sub.add_parser("ladder", help="a K ladder's record from eval JSONs; with --ship, its verdict on the card")

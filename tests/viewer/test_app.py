@@ -1137,8 +1137,8 @@ def test_the_network_sees_the_window_shape(display, tmp_path):
 
 
 def _camera_path_session(tmp_path: Path) -> None:
-    from diviewer.viewer.run import run_viewer
     from diviewer.commands.view import _play_camera_path
+    from diviewer.viewer.run import run_viewer
 
     seen, back_faces = [], []
     script = [(0, _play_camera_path)] + [(f, lambda v: seen.append(v.state.config.camera.position)) for f in (1, 2, 3)]
