@@ -21,6 +21,7 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Fit the baseline on the dataset's split and write it as an ONNX model."""
     from diviewer.evaluation.baseline import build_baseline
 
     build_baseline(args.data, args.out, split=args.split, max_frames=args.max_frames)

@@ -44,6 +44,7 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """The benchmark's settings (--quick's or the defaults, then the options given), run as a table or along --path."""
     import dataclasses
 
     from diviewer.bench import BenchSettings, quick, run_bench

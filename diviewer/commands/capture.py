@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 from diviewer.commands.common import add_number, add_out, add_scene, add_variant
 from diviewer.errors import DiviewerError
@@ -35,6 +34,7 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Capture the dataset the options describe (resumable)."""
     from diviewer.data.capture import CaptureSettings, capture, parse_shard
     from diviewer.frames import parse_resolution
 

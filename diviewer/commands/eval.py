@@ -10,6 +10,7 @@ from diviewer.errors import DiviewerError
 
 
 def run(args: argparse.Namespace) -> int:
+    """Score the models on an evaluation set (default the shipped compact one) or on a dataset's split."""
     from diviewer.evaluation.evaluate import evaluate, evaluate_evalset, strict_json
 
     if args.evalset is not None and args.data is not None:
@@ -33,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def jobs(args: argparse.Namespace) -> int:
+    """``--jobs``, or this machine's cores where it is not given."""
     from diviewer.evaluation.scoring import default_jobs
 
     if args.jobs is None:
@@ -46,7 +48,7 @@ def add_jobs(p) -> None:
     """``--jobs``: the processes scoring runs in."""
     add_number(p, "--jobs", default=None,
                help="processes the images are scored in (default: this machine's cores); scoring, HDR-FLIP "
-                        "above all, is most of an evaluation's time")
+                    "above all, is most of an evaluation's time")
 
 
 def add_parser(sub) -> None:

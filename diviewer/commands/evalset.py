@@ -39,6 +39,7 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Render the evaluation set the options describe (resumable), or write the compact set of one (--compact)."""
     from diviewer.data.capture import parse_shard
     from diviewer.evaluation.evalset import EvalSetSettings, build_evalset
     from diviewer.frames import parse_resolution

@@ -29,6 +29,7 @@ def add_parser(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Export the checkpoint (verified against PyTorch), or print a model's metadata (--info)."""
     from diviewer.train.export import ExportSettings, export, info
 
     if args.info:

@@ -67,6 +67,7 @@ def write_new(path: Path, text: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Survey the scene, print the report, and write the JSON and the scene file asked for."""
     from diviewer.scene.survey import OpenSpaceSettings, survey
 
     for path, option, suffix in ((args.json, "--json", ".json"), (args.write_toml, "--write-toml", ".toml")):

@@ -58,6 +58,7 @@ def _add_reference_args(p) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Render one configuration (with its reference), or a camera path's frames (--path)."""
     from diviewer.render import render_to_dir
 
     if args.path is not None:
