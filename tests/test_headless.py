@@ -42,3 +42,19 @@ def test_the_default_view_without_a_model(gl_context):
 def test_a_bad_size_is_a_user_error(size):
     with pytest.raises(DiviewerError, match="resolution"):
         diviewer.render_frame("cornell", size=size)
+
+
+def test_the_public_api_is_light_until_used():
+    """`import diviewer` and a scene load bring in no GL, no onnxruntime and no torch; every name of the API
+    resolves, and a misspelt one is an AttributeError."""
+    import subprocess
+    import sys
+
+    code = ("import sys, diviewer\n"
+            "diviewer.load_scene('cornell')\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'onnxruntime', 'moderngl')))\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stdout + r.stderr
+    assert all(callable(getattr(diviewer, name)) for name in diviewer.__all__ if name != "__version__")
+    with pytest.raises(AttributeError):
+        diviewer.render_frames  # noqa: B018

@@ -1,8 +1,8 @@
 """The `diviewer` command line: one module per command, each with ``add_parser(subparsers)`` and ``run(args)``.
 
 `build_parser` makes the top parser from `COMMANDS`, in the order ``diviewer --help`` lists them;
-`diviewer.cli.main` parses, checks every option before any work and runs the command. The option builders and
-the parser that records its options are in `diviewer.commands.common`.
+`diviewer.cli.main` parses, checks every option before any work and runs the command. The option builders are in
+`diviewer.commands.common`, the parser that records its options in `diviewer.commands.parser`.
 """
 
 from __future__ import annotations
