@@ -21,6 +21,7 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None
     options = {a.dest: a.option_strings[0] if a.option_strings else a.dest for a in arguments(chosen_parser(ap, args))}
     check_command_outputs(args.command, args, options)
 
+
 def _say_scene_warnings(command: str) -> None:
     """Print a scene load's warnings (an unhonoured glTF extension, a default material) as one line each."""
     import warnings

@@ -29,6 +29,9 @@ class CommandParser(argparse.ArgumentParser):
         group = super().add_argument_group(*args, **kwargs)
         return _RecordedGroup(group, self) if self.built else group
 
+    def add_mutually_exclusive_group(self, **kwargs: Any) -> Any:
+        return _RecordedGroup(super().add_mutually_exclusive_group(**kwargs), self)
+
     def add_subparsers(self, **kwargs: Any) -> argparse.Action:
         kwargs.setdefault("parser_class", CommandParser)
         self.subcommands = super().add_subparsers(**kwargs)
@@ -36,7 +39,8 @@ class CommandParser(argparse.ArgumentParser):
 
 
 class _RecordedGroup:
-    """An argument group whose options are recorded in its parser's ``arguments`` too."""
+    """An argument group (or a mutually exclusive one) whose options are recorded in its parser's ``arguments``
+    too."""
 
     def __init__(self, group: Any, parser: CommandParser) -> None:
         self.group, self.parser = group, parser
@@ -48,7 +52,8 @@ class _RecordedGroup:
 
 
 def arguments(parser: argparse.ArgumentParser) -> list[argparse.Action]:
-    """The options and positionals added to ``parser`` (a `CommandParser`), help aside."""
+    """The options (``--help`` included) and positionals added to ``parser``, a `CommandParser` (none for another
+    parser)."""
     return list(getattr(parser, "arguments", ()))
 
 

@@ -60,3 +60,14 @@ def test_a_number_without_a_range_is_refused_when_the_parser_is_built():
     add_number(p, "--spp", default=4)
     with pytest.raises(KeyError, match="OPTIONS"):
         add_number(p, "--not-an-option", default=1)
+
+
+def test_a_mutually_exclusive_groups_options_are_recorded_and_still_exclusive(capsys):
+    p = CommandParser(prog="t")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--a", action="store_true")
+    g.add_argument("--b", action="store_true")
+    assert [x.dest for x in arguments(p)] == ["help", "a", "b"]
+    with pytest.raises(SystemExit):
+        p.parse_args(["--a", "--b"])
+    assert "not allowed with argument" in capsys.readouterr().err
