@@ -5,7 +5,8 @@ Every option that takes a number, or numbers in a string (``--res 320x240``, ``-
 (finite, within its range; the same spec as the settings field it fills where there is one), applied to each value
 of a list. `check_options` refuses a value out of range in one line naming the option (exit 2). An option that
 takes text but no number is listed in `TEXT_OPTIONS`; tests/test_options.py walks every subcommand's parser and
-holds each of its options to one of the two, so an option added without a range fails there.
+holds each of its options to one of the two (`diviewer.commands.common.add_number` refuses a number without
+an entry when the parser is built), so an option added without a range fails there.
 
 Options bounded by what a GL context can hold name the limit (`GL_LIMITS`): `check_options` compares them with
 ``gl_info`` (a context's ``ctx.info``) where the caller has one, else with what every OpenGL 4.3 core context
@@ -21,6 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from diviewer.commands.parser import arguments, chosen_parser
 from diviewer.errors import DiviewerError
 from diviewer.fieldspec import MAX_SIZE, Float, Int, Ints, Invalid
 from diviewer.train.config import TRAIN_FIELDS
@@ -228,7 +230,7 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace,
     """Every numeric option of the chosen (sub)subcommand that was given: finite, in range, within the GL limits."""
     parser = chosen_parser(ap, args)
     limits = {**GL_GUARANTEED, **{k: v for k, v in (gl_info or {}).items() if isinstance(v, int)}}
-    for action in parser._actions:
+    for action in arguments(parser):
         spec = option_spec(args.command, action.dest)
         value = getattr(args, action.dest, None)
         if spec is None or value is None or not action.option_strings:
@@ -242,13 +244,3 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace,
             for limit in GL_LIMITS.get(action.dest, ()):
                 if any(side > limits[limit] for side in _sides(spec, v)):
                     raise DiviewerError(f"is larger than OpenGL allows ({limit} {limits[limit]}), got {v}", field=name)
-
-
-def chosen_parser(ap: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
-    """The (sub)subparser that parsed ``args``: its actions know the option strings the user typed."""
-    parser = ap
-    while True:
-        sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
-        if sub is None or getattr(args, sub.dest, None) not in sub.choices:
-            return parser
-        parser = sub.choices[getattr(args, sub.dest)]

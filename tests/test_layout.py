@@ -23,16 +23,19 @@ LAYERS = {
     # 2: what draws or runs a frame: GL passes, the path tracer, the onnxruntime model, frame records
     "gl/": 2, "reference/": 2, "runtime": 2, "lean": 2, "frames": 2, "weights": 2,
     # 3: datasets and single renders
-    "data/": 3, "render": 3, "render_path": 3,
+    "data/": 3, "render": 3, "render_path": 3, "headless": 3,
     # 4: training and evaluation
     "train/": 4, "evaluation/": 4,
     # 5: the applications
     "viewer/": 5, "bench/": 5, "build/": 5, "ship/": 5,
     # 6: the command line
-    "cli": 6, "evalcommand": 6, "datacommand": 6, "options": 6, "__main__": 6,
-    "inspectcommand": 6,
+    "cli": 6, "commands/": 6, "options": 6, "__main__": 6,
 }
 """Each unit (a subpackage, or a top-level module) and its floor: a unit imports only its own floor or lower."""
+
+ENTRY_POINTS = {"diviewer.train.cli": "diviewer.commands.train"}
+"""Modules that only give a command a documented ``python -m`` name (torchrun's `-m diviewer.train.cli`), and the
+command module each runs: the one import allowed to point up."""
 
 
 def _unit(module: str) -> str:
@@ -113,8 +116,29 @@ def test_no_import_points_upward():
     upward = sorted(f"{m} ({unit}, floor {LAYERS[unit]}) imports {name} ({_unit(name)}, floor {LAYERS[_unit(name)]})"
                     for m, (unit, _, names) in GRAPH.items() if unit in LAYERS
                     for name in names if name.startswith("diviewer.") and _unit(name) in LAYERS
-                    and LAYERS[_unit(name)] > LAYERS[unit])
+                    and LAYERS[_unit(name)] > LAYERS[unit] and ENTRY_POINTS.get(m) != name)
     assert not upward, "\n".join(upward)
+    for entry, command in ENTRY_POINTS.items():  # an entry point is that import and nothing else
+        assert GRAPH[entry][2] == {command, "sys"}, GRAPH[entry][2]
+
+
+def test_only_the_command_line_imports_the_commands():
+    assert not _offenders(set(LAYERS) - {"commands/", "cli", "__main__", "options"},
+                          lambda name: name.startswith("diviewer.commands") and name not in ENTRY_POINTS.values())
+
+
+ARGPARSE_PRIVATES = re.compile(r"\._actions\b|_SubParsersAction|_option_string_actions|\._get_[a-z_]+\(|"
+                               r"\._subparsers\b|\._group_actions\b|\._HelpAction|\._VersionAction")
+"""argparse's internals: a command finds its chosen subparser and its options through what it recorded
+(`diviewer.commands.common`), never through these."""
+
+
+def test_no_argparse_privates():
+    uses = [f"{path.relative_to(PACKAGE.parent)}:{n}: {line.strip()}" for path in sorted(PACKAGE.rglob("*.py"))
+            for n, line in enumerate(path.read_text().splitlines(), 1) if ARGPARSE_PRIVATES.search(line)]
+    assert not uses, "\n".join(uses)
+    assert ARGPARSE_PRIVATES.search("for a in parser._actions:") and ARGPARSE_PRIVATES.search("argparse._SubParsersAction")
+    assert ARGPARSE_PRIVATES.search("p._get_formatter()") and not ARGPARSE_PRIVATES.search("p.add_argument('--x')")
 
 
 def test_scene_imports_no_gl_no_torch_no_viewer():

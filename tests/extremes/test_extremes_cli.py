@@ -152,11 +152,11 @@ def test_disk_full_or_unwritable_while_merging_is_one_line(tmp_path, capsys, mon
 def test_programming_errors_are_not_hidden(monkeypatch):
     """Only the machine's OSErrors become one line; a bug still shows its traceback."""
     import diviewer.cli as cli
-    import diviewer.datacommand as datacommand
+    import diviewer.commands.data as data
 
     def bug(args):
         raise OSError(errno.EBADF, "Bad file descriptor")
 
-    monkeypatch.setattr(datacommand, "_cmd_data_check", bug)
+    monkeypatch.setitem(data.ACTIONS, "check", bug)
     with pytest.raises(OSError):
         cli.main(["data", "check", "x"])

@@ -1,4 +1,5 @@
-"""Every numeric option of every subcommand, found by walking the parser: NaN, infinities, -1, 0 and huge values
+"""Every numeric option of every subcommand, found by walking the parser (`diviewer.commands.common.leaves` and
+each parser's recorded `arguments`): NaN, infinities, -1, 0 and huge values
 are refused before any work, exit 2, one line naming the option, no traceback; an option added without a range
 (`diviewer.options.OPTIONS`) or a text kind (`TEXT_OPTIONS`) fails here."""
 
@@ -12,6 +13,7 @@ import pytest
 from hypothesis import given, strategies as st
 
 import diviewer.cli as cli
+from diviewer.commands.parser import arguments, leaves, option_table
 from diviewer.fieldspec import Float, Int, Invalid
 from diviewer.options import OPTIONS, TEXT_OPTIONS, check_options, option_spec
 
@@ -19,19 +21,9 @@ BAD = ["nan", "inf", "-inf", "-1", "0", "99999999999", "1e30", "1e-30"]
 """What a hostile user types into a number."""
 
 
-def _walk(parser: argparse.ArgumentParser, words: tuple[str, ...] = ()):
-    """(command words, subparser) for every leaf subcommand."""
-    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    if not subs:
-        yield words, parser
-        return
-    for name, sub in subs[0].choices.items():
-        yield from _walk(sub, (*words, name))
-
-
 def _kind(action: argparse.Action) -> str | None:
     """'flag', 'choice', 'path' or None (a value the options table must place)."""
-    if action.nargs == 0 or isinstance(action, (argparse._HelpAction, argparse._VersionAction)):
+    if action.nargs == 0:  # a flag, --help and --version included
         return "flag"
     if action.choices is not None:
         return "choice"
@@ -43,8 +35,8 @@ def _kind(action: argparse.Action) -> str | None:
 def _options():
     """(command words, subparser, action) for every option that takes a free value."""
     ap = cli.build_parser()
-    for words, parser in _walk(ap):
-        for action in parser._actions:
+    for words, parser in leaves(ap):
+        for action in arguments(parser):
             if action.option_strings and _kind(action) is None:
                 yield words, parser, action
 
@@ -62,10 +54,22 @@ def test_every_option_is_numeric_with_a_range_or_declared_text():
     assert not [d for d in TEXT_OPTIONS if d in OPTIONS]
 
 
+def test_the_option_table_lists_every_leaf_option_once():
+    """`option_table` is the walk's public face: each leaf command's options with their dest, type and nargs."""
+    rows = option_table(cli.build_parser())
+    seen = {(r["command"], r["option_strings"][0]) for r in rows if r["option_strings"]}
+    assert {(w, a.option_strings[0]) for w, _, a in OPTIONS_SEEN} <= seen
+    assert len(seen) == len([r for r in rows if r["option_strings"]]), "an option recorded twice"
+    spp = next(r for r in rows if r["command"] == ("data", "refine") and r["dest"] == "spp")
+    assert spp["type"] is int and spp["required"] and spp["option_strings"] == ("--spp",)
+    res = next(r for r in rows if r["command"] == ("bench",) and r["dest"] == "res")
+    assert res["nargs"] == "+" and res["type"] is int
+
+
 def _minimal_argv(words, parser, tmp: Path) -> list[str]:
     """The subcommand with its required arguments filled (paths that need not exist: nothing runs)."""
     argv = list(words)
-    for action in parser._actions:
+    for action in arguments(parser):
         if not action.option_strings and action.dest not in ("help",) and action.nargs != "?":
             argv.append(str(tmp / "x"))
         elif action.required:
@@ -96,7 +100,7 @@ def no_work(monkeypatch):
 
     def build():
         ap = real()
-        for _, parser in _walk(ap):
+        for _, parser in leaves(ap):
             parser.set_defaults(func=lambda args: pytest.fail(f"{args.command} started its work"))
         return ap
 

@@ -11,7 +11,8 @@ import pytest
 
 from diviewer.errors import DiviewerError
 from diviewer.paths import models_dir
-from diviewer.train.cli import add_train_parser, resolve_config
+from diviewer.commands.parser import CommandParser, arguments
+from diviewer.commands.train import add_parser as add_train_parser, resolve_config
 from diviewer.train.config import TrainConfig
 from diviewer.train.recipe import DEFAULT_RECIPE, load_recipe, shipped_recipes
 
@@ -283,11 +284,11 @@ def test_each_link_of_the_sponza_chain_gives_a_build_the_set_its_recipe_refines(
 def test_train_help_says_what_the_default_recipe_sets_beside_the_papers_defaults():
     """A plain `diviewer train` runs the default recipe, so its --help shows the recipe's value of each option the
     recipe sets (K, epochs, target...) beside TrainConfig's default, and lists every shipped recipe."""
-    ap = argparse.ArgumentParser()
+    ap = CommandParser()
     sub = ap.add_subparsers(dest="command")
     add_train_parser(sub)
     train = sub.choices["train"]
-    helps = {a.dest: a.help for a in train._actions}
+    helps = {a.dest: a.help for a in arguments(train)}
     given = load_recipe(DEFAULT_RECIPE).train
     assert f"[the {DEFAULT_RECIPE} recipe: {given['K']}]" in helps["K"]
     assert f"[the {DEFAULT_RECIPE} recipe: {given['epochs']}]" in helps["epochs"]

@@ -24,7 +24,7 @@ from diviewer.encoding import fit_exposure  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 from diviewer.train import trainer  # noqa: E402
 from diviewer.train.checkpoint import build_generator_from_checkpoint, load_checkpoint  # noqa: E402
-from diviewer.train.cli import add_train_parser, run_train  # noqa: E402
+from diviewer.commands.train import add_parser as add_train_parser, run as run_train  # noqa: E402
 from diviewer.train.config import TrainConfig  # noqa: E402
 from diviewer.train.distributed import epoch_batches  # noqa: E402
 from diviewer.train.report import CSV_COLUMNS, validate  # noqa: E402

@@ -329,8 +329,10 @@ def test_one_tone_map_list():
     from diviewer.cli import build_parser
     from diviewer.gl.display import DEFAULT_TONEMAP, TONEMAPS
 
-    render = build_parser()._subparsers._group_actions[0].choices["render"]
-    tonemap = next(a for a in render._actions if a.dest == "tonemap")
+    from diviewer.commands.parser import arguments, subcommands
+
+    render = subcommands(build_parser())["render"]
+    tonemap = next(a for a in arguments(render) if a.dest == "tonemap")
     assert tuple(tonemap.choices) == tuple(TONEMAPS) and tonemap.default == DEFAULT_TONEMAP
     shader = (Path(__file__).resolve().parents[2] / "shaders" / "tonemap.glsl").read_text()
     for name, code in TONEMAPS.items():  # the codes the shader's comment documents
@@ -340,13 +342,13 @@ def test_one_tone_map_list():
 def test_view_command_line():
     import argparse
 
-    from diviewer.viewer.command import add_view_parser, run_view
+    from diviewer.commands.view import add_parser, run
 
     ap = argparse.ArgumentParser()
-    add_view_parser(ap.add_subparsers(dest="command"))
+    add_parser(ap.add_subparsers(dest="command"))
     args = ap.parse_args(["view", "--model", "none", "--size", "320x240", "--no-vsync", "--frames", "3",
                           "--screenshot", "x.png", "--provider", "cpu"])
-    assert args.func is run_view and args.scene == "cornell" and args.model == "none" and args.no_vsync
+    assert args.func is run and args.scene == "cornell" and args.model == "none" and args.no_vsync
     assert args.frames == 3 and args.screenshot == Path("x.png") and args.provider == "cpu"
     args = ap.parse_args(["view"])
     assert args.model == "auto" and args.frames is None and not args.no_vsync and args.shadow_bands
@@ -1139,8 +1141,8 @@ def test_the_network_sees_the_window_shape(display, tmp_path):
 
 
 def _camera_path_session(tmp_path: Path) -> None:
+    from diviewer.commands.view import _play_camera_path
     from diviewer.viewer.run import run_viewer
-    from diviewer.viewer.command import _play_camera_path
 
     seen, back_faces = [], []
     script = [(0, _play_camera_path)] + [(f, lambda v: seen.append(v.state.config.camera.position)) for f in (1, 2, 3)]

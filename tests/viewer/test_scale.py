@@ -93,7 +93,7 @@ def test_render_size_rounds_and_keeps_a_pixel():
 def test_render_scale_setting_and_command_line():
     import argparse
 
-    from diviewer.viewer.command import add_view_parser
+    from diviewer.commands.view import add_parser as add_view_parser
     from diviewer.viewer.settings import ViewerSettings, check_render_scale, scale_settings
 
     assert scale_settings(ViewerSettings()).target_fps == 30.0

@@ -7,17 +7,18 @@ import contextlib
 import shlex
 from pathlib import Path
 
+from diviewer.commands.common import add_number, add_scene
 
-def add_build_parser(subparsers) -> argparse.ArgumentParser:
-    """The `build` subcommand; it calls `run_build_command`."""
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """The `build` subcommand; it calls `run`."""
     p = subparsers.add_parser(
         "build", help="one resumable pipeline from a scene to its shipped model: capture, check, evaluation set, "
                       "train and export each K of the ladder, evaluate, pick the smallest sufficient K, ship",
         description="Build a scene's model with a recipe (assets/recipes/*.toml). Every stage resumes: run the same "
                     "command again after an interruption. Uses CUDA (Mitsuba cuda_ad_rgb, torch) where present.")
-    p.add_argument("--scene", default=None,
-                   help="a shipped scene's name (cornell, sponza, atrium) or a .toml path "
-                        "(default: the recipe's scene)")
+    add_scene(p, default=None, help="a shipped scene's name (cornell, sponza, atrium) or a .toml path "
+                                    "(default: the recipe's scene)")
     p.add_argument("--recipe", default=None, metavar="R",
                    help="a shipped recipe's name (cornell, sponza, paper) or a .toml file (default: the scene's own "
                         "recipe where one is shipped, else cornell's, the best measured)")
@@ -31,20 +32,20 @@ def add_build_parser(subparsers) -> argparse.ArgumentParser:
                         "in place: --ship assets/models")
     p.add_argument("--replace-worse", action="store_true",
                    help="with --ship: replace the model there even where it scores better than the new one")
-    p.add_argument("--budget", type=float, default=None, metavar="HOURS",
-                   help="scale the recipe's frames and steps (never up) so the estimate fits in HOURS on this machine")
+    add_number(p, "--budget", type=float, default=None, metavar="HOURS",
+               help="scale the recipe's frames and steps (never up) so the estimate fits in HOURS on this machine")
     p.add_argument("--evalset", type=Path, default=None, metavar="DIR",
                    help="score on this evaluation set of the scene (e.g. the shipped compact one, "
                         "assets/evalsets/SCENE) instead of rendering the recipe's: the evaluation-set stage then "
                         "only checks it")
-    p.add_argument("--ks", type=int, nargs="+", default=None, metavar="K",
-                   help="the widths to train instead of the recipe's ladder (each 1 to 256)")
+    add_number(p, "--ks", nargs="+", default=None, metavar="K",
+               help="the widths to train instead of the recipe's ladder (each 1 to 256)")
     p.add_argument("--device", default=None, help="training device: auto (default: CUDA where present), cpu, cuda:N")
     p.add_argument("--stop-after", default=None, metavar="STAGE",
                    help="stop once this stage of the plan is done (capture, refine, filter, check, evalset, "
                         "train_k8, ...): render the data here and train later or elsewhere; the same command without it goes on")
     p.add_argument("--dry-run", action="store_true", help="print the plan and its estimated time; do nothing")
-    p.set_defaults(func=run_build_command)
+    p.set_defaults(func=run)
     return p
 
 
@@ -69,7 +70,7 @@ def rebuild_command(args: argparse.Namespace) -> str:
     return shlex.join(words)
 
 
-def run_build_command(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
     """`diviewer build`: the plan, printed (--dry-run) or run."""
     from diviewer.build.checks import check_device, check_folders, check_ks, check_replacement, check_splits
     from diviewer.build.plan import describe, make_plan

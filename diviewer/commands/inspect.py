@@ -10,23 +10,25 @@ import os
 import tempfile
 from pathlib import Path
 
+from diviewer.commands.common import add_json, add_number, add_scene
 from diviewer.errors import DiviewerError
 
 GLTF_SUFFIXES = (".gltf", ".glb")
 
 
-def add_inspect_parser(sub) -> None:
+def add_parser(sub) -> None:
+    """`diviewer inspect`."""
     p = sub.add_parser("inspect", help="a scene's bounds, triangles, materials, textures, lights and emitters, a "
                                        "suggested camera and camera region; optionally a scene file to start from")
-    p.add_argument("--scene", required=True,
-                   help="a shipped scene's name, a scene file (.toml) or a glTF file (.gltf or .glb)")
-    p.add_argument("--json", type=Path, default=None, help="also write the report as JSON to this file")
+    add_scene(p, default=None, required=True,
+              help="a shipped scene's name, a scene file (.toml) or a glTF file (.gltf or .glb)")
+    add_json(p, "also write the report as JSON to this file")
     p.add_argument("--write-toml", type=Path, default=None, metavar="FILE",
                    help="write a scene file importing the glTF with the suggested camera, camera region and a light "
                         "(never overwrites an existing file)")
-    p.add_argument("--cells", type=int, default=32,
-                   help="grid cells along the scene's longest side in the open-space search (default 32)")
-    p.set_defaults(func=_cmd_inspect)
+    add_number(p, "--cells", default=32,
+               help="grid cells along the scene's longest side in the open-space search (default 32)")
+    p.set_defaults(func=run)
 
 
 def load_any(scene: str):
@@ -64,7 +66,8 @@ def write_new(path: Path, text: str) -> None:
         os.unlink(tmp)
 
 
-def _cmd_inspect(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
+    """Survey the scene, print the report, and write the JSON and the scene file asked for."""
     from diviewer.scene.survey import OpenSpaceSettings, survey
 
     for path, option, suffix in ((args.json, "--json", ".json"), (args.write_toml, "--write-toml", ".toml")):

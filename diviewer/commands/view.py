@@ -5,30 +5,28 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from diviewer.commands.common import add_model, add_number, add_provider, add_scene
 from diviewer.errors import DiviewerError
-from diviewer.paths import shipped_scenes
 from diviewer.fieldspec import MAX_SIZE
 from diviewer.viewer.scale import DEFAULT_FLOOR, MAX_SCALE
 
 
-def add_view_parser(subparsers) -> argparse.ArgumentParser:
+def add_parser(subparsers) -> argparse.ArgumentParser:
     """Define ``diviewer view`` on the CLI's subparsers."""
     p = subparsers.add_parser("view", help="fly through a scene with neural GI every frame (window + panel)",
                               description="Open a window on a scene with its neural GI model; "
                                           "the panel lists the keyboard shortcuts.")
-    p.add_argument("--scene", default="cornell",
-                   help=f"shipped scene name ({', '.join(shipped_scenes())}) or a .toml path")
-    p.add_argument("--model", default="auto",
-                   help="model file, 'auto' (assets/models/<scene>*.onnx, the first that fits) or 'none'")
+    add_scene(p)
+    add_model(p, "model file, 'auto' (assets/models/<scene>*.onnx, the first that fits) or 'none'", type=str,
+              default="auto")
     p.add_argument("--size", default="768x768", help="window size WxH (or N); default 768x768")
     p.add_argument("--no-vsync", action="store_true", help="do not wait for the display's refresh")
-    p.add_argument("--frames", type=int, default=None, help="render N frames, then exit (with --screenshot)")
+    add_number(p, "--frames", default=None, help="render N frames, then exit (with --screenshot)")
     p.add_argument("--screenshot", type=Path, default=None, help="on exit, save the view as PNG (+ frame JSON)")
     p.add_argument("--window-screenshot", type=Path, default=None,
                    help="with --frames: save what the window shows in the last frame (its back buffer, panel "
                         "included) as PNG")
-    p.add_argument("--provider", default=None, choices=("cpu", "cuda", "tensorrt"),
-                   help="onnxruntime execution provider (default: the fastest available)")
+    add_provider(p, "onnxruntime execution provider (default: the fastest available)")
     p.add_argument("--camera", default="fly", choices=("fly", "orbit"), help="camera controller at start")
     p.add_argument("--gi-res", default="model",
                    help="neural GI resolution: 'model' (its training size, default), a fraction of the window "
@@ -40,17 +38,17 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
                         "and decoding in shaders (default); --no-lean runs the whole self-contained graph")
     p.add_argument("--pipelined", action="store_true",
                    help="run inference one frame behind on a worker thread (GL and onnxruntime overlap)")
-    p.add_argument("--target-fps", type=float, default=30.0,
-                   help="hold this frame rate by scaling the shading resolution between --scale-floor and the "
-                        "window's size, then upscaling (default 30; 0 turns it off)")
-    p.add_argument("--render-scale", type=float, default=None,
-                   help=f"shade at this fixed multiple of the window's size per side (0 < S <= {MAX_SCALE:g}; above 1 "
-                        "supersampled, 2: each pixel the mean of 2x2; turns --target-fps off)")
-    p.add_argument("--scale-floor", type=float, default=DEFAULT_FLOOR,
-                   help=f"lowest render scale --target-fps goes to (default {DEFAULT_FLOOR})")
-    p.add_argument("--scale-ceiling", type=float, default=1.0,
-                   help=f"highest render scale --target-fps goes to (1 to {MAX_SCALE:g}; default 1; above 1 it "
-                        "supersamples where the frame rate allows)")
+    add_number(p, "--target-fps", type=float, default=30.0,
+               help="hold this frame rate by scaling the shading resolution between --scale-floor and the "
+                    "window's size, then upscaling (default 30; 0 turns it off)")
+    add_number(p, "--render-scale", type=float, default=None,
+               help=f"shade at this fixed multiple of the window's size per side (0 < S <= {MAX_SCALE:g}; above 1 "
+                    "supersampled, 2: each pixel the mean of 2x2; turns --target-fps off)")
+    add_number(p, "--scale-floor", type=float, default=DEFAULT_FLOOR,
+               help=f"lowest render scale --target-fps goes to (default {DEFAULT_FLOOR})")
+    add_number(p, "--scale-ceiling", type=float, default=1.0,
+               help=f"highest render scale --target-fps goes to (1 to {MAX_SCALE:g}; default 1; above 1 it "
+                    "supersamples where the frame rate allows)")
     p.add_argument("--refine-still", action=argparse.BooleanOptionalAction, default=True,
                    help="while nothing changes (camera, lights, objects, window, view mode, model), draw the view at "
                         "scale 1 (or --scale-ceiling above 1), then show it without drawing again (default); "
@@ -76,16 +74,16 @@ def add_view_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--record-path", type=Path, default=None,
                    help="record the camera path from the first frame to the last into this JSON file (Ctrl+R "
                         "records by hand)")
-    p.add_argument("--fixed-step", type=float, default=None,
-                   help="advance animations, paths and recordings by this many seconds a frame instead of the clock "
-                        "(reproducible runs: a recording then replays frame for frame, with a fixed --render-scale)")
+    add_number(p, "--fixed-step", type=float, default=None,
+               help="advance animations, paths and recordings by this many seconds a frame instead of the clock "
+                    "(reproducible runs: a recording then replays frame for frame, with a fixed --render-scale)")
     p.add_argument("--stats", type=Path, default=None,
                    help="with --frames: write per-stage times, fps and the resolutions as JSON here")
-    p.set_defaults(func=run_view)
+    p.set_defaults(func=run)
     return p
 
 
-def run_view(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
     """Open the viewer as the arguments say; with ``--frames``, print one line of what it did."""
     from diviewer.frames import parse_resolution
     from diviewer.gl.neural import GISettings

@@ -6,17 +6,20 @@ import argparse
 import json
 from pathlib import Path
 
+from diviewer.commands.common import add_model, add_number
 
-def add_ship_parser(subparsers) -> argparse.ArgumentParser:
-    """The `ship` subcommand and its three actions."""
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """The `ship` subcommand and its three actions (`ACTIONS`)."""
     p = subparsers.add_parser(
         "ship", help="ship a model trained by hand with its card, record a later evaluation or a K ladder in it",
         description="Ship a model trained by hand (what `diviewer build` does at its end), record a later "
                     "evaluation of the shipped weights in its card, or record a K ladder measured by hand. The card "
                     "(SCENE.json) and the model's ONNX metadata are written together.")
     sub = p.add_subparsers(dest="ship_command", required=True, metavar="ACTION")
+    p.set_defaults(func=run)
     m = sub.add_parser("model", help="an exported model becomes its scene's shipped model (SCENE.onnx), with its card")
-    m.add_argument("--model", type=Path, required=True, help="an exported model (its card beside it)")
+    add_model(m, "an exported model (its card beside it)", required=True)
     m.add_argument("--run", type=Path, required=True, help="its training run (curves.png, metrics.csv)")
     m.add_argument("--eval", type=Path, required=True, help="diviewer eval JSON of it and the shipped model")
     m.add_argument("--previous-eval", type=Path, default=None,
@@ -31,13 +34,11 @@ def add_ship_parser(subparsers) -> argparse.ArgumentParser:
                    help="a K of the ladder and its training run (or the run's metrics.csv), once per K: their "
                         "curves on one figure, SCENE_ladder_curves.png (the card's ladder.curves)")
     m.add_argument("--ship", type=Path, default=None, metavar="DIR", help="where it goes (default assets/models)")
-    m.set_defaults(func=_cmd_model)
     e = sub.add_parser("eval", help="record a `diviewer eval` of the shipped weights in the model's card")
     e.add_argument("--eval", type=Path, required=True, help="diviewer eval JSON that scored the model")
-    e.add_argument("--model", type=Path, required=True, help="the shipped model (its card beside it)")
+    add_model(e, "the shipped model (its card beside it)", required=True)
     e.add_argument("--method", default=None, help="the model's name in the JSON (default: the file's stem)")
     e.add_argument("--key", default="evalset_full", help="the card's field for the record (default evalset_full)")
-    e.set_defaults(func=_cmd_eval)
     ld = sub.add_parser("ladder", help="a K ladder's record from eval JSONs; with --ship, its verdict on the card")
     ld.add_argument("--scene", required=True, help="the scene's name (the shipped SCENE.onnx)")
     ld.add_argument("--test-split", type=Path, required=True,
@@ -46,15 +47,14 @@ def add_ship_parser(subparsers) -> argparse.ArgumentParser:
                     "evaluation set (the rule's figure)")
     ld.add_argument("--model", action="append", required=True, metavar="KN=PATH", help="a K and its model, once "
                     "per K (K8=assets/models/cornell.onnx)")
-    ld.add_argument("--tolerance", type=float, default=0.5, help="dB below the best K that still suffices")
+    add_number(ld, "--tolerance", type=float, default=0.5, help="dB below the best K that still suffices")
     ld.add_argument("--ship", type=Path, default=None, metavar="DIR",
                     help="write SCENE_ladder.json there and the verdict on its SCENE.onnx's card")
     ld.add_argument("--note", default="", help="added to the verdict")
-    ld.set_defaults(func=_cmd_ladder)
     return p
 
 
-def _cmd_model(args) -> int:
+def _model(args) -> int:
     from diviewer.paths import models_dir
     from diviewer.ship.model import ship
 
@@ -66,7 +66,7 @@ def _cmd_model(args) -> int:
     return 0
 
 
-def _cmd_eval(args) -> int:
+def _eval(args) -> int:
     from diviewer.ship.card import record_eval
 
     card = record_eval(args.model, args.eval, args.key, args.method)
@@ -74,7 +74,7 @@ def _cmd_eval(args) -> int:
     return 0
 
 
-def _cmd_ladder(args) -> int:
+def _ladder(args) -> int:
     from diviewer.errors import DiviewerError
     from diviewer.ship.ladder import record_ladder
 
@@ -87,3 +87,12 @@ def _cmd_ladder(args) -> int:
     record = record_ladder(args.scene, args.test_split, args.evalset, models, args.tolerance, args.ship, args.note)
     print(json.dumps(record, indent=1))
     return 0
+
+
+ACTIONS = {"model": _model, "eval": _eval, "ladder": _ladder}
+"""What each `diviewer ship` action runs."""
+
+
+def run(args: argparse.Namespace) -> int:
+    """The action `args.ship_command` names."""
+    return ACTIONS[args.ship_command](args)

@@ -1,16 +1,17 @@
-"""The `diviewer data` subcommands (check, merge, refine, area-direct, filter-truth): their options and what they
-run."""
+"""`diviewer data check | merge | refine | area-direct | filter-truth`: a dataset's actions, their options and what
+they run."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
+from diviewer.commands.common import add_number, add_out
 from diviewer.errors import DiviewerError
 from diviewer.locks import run_lock
 
 
-def _cmd_data_check(args: argparse.Namespace) -> int:
+def _check(args: argparse.Namespace) -> int:
     from diviewer.data.capture import summarize
     from diviewer.data.dataset import Dataset, read_manifest
 
@@ -40,7 +41,7 @@ def _cmd_data_check(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_data_merge(args: argparse.Namespace) -> int:
+def _merge(args: argparse.Namespace) -> int:
     from diviewer.data.capture import merge
 
     for src in args.sources:
@@ -52,7 +53,7 @@ def _cmd_data_merge(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_data_refine(args: argparse.Namespace) -> int:
+def _refine(args: argparse.Namespace) -> int:
     from diviewer.data.capture import parse_shard
     from diviewer.data.refine import refine
 
@@ -60,19 +61,29 @@ def _cmd_data_refine(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_data_area_direct(args: argparse.Namespace) -> int:
+def _area_direct(args: argparse.Namespace) -> int:
     from diviewer.data.area import area_direct
 
     area_direct(args.dir, args.out, args.samples, partial=args.partial)
     return 0
 
 
-def _cmd_data_filter_truth(args: argparse.Namespace) -> int:
+def _filter_truth(args: argparse.Namespace) -> int:
     from diviewer.data.truth_filter import TruthFilter, filter_dataset
 
     filter_dataset(args.dir, args.out, TruthFilter(args.levels, args.normal_power, args.plane, args.range_sigma),
                    partial=args.partial)
     return 0
+
+
+ACTIONS = {"check": _check, "merge": _merge, "refine": _refine, "area-direct": _area_direct,
+           "filter-truth": _filter_truth}
+"""What each `diviewer data` action runs."""
+
+
+def run(args: argparse.Namespace) -> int:
+    """The action `args.data_command` names."""
+    return ACTIONS[args.data_command](args)
 
 
 def _add_partial_arg(q) -> None:
@@ -81,45 +92,41 @@ def _add_partial_arg(q) -> None:
                         "incomplete source is refused")
 
 
-def add_data_parsers(sub) -> None:
-    """`diviewer data check | merge | refine | area-direct | filter-truth`."""
+def add_parser(sub) -> None:
+    """`diviewer data ACTION`: one subparser per action of `ACTIONS`."""
     p = sub.add_parser("data", help="inspect datasets")
     data = p.add_subparsers(dest="data_command", required=True, metavar="ACTION")
+    p.set_defaults(func=run)
     q = data.add_parser("check", help="verify every frame: present, readable, finite, shapes, checksum")
     q.add_argument("dir", type=Path)
     q.add_argument("--fast", action="store_true", help="skip checksums")
-    q.set_defaults(func=_cmd_data_check)
     q = data.add_parser("merge", help="merge shards captured into separate folders")
     q.add_argument("sources", type=Path, nargs="+")
-    q.add_argument("--out", type=Path, required=True)
-    q.set_defaults(func=_cmd_data_merge)
+    add_out(q, None)
     q = data.add_parser("refine", help="raise a path-traced dataset's sample count into a new folder (renders only "
                                        "the extra samples; resumable)")
     q.add_argument("dir", type=Path)
-    q.add_argument("--spp", type=int, required=True, help="the refined dataset's samples per pixel (above the source's)")
-    q.add_argument("--out", type=Path, required=True)
+    add_number(q, "--spp", required=True, help="the refined dataset's samples per pixel (above the source's)")
+    add_out(q, None)
     q.add_argument("--shard", default=None, help="k/n: refine every n-th frame starting at the k-th")
     q.add_argument("--extras", type=Path, default=None, help="a folder of extra samples rendered elsewhere "
                    "(tools/device_refine.py): refine only its frames, from them")
     _add_partial_arg(q)
-    q.set_defaults(func=_cmd_data_refine)
     q = data.add_parser("area-direct", help="re-render a dataset's GL direct light over each pixel's area into a new "
                                             "folder (supersampled, box-filtered; minutes; resumable)")
     q.add_argument("dir", type=Path)
-    q.add_argument("--samples", type=int, default=4, help="samples per axis (default 4: 16 per pixel)")
-    q.add_argument("--out", type=Path, required=True)
+    add_number(q, "--samples", default=4, help="samples per axis (default 4: 16 per pixel)")
+    add_out(q, None)
     _add_partial_arg(q)
-    q.set_defaults(func=_cmd_data_area_direct)
     q = data.add_parser("filter-truth", help="filter a path-traced dataset's indirect light over each surface into a new "
                                              "folder (seconds; resumable)")
     q.add_argument("dir", type=Path)
-    q.add_argument("--out", type=Path, required=True)
-    q.add_argument("--levels", type=int, default=1, help="a-trous levels (default 1: the 5x5 neighbourhood)")
-    q.add_argument("--normal-power", type=float, default=32.0, help="exponent of the normals' cosine (default 32)")
-    q.add_argument("--plane", type=float, default=0.01,
-                   help="distance from the tangent plane, over the depth, at which a weight falls to 1/e (default 0.01)")
-    q.add_argument("--range-sigma", type=float, default=0.0,
-                   help="the range term: the relative difference of the light (filtered by one level) at which a "
-                        "weight falls to 1/e (default 0: geometry alone)")
+    add_out(q, None)
+    add_number(q, "--levels", default=1, help="a-trous levels (default 1: the 5x5 neighbourhood)")
+    add_number(q, "--normal-power", type=float, default=32.0, help="exponent of the normals' cosine (default 32)")
+    add_number(q, "--plane", type=float, default=0.01,
+               help="distance from the tangent plane, over the depth, at which a weight falls to 1/e (default 0.01)")
+    add_number(q, "--range-sigma", type=float, default=0.0,
+               help="the range term: the relative difference of the light (filtered by one level) at which a "
+                    "weight falls to 1/e (default 0: geometry alone)")
     _add_partial_arg(q)
-    q.set_defaults(func=_cmd_data_filter_truth)
