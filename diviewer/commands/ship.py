@@ -34,6 +34,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="a K of the ladder and its training run (or the run's metrics.csv), once per K: their "
                         "curves on one figure, SCENE_ladder_curves.png (the card's ladder.curves)")
     m.add_argument("--ship", type=Path, default=None, metavar="DIR", help="where it goes (default assets/models)")
+    m.add_argument("--replace-worse", action="store_true",
+                   help="replace the model there even where it scores better on the same frames than this one")
     e = sub.add_parser("eval", help="record a `diviewer eval` of the shipped weights in the model's card")
     e.add_argument("--eval", type=Path, required=True, help="diviewer eval JSON that scored the model")
     add_model(e, "the shipped model (its card beside it)", required=True)
@@ -56,13 +58,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def _model(args) -> int:
     from diviewer.paths import models_dir
-    from diviewer.ship.model import ship
+    from diviewer.ship.model import mean_psnr, ship
 
     dest = args.ship or models_dir()
     runs = {int(k): Path(run) for k, run in args.ladder_run}
     card = ship(args.model, args.run, args.eval, args.commands, args.note, args.ladder_why, args.ladder_file, dest,
-                args.previous_eval, runs)
-    print(f"shipped {args.model} as {dest / (card['scene'] + '.onnx')} (K={card['K']})")
+                args.previous_eval, runs, replace_worse=args.replace_worse)
+    compact = card["evalset_compact"]
+    print(f"shipped {args.model} as {dest / (card['scene'] + '.onnx')} (K={card['K']}), replacing the model there: "
+          f"{mean_psnr(compact['this_model']):.2f} dB against its {mean_psnr(compact['previous_shipped']):.2f} "
+          f"(tone-mapped PSNR, the mean of the splits)")
     return 0
 
 

@@ -50,9 +50,16 @@ def split_scores(ev: dict, method: str, path: Path) -> dict:
     return out
 
 
+def mean_psnr(scores: dict) -> float:
+    """The mean over splits of a card's per-split tone-mapped PSNR (`split_scores`)."""
+    return sum(row["psnr_tm"] for row in scores.values()) / max(len(scores), 1)
+
+
 def ship(model: Path, run: Path, eval_json: Path, commands: list[str], note: str, ladder_why: str,
          ladder_file: str | None, dest: Path, previous_eval: Path | None = None,
-         ladder_runs: dict[int, Path] | None = None) -> dict:
+         ladder_runs: dict[int, Path] | None = None, replace_worse: bool = False) -> dict:
+    """Ship ``model`` as its scene's model in ``dest``; refused, before anything is written, where the model it
+    replaces scores better on the same frames (the mean over splits of tone-mapped PSNR) unless ``replace_worse``."""
     card = json.loads(model.with_suffix(".json").read_text())
     scene = card["scene"]
     shipped = dest / f"{scene}.onnx"
@@ -62,6 +69,11 @@ def ship(model: Path, run: Path, eval_json: Path, commands: list[str], note: str
                "previous_shipped": split_scores(json.loads(before.read_text()), shipped.stem, before)}
     if previous_eval is not None:
         compact["previous_json"] = str(previous_eval)
+    new, old = mean_psnr(compact["this_model"]), mean_psnr(compact["previous_shipped"])
+    if shipped.is_file() and new < old and not replace_worse:
+        raise DiviewerError(f"{model} scores {new:.2f} dB where the model it would replace, {shipped}, scores "
+                            f"{old:.2f} (tone-mapped PSNR, the mean of the splits of {eval_json}); nothing was "
+                            f"replaced: --replace-worse ships it anyway", field="--model")
     card.update(commands=commands, note=note, rebuild=f"diviewer build --scene {scene}",
                 ladder={"chosen_K": card["K"], "why": ladder_why, "file": ladder_file or f"{scene}_ladder.json"},
                 evalset_compact=compact)

@@ -116,3 +116,25 @@ def test_a_scene_file_edited_with_the_model_takes_the_previous_models_scores_fro
     assert compact["this_model"]["moved_camera"]["psnr_tm"] == 36.0
     assert compact["previous_shipped"]["moved_camera"]["psnr_tm"] == 31.0
     assert (compact["json"], compact["previous_json"]) == (str(ev_new), str(ev_old))
+
+
+def test_a_model_that_scores_worse_than_the_shipped_one_is_refused_unless_asked(tmp_path, capsys):
+    """Shipping over a better model is refused before anything is written; --replace-worse ships it anyway, and the
+    line says what it replaced and how the two scored."""
+    ship, run = tmp_path / "ship", tmp_path / "run"
+    ship.mkdir()
+    run.mkdir()
+    scene = base_meta()["scene"]
+    old = _model(ship / f"{scene}.onnx", 1.0)
+    before = old.read_bytes()
+    new = _model(tmp_path / "new_k8.onnx", 2.0)
+    ev = _eval(tmp_path / "ev.json", {"new_k8": 31.0, scene: 33.0})
+    argv = ["ship", "model", "--model", str(new), "--run", str(run), "--eval", str(ev), "--command", "x", "--note",
+            "n", "--ladder-why", "w", "--ship", str(ship)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "scores 31.00 dB" in err and "33.00" in err and "--replace-worse" in err
+    assert old.read_bytes() == before
+    assert main([*argv, "--replace-worse"]) == 0
+    out = capsys.readouterr().out
+    assert "replacing the model there: 31.00 dB against its 33.00" in out and old.read_bytes() != before
