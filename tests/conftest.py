@@ -16,7 +16,7 @@ MARK_BY_FIXTURE = {"ctx": "gl", "gl_context": "gl", "display": "window"}
 NO_MITSUBA = importlib.util.find_spec("mitsuba") is None
 
 
-QUICK_LEFT_OUT = ("tests/train/", "tests/extremes/", "tests/bench/", "tests/build/test_pipeline.py",
+QUICK_LEFT_OUT = ("tests/train/", "tests/extremes/", "tests/bench/", "tests/builder/test_pipeline.py",
                   "tests/test_faults.py", "tests/viewer/test_recording.py")
 """Folders and files the quick loop leaves out besides what its marks say: training (torch), the extremes suite
 (``-m extremes``), the benchmark, and the modules that run whole pipelines or many subprocesses."""

@@ -27,7 +27,7 @@ LAYERS = {
     # 4: training and evaluation
     "train/": 4, "evaluation/": 4,
     # 5: the applications
-    "viewer/": 5, "bench/": 5, "build/": 5, "ship/": 5,
+    "viewer/": 5, "bench/": 5, "builder/": 5, "ship/": 5,
     # 6: the command line
     "cli": 6, "commands/": 6, "options": 6, "__main__": 6,
 }

@@ -57,7 +57,7 @@ def make_build_folder(w: Path, model: Path) -> None:
     state), and a file of the user's."""
     import shutil
 
-    from diviewer.build.state import BuildState
+    from diviewer.builder.state import BuildState
 
     (w / "models").mkdir(parents=True)
     for name in ("ladder.json", "evalset_eval.json"):

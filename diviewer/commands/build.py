@@ -72,8 +72,8 @@ def rebuild_command(args: argparse.Namespace) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """`diviewer build`: the plan, printed (--dry-run) or run."""
-    from diviewer.build.checks import check_device, check_folders, check_ks, check_replacement, check_splits
-    from diviewer.build.plan import describe, make_plan
+    from diviewer.builder.checks import check_device, check_folders, check_ks, check_replacement, check_splits
+    from diviewer.builder.plan import describe, make_plan
     from diviewer.errors import DiviewerError
     from diviewer.paths import default_work_dir
     from diviewer.train.recipe import load_recipe
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     check_folders(work, ship)
     device = args.device or recipe.train.get("device")
     check_device(device, "--device" if args.device else "train.device", None if args.device else recipe.path)
-    from diviewer.build.calibrate import keep_calibration, plan_basis  # noqa: F401 (keep_calibration: dry run)
+    from diviewer.builder.calibrate import keep_calibration, plan_basis  # noqa: F401 (keep_calibration: dry run)
 
     make_plan(scene, recipe, work, ship=ship, ks=tuple(sorted(set(args.ks))) if args.ks else None,
               train_overrides=overrides, evalset_dir=args.evalset)  # every input checked before the scene is timed
@@ -112,8 +112,8 @@ def run(args: argparse.Namespace) -> int:
         raise DiviewerError(f"'{args.stop_after}' is not a stage of this build's plan ({', '.join(names)})",
                             field="--stop-after")
     if args.dry_run:
-        from diviewer.build.pace import measured_pace
-        from diviewer.build.pipeline import finished_stages
+        from diviewer.builder.pace import measured_pace
+        from diviewer.builder.pipeline import finished_stages
 
         paces = measured_pace(plan)
         try:
@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
             keep_calibration(work, timing)
         print(f"dry run: nothing was done but timing the scene; run it without --dry-run ({resume_command(args)})")
         return 0
-    from diviewer.build.pipeline import BuildInterrupted, run_build
+    from diviewer.builder.pipeline import BuildInterrupted, run_build
 
     if replacing:
         print(replacing)
@@ -173,7 +173,7 @@ def interrupts_raise():
     import signal
     import threading
 
-    from diviewer.build.pipeline import BuildInterrupted
+    from diviewer.builder.pipeline import BuildInterrupted
 
     if threading.current_thread() is not threading.main_thread():
         yield

@@ -9,9 +9,9 @@ EVAL.json: `diviewer eval --model ...` on the evaluation set (the rule's figure:
 frame of the set, >= 1024 spp); TEST.json: `diviewer eval --data CAPTURE --split test --model ...` (the capture's
 test split, recorded beside it: its truth has the capture's spp, too noisy to part models near its floor; see
 docs/build.md). The rule is the bench's and `diviewer build`'s (`diviewer.bench.frontier.smallest_sufficient_k`
-on `diviewer.build.pipeline.evalset_psnr_tm`): the smallest K within the tolerance of the best. With --ship,
+on `diviewer.builder.pipeline.evalset_psnr_tm`): the smallest K within the tolerance of the best. With --ship,
 SCENE_ladder.json is written there and the shipped SCENE.onnx's card (its JSON and its ONNX metadata alike,
-`diviewer.build.shipfiles.write_model_card`) gets the verdict; the chosen K must be the one shipped (this tool
+`diviewer.builder.shipfiles.write_model_card`) gets the verdict; the chosen K must be the one shipped (this tool
 records a ladder, it does not swap models).
 """
 
@@ -22,7 +22,7 @@ from pathlib import Path
 
 from diviewer import imageio
 from diviewer.bench.frontier import smallest_sufficient_k
-from diviewer.build.pipeline import PICK_MEASURE, QUALITY, evalset_psnr_tm, write_model_card
+from diviewer.builder.pipeline import PICK_MEASURE, QUALITY, evalset_psnr_tm, write_model_card
 from diviewer.errors import DiviewerError
 
 

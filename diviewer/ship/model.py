@@ -13,7 +13,7 @@ set (the card records the tone-mapped region scores of both, per split: ``evalse
 with an edited scene file (a new ``scene_hash``) cannot be scored on the old model's set, nor the old model on the
 new: ``--previous-eval`` then names the old model's JSON on the same frames (the set before
 `tools/restamp_scene_hash.py`), and ``--eval`` holds the new model's. The card and the ONNX
-metadata are written together (`diviewer.build.shipfiles.write_model_card`); the run's curves.png and metrics.csv
+metadata are written together (`diviewer.builder.shipfiles.write_model_card`); the run's curves.png and metrics.csv
 are copied beside them, and with ``--ladder-run`` every K's curves on one figure (SCENE_ladder_curves.png). The
 shipped card's recipe must be the scene's recipe file (tests/train/test_recipe.py).
 """
@@ -25,7 +25,7 @@ import shutil
 from pathlib import Path
 
 from diviewer import imageio
-from diviewer.build.shipfiles import write_ladder_curves, write_model_card
+from diviewer.builder.shipfiles import write_ladder_curves, write_model_card
 from diviewer.errors import DiviewerError
 
 SCORES = ("psnr_tm", "ssim_tm", "psnr_tm_object", "psnr_tm_object_unlit", "ssim_tm_object_unlit", "psnr_tm_shade",

@@ -16,7 +16,7 @@ recipe is read:
 - ``[export]``: `diviewer.train.export.ExportSettings` (fp16, half_weights, verify_frames);
 - ``[ladder]``: ``K`` (the widths `diviewer build` trains), ``tolerance_db`` (the smallest K within this
   many dB of the best K's tone-mapped PSNR on the evaluation set is shipped;
-  `diviewer.bench.frontier.smallest_sufficient_k`, `diviewer.build.pipeline.PICK_MEASURE`) and ``max_mb``
+  `diviewer.bench.frontier.smallest_sufficient_k`, `diviewer.builder.pipeline.PICK_MEASURE`) and ``max_mb``
   (optional: the largest model file the pick may ship; a larger K is trained, scored and recorded, not shipped).
 
 `diviewer train --recipe R` trains ``[train]``; `diviewer build` runs every table. A run records where its
@@ -89,18 +89,18 @@ class Recipe:
     """The ladder rule's tolerance in dB (tone-mapped PSNR on the evaluation set's truth, as `diviewer bench`)."""
     max_mb: float | None = None
     """The largest exported model file (MB) the pick may ship (a repository's budget, a download's); None: any.
-    Not in `content_sha256`: a build keys the pick's record on it (`diviewer.build.pipeline`), and trains nothing
+    Not in `content_sha256`: a build keys the pick's record on it (`diviewer.builder.pipeline`), and trains nothing
     again where it changes."""
 
     def content_sha256(self) -> str:
         """sha256 of what the recipe asks for (every table's values and the ladder's tolerance), not of its bytes:
         comments, layout and the description leave it as it is, and so do the ladder's widths (a build keys them
-        on their own, `diviewer.build.state`: another ladder resumes a build)."""
+        on their own, `diviewer.builder.state`: another ladder resumes a build)."""
         return self._values_sha256(export=True)
 
     def model_sha256(self) -> str:
         """`content_sha256` without the ``[export]`` table: what the capture, the evaluation set, the training and
-        the pick ask for. A build keys on it, and on the export settings apart (`diviewer.build.state`): an edited
+        the pick ask for. A build keys on it, and on the export settings apart (`diviewer.builder.state`): an edited
         ``[export]`` exports the trained Ks again and trains nothing."""
         return self._values_sha256(export=False)
 

@@ -17,7 +17,7 @@ from diviewer.cli import main
 from diviewer.paths import models_dir
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from build.test_pipeline import TINY_RECIPE  # noqa: E402
+from builder.test_pipeline import TINY_RECIPE  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -126,7 +126,7 @@ def test_split_fractions_that_leave_no_test_frame_are_refused_before_the_capture
 def test_a_build_without_ship_ships_into_its_work_folder_even_for_a_shipped_scene(tmp_path, monkeypatch, capsys,
                                                                                  recipe):
     """The hostile case: `diviewer build --scene cornell` (a shipped scene) replaced assets/models/cornell.onnx."""
-    import diviewer.build.plan as plan_module
+    import diviewer.builder.plan as plan_module
 
     seen = {}
     real = plan_module.make_plan

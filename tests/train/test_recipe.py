@@ -92,7 +92,7 @@ def test_the_content_hash_ignores_comments_and_the_description_and_follows_every
     assert load_recipe(tmp_path / "cornell.toml").content_sha256() == shipped.content_sha256()
     (tmp_path / "cornell.toml").write_text(text.replace("tolerance_db = 0.5", "tolerance_db = 0.25"))
     assert load_recipe(tmp_path / "cornell.toml").content_sha256() != shipped.content_sha256()
-    # a size cap re-picks a finished build's ladder and trains nothing again (diviewer.build.pipeline._stale)
+    # a size cap re-picks a finished build's ladder and trains nothing again (diviewer.builder.pipeline._stale)
     (tmp_path / "cornell.toml").write_text(text.replace("tolerance_db = 0.5", "tolerance_db = 0.5\nmax_mb = 8"))
     capped = load_recipe(tmp_path / "cornell.toml")
     assert capped.max_mb == 8.0 and shipped.max_mb is None

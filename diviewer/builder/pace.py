@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-from diviewer.build.plan import Plan, hms
+from diviewer.builder.plan import Plan, hms
 from diviewer.errors import DiviewerError
 
 

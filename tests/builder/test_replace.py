@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import pytest
 
-import diviewer.build.replace as replace
+import diviewer.builder.replace as replace
 from diviewer.errors import DiviewerError
 
 

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from diviewer.build import costs
-from diviewer.build.plan import make_plan, planned_steps
-from diviewer.build.state import BuildState
+from diviewer.builder import costs
+from diviewer.builder.plan import make_plan, planned_steps
+from diviewer.builder.state import BuildState
 from diviewer.cli import main
 from diviewer.errors import DiviewerError
 from diviewer.train.recipe import load_recipe
@@ -279,7 +279,7 @@ def test_a_longer_ladder_keeps_every_k_trained_before_and_redoes_the_stages_over
 
 
 def test_the_pick_weighs_each_split_of_the_evaluation_set_by_its_frames():
-    from diviewer.build.pipeline import evalset_psnr_tm
+    from diviewer.builder.pipeline import evalset_psnr_tm
 
     splits = {"a": {"psnr_tm": 40.0, "frames": 6}, "b": {"psnr_tm": 30.0, "frames": 2},
               "refused": {"psnr_tm": None, "frames": 6}}
@@ -289,7 +289,7 @@ def test_the_pick_weighs_each_split_of_the_evaluation_set_by_its_frames():
 
 
 def test_the_pick_ships_the_smallest_sufficient_k_among_those_within_the_size_cap(tmp_path):
-    from diviewer.build.pipeline import pick_within
+    from diviewer.builder.pipeline import pick_within
 
     rows = [{"K": 8, "bytes": 1.4e6, "evalset_psnr_tm": 35.0}, {"K": 16, "bytes": 5.3e6, "evalset_psnr_tm": 36.0},
             {"K": 32, "bytes": 21e6, "evalset_psnr_tm": 37.5}]
@@ -306,7 +306,7 @@ def test_the_pick_ships_the_smallest_sufficient_k_among_those_within_the_size_ca
 def test_a_pick_by_another_rule_or_a_ship_of_another_ladder_runs_again(tmp_path):
     from types import SimpleNamespace
 
-    from diviewer.build.pipeline import PICK_MEASURE, _stale
+    from diviewer.builder.pipeline import PICK_MEASURE, _stale
 
     (tmp_path / "ladder.json").write_text('{"chosen_K": 8}')
     plan = SimpleNamespace(work=tmp_path, ship=tmp_path / "ship", recipe=SimpleNamespace(max_mb=None))
@@ -378,7 +378,7 @@ def test_a_k_begun_under_the_former_training_settings_is_kept_beside_and_trained
     """What the state allows (the recipe's [train] edited before any K finished) the training would refuse to
     resume: the run begun before is renamed, not resumed and not lost; a change the training may resume over
     (epochs) keeps it."""
-    from diviewer.build.pipeline import _set_aside_if_begun_otherwise
+    from diviewer.builder.pipeline import _set_aside_if_begun_otherwise
     from diviewer.train.trainer import train
     from train.test_trainer import make_dataset, quiet, tiny
 
@@ -606,7 +606,7 @@ def _refining(recipe: str, low: int, spp: int) -> str:
 def test_a_recipe_that_refines_its_capture_plans_the_capture_at_the_lower_count_then_the_refinement(tmp_path):
     """[capture] refine_from: the capture at that count into WORK/data, a refine stage to the recipe's spp into
     WORK/data_<spp>spp, which the trainings read; the plan's key says so (a build without it keeps its key)."""
-    from diviewer.build.pipeline import plan_key
+    from diviewer.builder.pipeline import plan_key
 
     (tmp_path / "r.toml").write_text(_refining(TINY_RECIPE, 2, 8))
     plan = make_plan("cornell", load_recipe(tmp_path / "r.toml"), tmp_path / "w", machine=CPU)
@@ -643,8 +643,8 @@ def test_a_capture_folder_that_links_to_a_set_not_yet_made_is_refused_not_captur
 def test_a_refinement_under_way_tells_this_machines_pace(tmp_path):
     """The frames refined so far (each sidecar's ``refined.seconds``) give the refinement's pace and its time left,
     listed after the capture's; a plan without a refine stage says nothing of it."""
-    from diviewer.build.pace import measured_pace, refine_pace
-    from diviewer.build.plan import hms
+    from diviewer.builder.pace import measured_pace, refine_pace
+    from diviewer.builder.plan import hms
 
     (tmp_path / "r.toml").write_text(_refining(TINY_RECIPE, 2, 8))
     plan = make_plan("cornell", load_recipe(tmp_path / "r.toml"), tmp_path / "w", machine=CPU)
@@ -667,7 +667,7 @@ def test_a_refinement_not_begun_is_paced_from_the_captures_path_tracing_here(tmp
     """Before its first frame the refinement's pace is the capture's path tracing on this machine (each sidecar's
     ``gt`` seconds over the capture's spp, or a refined capture's ``refined`` seconds over its samples; median), times
     the samples a frame it adds; frames traced by another kind of variant (a CUDA device's on a CPU) are left out."""
-    from diviewer.build.pace import refine_pace
+    from diviewer.builder.pace import refine_pace
 
     (tmp_path / "r.toml").write_text(_refining(TINY_RECIPE, 2, 8))
     plan = make_plan("cornell", load_recipe(tmp_path / "r.toml"), tmp_path / "w", machine=CPU)
@@ -773,7 +773,7 @@ def test_a_recipe_that_filters_its_truth_plans_the_filter_after_the_refinement_a
     """[capture] truth_filter: a filter stage from the truth as rendered (the capture, or its refinement) into
     WORK/data_<spp>spp_filtered, which the trainings read; the plan's key records the settings; a bad table is refused
     when the recipe is read, naming the field."""
-    from diviewer.build.pipeline import plan_key
+    from diviewer.builder.pipeline import plan_key
 
     (tmp_path / "r.toml").write_text(_filtering(_refining(TINY_RECIPE, 2, 8)))
     plan = make_plan("cornell", load_recipe(tmp_path / "r.toml"), tmp_path / "w", machine=CPU)

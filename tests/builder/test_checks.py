@@ -13,16 +13,16 @@ import time
 
 import pytest
 
-import diviewer.build.pipeline as pipeline
-from diviewer.build.checks import check_splits
-from diviewer.build.plan import make_plan
-from diviewer.build.state import BuildState
+import diviewer.builder.pipeline as pipeline
+from diviewer.builder.checks import check_splits
+from diviewer.builder.plan import make_plan
+from diviewer.builder.state import BuildState
 from diviewer.cli import main
 from diviewer.errors import DiviewerError
 from diviewer.locks import holder, lock_path, run_lock
 from diviewer.train.recipe import load_recipe
 
-from build.test_pipeline import CPU, TINY_RECIPE
+from builder.test_pipeline import CPU, TINY_RECIPE
 from scenes import write_tiny_scene
 
 
@@ -146,7 +146,7 @@ def test_a_build_stopped_by_sigterm_or_ctrl_c_names_the_stage_and_the_command_th
 def test_an_evaluation_set_made_before_is_the_same_when_moved_with_the_project(tmp_path):
     """--evalset's key: its manifest's sha256 and its path from the work folder; a key of the version before (its
     absolute path) is the same while that path is the set's."""
-    from diviewer.build.state import _same
+    from diviewer.builder.state import _same
 
     (tmp_path / "proj" / "evalset").mkdir(parents=True)
     (tmp_path / "proj" / "evalset" / "manifest.json").write_text('{"kind": "evalset"}')

@@ -1,8 +1,8 @@
-"""The build's last lines and the rules of what they suggest (diviewer.build.summary), on synthetic records."""
+"""The build's last lines and the rules of what they suggest (diviewer.builder.summary), on synthetic records."""
 
 from __future__ import annotations
 
-from diviewer.build.summary import larger_k_helps, still_improving, suggestions, summary_lines, weakest
+from diviewer.builder.summary import larger_k_helps, still_improving, suggestions, summary_lines, weakest
 
 
 def _method(psnr, lit=None, shade=None, obj=None, stride=None, eq=None):

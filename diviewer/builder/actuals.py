@@ -1,20 +1,20 @@
 """A build's plan against its actual stage times, reported at its end and kept in the work folder
-(`diviewer.build.calibrate.ACTUALS_FILE`, written atomically) so the next plan there costs each stage from them."""
+(`diviewer.builder.calibrate.ACTUALS_FILE`, written atomically) so the next plan there costs each stage from them."""
 
 from __future__ import annotations
 
 import json
 
 from diviewer import imageio
-from diviewer.build.calibrate import ACTUALS_FILE, actuals_key
-from diviewer.build.plan import Plan, hms
+from diviewer.builder.calibrate import ACTUALS_FILE, actuals_key
+from diviewer.builder.plan import Plan, hms
 
 
 def frames_actual(folder) -> float | None:
     """A capture's or evaluation set's actual seconds as its frames' sidecars record them (GL + path tracing, summed
     over every frame, whichever run rendered it: a resumed stage counts all its runs); None where no frame is
     timed."""
-    from diviewer.build.pace import frame_seconds
+    from diviewer.builder.pace import frame_seconds
 
     count, seconds = frame_seconds(folder, lambda i: float(i["seconds"]["gl"]) + float(i["seconds"]["gt"]))
     if not seconds:
@@ -26,7 +26,7 @@ def actual_seconds(plan: Plan, state) -> dict[str, float]:
     """Each stage's actual seconds: the capture's and the evaluation set's from their frames (`frames_actual`, at
     least what the state records), a training's from its metrics.csv (its cumulative seconds, resumes included),
     the others as the state records the run that finished them."""
-    from diviewer.build.pace import last_row
+    from diviewer.builder.pace import last_row
 
     out = {}
     for s in plan.stages:

@@ -18,7 +18,7 @@ def score_replaced(plan, old: Path, log) -> float:
     then `evalset_psnr_tm`); an error naming it where it cannot be (another scene's model, not a model)."""
     import json
 
-    from diviewer.build.scores import evalset_psnr_tm, evalset_scores
+    from diviewer.builder.scores import evalset_psnr_tm, evalset_scores
     from diviewer.evaluation.scoring import default_jobs
     from diviewer.evaluation.evaluate import evaluate_evalset
     from diviewer.outputs import building

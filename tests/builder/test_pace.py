@@ -1,4 +1,4 @@
-"""What a build's work folder says of its progress (`diviewer.build.pace`): the pace of a capture and a training
+"""What a build's work folder says of its progress (`diviewer.builder.pace`): the pace of a capture and a training
 under way, and whether a complete capture there is taken."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from diviewer.build import costs
-from diviewer.build.plan import hms, make_plan
+from diviewer.builder import costs
+from diviewer.builder.plan import hms, make_plan
 from diviewer.data.capture import build_manifest
 from diviewer.scene.loader import load_scene
 from diviewer.train.recipe import load_recipe
@@ -22,7 +22,7 @@ def test_a_capture_under_way_tells_this_machines_pace(tmp_path):
     """The frames captured so far (their sidecars' GL and path-tracing seconds) give this machine's pace and the
     capture's time left at it; nothing is said before the first frame, and once every frame is there, that a run
     renders none."""
-    from diviewer.build.pace import capture_pace
+    from diviewer.builder.pace import capture_pace
 
     plan = make_plan("cornell", load_recipe("cornell"), tmp_path, machine=CPU)
     assert capture_pace(plan) is None  # no capture yet
@@ -63,7 +63,7 @@ def test_a_capture_under_way_tells_this_machines_pace(tmp_path):
 def test_a_training_under_way_tells_this_machines_pace(tmp_path):
     """A run's metrics.csv (cumulative seconds, resumes included) gives the pace of a build's training and its time
     left; the plan lists it after the capture's."""
-    from diviewer.build.pace import measured_pace, training_pace
+    from diviewer.builder.pace import measured_pace, training_pace
 
     plan = make_plan("cornell", load_recipe("cornell"), tmp_path, machine=CPU)
     metrics = plan.run_dir(8) / "metrics.csv"
@@ -85,7 +85,7 @@ def test_a_k_not_begun_is_paced_from_the_k_measured_here_nearest_to_it(tmp_path)
     """A K whose training has not begun takes the measured pace of the nearest K in width that has run at least
     MIN_PACE_STEPS steps (done or under way), scaled by the plan's ratio of their costs; fewer steps, or none
     measured, and it has no pace (the plan's estimate stands)."""
-    from diviewer.build.pace import MIN_PACE_STEPS, measured_pace, scaled_training_pace
+    from diviewer.builder.pace import MIN_PACE_STEPS, measured_pace, scaled_training_pace
 
     plan = make_plan("cornell", load_recipe("cornell"), tmp_path, machine=CPU, ks=(8, 16, 32))
     seconds = {s.name: s.seconds for s in plan.stages}
@@ -120,7 +120,7 @@ def test_a_k_not_begun_is_paced_from_the_k_measured_here_nearest_to_it(tmp_path)
 def test_the_plan_counts_a_stage_under_way_at_this_machines_pace():
     """The time left counts a stage under way at its measured pace, the others at the plan's estimate; without a
     measured stage the line is not there."""
-    from diviewer.build.plan import describe
+    from diviewer.builder.plan import describe
 
     plan = make_plan("cornell", load_recipe("cornell"), Path("w"), machine=CPU)
     assert not any(line.startswith("left with") for line in describe(plan, {"capture"}))

@@ -2,8 +2,8 @@
 
 A recipe (assets/recipes/*.toml) gives the capture, the evaluation set, the training and the K ladder;
 ``--budget HOURS`` scales the frames and the steps together (the recipe's proportions kept) until the
-estimate fits, from the costs measured on this project's machines (`diviewer.build.costs`) scaled to the
-scene as timed here or as a previous build took (`diviewer.build.calibrate`); each stage names its source.
+estimate fits, from the costs measured on this project's machines (`diviewer.builder.costs`) scaled to the
+scene as timed here or as a previous build took (`diviewer.builder.calibrate`); each stage names its source.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from diviewer.build import costs
+from diviewer.builder import costs
 from diviewer.errors import DiviewerError
 
 MIN_FRAMES = 100
@@ -39,8 +39,8 @@ class Stage:
     """What it does, in words."""
     seconds: float
     """Its estimated time on this machine."""
-    source: str = "the constants in diviewer/build/costs.py"
-    """Where its cost comes from (`diviewer.build.calibrate.CostBasis`)."""
+    source: str = "the constants in diviewer/builder/costs.py"
+    """Where its cost comes from (`diviewer.builder.calibrate.CostBasis`)."""
     factor: float = 1.0
     """Its cost against the constants' (the measured ratio its source gives)."""
 
@@ -168,7 +168,7 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
               machine: costs.Machine | None = None, evalset_dir: Path | None = None, basis=None) -> Plan:
     """The build's plan: the recipe's stages, sized to ``budget_hours`` if given; ``evalset_dir``: score on that
     evaluation set instead of rendering the recipe's (its settings then come from its manifest); ``basis``: where
-    each stage's cost comes from (`diviewer.build.calibrate.CostBasis`; None: the constants)."""
+    each stage's cost comes from (`diviewer.builder.calibrate.CostBasis`; None: the constants)."""
     from diviewer.scene.loader import resolve_scene_path
     from diviewer.train.recipe import capture_settings, evalset_settings, refine_from, truth_filter
 
@@ -179,11 +179,11 @@ def make_plan(scene: str, recipe, work: Path, ship: Path | None = None, budget_h
         scene_name = tomllib.loads(path.read_text()).get("scene", {}).get("name", path.stem)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DiviewerError(f"not valid TOML: {exc}", path=path) from exc
-    from diviewer.build.checks import check_ks
+    from diviewer.builder.checks import check_ks
 
     machine = machine or costs.detect_machine()
     if basis is None:
-        from diviewer.build.calibrate import CostBasis, constants_source
+        from diviewer.builder.calibrate import CostBasis, constants_source
 
         basis = CostBasis(default=constants_source(scene_name))
     check_ks(ks or recipe.ks(), *(("--ks", None) if ks else ("ladder.K", recipe.path)))
@@ -385,7 +385,7 @@ def _fit_scale(cap, train, ev, ks, scene, m, budget: float, given_evalset: Path 
 def describe(plan: Plan, done: set[str] = frozenset(), left_here: dict[str, float] | None = None) -> list[str]:
     """The plan for people: what each stage does and how long it should take on this machine (``done``: stages a
     build in the work folder has finished, whose outputs still match; they are skipped; ``left_here``: the seconds
-    left of stages under way at this machine's measured pace, `diviewer.build.pace`)."""
+    left of stages under way at this machine's measured pace, `diviewer.builder.pace`)."""
     r = plan.recipe
     lines = [f"build {plan.scene_name} ({plan.scene}) with recipe {r.name} ({r.path}, sha256 {r.sha256[:12]})",
              f"machine: {plan.machine.kind}, {plan.machine.cpus} CPU cores; {plan.machine.why}",

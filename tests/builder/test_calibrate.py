@@ -1,5 +1,5 @@
 """Where a build's costs come from: the user's scene timed here, a previous build's actuals, or the constants
-(diviewer.build.calibrate), and the evaluation set's frames as the plan, the render and the scoring count them."""
+(diviewer.builder.calibrate), and the evaluation set's frames as the plan, the render and the scoring count them."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ import json
 
 import pytest
 
-from diviewer.build import costs
-from diviewer.build.calibrate import ACTUALS_FILE, CALIBRATION_FILE, basis, calibrate, machine_key
-from diviewer.build.plan import describe, make_plan
+from diviewer.builder import costs
+from diviewer.builder.calibrate import ACTUALS_FILE, CALIBRATION_FILE, basis, calibrate, machine_key
+from diviewer.builder.plan import describe, make_plan
 from diviewer.train.recipe import capture_settings, load_recipe
 from scenes import write_tiny_scene
-from build.test_pipeline import TINY_RECIPE
+from builder.test_pipeline import TINY_RECIPE
 
 CPU = costs.Machine("cpu", 2, "the test's machine")
 
@@ -60,7 +60,7 @@ def test_a_previous_builds_actuals_cost_the_next_plan(tmp_path):
     b = basis("tiny", cap, None, actuals)
     assert b.of("capture")[0] == 3.0 and "a previous build's actuals" in b.of("capture")[1]
     assert b.of("train_k2")[0] == 0.5 and b.of("train_k4")[0] == 1.0
-    from diviewer.build.calibrate import actuals_key, previous_actuals
+    from diviewer.builder.calibrate import actuals_key, previous_actuals
 
     (tmp_path / ACTUALS_FILE).write_text(json.dumps({"key": actuals_key("abc", cap), "stages": actuals}))
     assert previous_actuals(tmp_path, "abc", cap) == actuals
@@ -92,8 +92,8 @@ def test_the_evaluation_sets_counts_agree_between_plan_render_and_score(tmp_path
 def test_the_build_reports_plan_against_actual_and_the_next_plan_costs_from_it(tmp_path):
     from types import SimpleNamespace
 
-    from diviewer.build.actuals import keep_actuals
-    from diviewer.build.calibrate import plan_basis
+    from diviewer.builder.actuals import keep_actuals
+    from diviewer.builder.calibrate import plan_basis
 
     scene, recipe, work = write_tiny_scene(tmp_path), _recipe(tmp_path), tmp_path / "w"
     work.mkdir()

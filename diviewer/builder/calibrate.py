@@ -1,7 +1,7 @@
 """Where a build's cost estimates come from, for the user's own scene: one GL frame and one low-spp path-traced
 frame of it timed on this machine at the recipe's resolution (cached in the work folder, keyed by the scene's
 identity and the machine), or a previous build's actual stage times in the same folder, else the constants of
-`diviewer.build.costs` (measured on Sponza and cornell).
+`diviewer.builder.costs` (measured on Sponza and cornell).
 
 The constants are scaled, not replaced: a stage's estimate is its constant cost times the factor its source gives
 (`CostBasis`), so the recipe's proportions (spp, ladder, frames) still come from the cost model.
@@ -16,12 +16,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from diviewer import imageio
-from diviewer.build import costs
+from diviewer.builder import costs
 
 CALIBRATION_FILE = "calibration.json"
 """The timed frames of the scene on this machine, in the work folder."""
 ACTUALS_FILE = "costs_actual.json"
-"""A build's actual stage times against its plan, in the work folder (`diviewer.build.actuals`)."""
+"""A build's actual stage times against its plan, in the work folder (`diviewer.builder.actuals`)."""
 SPP_LOW, SPP_HIGH = 2, 8
 """The two sample counts the path tracer is timed at, each after a first frame that compiles its kernels: the slope is
 the seconds a sample, the rest a frame's fixed cost."""
@@ -36,7 +36,7 @@ class CostBasis:
 
     factors: dict[str, float] = field(default_factory=dict)
     sources: dict[str, str] = field(default_factory=dict)
-    default: str = "the constants in diviewer/build/costs.py"
+    default: str = "the constants in diviewer/builder/costs.py"
 
     def of(self, stage: str) -> tuple[float, str]:
         for key in (stage, stage.partition("_k")[0]):
@@ -49,10 +49,10 @@ class CostBasis:
         return 1.0, self.default
 
 
-TRAIN_SOURCE = "the training constants in diviewer/build/costs.py (Sponza's ladder on a 2-core CPU, an H100)"
+TRAIN_SOURCE = "the training constants in diviewer/builder/costs.py (Sponza's ladder on a 2-core CPU, an H100)"
 """Where a training's cost comes from without a previous build's actuals: it depends on the resolution and K, not
 on the scene."""
-EXPORT_SOURCE = "an allowance, not a measurement (EXPORT_EVAL_ALLOWANCE in diviewer/build/costs.py)"
+EXPORT_SOURCE = "an allowance, not a measurement (EXPORT_EVAL_ALLOWANCE in diviewer/builder/costs.py)"
 
 
 def machine_key() -> dict:
@@ -72,8 +72,8 @@ def machine_key() -> dict:
 def constants_source(scene_name: str) -> str:
     """The constants a scene's path tracing is costed with when nothing of it was measured, in words."""
     if ("cpu", scene_name) in costs.PT_SECONDS_PER_SAMPLE:
-        return f"{scene_name}'s constants (diviewer/build/costs.py)"
-    return "Sponza's constants: this scene's own cost is unmeasured (diviewer/build/costs.py)"
+        return f"{scene_name}'s constants (diviewer/builder/costs.py)"
+    return "Sponza's constants: this scene's own cost is unmeasured (diviewer/builder/costs.py)"
 
 
 def time_scene(scene, width: int, height: int, spp: int, max_depth: int) -> dict:

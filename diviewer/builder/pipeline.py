@@ -14,12 +14,12 @@ from pathlib import Path
 from typing import Any, Callable
 
 from diviewer import imageio
-from diviewer.build.actuals import keep_actuals
-from diviewer.build.pace import measured_pace, missing_link
-from diviewer.build.plan import RUN_ONLY, Plan, describe
-from diviewer.build.scores import QUALITY, evalset_psnr_tm, evalset_scores
-from diviewer.build.shipfiles import write_ladder_curves, write_model_card  # noqa: F401 (diviewer.ship.ladder)
-from diviewer.build.state import BuildState
+from diviewer.builder.actuals import keep_actuals
+from diviewer.builder.pace import measured_pace, missing_link
+from diviewer.builder.plan import RUN_ONLY, Plan, describe
+from diviewer.builder.scores import QUALITY, evalset_psnr_tm, evalset_scores
+from diviewer.builder.shipfiles import write_ladder_curves, write_model_card  # noqa: F401 (diviewer.ship.ladder)
+from diviewer.builder.state import BuildState
 from diviewer.data.dataset import sha256_file
 from diviewer.console import overall, progress_bar
 from diviewer.errors import DiviewerError
@@ -90,7 +90,7 @@ def run_build(plan: Plan, command: str, log: Callable[[str], None] = print,
     from diviewer.locks import run_lock
     from diviewer.outputs import building
 
-    from diviewer.build.calibrate import keep_calibration
+    from diviewer.builder.calibrate import keep_calibration
 
     with run_lock(plan.work, "build", option="--work"), building(plan.work):
         keep_calibration(plan.work, timing)  # the scene's timing (`plan_basis`), kept for the next plan
@@ -155,7 +155,7 @@ def _run(plan: Plan, command: str, log, stop_after: str | None, replace_worse: b
     where = state.data["stages"]["ship"]["result"].get("model")
     log(f"built {plan.scene_name}: K={ladder['chosen_K']} ({ladder['rule']})" + (f"; shipped {where}" if where else ""))
     try:
-        from diviewer.build.summary import summary_lines
+        from diviewer.builder.summary import summary_lines
         from diviewer.train.report import read_metrics
 
         k = ladder["chosen_K"]
@@ -258,7 +258,7 @@ def _evalset(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]
 
 def _given_evalset(plan: Plan, log) -> tuple[list[Path], dict]:
     """An evaluation set made before (``--evalset``): of this scene file, and every frame present and sound."""
-    from diviewer.build.plan import check_evalset_scene
+    from diviewer.builder.plan import check_evalset_scene
     from diviewer.evaluation.frames import EvalFrames
     from diviewer.evaluation.evaluate import check_frames
     from diviewer.scene.loader import load_scene
@@ -397,8 +397,8 @@ def _ship(plan: Plan, state: BuildState, log, command: str, replace_worse: bool 
     the ONNX metadata alike), its curves, metrics and the ladder record. A model there that this build did not
     ship is scored first and replaced only where the new one scores at least as well (or ``replace_worse``), its
     files kept in WORK/replaced."""
-    from diviewer.build.checks import own_ship, replaced_model
-    from diviewer.build.replace import check_not_worse, keep_replaced
+    from diviewer.builder.checks import own_ship, replaced_model
+    from diviewer.builder.replace import check_not_worse, keep_replaced
     from diviewer.outputs import SHIPPED_SUFFIXES
 
     if plan.ship is None:

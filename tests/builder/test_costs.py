@@ -1,4 +1,4 @@
-"""The build's cost model: a training step's time across K on the CPU (diviewer.build.costs)."""
+"""The build's cost model: a training step's time across K on the CPU (diviewer.builder.costs)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from diviewer.build import costs
+from diviewer.builder import costs
 
 
 def step(K: int, width: int = 128, height: int = 128) -> float:
@@ -48,7 +48,7 @@ def test_sponzas_plan_reads_its_ladder_as_it_trained():
     s); its recipe planned on a CPU gives those times back, where the plan read 1 h 36 / 2 h 41 / 5 h 38 before."""
     from pathlib import Path
 
-    from diviewer.build.plan import make_plan
+    from diviewer.builder.plan import make_plan
     from diviewer.train.recipe import load_recipe
 
     cpu = costs.Machine("cpu", 2, "test")

@@ -88,7 +88,7 @@ def shipped_file(plan) -> Path | None:
 
 def own_ship(plan, dst: Path) -> bool:
     """Whether ``dst`` is a file this build shipped (its state's ship record, or `SHIPPED`), unchanged since."""
-    from diviewer.build.state import SHIPPED, output_key
+    from diviewer.builder.state import SHIPPED, output_key
     from diviewer.data.dataset import sha256_file
 
     try:
