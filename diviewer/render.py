@@ -170,13 +170,13 @@ def model_pass(ctx, scene: Scene, renderer, net, config: FrameConfig, settings):
     from diviewer.gl.renderer import Renderer
 
     width, height, source, area = renderer.width, renderer.height, renderer, None
-    if net.direct_samples > 1:
-        s = net.direct_samples
+    s = net.direct_samples
+    if s > 1:
         check_render_size(ctx, width * s, height * s, "--res")
         source = area = Renderer(ctx, scene, width * s, height * s, settings)
         area.render(config)
     neural = NeuralPass(ctx, source, net, gi_size=(width, height))
-    neural.run(**neural.inputs_for(scene, config))
+    neural.run(**neural.inputs_for(scene, config), frame=source.buffers(samples=s))
     return neural, area
 
 
