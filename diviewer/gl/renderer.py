@@ -193,8 +193,7 @@ class Renderer:
         """Whether a sun's map is not yet the one drawn at rest (the moving map, or the full one still drawn in
         bands): the next frames draw it."""
         full = self.settings.shadow_size
-        return any(m is not None and (m.get("size") not in (None, full) or m.get("footprint"))
-                   for m in self.shadow_pass.maps.values())
+        return any(m is not None and m.pending(full) for m in self.shadow_pass.maps.values())
 
     def ensure_direct(self) -> moderngl.Texture:
         """The direct-light target of the last frame, running the direct pass if ``render`` deferred it."""
@@ -356,10 +355,10 @@ class Renderer:
         self._fullscreen(prog)
         ctx.disable(moderngl.BLEND)
 
-    def set_light_uniforms(self, prog, light, shadow: dict | None) -> None:
+    def set_light_uniforms(self, prog, light, shadow) -> None:
         """One light's radiometry and shadow-lookup uniforms for direct.glsl's code (the direct pass, and
         VXGI's injection, which shares the shadow lookup); ``shadow`` is this frame's map of the light."""
-        light_uniforms(prog, light, shadow, self.settings, self.shadow_pass.face_size)
+        light_uniforms(prog, light, shadow, self.settings)
 
     def _emission_pass(self) -> None:
         ctx = self.ctx
