@@ -314,13 +314,11 @@ def frame_hashes(ctx, name: str) -> dict[str, str]:
                 assert p.inline_direct == (path == "inline")
                 final = np.frombuffer(p.composite().read(), np.float16)
                 out[f"{path}/{k}"] = _digest(p.image(), final)
-            neural, area = model_pass(ctx, scene, renderer, net, config, None)  # `diviewer render`'s
+            neural = model_pass(ctx, scene, renderer, net, config)  # `diviewer render`'s
             try:
                 out[f"render/{k}"] = _digest(neural.image())
             finally:
                 neural.release()
-                if area is not None:
-                    area.release()
     finally:
         for p in passes.values():
             p.release()
