@@ -156,10 +156,10 @@ class NeuralPass:
         return self.settings.pipelined
 
     # --- the frame: its buffers and its direct light, decided once -----------------------------------
-    def _frame(self, frame: Frame | None = None) -> Frame:
+    def _frame(self, frame: Frame | None = None, again: bool = False) -> Frame:
         """The frame this pass reads (``frame``, else the renderer's last, `Renderer.buffers`), its direct light
-        decided once: run() records it and composite() reads the same frame (unless run() took the renderer's and
-        the renderer drew another since).
+        decided once: run() records it and composite() (``again``) reads the same frame, unless run() took the
+        renderer's and the renderer drew another since.
 
         Where the renderer deferred its direct pass and the frame has at most one light, pack and upsample compute
         each pixel's direct light as the direct pass would have (one full-resolution pass, its target and its reads
@@ -170,7 +170,7 @@ class NeuralPass:
         """
         given = frame is not None
         if frame is None:
-            if self.frame is not None and (self._given or self.frame.view is self.renderer.frame_view):
+            if again and self.frame is not None and (self._given or self.frame.view is self.renderer.frame_view):
                 return self.frame
             footprint = "AREA" in self._pack_defines or "AREA_DIRECT" in self._pack_defines
             frame = self.renderer.buffers(inline=not footprint)
@@ -302,7 +302,7 @@ class NeuralPass:
         upsampled by the joint bilateral filter (``indirect_only``: the upsampled indirect light alone)."""
         if self.output is None:
             raise RuntimeError("NeuralPass.run has not been called")
-        frame = self._frame()  # run()'s frame, or the renderer's if it drew one since
+        frame = self._frame(again=True)  # run()'s frame, or the renderer's if it drew one since
         prog, s = self.upsample, self.settings
         fbo = self._final_target(frame.size)
         w, h = self.gi_size

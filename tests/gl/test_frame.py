@@ -55,7 +55,8 @@ def test_a_frame_is_consistent(ctx):
 
 def test_the_neural_pass_composites_the_frame_it_ran_on(ctx, cornell):
     """run() decides the direct light once; something reading the direct buffer between run() and composite()
-    (a view mode, VXGI) changes nothing; a frame of a model of another area's samples is refused."""
+    (a view mode, VXGI) changes nothing; a frame of a model of another area's samples is refused; a frame given to
+    run() is read until run() is called without one."""
     pytest.importorskip("onnx")
     from diviewer.gl.neural import GISettings, NeuralPass
     from diviewer.runtime import NeuralGI
@@ -77,6 +78,12 @@ def test_the_neural_pass_composites_the_frame_it_ran_on(ctx, cornell):
         np.testing.assert_array_equal(*finals)
         with pytest.raises(ValueError, match="samples"):
             p.run(**p.inputs_for(cornell, cornell.default), frame=r.buffers(samples=2))
+        given = r.buffers()
+        p.run(**p.inputs_for(cornell, cornell.default), frame=given)
+        assert p.frame is given and not p.inline_direct
+        r.render(cornell.default, direct=False)  # a new frame: run() without one reads it
+        p.run(**p.inputs_for(cornell, cornell.default))
+        assert p.frame.view is r.frame_view and p.inline_direct
     finally:
         p.release()
         r.release()
