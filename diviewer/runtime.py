@@ -350,7 +350,7 @@ class NeuralGI:
         if self.light_scaled:
             if light_scale is None:
                 raise ValueError(f"{self.path.name} uses encoding version 2: run() needs each frame's light scale "
-                                 "(NeuralGI.light_scale(config))")
+                                 "(its conditioning: NeuralGI.frame_inputs)")
             s = np.asarray(light_scale, np.float32).reshape(-1)
             feeds[LIGHT_SCALE_NAME] = np.ascontiguousarray(np.broadcast_to(s, (n,)) if s.size == 1 else s)
             if feeds[LIGHT_SCALE_NAME].shape != (n,):
@@ -358,7 +358,7 @@ class NeuralGI:
         if self.world:
             if camera is None:
                 raise ValueError(f"{self.path.name} uses encoding version 3: run() needs each frame's camera "
-                                 "(NeuralGI.camera(config.camera, width, height))")
+                                 "(its conditioning: NeuralGI.frame_inputs)")
             c = np.asarray(camera, np.float32).reshape(-1, CAMERA_PARAMS)
             if c.shape[0] not in (1, n):
                 raise ValueError(f"camera: expected one or {n}, got {c.shape[0]}")
@@ -367,7 +367,7 @@ class NeuralGI:
         if self.lit:
             if light is None:
                 raise ValueError(f"{self.path.name} uses encoding version 4: run() needs each frame's lights "
-                                 "(NeuralGI.lights(config))")
+                                 "(its conditioning: NeuralGI.frame_inputs)")
             lights = LIGHT_PARAMS * self.light_count
             g = np.asarray(light, np.float32).reshape(-1, lights)
             if g.shape[0] not in (1, n):
