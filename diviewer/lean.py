@@ -211,7 +211,7 @@ class LeanModel:
         if self.enc.light_scaled:
             if light_scale is None:
                 raise ValueError(f"{self.path.name} uses encoding version {self.enc.version}: it needs each frame's "
-                                 "light scale (NeuralGI.light_scale(config))")
+                                 "light scale (its conditioning: NeuralGI.frame_inputs)")
             s = f(np.asarray(light_scale, f).reshape(-1)[0])
             inv = f(1.0) / s if s > 0 else f(0.0)
             out["in_k"], out["out_k"] = f(inv * f(self.enc.exposure)), f(s * f(self.out_scale))

@@ -70,14 +70,14 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
         check_render_size(ctx, width, height, "--res")
         renderer = Renderer(ctx, scene, width, height, settings)
         compositor = DisplayPass(ctx, renderer.shaders)
-        neural = vx = area = None
+        neural = vx = None
         vxgi_info = None
         try:
             frame = renderer.frame(config)
             if vxgi is not None:
                 vx, vxgi_info = _vxgi_pass(ctx, renderer, vxgi, config, frame)
             if net is not None:
-                neural, area = model_pass(ctx, scene, renderer, net, config, settings)
+                neural = model_pass(ctx, scene, renderer, net, config)
                 frame["neural"] = neural.image()
                 neural_info = {"model": str(model), "provider": net.provider, "target": net.meta["target"],
                                "K": net.meta["K"], "ms": {k: round(v, 3) for k, v in neural.timings.items()}}
@@ -100,8 +100,6 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
                 vx.release()
             if neural is not None:
                 neural.release()
-            if area is not None:
-                area.release()
             compositor.release()
             renderer.release()
     return record
@@ -160,24 +158,27 @@ def _write_render(out: Path, frame: dict, record: dict, compositor, ev: float, t
                 imageio.write_png(stage(out / f"{name}.png"), compositor.to_ldr(frame[name], ev, tonemap))
         imageio.write_text(stage(out / "frame.json"), dumps(record, indent=2))
 
-def model_pass(ctx, scene: Scene, renderer, net, config: FrameConfig, settings):
-    """The model run on ``renderer``'s frame at its own size (the model pads it to its stride); returns the pass and
-    the supersampled renderer it packed from, or None. A model of the direct light over each pixel's area
-    (``direct_samples`` s > 1, `diviewer.gl.area`) takes its inputs from a render at s x s times the size, the
-    direct light averaged over each pixel's block (`pack.glsl`'s AREA_DIRECT); the caller releases both."""
+def model_pass(ctx, scene: Scene, renderer, net, config: FrameConfig):
+    """The model run on ``config`` at ``renderer``'s size (the model pads it to its stride); returns the pass (the
+    caller releases it). A model of the direct light over each pixel's area (``direct_samples`` s > 1,
+    `diviewer.gl.area`) takes its inputs from the same renderer drawing ``config`` at s x s times its size, the
+    direct light averaged over each pixel's block (`pack.glsl`'s AREA_DIRECT); the renderer then takes its own
+    size back with its buffers blank (read them before)."""
     from diviewer.gl.context import check_render_size
     from diviewer.gl.neural import NeuralPass
-    from diviewer.gl.renderer import Renderer
 
-    width, height, source, area = renderer.width, renderer.height, renderer, None
-    if net.direct_samples > 1:
-        s = net.direct_samples
+    width, height, s = renderer.width, renderer.height, net.direct_samples
+    if s > 1:
         check_render_size(ctx, width * s, height * s, "--res")
-        source = area = Renderer(ctx, scene, width * s, height * s, settings)
-        area.render(config)
-    neural = NeuralPass(ctx, source, net, gi_size=(width, height))
-    neural.run(**neural.inputs_for(scene, config))
-    return neural, area
+        renderer.resize(width * s, height * s)
+    try:
+        if s > 1:
+            renderer.render(config)
+        neural = NeuralPass(ctx, renderer, net, gi_size=(width, height))
+        neural.run(**neural.inputs_for(scene, config), frame=renderer.buffers(samples=s))
+    finally:
+        renderer.resize(width, height)
+    return neural
 
 
 def check_finite(scene: Scene, config: FrameConfig, frame: dict, names) -> None:

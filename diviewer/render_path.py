@@ -180,7 +180,7 @@ def _render_frames(scene, path, out: Path, todo: list[int], settings: dict, meth
             for i in todo:
                 t = settings["times"][i]
                 config = path.config_at(t, scene.default)
-                images, info = _method_images(ctx, scene, renderer, net, config, methods, settings, render_settings)
+                images, info = _method_images(ctx, scene, renderer, net, config, methods, settings)
                 if settings["exposure"] is None:  # metered once, on the first frame drawn, then kept
                     from diviewer.render import display_exposure
 
@@ -196,21 +196,19 @@ def _render_frames(scene, path, out: Path, todo: list[int], settings: dict, meth
             renderer.release()
 
 
-def _method_images(ctx, scene, renderer, net, config, methods, settings, render_settings) -> tuple[dict, dict]:
+def _method_images(ctx, scene, renderer, net, config, methods, settings) -> tuple[dict, dict]:
     """Each method's linear radiance image of ``config`` (the direct light always), and what the record says of them."""
     from diviewer.render import check_finite, model_pass
 
     frame = renderer.frame(config)
     images, info = {"direct": frame["direct"]}, {}
     if "neural" in methods:
-        neural, area = model_pass(ctx, scene, renderer, net, config, render_settings)
+        neural = model_pass(ctx, scene, renderer, net, config)  # the renderer's buffers blank after: read above
         try:
             images["neural"] = neural.image()
             info["neural"] = {"model": settings["model"], "provider": net.provider, "K": net.meta["K"]}
         finally:
             neural.release()
-            if area is not None:
-                area.release()
     check_finite(scene, config, images, tuple(images))
     if "reference" in methods:
         from diviewer.reference import mitsuba as ref

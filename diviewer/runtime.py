@@ -205,6 +205,10 @@ class NeuralGI:
         self.meta = _metadata(self.session, self.path)
         check_compatible(self.meta, self.path, scene)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        from diviewer.encoding import Encoding
+
+        self.encoding = Encoding.from_dict(self.meta["encoding"])
+        """The model's encoding (its metadata's); `conditioning` reads what a frame must bring from it."""
         self.light_scaled = int(self.meta["encoding"].get("version", 1)) >= 2
         """Encoding version 2: ``run`` needs each frame's light scale."""
         self.world = int(self.meta["encoding"].get("version", 1)) >= 3
@@ -290,37 +294,32 @@ class NeuralGI:
             raise ValueError("light_scale needs the scene: load the model with scene= or pass it")
         return light_scale(scene, config)
 
+    def conditioning(self, config, width: int, height: int, scene=None):
+        """The conditioning of a ``width`` x ``height`` frame of ``config`` (`diviewer.conditioning`) of ``scene``
+        (default: the scene the model was loaded for) under the model's encoding."""
+        from diviewer.conditioning import conditioning
+
+        return conditioning(scene if scene is not None else self.scene, config, (width, height), self.encoding)
+
     def frame_inputs(self, config, width: int, height: int, scene=None) -> dict:
-        """What ``run`` needs besides the buffers for a ``width`` x ``height`` frame of ``config`` (a FrameConfig):
-        its light scale (encoding 2 and later) and its camera (encoding 3), as keyword arguments."""
-        out = {}
-        if self.light_scaled:
-            out["light_scale"] = self.light_scale(config, scene)
-        if self.world:
-            out["camera"] = self.camera(config.camera, width, height)
-        if self.lit:
-            out["light"] = self.lights(config)
-        return out
+        """What ``run`` needs besides the buffers for a ``width`` x ``height`` frame of ``config`` (a FrameConfig), as
+        keyword arguments: its conditioning's (`conditioning`)."""
+        return self.conditioning(config, width, height, scene).inputs()
 
     def lights(self, config) -> np.ndarray:
         """The ``light`` input of a frame of ``config`` (encoding 4; a FrameConfig, or the dict a dataset stores):
-        where each of its lights is, in the world box the model was trained in (`diviewer.scene.lights.light_params`)."""
-        from diviewer.scene.lights import light_params
+        where each of its lights is, in the world box the model was trained in (`diviewer.conditioning.frame_lights`)."""
+        from diviewer.conditioning import frame_lights
 
-        enc = self.meta["encoding"]
-        lights = config["lights"] if isinstance(config, dict) else config.lights
-        if len(lights) != self.light_count:
-            raise ValueError(f"{self.path.name} takes {self.light_count} light(s); the frame has {len(lights)}")
-        return light_params(lights, enc["world_center"], enc["world_half"])
+        return frame_lights(config["lights"] if isinstance(config, dict) else config.lights, self.encoding)
 
     @staticmethod
     def camera(camera, width: int, height: int) -> np.ndarray:
         """The ``camera`` input of a ``width`` x ``height`` frame seen by a scene camera (position, target, up, fov:
-        `diviewer.scene.Camera` or its dict), for ``run``."""
-        from diviewer.scene.camera import camera_params
+        `diviewer.scene.Camera` or its dict), for ``run`` (`diviewer.conditioning.frame_camera`)."""
+        from diviewer.conditioning import frame_camera
 
-        get = (lambda k: camera[k]) if isinstance(camera, dict) else (lambda k: getattr(camera, k))
-        return camera_params(get("position"), get("target"), get("up"), get("fov"), width, height)
+        return frame_camera(camera, (width, height))
 
     def run(self, buffers: np.ndarray, timer: StageTimer | None = None, light_scale=None,
             camera=None, light=None) -> np.ndarray:
@@ -351,7 +350,7 @@ class NeuralGI:
         if self.light_scaled:
             if light_scale is None:
                 raise ValueError(f"{self.path.name} uses encoding version 2: run() needs each frame's light scale "
-                                 "(NeuralGI.light_scale(config))")
+                                 "(its conditioning: NeuralGI.frame_inputs)")
             s = np.asarray(light_scale, np.float32).reshape(-1)
             feeds[LIGHT_SCALE_NAME] = np.ascontiguousarray(np.broadcast_to(s, (n,)) if s.size == 1 else s)
             if feeds[LIGHT_SCALE_NAME].shape != (n,):
@@ -359,7 +358,7 @@ class NeuralGI:
         if self.world:
             if camera is None:
                 raise ValueError(f"{self.path.name} uses encoding version 3: run() needs each frame's camera "
-                                 "(NeuralGI.camera(config.camera, width, height))")
+                                 "(its conditioning: NeuralGI.frame_inputs)")
             c = np.asarray(camera, np.float32).reshape(-1, CAMERA_PARAMS)
             if c.shape[0] not in (1, n):
                 raise ValueError(f"camera: expected one or {n}, got {c.shape[0]}")
@@ -368,7 +367,7 @@ class NeuralGI:
         if self.lit:
             if light is None:
                 raise ValueError(f"{self.path.name} uses encoding version 4: run() needs each frame's lights "
-                                 "(NeuralGI.lights(config))")
+                                 "(its conditioning: NeuralGI.frame_inputs)")
             lights = LIGHT_PARAMS * self.light_count
             g = np.asarray(light, np.float32).reshape(-1, lights)
             if g.shape[0] not in (1, n):

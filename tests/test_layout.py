@@ -19,7 +19,7 @@ LAYERS = {
     "errors": 0, "paths": 0, "provenance": 0, "console": 0, "timing": 0, "imageio": 0, "metrics": 0, "outputs": 0,
     "locks": 0, "faults": 0, "exposure": 0, "fieldspec": 0,
     # 1: scene data and math, the channel encoding
-    "scene/": 1, "encoding": 1, "padding": 1,
+    "scene/": 1, "encoding": 1, "padding": 1, "conditioning": 1,
     # 2: what draws or runs a frame: GL passes, the path tracer, the onnxruntime model, frame records
     "gl/": 2, "reference/": 2, "runtime": 2, "lean": 2, "frames": 2, "weights": 2,
     # 3: datasets and single renders

@@ -21,15 +21,17 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from diviewer import imageio
+from diviewer.conditioning import conditioning, needs_scene
 from diviewer.data.area import direct_samples
 from diviewer.data.dataset import Dataset
 from diviewer.data.lineage import refuse_derived_evalset
+from diviewer.data.scales import dataset_scene
 from diviewer.errors import DiviewerError
-from diviewer.data.scales import light_scales
 from diviewer.evaluation.frames import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
 from diviewer.evaluation.scoring import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer, aggregate, below_direct, done,
                                 equivalent, ladder_methods, per_frame, pooled_bias, score, score_frame,
@@ -42,7 +44,7 @@ from diviewer.evaluation.truthmargin import FILTERED_MARGIN, MARGIN_DB, model_tr
 SSIM_MIN = 11
 """SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
 __all__ = ["EQUIVALENT_BY", "EVAL_KEYS", "KEYS", "aggregate", "equivalent", "evaluate", "evaluate_evalset",
-           "pooled_bias", "run_model", "score", "score_frame", "stored_inputs", "strict_json"]
+           "pooled_bias", "run_model", "score", "score_frame", "stored_inputs", "stored_scene", "strict_json"]
 
 
 def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | None = None,
@@ -54,27 +56,23 @@ def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | 
     return net.run(pack_buffers(frame), light_scale=light_scale, camera=camera, light=light)
 
 
-def _lights(net: NeuralGI, entry: dict):
-    """An encoding-4 model's light input for a stored frame (its configuration's lights); None for older models."""
-    return net.lights(entry["config"]) if getattr(net, "lit", False) else None
+def stored_scene(data, nets) -> Any:
+    """The scene ``data`` (a dataset or an evaluation set) was captured from, where a frame's conditioning under one
+    of the models ``nets`` needs it (`diviewer.conditioning.needs_scene`); else None."""
+    return dataset_scene(data) if any(needs_scene(n.encoding) for n in nets) else None
 
 
-def _camera(net: NeuralGI, entry: dict, frame: dict[str, np.ndarray]):
-    """An encoding-3 model's camera input for a stored frame (its configuration's camera at the frame's size; the
-    evaluation set's narrower shapes are centred crops at the same vertical fov, i.e. renders of that size)."""
-    if not getattr(net, "world", False):
-        return None
-    if "crop_xy" in entry:
+def stored_inputs(net: NeuralGI, scene, entry: dict, frame: dict[str, np.ndarray]) -> dict:
+    """A model's conditioning of a stored frame (`diviewer.conditioning`: an evaluation set's or a dataset's
+    ``entry``, its buffers ``frame`` at the size it is run at; ``scene``: `stored_scene`'s), as `run_model`'s
+    keyword arguments. The evaluation set's narrower shapes are centred crops at the same vertical fov, i.e. renders
+    of that size; frames cropped off-centre (``crop_xy``) have no camera of their own."""
+    h, w = frame["depth"].shape[:2]
+    c = conditioning(scene, entry.get("config"), (w, h), net.encoding)
+    if c.camera is not None and "crop_xy" in entry:
         raise DiviewerError("frames cropped off-centre from a wider render (crop_xy) have no camera of their own "
                             "to give a model with world-space inputs", field="--data")
-    h, w = frame["depth"].shape[:2]
-    return net.camera(entry["config"]["camera"], w, h)
-
-
-def stored_inputs(net: NeuralGI, entry: dict, frame: dict[str, np.ndarray]) -> dict:
-    """A model's camera and light inputs for a stored frame (an evaluation set's or a dataset's ``entry``, its
-    buffers ``frame`` at the size it is run at), as `run_model`'s keyword arguments; None for what it does not take."""
-    return {"camera": _camera(net, entry, frame), "light": _lights(net, entry)}
+    return c.inputs()
 
 
 def scene_exposure(scene_name: str, scene_hash: str, direct_frames) -> tuple[float, str]:
@@ -118,13 +116,13 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
                                              (np.array(np.load(ds.path(i), mmap_mode="r")[..., direct])
                                               for i in ds.indices("train")))
     rows, times, black = {"neural": [], "direct": []}, [], []
-    scales = light_scales(ds, idx) if model.light_scaled else [None] * len(idx)  # encoding 2: each frame's light
-    for i, s in zip(idx, scales):
+    scene = stored_scene(ds, [model])
+    for i in idx:
         f = ds.load(i)
         if not np.any(f["pt"] > 0):
             black.append(i)
         t0 = time.perf_counter()
-        y = run_model(model, f, s, **stored_inputs(model, ds.entry(i), f))
+        y = run_model(model, f, **stored_inputs(model, scene, ds.entry(i), f))
         times.append((time.perf_counter() - t0) * 1e3)
         rows["neural"].append(score(y, f["pt"], exposure))
         rows["direct"].append(score(f["direct"], f["pt"], exposure))
@@ -307,8 +305,7 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
     if not ev.ladder_images():
         rows.update({m: [] for m in ev.ladder_rows(idx[0], key)})
     times, refused, flat = {k: [] for k in models}, {}, 0
-    # encoding 2: each frame's light scale from its stored configuration
-    scales = dict(zip(idx, light_scales(ev, idx))) if any(n.light_scaled for n in models.values()) else {}
+    scene = stored_scene(ev, models.values())  # what each frame's conditioning needs
     pending = []  # per frame, the futures of its rows (scored in ``scorer``'s workers while the models run)
     for i in idx:
         frame = ev.load(i)
@@ -322,7 +319,7 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
             x = model_input(net, f, frame, area, i, shape[0])  # the area's direct light for a model of it
             t0 = time.perf_counter()
             try:
-                y = run_model(net, x, scales.get(i), **stored_inputs(net, ev.entry(i), x))
+                y = run_model(net, x, **stored_inputs(net, scene, ev.entry(i), x))
             except DiviewerError as exc:  # the runtime refuses this shape: say so, score the rest
                 refused[name] = str(exc)
                 continue

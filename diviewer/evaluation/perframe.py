@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.data.scales import light_scales
 from diviewer.errors import DiviewerError
-from diviewer.evaluation.evaluate import area_direct_of, check_frames, model_input, run_model, stored_inputs
+from diviewer.evaluation.evaluate import (area_direct_of, check_frames, model_input, run_model, stored_inputs,
+                                          stored_scene)
 from diviewer.evaluation.frames import EvalFrames, crop_frame, split_key
 from diviewer.metrics import tonemap
 from diviewer.runtime import NeuralGI
@@ -84,9 +84,9 @@ def iter_frames(evalset_dir: str | Path, model: str | Path | NeuralGI | None = N
                             f"{', '.join(shapes_of)}", path=ev.root, field="splits")
     problems = check_frames(ev, partial, log)
     area = area_direct_of(ev, {net.direct_samples} - {1}) if net is not None else {}
+    scene = stored_scene(ev, [net] if net is not None else [])  # what each frame's conditioning needs
     for split in splits or list(shapes_of):
         idx, shapes = ev.present(split, problems), shapes_of[split]
-        scales = dict(zip(idx, light_scales(ev, idx))) if net is not None and net.light_scaled and idx else {}
         for i in idx:
             frame = ev.load(i)
             for shape in shapes:
@@ -94,7 +94,7 @@ def iter_frames(evalset_dir: str | Path, model: str | Path | NeuralGI | None = N
                 x, y = f, None
                 if net is not None:
                     x = model_input(net, f, frame, area, i, shape[0])
-                    y = run_model(net, x, scales.get(i), **stored_inputs(net, ev.entry(i), x))
+                    y = run_model(net, x, **stored_inputs(net, scene, ev.entry(i), x))
                 yield EvalFrame(index=i, split=split, shape=(int(shape[0]), int(shape[1])),
                                 key=split_key(split, shape, shapes), entry=ev.entry(i), inputs=x, truth=f["pt"],
                                 exposure=ev.exposure, output=y)

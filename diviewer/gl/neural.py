@@ -26,9 +26,9 @@ import numpy as np
 from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, input_channel_slices
 from diviewer.errors import DiviewerError
 from diviewer.gl.context import unbind_framebuffer
+from diviewer.gl.frame import Frame
 from diviewer.gl.renderer import Renderer
 from diviewer.gl.resources import set_uniform
-from diviewer.gl.shadow_fit import light_defines
 from diviewer.timing import StageTimer
 
 PACK_DEFINES = {
@@ -103,10 +103,9 @@ class NeuralPass:
         self.guide = renderer.shaders.compute("gi_guide.glsl", PACK_DEFINES)
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._defines: dict[str, int] = {}
-        self._light = None
-        self.inline_direct = False
-        """This frame's direct light was computed inside the pack and the upsample (direct_inline.glsl),
-        not read from the renderer's direct pass (which then did not run)."""
+        self.frame: Frame | None = None
+        """The frame the last ``run`` read (`diviewer.gl.frame.Frame`): its buffers and how its direct light was made."""
+        self._given = False
         # Two input slots: with pipelining, frame N packs into one while frame N-1's (read by the upsample,
         # which must see the inputs its output was predicted from) stays in the other.
         self._packed = [np.empty((1, h, w, INPUT_CHANNEL_COUNT), np.float32) for _ in range(2)]
@@ -156,36 +155,37 @@ class NeuralPass:
     def pipelined(self) -> bool:
         return self.settings.pipelined
 
-    # --- the direct light: the renderer's target, or computed where it is read ---------------------
-    def _direct_defines(self) -> dict[str, int]:
-        """Decide this frame's direct light (``inline_direct``) and return the shaders' defines for it.
+    # --- the frame: its buffers and its direct light, decided once -----------------------------------
+    def _frame(self, frame: Frame | None = None, again: bool = False) -> Frame:
+        """The frame this pass reads (``frame``, else the renderer's last, `Renderer.buffers`), its direct light
+        decided once: run() records it and composite() (``again``) reads the same frame, unless run() took the
+        renderer's and the renderer drew another since.
 
-        When the renderer deferred its direct pass and the frame has at most one light, pack and upsample
-        compute each pixel's direct light as the direct pass would have (one full-resolution pass, its
-        target and its reads fewer); otherwise the direct pass runs now, if it has not, and they read it.
-        A pack that averages each GI texel's footprint (AREA, AREA_DIRECT) reads every pixel's direct light
-        itself, so inline it would compute the full-resolution light twice (pack and upsample): it reads the
-        direct pass's target instead (the viewer at 768x768, full resolution, llvmpipe: 62.6 -> 57.1 ms a frame).
+        Where the renderer deferred its direct pass and the frame has at most one light, pack and upsample compute
+        each pixel's direct light as the direct pass would have (one full-resolution pass, its target and its reads
+        fewer); otherwise they read the direct pass's target. A pack that averages each GI texel's footprint (AREA,
+        AREA_DIRECT) reads every pixel's direct light itself, so inline it would compute the full-resolution light
+        twice (pack and upsample): it reads the direct pass's target instead (the viewer at 768x768, full
+        resolution, llvmpipe: 62.6 -> 57.1 ms a frame).
         """
-        r = self.renderer
-        ok, self._light = r.inline_light()
-        footprint = "AREA" in self._pack_defines or "AREA_DIRECT" in self._pack_defines
-        self.inline_direct = bool(r.direct_pending and ok and not footprint)
-        if not self.inline_direct:
-            r.ensure_direct()
-            return {}
-        return {"INLINE_DIRECT": 1, **light_defines(self._light), **({"EMISSIVE": 1} if r.emissive else {})}
+        given = frame is not None
+        if frame is None:
+            if again and self.frame is not None and (self._given or self.frame.view is self.renderer.frame_view):
+                return self.frame
+            footprint = "AREA" in self._pack_defines or "AREA_DIRECT" in self._pack_defines
+            frame = self.renderer.buffers(inline=not footprint)
+        elif frame.samples > 1 and frame.samples != int(getattr(self.model, "direct_samples", 1)):
+            raise ValueError(f"the frame's direct light is over {frame.samples}x{frame.samples} samples, the model's "
+                             f"over {getattr(self.model, 'direct_samples', 1)}")
+        self.frame, self._given = frame, given
+        self._defines = frame.defines()
+        return frame
 
-    def _bind_gbuffer(self, prog) -> None:
-        """Units 0-3: depth, normal, albedo and the direct target (or the emission buffer); unit 4: the
-        light's shadow map (Renderer.set_direct_uniforms)."""
-        r = self.renderer
-        fourth = "emission" if self.inline_direct else "direct"
-        for i, name in enumerate(("depth", "normal", "albedo", fourth)):
-            r.textures[name].use(location=i)
-            set_uniform(prog, f"u_{name}", i)
-        if self.inline_direct and self._light is not None:
-            r.set_direct_uniforms(prog, self._light)
+    @property
+    def inline_direct(self) -> bool:
+        """This frame's direct light was computed inside the pack and the upsample (direct_inline.glsl),
+        not read from the renderer's direct pass (which then did not run)."""
+        return self.frame is not None and self.frame.inline
 
     @property
     def program(self) -> moderngl.ComputeShader:
@@ -199,11 +199,11 @@ class NeuralPass:
 
     # --- the network ----------------------------------------------------------------------------
     def _pack(self, slot: int) -> None:
-        r, prog = self.renderer, self.program
-        self._bind_gbuffer(prog)
+        prog = self.program
+        self.frame.bind(prog)
         w, h = self.gi_size
         set_uniform(prog, "u_size", (w, h))
-        set_uniform(prog, "u_src_size", (r.width, r.height))
+        set_uniform(prog, "u_src_size", self.frame.size)
         self.ssbos[slot].bind_to_storage_buffer(0)
         prog.run((w + 7) // 8, (h + 7) // 8, 1)
         if self.lean is not None:  # encoded on the GPU: the encoded input is what comes back
@@ -224,19 +224,21 @@ class NeuralPass:
         return y, (time.perf_counter() - t0) * 1e3
 
     def inputs_for(self, scene, config) -> dict:
-        """What ``run`` needs for a frame of ``config`` at this pass's GI size (`NeuralGI.frame_inputs`): the light
-        scale for encoding 2 and later, the camera for encoding 3; nothing for other models."""
+        """What ``run`` needs for a frame of ``config`` at this pass's GI size: its conditioning
+        (`diviewer.conditioning`, `NeuralGI.frame_inputs`); nothing for a runtime without one."""
         inputs = getattr(self.model, "frame_inputs", None)
         return inputs(config, *self.gi_size, scene) if inputs is not None else {}
 
-    def run(self, light_scale: float | None = None, camera=None, light=None) -> moderngl.Texture:
-        """Infer the GI image from the renderer's current textures (call after renderer.render).
+    def run(self, light_scale: float | None = None, camera=None, light=None, frame: Frame | None = None
+            ) -> moderngl.Texture:
+        """Infer the GI image from a frame's buffers: ``frame``, else the renderer's last (call after
+        renderer.render).
 
-        ``light_scale`` and ``camera``: the frame's (``inputs_for(scene, config)``), for models of encoding
-        version 2 and 3. Pipelined, the returned texture holds the previous frame's prediction (this frame's, on
-        the first).
+        ``light_scale``, ``camera`` and ``light``: the frame's conditioning (``inputs_for(scene, config)``), for
+        models of encoding version 2 to 4. Pipelined, the returned texture holds the previous frame's prediction
+        (this frame's, on the first).
         """
-        self._defines = self._direct_defines()  # may run the direct pass: before this pass's stages
+        self._frame(frame)  # may run the direct pass: before this pass's stages
         before = {k: self.timer.times.get(k, 0.0) for k in STAGES}
         slot = self._slot
         if self.lean is not None:
@@ -287,8 +289,7 @@ class NeuralPass:
         return self.output[0]
 
     # --- the full-resolution frame ----------------------------------------------------------------
-    def _final_target(self) -> moderngl.Framebuffer:
-        size = (self.renderer.width, self.renderer.height)
+    def _final_target(self, size: tuple[int, int]) -> moderngl.Framebuffer:
         if self.final is None or self.final.size != size:
             self._release_final()
             self.final = self.ctx.texture(size, 4, dtype="f2")  # half floats: radiance needs no more
@@ -301,9 +302,9 @@ class NeuralPass:
         upsampled by the joint bilateral filter (``indirect_only``: the upsampled indirect light alone)."""
         if self.output is None:
             raise RuntimeError("NeuralPass.run has not been called")
-        self._defines = self._direct_defines()  # run()'s decision again, or the frame's if one was rendered since
+        frame = self._frame(again=True)  # run()'s frame, or the renderer's if it drew one since
         prog, s = self.upsample, self.settings
-        fbo = self._final_target()
+        fbo = self._final_target(frame.size)
         w, h = self.gi_size
         with self.timer.stage("upsample", gpu=True):
             self.ssbos[self.shown_slot].bind_to_storage_buffer(0)
@@ -316,7 +317,7 @@ class NeuralPass:
             self.ctx.memory_barrier(moderngl.TEXTURE_FETCH_BARRIER_BIT)
             fbo.use()
             self.ctx.enable_only(moderngl.NOTHING)
-            self._bind_gbuffer(prog)
+            frame.bind(prog)
             for i, (name, t) in enumerate(zip(("u_irradiance_depth", "u_guide_normal"), self.guides)):
                 t.use(location=5 + i)
                 set_uniform(prog, name, 5 + i)

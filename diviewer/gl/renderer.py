@@ -16,6 +16,7 @@ import numpy as np
 from diviewer.encoding import INPUT_NAMES
 from diviewer.gl.context import gl_flush, unbind_framebuffer
 from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes, shadow_casters
+from diviewer.gl.frame import Frame
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shadow_fit import RenderSettings, light_defines, light_uniforms
 from diviewer.gl.shadow_pass import ShadowPass
@@ -164,7 +165,8 @@ class Renderer:
 
     # --- passes ---------------------------------------------------------------------------------
     def render(self, config: FrameConfig | None = None, direct: bool = True) -> dict[str, moderngl.Texture]:
-        """Render one frame; returns the named textures (depth, normal, albedo, emission, direct).
+        """Render one frame; returns the named textures (depth, normal, albedo, emission, direct); `buffers` gives
+        them as the frame's value, its direct light decided.
 
         ``direct=False`` defers the direct pass: ``textures["direct"]`` is then stale until
         ``ensure_direct()`` runs it. The viewer renders so, because its neural pass computes the direct
@@ -191,8 +193,7 @@ class Renderer:
         """Whether a sun's map is not yet the one drawn at rest (the moving map, or the full one still drawn in
         bands): the next frames draw it."""
         full = self.settings.shadow_size
-        return any(m is not None and (m.get("size") not in (None, full) or m.get("footprint"))
-                   for m in self.shadow_pass.maps.values())
+        return any(m is not None and m.pending(full) for m in self.shadow_pass.maps.values())
 
     def ensure_direct(self) -> moderngl.Texture:
         """The direct-light target of the last frame, running the direct pass if ``render`` deferred it."""
@@ -201,6 +202,20 @@ class Renderer:
                 self._direct_pass(self.frame_view)
             self.direct_pending = False
         return self.textures["direct"]
+
+    def buffers(self, inline: bool = False, samples: int = 1) -> Frame:
+        """The last frame's buffers (`diviewer.gl.frame.Frame`), its direct light decided once: ``inline`` where
+        the reader asks for it (``inline``), the direct pass was deferred and the frame has at most one light;
+        else the direct pass's target, the pass run now if it was deferred. ``samples`` > 1: this renderer draws
+        at that many times the size of the frame it stands for (``area``, `diviewer.gl.area`)."""
+        t, ok, light = self.textures, *self.inline_light()
+        common = dict(size=(self.width, self.height), depth=t["depth"], normal=t["normal"], albedo=t["albedo"],
+                      emissive=self.emissive, view=self.frame_view)
+        if inline and self.direct_pending and ok and samples == 1:
+            return Frame(direct=t["emission"], direct_from="inline", light=light,
+                         light_uniforms=self.set_direct_uniforms, **common)
+        return Frame(direct=self.ensure_direct(), direct_from="area" if samples > 1 else "pass", samples=samples,
+                     **common)
 
     def inline_light(self) -> tuple[bool, object]:
         """Whether the last frame's direct light can be computed where it is read (direct_inline.glsl: at
@@ -340,10 +355,10 @@ class Renderer:
         self._fullscreen(prog)
         ctx.disable(moderngl.BLEND)
 
-    def set_light_uniforms(self, prog, light, shadow: dict | None) -> None:
+    def set_light_uniforms(self, prog, light, shadow) -> None:
         """One light's radiometry and shadow-lookup uniforms for direct.glsl's code (the direct pass, and
         VXGI's injection, which shares the shadow lookup); ``shadow`` is this frame's map of the light."""
-        light_uniforms(prog, light, shadow, self.settings, self.shadow_pass.face_size)
+        light_uniforms(prog, light, shadow, self.settings)
 
     def _emission_pass(self) -> None:
         ctx = self.ctx
@@ -366,3 +381,21 @@ class Renderer:
         self.render(config)
         with self.timer.stage("readback", gpu=True):
             return {name: self.read(name) for name in BUFFERS}
+
+
+def render_buffers(scene: Scene, config: FrameConfig | None, size: tuple[int, int],
+                   settings: RenderSettings | None = None, ctx: moderngl.Context | None = None) -> dict[str, np.ndarray]:
+    """A frame's named buffers (`BUFFERS`: depth (H, W), normal, albedo, direct (H, W, 3)) as float32 arrays, top row
+    first, of ``config`` (None: the scene's default) at ``size`` (width, height): rendered headless (in ``ctx`` when
+    given, else in a context of its own, released after)."""
+    from contextlib import nullcontext
+
+    from diviewer.gl.context import check_render_size, headless_context
+
+    with (nullcontext(ctx) if ctx is not None else headless_context()) as c:
+        check_render_size(c, *size, "size")
+        renderer = Renderer(c, scene, *size, settings)
+        try:
+            return renderer.frame(config)
+        finally:
+            renderer.release()

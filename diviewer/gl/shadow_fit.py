@@ -141,9 +141,9 @@ def light_defines(light) -> dict[str, int]:
     return {"DIRECTIONAL": 1} if isinstance(light, DirectionalLight) else {"POINT_LIGHT": 1}
 
 
-def light_uniforms(prog, light, shadow: dict | None, s: RenderSettings, face_size: int) -> None:
+def light_uniforms(prog, light, shadow, s: RenderSettings) -> None:
     """One light's radiometry and shadow-lookup uniforms for direct.glsl's code; ``shadow`` is this frame's map of
-    the light (the shadow pass's lookup parameters, None: shadows off), ``face_size`` a point light's cube face."""
+    the light (`diviewer.gl.shadows`: it binds its own lookup; None: shadows off)."""
     set_uniform(prog, "u_shadows", shadow is not None)
     set_uniform(prog, "u_pcf_radius", int(s.pcf_radius))
     set_uniform(prog, "u_bias", float(s.bias))
@@ -155,11 +155,5 @@ def light_uniforms(prog, light, shadow: dict | None, s: RenderSettings, face_siz
     set_uniform(prog, "u_light_color", tuple(float(c) * power for c in light.color))
     name, where = ("u_light_dir", light.direction) if sun else ("u_light_pos", light.position)
     set_uniform(prog, name, tuple(float(x) for x in where))
-    if shadow is None:
-        return
-    shadow["map"].use(location=4)
-    lookup = ({"u_shadow_map": 4, "m_light": shadow["m_light"], "u_texel_world": float(shadow["texel_world"]),
-               "u_depth_range": float(shadow["depth_range"])} if sun else
-              {"u_shadow_atlas": 4, "m_faces": shadow["faces"], "u_face_size": float(face_size)})
-    for key, value in lookup.items():
-        set_uniform(prog, key, value)
+    if shadow is not None:
+        shadow.bind(prog)

@@ -19,6 +19,7 @@ import numpy as np
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.resources import set_uniform
 from diviewer.gl.shadow_fit import fit_directional, point_faces, sun_footprint
+from diviewer.gl.shadows import DirectionalShadow, PointShadow
 from diviewer.scene.model import DirectionalLight, FrameConfig
 
 
@@ -39,14 +40,15 @@ def band_clip(m_light: np.ndarray, size: int, y0: int, rows: int) -> np.ndarray:
 
 class ShadowPass:
     """Each light's shadow map for a Renderer's frames (its pass named "shadows"): ``run(frame)`` leaves this
-    frame's lookup parameters per light in ``maps`` (None: shadows off)."""
+    frame's map per light in ``maps`` (`diviewer.gl.shadows`, each binding its lookup to a program; None: shadows
+    off)."""
 
     def __init__(self, renderer):
         self.renderer = renderer
         self.face_size = max(renderer.settings.shadow_size // 2, 16)
         """A point light's cube face, texels a side (half the map size the renderer started with)."""
-        self.maps: dict[str, dict | None] = {}
-        """This frame's shadow lookup parameters per light (None entries: shadows off)."""
+        self.maps: dict[str, DirectionalShadow | PointShadow | None] = {}
+        """This frame's map per light (`diviewer.gl.shadows`; None entries: shadows off)."""
         self._targets: dict[tuple[str, int], tuple] = {}
         """Per (light name, map size; 0 for a point light's atlas): (kind, texture, framebuffer, depth or None)."""
         self._keys: dict[str, tuple] = {}
@@ -89,7 +91,7 @@ class ShadowPass:
         unbind_framebuffer(self.renderer.ctx)
         _, tex, fbo, depth = self._targets.pop(key)
         shown = self.maps.get(key[0])
-        if shown is not None and shown["map"] is tex:
+        if shown is not None and shown.map is tex:
             self._keys.pop(key[0], None)
             self.maps.pop(key[0], None)
         self._bands.pop(key[0], None)
@@ -120,12 +122,12 @@ class ShadowPass:
             key, full = self._key(frame.config, light, frame.bounds), r.settings.shadow_size
             cached = self.maps.get(light.name)
             rests = cached is not None and self._keys.get(light.name) == key
-            if rests and cached.get("size") in (None, full) and not cached.get("footprint"):
+            if rests and not cached.pending(full):
                 maps[light.name] = cached
                 continue
             if not rests:
                 self._bands.pop(light.name, None)
-            elif r.rest_in_bands and r.moving_shadow_size is not None and cached.get("size", full) < full:
+            elif r.rest_in_bands and r.moving_shadow_size is not None and (cached.size or full) < full:
                 maps[light.name] = self._next_band(frame, light, cached)
                 continue
             # the light or an object moved since the last frame: the moving size (if smaller); at rest: the full map
@@ -136,12 +138,12 @@ class ShadowPass:
             r.shadow_renders += 1
         self.maps = maps
 
-    def _next_band(self, frame, light, moving: dict) -> dict:
+    def _next_band(self, frame, light, moving: DirectionalShadow) -> DirectionalShadow:
         """One band more of a resting sun's full map; the full map once its last band is drawn, until then the
         moving one (drawn again for this view if it holds only what shaded another, whole once the renderer's
         ``shadow_footprint`` is off)."""
         r, full = self.renderer, self.renderer.settings.shadow_size
-        bands = math.ceil(full / moving["size"]) ** 2  # the moving map is smaller: 4 at least
+        bands = math.ceil(full / moving.size) ** 2  # the moving map is smaller: 4 at least
         done = self._bands.get(light.name, 0)
         drawn = self._draw(frame, light, full, False, band=band_rows(full, bands, done))
         if done + 1 == bands:
@@ -151,14 +153,15 @@ class ShadowPass:
         self._bands[light.name] = done + 1
         # a map of what shaded another view, or one the renderer no longer wants cut to the view (VXGI reads it over
         # its whole grid): the moving map again, as the renderer wants it now
-        if moving["footprint"] and not (r.shadow_footprint and np.array_equal(moving["clip"], frame.proj @ frame.view)):
-            moving = self._draw(frame, light, moving["size"], r.shadow_footprint)
+        if moving.footprint and not (r.shadow_footprint and np.array_equal(moving.clip, frame.proj @ frame.view)):
+            moving = self._draw(frame, light, moving.size, r.shadow_footprint)
             r.shadow_renders += 1
         return moving
 
-    def _draw(self, frame, light, size: int, footprint: bool, band: tuple[int, int] | None = None) -> dict:
+    def _draw(self, frame, light, size: int, footprint: bool, band: tuple[int, int] | None = None
+              ) -> DirectionalShadow | PointShadow:
         """Draw the light's map of ``size`` (a sun's: only what shades the view with ``footprint``, only the rows
-        (first, count) of ``band``, the rest of the map left as it is) and return its lookup parameters."""
+        (first, count) of ``band``, the rest of the map left as it is) and return it (`diviewer.gl.shadows`)."""
         r, config, bounds = self.renderer, frame.config, frame.bounds
         ctx = r.ctx
         ctx.enable_only(moderngl.DEPTH_TEST)
@@ -177,8 +180,7 @@ class ShadowPass:
             r.draw_objects(config, "shadow.glsl", {}, lambda prog: set_uniform(prog, "m_light", m_light), None,
                            cull, "shadows", sweep=sweep)
             fbo.scissor = None
-            return {"map": tex, "m_light": m_light, "texel_world": extent / size, "depth_range": depth_range,
-                    "size": size, "footprint": footprint, "clip": clip}
+            return DirectionalShadow(tex, m_light, extent / size, depth_range, size, footprint, clip)
         faces = point_faces(light.position, bounds)
         fbo.use()
         fbo.clear(1e30, 1e30, 1e30, 1e30, depth=1.0)
@@ -191,4 +193,4 @@ class ShadowPass:
                 set_uniform(prog, "m_light", m)
             r.draw_objects(config, "shadow.glsl", {"POINT_LIGHT": 1}, setup, None, m, "shadows")
         fbo.viewport = (0, 0, 3 * s, 2 * s)
-        return {"map": tex, "faces": faces}
+        return PointShadow(tex, faces, s)

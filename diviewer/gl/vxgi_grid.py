@@ -11,8 +11,9 @@ import moderngl
 import numpy as np
 
 from diviewer.gl.resources import set_uniform
+from diviewer.gl.shadow_fit import light_defines
 from diviewer.scene import camera as cam
-from diviewer.scene.model import DirectionalLight, FrameConfig, Object
+from diviewer.scene.model import FrameConfig, Object
 
 _FRAG_BYTES = 48  # three vec4 per voxel fragment
 
@@ -84,8 +85,7 @@ class VoxelGridPasses:
             else:
                 # This frame's shadow map of the light, as the renderer's direct pass used it.
                 shadow = r.shadow_pass.maps.get(light.name)
-                directional = isinstance(light, DirectionalLight)
-                prog = self.shaders.compute("vxgi_inject.glsl", {"DIRECTIONAL": 1} if directional else {"POINT_LIGHT": 1})
+                prog = self.shaders.compute("vxgi_inject.glsl", light_defines(light))
                 self.renderer.set_light_uniforms(prog, light, shadow)
             set_uniform(prog, "u_first", first)
             for lst in self._lists.values():

@@ -133,12 +133,11 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
     frames, scales, source, configs = _frames_and_scales(data_dir, n, res, light_scaled)
     if not world:
         return frames, scales, source, None
-    from diviewer.scene.camera import camera_params
+    from diviewer.conditioning import frame_camera
 
     h, w = frames.shape[1:3]
     default = {"position": [0.0, 1.0, 3.0], "target": [0.0, 1.0, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0}
-    cams = np.stack([camera_params(c["position"], c["target"], c["up"], c["fov"], w, h)
-                     for c in (configs or [default] * len(frames))])
+    cams = np.stack([frame_camera(c, (w, h)) for c in (configs or [default] * len(frames))])
     return frames, scales, source, cams
 
 
@@ -147,8 +146,8 @@ def _verification_lights(encoding, data_dir: str | None, n: int) -> np.ndarray |
     frame's lights from the dataset, or for procedural frames suns at a few directions; None for older encodings."""
     if not encoding.light_inputs:
         return None
+    from diviewer.conditioning import frame_lights
     from diviewer.data.dataset import Dataset
-    from diviewer.scene.lights import light_params
 
     if data_dir and (Path(data_dir) / "manifest.json").is_file():
         ds = Dataset(data_dir)
@@ -156,10 +155,10 @@ def _verification_lights(encoding, data_dir: str | None, n: int) -> np.ndarray |
         if idx:
             configs = {f["index"]: (f.get("config") or {}).get("lights") for f in ds.frames}
             if all(configs[i] and len(configs[i]) == encoding.lights for i in idx):
-                return np.stack([light_params(configs[i], encoding.world_center, encoding.world_half) for i in idx])
+                return np.stack([frame_lights(configs[i], encoding) for i in idx])
     suns = [[{"type": "directional", "direction": [np.sin(a), -1.0, np.cos(a)]}] * encoding.lights
             for a in np.linspace(0.0, 2.0, n)]
-    return np.stack([light_params(s, encoding.world_center, encoding.world_half) for s in suns])
+    return np.stack([frame_lights(s, encoding) for s in suns])
 
 
 def _frames_and_scales(data_dir: str | None, n: int, res: tuple[int, int], light_scaled: bool):

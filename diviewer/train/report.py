@@ -46,8 +46,8 @@ def validate(netG, val: np.ndarray, slices: Mapping[str, slice], enc: Encoding, 
     2: the decoded output is multiplied by it). Frames are padded to ``multiple`` as the runtime pads them,
     and the metrics taken on the frame's own pixels. tonemap_exposure: the tone map's (default
     ``enc.exposure``; with encoding 2 the trainer passes the one fitted on the raw direct light, as eval fits it).
-    cams: each val frame's camera (encoding version 3, `diviewer.train.targets.run_cameras`); lights: its lights
-    (encoding version 4, `diviewer.train.targets.run_lights`).
+    cams: each val frame's camera (encoding version 3, `diviewer.train.targets.run_conditioning`); lights: its lights
+    (encoding version 4, `diviewer.train.targets.run_conditioning`).
     """
     import torch
 

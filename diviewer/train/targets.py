@@ -201,35 +201,24 @@ def raw_exposure(ds: Dataset, train_arr: np.ndarray) -> float:
     return float(fit_exposure([frame[..., ds.slices["direct"]] for frame in train_arr]))
 
 
-def run_cameras(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool) -> tuple[Any, Any]:
-    """Each train (and val) frame's camera (`diviewer.scene.camera.camera_params` of its whole stored frame),
-    (N, CAMERA_PARAMS) float32 in the order of the frames' arrays; (None, None) unless encoding version 3."""
-    if not enc.world_inputs:
-        return None, None
-    from diviewer.scene.camera import camera_params
+def run_conditioning(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool) -> tuple[tuple, tuple]:
+    """Each train (and val) frame's camera and lights: its conditioning (`diviewer.conditioning`) of its stored
+    configuration over the whole stored frame, stacked in the order of the frames' arrays as ((cameras, lights) of
+    train, (cameras, lights) of val): (N, CAMERA_PARAMS) and (N, 3 L) float32, None where the encoding takes none
+    (and val's (None, None) without ``with_val``). The light scales come before the encoding (`run_light_scales`)."""
+    from diviewer.conditioning import conditioning, needs_scene
+    from diviewer.data.scales import dataset_scene
 
-    config = {f["index"]: f["config"]["camera"] for f in ds.frames}
+    scene = dataset_scene(ds) if needs_scene(enc) else None
+    config = {f["index"]: f.get("config") for f in ds.frames}
+    where = ds.root / "manifest.json"
 
-    def cams(idx: list[int]) -> np.ndarray:
-        return np.stack([camera_params(c["position"], c["target"], c["up"], c["fov"], ds.width, ds.height)
-                         for c in (config[i] for i in idx)])
+    def stacked(idx: list[int]) -> tuple:
+        cs = [conditioning(scene, config.get(i), (ds.width, ds.height), enc, path=where) for i in idx]
+        return tuple(None if not cs or getattr(cs[0], k) is None else np.stack([getattr(c, k) for c in cs])
+                     for k in ("camera", "lights"))
 
-    return cams(train_idx), cams(sorted(ds.indices("val"))) if with_val else None
-
-
-def run_lights(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool) -> tuple[Any, Any]:
-    """Each train (and val) frame's lights (`diviewer.scene.lights.light_params` of its configuration), (N, 3 L)
-    float32 in the order of the frames' arrays; (None, None) unless encoding version 4."""
-    if not enc.light_inputs:
-        return None, None
-    from diviewer.scene.lights import light_params
-
-    config = {f["index"]: f["config"]["lights"] for f in ds.frames}
-
-    def lights(idx: list[int]) -> np.ndarray:
-        return np.stack([light_params(config[i], enc.world_center, enc.world_half) for i in idx])
-
-    return lights(train_idx), lights(sorted(ds.indices("val"))) if with_val else None
+    return stacked(train_idx), stacked(sorted(ds.indices("val"))) if with_val else (None, None)
 
 
 def crop_widths(aspect_crops: tuple[float, float], height: int, width: int) -> tuple[int, int]:
@@ -268,7 +257,7 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
         crop: (width, left edges): each frame cut to that width first (`crop_plan`).
         cams: (N, CAMERA_PARAMS) each frame's camera over its whole stored frame (encoding version 3: the world
             planes are computed on the padded crop, as the graph computes them on the runtime's padded frame).
-        lights: (N, 3 L) each frame's lights (encoding version 4, `run_lights`).
+        lights: (N, 3 L) each frame's lights (encoding version 4, `run_conditioning`).
     """
     import torch
 

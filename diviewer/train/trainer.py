@@ -42,7 +42,7 @@ from diviewer.train.checkpoint import (check_resume, init_record, load_checkpoin
 from diviewer.train.config import TrainConfig
 from diviewer.train.distributed import Dist, epoch_batches
 from diviewer.train.report import METRIC_KEYS, draw_curves, read_metrics, validate, write_metrics
-from diviewer.train.targets import (crop_plan, fit_encoding, raw_exposure, run_cameras, run_light_scales, run_lights,
+from diviewer.train.targets import (crop_plan, fit_encoding, raw_exposure, run_conditioning, run_light_scales,
                                     split_batch)
 
 if TYPE_CHECKING:
@@ -129,10 +129,10 @@ class Run:
     """Each val frame's light scale (encoding version 2), in val_arr's order."""
     train_cams: np.ndarray | None = None
     val_cams: np.ndarray | None = None
-    """Each train / val frame's camera (encoding version 3, `targets.run_cameras`), in the arrays' order."""
+    """Each train / val frame's camera (encoding version 3, `targets.run_conditioning`), in the arrays' order."""
     train_lights: np.ndarray | None = None
     val_lights: np.ndarray | None = None
-    """Each train / val frame's lights (encoding version 4, `targets.run_lights`), in the arrays' order."""
+    """Each train / val frame's lights (encoding version 4, `targets.run_conditioning`), in the arrays' order."""
     tonemap_exposure: float | None = None
     """Validation's tone map: `fit_exposure` on the train frames' raw GL direct light, as `diviewer eval --data`
     fits it (with encoding 2 the encoding's exposure is the light-normalised data's); None: the encoding's."""
@@ -208,8 +208,7 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
     else:
         enc = fit_encoding(ds, train_idx, train_arr, train_scales, world=cfg.world_inputs, lights=cfg.light_inputs,
                            output_of=cfg, say=say)
-    train_cams, val_cams = run_cameras(enc, ds, train_idx, val_arr is not None)
-    train_lights, val_lights = run_lights(enc, ds, train_idx, val_arr is not None)
+    (train_cams, train_lights), (val_cams, val_lights) = run_conditioning(enc, ds, train_idx, val_arr is not None)
     net_cfg = net_config(cfg, ds)
     _check_trainable(net_cfg, cfg, ds, len(train_idx), enc.input_planes)
     nets = build_nets(cfg, net_cfg, enc, dev, say)

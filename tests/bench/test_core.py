@@ -481,8 +481,8 @@ def test_the_bench_times_a_moving_sun_with_the_viewers_map_and_scores_with_the_f
     try:
         timing = gb.time_direct(configs, warmup=2)
         assert timing["frame"]["median"] > 0
-        assert gb.renderer.shadow_pass.maps["sun"]["size"] == 32 and gb.renderer.moving_shadow_size is None
+        assert gb.renderer.shadow_pass.maps["sun"].size == 32 and gb.renderer.moving_shadow_size is None
         gb.renderer.render(configs[0])  # the sun moved again, outside the timing: the full map
-        assert gb.renderer.shadow_pass.maps["sun"]["size"] == 256
+        assert gb.renderer.shadow_pass.maps["sun"].size == 256
     finally:
         gb.release()

@@ -544,11 +544,11 @@ def test_sponza_moving_sun_map_holds_only_what_shades_the_view_and_changes_no_pi
             for k in (1, 2):
                 frames[footprint, k] = r.frame(turned[k])
                 drawn[footprint, k] = r.drawn["shadows"][1]
-                assert r.shadow_pass.maps[sun.name]["footprint"] is footprint
-                written[footprint, k] = (np.frombuffer(r.shadow_pass.maps[sun.name]["map"].read(), "f4") < 1.0).mean()
+                assert r.shadow_pass.maps[sun.name].footprint is footprint
+                written[footprint, k] = (np.frombuffer(r.shadow_pass.maps[sun.name].map.read(), "f4") < 1.0).mean()
             renders = r.shadow_renders
             frames[footprint, "rest"] = r.frame(turned[2])  # the sun rests: a footprint map is not kept
-            assert r.shadow_renders == renders + footprint and not r.shadow_pass.maps[sun.name]["footprint"]
+            assert r.shadow_renders == renders + footprint and not r.shadow_pass.maps[sun.name].footprint
         finally:
             r.release()
     for k in (1, 2):
@@ -728,7 +728,7 @@ def test_a_moving_sun_renders_its_map_at_the_moving_size_and_the_full_one_when_i
             if direction is not None:
                 config = config.replace_light("sun", direction=direction)
             frame = r.frame(config)["direct"]
-            sizes.append((r.shadow_renders, r.shadow_pass.maps["sun"]["map"].size[0]))
+            sizes.append((r.shadow_renders, r.shadow_pass.maps["sun"].map.size[0]))
         assert sizes == [(1, 256), (2, 32), (3, 32), (4, 256), (4, 256)]
         np.testing.assert_array_equal(frame, plain.frame(config)["direct"])
         moving = r.frame(config.replace_light("sun", direction=(0.3, -0.4, -1.0)))["direct"]

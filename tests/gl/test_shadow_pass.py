@@ -55,16 +55,16 @@ def test_a_resting_sun_shows_the_moving_map_until_its_last_band_then_the_map_dra
     try:
         r.frame(turned[0])
         r.frame(turned[1])  # the sun moved: the moving map
-        assert r.shadow_pass.maps["sun"]["size"] == 128 and r.shadow_renders == 2
+        assert r.shadow_pass.maps["sun"].size == 128 and r.shadow_renders == 2
         shown = []
         for _ in range(4):  # (256 / 128)^2 bands
             frame = r.frame(turned[1])["direct"]
-            shown.append((r.shadow_pass.maps["sun"]["size"], r.shadow_renders))
+            shown.append((r.shadow_pass.maps["sun"].size, r.shadow_renders))
             if len(shown) < 4:
                 np.testing.assert_array_equal(frame, moving.frame(turned[1])["direct"])
         assert shown == [(128, 2), (128, 2), (128, 2), (256, 3)]
         np.testing.assert_array_equal(frame, plain.frame(turned[1])["direct"])
-        assert r.shadow_pass.maps["sun"]["map"].read() == plain.shadow_pass.maps["sun"]["map"].read()
+        assert r.shadow_pass.maps["sun"].map.read() == plain.shadow_pass.maps["sun"].map.read()
         r.frame(turned[1])
         assert r.shadow_renders == 3  # kept
         r.frame(turned[2])
@@ -74,7 +74,7 @@ def test_a_resting_sun_shows_the_moving_map_until_its_last_band_then_the_map_dra
         sizes = []
         for _ in range(4):
             r.frame(turned[1])
-            sizes.append(r.shadow_pass.maps["sun"]["size"])
+            sizes.append(r.shadow_pass.maps["sun"].size)
         assert sizes == [128, 128, 128, 256]
         np.testing.assert_array_equal(r.frame(turned[1])["direct"], plain.frame(turned[1])["direct"])
     finally:
@@ -94,15 +94,15 @@ def test_a_moving_map_cut_to_the_view_is_drawn_whole_mid_bands_once_the_footprin
         r.frame(scene.default)
         r.frame(turned)
         r.frame(turned)  # band 1 of 4
-        assert r.shadow_pass.maps["sun"]["footprint"] and r.shadow_renders == 2
+        assert r.shadow_pass.maps["sun"].footprint and r.shadow_renders == 2
         r.shadow_footprint = False
         r.frame(turned)  # band 2
-        assert not r.shadow_pass.maps["sun"]["footprint"] and r.shadow_pass.maps["sun"]["size"] == 128
+        assert not r.shadow_pass.maps["sun"].footprint and r.shadow_pass.maps["sun"].size == 128
         assert r.shadow_renders == 3
         r.frame(turned)  # band 3: the whole moving map is kept
         assert r.shadow_renders == 3
         r.frame(turned)  # band 4: the full map
-        assert r.shadow_pass.maps["sun"]["size"] == 256 and r.shadow_renders == 4
+        assert r.shadow_pass.maps["sun"].size == 256 and r.shadow_renders == 4
     finally:
         r.release()
 
@@ -117,9 +117,9 @@ def test_without_a_smaller_moving_map_a_resting_sun_is_drawn_whole_at_once(ctx):
         r.frame(scene.default)
         turned = scene.default.replace_light("sun", direction=(0.4, -0.4, -1.0))
         r.frame(turned)
-        assert r.shadow_pass.maps["sun"]["footprint"]  # the full size, only what shades the view
+        assert r.shadow_pass.maps["sun"].footprint  # the full size, only what shades the view
         r.frame(turned)
-        assert r.shadow_renders == 3 and not r.shadow_pass.maps["sun"]["footprint"]
+        assert r.shadow_renders == 3 and not r.shadow_pass.maps["sun"].footprint
     finally:
         r.release()
 

@@ -183,7 +183,7 @@ def test_grid_is_lit_by_whole_maps_and_again_when_the_sun_comes_to_rest(ctx, cor
                                  (turned, ())]:
             r.render(config)
             v.run(config)
-            assert v.updated == expected and not r.shadow_pass.maps["sun"]["footprint"]
+            assert v.updated == expected and not r.shadow_pass.maps["sun"].footprint
     finally:
         v.release()
         assert r.shadow_footprint
