@@ -48,15 +48,15 @@ def render_frame(scene: str | Path | Scene, config: FrameConfig | None = None, s
     with headless_context() as ctx:
         check_render_size(ctx, width, height, "size")
         renderer = Renderer(ctx, scene, width, height, settings)
-        neural = area = None
+        neural = None
         try:
             frame = renderer.frame(config)
             if net is not None:
-                neural, area = model_pass(ctx, scene, renderer, net, config, settings)
+                neural = model_pass(ctx, scene, renderer, net, config)  # the renderer's buffers are read above
                 frame["neural"] = neural.image()
             check_finite(scene, config, frame, (*BUFFERS, "neural"))
         finally:
-            for resource in (neural, area, renderer):
+            for resource in (neural, renderer):
                 if resource is not None:
                     resource.release()
     return frame
