@@ -7,7 +7,7 @@ stays cheap (no GL, no onnxruntime, no torch):
 - `sample_config` (`diviewer.scene`): a frame's camera, lights and objects drawn from the scene's ranges;
 - `render_frame` (`diviewer.headless`): one frame headless, its named buffers as numpy arrays, and with a model
   its neural GI image;
-- `NeuralGI` (`diviewer.runtime`): an ONNX model loaded and checked, run on raw buffers;
+- `NeuralGI` (`diviewer.contract.runtime`): an ONNX model loaded and checked, run on raw buffers;
 - `iter_frames` (`diviewer.evaluation.perframe`): an evaluation set frame by frame, the model's inputs, output and
   the path-traced truth;
 - `evaluate_evalset` (`diviewer.evaluation.evaluate`): `diviewer eval`'s scores of models on an evaluation set;
@@ -17,7 +17,7 @@ stays cheap (no GL, no onnxruntime, no torch):
 __version__ = "0.1.0"
 
 _API = {"load_scene": "diviewer.scene", "sample_config": "diviewer.scene", "render_frame": "diviewer.headless",
-        "NeuralGI": "diviewer.runtime", "iter_frames": "diviewer.evaluation.perframe",
+        "NeuralGI": "diviewer.contract.runtime", "iter_frames": "diviewer.evaluation.perframe",
         "evaluate_evalset": "diviewer.evaluation.evaluate", "DiviewerError": "diviewer.errors"}
 
 __all__ = ["__version__", *_API]

@@ -40,7 +40,7 @@ def render_frame(scene: str | Path | Scene, config: FrameConfig | None = None, s
     config = scene.default if config is None else config
     net = None
     if model is not None:
-        from diviewer.runtime import NeuralGI
+        from diviewer.contract.runtime import NeuralGI
 
         net = NeuralGI(model, scene=scene, provider=provider)
         net.check_size(width, height)

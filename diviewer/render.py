@@ -54,7 +54,7 @@ def render_to_dir(scene_name: str, out: Path, res: str | None = "256", seed: int
     scene = load_scene(scene_name)
     net = None
     if model is not None:
-        from diviewer.runtime import NeuralGI
+        from diviewer.contract.runtime import NeuralGI
 
         net = NeuralGI(model, scene=scene, provider=provider)
     if res is None:

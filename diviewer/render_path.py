@@ -88,7 +88,7 @@ def render_path(scene_name: str, path_file: Path, out: Path, *, frames: int | No
     methods = parse_compare(compare, model)
     net = None
     if model is not None:
-        from diviewer.runtime import NeuralGI
+        from diviewer.contract.runtime import NeuralGI
 
         net = NeuralGI(model, scene=scene, provider=provider)
     width, height = parse_resolution(res or ("x".join(map(str, net.resolution)) if net else "256"))

@@ -1,4 +1,4 @@
-// The lean path's decoding (diviewer.lean): the generator's raw output (binding 1, float32 NCHW over the padded
+// The lean path's decoding (diviewer.contract.lean): the generator's raw output (binding 1, float32 NCHW over the padded
 // size, the frame at u_pad) to the radiance the exported graph gives, per GI texel, into u_radiance (rows top
 // first, as the graph path's uploaded output): sign(y) (exp(|y| log(1 + radiance_max)) - 1) u_out_k (1 /
 // exposure, the frame's light scale and the albedo floor's 1/2 folded in); unless FULL, times max(2 albedo - 1,

@@ -1,5 +1,5 @@
 // The network's encoded input of one padded texel, as the exported graph computes it (diviewer.train.graph,
-// diviewer.lean.LeanModel.encode): NaN made 0 and infinite depth 0 (no geometry), then depth / depth_scale
+// diviewer.contract.lean.LeanModel.encode): NaN made 0 and infinite depth 0 (no geometry), then depth / depth_scale
 // (-1 off the surfaces), the normal, 2 albedo - 1, the direct light exposed by u_in_k (the frame's light scale
 // folded in) as sign(c) log(1 + |c|) / log(1 + radiance_max); with WORLD the world position and normal from the
 // padded camera (diviewer.scene.camera.camera_params); with LIGHTS the lights' parameters over the surfaces.

@@ -5,10 +5,10 @@
 // or with AREA defined the mean of the pixels whose centres fall in its footprint for normal, albedo and
 // direct light (depth stays the nearest pixel's: a mean of two surfaces' depths is no surface's); with
 // AREA_DIRECT that mean for the direct light alone (models with direct_samples > 1 on their card). The channel layout is not written here:
-// gl/neural.py injects it from diviewer.encoding.INPUT_CHANNELS as defines (IN_CHANNELS, the total,
+// gl/neural.py injects it from diviewer.contract.encoding.INPUT_CHANNELS as defines (IN_CHANNELS, the total,
 // IN_<NAME>, where each buffer starts, and IN_<NAME>_N, its component count, checked below). The direct
 // light is read from the direct pass's target or, with INLINE_DIRECT, computed (direct_inline.glsl).
-// For a model's lean path (diviewer.lean) encode.glsl then encodes what it wrote.
+// For a model's lean path (diviewer.contract.lean) encode.glsl then encodes what it wrote.
 #if defined COMPUTE_SHADER
 
 #if !defined IN_CHANNELS || !defined IN_DEPTH || !defined IN_NORMAL || !defined IN_ALBEDO || !defined IN_DIRECT

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, input_channel_slices
+from diviewer.contract.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, input_channel_slices
 
 
 def base_meta(scene_hash: str = "0" * 64, scene: str = "plane") -> dict:

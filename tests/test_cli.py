@@ -147,7 +147,7 @@ def test_viewer_runtime_and_render_work_without_torch(gl_context, tmp_path):
         "import diviewer\n"
         "names = [m.name for m in pkgutil.walk_packages(diviewer.__path__, 'diviewer.')\n"
         "         if not m.name.startswith('diviewer.train') and not m.name.endswith('__main__')]\n"
-        "assert {'diviewer.viewer.app', 'diviewer.runtime', 'diviewer.render'} <= set(names), names\n"
+        "assert {'diviewer.viewer.app', 'diviewer.contract.runtime', 'diviewer.render'} <= set(names), names\n"
         "for name in names:\n"
         "    importlib.import_module(name)\n"
         "from diviewer.cli import main\n"

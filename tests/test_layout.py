@@ -18,10 +18,10 @@ LAYERS = {
     # 0: leaves every floor may use
     "errors": 0, "paths": 0, "provenance": 0, "console": 0, "timing": 0, "imageio": 0, "metrics": 0, "outputs": 0,
     "locks": 0, "faults": 0, "exposure": 0, "fieldspec": 0,
-    # 1: scene data and math, the channel encoding
-    "scene/": 1, "encoding": 1, "padding": 1, "conditioning": 1,
-    # 2: what draws or runs a frame: GL passes, the path tracer, the onnxruntime model, frame records
-    "gl/": 2, "reference/": 2, "runtime": 2, "lean": 2, "frames": 2, "weights": 2,
+    # 1: scene data and math; the model contract (the channel encoding, padding, conditioning, the ONNX run)
+    "scene/": 1, "contract/": 1,
+    # 2: what draws a frame: GL passes, the path tracer, frame records
+    "gl/": 2, "reference/": 2, "frames": 2,
     # 3: datasets and single renders
     "data/": 3, "render": 3, "render_path": 3, "headless": 3,
     # 4: training and evaluation
@@ -39,7 +39,7 @@ command module each runs: the one import allowed to point up."""
 
 
 def _unit(module: str) -> str:
-    """``diviewer.gl.neural`` -> ``gl/``; ``diviewer.runtime`` -> ``runtime``."""
+    """``diviewer.gl.neural`` -> ``gl/``; ``diviewer.contract.runtime`` -> ``runtime``."""
     parts = module.split(".")
     if len(parts) < 2:
         return parts[0]
@@ -156,7 +156,7 @@ def test_only_train_imports_torch():
 
 
 def test_viewer_bench_and_runtime_never_import_train():
-    assert not _offenders({"viewer/", "bench/", "runtime"}, _is_unit("train/"))
+    assert not _offenders({"viewer/", "bench/", "contract/"}, _is_unit("train/"))
 
 
 LONG_MODULES: dict[str, str] = {}

@@ -191,7 +191,7 @@ def test_every_writer_refuses_other_commands_files_before_the_work(files, capsys
 
 def test_baseline_writes_its_model_and_card_and_replaces_its_own(files, tmp_path):
     from diviewer.cli import main
-    from diviewer.runtime import read_metadata
+    from diviewer.contract.runtime import read_metadata
 
     out = tmp_path / "b.onnx"
     for _ in range(2):  # the second run replaces the first run's model and card

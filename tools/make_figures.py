@@ -40,7 +40,7 @@ def neural_figure(ctx, comp: DisplayPass, name: str, spp: int, seeds: tuple[int,
     from diviewer.exposure import still_ev
     from diviewer.reference.mitsuba import load_frame
     from diviewer.render import model_pass
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
 
     model_path = model_path or models_dir() / f"{name}.onnx"
     if not model_path.is_file():

@@ -32,7 +32,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.errors import DiviewerError
 from diviewer.outputs import dumps, staged
-from diviewer.weights import weights_to_float32
+from diviewer.contract.weights import weights_to_float32
 
 REBUILD_TOLERANCE = 1e-5
 """The rebuilt generator must reproduce the old float32 graph to this fraction of the peak radiance."""
@@ -53,7 +53,7 @@ def rebuild_generator(model, meta: dict):
     if meta.get("norm", "batch") != "batch" or meta.get("upsample", "transpose") not in ("transpose", "resize"):
         raise DiviewerError("only batch-norm generators with transpose or resize decoders are rebuilt",
                             field="norm/upsample")
-    from diviewer.encoding import INPUT_CHANNEL_COUNT, Encoding
+    from diviewer.contract.encoding import INPUT_CHANNEL_COUNT, Encoding
 
     # the encoding's own planes (encoding 3's world planes, 4's light planes), and its Fourier features if any
     planes = Encoding.from_dict(meta["encoding"]).input_planes if meta.get("encoding") else INPUT_CHANNEL_COUNT
@@ -119,7 +119,7 @@ def gl_frames(scene_name: str, n: int, res: tuple[int, int]) -> np.ndarray:
     """GL inputs of the scene's first ``n`` test configurations (as the viewer packs them)."""
     from diviewer.gl.context import headless_context
     from diviewer.gl.renderer import Renderer
-    from diviewer.runtime import pack_buffers
+    from diviewer.contract.runtime import pack_buffers
     from diviewer.scene import load_scene, sample_config
 
     scene = load_scene(scene_name)
@@ -142,10 +142,10 @@ def reexport(path: Path, out: Path, n_frames: int = 4, log=print) -> dict:
     import torch
 
     from diviewer.bench.onnx_tools import get_meta, to_fp32
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.provenance import versions
     from diviewer.train.export import OPSET, ExportSettings, gi_module, verified_onnx
-    from diviewer.runtime import META_KEY
+    from diviewer.contract.runtime import META_KEY
 
     old = onnx.load(str(path))
     meta = get_meta(old)

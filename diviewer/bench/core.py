@@ -59,7 +59,7 @@ class BenchSettings:
     """GL stage timing: auto (timer queries where supported), query, or sync (wall clock around glFinish)."""
     paths: tuple[str, ...] = ("lean", "graph")
     """Inference paths each model is timed on: ``lean`` (the generator alone, its encoding and decoding in shaders,
-    `diviewer.lean`; where a model has none, a note says why) and ``graph`` (the self-contained graph)."""
+    `diviewer.contract.lean`; where a model has none, a note says why) and ``graph`` (the self-contained graph)."""
 
     def check(self) -> None:
         if self.frames < 1 or self.warmup < 0 or self.pt_frames < 1 or self.temporal_frames < 2:
@@ -112,7 +112,7 @@ def _variants(paths: list[Path], tmp: Path, notes: list[str], log) -> list[dict]
     import onnxruntime as ort
 
     from diviewer.bench.onnx_tools import to_fp16, to_fp32
-    from diviewer.runtime import read_metadata
+    from diviewer.contract.runtime import read_metadata
 
     out = []
     for n, path in enumerate(paths):  # n: two models of one name (a/cornell.onnx, b/cornell.onnx) convert apart
@@ -187,7 +187,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
     from diviewer.bench import report
     from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_rows, time_path_tracer
     from diviewer.gl.context import headless_context
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
     from diviewer.scene import load_scene, sample_config
 
     settings.check()
@@ -246,9 +246,9 @@ def _rows_at(res: int, gb, settings: BenchSettings, scene, configs: list, varian
     import onnx
 
     from diviewer.bench.onnx_tools import generator_flops, network_inputs, untrained_generator
-    from diviewer.lean import lean_model
-    from diviewer.padding import padded_size
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.lean import lean_model
+    from diviewer.contract.padding import padded_size
+    from diviewer.contract.runtime import NeuralGI
 
     rows = [_row("direct", "direct light only", res, res, gb.time_direct(configs, settings.warmup))]
     for g in settings.vxgi_grids:

@@ -1,9 +1,9 @@
 """The inference paths against a bare generator, in one run: each model's lean path (the generator alone,
-`diviewer.lean`) and its self-contained graph, each as a ratio to an untrained U-Net of the same K and levels at the
+`diviewer.contract.lean`) and its self-contained graph, each as a ratio to an untrained U-Net of the same K and levels at the
 same size, timed in the viewer's GL frame (`diviewer.bench.runner.GlBench.time_model`) in interleaved rounds, so a
 busy machine slows all alike. Two bare generators: one at the frame's size (``bare``, as `diviewer bench` times it)
 and one padded as the model pads the frame (``bare_padded``: a model trained on random-width crops gets its column
-guard, `diviewer.padding.EDGE_GUARD`, which at 128x128 doubles the network's input to 256x128).
+guard, `diviewer.contract.padding.EDGE_GUARD`, which at 128x128 doubles the network's input to 256x128).
 
 Usage: python -m diviewer.bench.lean --scene cornell --res 128 --frames 30 --rounds 3 --json out.json [MODEL ...]
 """
@@ -41,9 +41,9 @@ def run_paths(scene_name: str, models: list[str], res: int, frames: int, warmup:
     from diviewer.bench.report import environment
     from diviewer.bench.runner import GlBench, gl_timing_mode
     from diviewer.gl.context import headless_context
-    from diviewer.lean import lean_model
-    from diviewer.padding import padded_size
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.lean import lean_model
+    from diviewer.contract.padding import padded_size
+    from diviewer.contract.runtime import NeuralGI
     from diviewer.scene import load_scene, sample_config
 
     scene = load_scene(scene_name)

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, OUTPUT_CHANNELS, input_channel_slices
+from diviewer.contract.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, OUTPUT_CHANNELS, input_channel_slices
 from diviewer.errors import DiviewerError, missing_extra
-from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME,
+from diviewer.contract.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME,
                               model_edge_guard)
-from diviewer.weights import weights_to_float32
+from diviewer.contract.weights import weights_to_float32
 from diviewer.scene.lights import light_params
 
 OPSET = 17
@@ -48,7 +48,7 @@ def widths(K: int, levels: int) -> list[int]:
 def network_inputs(card: dict) -> int:
     """The planes a model card's generator takes into its first layer: its encoding's inputs (the buffers, the
     world planes, the lights' planes) and the Fourier features of the world position (``world_frequencies``)."""
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
 
     enc = card.get("encoding")
     base = Encoding.from_dict(enc).input_planes if enc else INPUT_CHANNEL_COUNT
@@ -300,7 +300,7 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
     from onnxruntime.quantization import (CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType,
                                           quantize_static)
 
-    from diviewer.padding import pad_camera_params, pad_nhwc
+    from diviewer.contract.padding import pad_camera_params, pad_nhwc
 
     # float16-stored weights (export --half-weights) folded back: the quantiser reads each weight as an initializer
     plain = weights_to_float32(onnx.load(str(fp32_path)))

@@ -28,7 +28,7 @@ def run_path_bench(settings, path_file: Path, json_out: Path | None = None, log=
     from diviewer.bench.core import model_paths
     from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_rows
     from diviewer.gl.context import headless_context
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
     from diviewer.scene import load_scene
     from diviewer.scene.camera_path import frame_times, read_path
 

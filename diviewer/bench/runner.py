@@ -156,7 +156,7 @@ class GlBench:
 
     def buffers(self, config) -> np.ndarray:
         """The model input of one configuration at this resolution, (1, H, W, 10) (for calibration)."""
-        from diviewer.runtime import pack_buffers
+        from diviewer.contract.runtime import pack_buffers
 
         return pack_buffers(self.renderer.frame(config))[None]
 
@@ -308,13 +308,13 @@ def calibration(settings, scene, ctx, width: int, height: int, mode: str) -> tup
     """Model inputs of training frames, each (buffers (1, H, W, 10), light scale, camera (1, CAMERA_PARAMS)): what
     encoding-2 and -3 models also take. A capture's train split when given, else GL renders (in ``ctx``, timed by
     ``mode`` as GlBench times) of training configs."""
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
     from diviewer.scene.lights import light_scale
 
     if settings.calib_data:
         from diviewer.data.dataset import Dataset
         from diviewer.data.scales import light_scales
-        from diviewer.runtime import pack_buffers
+        from diviewer.contract.runtime import pack_buffers
 
         ds = Dataset(settings.calib_data)
         idx = ds.indices("train")[: settings.calib_frames]
@@ -343,9 +343,9 @@ def temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log, 
     """Frame-to-frame change of each method along a smooth sequence (``seq``, default `temporal_configs`) against
     the path tracer's (Mitsuba needed)."""
     from diviewer.bench.frontier import temporal_stability
-    from diviewer.encoding import fit_exposure
+    from diviewer.contract.encoding import fit_exposure
     from diviewer.metrics import tonemap
-    from diviewer.runtime import pack_buffers
+    from diviewer.contract.runtime import pack_buffers
 
     try:
         from diviewer.reference.mitsuba import MitsubaFrame, import_mitsuba as _import_mitsuba

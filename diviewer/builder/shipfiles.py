@@ -24,7 +24,7 @@ def write_model_card(src: Path, dst: Path, card: dict) -> None:
     import onnx
 
     from diviewer.outputs import dumps, staged
-    from diviewer.runtime import META_KEY
+    from diviewer.contract.runtime import META_KEY
 
     model = onnx.load(str(src))
     onnx.helper.set_model_props(model, {META_KEY: dumps(card, sort_keys=True)})

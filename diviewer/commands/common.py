@@ -15,7 +15,7 @@ from typing import Any
 from diviewer.paths import scene_help
 
 PROVIDERS = ("cpu", "cuda", "tensorrt")
-"""The onnxruntime execution providers a command may ask for (`diviewer.runtime` maps each to its provider)."""
+"""The onnxruntime execution providers a command may ask for (`diviewer.contract.runtime` maps each to its provider)."""
 
 SPLITS = ("train", "val", "test")
 """A dataset's splits."""

@@ -26,13 +26,13 @@ import numpy as np
 
 from diviewer import imageio
 from diviewer.data.object_lists import expand_object_lists
-from diviewer.encoding import INPUT_CHANNELS, channel_slices
+from diviewer.contract.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError
 
 FORMAT = "diviewer-dataset"
 FORMAT_VERSION = 1
 CHANNELS = (*INPUT_CHANNELS, ("pt", 3), ("pt_direct", 3))
-"""Stored channels: the network inputs (GL, diviewer.encoding's layout) then the path-traced ground truth
+"""Stored channels: the network inputs (GL, diviewer.contract.encoding's layout) then the path-traced ground truth
 (full, direct only)."""
 
 # Manifest fields that define a dataset: a resumed capture or a shard must agree on all of them.

@@ -12,7 +12,7 @@ so 48 parameters in all: the albedo products let bounce light be coloured by the
 as a diffuse surface does. The fit solves the normal equations accumulated over every pixel of the
 training split (float64; a ridge of 1e-9 of the diagonal only guards a degenerate feature).
 
-The model follows the runtime's contract (diviewer/runtime.py): input ``buffers`` (N, H, W, 10) raw
+The model follows the runtime's contract (diviewer/contract/runtime.py): input ``buffers`` (N, H, W, 10) raw
 linear, output ``radiance`` (N, H, W, 3), metadata under ``diviewer`` with ``"kind": "linear_baseline"``,
 so ``diviewer eval``, the benchmark and the viewer run it like any model. Building it needs numpy and
 the ``onnx`` package (no torch); running it needs only onnxruntime.
@@ -29,10 +29,10 @@ import numpy as np
 from diviewer import imageio
 from diviewer.data.area import direct_samples
 from diviewer.data.dataset import Dataset
-from diviewer.encoding import INPUT_CHANNELS, Encoding, fit_exposure
+from diviewer.contract.encoding import INPUT_CHANNELS, Encoding, fit_exposure
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.provenance import versions
-from diviewer.runtime import INPUT_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
+from diviewer.contract.runtime import INPUT_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME
 
 KIND = "linear_baseline"
 FEATURES = ("1", "depth/depth_scale", "normal_x", "normal_y", "normal_z", "direct_r", "direct_g", "direct_b")

@@ -41,7 +41,7 @@ tracer's frames differ only in their noise.
 One stored resolution keeps the dataset format, its checks and resume unchanged.
 
 The tone map's exposure is fitted once, on the GL direct light of the square crops of streams 0 and 1
-(diviewer.encoding.fit_exposure: deterministic), and stored in the manifest: every model and every
+(diviewer.contract.encoding.fit_exposure: deterministic), and stored in the manifest: every model and every
 split is scored with the same tone map, the scene's, never a model's.
 """
 
@@ -321,7 +321,7 @@ class EvalTruth:
 
 def _fit_exposure(ctx, scene: Scene, plan: list[dict], settings: EvalSetSettings) -> float:
     """The tone map's exposure from the GL direct light of the square crops of streams 0 and 1 (no path tracing)."""
-    from diviewer.encoding import fit_exposure
+    from diviewer.contract.encoding import fit_exposure
     from diviewer.gl.renderer import Renderer
     from diviewer.scene.loader import config_from_dict
 

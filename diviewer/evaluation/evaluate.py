@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from diviewer import imageio
-from diviewer.conditioning import conditioning, needs_scene
+from diviewer.contract.conditioning import conditioning, needs_scene
 from diviewer.data.area import direct_samples
 from diviewer.data.dataset import Dataset
 from diviewer.data.lineage import refuse_derived_evalset
@@ -38,7 +38,7 @@ from diviewer.evaluation.scoring import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS
                                 strict_json)
 from diviewer.metrics import flat_mask
 from diviewer.outputs import check_output_file, write_json
-from diviewer.runtime import NeuralGI, pack_buffers
+from diviewer.contract.runtime import NeuralGI, pack_buffers
 from diviewer.evaluation.truthmargin import FILTERED_MARGIN, MARGIN_DB, model_truth_spp, truth_margin
 
 SSIM_MIN = 11
@@ -58,12 +58,12 @@ def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | 
 
 def stored_scene(data, nets) -> Any:
     """The scene ``data`` (a dataset or an evaluation set) was captured from, where a frame's conditioning under one
-    of the models ``nets`` needs it (`diviewer.conditioning.needs_scene`); else None."""
+    of the models ``nets`` needs it (`diviewer.contract.conditioning.needs_scene`); else None."""
     return dataset_scene(data) if any(needs_scene(n.encoding) for n in nets) else None
 
 
 def stored_inputs(net: NeuralGI, scene, entry: dict, frame: dict[str, np.ndarray]) -> dict:
-    """A model's conditioning of a stored frame (`diviewer.conditioning`: an evaluation set's or a dataset's
+    """A model's conditioning of a stored frame (`diviewer.contract.conditioning`: an evaluation set's or a dataset's
     ``entry``, its buffers ``frame`` at the size it is run at; ``scene``: `stored_scene`'s), as `run_model`'s
     keyword arguments. The evaluation set's narrower shapes are centred crops at the same vertical fov, i.e. renders
     of that size; frames cropped off-centre (``crop_xy``) have no camera of their own."""
@@ -79,7 +79,7 @@ def scene_exposure(scene_name: str, scene_hash: str, direct_frames) -> tuple[flo
     """The scene's tone-map exposure: the shipped evaluation set's (same scene file), else fitted on the
     given GL direct-light frames (deterministic); never a model's."""
     from diviewer.data.dataset import read_manifest
-    from diviewer.encoding import fit_exposure
+    from diviewer.contract.encoding import fit_exposure
 
     path = default_evalset(scene_name)
     if (path / "manifest.json").is_file():

@@ -23,7 +23,7 @@ from diviewer.evaluation.evaluate import (area_direct_of, check_frames, model_in
                                           stored_scene)
 from diviewer.evaluation.frames import EvalFrames, crop_frame, split_key
 from diviewer.metrics import tonemap
-from diviewer.runtime import NeuralGI
+from diviewer.contract.runtime import NeuralGI
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""The GL side of a model's lean path (`diviewer.lean`): encode.glsl encodes the inputs pack.glsl wrote into the
+"""The GL side of a model's lean path (`diviewer.contract.lean`): encode.glsl encodes the inputs pack.glsl wrote into the
 network's padded input on the GPU (one read-back, of the encoded tensor), onnxruntime runs the generator alone,
 decode.glsl decodes its raw output into the radiance texture the rest of the neural pass reads
 (`diviewer.gl.neural.NeuralPass`)."""
@@ -33,7 +33,7 @@ class LeanIO:
         self.decode = shaders.compute("decode.glsl", decode_defines)
 
     def set_frame(self, slot: int, width: int, height: int, light_scale=None, camera=None, light=None) -> None:
-        """The frame's constants (`diviewer.lean.LeanModel.constants`) for the slot it is packed into."""
+        """The frame's constants (`diviewer.contract.lean.LeanModel.constants`) for the slot it is packed into."""
         self.constants[slot] = self.model.constants(width, height, light_scale, camera, light)
 
     def encode(self, slot: int, packed: moderngl.Buffer, gi_size: tuple[int, int]) -> None:

@@ -8,7 +8,7 @@ full-resolution image (direct light at full resolution + upsampled indirect ligh
 ``pipelined`` the network runs on a worker thread one frame behind: frame N's inputs are packed and
 handed over while frame N-1's output is composited, so GL and onnxruntime overlap.
 
-A lean model (`diviewer.lean.LeanModel`) runs its generator alone: an encode pass turns the packed inputs into the
+A lean model (`diviewer.contract.lean.LeanModel`) runs its generator alone: an encode pass turns the packed inputs into the
 network's padded input (read back instead of the raw buffers) and a decode pass turns the generator's raw output into the same
 radiance texture (`diviewer.gl.lean`); the ``readback`` stage then holds the encode pass, the ``upload`` stage
 the upload and the decode's dispatch.
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from diviewer.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, input_channel_slices
+from diviewer.contract.encoding import INPUT_CHANNEL_COUNT, INPUT_CHANNELS, input_channel_slices
 from diviewer.errors import DiviewerError
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.frame import Frame
@@ -63,12 +63,12 @@ class GISettings:
     pipelined: bool = False
     """Run the network on a worker thread, one frame behind (the frame shows the previous frame's GI)."""
     lean: bool = True
-    """Run a model's lean path where it has one (`diviewer.lean`: the generator alone in onnxruntime, its encoding
+    """Run a model's lean path where it has one (`diviewer.contract.lean`: the generator alone in onnxruntime, its encoding
     and decoding in shaders; equal to the graph's radiance to 1e-4 of the frame's peak, tests/gl/test_lean.py); False: its whole graph."""
 
 
 class NeuralPass:
-    """Runs a model (diviewer.runtime.NeuralGI) on a Renderer's buffers at a GI resolution; composites the result.
+    """Runs a model (diviewer.contract.runtime.NeuralGI) on a Renderer's buffers at a GI resolution; composites the result.
 
     Per frame it makes exactly one GPU->CPU copy (the packed GI-resolution buffer, read into a preallocated
     array that onnxruntime reads as is) and one CPU->GPU copy (the model's output into ``self.texture``).
@@ -82,7 +82,7 @@ class NeuralPass:
         self.path_note = ""
         """Why a model runs its graph although ``settings.lean`` asks for its lean path, or empty."""
         if settings.lean and not getattr(model, "lean", False):
-            from diviewer.lean import lean_model
+            from diviewer.contract.lean import lean_model
 
             lean, self.path_note = lean_model(model)
             model = lean if lean is not None else model
@@ -148,7 +148,7 @@ class NeuralPass:
 
     @property
     def inference_path(self) -> str:
-        """"lean" (the generator alone, `diviewer.lean`) or "graph" (the model's self-contained graph)."""
+        """"lean" (the generator alone, `diviewer.contract.lean`) or "graph" (the model's self-contained graph)."""
         return "lean" if self.lean is not None else "graph"
 
     @property
@@ -225,7 +225,7 @@ class NeuralPass:
 
     def inputs_for(self, scene, config) -> dict:
         """What ``run`` needs for a frame of ``config`` at this pass's GI size: its conditioning
-        (`diviewer.conditioning`, `NeuralGI.frame_inputs`); nothing for a runtime without one."""
+        (`diviewer.contract.conditioning`, `NeuralGI.frame_inputs`); nothing for a runtime without one."""
         inputs = getattr(self.model, "frame_inputs", None)
         return inputs(config, *self.gi_size, scene) if inputs is not None else {}
 

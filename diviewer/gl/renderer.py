@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from diviewer.encoding import INPUT_NAMES
+from diviewer.contract.encoding import INPUT_NAMES
 from diviewer.gl.context import gl_flush, unbind_framebuffer
 from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes, shadow_casters
 from diviewer.gl.frame import Frame
@@ -26,7 +26,7 @@ from diviewer.scene.model import FrameConfig, Scene
 from diviewer.timing import StageTimer
 
 BUFFERS = INPUT_NAMES
-"""The buffers a frame returns, in the network's input order (diviewer.encoding.INPUT_CHANNELS)."""
+"""The buffers a frame returns, in the network's input order (diviewer.contract.encoding.INPUT_CHANNELS)."""
 
 
 @dataclass(frozen=True)

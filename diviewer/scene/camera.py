@@ -104,7 +104,7 @@ def camera_params(position, target, up, fov_y_deg: float, width: int, height: in
     """A frame's camera as the (CAMERA_PARAMS,) float32 vector the world-space inputs are computed from.
 
     The frame is ``width`` x ``height`` pixels cut at (x0, y0) out of a render of ``source`` (width, height;
-    default the frame itself), then padded with ``pad`` (left, top) pixels before it (`diviewer.padding`). A
+    default the frame itself), then padded with ``pad`` (left, top) pixels before it (`diviewer.contract.padding`). A
     pixel (column c, row r) of the padded frame sees along the view-space ray ``(ax (c' + 0.5) + bx, ay (r' + 0.5)
     + by, -1)`` with c' = clip(c, x_lo, x_hi) and r' = clip(r, y_lo, y_hi): `pixel_rays_view` of the render at the
     frame's pixels, and on the padding the edge pixel's ray (padding replicates edge pixels; so do their rays).

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from diviewer.builder.pipeline import write_model_card
 from diviewer.errors import DiviewerError
-from diviewer.runtime import read_metadata
+from diviewer.contract.runtime import read_metadata
 from diviewer.ship.model import split_scores
 
 

@@ -84,7 +84,7 @@ def build_generator_from_checkpoint(ckpt: Mapping[str, Any] | str | Path):
         val metrics, model_args, net_config, train config, versions and the dataset's capture settings.
     """
     require_torch()
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.train.networks import UnetGenerator
 
     if not isinstance(ckpt, Mapping):
@@ -345,7 +345,7 @@ def open_parent(cfg: TrainConfig, ds: Dataset) -> dict[str, Any]:
 
 def parent_encoding(parent: Mapping[str, Any], cfg: TrainConfig):
     """The encoding a warm start keeps (its weights were trained on it), refused where this run asks another."""
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
 
     enc = Encoding.from_dict(parent["encoding"])
     if (enc.light_scaled, enc.world_inputs, enc.light_inputs) != (cfg.light_scale, cfg.world_inputs,

@@ -1,6 +1,6 @@
-"""The encodings of `diviewer.encoding` on torch tensors: the same functions, given torch's operations.
+"""The encodings of `diviewer.contract.encoding` on torch tensors: the same functions, given torch's operations.
 
-`diviewer.encoding` defines the curves once against a few array operations and never imports torch
+`diviewer.contract.encoding` defines the curves once against a few array operations and never imports torch
 (the viewer and the benchmark run without it); training and ONNX export call these wrappers, which
 pass `TORCH_OPS`, so the exported graph carries exactly the encoding the runtime documents.
 """
@@ -11,8 +11,8 @@ from typing import Any
 
 import torch
 
-from diviewer import encoding
-from diviewer.encoding import ArrayOps, Encoding
+from diviewer.contract import encoding
+from diviewer.contract.encoding import ArrayOps, Encoding
 
 
 class TorchOps(ArrayOps):
@@ -55,16 +55,16 @@ TORCH_OPS = TorchOps()
 
 
 def encode_radiance(x: torch.Tensor, enc: Encoding) -> torch.Tensor:
-    """`diviewer.encoding.encode_radiance` on a tensor."""
+    """`diviewer.contract.encoding.encode_radiance` on a tensor."""
     return encoding.encode_radiance(x, enc, TORCH_OPS)
 
 
 def decode_radiance(y: torch.Tensor, enc: Encoding) -> torch.Tensor:
-    """`diviewer.encoding.decode_radiance` on a tensor."""
+    """`diviewer.contract.encoding.decode_radiance` on a tensor."""
     return encoding.decode_radiance(y, enc, TORCH_OPS)
 
 
 def encode_inputs(depth: torch.Tensor, normal: torch.Tensor, albedo: torch.Tensor, direct: torch.Tensor,
                   enc: Encoding, *, channel_axis: int) -> torch.Tensor:
-    """`diviewer.encoding.encode_inputs` on tensors (NCHW batches: channel_axis=1)."""
+    """`diviewer.contract.encoding.encode_inputs` on tensors (NCHW batches: channel_axis=1)."""
     return encoding.encode_inputs(depth, normal, albedo, direct, enc, channel_axis=channel_axis, ops=TORCH_OPS)

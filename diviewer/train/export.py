@@ -1,7 +1,7 @@
 """`diviewer export`: a checkpoint's generator to ONNX with encoding and decoding inside the graph,
 verified against PyTorch in onnxruntime before it is written.
 
-The graph follows the model contract in diviewer/runtime.py: input ``buffers`` (N, H, W, 10) raw
+The graph follows the model contract in diviewer/contract/runtime.py: input ``buffers`` (N, H, W, 10) raw
 linear buffers (or (N, 10, H, W) with ``--layout NCHW``), for encoding version 2 a second input
 ``light_scale`` (N,), output ``radiance`` (N, H, W, 3) linear radiance of the final image. For a model
 of the ``indirect`` target the exact GL direct light is added inside the graph, so the runtime never
@@ -21,15 +21,15 @@ from pathlib import Path
 import numpy as np
 
 from diviewer import imageio
-from diviewer.encoding import INPUT_CHANNELS, channel_slices
+from diviewer.contract.encoding import INPUT_CHANNELS, channel_slices
 from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
 from diviewer.outputs import check_output_file, dumps, staged
-from diviewer.padding import crop_nhwc, pad_camera_params, pad_nhwc
+from diviewer.contract.padding import crop_nhwc, pad_camera_params, pad_nhwc
 from diviewer.provenance import versions
-from diviewer.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT,
+from diviewer.contract.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT,
                               OUTPUT_NAME)
-from diviewer.weights import store_weights_half, store_weights_int8
+from diviewer.contract.weights import store_weights_half, store_weights_int8
 from diviewer.train.checks import (FP16_TOLERANCE, HALF_WEIGHTS_TOLERANCE, INT8_WEIGHTS_TOLERANCE, extreme_frame,
                                    refuse_broken, refuse_departures, verification_line)
 
@@ -53,7 +53,7 @@ class ExportSettings:
     """Store the inner convolutions' weights as int8 with a float32 scale per output channel, the rest as
     ``half_weights`` stores them, and run in float32: onnxruntime folds the casts and scales as it loads the model,
     so the file is about a quarter of float32's and the arithmetic the float32 graph's, on weights rounded to 1/254
-    of their channel's range (`INT8_WEIGHTS_TOLERANCE`; `diviewer.weights.store_weights_int8`)."""
+    of their channel's range (`INT8_WEIGHTS_TOLERANCE`; `diviewer.contract.weights.store_weights_int8`)."""
     verify_frames: int = 4
     """Frames compared between onnxruntime and PyTorch before the file is written."""
     layout: str = "NHWC"
@@ -133,7 +133,7 @@ def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[in
     frames, scales, source, configs = _frames_and_scales(data_dir, n, res, light_scaled)
     if not world:
         return frames, scales, source, None
-    from diviewer.conditioning import frame_camera
+    from diviewer.contract.conditioning import frame_camera
 
     h, w = frames.shape[1:3]
     default = {"position": [0.0, 1.0, 3.0], "target": [0.0, 1.0, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0}
@@ -146,7 +146,7 @@ def _verification_lights(encoding, data_dir: str | None, n: int) -> np.ndarray |
     frame's lights from the dataset, or for procedural frames suns at a few directions; None for older encodings."""
     if not encoding.light_inputs:
         return None
-    from diviewer.conditioning import frame_lights
+    from diviewer.contract.conditioning import frame_lights
     from diviewer.data.dataset import Dataset
 
     if data_dir and (Path(data_dir) / "manifest.json").is_file():
@@ -409,7 +409,7 @@ def _hardware(t: dict | None) -> str:
 
 def info(path: str | Path) -> str:
     """A readable summary of a model's metadata (`diviewer export --info`)."""
-    from diviewer.runtime import model_edge_guard, read_metadata
+    from diviewer.contract.runtime import model_edge_guard, read_metadata
 
     m = read_metadata(path)
     if m.get("kind") == "linear_baseline":

@@ -1,7 +1,7 @@
 """The exported computation as torch modules: the lean graph that `diviewer export` writes, and the
 reference it is verified against (training's own encode, netG, decode and composition).
 
-The lean graph computes what training computes (`diviewer.encoding`, `diviewer.train.targets`) with few
+The lean graph computes what training computes (`diviewer.contract.encoding`, `diviewer.train.targets`) with few
 cheap operators, because onnxruntime's CPU kernels for Where, Sign and Cast of a whole frame cost as much as
 several convolution layers of a small U-Net (measured per operator on 10 x 128 x 128 float32):
 
@@ -29,7 +29,7 @@ import warnings
 
 import torch
 
-from diviewer.encoding import INPUT_CHANNELS, Encoding, channel_slices
+from diviewer.contract.encoding import INPUT_CHANNELS, Encoding, channel_slices
 from diviewer.train.targets import ALBEDO_FLOOR, compose_radiance
 from diviewer.train.world import light_planes, world_planes
 
@@ -172,7 +172,7 @@ class ReferenceGI(torch.nn.Module):
     def forward(self, buffers: torch.Tensor, light_scale: torch.Tensor | None = None,
                 camera: torch.Tensor | None = None, light: torch.Tensor | None = None) -> torch.Tensor:
         from diviewer.train.encoding_torch import TORCH_OPS, decode_radiance, encode_inputs
-        from diviewer.encoding import inverse_light_scale
+        from diviewer.contract.encoding import inverse_light_scale
 
         x = buffers.permute(0, 3, 1, 2)
         depth, normal, albedo, direct = (x[:, channel_slices()[k]] for k, _ in INPUT_CHANNELS)

@@ -1,7 +1,7 @@
 """Training losses: the adversarial loss (`GANLoss`) and the reconstruction loss (`reconstruction_loss`).
 
 The reconstruction loss compares netG's output with the path-traced target. Both arrive encoded
-(`diviewer.encoding.encode_radiance`: linear below ~1, logarithmic above), and the loss is taken
+(`diviewer.contract.encoding.encode_radiance`: linear below ~1, logarithmic above), and the loss is taken
 either on those encoded values or on linear radiance scaled by the dataset's exposure. Which
 statistic of a noisy target each choice converges to matters, because the ground truth is a
 Monte-Carlo estimate whose noise is heavy-tailed (rare, very bright "firefly" samples):
@@ -62,7 +62,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from diviewer.encoding import Encoding
+from diviewer.contract.encoding import Encoding
 from diviewer.errors import DiviewerError
 from diviewer.provenance import check_known_keys
 from diviewer.train.encoding_torch import encode_radiance
@@ -143,7 +143,7 @@ def reconstruction_loss(fake_B: torch.Tensor, real_B: torch.Tensor, mode: str = 
         space: "encoded", "linear", "log" or "relative" (`RECONSTRUCTION_SPACES`); all but "encoded" need
             `encoding`.
         encoding: the dataset's encoding, to decode to linear radiance (times its exposure).
-        mask: (1 or N, 1, H, W), 1 on the frame's pixels and 0 on the stride padding (`diviewer.padding`):
+        mask: (1 or N, 1, H, W), 1 on the frame's pixels and 0 on the stride padding (`diviewer.contract.padding`):
             the mean is then over the frame's pixels only. None: every pixel.
 
     Returns:

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import torch
 from torch import nn
 
-from diviewer.encoding import INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS
+from diviewer.contract.encoding import INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
 from diviewer.provenance import check_known_keys
 from diviewer.train.config import MAX_FREQUENCIES

@@ -17,7 +17,7 @@ from diviewer.train.config import TrainConfig
 from diviewer.train.targets import compose_radiance, split_batch
 
 if TYPE_CHECKING:
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
 
 METRIC_KEYS: tuple[str, ...] = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 """Validation metrics: on linear radiance, then on tone-mapped images (suffix _tm)."""

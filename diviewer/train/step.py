@@ -9,7 +9,7 @@ from typing import Any
 
 import torch
 
-from diviewer.encoding import Encoding
+from diviewer.contract.encoding import Encoding
 from diviewer.train.config import TrainConfig
 from diviewer.train.distributed import Dist, seed_all
 from diviewer.train.losses import LossConfig, structure_loss

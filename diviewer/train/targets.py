@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     import torch
 
     from diviewer.data.dataset import Dataset
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.train.config import TrainConfig
 
 
@@ -108,7 +108,7 @@ def fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: n
 
         return dataclasses.replace(enc, output_gain=gain)
     if gain >= GAIN_NOTE:
-        from diviewer.encoding import encode_radiance
+        from diviewer.contract.encoding import encode_radiance
 
         say(f"note: the target's 99th percentile is {1 / gain:.2g} at the direct light's exposure, "
             f"{float(encode_radiance(1 / gain / enc.exposure, enc)):.1e} of the network's range; --output-gain "
@@ -122,7 +122,7 @@ def fit_output_gain(ds: Dataset, train: np.ndarray, scales: np.ndarray | None, e
     the targets as the trainer makes them: divided by the albedo and the light scale, times the exposure). Sponza's
     indirect light is ~1 % of its direct light: its target's 99th percentile is 0.14 at the direct light's
     exposure, its median 0.0057, i.e. 5e-4 of the encoded range (docs/sponza.md at commit c48f1bc; cornell's median: 0.107)."""
-    from diviewer.encoding import fit_exposure
+    from diviewer.contract.encoding import fit_exposure
 
     return float(fit_exposure(list(exposed_targets(ds, train, scales, enc, cfg, stride=4))))  # 1/16: bounded memory
 
@@ -131,7 +131,7 @@ def exposed_targets(ds: Dataset, train: np.ndarray, scales: np.ndarray | None, e
                     stride: int = 1):
     """Each frame's target as the trainer makes it (`target_radiance`, divided by the frame's light scale), times
     the encoding's (input) exposure, at every ``stride``-th row and column: float32 (H', W', 3) arrays, one a frame."""
-    from diviewer.encoding import inverse_light_scale
+    from diviewer.contract.encoding import inverse_light_scale
 
     s = ds.slices
     inv = np.ones(len(train)) if scales is None else inverse_light_scale(scales.astype(np.float64))
@@ -144,7 +144,7 @@ def exposed_targets(ds: Dataset, train: np.ndarray, scales: np.ndarray | None, e
 
 def _fit_encoding(ds: Dataset, train_idx: list[int], train: np.ndarray, scales: np.ndarray | None, world: bool,
                   lights: bool) -> Encoding:
-    from diviewer.encoding import Encoding, fit_exposure, inverse_light_scale
+    from diviewer.contract.encoding import Encoding, fit_exposure, inverse_light_scale
 
     direct = ds.slices["direct"]
     if scales is None:
@@ -196,17 +196,17 @@ def _scene_of(ds: Dataset):
 def raw_exposure(ds: Dataset, train_arr: np.ndarray) -> float:
     """`fit_exposure` on the train frames' GL direct light as stored (not divided by the light scale): the
     tone map `diviewer eval --data` fits, so validation and eval score alike."""
-    from diviewer.encoding import fit_exposure
+    from diviewer.contract.encoding import fit_exposure
 
     return float(fit_exposure([frame[..., ds.slices["direct"]] for frame in train_arr]))
 
 
 def run_conditioning(enc: Encoding, ds: Dataset, train_idx: list[int], with_val: bool) -> tuple[tuple, tuple]:
-    """Each train (and val) frame's camera and lights: its conditioning (`diviewer.conditioning`) of its stored
+    """Each train (and val) frame's camera and lights: its conditioning (`diviewer.contract.conditioning`) of its stored
     configuration over the whole stored frame, stacked in the order of the frames' arrays as ((cameras, lights) of
     train, (cameras, lights) of val): (N, CAMERA_PARAMS) and (N, 3 L) float32, None where the encoding takes none
     (and val's (None, None) without ``with_val``). The light scales come before the encoding (`run_light_scales`)."""
-    from diviewer.conditioning import conditioning, needs_scene
+    from diviewer.contract.conditioning import conditioning, needs_scene
     from diviewer.data.scales import dataset_scene
 
     scene = dataset_scene(ds) if needs_scene(enc) else None
@@ -251,7 +251,7 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
 
     Args:
         scale: (N,) each frame's light scale (encoding version 2; ignored for version 1).
-        multiple: frames are edge-padded to multiples of this (`diviewer.padding`, as the runtime pads);
+        multiple: frames are edge-padded to multiples of this (`diviewer.contract.padding`, as the runtime pads);
             ``mask`` (1 on the frame's pixels, 0 on the padding) and ``crop`` (the frame's rows and columns
             in the padded planes) say where the frame lies.
         crop: (width, left edges): each frame cut to that width first (`crop_plan`).
@@ -261,8 +261,8 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
     """
     import torch
 
-    from diviewer.encoding import inverse_light_scale
-    from diviewer.padding import crop_slice, pad_index, valid_mask
+    from diviewer.contract.encoding import inverse_light_scale
+    from diviewer.contract.padding import crop_slice, pad_index, valid_mask
     from diviewer.train.encoding_torch import TORCH_OPS, encode_inputs, encode_radiance
 
     x = x16.permute(0, 3, 1, 2).float()
@@ -286,7 +286,7 @@ def split_batch(x16: torch.Tensor, slices: Mapping[str, slice], enc: Encoding, c
         direct_in = direct_in * inv
     real_A = encode_inputs(p["depth"], p["normal"], p["albedo"], direct_in, enc, channel_axis=1)
     if enc.world_inputs:
-        from diviewer.padding import pad_before, shift_camera_params
+        from diviewer.contract.padding import pad_before, shift_camera_params
         from diviewer.train.world import world_planes
 
         if cams is None:

@@ -47,7 +47,7 @@ from diviewer.train.targets import (crop_plan, fit_encoding, raw_exposure, run_c
 
 if TYPE_CHECKING:
     from diviewer.data.dataset import Dataset
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.train.networks import NetConfig
     from diviewer.train.step import Nets
 
@@ -190,7 +190,7 @@ def _prepare(cfg: TrainConfig, dev: Dist, say, resume: bool) -> tuple[Run, Nets,
     """The run's data, encoding, networks and state: fresh, warm-started from a parent, or resumed."""
     import torch
 
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.train.networks import net_config
     from diviewer.train.step import build_nets
 
@@ -376,7 +376,7 @@ def _check_trainable(net_cfg: NetConfig, cfg: TrainConfig, ds: Dataset, n_train:
     try:
         with torch.device("meta"):
             netG, netD = net_cfg.build_generator(channels).train(), net_cfg.build_discriminator(channels).train()
-            from diviewer.padding import padded_size
+            from diviewer.contract.padding import padded_size
 
             m = 2 ** net_cfg.levels
             real_A = torch.zeros(smallest, netG.in_channels, padded_size(ds.height, m), padded_size(ds.width, m))

@@ -30,7 +30,7 @@ def open_model(spec: str | Path | None, scene: Scene, provider: str | None = Non
     Returns:
         (NeuralGI or None, message): the message says why there is no model, or which was chosen.
     """
-    from diviewer.runtime import NeuralGI, choose_providers
+    from diviewer.contract.runtime import NeuralGI, choose_providers
 
     spec = "auto" if spec is None else str(spec)
     if spec.lower() == "none":

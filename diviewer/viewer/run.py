@@ -50,7 +50,7 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
     if settings.provider:
         import onnxruntime as ort
 
-        from diviewer.runtime import choose_providers
+        from diviewer.contract.runtime import choose_providers
 
         choose_providers(ort.get_available_providers(), settings.provider)  # before a window opens
     steps = normalise_script(script)

@@ -247,7 +247,7 @@ def test_temporal_rows_run_a_model_whose_stride_the_sequence_does_not_fill(ctx, 
     from diviewer.bench.core import BenchSettings, _open_evalset
     from diviewer.bench.onnx_tools import untrained_generator
     from diviewer.bench.runner import gl_timing_mode, temporal_rows
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
     from diviewer.scene import load_scene
 
     scene = load_scene("cornell")
@@ -337,7 +337,7 @@ def _encoding_2_model(path: Path) -> Path:
     from onnx_models import base_meta
 
     from diviewer.bench.onnx_tools import set_meta
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.train.export import gi_module, onnx_bytes
     from diviewer.train.networks import UnetGenerator
 
@@ -356,7 +356,7 @@ def test_int8_quantisation_calibrates_an_encoding_2_model_with_its_light_scales(
     with 'Required inputs (['light_scale']) are missing')."""
     pytest.importorskip("onnx")
     from diviewer.bench.onnx_tools import get_meta, quantize_int8
-    from diviewer.runtime import NeuralGI, read_metadata
+    from diviewer.contract.runtime import NeuralGI, read_metadata
 
     src = _encoding_2_model(tmp_path / "v2.onnx")
     assert read_metadata(src)["encoding"]["version"] == 2
@@ -382,7 +382,7 @@ def test_int8_quantisation_calibrates_an_encoding_3_model_with_its_cameras(tmp_p
 
     from diviewer.bench.onnx_tools import CALIB_PERCENTILE, get_meta, quantize_int8
     from diviewer.paths import models_dir
-    from diviewer.runtime import NeuralGI, read_metadata
+    from diviewer.contract.runtime import NeuralGI, read_metadata
 
     src = models_dir() / "cornell.onnx"
     if read_metadata(src)["encoding"]["version"] < 3:
@@ -425,7 +425,7 @@ def test_fp16_twin_of_a_lean_export_halves_the_generator_only():
     x = random_buffers(rng, 128, 128, batch=1)
     feed = {"buffers": x, "light_scale": np.full(1, 0.7, np.float32)}
     if int(get_meta(src)["encoding"]["version"]) >= 3:  # encoding 3: the frame's camera too
-        from diviewer.runtime import NeuralGI
+        from diviewer.contract.runtime import NeuralGI
         from diviewer.scene import load_scene
 
         feed["camera"] = NeuralGI.camera(load_scene("cornell").default.camera, 128, 128)[None]

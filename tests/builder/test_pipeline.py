@@ -453,7 +453,7 @@ needs_pipeline = pytest.mark.skipif(any(importlib.util.find_spec(m) is None for 
 def test_build_a_tiny_scene_killed_and_resumed(gl_context, tmp_path, capsys):
     """The whole pipeline shrunk: killed (SIGKILL) once the capture is recorded, resumed to the shipped model,
     then run again with nothing left to do."""
-    from diviewer.runtime import read_metadata
+    from diviewer.contract.runtime import read_metadata
 
     scene, recipe = write_tiny_scene(tmp_path), tmp_path / "tinyrecipe.toml"
     recipe.write_text(TINY_RECIPE)

@@ -11,7 +11,7 @@ from diviewer.evaluation.baseline import FEATURES, KIND, build_baseline, fit, pr
 from diviewer.cli import main
 from diviewer.data.capture import open_or_create
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, Dataset, write_frame
-from diviewer.runtime import NeuralGI, pack_buffers
+from diviewer.contract.runtime import NeuralGI, pack_buffers
 from diviewer.scene import load_scene
 
 pytest.importorskip("onnx")
@@ -98,7 +98,7 @@ def test_onnx_model_matches_numpy_and_follows_the_runtime_contract(tmp_path):
     y = net.run(pack_buffers(f))
     expected = predict(np.array(card["weights"]["A"]), np.array(card["weights"]["B"]), f["depth"], f["normal"],
                        f["albedo"], f["direct"], 10.0)
-    # the runtime clamps radiance at 0 (diviewer.runtime); the synthetic truth may dip below it
+    # the runtime clamps radiance at 0 (diviewer.contract.runtime); the synthetic truth may dip below it
     np.testing.assert_allclose(y, np.maximum(expected, 0.0), rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(y, np.maximum(f["pt"], 0.0), atol=1e-3)  # and the truth, which this data lets it represent
     assert json.loads(out.with_suffix(".json").read_text())["fit"]["frames"] == 4

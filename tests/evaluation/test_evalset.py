@@ -407,7 +407,7 @@ def test_compact_set_scores_as_the_full_one_and_is_checked(evalset, tmp_path, mo
 
     frames = [np.full((4, 4, 3), 2.0)]
     assert scene_exposure("cornell", ev.manifest["scene_hash"], frames)[0] == ev.exposure
-    from diviewer.encoding import fit_exposure
+    from diviewer.contract.encoding import fit_exposure
 
     assert scene_exposure("cornell", "another", frames)[0] == fit_exposure(frames)
     with pytest.raises(DiviewerError, match="already a compact"):

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diviewer.lean import lean_model
-from diviewer.runtime import NeuralGI, probe_frame
+from diviewer.contract.lean import lean_model
+from diviewer.contract.runtime import NeuralGI, probe_frame
 from diviewer.train.checks import extreme_frame
 
 pytest.importorskip("onnx")

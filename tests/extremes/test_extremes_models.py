@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from diviewer.errors import DiviewerError
-from diviewer.runtime import NeuralGI, probe_frame
+from diviewer.contract.runtime import NeuralGI, probe_frame
 from onnx_models import direct_times
 
 torch = pytest.importorskip("torch")

@@ -9,9 +9,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from diviewer.encoding import INPUT_CHANNELS
+from diviewer.contract.encoding import INPUT_CHANNELS
 from diviewer.errors import DiviewerError
-from diviewer.runtime import NeuralGI, count_nonfinite, pack_buffers, read_metadata
+from diviewer.contract.runtime import NeuralGI, count_nonfinite, pack_buffers, read_metadata
 from onnx_models import base_meta, direct_times
 
 CHANNEL_NAMES = [f"{name}[{k}]" for name, n in INPUT_CHANNELS for k in range(n)]
@@ -208,7 +208,7 @@ def test_a_light_scaled_model_is_black_at_zero_light_and_linear_in_it(cornell_fr
     from tool_modules import load_tool
 
     from diviewer.bench.onnx_tools import get_meta, set_meta
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.paths import models_dir
     from diviewer.train.export import gi_module, onnx_bytes
 

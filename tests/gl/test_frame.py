@@ -59,7 +59,7 @@ def test_the_neural_pass_composites_the_frame_it_ran_on(ctx, cornell):
     run() is read until run() is called without one."""
     pytest.importorskip("onnx")
     from diviewer.gl.neural import GISettings, NeuralPass
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
 
     net = NeuralGI("assets/models/cornell.onnx", scene=cornell)
     net.direct_samples = 1  # as a model of the light at each pixel's centre: inline where it can

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diviewer.lean import lean_model
-from diviewer.runtime import NeuralGI
+from diviewer.contract.lean import lean_model
+from diviewer.contract.runtime import NeuralGI
 
 pytest.importorskip("onnx")
 

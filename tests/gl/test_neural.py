@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from diviewer.errors import DiviewerError
-from diviewer.runtime import NeuralGI
+from diviewer.contract.runtime import NeuralGI
 from scenes import facing_plane
 
 pytest.importorskip("onnx")
@@ -294,7 +294,7 @@ def frame_hashes(ctx, name: str) -> dict[str, str]:
     from diviewer.gl.neural import GISettings, NeuralPass
     from diviewer.gl.renderer import Renderer
     from diviewer.render import model_pass
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
     from diviewer.scene import load_scene, sample_config
 
     scene = load_scene(name)

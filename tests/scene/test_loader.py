@@ -308,7 +308,7 @@ def test_a_model_trained_before_a_texture_edit_is_refused_after_it(tmp_path):
     from gltf_doc import write_scene
     from onnx_models import base_meta, direct_times
 
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
 
     path = write_scene(tmp_path / "scene")
     before = load_scene(path)

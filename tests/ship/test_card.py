@@ -37,7 +37,7 @@ def _weights(path: Path) -> dict:
 
 
 def test_the_scores_of_the_same_weights_land_in_the_card_and_the_metadata(tmp_path):
-    from diviewer.runtime import read_metadata
+    from diviewer.contract.runtime import read_metadata
 
     model = _shipped(tmp_path / "plane.onnx", "a" * 64)
     weights = _weights(model)

@@ -36,7 +36,7 @@ def _eval(path: Path, scores: dict[str, float]) -> Path:
 
 
 def test_ship_writes_card_fields_and_files_and_replaces_the_shipped_model(tmp_path):
-    from diviewer.runtime import read_metadata
+    from diviewer.contract.runtime import read_metadata
 
     ship, run = tmp_path / "ship", tmp_path / "run"
     ship.mkdir()
@@ -65,7 +65,7 @@ def test_ship_draws_the_ladders_curves_from_each_ks_run_sized_by_the_ladder_reco
     the card's ladder."""
     from PIL import Image
 
-    from diviewer.runtime import read_metadata
+    from diviewer.contract.runtime import read_metadata
 
     ship = tmp_path / "ship"
     ship.mkdir()

@@ -10,10 +10,10 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from diviewer import encoding as np_encoding  # noqa: E402
-from diviewer.encoding import INPUT_CHANNEL_COUNT, Encoding  # noqa: E402
+from diviewer.contract import encoding as np_encoding  # noqa: E402
+from diviewer.contract.encoding import INPUT_CHANNEL_COUNT, Encoding  # noqa: E402
 from diviewer.train.encoding_torch import decode_radiance, encode_inputs, encode_radiance  # noqa: E402
-from test_encoding import random_frame  # noqa: E402  (the same random buffers as the numpy tests)
+from contract.test_encoding import random_frame  # noqa: E402  (the same random buffers as the numpy tests)
 
 ENC = Encoding(exposure=0.25, depth_scale=50.0)
 

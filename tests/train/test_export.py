@@ -12,7 +12,7 @@ pytest.importorskip("onnx")
 
 from diviewer.cli import main  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
-from diviewer.runtime import NeuralGI, read_metadata  # noqa: E402
+from diviewer.contract.runtime import NeuralGI, read_metadata  # noqa: E402
 from diviewer.train.export import INT8_WEIGHTS_TOLERANCE, ExportSettings, export, gi_module, info  # noqa: E402
 from diviewer.train.checkpoint import build_generator_from_checkpoint  # noqa: E402
 from diviewer.train.trainer import train  # noqa: E402
@@ -196,7 +196,7 @@ def test_cli_export_and_info(checkpoints, tmp_path, capsys):
 
 
 def test_info_names_the_column_guard_of_a_model_trained_on_aspect_crops():
-    from diviewer.padding import EDGE_GUARD
+    from diviewer.contract.padding import EDGE_GUARD
     from diviewer.paths import models_dir
 
     assert f"padded to multiples of 128 with {EDGE_GUARD} columns a side at least" in info(models_dir() / "sponza.onnx")
@@ -248,7 +248,7 @@ def test_each_option_exports_and_matches_torch(upsample, norm):
     peak for the full target and for indirect / albedo, whose composition the graph must carry."""
     import onnxruntime as ort
 
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.train.encoding_torch import decode_radiance, encode_inputs
     from diviewer.train.export import OPSET, onnx_bytes
     from diviewer.train.losses import reconstruction_loss
@@ -427,8 +427,8 @@ def test_lean_graph_equals_training_functions_on_broken_buffers(checkpoints):
 
 def test_nchw_export_and_any_frame_size(checkpoints, tmp_path):
     """An NCHW export runs through the runtime like the NHWC one; any H x W is padded to the stride (as
-    training pads, diviewer.padding) and cropped back."""
-    from diviewer.padding import crop_nhwc, pad_nhwc
+    training pads, diviewer.contract.padding) and cropped back."""
+    from diviewer.contract.padding import crop_nhwc, pad_nhwc
 
     a, b = tmp_path / "nhwc.onnx", tmp_path / "nchw.onnx"
     export(checkpoints["full"], a, log=quiet)
@@ -454,7 +454,7 @@ def test_batch_norm_is_folded_into_the_convolutions(upsample):
     one included), and the folded generator equals the original in eval mode; the original is untouched."""
     import onnx
 
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.train.export import onnx_bytes
     from diviewer.train.graph import fold_batchnorm
     from diviewer.train.networks import NetConfig, init_weights
@@ -491,7 +491,7 @@ def test_the_verification_scores_the_frames_own_pixels_not_the_stride_padding(ch
     runtime crops the padding off, so the export's tolerance is checked on the frame's own pixels. A graph that
     departs from PyTorch only in the padding columns is written; one that departs inside the frame is refused."""
     import diviewer.train.export as ex
-    from diviewer.padding import crop_slice, pad_nhwc
+    from diviewer.contract.padding import crop_slice, pad_nhwc
 
     ck = checkpoints["indirect"]
     netG, enc, meta = build_generator_from_checkpoint(ck)

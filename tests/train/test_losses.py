@@ -8,7 +8,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from diviewer.encoding import Encoding  # noqa: E402
+from diviewer.contract.encoding import Encoding  # noqa: E402
 from diviewer.train.encoding_torch import decode_radiance, encode_radiance  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 from diviewer.train import networks  # noqa: E402

@@ -8,7 +8,7 @@ torch = pytest.importorskip("torch")
 
 from torch import nn  # noqa: E402
 
-from diviewer.encoding import INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS, Encoding  # noqa: E402
+from diviewer.contract.encoding import INPUT_CHANNEL_COUNT, OUTPUT_CHANNELS, Encoding  # noqa: E402
 from diviewer.train.encoding_torch import encode_inputs, encode_radiance  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 from diviewer.train.losses import reconstruction_loss  # noqa: E402

@@ -62,7 +62,7 @@ def test_a_shipped_cards_recipe_is_its_scenes_recipe_file(card):
 
 @pytest.mark.parametrize("card", CARDS)
 def test_a_shipped_card_names_the_build_that_rebuilds_it_in_the_json_and_the_onnx_alike(card):
-    from diviewer.runtime import read_metadata
+    from diviewer.contract.runtime import read_metadata
 
     meta = json.loads((models_dir() / f"{card}.json").read_text())
     assert meta["rebuild"] == f"diviewer build --scene {meta['scene']}"

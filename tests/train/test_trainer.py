@@ -20,7 +20,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from diviewer.data.dataset import CHANNELS, FORMAT, FORMAT_VERSION, Dataset, write_frame  # noqa: E402
-from diviewer.encoding import fit_exposure  # noqa: E402
+from diviewer.contract.encoding import fit_exposure  # noqa: E402
 from diviewer.errors import DiviewerError  # noqa: E402
 from diviewer.train import trainer  # noqa: E402
 from diviewer.train.checkpoint import build_generator_from_checkpoint, load_checkpoint  # noqa: E402
@@ -334,7 +334,7 @@ def test_indirect_target_divided_by_albedo_trains(data, tmp_path):
 def test_residual_target_trains_and_exports_a_graph_that_adds_the_gl_direct_light(data, tmp_path):
     """target "residual": netG learns pt - GL direct; the exported graph composes it exactly as "indirect" (GL direct
     + prediction, clamped at 0) and export's verification against training's functions passes."""
-    from diviewer.runtime import read_metadata
+    from diviewer.contract.runtime import read_metadata
     from diviewer.train.export import export
 
     result = train(tiny(data, tmp_path / "res", epochs=1, target="residual", divide_albedo=True), log=quiet)
@@ -760,7 +760,7 @@ def test_training_on_aspect_crops_of_wide_frames(tmp_path):
     """A 48x32 capture trained on random-width crops (one width per batch, padded to the stride 32 with the
     loss on the frame's pixels): the network's depth follows the height, validation runs on whole padded
     frames, and the export runs at the capture's own shape and at others."""
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
     from diviewer.train.export import export
 
     make_wide_dataset(tmp_path / "wide")
@@ -824,7 +824,7 @@ def test_output_gain_fits_the_targets_exposure_and_trains_exports_and_resumes(da
     """--output-gain: the gain puts the 99th percentile of the train split's exposed target (indirect / albedo /
     light scale x exposure) at 1; the batches' encoded targets use it, export verifies the graph that decodes with
     it, and a resumed run keeps it."""
-    from diviewer.encoding import Encoding, encode_radiance
+    from diviewer.contract.encoding import Encoding, encode_radiance
     from diviewer.train.export import export
 
     out = tmp_path / "gain"

@@ -13,11 +13,11 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from diviewer.errors import DiviewerError  # noqa: E402
-from diviewer.padding import pad_before, pad_index  # noqa: E402
+from diviewer.contract.padding import pad_before, pad_index  # noqa: E402
 from diviewer.scene import camera as cam  # noqa: E402
 from diviewer.scene.loader import load_scene  # noqa: E402
 from diviewer.train.checkpoint import load_checkpoint  # noqa: E402
-from diviewer.padding import shift_camera_params  # noqa: E402
+from diviewer.contract.padding import shift_camera_params  # noqa: E402
 from diviewer.train.world import light_planes, world_planes  # noqa: E402
 from oracles import world_buffers  # noqa: E402
 
@@ -114,7 +114,7 @@ def test_a_run_trains_on_world_inputs_and_records_them(tmp_path):
     assert card["encoding"]["version"] == 3 and card["verification"]["max_rel_to_peak"] < 1e-4
     assert card["verification"]["zero_light_max"] == 0.0
     # ... and the runtime runs it at any size given each frame's camera, refusing it without one.
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
 
     model = NeuralGI(tmp_path / "m.onnx")
     assert model.world and [i.name for i in model.session.get_inputs()] == ["buffers", "light_scale", "camera"]
@@ -132,7 +132,7 @@ def test_a_run_trains_on_world_inputs_and_records_them(tmp_path):
 def test_the_graph_matches_training_on_a_padded_crop(tmp_path, lit):
     """The exported graph on a crop the runtime pads gives what training's own functions give on the same crop
     padded by split_batch: the world planes (and encoding 4's light planes) line up with the pixels on both paths."""
-    from diviewer.encoding import Encoding
+    from diviewer.contract.encoding import Encoding
     from diviewer.train.config import TrainConfig
     from diviewer.train.graph import ReferenceGI
     from diviewer.train.networks import UnetGenerator
@@ -159,7 +159,7 @@ def test_the_graph_matches_training_on_a_padded_crop(tmp_path, lit):
         want = netG(b["real_A"])[:, :, b["crop"][0], b["crop"][1]]
     # The runtime's way: the crop as a frame of its own, its camera over its own pixels (x0 in the source).
     crop_cam = _params(width=w, height=h, x0=x0, source=(40, h))
-    from diviewer.padding import pad_camera_params, pad_nhwc
+    from diviewer.contract.padding import pad_camera_params, pad_nhwc
 
     frame = pad_nhwc(stored[:, :, x0:x0 + w, :10], 16)
     cam_p = pad_camera_params(crop_cam[None], w, h, 16)
@@ -178,7 +178,7 @@ def test_fourier_features_of_the_world_position_train_export_and_run(tmp_path):
     PyTorch, run by the runtime; refused without world inputs or out of range, naming the field."""
     from train.test_trainer import quiet, tiny
 
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
     from diviewer.train.export import export
     from diviewer.train.trainer import train
 
@@ -250,7 +250,7 @@ def test_a_run_trains_on_light_inputs_and_the_runtime_feeds_them(tmp_path):
     from train.test_trainer import quiet, tiny
 
     from diviewer.evaluation.evaluate import evaluate
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
     from diviewer.scene.lights import light_params
     from diviewer.train.export import export
     from diviewer.train.trainer import train

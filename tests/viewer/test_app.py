@@ -360,7 +360,7 @@ def test_view_command_line():
 @pytest.mark.slow
 def test_viewer_imports_no_torch():
     code = ("import sys, diviewer.viewer.app, diviewer.viewer.imgui_gl, diviewer.reference.progressive, "
-            "diviewer.viewer.panel, diviewer.gl.neural, diviewer.runtime; assert 'torch' not in sys.modules, 'torch was imported'")
+            "diviewer.viewer.panel, diviewer.gl.neural, diviewer.contract.runtime; assert 'torch' not in sys.modules, 'torch was imported'")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
 
@@ -511,7 +511,7 @@ def _offscreen_view(ctx, shot: Path, a=DIRECT, b=None, layout: str = "single", w
     if record.get("gi_size"):
         # The neural GI as the viewer ran it: the recorded model at the recorded GI resolution and settings.
         from diviewer.gl.neural import GISettings, NeuralPass
-        from diviewer.runtime import NeuralGI
+        from diviewer.contract.runtime import NeuralGI
 
         gi = GISettings(**{**record["gi_settings"], "pipelined": False})
         neural = NeuralPass(ctx, renderer, NeuralGI(record["model"], scene=scene), tuple(record["gi_size"]), gi)
@@ -952,7 +952,7 @@ def _upscaled_offscreen(ctx, shot: Path) -> np.ndarray:
     from diviewer.gl.display import DisplayPass
     from diviewer.gl.neural import GISettings, NeuralPass
     from diviewer.gl.renderer import Renderer, RenderSettings
-    from diviewer.runtime import NeuralGI
+    from diviewer.contract.runtime import NeuralGI
 
     path = shot.with_suffix(".json")
     record = json.loads(path.read_text())

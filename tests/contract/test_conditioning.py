@@ -1,4 +1,4 @@
-"""A frame's conditioning (diviewer.conditioning): what each encoding version takes, derived alike from a scene
+"""A frame's conditioning (diviewer.contract.conditioning): what each encoding version takes, derived alike from a scene
 configuration and from the dict a dataset stores, and refused where the frame cannot give it."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from diviewer.conditioning import Conditioning, conditioning, needs_scene
-from diviewer.encoding import Encoding
+from diviewer.contract.conditioning import Conditioning, conditioning, needs_scene
+from diviewer.contract.encoding import Encoding
 from diviewer.errors import DiviewerError
 from diviewer.scene import load_scene, sample_config
 from diviewer.scene.camera import camera_params

@@ -1,4 +1,4 @@
-"""Tests for diviewer.encoding: the radiance curve, the input stack, the settings, the exposure fit."""
+"""Tests for diviewer.contract.encoding: the radiance curve, the input stack, the settings, the exposure fit."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from diviewer.encoding import (
+from diviewer.contract.encoding import (
     ENCODING_VERSION,
     INPUT_CHANNEL_COUNT,
     INPUT_CHANNELS,
@@ -54,7 +54,7 @@ def test_every_copy_of_the_channel_layout_follows_the_encoding() -> None:
     from diviewer.gl.neural import PACK_DEFINES
     from diviewer.gl.renderer import BUFFERS
     from diviewer.paths import shaders_dir
-    from diviewer.runtime import pack_buffers
+    from diviewer.contract.runtime import pack_buffers
 
     names = [name for name, _ in INPUT_CHANNELS]
     assert list(BUFFERS) == names
@@ -177,7 +177,7 @@ def test_encode_inputs_refuses_bad_buffers() -> None:
 
 
 def test_module_does_not_import_torch() -> None:
-    code = "import sys, diviewer.encoding; sys.exit('torch' in sys.modules)"
+    code = "import sys, diviewer.contract.encoding; sys.exit('torch' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
 
 

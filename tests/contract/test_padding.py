@@ -1,11 +1,11 @@
-"""diviewer.padding: any frame size to the network's stride and back, the same for training and the runtime."""
+"""diviewer.contract.padding: any frame size to the network's stride and back, the same for training and the runtime."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from diviewer.padding import crop_nhwc, crop_slice, pad_before, pad_index, pad_nhwc, padded_size, valid_mask
+from diviewer.contract.padding import crop_nhwc, crop_slice, pad_before, pad_index, pad_nhwc, padded_size, valid_mask
 
 
 @pytest.mark.parametrize(("n", "m", "size", "before"), [(128, 128, 128, 0), (228, 128, 256, 14), (72, 128, 128, 28),
@@ -54,7 +54,7 @@ def test_a_guard_asks_for_that_much_padding_a_side_at_least(n, m, guard, size, b
 
 
 def test_the_guard_pads_columns_only_and_crops_back():
-    from diviewer.padding import EDGE_GUARD, edge_guard
+    from diviewer.contract.padding import EDGE_GUARD, edge_guard
 
     x = np.random.default_rng(1).random((1, 32, 32, 3)).astype(np.float32)
     p = pad_nhwc(x, 16, 4)

@@ -261,7 +261,7 @@ class ArrayOps:
     def prepare(x: Any, name: str) -> Any:
         """x as a floating-point array; integer buffers are refused (their scale is unknown)."""
         if type(x).__module__.startswith("torch"):
-            raise TypeError(f"{name}: torch tensors are encoded by diviewer.train.encoding_torch, not diviewer.encoding")
+            raise TypeError(f"{name}: torch tensors are encoded by diviewer.train.encoding_torch, not diviewer.contract.encoding")
         if not isinstance(x, np.ndarray):
             return np.asarray(x, dtype=np.float64)  # Python numbers and lists
         if x.dtype.kind != "f":

@@ -2,12 +2,12 @@
 
 The model contract (written by ``diviewer export``, read here; torch-free):
 
-- input ``buffers``: float32, linear and raw, channels in ``diviewer.encoding.INPUT_CHANNELS`` order
+- input ``buffers``: float32, linear and raw, channels in ``diviewer.contract.encoding.INPUT_CHANNELS`` order
   (depth, normal xyz, albedo rgb, direct rgb), rows top first; (N, H, W, 10) when the metadata's
   ``layout`` is "NHWC" (every model before the lean graph), (N, 10, H, W) when it is "NCHW" (no
   transpose before the first convolution); H and W multiples of the model's ``multiple``: ``run``
-  pads any other size to it (`diviewer.padding`, as training pads) and crops the output back; a model trained on
-  random-width crops gets at least `diviewer.padding.EDGE_GUARD` columns of padding a side (``edge_guard``);
+  pads any other size to it (`diviewer.contract.padding`, as training pads) and crops the output back; a model trained on
+  random-width crops gets at least `diviewer.contract.padding.EDGE_GUARD` columns of padding a side (``edge_guard``);
 - for encoding version 2 a second input ``light_scale``: float32 (N,), each frame's light scale
   (`diviewer.scene.lights.light_scale`): the graph divides the direct light by it and multiplies its
   output by it, so the model is linear in the light (0 gives exactly 0);
@@ -18,7 +18,7 @@ The model contract (written by ``diviewer export``, read here; torch-free):
 - the encoding and decoding live inside the graph; the metadata key ``diviewer`` holds a JSON
   object describing the model (see REQUIRED_META);
 - the weights may be stored as float16 in a float32 graph (metadata ``weights`` "fp16", ``export
-  --half-weights``): each behind a Cast to float32 that onnxruntime folds at load (`diviewer.weights`); or the
+  --half-weights``): each behind a Cast to float32 that onnxruntime folds at load (`diviewer.contract.weights`); or the
   inner convolutions' as int8 (``weights`` "int8", ``export --int8-weights``): each behind a Cast and a Mul by
   its per-channel scales, folded alike.
 """
@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from diviewer.encoding import ENCODING_VERSION, INPUT_CHANNELS, OUTPUT_CHANNELS
+from diviewer.contract.encoding import ENCODING_VERSION, INPUT_CHANNELS, OUTPUT_CHANNELS
 from diviewer.errors import DiviewerError
-from diviewer.padding import crop_nhwc, edge_guard, pad_camera_params, pad_nhwc
+from diviewer.contract.padding import crop_nhwc, edge_guard, pad_camera_params, pad_nhwc
 from diviewer.scene.camera import CAMERA_PARAMS
 from diviewer.scene.lights import LIGHT_PARAMS
 from diviewer.timing import StageTimer
@@ -129,7 +129,7 @@ def check_compatible(meta: dict, path: Path, scene=None) -> None:
         raise DiviewerError(f"the model uses encoding version {enc_version}, newer than this diviewer's "
                             f"({ENCODING_VERSION}); upgrade diviewer", path=path, field="encoding.version")
     if enc_version >= 3:  # the world box (3) and the light count (4) that the graph's extra inputs are made with
-        from diviewer.encoding import Encoding
+        from diviewer.contract.encoding import Encoding
 
         try:
             Encoding.from_dict(meta["encoding"])
@@ -169,7 +169,7 @@ def choose_providers(available: list[str], requested: str | None = None) -> list
 
 
 def model_edge_guard(meta: dict) -> int:
-    """The column guard a model runs with (`diviewer.padding.edge_guard`): from the aspect crops its recipe trained
+    """The column guard a model runs with (`diviewer.contract.padding.edge_guard`): from the aspect crops its recipe trained
     with (the model's ``recipe`` record; none recorded: whole frames, no guard)."""
     train = (meta.get("recipe") or {}).get("train") or {}
     return edge_guard(train.get("aspect_crops"))
@@ -197,7 +197,7 @@ class NeuralGI:
             opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
         providers = choose_providers(ort.get_available_providers(), provider)
         self.session_options = opts
-        """The session's options (`diviewer.lean` builds the generator's session with them)."""
+        """The session's options (`diviewer.contract.lean` builds the generator's session with them)."""
         try:
             self.session = ort.InferenceSession(str(self.path), sess_options=opts, providers=providers)
         except Exception as exc:
@@ -205,7 +205,7 @@ class NeuralGI:
         self.meta = _metadata(self.session, self.path)
         check_compatible(self.meta, self.path, scene)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
-        from diviewer.encoding import Encoding
+        from diviewer.contract.encoding import Encoding
 
         self.encoding = Encoding.from_dict(self.meta["encoding"])
         """The model's encoding (its metadata's); `conditioning` reads what a frame must bring from it."""
@@ -235,7 +235,7 @@ class NeuralGI:
         self.provider = self.session.get_providers()[0]
         self.multiple = int(self.meta["multiple"])
         self.edge_guard = model_edge_guard(self.meta) if guard is None else int(guard)
-        """Columns of padding a side at least (`diviewer.padding`): the model's (`model_edge_guard`) unless
+        """Columns of padding a side at least (`diviewer.contract.padding`): the model's (`model_edge_guard`) unless
         ``guard`` is given."""
         if self.edge_guard < 0:
             raise DiviewerError(f"an edge guard is a number of columns >= 0, got {self.edge_guard}", field="guard")
@@ -295,9 +295,9 @@ class NeuralGI:
         return light_scale(scene, config)
 
     def conditioning(self, config, width: int, height: int, scene=None):
-        """The conditioning of a ``width`` x ``height`` frame of ``config`` (`diviewer.conditioning`) of ``scene``
+        """The conditioning of a ``width`` x ``height`` frame of ``config`` (`diviewer.contract.conditioning`) of ``scene``
         (default: the scene the model was loaded for) under the model's encoding."""
-        from diviewer.conditioning import conditioning
+        from diviewer.contract.conditioning import conditioning
 
         return conditioning(scene if scene is not None else self.scene, config, (width, height), self.encoding)
 
@@ -308,16 +308,16 @@ class NeuralGI:
 
     def lights(self, config) -> np.ndarray:
         """The ``light`` input of a frame of ``config`` (encoding 4; a FrameConfig, or the dict a dataset stores):
-        where each of its lights is, in the world box the model was trained in (`diviewer.conditioning.frame_lights`)."""
-        from diviewer.conditioning import frame_lights
+        where each of its lights is, in the world box the model was trained in (`diviewer.contract.conditioning.frame_lights`)."""
+        from diviewer.contract.conditioning import frame_lights
 
         return frame_lights(config["lights"] if isinstance(config, dict) else config.lights, self.encoding)
 
     @staticmethod
     def camera(camera, width: int, height: int) -> np.ndarray:
         """The ``camera`` input of a ``width`` x ``height`` frame seen by a scene camera (position, target, up, fov:
-        `diviewer.scene.Camera` or its dict), for ``run`` (`diviewer.conditioning.frame_camera`)."""
-        from diviewer.conditioning import frame_camera
+        `diviewer.scene.Camera` or its dict), for ``run`` (`diviewer.contract.conditioning.frame_camera`)."""
+        from diviewer.contract.conditioning import frame_camera
 
         return frame_camera(camera, (width, height))
 
@@ -326,7 +326,7 @@ class NeuralGI:
         """(N, H, W, 10) or (H, W, 10) float32 raw buffers to radiance of the same leading shape.
 
         Any H x W: frames that are not multiples of the model's stride are edge-padded to it and the
-        output cropped back (`diviewer.padding`, exactly as training pads), with ``edge_guard`` columns a side at
+        output cropped back (`diviewer.contract.padding`, exactly as training pads), with ``edge_guard`` columns a side at
         least. ``light_scale``: each frame's
         light scale, a number or (N,) (`light_scale`); needed by encoding-2 models, ignored by older ones.
         ``camera``: each frame's camera over its own H x W pixels, (CAMERA_PARAMS,) or (N, CAMERA_PARAMS)

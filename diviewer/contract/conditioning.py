@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from diviewer.encoding import Encoding
+from diviewer.contract.encoding import Encoding
 from diviewer.errors import DiviewerError
 
 

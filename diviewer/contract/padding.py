@@ -6,7 +6,7 @@ the two sides (one more pixel at the bottom / right when it is odd), then the ne
 back to the frame. Replicated edges are what a render of a slightly larger view would show first
 (the same surface continues), where zeros would read as "background" to the network.
 
-Training (`diviewer.train.targets`) and the runtime (`diviewer.runtime.NeuralGI.run`) both pad with
+Training (`diviewer.train.targets`) and the runtime (`diviewer.contract.runtime.NeuralGI.run`) both pad with
 `pad_index`: gathering rows and columns through these index arrays works on numpy arrays and on torch
 tensors alike, so the two pad exactly alike.
 

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from diviewer.encoding import input_channel_slices
+from diviewer.contract.encoding import input_channel_slices
 from diviewer.errors import DiviewerError
 from diviewer.paths import models_dir
-from diviewer.runtime import NeuralGI, choose_providers, pack_buffers, read_metadata
+from diviewer.contract.runtime import NeuralGI, choose_providers, pack_buffers, read_metadata
 
 from onnx_models import base_meta, direct_times, random_buffers
 from scenes import facing_plane
@@ -97,12 +97,12 @@ def test_model_for_another_scene_is_refused(tmp_path):
 
 def test_any_size_is_padded_to_the_stride_and_cropped_back():
     """A shipped model (stride 128) at sizes that are not multiples of it: the output has the frame's size, is
-    finite, and each pixel equals that pixel of a run on the frame padded by hand (diviewer.padding)."""
-    from diviewer.padding import crop_nhwc, pad_nhwc
+    finite, and each pixel equals that pixel of a run on the frame padded by hand (diviewer.contract.padding)."""
+    from diviewer.contract.padding import crop_nhwc, pad_nhwc
 
     model = NeuralGI(SHIPPED[0])  # a shipped model: no onnx package needed
     m = model.multiple
-    from diviewer.padding import pad_camera_params
+    from diviewer.contract.padding import pad_camera_params
 
     scale = 1.0 if model.light_scaled else None  # encoding 2 takes each frame's light scale
     view = {"position": (0.0, 1.0, 3.4), "target": (0.0, 1.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 40.0}
@@ -126,9 +126,9 @@ def test_any_size_is_padded_to_the_stride_and_cropped_back():
 
 
 def test_a_model_trained_on_random_width_crops_guards_its_columns_and_a_whole_frame_one_does_not(tmp_path):
-    """The guard comes from the aspect crops the model's recipe record trained with (diviewer.padding.edge_guard);
+    """The guard comes from the aspect crops the model's recipe record trained with (diviewer.contract.padding.edge_guard);
     an explicit ``guard`` overrides it, and a negative one is refused naming the field."""
-    from diviewer.padding import EDGE_GUARD
+    from diviewer.contract.padding import EDGE_GUARD
 
     whole = direct_times(tmp_path / "whole.onnx")
     crops = direct_times(tmp_path / "crops.onnx",
@@ -150,7 +150,7 @@ def _aspect_crops(path):
 def test_the_guard_changes_what_a_crop_trained_network_sees_only_at_widths_the_stride_barely_pads():
     """A shipped crop-trained model: at a width the stride pads by EDGE_GUARD or more a side the guard changes
     nothing; at a width that fills the stride it runs the frame with replicated columns beside it."""
-    from diviewer.padding import EDGE_GUARD
+    from diviewer.contract.padding import EDGE_GUARD
 
     path = next((p for p in SHIPPED if _aspect_crops(p) and read_metadata(p)["encoding"].get("version", 1) < 4), None)
     if path is None:

@@ -1,4 +1,4 @@
-"""diviewer.weights: float32 weights stored as float16 behind a Cast (export --half-weights), or as int8 with
+"""diviewer.contract.weights: float32 weights stored as float16 behind a Cast (export --half-weights), or as int8 with
 per-channel scales (export --int8-weights), and folded back."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ def test_weights_stored_half_fold_back_to_the_float32_graph_with_the_rounded_wei
     from onnx import TensorProto, numpy_helper
 
     from diviewer.bench.onnx_tools import untrained_generator
-    from diviewer.weights import HALF_WEIGHTS_MIN_SIZE, store_weights_half, weights_to_float32
+    from diviewer.contract.weights import HALF_WEIGHTS_MIN_SIZE, store_weights_half, weights_to_float32
     from diviewer.scene import load_scene
 
     src = untrained_generator(16, 2, load_scene("cornell"), 32)
@@ -55,7 +55,7 @@ def test_weights_stored_int8_keep_the_end_layers_float16_and_fold_back_to_a_floa
 
     from diviewer.bench.onnx_tools import untrained_generator
     from diviewer.scene import load_scene
-    from diviewer.weights import int8_weight_names, store_weights_int8, weights_to_float32
+    from diviewer.contract.weights import int8_weight_names, store_weights_int8, weights_to_float32
 
     src = untrained_generator(16, 2, load_scene("cornell"), 32)
     before = {i.name: numpy_helper.to_array(i) for i in src.graph.initializer}

@@ -1,4 +1,4 @@
-"""diviewer.lean: the generator cut out of a self-contained model, and the numpy twins of the per-pixel work."""
+"""diviewer.contract.lean: the generator cut out of a self-contained model, and the numpy twins of the per-pixel work."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from diviewer.lean import LeanUnsupported, albedo_floor, generator_subgraph, lean_model, world_planes_np
-from diviewer.runtime import NeuralGI
+from diviewer.contract.lean import LeanUnsupported, albedo_floor, generator_subgraph, lean_model, world_planes_np
+from diviewer.contract.runtime import NeuralGI
 
 onnx = pytest.importorskip("onnx")
 
@@ -16,8 +16,8 @@ onnx = pytest.importorskip("onnx")
 @pytest.mark.parametrize("name", ["cornell", "sponza"])
 def test_the_cut_is_the_generator_and_the_floor_the_trainers(name):
     from diviewer.data.scales import ALBEDO_FLOOR
-    from diviewer.encoding import Encoding
-    from diviewer.runtime import read_metadata
+    from diviewer.contract.encoding import Encoding
+    from diviewer.contract.runtime import read_metadata
 
     model = onnx.load(f"assets/models/{name}.onnx")
     sub = generator_subgraph(model)

@@ -20,8 +20,8 @@ import math
 
 import numpy as np
 
-from diviewer.encoding import Encoding
-from diviewer.padding import crop_slice, pad_camera_params, pad_nhwc, padded_size
+from diviewer.contract.encoding import Encoding
+from diviewer.contract.padding import crop_slice, pad_camera_params, pad_nhwc, padded_size
 from diviewer.timing import StageTimer
 
 GENERATOR_OPS = frozenset({"Conv", "ConvTranspose", "Relu", "LeakyRelu", "Concat", "Tanh", "Cast", "Mul", "Add",
@@ -198,7 +198,7 @@ class LeanModel:
     # --- what the shaders and numpy share -------------------------------------------------------------------------
     def padding(self, width: int, height: int) -> tuple[tuple[int, int], tuple[int, int]]:
         """The padded size (W', H') of a ``width`` x ``height`` frame and where the frame starts in it (left, top),
-        as the graph path pads it (`diviewer.padding`)."""
+        as the graph path pads it (`diviewer.contract.padding`)."""
         m, g = self.multiple, self.edge_guard
         return ((padded_size(width, m, g), padded_size(height, m)),
                 (crop_slice(width, m, g).start, crop_slice(height, m).start))
@@ -277,8 +277,8 @@ class LeanModel:
 
     def run(self, buffers: np.ndarray, timer: StageTimer | None = None, light_scale=None, camera=None,
             light=None) -> np.ndarray:
-        """`diviewer.runtime.NeuralGI.run`'s contract, the per-pixel work in numpy and the generator in onnxruntime."""
-        from diviewer.runtime import count_nonfinite
+        """`diviewer.contract.runtime.NeuralGI.run`'s contract, the per-pixel work in numpy and the generator in onnxruntime."""
+        from diviewer.contract.runtime import count_nonfinite
 
         single = buffers.ndim == 3
         x = np.ascontiguousarray(buffers[None] if single else buffers, dtype=np.float32)
@@ -298,7 +298,7 @@ class LeanModel:
 
 def lean_model(graph, check: bool = True):
     """``graph`` (a NeuralGI)'s lean model and "" or, where it has none, None and the reason. With ``check`` the lean
-    model must give the graph's radiance on the probe frame (`diviewer.runtime.probe_frame`) to PROBE_TOLERANCE of
+    model must give the graph's radiance on the probe frame (`diviewer.contract.runtime.probe_frame`) to PROBE_TOLERANCE of
     its peak (a frame with background and albedo under the floor, so constants the graph holds are compared)."""
     if getattr(graph, "lean", False):
         return graph, ""
@@ -308,7 +308,7 @@ def lean_model(graph, check: bool = True):
 
 
 def _lean_model(graph, check: bool):
-    from diviewer.runtime import NeuralGI, probe_frame
+    from diviewer.contract.runtime import NeuralGI, probe_frame
 
     from diviewer.errors import DiviewerError
 
