@@ -134,7 +134,8 @@ def format_report(r: dict) -> str:
     for m in r["materials"]:
         notes = [f"albedo {_v(m['albedo'])}"]
         if max(m["emission"]) > 0:
-            notes.append(f"emission {_v(m['emission'])}")
+            notes.append(f"emission {_v(m['emission'])}" + (f" x texture {m['emission_texture']}"
+                                                             if m.get("emission_texture") else ""))
         if m["texture"]:
             notes.append(f"texture {m['texture']}")
         notes += (["alpha cut-out"] if m["masked"] else []) + (["DEFAULT (the file gives none)"] if m["default"] else [])

@@ -1,11 +1,11 @@
 """glTF materials as diffuse Materials, their textures (files, data URIs, buffer views) and the extensions read.
 
-Honoured: the base colour (factor and texture), ``alphaMode``/``alphaCutoff``, ``doubleSided``, ``emissiveFactor``,
-``KHR_materials_emissive_strength`` (multiplies it), ``KHR_texture_transform`` on the base colour texture (the
-offset, rotation and scale are applied to the primitive's uvs) and ``KHR_draco_mesh_compression`` (with the
-``draco`` extra). Any other extension the file lists in ``extensionsUsed`` is named in a warning; one in
-``extensionsRequired`` is refused. An ``emissiveTexture`` is not rendered (emission is one colour per material):
-the material's emission is left out with a warning that gives the texture's mean colour to set instead.
+Honoured: the base colour (factor and texture), ``alphaMode``/``alphaCutoff``, ``doubleSided``, ``emissiveFactor``
+and ``emissiveTexture`` (the factor multiplies the texture), ``KHR_materials_emissive_strength`` (multiplies the
+factor), ``KHR_texture_transform`` on the base colour or emissive texture (the offset, rotation and scale are applied
+to the primitive's uvs; a material whose two textures are placed by different transforms loses its emission, with a
+warning: one uv set is read) and ``KHR_draco_mesh_compression`` (with the ``draco`` extra). Any other extension the
+file lists in ``extensionsUsed`` is named in a warning; one in ``extensionsRequired`` is refused.
 """
 
 from __future__ import annotations
@@ -99,7 +99,7 @@ def uv_transform(d: Doc, ref: dict, field: str) -> np.ndarray | None:
 
 
 def material(d: Doc, buffers: list[bytes], i: int, name: str, base: Path) -> tuple[Material, np.ndarray | None]:
-    """glTF material ``i`` as a Material named ``name``, and its base colour's uv transform (or None)."""
+    """glTF material ``i`` as a Material named ``name``, and its textures' uv transform (or None)."""
     m = d.array("materials")[i]
     where = f"materials[{i}]"
     pbr = d.table(m, "pbrMetallicRoughness", f"{where}.pbrMetallicRoughness")
@@ -131,20 +131,34 @@ def material(d: Doc, buffers: list[bytes], i: int, name: str, base: Path) -> tup
         field = f"{where}.extensions.KHR_materials_emissive_strength"
         emission = emission * d.num(d.table(exts, "KHR_materials_emissive_strength", field), "emissiveStrength",
                                     f"{field}.emissiveStrength", 1.0, lo=0.0)
+    emission_texture, emission_source = None, ""
     if "emissiveTexture" in m and emission.max() > 0.0:
         field = f"{where}.emissiveTexture"
-        rgb, _, src = _texture_ref(d, buffers, d.table(m, "emissiveTexture", field), base, field)
-        mean = rgb.reshape(-1, 3).mean(axis=0) * emission
-        note_warning(f"{d.file}: {field}: material '{name}' glows by a texture ({src}), which diviewer does not "
-                     f"render (emission is one colour per material): its emission is left out. To make it glow "
-                     f"evenly, set [materials.{toml_key(name)}] emission = [{', '.join(f'{x:.4g}' for x in mean)}] "
-                     f"(the texture's mean times emissiveFactor)")
-        emission = np.zeros(3)
+        ref = d.table(m, "emissiveTexture", field)
+        rgb, _, src = _texture_ref(d, buffers, ref, base, field)
+        own = uv_transform(d, ref, field)
+        if "baseColorTexture" not in pbr:
+            emission_texture, emission_source, transform = rgb, src, own  # the uvs take the emission's transform
+        elif _same_transform(own, transform):
+            emission_texture, emission_source = rgb, src
+        else:
+            note_warning(f"{d.file}: {field}: material '{name}' places its emissive "
+                         f"texture ({src}) with another transform than its base colour texture, and diviewer reads one "
+                         f"uv set per material: its emission is left out. Export both textures with the same "
+                         f"transform (or bake the emission onto the base colour's uvs)")
+            emission = np.zeros(3)
     if not np.all(np.isfinite(emission)) or emission.max() > 3.0e38:
         raise d.err(f"{where}.emissiveFactor", "emissiveFactor times emissiveStrength is beyond float32")
     return Material(name, albedo=factor[:3], emission=tuple(map(float, emission)), texture=texture,
                     texture_source=source, alpha=alpha, alpha_cutoff=cutoff if mode == "MASK" else 0.5,
+                    emission_texture=emission_texture, emission_texture_source=emission_source,
                     double_sided=d.flag(m, "doubleSided", f"{where}.doubleSided", False)), transform
+
+
+def _same_transform(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """Whether two KHR_texture_transform matrices (None: none, the identity) move uvs alike."""
+    eye = np.eye(3)
+    return bool(np.allclose(eye if a is None else a, eye if b is None else b, rtol=0.0, atol=1e-9))
 
 
 def toml_key(name: str) -> str:

@@ -61,7 +61,8 @@ def light_scale(scene, config) -> float:
     """The frame's light scale: how much light enters it, from its light sources (never from an image).
 
     Sum over the lights of luminance(color) x irradiance (a sun) or x intensity (a point light), plus the
-    emission luminance of every emissive material the frame's objects use, plus the sky's (the scene's
+    emission luminance of every emissive material the frame's objects use (a textured emitter's brightest texel
+    times its factor: `Material.peak_emission`, so it scales as a uniform one of that radiance), plus the sky's (the scene's
     ambient radiance, an emitter of the path tracer). Encoding version 2 divides the network's radiance
     input by it and multiplies its output back, so GI is linear in the light by construction: zero light
     gives exactly zero, twice the light twice the frame. A camera looking into a shaded corner sees no
@@ -77,7 +78,7 @@ def light_scale(scene, config) -> float:
     for name in sorted(used):
         m = scene.materials.get(name)
         if m is not None and m.is_emissive:
-            s += luminance(m.emission)
+            s += luminance(m.peak_emission)
     s += luminance(scene.ambient)
     return s
 

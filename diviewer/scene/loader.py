@@ -161,7 +161,8 @@ def _unused_overrides(root: TomlTable, path: Path | None, from_gltf: set[str], u
 
 def _material(key: str, t: TomlTable, base: Path, path: Path | None, over: Material | None = None) -> Material:
     """One [materials.KEY] table: albedo, emission, an optional texture and its alpha cut-out, double_sided.
-    ``over``: the glTF material of that name, whose values stand where the table gives none."""
+    ``over``: the glTF material of that name, whose values stand where the table gives none (its emission texture
+    stays: ``emission`` replaces the factor that multiplies it)."""
     if over is None:
         over = Material(key, double_sided=True)  # a scene file's own material: both faces by default
         texture, alpha, tex_src, cutoff = None, None, "", 0.5
@@ -186,6 +187,7 @@ def _material(key: str, t: TomlTable, base: Path, path: Path | None, over: Mater
     return Material(key, albedo=t.vec("albedo", 3, over.albedo, lo=0.0, hi=1.0),
                     emission=t.vec("emission", 3, over.emission, lo=0.0),
                     texture=texture, texture_source=tex_src, alpha=alpha, alpha_cutoff=cutoff,
+                    emission_texture=over.emission_texture, emission_texture_source=over.emission_texture_source,
                     double_sided=t.bool("double_sided", over.double_sided))
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -11,6 +12,7 @@ from typing import Union
 import numpy as np
 
 from diviewer.scene import camera as cam
+from diviewer.scene.colour import LUMINANCE_WEIGHTS
 
 Vec3 = tuple[float, float, float]
 
@@ -50,7 +52,8 @@ class Material:
     albedo: Vec3 = (0.8, 0.8, 0.8)
     """Diffuse reflectance (linear RGB, each in [0, 1]); multiplies the texture when there is one."""
     emission: Vec3 = (0.0, 0.0, 0.0)
-    """Emitted radiance (linear RGB, W/(m^2 sr)); zero for non-emitters."""
+    """Emitted radiance (linear RGB, W/(m^2 sr)); zero for non-emitters. Multiplies ``emission_texture`` when there
+    is one (glTF's emissiveFactor)."""
     texture: np.ndarray | None = None
     """(H, W, 3) float32 linear base-colour texture, top row first, or None."""
     texture_source: str = ""
@@ -59,6 +62,11 @@ class Material:
     """(H, W) float32 cut-out mask in [0, 1] (the base colour's alpha, same size as ``texture``), or None:
     opaque. Where the filtered alpha is below ``alpha_cutoff`` the surface is not there (glTF MASK)."""
     alpha_cutoff: float = 0.5
+    emission_texture: np.ndarray | None = None
+    """(H, W, 3) float32 linear emission texture (glTF's emissiveTexture, sRGB-decoded as the base colour is), top
+    row first, sampled at the same uvs as ``texture``; or None: the emission is ``emission`` all over."""
+    emission_texture_source: str = ""
+    """The file the emission texture came from."""
     double_sided: bool = True
     """Both faces are surfaces. False (glTF's ``doubleSided``, false unless said): a back face is the inside of a
     closed surface, which the camera does not see, so the rasterizer's camera pass culls it; shadows, VXGI and the
@@ -67,6 +75,15 @@ class Material:
     @property
     def is_emissive(self) -> bool:
         return max(self.emission) > 0.0
+
+    @functools.cached_property
+    def peak_emission(self) -> Vec3:
+        """The brightest emitted radiance (linear RGB): ``emission`` times the emission texture's texel of the
+        highest luminance, or ``emission`` itself without a texture."""
+        if self.emission_texture is None:
+            return self.emission
+        texels = self.emission_texture.reshape(-1, 3).astype(np.float64) * np.asarray(self.emission, np.float64)
+        return _vec3(texels[int(np.argmax(texels @ LUMINANCE_WEIGHTS))] if len(texels) else np.zeros(3))
 
     @property
     def is_masked(self) -> bool:

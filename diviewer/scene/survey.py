@@ -214,9 +214,10 @@ def survey(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings(), near
         used[o.material] = used.get(o.material, 0) + 1
     materials = []
     for name, m in scene.materials.items():
+        glow = None if m.emission_texture is None else m.emission_texture_source or "(in memory)"
         materials.append({"name": name, "albedo": _r(m.albedo), "emission": _r(m.emission),
-                          "texture": m.texture_source or None, "masked": m.is_masked, "double_sided": m.double_sided,
-                          "default": name == DEFAULT_MATERIAL, "objects": used.get(name, 0)})
+                          "texture": m.texture_source or None, "emission_texture": glow, "masked": m.is_masked,
+                          "double_sided": m.double_sided, "default": name == DEFAULT_MATERIAL, "objects": used.get(name, 0)})
     textures = [{"material": name, "source": m.texture_source or "(in memory)",
                  "size": [int(m.texture.shape[1]), int(m.texture.shape[0])]}
                 for name, m in scene.materials.items() if m.texture is not None]

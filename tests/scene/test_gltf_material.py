@@ -1,5 +1,5 @@
-"""glTF materials: KHR_texture_transform on the uvs, KHR_materials_emissive_strength, an emissive texture left out
-with a warning (never a silent glow), unhonoured extensions named, the default material, and TOML overrides."""
+"""glTF materials: KHR_texture_transform on the uvs, KHR_materials_emissive_strength, an emissive texture kept as a
+texture (never flattened to a uniform glow), unhonoured extensions named, the default material, and TOML overrides."""
 
 from __future__ import annotations
 
@@ -50,15 +50,59 @@ def test_emissive_strength_multiplies_the_emissive_factor(tmp_path):
     assert _load(tmp_path, edit).materials["stone"].emission == (8.0, 4.0, 2.0)
 
 
-def test_an_emissive_texture_is_left_out_with_a_warning_that_gives_its_mean(tmp_path):
+CHECKER_RGB = srgb_to_linear(np.array([200, 120, 60]) / 255.0)  # tex.png's colour, decoded as a base colour is
+
+
+def test_an_emissive_texture_is_kept_as_a_texture_times_its_factor(tmp_path, recwarn):
     def edit(doc):
-        doc["materials"][1].update(emissiveFactor=[1.0, 1.0, 0.5], emissiveTexture={"index": 0})
-    with pytest.warns(SceneWarning, match=r"materials\[1\]\.emissiveTexture: material 'stone' glows by a texture"):
+        doc["materials"][0].update(emissiveFactor=[1.0, 1.0, 0.5], emissiveTexture={"index": 0})
+    leaf = _load(tmp_path, edit).materials["leaf"]
+    assert leaf.emission == (1.0, 1.0, 0.5)  # the factor, not a uniform glow
+    assert leaf.emission_texture.shape == (8, 8, 3) and leaf.emission_texture_source.endswith("tex.png")
+    np.testing.assert_allclose(leaf.emission_texture.reshape(-1, 3), np.broadcast_to(CHECKER_RGB, (64, 3)), atol=1e-6)
+    assert not [w for w in recwarn if "emissive" in str(w.message)]
+
+
+def test_an_emissive_texture_under_a_zero_factor_is_not_read(tmp_path):
+    def edit(doc):
+        doc["materials"][0]["emissiveTexture"] = {"index": 0}  # glTF's emissiveFactor defaults to black
+    leaf = _load(tmp_path, edit).materials["leaf"]
+    assert leaf.emission == (0.0, 0.0, 0.0) and leaf.emission_texture is None and not leaf.is_emissive
+
+
+def test_the_emissive_textures_transform_moves_the_uvs_of_a_material_without_a_base_colour_texture(tmp_path):
+    ext = {"offset": [0.5, 0.25], "scale": [2.0, 3.0]}
+
+    def edit(doc):
+        doc["extensionsUsed"] = ["KHR_texture_transform"]
+        leaf = doc["materials"][0]
+        del leaf["pbrMetallicRoughness"]["baseColorTexture"], leaf["alphaMode"]
+        leaf.update(emissiveFactor=[2.0, 2.0, 2.0],
+                    emissiveTexture={"index": 0, "extensions": {"KHR_texture_transform": ext}})
+    scene = _load(tmp_path, edit)
+    assert scene.materials["leaf"].emission_texture is not None and scene.materials["leaf"].texture is None
+    assert np.allclose(_gltf_uv(scene), QUAD_UV * (2.0, 3.0) + (0.5, 0.25), atol=1e-6)
+
+
+def test_an_emissive_texture_placed_unlike_the_base_colour_is_left_out_with_a_warning(tmp_path):
+    def edit(doc):
+        doc["extensionsUsed"] = ["KHR_texture_transform"]
+        doc["materials"][0].update(emissiveFactor=[1.0, 1.0, 1.0], emissiveTexture={
+            "index": 0, "extensions": {"KHR_texture_transform": {"scale": [2.0, 2.0]}}})
+    with pytest.warns(SceneWarning, match=r"materials\[0\]\.emissiveTexture: material 'leaf' places its emissive "
+                                          r"texture .* with another transform than its base colour texture"):
         scene = _load(tmp_path, edit)
-    assert scene.materials["stone"].emission == (0.0, 0.0, 0.0)  # not a uniform glow
-    (msg,) = [w for w in scene.warnings if "emissiveTexture" in w]
-    mean = srgb_to_linear(np.array([200, 120, 60]) / 255.0) * (1.0, 1.0, 0.5)  # the checker's colour
-    assert "[materials.stone] emission = [" + ", ".join(f"{x:.4g}" for x in mean) + "]" in msg
+    leaf = scene.materials["leaf"]
+    assert leaf.emission == (0.0, 0.0, 0.0) and leaf.emission_texture is None  # never a uniform glow
+    assert np.allclose(_gltf_uv(scene), QUAD_UV, atol=1e-6)  # the base colour's (no) transform places the uvs
+
+
+def test_a_toml_emission_replaces_the_factor_and_keeps_the_emissive_texture(tmp_path):
+    def edit(doc):
+        doc["materials"][0].update(emissiveFactor=[1.0, 1.0, 0.5], emissiveTexture={"index": 0})
+    leaf = _load(tmp_path, edit, SCENE_TOML + "\n[materials.leaf]\nemission = [4.0, 2.0, 1.0]\n").materials["leaf"]
+    assert leaf.emission == (4.0, 2.0, 1.0) and leaf.emission_texture is not None
+    assert leaf.peak_emission == pytest.approx(tuple(CHECKER_RGB * (4.0, 2.0, 1.0)))
 
 
 def test_unhonoured_extensions_are_named_and_required_ones_refused(tmp_path):

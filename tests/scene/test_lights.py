@@ -45,6 +45,28 @@ def test_emitters_and_the_sky_count():
     assert light_scale(scene, scene.default) == pytest.approx(2.0 + 0.1)  # only the emitters in the frame
 
 
+def test_a_textured_emitter_scales_as_a_uniform_one_of_its_brightest_texel():
+    """Encoding 2's light scale counts a textured emitter by factor x its brightest texel (by luminance), so a
+    half-dark lamp scales as the uniform lamp its bright half is."""
+    from diviewer.scene.loader import parse_scene
+    from diviewer.scene.model import Material
+
+    data = {"camera": {"position": [0, 0, 0], "target": [0, 0, -1], "fov": 40},
+            "materials": {"lamp": {"albedo": [0.5, 0.5, 0.5], "emission": [2.0, 1.0, 4.0]}},
+            "meshes": {"box": {"shape": "box", "size": [1, 1, 1]}},
+            "objects": [{"name": "lamp", "mesh": "box", "material": "lamp"}], "lights": []}
+    scene = parse_scene(data)
+    texture = np.zeros((2, 4, 3), np.float32)
+    texture[0, 1] = (0.5, 0.25, 0.5)   # times the factor (1, 0.25, 2): the brightest texel, luminance 0.54
+    texture[1, 3] = (0.0, 0.0, 1.0)    # (0, 0, 4): the most blue, luminance 0.29 (blue weighs 0.07)
+    lamp = dataclasses.replace(scene.materials["lamp"], emission_texture=texture)
+    textured = dataclasses.replace(scene, materials={"lamp": lamp})
+    assert lamp.peak_emission == (1.0, 0.25, 2.0)
+    assert light_scale(textured, scene.default) == pytest.approx(luminance((1.0, 0.25, 2.0)))
+    uniform = dataclasses.replace(scene, materials={"lamp": Material("lamp", emission=(1.0, 0.25, 2.0))})
+    assert light_scale(textured, scene.default) == pytest.approx(light_scale(uniform, uniform.default))
+
+
 def test_light_params_give_suns_directions_and_point_lights_positions_in_the_world_box():
     """Encoding 4's light input: a sun's unit direction, a point light's position normalised (and clipped) to the
     world box, from the scene's light objects or a dataset's dicts alike; strength plays no part."""
