@@ -33,6 +33,8 @@ uniform vec3 u_albedo;
 uniform vec3 u_emission;
 uniform bool u_has_texture;
 uniform sampler2D u_albedo_map;  // linear RGB, alpha = cut-out mask (1 where the material has none)
+uniform bool u_has_emission_map;
+uniform sampler2D u_emission_map;  // linear RGB emission texture; u_emission multiplies it
 #if defined ALPHA_TEST
 uniform float u_alpha_cutoff;
 // The cut-out test reads the nearest texel of the full-resolution mask, as the path tracer does
@@ -61,7 +63,9 @@ void main() {
     out_depth = v_depth;
     out_normal = vec4(n, 1.0);
     out_albedo = vec4(albedo, 1.0);
-    out_emission = vec4(u_emission, 1.0);
+    vec3 emission = u_emission;
+    if (u_has_emission_map) emission *= texture(u_emission_map, v_uv).rgb;
+    out_emission = vec4(emission, 1.0);
 }
 
 #endif

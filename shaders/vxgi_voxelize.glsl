@@ -69,6 +69,8 @@ uniform vec3 u_albedo;
 uniform vec3 u_emission;
 uniform bool u_has_texture;
 uniform sampler2D u_albedo_map;
+uniform bool u_has_emission_map;
+uniform sampler2D u_emission_map;  // u_emission multiplies it
 
 layout(std430, binding = 0) buffer Counter { uint count; uint capacity; };
 // Three vec4 per fragment: (world position, voxel index), (normal, albedo.rg), (emission, albedo.b).
@@ -84,11 +86,13 @@ void main() {
     vec3 albedo = u_albedo;
     // Derivatives here are per voxel, so the mip level matches the voxel's footprint on the texture.
     if (u_has_texture) albedo *= texture(u_albedo_map, g_uv).rgb;
+    vec3 emission = u_emission;
+    if (u_has_emission_map) emission *= texture(u_emission_map, g_uv).rgb;
     uint index = uint(v.x + u_res * (v.y + u_res * v.z));
     frags[3u * slot] = vec4(g_world, uintBitsToFloat(index));
     // Albedo as half floats in the two spare components (8-bit would round 0.73 to 0.729).
     frags[3u * slot + 1u] = vec4(normalize(g_normal), uintBitsToFloat(packHalf2x16(albedo.rg)));
-    frags[3u * slot + 2u] = vec4(u_emission, uintBitsToFloat(packHalf2x16(vec2(albedo.b, 0.0))));
+    frags[3u * slot + 2u] = vec4(emission, uintBitsToFloat(packHalf2x16(vec2(albedo.b, 0.0))));
 }
 
 #endif

@@ -98,3 +98,39 @@ def write_tiny_scene(folder) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(TINY_SCENE_TOML)
     return path
+
+
+def emissive_tile(emission=(2.0, 1.0, 0.5), albedo=(0.0, 0.0, 0.0)):
+    """A thin closed slab (2 x 2 x 0.02, closed: Mitsuba's area emitters need it) facing a camera 2.5 away, its
+    material emitting ``emission`` times a texture whose left half is 1 and right half 0.25, on a grey wall.
+
+    The slab's front face has uvs (0, 0) at its bottom-left to (1, 1) at its top-right; its other faces get (0, 0).
+    """
+    import dataclasses
+
+    import numpy as np
+
+    from diviewer.scene.model import Mesh, Object
+
+    corners = np.array([[x, y, z] for z in (0.01, -0.01) for y in (-1, 1) for x in (-1, 1)], np.float32)
+    quads = [((0, 1, 3, 2), (0, 0, 1)), ((5, 4, 6, 7), (0, 0, -1)), ((4, 0, 2, 6), (-1, 0, 0)),
+             ((1, 5, 7, 3), (1, 0, 0)), ((2, 3, 7, 6), (0, 1, 0)), ((4, 5, 1, 0), (0, -1, 0))]
+    verts, normals, uvs, faces = [], [], [], []
+    for k, (quad, normal) in enumerate(quads):
+        verts += [corners[i] for i in quad]
+        normals += [normal] * 4
+        uvs += [(0, 0), (1, 0), (1, 1), (0, 1)] if k == 0 else [(0, 0)] * 4
+        faces += [(4 * k, 4 * k + 1, 4 * k + 2), (4 * k, 4 * k + 2, 4 * k + 3)]
+    tile = Mesh("tile", np.array(verts, np.float32), np.array(normals, np.float32), np.array(faces, np.uint32),
+                uvs=np.array(uvs, np.float32))
+    texture = np.full((8, 16, 3), 0.25, np.float32)
+    texture[:, :8] = 1.0
+    scene = parse_scene({
+        "camera": {"position": [0, 0, 2.5], "target": [0, 0, 0], "fov": 60},
+        "materials": {"glow": {"albedo": list(albedo), "emission": list(emission)}, "grey": {"albedo": [0.5] * 3}},
+        "meshes": {"wall": {"shape": "box", "size": [8, 8, 0.1]}},
+        "objects": [{"name": "wall", "mesh": "wall", "material": "grey", "position": [0, 0, -1]}]})
+    glow = dataclasses.replace(scene.materials["glow"], emission_texture=texture)
+    default = dataclasses.replace(scene.default, objects=(*scene.default.objects, Object("tile", "tile", "glow")))
+    return dataclasses.replace(scene, meshes={**scene.meshes, "tile": tile}, materials={**scene.materials, "glow": glow},
+                               default=default)

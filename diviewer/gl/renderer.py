@@ -283,6 +283,11 @@ class Renderer:
                 set_uniform(prog, "u_albedo", tuple(mat.albedo))
                 set_uniform(prog, "u_emission", tuple(mat.emission))
                 set_uniform(prog, "u_has_texture", tex is not None)
+                glow = self.gpu.emission_textures.get(mat_name)
+                set_uniform(prog, "u_has_emission_map", glow is not None)
+                if glow is not None:
+                    glow.use(location=1)
+                    set_uniform(prog, "u_emission_map", 1)
             if tex is not None and (view is not None or masked):
                 tex.use(location=0)
                 set_uniform(prog, "u_albedo_map", 0)

@@ -111,6 +111,9 @@ class GpuScene:
         self.meshes = {k: GpuMesh(ctx, m) for k, m in meshes.items()}
         self.textures = {k: upload_texture(ctx, m.texture, m.alpha) for k, m in materials.items()
                          if m.texture is not None}
+        self.emission_textures = {k: upload_texture(ctx, m.emission_texture) for k, m in materials.items()
+                                  if m.emission_texture is not None}
+        """Each textured emitter's emission texture (the G-buffer and VXGI multiply the material's emission by it)."""
         self._sources: dict[str, object] = {**meshes, **{f"material:{k}": m for k, m in materials.items()}}
         """What each GPU copy was made from, so ``sync`` uploads only what changed."""
         self.static: list[tuple[str, GpuMesh]] = []
@@ -141,14 +144,18 @@ class GpuScene:
             if self._sources.get(key) is not mesh:
                 self.add_mesh(ctx, mesh)
         for key, mat in scene.materials.items():
-            if mat.texture is not None and self._sources.get(f"material:{key}") is not mat:
-                if key in self.textures:
-                    self.textures[key].release()
-                self.textures[key] = upload_texture(ctx, mat.texture, mat.alpha)
-                self._sources[f"material:{key}"] = mat
+            if self._sources.get(f"material:{key}") is mat:
+                continue
+            for textures, image, alpha in ((self.textures, mat.texture, mat.alpha),
+                                           (self.emission_textures, mat.emission_texture, None)):
+                if key in textures:
+                    textures.pop(key).release()
+                if image is not None:
+                    textures[key] = upload_texture(ctx, image, alpha)
+            self._sources[f"material:{key}"] = mat
 
     def release(self) -> None:
         for m in (*self.meshes.values(), *(g for _, g in self.static)):
             m.release()
-        for t in self.textures.values():
+        for t in (*self.textures.values(), *self.emission_textures.values()):
             t.release()

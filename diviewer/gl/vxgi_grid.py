@@ -65,6 +65,11 @@ class VoxelGridPasses:
                 if tex is not None:
                     tex.use(location=0)
                     set_uniform(prog, "u_albedo_map", 0)
+                glow = self.renderer.gpu.emission_textures.get(obj.material)
+                set_uniform(prog, "u_has_emission_map", glow is not None)
+                if glow is not None:
+                    glow.use(location=1)
+                    set_uniform(prog, "u_emission_map", 1)
                 self.renderer.gpu.meshes[obj.mesh].vao(prog).render(moderngl.TRIANGLES)
             ctx.memory_barrier()
             count = int(np.frombuffer(lst.header.read(4), dtype="u4")[0])

@@ -162,24 +162,7 @@ def to_mitsuba_dict(scene: Scene, config: FrameConfig, width: int, height: int, 
         mat = scene.materials[obj.material]
         mesh = scene.meshes[obj.mesh]
         if obj.material not in bsdfs:
-            if mat.texture is not None:
-                # The albedo multiplies the texture; linear scaling commutes with bilinear filtering.
-                tex = np.ascontiguousarray(mat.texture * np.asarray(mat.albedo, np.float32), dtype=np.float32)
-                refl = {"type": "bitmap", "data": mi.TensorXf(tex), "raw": True, "wrap_mode": "repeat",
-                        "filter_type": "bilinear"}
-            else:
-                refl = _rgb(mat.albedo)
-            bsdf = {"type": "twosided", "material": {"type": "diffuse", "reflectance": refl}}
-            if mat.is_masked:
-                # Alpha-tested (glTF MASK): opaque where the alpha passes the cutoff, absent elsewhere.
-                # Nearest texels of the binary mask: Mitsuba reads a fractional opacity as partial
-                # coverage, GL's test is binary; for a binary mask the edge of GL's test on the bilinear
-                # alpha is the texel boundary, where nearest lookup puts it too.
-                opacity = np.ascontiguousarray((mat.alpha >= mat.alpha_cutoff)[..., None], dtype=np.float32)
-                bsdf = {"type": "mask", "material": bsdf,
-                        "opacity": {"type": "bitmap", "data": mi.TensorXf(opacity), "raw": True,
-                                    "wrap_mode": "repeat", "filter_type": "nearest"}}
-            bsdfs[obj.material] = mi.load_dict(bsdf)
+            bsdfs[obj.material] = mi.load_dict(_bsdf(mi, mat))
         m = obj.matrix()
         v = mesh.vertices.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
         n = mesh.normals.astype(np.float64) @ cam.normal_matrix(m).T
@@ -190,16 +173,45 @@ def to_mitsuba_dict(scene: Scene, config: FrameConfig, width: int, height: int, 
         uvs = None
         if mesh.uvs is not None:
             uvs = np.stack([mesh.uvs[:, 0], 1.0 - mesh.uvs[:, 1]], axis=1)
-        elif mat.texture is not None:
+        elif mat.texture is not None or mat.emission_texture is not None:
             # GL feeds uv = (0, 0) to meshes without uvs; Mitsuba would use barycentrics instead.
             uvs = np.tile(np.float32([0.0, 1.0]), (len(mesh.vertices), 1))
-        emitter = mi.load_dict({"type": "area", "radiance": _rgb(mat.emission)}) if mat.is_emissive else None
+        emitter = mi.load_dict({"type": "area", "radiance": _radiance(mi, mat)}) if mat.is_emissive else None
         out[f"object_{i}"] = _mesh(mi, obj.name, v, n, faces, uvs, bsdfs[obj.material], emitter)
     for i, light in enumerate(config.lights):
         out[f"light_{i}"] = _emitter(light)
     if max(scene.ambient) > 0.0:
         out["ambient"] = {"type": "constant", "radiance": _rgb(scene.ambient)}
     return out
+
+
+def _bitmap(mi, data: np.ndarray, filter_type: str = "bilinear") -> dict:
+    """A ``bitmap`` texture of raw linear values (top row first), repeating as GL's textures do."""
+    return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(data, dtype=np.float32)), "raw": True,
+            "wrap_mode": "repeat", "filter_type": filter_type}
+
+
+def _bsdf(mi, mat) -> dict:
+    """A material's two-sided diffuse BSDF: albedo times its texture, cut out by its alpha mask."""
+    # The albedo multiplies the texture; linear scaling commutes with bilinear filtering.
+    refl = _rgb(mat.albedo) if mat.texture is None else _bitmap(mi, mat.texture * np.asarray(mat.albedo, np.float32))
+    bsdf = {"type": "twosided", "material": {"type": "diffuse", "reflectance": refl}}
+    if mat.is_masked:
+        # Alpha-tested (glTF MASK): opaque where the alpha passes the cutoff, absent elsewhere.
+        # Nearest texels of the binary mask: Mitsuba reads a fractional opacity as partial
+        # coverage, GL's test is binary; for a binary mask the edge of GL's test on the bilinear
+        # alpha is the texel boundary, where nearest lookup puts it too.
+        bsdf = {"type": "mask", "material": bsdf,
+                "opacity": _bitmap(mi, (mat.alpha >= mat.alpha_cutoff)[..., None], "nearest")}
+    return bsdf
+
+
+def _radiance(mi, mat) -> dict:
+    """An emissive material's radiance: its emission, times its emission texture (raw linear values at the mesh's
+    uvs, as the G-buffer samples it) where it has one."""
+    if mat.emission_texture is None:
+        return _rgb(mat.emission)
+    return _bitmap(mi, mat.emission_texture * np.asarray(mat.emission, np.float32))
 
 
 def _emitter(light) -> dict:

@@ -12,7 +12,7 @@ from diviewer.gl.display import DisplayPass
 from diviewer.gl.renderer import Renderer, RenderSettings
 from diviewer.scene import camera as cam
 from diviewer.scene.model import Mesh
-from scenes import facing_plane
+from scenes import emissive_tile, facing_plane
 
 RES = 48
 
@@ -155,6 +155,33 @@ def test_emission_is_added_to_direct(ctx):
     scene = dataclasses.replace(scene, materials={**scene.materials, "m": mat})
     f = render(ctx, scene)
     np.testing.assert_allclose(f["direct"], np.broadcast_to([1.5, 0.0, 3.0], f["direct"].shape), rtol=1e-6)
+
+
+def test_an_emission_texture_shows_its_pattern_in_the_emission_and_direct_buffers(ctx):
+    """The G-buffer writes the material's emission times its emission texture at the pixel's uv: a tile whose
+    texture is 1 on its left half and 0.25 on its right glows with the factor there and a quarter of it here."""
+    scene = emissive_tile(emission=(2.0, 1.0, 0.5))
+    plain = dataclasses.replace(scene.materials["glow"], emission_texture=None)
+    r = Renderer(ctx, scene, 64, 64)
+    try:
+        f = r.frame()
+        emission = r.read("emission")
+        r.scene = dataclasses.replace(scene, materials={**scene.materials, "glow": plain})
+        r.gpu.sync(ctx, r.scene)  # as the viewer does on a material's change: the texture goes
+        assert "glow" not in r.gpu.emission_textures
+        r.frame()
+        uniform = r.read("emission")
+    finally:
+        r.release()
+    tile = (f["albedo"].max(-1) == 0.0) & (f["depth"] > 0)
+    cols = np.nonzero(tile.any(axis=0))[0]
+    # a third each side, clear of the seam and of the edges (where the repeating texture wraps around)
+    left, right, rows = cols[2:len(cols) // 3], cols[-(len(cols) // 3):-2], np.nonzero(tile.any(axis=1))[0][2:-2]
+    for side, want in ((left, [2.0, 1.0, 0.5]), (right, [0.5, 0.25, 0.125])):
+        patch = emission[rows][:, side]
+        np.testing.assert_allclose(patch, np.broadcast_to(want, patch.shape), rtol=1e-3)
+        np.testing.assert_allclose(f["direct"][rows][:, side], patch, rtol=1e-6)
+    np.testing.assert_allclose(uniform[tile], np.broadcast_to([2.0, 1.0, 0.5], (tile.sum(), 3)))
 
 
 def test_lights_and_emission_add_up(ctx):
