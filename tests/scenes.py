@@ -102,9 +102,10 @@ def write_tiny_scene(folder) -> Path:
 
 def emissive_tile(emission=(2.0, 1.0, 0.5), albedo=(0.0, 0.0, 0.0)):
     """A thin closed slab (2 x 2 x 0.02, closed: Mitsuba's area emitters need it) facing a camera 2.5 away, its
-    material emitting ``emission`` times a texture whose left half is 1 and right half 0.25, on a grey wall.
+    material emitting ``emission`` times a 16 x 8 texture whose left half is 1 and right half 0.25, on a grey wall.
 
-    The slab's front face has uvs (0, 0) at its bottom-left to (1, 1) at its top-right; its other faces get (0, 0).
+    Every vertex's uv follows its x and y: u from the first texel's centre (x = -1) to the last's (x = 1), v from 0
+    (bottom) to 1 (top); so each face glows by its x alone, the texture never wraps, and the seam is at x = 0.
     """
     import dataclasses
 
@@ -115,14 +116,12 @@ def emissive_tile(emission=(2.0, 1.0, 0.5), albedo=(0.0, 0.0, 0.0)):
     corners = np.array([[x, y, z] for z in (0.01, -0.01) for y in (-1, 1) for x in (-1, 1)], np.float32)
     quads = [((0, 1, 3, 2), (0, 0, 1)), ((5, 4, 6, 7), (0, 0, -1)), ((4, 0, 2, 6), (-1, 0, 0)),
              ((1, 5, 7, 3), (1, 0, 0)), ((2, 3, 7, 6), (0, 1, 0)), ((4, 5, 1, 0), (0, -1, 0))]
-    verts, normals, uvs, faces = [], [], [], []
-    for k, (quad, normal) in enumerate(quads):
-        verts += [corners[i] for i in quad]
-        normals += [normal] * 4
-        uvs += [(0, 0), (1, 0), (1, 1), (0, 1)] if k == 0 else [(0, 0)] * 4
-        faces += [(4 * k, 4 * k + 1, 4 * k + 2), (4 * k, 4 * k + 2, 4 * k + 3)]
-    tile = Mesh("tile", np.array(verts, np.float32), np.array(normals, np.float32), np.array(faces, np.uint32),
-                uvs=np.array(uvs, np.float32))
+    verts = np.array([corners[i] for quad, _ in quads for i in quad], np.float32)
+    normals = np.repeat(np.array([n for _, n in quads], np.float32), 4, axis=0)
+    uvs = np.stack([1 / 32 + (verts[:, 0] + 1) / 2 * 15 / 16, (verts[:, 1] + 1) / 2], axis=1).astype(np.float32)
+    faces = np.array([(4 * k + a, 4 * k + b, 4 * k + c) for k in range(6) for a, b, c in ((0, 1, 2), (0, 2, 3))],
+                     np.uint32)
+    tile = Mesh("tile", verts, normals, faces, uvs=uvs)
     texture = np.full((8, 16, 3), 0.25, np.float32)
     texture[:, :8] = 1.0
     scene = parse_scene({

@@ -15,6 +15,7 @@ from diviewer.scene import camera as cam
 from diviewer.scene import load_scene, sample_config
 from diviewer.scene.loader import parse_scene
 from diviewer.scene.model import PointLight
+from scenes import emissive_tile
 
 RES = 32
 GRID = VXGISettings(resolution=32, trace_scale=1)
@@ -130,6 +131,19 @@ def glowing_box():
                     for i, (p, _) in enumerate(walls)],
         "lights": [],
     })
+
+
+def test_the_grid_holds_an_emission_textures_pattern(ctx):
+    """Voxelization reads the emission texture per fragment: the tile's left half (texture 1) puts 4x the radiance
+    of its right half (0.25) into the grid; without the texture both halves hold the same."""
+    scene = emissive_tile(emission=(2.0, 1.0, 0.5))
+    plain = dataclasses.replace(scene, materials={**scene.materials, "glow": dataclasses.replace(
+        scene.materials["glow"], emission_texture=None)})
+    for s, ratio in ((scene, 4.0), (plain, 1.0)):
+        red = run_vxgi(ctx, s, names=())[1]["grid"][..., 0]  # (z, y, x); the grid is centred on x = 0, the seam
+        half = red.shape[2] // 2
+        assert red.max() == pytest.approx(2.0)
+        assert red[..., :half].sum() == pytest.approx(ratio * red[..., half:].sum(), rel=1e-3)
 
 
 @pytest.mark.parametrize("resolution", [32, 64])
