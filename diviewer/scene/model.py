@@ -78,8 +78,8 @@ class Material:
 
     @functools.cached_property
     def peak_emission(self) -> Vec3:
-        """The brightest emitted radiance (linear RGB): ``emission`` times the emission texture's texel of the
-        highest luminance, or ``emission`` itself without a texture."""
+        """The brightest emitted radiance (linear RGB): of ``emission`` times each texel of the emission texture, the
+        one of the highest luminance; ``emission`` itself without a texture."""
         if self.emission_texture is None:
             return self.emission
         texels = self.emission_texture.reshape(-1, 3).astype(np.float64) * np.asarray(self.emission, np.float64)

@@ -94,3 +94,12 @@ def test_the_region_is_found_where_the_scene_camera_stands(tmp_path):
     assert anywhere[1][0] < 0.9  # the largest box: in the big room
     here = suggest_camera(scene, near=(1.6, 1.5, 0.0))["camera_region"]["region"]
     assert here[0][0] > 1.1 and here[1][0] < 2.0  # in the small room, where the camera is
+
+
+def test_a_materials_emission_texture_is_named(tmp_path):
+    from gltf_doc import gltf_document, write_scene
+
+    doc, blob = gltf_document()
+    doc["materials"][0].update(emissiveFactor=[1.0, 1.0, 1.0], emissiveTexture={"index": 0})
+    rows = {m["name"]: m for m in survey(load_scene(write_scene(tmp_path, doc=doc, blob=blob)))["materials"]}
+    assert rows["leaf"]["emission_texture"].endswith("tex.png") and rows["stone"]["emission_texture"] is None
