@@ -253,7 +253,7 @@ def test_an_emission_texture_shows_its_pattern_as_in_gl(ctx):
         np.testing.assert_allclose(m[half], np.broadcast_to(want, m[half].shape), rtol=1e-3)
         np.testing.assert_allclose(g["direct"][half], m[half], rtol=1e-3)
     assert m[tile & left].mean() > 3.9 * m[tile & right].mean()
-    assert abs(m[tile].mean() / g["direct"][tile].mean() - 1.0) < 0.02
+    assert abs(m[tile].mean() / g["direct"][tile].mean() - 1.0) < 0.01  # measured 1e-6 (llvm_ad_rgb, 16 spp)
 
 
 # --- energy ----------------------------------------------------------------------------------------------------
