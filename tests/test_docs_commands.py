@@ -180,6 +180,34 @@ def test_the_scene_snippets_of_the_walkthrough_load_on_the_room(tmp_path):
         assert set(tomllib.loads(block).get("materials", {})) <= worn, (block, worn)
 
 
+def _run_page(page: str, tmp_path: Path, windows: bool) -> int:
+    """Every command of ``page`` in its order, in a folder of its own; how many ran (not only parsed)."""
+    commands = [shrink(argv) for argv in doc_commands((ROOT / page).read_text(encoding="utf-8"))]
+    if not commands:
+        return 0
+    folder = tmp_path / Path(page).stem
+    folder.mkdir()
+    (folder / "room.glb").write_bytes(room_glb())
+    # room.toml first: commands before the page's own inspect (a README's flight) fly it; the page's
+    # inspect --write-toml then writes it anew, as in the fresh folder the page is written for.
+    _run(["inspect", "--scene", "room.glb", "--write-toml", "room.toml"], folder)
+    ran = 0
+    for argv in commands:
+        if argv[0] == "inspect" and "--write-toml" in argv:
+            (folder / argv[argv.index("--write-toml") + 1]).unlink(missing_ok=True)
+        if (argv[0] in PARSE_ONLY or ("--reference" in argv and not HAS_MITSUBA)
+                or (argv[0] == "view" and not windows)):
+            _parses(argv)
+            if argv[0] == "view" and "--record-path" in argv:
+                _recorded_without_a_window(argv, folder)
+            continue
+        if MODEL in argv and not (folder / MODEL).exists():
+            _stand_in_model(folder)
+        _run(argv, folder)
+        ran += 1
+    return ran
+
+
 @pytest.mark.slow
 def test_the_commands_of_the_docs_run(tmp_path, request):
     """Every command of each page, in the page's order, on the room in a folder of its own, room.toml written
@@ -190,28 +218,10 @@ def test_the_commands_of_the_docs_run(tmp_path, request):
         windows = True
     except pytest.skip.Exception:
         windows = False
-    ran = 0
-    for page in DOCS:
-        commands = [shrink(argv) for argv in doc_commands((ROOT / page).read_text(encoding="utf-8"))]
-        if not commands:
-            continue
-        folder = tmp_path / Path(page).stem
-        folder.mkdir()
-        (folder / "room.glb").write_bytes(room_glb())
-        # room.toml first: commands before the page's own inspect (a README's flight) fly it; the page's
-        # inspect --write-toml then writes it anew, as in the fresh folder the page is written for.
-        _run(["inspect", "--scene", "room.glb", "--write-toml", "room.toml"], folder)
-        for argv in commands:
-            if argv[0] == "inspect" and "--write-toml" in argv:
-                (folder / argv[argv.index("--write-toml") + 1]).unlink(missing_ok=True)
-            if (argv[0] in PARSE_ONLY or ("--reference" in argv and not HAS_MITSUBA)
-                    or (argv[0] == "view" and not windows)):
-                _parses(argv)
-                if argv[0] == "view" and "--record-path" in argv:
-                    _recorded_without_a_window(argv, folder)
-                continue
-            if MODEL in argv and not (folder / MODEL).exists():
-                _stand_in_model(folder)
-            _run(argv, folder)
-            ran += 1
+    from concurrent.futures import ThreadPoolExecutor
+
+    # The pages run side by side (each in its own folder, its commands in order): the commands are processes,
+    # so two pages at a time keep both cores busy.
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        ran = sum(pool.map(lambda page: _run_page(page, tmp_path, windows), DOCS))
     assert ran >= (8 if windows else 5), ran
