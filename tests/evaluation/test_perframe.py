@@ -48,13 +48,28 @@ def test_a_models_output_is_what_it_gives_for_the_inputs(tmp_path):
         assert fr.output.shape == fr.truth.shape
 
 
+def _one_split(tmp_path, split: str):
+    """A copy of the shipped compact set that lists only ``split``'s frames (eval scores what the manifest lists)."""
+    import json
+    import shutil
+
+    copy = tmp_path / "one_split"
+    shutil.copytree(CORNELL, copy)
+    manifest = json.loads((copy / "manifest.json").read_text())
+    manifest["frame_list"] = [f for f in manifest["frame_list"] if f["split"] == split]
+    manifest["frames"] = len(manifest["frame_list"])
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    return copy
+
+
 @pytest.mark.slow
 def test_the_frames_score_as_eval_scores_them(tmp_path):
     from diviewer.evaluation.evaluate import evaluate_evalset
 
     model = _twice(tmp_path)
     frames = list(iter_frames(CORNELL, model, splits=["moved_camera"], log=quiet))
-    scored = evaluate_evalset([model], CORNELL, log=quiet)["splits"]["moved_camera"]["methods"]["twice"]["per_frame"]
+    one = _one_split(tmp_path, "moved_camera")
+    scored = evaluate_evalset([model], one, log=quiet)["splits"]["moved_camera"]["methods"]["twice"]["per_frame"]
     mine = [{"index": fr.index, "psnr_tm": psnr(fr.tonemapped(fr.output), fr.tonemapped(fr.truth))} for fr in frames]
     assert [r["index"] for r in scored] == [r["index"] for r in mine]
     assert np.allclose([r["psnr_tm"] for r in scored], [r["psnr_tm"] for r in mine], atol=1e-9)
