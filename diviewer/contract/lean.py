@@ -149,7 +149,8 @@ def world_planes_np(depth, normal, cams, center, half) -> np.ndarray:
                           + c[:, 3 * k + 2:3 * k + 3] * view[2] + c[:, 9 + k:10 + k] for k in range(3)], 1)
     wn = np.concatenate([c[:, 3 * k:3 * k + 1] * nrm[:, 0:1] + c[:, 3 * k + 1:3 * k + 2] * nrm[:, 1:2]
                          + c[:, 3 * k + 2:3 * k + 3] * nrm[:, 2:3] for k in range(3)], 1)
-    geo = np.clip(depth * f(HUGE), 0.0, 1.0)
+    with np.errstate(over="ignore", invalid="ignore"):  # the graph's geometry mask: depth x HUGE saturates to 1
+        geo = np.clip(depth * f(HUGE), 0.0, 1.0)
     return np.concatenate([np.clip((pos - center) * inv_half, -1.0, 1.0) * geo, np.clip(wn, -1.0, 1.0) * geo], 1)
 
 
