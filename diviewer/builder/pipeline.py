@@ -27,6 +27,11 @@ from diviewer.errors import DiviewerError
 STATE_FILE = "build.json"
 
 
+STOP_SIGNALS: list[str] = []
+"""The stop signals a running build received (its SIGTERM handler appends them): an error that a library raises after
+one (Mitsuba wraps an exception raised inside its render in its own) is that stop, not a failure."""
+
+
 class BuildInterrupted(Exception):
     """A stage stopped before its end (Ctrl-C, SIGTERM): the build stops, and resumes when run again."""
 
@@ -147,6 +152,10 @@ def _run(plan: Plan, command: str, log, stop_after: str | None, replace_worse: b
         raise BuildInterrupted("interrupted", stage and stage.name) from None
     except BuildInterrupted as exc:
         raise BuildInterrupted(str(exc), exc.stage or (stage and stage.name)) from None
+    except Exception:
+        if STOP_SIGNALS:
+            raise BuildInterrupted(STOP_SIGNALS[-1], stage and stage.name) from None
+        raise
     finally:
         if bar is not None:
             bar.close()

@@ -173,7 +173,7 @@ def interrupts_raise():
     import signal
     import threading
 
-    from diviewer.builder.pipeline import BuildInterrupted
+    from diviewer.builder.pipeline import STOP_SIGNALS, BuildInterrupted
 
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -185,8 +185,10 @@ def interrupts_raise():
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
             return
+        STOP_SIGNALS.append(signal.Signals(signum).name)
         raise BuildInterrupted(signal.Signals(signum).name)
 
+    STOP_SIGNALS.clear()
     signal.signal(signal.SIGTERM, stop)
     try:
         yield
