@@ -196,3 +196,29 @@ def test_a_build_sent_sigterm_while_it_captures_says_where_it_stopped_and_resume
     assert 2 <= kept < 40
     assert main(argv) == 0
     assert len(list((work / "data" / "frames").glob("*.json"))) == 40
+
+
+def test_an_error_a_library_raises_after_a_stop_signal_ends_the_build_as_stopped(tmp_path, monkeypatch):
+    """A SIGTERM that lands inside a library's own callback (Mitsuba's render wraps the handler's exception in its
+    RuntimeError) still ends the build as stopped in its stage; without a stop signal the error is the error."""
+    scene, recipe = write_tiny_scene(tmp_path), tmp_path / "recipe.toml"
+    recipe.write_text(TINY_RECIPE)
+    plan = make_plan(str(scene), load_recipe(recipe), tmp_path / "w", machine=CPU)
+
+    def wrapped(*_args, **_kwargs):
+        pipeline.STOP_SIGNALS.append("SIGTERM")  # what the build's handler records before it raises
+        raise RuntimeError("drjit.custom(<mitsuba.python.util._RenderOp>): error while performing a custom op")
+
+    monkeypatch.setitem(pipeline.STAGES, "capture", wrapped)
+    monkeypatch.setattr(pipeline, "STOP_SIGNALS", [])
+    with pytest.raises(pipeline.BuildInterrupted) as stopped:
+        pipeline.run_build(plan, "diviewer build", log=lambda *_: None)
+    assert stopped.value.stage == "capture" and str(stopped.value) == "SIGTERM"
+
+    def failing(*_args, **_kwargs):
+        raise RuntimeError("a real failure")
+
+    monkeypatch.setitem(pipeline.STAGES, "capture", failing)
+    monkeypatch.setattr(pipeline, "STOP_SIGNALS", [])
+    with pytest.raises(RuntimeError, match="a real failure"):
+        pipeline.run_build(plan, "diviewer build", log=lambda *_: None)
