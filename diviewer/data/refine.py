@@ -101,7 +101,7 @@ def derive_frames(src: Dataset, frames: list[dict], out: Path, manifest: dict, v
         log(f"{verb} {src.root} -> {out}: {len(present) - len(todo)} of {len(present)} present frames already "
             f"written, {len(todo)} to {what}")
         t_all = time.perf_counter()
-        progress = progress_bar(len(todo), verb, "frame")
+        progress = progress_bar(len(present), verb, "frame", initial=len(present) - len(todo))  # resumes there
         try:
             for f in todo:
                 i = f["index"]
@@ -143,13 +143,14 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
         ds = open_or_create(out, manifest)
         mine = [f for f in frames if f["index"] % n == k - 1]
         todo = [f for f in mine if ds.check_frame(f["index"]) is not None]
+        done = len(mine) - len(todo)  # refined before: the bar starts there
         if extras is not None:
             held = extras_present(extras)
             todo = [f for f in todo if f["index"] in held]
         log(f"refine {src.root} ({old} spp) -> {out} ({spp} spp): {len(mine) - len(todo)} of {len(mine)} present "
             f"frames of shard {k}/{n} already refined, {len(todo)} to " + (
                 f"render ({eff_extra} spp each, {variant})" if extras is None else f"take from {extras}"))
-        progress = progress_bar(len(todo), "refine", "frame")
+        progress = progress_bar(done + len(todo), "refine", "frame", initial=done)
         t_all = time.perf_counter()
         try:
             for f in todo:

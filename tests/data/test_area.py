@@ -76,7 +76,7 @@ def test_identity_changes_only_for_a_derived_dataset():
 
 
 @pytest.mark.mitsuba
-def test_derived_dataset_has_the_area_light_and_every_other_channel_as_captured(gl_context, tmp_path):
+def test_derived_dataset_has_the_area_light_and_every_other_channel_as_captured(gl_context, tmp_path, monkeypatch):
     src, out = tmp_path / "src", tmp_path / "area"
     capture("cornell", src, CaptureSettings(frames=3, seed=1, **TINY), **QUIET)
     summary = area_direct(src, out, 2, **QUIET)
@@ -95,6 +95,14 @@ def test_derived_dataset_has_the_area_light_and_every_other_channel_as_captured(
         for name in ("depth", "normal", "albedo", "pt", "pt_direct"):
             np.testing.assert_array_equal(fa[name], fb[name])
         np.testing.assert_array_equal(fb["direct"], expect[f["index"]])
+    import io
+
+    log = io.StringIO()  # not a terminal: plain lines, and the bar of a resumed run starts at the frames done
+    (out / "frames" / f"{a.frames[-1]['index']:06d}.json").unlink()  # one frame lost: the rest are kept
+    monkeypatch.setattr("sys.stderr", log)
+    assert area_direct(src, out, 2, **QUIET)["rendered"] == 1
+    assert "67% 2/3" in log.getvalue() and "100% 3/3" in log.getvalue(), log.getvalue()
+    monkeypatch.undo()
     assert area_direct(src, out, 2, **QUIET)["rendered"] == 0  # resumed: nothing left to render
     with pytest.raises(DiviewerError, match="already covers"):
         area_manifest(b, 2)
