@@ -58,3 +58,23 @@ def test_the_public_api_is_light_until_used():
     assert all(callable(getattr(diviewer, name)) for name in diviewer.__all__ if name != "__version__")
     with pytest.raises(AttributeError):
         diviewer.render_frames  # noqa: B018
+
+
+def test_the_buffers_are_the_renderers_frame(gl_context):
+    """Without a model, `render_frame` is the renderer's own frame of that configuration, buffer for buffer."""
+
+    from diviewer.gl.renderer import BUFFERS, Renderer
+    from diviewer.scene import load_scene, sample_config
+
+    cornell = load_scene("cornell")
+    config = sample_config(cornell, 2, "test")
+    got = diviewer.render_frame(cornell, config, (20, 12))
+    with gl_context:  # current again: render_frame made and released its own context
+        r = Renderer(gl_context, cornell, 20, 12)
+        try:
+            want = r.frame(config)
+        finally:
+            r.release()
+    assert list(got) == list(BUFFERS) and got["depth"].shape == (12, 20) and got["direct"].shape == (12, 20, 3)
+    for name in BUFFERS:
+        np.testing.assert_array_equal(got[name], want[name])

@@ -386,21 +386,3 @@ class Renderer:
         self.render(config)
         with self.timer.stage("readback", gpu=True):
             return {name: self.read(name) for name in BUFFERS}
-
-
-def render_buffers(scene: Scene, config: FrameConfig | None, size: tuple[int, int],
-                   settings: RenderSettings | None = None, ctx: moderngl.Context | None = None) -> dict[str, np.ndarray]:
-    """A frame's named buffers (`BUFFERS`: depth (H, W), normal, albedo, direct (H, W, 3)) as float32 arrays, top row
-    first, of ``config`` (None: the scene's default) at ``size`` (width, height): rendered headless (in ``ctx`` when
-    given, else in a context of its own, released after)."""
-    from contextlib import nullcontext
-
-    from diviewer.gl.context import check_render_size, headless_context
-
-    with (nullcontext(ctx) if ctx is not None else headless_context()) as c:
-        check_render_size(c, *size, "size")
-        renderer = Renderer(c, scene, *size, settings)
-        try:
-            return renderer.frame(config)
-        finally:
-            renderer.release()

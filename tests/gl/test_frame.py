@@ -87,19 +87,3 @@ def test_the_neural_pass_composites_the_frame_it_ran_on(ctx, cornell):
     finally:
         p.release()
         r.release()
-
-
-def test_render_buffers_is_the_renderers_frame(ctx, cornell):
-    from diviewer.gl.renderer import BUFFERS, render_buffers
-    from diviewer.scene import sample_config
-
-    config = sample_config(cornell, 2, "test")
-    got = render_buffers(cornell, config, (20, 12), ctx=ctx)
-    r = Renderer(ctx, cornell, 20, 12)
-    try:
-        want = r.frame(config)
-    finally:
-        r.release()
-    assert list(got) == list(BUFFERS) and got["depth"].shape == (12, 20) and got["direct"].shape == (12, 20, 3)
-    for name in BUFFERS:
-        np.testing.assert_array_equal(got[name], want[name])
