@@ -3,7 +3,7 @@ dynamic resolution.
 
 Usage: xvfb-run -a python tools/experiments/viewer_motion.py [--scene cornell] [--size 384] [--frames 60]
            [--motion light|fly-then-still] [--fly-frames 30]
-           [--fixed-step 0.0333] [--scale 0.4] [--arms scale1,scale2,plain,temporal,dynamic,dynamic_temporal]
+           [--fixed-step 0.0333] [--scale 0.4] [--arms scale1,scale2,plain,temporal,dynamic,dynamic_temporal,plain@S]
            --out OUT.json
 
 Each arm is one scripted `diviewer view` run with the light animated from the first frame (or the camera flying
@@ -11,7 +11,8 @@ for ``--fly-frames`` frames, then resting: ``--motion fly-then-still``) and ``--
 (the frame count drives the motion, so frame i shows the same state in every arm) that saves every frame's view
 (PNG, tone-mapped as shown). ``scale1`` is ``--render-scale 1`` (the reference); ``plain`` and ``temporal`` draw at
 ``--scale`` fixed, upscaled bilinearly or by the temporal upsampler; ``dynamic`` and ``dynamic_temporal`` are the
-default dynamic resolution (its scale follows this machine's clock); ``scale2`` (``--render-scale 2``, each pixel the
+default dynamic resolution (its scale follows this machine's clock); ``plain@S`` is plain upscaling at the fixed
+scale ``S`` (``--arms plain@0.4,plain@0.6,plain@0.8``: what a higher scale floor would buy); ``scale2`` (``--render-scale 2``, each pixel the
 mean of 2x2) is the anti-aliased frame. Each frame is scored by display PSNR (8-bit PNGs) against the ``scale1``
 frame of the same index, and against the ``scale2`` one where that arm runs. Measures only; needs a display (Xvfb)
 and GL.
@@ -42,7 +43,8 @@ def _finite(x) -> float | None:
 
 def run_arm(scene: str, arm: str, size: int, frames: int, step: float, scale: float, folder: Path,
             motion: str = "light", fly_frames: int = 30) -> dict:
-    changes = {"render_scale": scale, **ARMS[arm]}
+    fixed = arm.startswith("plain@")  # plain upscaling at the scale after the @
+    changes = {"render_scale": float(arm[6:])} if fixed else {"render_scale": scale, **ARMS[arm]}
     settings = ViewerSettings(size=(size, size), vsync=False, model="auto", fixed_step=step, **changes)
     if motion == "light":
         script = [(0, lambda v: setattr(v.state, "animate_light", True))]
