@@ -191,7 +191,8 @@ def check_finite(scene: Scene, config: FrameConfig, frame: dict, names) -> None:
     strengths = [(max(l.color) * (l.irradiance if hasattr(l, "irradiance") else l.intensity),
                   f"lights[{i}].{'irradiance' if hasattr(l, 'irradiance') else 'intensity'}")
                  for i, l in enumerate(config.lights)]
-    strengths += [(max(m.emission), f"materials.{k}.emission") for k, m in scene.materials.items()]
+    # A textured emitter's strength is its brightest texel's (its factor times the texture's peak).
+    strengths += [(max(m.peak_emission), f"materials.{k}.emission") for k, m in scene.materials.items()]
     hint = ""
     if strengths:
         value, field = max(strengths)
