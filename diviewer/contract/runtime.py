@@ -417,7 +417,9 @@ def probe(model: "NeuralGI") -> None:
 def count_nonfinite(x: np.ndarray) -> int:
     """How many values of ``x`` are NaN or infinite, in one pass without a mask when there are none."""
     # A float64 sum of float32 values cannot overflow, and it is NaN/Inf exactly when an element is.
-    if np.isfinite(np.add.reduce(x, axis=None, dtype=np.float64)):
+    with np.errstate(invalid="ignore", over="ignore"):  # inf + -inf is the NaN this looks for, not a fault
+        total = np.add.reduce(x, axis=None, dtype=np.float64)
+    if np.isfinite(total):
         return 0
     return int(x.size - np.count_nonzero(np.isfinite(x)))
 

@@ -237,3 +237,14 @@ def test_a_light_scaled_model_is_black_at_zero_light_and_linear_in_it(cornell_fr
     assert scale(0.0) == 0.0 and np.all(dark == 0.0)
     assert lit.mean() > 0 and np.all(np.isfinite(bright))
     np.testing.assert_allclose(bright, 8.0 * lit, rtol=1e-6, atol=0)
+
+
+def test_count_of_opposite_infinities_warns_nothing():
+    """+Inf and -Inf sum to NaN inside the count: both are counted, and numpy says nothing of the NaN it made."""
+    import warnings
+
+    x = buffers()[None]
+    x[0, 0, 0, 0], x[0, 1, 0, 0] = np.inf, -np.inf
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert count_nonfinite(x) == 2
