@@ -65,6 +65,13 @@ def needs_scene(encoding: Encoding | Mapping[str, Any]) -> bool:
     return as_encoding(encoding).light_scaled
 
 
+def has_lights_for(config, encoding: Encoding | Mapping[str, Any]) -> bool:
+    """Whether a stored configuration (a dataset frame's dict, or None) holds the lights ``encoding`` takes: as many
+    as it takes, where it takes any."""
+    enc = as_encoding(encoding)
+    return not enc.light_inputs or len((config or {}).get("lights") or []) == enc.lights
+
+
 def _get(obj, key: str):
     return obj[key] if isinstance(obj, Mapping) else getattr(obj, key)
 

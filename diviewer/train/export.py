@@ -131,15 +131,14 @@ def _verification_frames(encoding, data_dir: str | None, n: int, res: tuple[int,
     (`diviewer.contract.conditioning`): the training dataset's val split (each frame's from its stored
     configuration) when it is there and its frames have as many lights as the model takes, else procedural
     buffers (each a `stand_in`'s: a light scale of 0.5 to 2, the stand-in camera, suns at a few directions)."""
-    from diviewer.contract.conditioning import conditioning, needs_scene, stand_in
+    from diviewer.contract.conditioning import conditioning, has_lights_for, needs_scene, stand_in
     from diviewer.data.dataset import Dataset
 
     if data_dir and (Path(data_dir) / "manifest.json").is_file():
         ds = Dataset(data_dir)
         idx = (ds.indices("val") or ds.indices())[:n]
         configs = {f["index"]: f.get("config") for f in ds.frames}
-        if idx and (not encoding.light_inputs or all(len((configs[i] or {}).get("lights") or []) == encoding.lights
-                                                     for i in idx)):
+        if idx and all(has_lights_for(configs[i], encoding) for i in idx):
             frames = []
             for i in idx:
                 f = ds.load(i)

@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from diviewer.contract.conditioning import STAND_IN_CAMERA, Conditioning, conditioning, needs_scene, stacked, stand_in
+from diviewer.contract.conditioning import (STAND_IN_CAMERA, Conditioning, conditioning, has_lights_for, needs_scene,
+                                            stacked, stand_in)
 from diviewer.contract.encoding import Encoding
 from diviewer.errors import DiviewerError
 from diviewer.scene import load_scene, sample_config
@@ -100,3 +101,11 @@ def test_stacked_gives_float32_arrays_of_the_parts_taken(cornell):
     assert stacked([conditioning(None, None, (16, 8), _encoding(1))] * 2) == (None, None, None)
     scales, cams, lights = stacked([conditioning(cornell, c, (16, 8), _encoding(2)) for c in configs])
     assert scales.shape == (3,) and cams is None and lights is None
+
+
+def test_a_stored_configuration_has_the_lights_an_encoding_takes_or_not(cornell):
+    stored = cornell.default.to_dict()
+    n = len(stored["lights"])
+    assert has_lights_for(stored, _encoding(4, n)) and not has_lights_for(stored, _encoding(4, n + 1))
+    assert not has_lights_for(None, _encoding(4, n)) and not has_lights_for({**stored, "lights": []}, _encoding(4, n))
+    assert all(has_lights_for(c, _encoding(v)) for v in (1, 2, 3) for c in (None, stored))  # takes none
