@@ -170,7 +170,7 @@ def _int8_twins(settings, scene, ctx, mode, variants: list[dict], tmp: Path, not
     out = []
     for v in [v for v in variants if v["kind"] == "neural" and v["precision"] == "fp32"]:
         w, h = (int(x) for x in v["meta"]["resolution"])
-        calib, calib_note = calibration(settings, scene, ctx, w, h, mode)
+        calib, calib_note = calibration(settings, scene, ctx, w, h, mode, v["meta"]["encoding"])
         dst = tmp / f"{v['n']}_{v['name']}_int8.onnx"
         try:
             quantize_int8(Path(v["path"]), dst, calib)

@@ -24,7 +24,6 @@ from diviewer.errors import DiviewerError, missing_extra
 from diviewer.contract.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT, OUTPUT_NAME,
                               model_edge_guard)
 from diviewer.contract.weights import weights_to_float32
-from diviewer.scene.lights import light_params
 
 OPSET = 17
 UPSAMPLE_MACS = {"transpose": 4, "resize": 9}
@@ -291,21 +290,20 @@ on its compact evaluation set, int8 against fp32, tone-mapped PSNR per split: mi
 def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
                   percentile: float | None = CALIB_PERCENTILE) -> Path:
     """Static int8 quantisation (QDQ, per-channel weights) of the convolutions, calibrated on ``calibration``
-    ((1, H, W, 10) buffers, padded to the model's stride as the runtime pads them, each with its frame's light
-    scale, camera (1, CAMERA_PARAMS) and lights (the configuration's), fed where the model takes them: encodings 2,
-    3 and 4); the encoding and
-    decoding stay float. Each activation's range is its ``percentile`` over the calibration frames (None: its
-    extremes) (CALIB_PERCENTILE)."""
+    ((1, H, W, 10) buffers, padded to the model's stride as the runtime pads them, each with its frame's
+    `diviewer.contract.conditioning.Conditioning` under the model's encoding: its light scale, camera and lights,
+    fed where it has them); the encoding and decoding stay float. Each activation's range is its ``percentile``
+    over the calibration frames (None: its extremes) (CALIB_PERCENTILE)."""
     onnx = _onnx()
     from onnxruntime.quantization import (CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType,
                                           quantize_static)
 
+    from diviewer.contract.conditioning import stacked
     from diviewer.contract.padding import pad_camera_params, pad_nhwc
 
     # float16-stored weights (export --half-weights) folded back: the quantiser reads each weight as an initializer
     plain = weights_to_float32(onnx.load(str(fp32_path)))
     meta = get_meta(plain)
-    version = int(meta.get("encoding", {}).get("version", 1))
     multiple = int(meta.get("multiple", 1))  # padded as the runtime pads (a 228x128 model runs at 256x128)
     guard = model_edge_guard(meta)  # and its column guard (a 128x128 frame of a crop-trained model at 256x128)
 
@@ -319,13 +317,12 @@ def quantize_int8(fp32_path: Path, out_path: Path, calibration: list[tuple],
                 return None
             n, h, w = item[0].shape[:3]
             feed = {INPUT_NAME: pad_nhwc(item[0], multiple, guard)}
-            if version >= 2:
-                feed[LIGHT_SCALE_NAME] = np.full(n, item[1], np.float32)
-            if version >= 3:
-                feed[CAMERA_NAME] = pad_camera_params(np.asarray(item[2], np.float32), w, h, multiple, guard)
-            if version >= 4:  # the frame's lights in the model's world box (encoding 4)
-                enc = meta["encoding"]
-                feed[LIGHT_NAME] = np.tile(light_params(item[3], enc["world_center"], enc["world_half"]), (n, 1))
+            scale, camera, lights = stacked([item[1]])
+            if camera is not None:  # the camera of the padded frame, as the runtime shifts it
+                camera = pad_camera_params(camera, w, h, multiple, guard)
+            for name, value in ((LIGHT_SCALE_NAME, scale), (CAMERA_NAME, camera), (LIGHT_NAME, lights)):
+                if value is not None:
+                    feed[name] = np.repeat(value, n, axis=0)
             return feed
 
     root = logging.getLogger()

@@ -254,7 +254,7 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
             if passes:
                 gl.renderer.render(config, direct=False)  # as timed
             for key, (net, step) in models.items():
-                if step == 1:  # encoding 2 and 3: the frame's light scale and camera
+                if step == 1:  # the model at the set's size, with the frame's conditioning
                     x = model_input(net, f, frame, area, i, shape[0])
                     image = run_model(net, x, **net.frame_inputs(config, shape[0], shape[1], gl.scene))
                 else:
@@ -304,16 +304,15 @@ def temporal_configs(scene, n: int, span: float = 0.25) -> list:
     return out
 
 
-def calibration(settings, scene, ctx, width: int, height: int, mode: str) -> tuple[list[tuple], str]:
-    """Model inputs of training frames, each (buffers (1, H, W, 10), light scale, camera (1, CAMERA_PARAMS)): what
-    encoding-2 and -3 models also take. A capture's train split when given, else GL renders (in ``ctx``, timed by
+def calibration(settings, scene, ctx, width: int, height: int, mode: str, encoding) -> tuple[list[tuple], str]:
+    """Model inputs of training frames, each (buffers (1, H, W, 10), its conditioning under ``encoding``, a model's
+    (`diviewer.contract.conditioning`)). A capture's train split when given, else GL renders (in ``ctx``, timed by
     ``mode`` as GlBench times) of training configs."""
-    from diviewer.contract.runtime import NeuralGI
-    from diviewer.scene.lights import light_scale
+    from diviewer.contract.conditioning import conditioning
 
+    size = (width, height)
     if settings.calib_data:
         from diviewer.data.dataset import Dataset
-        from diviewer.data.scales import light_scales
         from diviewer.contract.runtime import pack_buffers
 
         ds = Dataset(settings.calib_data)
@@ -322,18 +321,16 @@ def calibration(settings, scene, ctx, width: int, height: int, mode: str) -> tup
             raise DiviewerError("no train frames to calibrate int8 on", path=settings.calib_data)
         frames = [pack_buffers(ds.load(i)) for i in idx]
         if frames[0].shape[:2] == (height, width):
-            cams = {f["index"]: f["config"]["camera"] for f in ds.frames}
-            lights = {f["index"]: f["config"].get("lights", []) for f in ds.frames}
-            return ([(f[None], float(s), NeuralGI.camera(cams[i], width, height)[None], lights[i])
-                     for i, f, s in zip(idx, frames, light_scales(ds, idx))],
-                    f"{len(idx)} train frames of {settings.calib_data}")
+            configs = {f["index"]: f.get("config") for f in ds.frames}
+            manifest = ds.root / "manifest.json"
+            return ([(f[None], conditioning(scene, configs[i], size, encoding, path=manifest))
+                     for i, f in zip(idx, frames)], f"{len(idx)} train frames of {settings.calib_data}")
     from diviewer.scene import sample_config
 
     configs = [sample_config(scene, 9000 + i, "train") for i in range(settings.calib_frames)]
     gb = GlBench(ctx, scene, width, height, mode)
     try:
-        inputs = [(gb.buffers(c), light_scale(scene, c), NeuralGI.camera(c.camera, width, height)[None], c.lights)
-                  for c in configs]
+        inputs = [(gb.buffers(c), conditioning(scene, c, size, encoding)) for c in configs]
     finally:
         gb.release()
     return inputs, f"GL inputs of {settings.calib_frames} training configurations"

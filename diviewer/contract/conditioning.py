@@ -8,8 +8,10 @@ frame's configuration, its size and the model's encoding.
 - the lights (version 4, `diviewer.scene.lights.light_params` in the encoding's world box): where each light is.
 
 `conditioning` is the one place the encoding's version decides what a frame's conditioning holds: the runtime
-(`NeuralGI.frame_inputs`), the viewer's neural pass, evaluation, training's targets and export's verification
-frames all call it. No GL, no torch (training turns the arrays into tensors).
+(`NeuralGI.frame_inputs`), the viewer's neural pass, evaluation, training's targets, the bench's int8 calibration
+and export's verification frames all call it; `stand_in` is its twin for procedural buffers with no scene behind
+them (export's verification frames without a dataset, the runtime's probe). No GL, no torch (training turns the
+arrays into tensors).
 """
 
 from __future__ import annotations
@@ -42,6 +44,16 @@ class Conditioning:
         return {k: v for k, v in pairs if v is not None}
 
 
+def stacked(conds) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """N frames' conditionings (one encoding's) as arrays: (N,) float32 light scales, (N, CAMERA_PARAMS) cameras and
+    (N, 3 L) lights, None for a part the encoding does not take."""
+    def stack(name):
+        parts = [getattr(c, name) for c in conds]
+        return None if not parts or parts[0] is None else np.asarray(np.stack(parts), np.float32)
+
+    return stack("light_scale"), stack("camera"), stack("lights")
+
+
 def as_encoding(encoding: Encoding | Mapping[str, Any]) -> Encoding:
     """``encoding`` as an `Encoding` (a model's metadata or a manifest stores its dict)."""
     return encoding if isinstance(encoding, Encoding) else Encoding.from_dict(encoding)
@@ -51,6 +63,13 @@ def needs_scene(encoding: Encoding | Mapping[str, Any]) -> bool:
     """Whether a frame's conditioning under ``encoding`` needs the scene (its light scale does: the materials' and
     the sky's emission)."""
     return as_encoding(encoding).light_scaled
+
+
+def has_lights_for(config, encoding: Encoding | Mapping[str, Any]) -> bool:
+    """Whether a stored configuration (a dataset frame's dict, or None) holds the lights ``encoding`` takes: as many
+    as it takes, where it takes any."""
+    enc = as_encoding(encoding)
+    return not enc.light_inputs or len((config or {}).get("lights") or []) == enc.lights
 
 
 def _get(obj, key: str):
@@ -85,6 +104,22 @@ def conditioning(scene, config, size: tuple[int, int], encoding: Encoding | Mapp
     camera = frame_camera(_get(config, "camera"), size) if enc.world_inputs else None
     lights = frame_lights(_get(config, "lights"), enc) if enc.light_inputs else None
     return Conditioning(scale, camera, lights)
+
+
+STAND_IN_CAMERA = {"position": [0.0, 1.0, 3.0], "target": [0.0, 1.0, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0}
+"""`stand_in`'s camera unless given: 3 units in front of the point (0, 1, 0), looking at it."""
+
+
+def stand_in(encoding: Encoding | Mapping[str, Any], size: tuple[int, int], *, light_scale: float = 1.0,
+             camera=STAND_IN_CAMERA, sun=(0.0, -1.0, 0.0)) -> Conditioning:
+    """The conditioning under ``encoding`` of a ``size`` (width, height) frame of procedural buffers, with no scene
+    or configuration behind it: ``light_scale``, ``camera`` (a scene camera or its dict) over the whole frame, and
+    a sun shining along ``sun`` for each light the encoding takes; the parts the encoding does not take left out."""
+    enc = as_encoding(encoding)
+    suns = [{"type": "directional", "direction": list(sun)}] * (enc.lights or 0)
+    return Conditioning(float(light_scale) if enc.light_scaled else None,
+                        frame_camera(camera, size) if enc.world_inputs else None,
+                        frame_lights(suns, enc) if enc.light_inputs else None)
 
 
 def frame_camera(camera, size: tuple[int, int]) -> np.ndarray:

@@ -309,7 +309,8 @@ def lean_model(graph, check: bool = True):
 
 
 def _lean_model(graph, check: bool):
-    from diviewer.contract.runtime import NeuralGI, probe_frame
+    from diviewer.contract.conditioning import stand_in
+    from diviewer.contract.runtime import probe_frame
 
     from diviewer.errors import DiviewerError
 
@@ -322,9 +323,7 @@ def _lean_model(graph, check: bool):
     if check:
         w, h = (min(int(d), 64) for d in graph.resolution)
         cam = {"position": (0.3, 0.8, 3.0), "target": (0.0, 0.5, 0.0), "up": (0.0, 1.0, 0.0), "fov": 45.0}
-        extra = {"light_scale": 1.0 if graph.light_scaled else None,
-                 "camera": NeuralGI.camera(cam, w, h) if graph.world else None,
-                 "light": np.tile(np.array([0.3, -1.0, 0.2], np.float32), graph.light_count) if graph.lit else None}
+        extra = stand_in(graph.encoding, (w, h), camera=cam, sun=(0.3, -1.0, 0.2)).inputs()
         frame = probe_frame(h, w)[0]
         frame[: h // 4, :, 4:7] = 0.01  # albedo under the composition's floor
         frame[h // 2:, : w // 4, 0] = 0.0  # background

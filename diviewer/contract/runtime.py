@@ -209,13 +209,13 @@ class NeuralGI:
 
         self.encoding = Encoding.from_dict(self.meta["encoding"])
         """The model's encoding (its metadata's); `conditioning` reads what a frame must bring from it."""
-        self.light_scaled = int(self.meta["encoding"].get("version", 1)) >= 2
+        self.light_scaled = self.encoding.light_scaled
         """Encoding version 2: ``run`` needs each frame's light scale."""
-        self.world = int(self.meta["encoding"].get("version", 1)) >= 3
+        self.world = self.encoding.world_inputs
         """Encoding version 3: ``run`` also needs each frame's camera (`camera`)."""
-        self.lit = int(self.meta["encoding"].get("version", 1)) >= 4
+        self.lit = self.encoding.light_inputs
         """Encoding version 4: ``run`` also needs each frame's lights (`lights`)."""
-        self.light_count = int(self.meta["encoding"]["lights"]) if self.lit else 0
+        self.light_count = self.encoding.lights if self.lit else 0
         """Encoding version 4: how many lights the ``light`` input describes (three numbers each)."""
         self.direct_samples = int(self.meta.get("direct_samples", 1))
         """Samples per axis of the direct light the model was trained on (`diviewer.gl.area`): 1 is the light at
@@ -401,11 +401,10 @@ def probe(model: "NeuralGI") -> None:
     probe is padded, laid out and light-scaled as every frame is."""
     w, h = (min(int(d), 64) for d in model.resolution)
     camera = {"position": (0.0, 0.0, 4.0), "target": (0.0, 0.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 45.0}
-    try:
-        sun = np.tile(np.array([0.0, -1.0, 0.0], np.float32), model.light_count) \
-            if model.lit else None  # encoding 4: suns straight down
-        model.run(probe_frame(h, w)[0], light_scale=1.0 if model.light_scaled else None,
-                  camera=NeuralGI.camera(camera, w, h) if model.world else None, light=sun)
+    from diviewer.contract.conditioning import stand_in
+
+    try:  # light scale 1, suns straight down, as the model's encoding takes them
+        model.run(probe_frame(h, w)[0], **stand_in(model.encoding, (w, h), camera=camera).inputs())
     except Exception as exc:  # onnxruntime raises its own types for a graph that cannot run
         raise DiviewerError(f"the model cannot run on a {w}x{h} probe frame: {exc}", path=model.path) from exc
     bad = model.nonfinite_outputs  # counted before the clamp at 0, which would hide a -Inf

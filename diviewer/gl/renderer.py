@@ -16,7 +16,7 @@ import numpy as np
 from diviewer.contract.encoding import INPUT_NAMES
 from diviewer.gl.context import gl_flush, unbind_framebuffer
 from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes, shadow_casters
-from diviewer.gl.frame import Frame
+from diviewer.gl.frame import NAMES, Frame
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shadow_fit import RenderSettings, light_defines, light_uniforms
 from diviewer.gl.shadow_pass import ShadowPass
@@ -216,6 +216,16 @@ class Renderer:
                          light_uniforms=self.set_direct_uniforms, **common)
         return Frame(direct=self.ensure_direct(), direct_from="area" if samples > 1 else "pass", samples=samples,
                      **common)
+
+    def buffer(self, name: str) -> moderngl.Texture:
+        """One of the last frame's buffers (`diviewer.gl.frame.NAMES`) by name, without deciding the others: ``direct``
+        is `buffers`' (the direct pass's target, the pass run now if it was deferred), depth, normal and albedo
+        are the G-buffer's as drawn, so showing them leaves a deferred direct pass deferred."""
+        if name == "direct":
+            return self.buffers().direct
+        if name not in NAMES:
+            raise KeyError(f"no buffer {name!r}: one of {', '.join(NAMES)}")
+        return self.textures[name]
 
     def inline_light(self) -> tuple[bool, object]:
         """Whether the last frame's direct light can be computed where it is read (direct_inline.glsl: at

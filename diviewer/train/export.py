@@ -26,6 +26,7 @@ from diviewer.errors import DiviewerError, missing_extra
 from diviewer.metrics import psnr
 from diviewer.outputs import check_output_file, dumps, staged
 from diviewer.contract.padding import crop_nhwc, pad_camera_params, pad_nhwc
+from diviewer.contract.conditioning import stacked
 from diviewer.provenance import versions
 from diviewer.contract.runtime import (CAMERA_NAME, INPUT_NAME, LIGHT_NAME, LIGHT_SCALE_NAME, META_KEY, MODEL_FORMAT,
                               OUTPUT_NAME)
@@ -125,62 +126,29 @@ def onnx_bytes(module, example, light_scale=None, camera=None, light=None) -> by
     return buf.getvalue()
 
 
-def _verification_frames(meta: dict, data_dir: str | None, n: int, res: tuple[int, int], light_scaled: bool = False,
-                         world: bool = False) -> tuple[np.ndarray, np.ndarray | None, str, np.ndarray | None]:
-    """Real frames from the training dataset's val split when it is there, else procedural buffers; with
-    their light scales for encoding 2 (the dataset's, or 0.5 to 2 for procedural frames) and, for encoding 3,
-    their cameras (the dataset's, or one looking at the procedural frames' surface) over the whole frame."""
-    frames, scales, source, configs = _frames_and_scales(data_dir, n, res, light_scaled)
-    if not world:
-        return frames, scales, source, None
-    from diviewer.contract.conditioning import frame_camera
-
-    h, w = frames.shape[1:3]
-    default = {"position": [0.0, 1.0, 3.0], "target": [0.0, 1.0, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0}
-    cams = np.stack([frame_camera(c, (w, h)) for c in (configs or [default] * len(frames))])
-    return frames, scales, source, cams
-
-
-def _verification_lights(encoding, data_dir: str | None, n: int) -> np.ndarray | None:
-    """Encoding 4's light input for the verification frames (`_frames_and_scales`' frames, in its order): each
-    frame's lights from the dataset, or for procedural frames suns at a few directions; None for older encodings."""
-    if not encoding.light_inputs:
-        return None
-    from diviewer.contract.conditioning import frame_lights
+def _verification_frames(encoding, data_dir: str | None, n: int, res: tuple[int, int]) -> tuple[np.ndarray, str, list]:
+    """Frames to verify an export on, each with its conditioning under ``encoding``
+    (`diviewer.contract.conditioning`): the training dataset's val split (each frame's from its stored
+    configuration) when it is there and its frames have as many lights as the model takes, else procedural
+    buffers (each a `stand_in`'s: a light scale of 0.5 to 2, the stand-in camera, suns at a few directions)."""
+    from diviewer.contract.conditioning import conditioning, has_lights_for, needs_scene, stand_in
     from diviewer.data.dataset import Dataset
 
     if data_dir and (Path(data_dir) / "manifest.json").is_file():
         ds = Dataset(data_dir)
         idx = (ds.indices("val") or ds.indices())[:n]
-        if idx:
-            configs = {f["index"]: (f.get("config") or {}).get("lights") for f in ds.frames}
-            if all(configs[i] and len(configs[i]) == encoding.lights for i in idx):
-                return np.stack([frame_lights(configs[i], encoding) for i in idx])
-    suns = [[{"type": "directional", "direction": [np.sin(a), -1.0, np.cos(a)]}] * encoding.lights
-            for a in np.linspace(0.0, 2.0, n)]
-    return np.stack([frame_lights(s, encoding) for s in suns])
-
-
-def _frames_and_scales(data_dir: str | None, n: int, res: tuple[int, int], light_scaled: bool):
-    """`_verification_frames` less the cameras, and the frames' camera configurations (None for procedural ones)."""
-    from diviewer.data.dataset import Dataset
-
-    if data_dir and (Path(data_dir) / "manifest.json").is_file():
-        ds = Dataset(data_dir)
-        idx = (ds.indices("val") or ds.indices())[:n]
-        if idx:
+        configs = {f["index"]: f.get("config") for f in ds.frames}
+        if idx and all(has_lights_for(configs[i], encoding) for i in idx):
             frames = []
             for i in idx:
                 f = ds.load(i)
                 frames.append(np.concatenate([f[name].reshape(*f[name].shape[:2], n) for name, n in INPUT_CHANNELS], -1))
-            scales = None
-            if light_scaled:
-                from diviewer.data.scales import light_scales
+            from diviewer.data.scales import dataset_scene
 
-                scales = light_scales(ds, idx)
-            configs = {f["index"]: f.get("config", {}).get("camera") for f in ds.frames}
-            return (np.stack(frames).astype(np.float32), scales, f"{len(idx)} frames of {data_dir}",
-                    [configs[i] for i in idx] if all(configs[i] for i in idx) else None)
+            scene = dataset_scene(ds) if needs_scene(encoding) else None
+            size = (frames[0].shape[1], frames[0].shape[0])
+            return (np.stack(frames).astype(np.float32), f"{len(idx)} frames of {data_dir}",
+                    [conditioning(scene, configs[i], size, encoding, path=ds.root / "manifest.json") for i in idx])
     # No dataset: smooth synthetic buffers with plausible ranges (depth 1..far, unit normals).
     rng = np.random.default_rng(0)
     w, h = res
@@ -194,8 +162,10 @@ def _frames_and_scales(data_dir: str | None, n: int, res: tuple[int, int], light
         albedo = np.stack([0.2 + 0.6 * xx, 0.5 + 0.0 * yy, 0.8 - 0.6 * yy], -1)
         direct = albedo * np.maximum(0, np.sin(5 * xx * a[0]) * np.cos(4 * yy * a[1]))[..., None] * a[2]
         frames.append(np.concatenate([depth[..., None], normal, albedo, direct], -1))
-    scales = rng.uniform(0.5, 2.0, n).astype(np.float32) if light_scaled else None
-    return np.stack(frames).astype(np.float32), scales, f"{n} synthetic frames (dataset {data_dir} not found)", None
+    scales = rng.uniform(0.5, 2.0, n).astype(np.float32)  # drawn last: the frames are the same for every encoding
+    conds = [stand_in(encoding, res, light_scale=s, sun=(np.sin(t), -1.0, np.cos(t)))
+             for s, t in zip(scales, np.linspace(0.0, 2.0, n))]
+    return np.stack(frames).astype(np.float32), f"{n} synthetic frames (dataset {data_dir} not found)", conds
 
 
 def check_export_paths(ckpt_path: Path, out: Path) -> None:
@@ -320,11 +290,10 @@ def export(ckpt_path: str | Path, out: str | Path, settings: ExportSettings = Ex
     netG, encoding, meta = build_generator_from_checkpoint(ckpt)
     levels = int(meta["model_args"]["levels"])
     res = tuple(int(x) for x in meta["resolution"])
-    frames, scales, source, cams = _verification_frames(meta, meta["config"].get("data"), settings.verify_frames,
-                                                        res, encoding.light_scaled, encoding.world_inputs)
+    frames, source, conds = _verification_frames(encoding, meta["config"].get("data"), settings.verify_frames, res)
+    scales, cams, lights = stacked(conds)
     if cams is not None:  # the cameras of the padded frames, as the runtime shifts them
         cams = pad_camera_params(cams, frames.shape[2], frames.shape[1], 2 ** levels)
-    lights = _verification_lights(encoding, meta["config"].get("data"), len(frames))
     shown = (frames.shape[1], frames.shape[2], 2 ** levels)
     frames = pad_nhwc(frames, 2 ** levels)  # a capture of another shape (e.g. 228x128): padded as the runtime pads
     model, check = verified_onnx(lambda: build_generator_from_checkpoint(ckpt)[0], encoding, meta, settings, frames,

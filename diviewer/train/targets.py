@@ -206,19 +206,17 @@ def run_conditioning(enc: Encoding, ds: Dataset, train_idx: list[int], with_val:
     configuration over the whole stored frame, stacked in the order of the frames' arrays as ((cameras, lights) of
     train, (cameras, lights) of val): (N, CAMERA_PARAMS) and (N, 3 L) float32, None where the encoding takes none
     (and val's (None, None) without ``with_val``). The light scales come before the encoding (`run_light_scales`)."""
-    from diviewer.contract.conditioning import conditioning, needs_scene
+    from diviewer.contract.conditioning import conditioning, needs_scene, stacked
     from diviewer.data.scales import dataset_scene
 
     scene = dataset_scene(ds) if needs_scene(enc) else None
     config = {f["index"]: f.get("config") for f in ds.frames}
     where = ds.root / "manifest.json"
 
-    def stacked(idx: list[int]) -> tuple:
-        cs = [conditioning(scene, config.get(i), (ds.width, ds.height), enc, path=where) for i in idx]
-        return tuple(None if not cs or getattr(cs[0], k) is None else np.stack([getattr(c, k) for c in cs])
-                     for k in ("camera", "lights"))
+    def of(idx: list[int]) -> tuple:
+        return stacked([conditioning(scene, config.get(i), (ds.width, ds.height), enc, path=where) for i in idx])[1:]
 
-    return stacked(train_idx), stacked(sorted(ds.indices("val"))) if with_val else (None, None)
+    return of(train_idx), of(sorted(ds.indices("val"))) if with_val else (None, None)
 
 
 def crop_widths(aspect_crops: tuple[float, float], height: int, width: int) -> tuple[int, int]:

@@ -388,7 +388,7 @@ class Viewer:
         if temporal and images[0].kind == "radiance" and not images[0].flip:
             r = self.renderer
             with self.timer.stage("temporal", gpu=True):
-                images[0] = Image(self.temporal.resolve(images[0].texture, r.textures["depth"], self.view_size,
+                images[0] = Image(self.temporal.resolve(images[0].texture, r.buffer("depth"), self.view_size,
                                                         r.jitter, r.frame_view.view, r.frame_view.proj,
                                                         resting=resting))
         return images, notes

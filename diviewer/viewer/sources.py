@@ -61,15 +61,15 @@ class FrameImages:
         self._vxgi: Image | None = None
 
     def buffer(self, name: str) -> Image:
-        r = self.v.renderer
-        return Image(r.ensure_direct() if name == "direct" else r.textures[name])
+        """One of the frame's buffers (`Renderer.buffer`): the deferred direct pass runs only for ``direct``."""
+        return Image(self.v.renderer.buffer(name))
 
     def network_output(self) -> Image:
         v = self.v
         if v.neural is None:
             raise Unavailable(v.state.model_message or "no model loaded")
         if self._neural is None:
-            # encodings 2-4: the frame's light scale, camera and lights
+            # the frame's conditioning (contract.conditioning), as its encoding takes it
             inputs = v.neural.inputs_for(v.state.scene, v.state.config)
             self._neural = Image(v.neural.run(**inputs), flip=True)  # stages go to the viewer's timer
         return self._neural

@@ -356,14 +356,16 @@ def test_int8_quantisation_calibrates_an_encoding_2_model_with_its_light_scales(
     with 'Required inputs (['light_scale']) are missing')."""
     pytest.importorskip("onnx")
     from diviewer.bench.onnx_tools import get_meta, quantize_int8
+    from diviewer.contract.conditioning import stand_in
     from diviewer.contract.runtime import NeuralGI, read_metadata
 
     src = _encoding_2_model(tmp_path / "v2.onnx")
-    assert read_metadata(src)["encoding"]["version"] == 2
+    enc = read_metadata(src)["encoding"]
+    assert enc["version"] == 2
     rng = np.random.default_rng(3)
     calib = []
     for scale in (0.5, 2.0):  # at the model's 228x128 (16:9), which the graph runs padded to 256x128
-        calib.append((random_buffers(rng, 128, 228, batch=1), scale))
+        calib.append((random_buffers(rng, 128, 228, batch=1), stand_in(enc, (228, 128), light_scale=scale)))
     out = quantize_int8(src, tmp_path / "int8.onnx", calib, percentile=None)
     import onnx
 
@@ -381,21 +383,24 @@ def test_int8_quantisation_calibrates_an_encoding_3_model_with_its_cameras(tmp_p
     import onnx
 
     from diviewer.bench.onnx_tools import CALIB_PERCENTILE, get_meta, quantize_int8
+    from diviewer.contract.conditioning import stand_in
     from diviewer.paths import models_dir
     from diviewer.contract.runtime import NeuralGI, read_metadata
 
     src = models_dir() / "cornell.onnx"
-    if read_metadata(src)["encoding"]["version"] < 3:
+    enc = read_metadata(src)["encoding"]
+    if enc["version"] < 3:
         pytest.skip("the shipped cornell model is not encoding 3")
     rng = np.random.default_rng(5)
     camera = {"position": (0.0, 1.0, 3.5), "target": (0.0, 1.0, 0.0), "up": (0.0, 1.0, 0.0), "fov": 45.0}
-    calib = [(random_buffers(rng, 96, 160, batch=1), s, NeuralGI.camera(camera, 160, 96)[None]) for s in (0.5, 2.0)]
+    calib = [(random_buffers(rng, 96, 160, batch=1), stand_in(enc, (160, 96), light_scale=s, camera=camera))
+             for s in (0.5, 2.0)]
     out = quantize_int8(src, tmp_path / "int8.onnx", calib)
     meta = get_meta(onnx.load(str(out)))  # the default activation ranges: a percentile, recorded in the model
     assert meta["precision"] == "int8" and meta["quantization"]["calibration"] == f"percentile {CALIB_PERCENTILE:g}"
-    x, scale, cam = calib[0]
-    y8 = NeuralGI(out).run(x[0], light_scale=scale, camera=cam)
-    y32 = NeuralGI(src).run(x[0], light_scale=scale, camera=cam)
+    x, cond = calib[0]
+    y8 = NeuralGI(out).run(x[0], **cond.inputs())
+    y32 = NeuralGI(src).run(x[0], **cond.inputs())
     assert y8.shape == (96, 160, 3) and np.isfinite(y8).all() and y8.max() > 0
     assert np.abs(y8 - y32).mean() < 0.1 * np.abs(y32).mean()
 

@@ -40,6 +40,25 @@ def test_the_renderer_returns_its_targets_with_the_direct_light_decided(ctx, cor
         r.release()
 
 
+def test_one_buffer_by_name_leaves_a_deferred_direct_pass_deferred_but_for_direct(ctx, cornell):
+    """`Renderer.buffer` (what the viewer's view modes show): the G-buffer's textures as drawn, the direct pass still
+    deferred; ``direct`` is `buffers`' own, the deferred pass run then."""
+    r = Renderer(ctx, cornell, 24, 16)
+    try:
+        two = dataclasses.replace(cornell.default, lights=cornell.default.lights * 2)  # no inline light: a pass
+        r.render(two, direct=False)
+        for name in ("depth", "normal", "albedo"):
+            assert r.buffer(name) is r.textures[name] and r.direct_pending
+        assert r.buffer("direct") is r.buffers().direct is r.textures["direct"] and not r.direct_pending
+        deferred = r.read("direct")
+        r.render(two)
+        np.testing.assert_array_equal(deferred, r.read("direct"))  # the pass it ran is the frame's own
+        with pytest.raises(KeyError, match="emission"):
+            r.buffer("emission")
+    finally:
+        r.release()
+
+
 def test_a_frame_is_consistent(ctx):
     tex = ctx.texture((2, 2), 4, dtype="f4")
     try:

@@ -547,3 +547,75 @@ def test_both_graphs_decode_the_output_at_the_output_gains_exposure(checkpoints)
             live = base > 1e-3  # where ReLU of the composite does not clip
             assert live.mean() > 0.5
             np.testing.assert_allclose(quarter[live], base[live] / 4, rtol=1e-4, atol=1e-6)
+
+
+def test_procedural_verification_frames_and_their_conditioning_are_pinned():
+    """Export's procedural verification frames (no dataset) and their stand-in conditioning draw the same numbers as
+    they always did: buffers, light scales (0.5 to 2, drawn after the buffers), the stand-in camera and suns at a few
+    directions, pinned at the values they had before the conditioning moved to `diviewer.contract.conditioning`."""
+    from diviewer.contract.conditioning import stacked
+    from diviewer.contract.encoding import Encoding
+    from diviewer.train.export import _verification_frames
+
+    box = {"world_center": (0.0, 1.0, 0.0), "world_half": (1.5, 1.5, 1.5)}
+    frames, source, conds = _verification_frames(Encoding(version=4, lights=2, **box), None, 3, (24, 16))
+    scales, cams, lights = stacked(conds)
+    assert frames.shape == (3, 16, 24, 10) and "3 synthetic frames" in source
+    corner = [[3.5997514724731445, 0.0, 0.7071067690849304, 0.7071067690849304],
+              [4.363836765289307, 0.0, 0.7071067690849304, 0.7071067690849304],
+              [3.5591225624084473, 0.0, 0.7071067690849304, 0.7071067690849304]]
+    np.testing.assert_allclose(frames[:, 0, 0, :4], corner, rtol=1e-6)
+    far = [[1.5884932279586792, 0.34878847002983093, 0.6443120241165161, 0.6805943250656128],
+           [1.0008665323257446, 0.6509829759597778, 0.36239805817604065, 0.666999876499176],
+           [1.0027966499328613, 0.5855496525764465, 0.5585649013519287, 0.5874834656715393]]
+    np.testing.assert_allclose(frames[:, -1, -1, :4], far, rtol=1e-6)
+    np.testing.assert_allclose(frames[2, -1, -1, 7:], [0.0011759098852053285, 0.0007586515857838094,
+                                                       0.0006448538042604923], rtol=1e-5)
+    np.testing.assert_allclose(frames.sum(axis=(1, 2, 3), dtype=np.float64),
+                               [2484.3612984007923, 2388.8165708293673, 2284.045064641221], rtol=1e-6)
+    assert scales.dtype == np.float32
+    np.testing.assert_array_equal(scales, np.float32([1.7861064672470093, 0.5503783822059631, 1.5944831371307373]))
+    camera = [1.0, 0.0, -0.0, -0.0, 1.0, -0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 3.0, 0.0517766959965229, -0.621320366859436,
+              -0.0517766959965229, 0.4142135679721832, 0.0, 23.0, 0.0, 15.0]
+    np.testing.assert_allclose(cams, [camera] * 3, rtol=1e-6, atol=1e-7)
+    suns = [[0.0, -0.7071067690849304, 0.7071067690849304], [0.5950098633766174, -0.7071067690849304,
+                                                             0.3820514380931854],
+            [0.6429703831672668, -0.7071067690849304, -0.29426026344299316]]
+    np.testing.assert_allclose(lights, [s * 2 for s in suns], rtol=1e-6, atol=1e-7)
+    for version in (1, 2, 3):  # the same buffers and draws whatever the encoding takes
+        enc = Encoding(version=version, **(box if version >= 3 else {}))
+        same, _, c = _verification_frames(enc, None, 3, (24, 16))
+        np.testing.assert_array_equal(same, frames)
+        s, cam, light = stacked(c)
+        assert light is None and (cam is None) == (version < 3) and (s is None) == (version < 2)
+        if version >= 2:
+            np.testing.assert_array_equal(s, scales)
+
+
+def test_dataset_verification_frames_take_each_frames_stored_configuration(tmp_path):
+    """Export's verification frames from a dataset carry each frame's light scale, camera and lights as its stored
+    configuration gives them; a dataset whose frames have another number of lights than the model takes leaves
+    procedural frames."""
+    from diviewer.contract.conditioning import stacked
+    from diviewer.contract.encoding import Encoding
+    from diviewer.data.scales import light_scales
+    from diviewer.scene.camera import camera_params
+    from diviewer.scene.lights import light_params
+    from diviewer.train.export import _verification_frames
+    from tiny_datasets import tiny_capture
+
+    ds = tiny_capture(tmp_path / "cap", frames=3)
+    box = {"world_center": (0.0, 1.0, 0.0), "world_half": (1.5, 1.5, 1.5)}
+    frames, source, conds = _verification_frames(Encoding(version=4, lights=1, **box), str(ds.root), 2, (24, 16))
+    idx = (ds.indices("val") or ds.indices())[:2]
+    assert "frames of" in source and frames.shape == (len(idx), 16, 16, 10)
+    scales, cams, lights = stacked(conds)
+    np.testing.assert_array_equal(scales, light_scales(ds, idx))
+    configs = [next(f["config"] for f in ds.frames if f["index"] == i) for i in idx]
+    c = [x["camera"] for x in configs]
+    np.testing.assert_array_equal(cams, [camera_params(k["position"], k["target"], k["up"], k["fov"], 16, 16)
+                                         for k in c])
+    np.testing.assert_array_equal(lights, [light_params(x["lights"], box["world_center"], box["world_half"])
+                                           for x in configs])
+    _, other, _ = _verification_frames(Encoding(version=4, lights=2, **box), str(ds.root), 2, (24, 16))
+    assert "synthetic frames" in other
