@@ -137,6 +137,23 @@ class Shard:
 
 
 @dataclass(frozen=True)
+class FrameRange:
+    """``A:B``: the frame indices A <= index < B, 0 <= A < B."""
+
+    def describe(self) -> str:
+        return "A:B with 0 <= A < B"
+
+    def check(self, v: Any) -> Any:
+        try:
+            a, b = (int(x) for x in str(v).split(":"))
+        except ValueError:
+            a = b = -1
+        if not 0 <= a < b:
+            raise Invalid(f"must be {self.describe()}")
+        return v
+
+
+@dataclass(frozen=True)
 class Crops:
     """`train --aspect-crops`: () for 'off', else two aspect ratios as `TrainConfig.aspect_crops` takes them."""
 
@@ -175,7 +192,8 @@ _BENCH = {"warmup": Int(0, 10_000), "untrained_k": K, "gi_steps": Int(1, 16), "e
 _OTHERS = {"budget": Float(0.0, 100_000.0, lo_open=True), "ks": Int(1, MAX_LADDER_K), "frames_per_split": Int(1, 100_000),
            "ladder": Numbers(Ints(SPP, max_len=64, increasing=True)),
            "window_widths": Numbers(Ints(Int(16, MAX_SIZE), max_len=64, distinct=True)),
-           "aspect_crops": Crops(), **TRUTH_FILTER}
+           "aspect_crops": Crops(), "frame_range": FrameRange(), "deadline": Float(0.0, 1e12),
+           **TRUTH_FILTER}
 
 OPTIONS: dict[str, Any] = {**_CORE, **_TRAIN, **_VIEW, **_BENCH, **_OTHERS}
 """Each numeric option's spec, by its destination; the settings fields' own specs where the option fills one

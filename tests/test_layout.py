@@ -6,6 +6,7 @@ are deliberately lazy."""
 from __future__ import annotations
 
 import ast
+import json
 import re
 from pathlib import Path
 
@@ -265,6 +266,8 @@ DOCS_TESTS = {"test_docs_commands.py", "test_docs_examples.py", "test_results_pa
 """Tests of the docs, not of a module: the commands of the pages run (tests/test_docs_commands.py); the results page
 is what its data gives (tests/test_results_page.py, of tools/make_results.py)."""
 """Folders of tests/ that are suites across the package (run alone with their mark), not mirrors of a package."""
+WHOLE_TESTS = {"test_walks.py"}
+"""Tests of the package as a whole, not of one module: the frame and recipe walks through its modules."""
 
 
 def test_tests_mirror_the_package():
@@ -274,7 +277,7 @@ def test_tests_mirror_the_package():
     strays = []
     for path in sorted(TESTS.rglob("test_*.py")):
         rel = path.relative_to(TESTS)
-        if rel.parts[0] in SUITES or rel.as_posix() in DOCS_TESTS or path == Path(__file__).resolve():
+        if rel.parts[0] in SUITES or rel.as_posix() in DOCS_TESTS | WHOLE_TESTS or path == Path(__file__).resolve():
             continue
         module = path.stem[len("test_"):]
         folder = PACKAGE.joinpath(*rel.parts[:-1])
@@ -327,8 +330,8 @@ def test_heading_slugs_follow_githubs_rule():
 
 
 def test_every_shell_script_parses():
-    """tools/*.sh, docs/examples/*.sh and .ci/run parse (`bash -n`): the Sponza chain is edited while it runs (write a new file, then
-    `mv`), and a syntax error would surface only when the running chain reached it, sessions later."""
+    """tools/*.sh, docs/examples/*.sh and .ci/run parse (`bash -n`): a syntax error in a branch a run does not take
+    would otherwise surface only when a user's run reaches it."""
     import subprocess
 
     root = PACKAGE.parent
@@ -338,7 +341,18 @@ def test_every_shell_script_parses():
         r = subprocess.run(["bash", "-n", str(script)], capture_output=True, text=True)
         if r.returncode:
             bad[str(script.relative_to(root))] = r.stderr.strip()
-    assert len(scripts) > 5 and not bad, bad
+    assert len(scripts) > 3 and not bad, bad
+
+
+def test_tools_holds_only_what_its_readme_lists():
+    """tools/ keeps the scripts that rebuild shipped files and the README's set-up and test commands, each listed in
+    tools/README.md's table (tools/experiments/ has its own README); a script added without its line fails here."""
+    readme = (ROOT / "tools" / "README.md").read_text()
+    listed = set(re.findall(r"^\| `([^`/]+)` \|", readme, flags=re.M))
+    present = {p.name for p in (ROOT / "tools").iterdir() if p.is_file() and p.name != "README.md"}
+    assert present, "tools/ is empty"
+    assert present == listed, (f"in tools/ but not in tools/README.md: {sorted(present - listed)}; "
+                               f"listed but absent: {sorted(listed - present)}")
 
 
 TREE_BUDGET_BYTES = 35_000_000
@@ -361,15 +375,23 @@ def test_the_tracked_tree_fits_its_budget():
         f"tracked tree {total / 1e6:.2f} MB, budget {TREE_BUDGET_BYTES / 1e6:.0f} MB; largest: {largest}")
 
 
-def test_the_data_the_docs_cite_is_laid_out_by_rows(capsys):
-    """docs/data/ and the shipped sets' manifests: one line per record (tools/relayout_json.py), a fifth smaller than
-    one member a line, which is 2 MB of the tree's budget."""
-    from tool_modules import load_tool
+def test_the_data_the_docs_cite_is_laid_out_by_rows():
+    """docs/data/ and the shipped sets' manifests: one line per record (`diviewer.outputs.dumps_rows`), a fifth
+    smaller than one member a line, which is 2 MB of the tree's budget; each strict JSON (no NaN, no Infinity)."""
+    from diviewer.outputs import dumps_rows
+
+    def strict(name):
+        raise ValueError(f"{name} is not strict JSON")
 
     root = PACKAGE.parent
-    folders = [str(root / "docs" / "data"), str(root / "assets" / "evalsets")]
-    status = load_tool("relayout_json").main(["--check", *folders])
-    assert status == 0, capsys.readouterr().out
+    files = sorted(p for folder in ("docs/data", "assets/evalsets") for p in (root / folder).rglob("*.json"))
+    assert files
+    off = []
+    for f in files:
+        text = f.read_text(encoding="utf-8")
+        if dumps_rows(json.loads(text, parse_constant=strict)) + ("\n" if text.endswith("\n") else "") != text:
+            off.append(str(f.relative_to(root)))
+    assert not off, f"not laid out by rows (diviewer.outputs.dumps_rows): {off}"
 
 
 PRIVATE_ALLOWED: dict[tuple[str, str], str] = {}

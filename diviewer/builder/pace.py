@@ -15,7 +15,7 @@ from diviewer.errors import DiviewerError
 
 def missing_link(plan: Plan) -> str | None:
     """Why a run refuses the work folder's capture folder before looking in it: a link to a folder that is not there
-    (a refined set another build has yet to make, as tools/sponza_chain.sh links them ahead), which a capture would
+    (a refined set another build has yet to make, linked ahead of it), which a capture would
     otherwise fill through the link, at the recipe's ``refine_from`` spp, for hours; None where it is not one."""
     where = plan.capture_dir
     if not where.is_symlink() or where.exists():

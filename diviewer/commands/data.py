@@ -1,5 +1,5 @@
-"""`diviewer data check | merge | refine | area-direct | filter-truth`: a dataset's actions, their options and what
-they run."""
+"""`diviewer data check | merge | refine | refine-job | render-extras | area-direct | filter-truth`: a dataset's
+actions, their options and what they run."""
 
 from __future__ import annotations
 
@@ -61,6 +61,26 @@ def _refine(args: argparse.Namespace) -> int:
     return 0
 
 
+def _refine_job(args: argparse.Namespace) -> int:
+    from diviewer.data.refine_extras import write_job
+
+    first, stop = (int(x) for x in args.frame_range.split(":"))
+    n = write_job(args.dir, args.spp, first, stop, args.out)
+    print(f"job of {n} frames ({args.dir} to {args.spp} spp, frames {first}..{stop - 1}): {args.out} "
+          f"({args.out.stat().st_size / 1e6:.2f} MB)")
+    return 0
+
+
+def _render_extras(args: argparse.Namespace) -> int:
+    from diviewer.data.capture import parse_shard
+    from diviewer.data.refine_extras import render_extras
+
+    s = render_extras(args.job, args.out, parse_shard(args.shard), args.deadline)
+    print(f"done: {s['present']} of {s['frames']} frames of the shard in {args.out} ({s['rendered']} rendered "
+          f"in {s['seconds']:.0f} s)")
+    return 0
+
+
 def _area_direct(args: argparse.Namespace) -> int:
     from diviewer.data.area import area_direct
 
@@ -76,8 +96,8 @@ def _filter_truth(args: argparse.Namespace) -> int:
     return 0
 
 
-ACTIONS = {"check": _check, "merge": _merge, "refine": _refine, "area-direct": _area_direct,
-           "filter-truth": _filter_truth}
+ACTIONS = {"check": _check, "merge": _merge, "refine": _refine, "refine-job": _refine_job,
+           "render-extras": _render_extras, "area-direct": _area_direct, "filter-truth": _filter_truth}
 """What each `diviewer data` action runs."""
 
 
@@ -110,8 +130,21 @@ def add_parser(sub) -> None:
     add_out(q, None)
     q.add_argument("--shard", default=None, help="k/n: refine every n-th frame starting at the k-th")
     q.add_argument("--extras", type=Path, default=None, help="a folder of extra samples rendered elsewhere "
-                   "(tools/device_refine.py): refine only its frames, from them")
+                   "(`data refine-job`, then `data render-extras` there): refine only its frames, from them")
     _add_partial_arg(q)
+    q = data.add_parser("refine-job", help="write what a refinement's extra samples need, for a range of frames, to "
+                                           "render them on another machine (`data render-extras`)")
+    q.add_argument("dir", type=Path)
+    add_number(q, "--spp", required=True, help="the refined dataset's samples per pixel (above the source's)")
+    add_number(q, "--frames", dest="frame_range", type=str, required=True, metavar="A:B",
+               help="A:B: the present frames with A <= index < B")
+    add_out(q, "the job file (LZMA-compressed JSON)")
+    q = data.add_parser("render-extras", help="render a refinement job's extra samples (this shard's frames) into a "
+                                              "folder, for `data refine --extras` (resumable)")
+    q.add_argument("job", type=Path)
+    add_out(q, "the folder of extra samples")
+    q.add_argument("--shard", default=None, help="k/n: every n-th frame of the job starting at the k-th")
+    add_number(q, "--deadline", type=float, default=None, help="begin no frame after this Unix time")
     q = data.add_parser("area-direct", help="re-render a dataset's GL direct light over each pixel's area into a new "
                                             "folder (supersampled, box-filtered; minutes; resumable)")
     q.add_argument("dir", type=Path)

@@ -5,10 +5,10 @@ and a lent accelerator takes 64 MiB a call and gives back 128 MiB: the dataset c
 extra samples need does (each frame's seed and configuration, the scene's identity), and the samples come back
 (two float16 images a frame, 192 KB at 128x128). So:
 
-1. here, `write_job`: the refinement's job for a range of frames (`tools/device_refine.py job`): the refined
+1. here, `write_job`: the refinement's job for a range of frames (`diviewer data refine-job`): the refined
    manifest without its frame list, the source dataset's hash, and each present frame's index, seed and
    configuration (LZMA-compressed JSON: the configurations repeat the scene's objects);
-2. there, `render_extras` (`tools/device_refine.py render`): each frame's extra samples exactly as `refine`
+2. there, `render_extras` (`diviewer data render-extras`): each frame's extra samples exactly as `refine`
    renders them (the same seed, count, depth and one-pass estimator) into a folder: ``FRAME.npy`` (float16,
    H x W x 6: ``pt`` then ``pt_direct``) and its sidecar ``FRAME.json`` (the job's source hash, counts, seed,
    variant, estimator, seconds, the array's checksum); resumable, sharded, and stopped at a deadline between frames;

@@ -106,18 +106,23 @@ def shadow_casters(boxes: np.ndarray, camera_clip: np.ndarray, direction, bounds
     return np.all(ahead >= -1e-4, axis=1)
 
 
-def draw_list(scene: Scene, config: FrameConfig, gpu, ctx) -> list[tuple]:
+def static_objects(scene: Scene, config: FrameConfig) -> list | None:
+    """The objects the scene's ranges never move, where a frame draws them merged (`draw_list`): more than one, all
+    of them in the frame unchanged; else None."""
+    static = [o for o in scene.default.objects if o.name not in scene.ranges.objects]
+    return static if len(static) > 1 and set(static) <= set(config.objects) else None
+
+
+def draw_list(scene: Scene, config: FrameConfig, gpu, static: list | None) -> list[tuple]:
     """(GPU mesh, material, model matrix or None for world space, world box) per draw, opaque first.
 
-    Objects that the scene's ranges never move are merged per material and cut into chunks once (``gpu``, a
-    resources.GpuScene, holds them); they are used while the frame holds all of them unchanged, and the
-    moving objects are drawn one by one.
+    The objects that the scene's ranges never move (``static``, `static_objects`) are drawn from their geometry
+    merged per material and cut into chunks, which ``gpu`` (a resources.GpuScene) holds uploaded
+    (``GpuScene.set_static``); the moving objects are drawn one by one.
     """
-    static = [o for o in scene.default.objects if o.name not in scene.ranges.objects]
-    static_set = set(static)
     items = []
-    if len(static) > 1 and static_set <= set(config.objects):
-        gpu.set_static(ctx, scene.meshes, static, key=scene)
+    if static is not None:
+        static_set = set(static)
         items = [(m, material, None, m.bounds) for material, m in gpu.static]
         moving = [o for o in config.objects if o not in static_set]
     else:

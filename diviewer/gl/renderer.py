@@ -14,8 +14,8 @@ import moderngl
 import numpy as np
 
 from diviewer.contract.encoding import INPUT_NAMES
-from diviewer.gl.context import gl_flush, unbind_framebuffer
-from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes, shadow_casters
+from diviewer.gl.context import unbind_framebuffer
+from diviewer.gl.draw import draw_objects
 from diviewer.gl.frame import NAMES, Frame
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shadow_fit import RenderSettings, light_defines, light_uniforms
@@ -37,9 +37,10 @@ class FrameView:
     view: np.ndarray
     proj: np.ndarray
     bounds: np.ndarray
+    settings: RenderSettings
+    """The renderer's settings for this frame (the shadow pass's map sizes and lookups)."""
 
 
-_IDENTITY = np.identity(4)
 FLUSH_EVERY_DRAWS = 8
 """The G-buffer pass hands what it has drawn to the rasterizer (glFlush) every this many draws. llvmpipe shades and
 bins a pass's triangles on the calling thread and rasterizes them on its own threads only once the pass is flushed;
@@ -73,7 +74,8 @@ class Renderer:
         """Times each pass as a stage; the frame's owner resets it (GL passes need its sync or queries)."""
         self.gpu = GpuScene(ctx, scene.meshes, scene.materials)
         self._screen_vaos: dict[int, moderngl.VertexArray] = {}
-        self._draw_cache: tuple = (None, None, [])
+        self.draw_cache: tuple = (None, None, [])
+        """(scene, objects tuple, the draw list with its boxes and alpha-masked items): `gl.draw.frame_draw_list`."""
         self._bounds: tuple = (None, None, None)
         self._emissive: tuple = (None, False)
         self.shadow_renders = 0
@@ -93,7 +95,7 @@ class Renderer:
         """Sub-pixel offset (pixels, x right, y up) of the G-buffer's image (``camera.jittered``; temporal
         upsampling's): pixel centre ``c`` shows what lies at ``c - jitter``. Lighting passes reconstruct positions
         through pixel centres, at the jittered depth."""
-        self.shadow_pass = ShadowPass(self)
+        self.shadow_pass = ShadowPass(self, self.settings)
         """The shadow maps: drawn, kept, and this frame's lookups (``shadow_pass.maps``)."""
         self.passes = (("shadows", self.shadow_pass.run), ("gbuffer", self._gbuffer_pass),
                        ("direct", self._direct_pass))
@@ -177,7 +179,7 @@ class Renderer:
             # The shadow maps' fit; a loop over the objects, so once per (scene, objects tuple).
             self._bounds = (self.scene, config.objects, self.scene.bounds(config))
         frame = FrameView(config, config.camera.view_matrix(), config.camera.projection(self.width / self.height),
-                          self._bounds[2])
+                          self._bounds[2], self.settings)
         self.frame_view = frame
         self.direct_pending = not direct
         self.drawn = {}
@@ -243,71 +245,6 @@ class Renderer:
         set_uniform(prog, "u_jitter", tuple(map(float, self.jitter)))
         self.set_light_uniforms(prog, light, self.shadow_pass.maps.get(light.name))
 
-    def _draw_list(self, config: FrameConfig) -> tuple:
-        """culling.draw_list per (scene, objects tuple), its boxes (N, 2, 3) and its alpha-masked items (N,)."""
-        if self._draw_cache[0] is not self.scene or self._draw_cache[1] is not config.objects:
-            items = draw_list(self.scene, config, self.gpu, self.ctx)
-            boxes = np.array([it[3] for it in items], np.float64).reshape(-1, 2, 3)
-            cut_out = np.array([self.scene.materials[it[1]].is_masked for it in items], bool)
-            self._draw_cache = (self.scene, config.objects, (items, boxes, cut_out))
-        return self._draw_cache[2]
-
-    def draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None,
-                     clip: np.ndarray, stage: str, cull_back: bool = False, sweep: tuple | None = None) -> None:
-        """Draw the frame's objects inside the frustum of ``clip`` (world to clip space) with shaders/<file>;
-        alpha-masked materials use its ALPHA_TEST variant; ``cull_back``: single-sided materials without their back
-        faces; ``sweep``: `shadow_casters`' arguments after the boxes, to draw only those. Counts draws and triangles
-        (before face culling) in ``drawn[stage]``. The G-buffer flushes every ``flush_every`` draws.
-
-        ``setup(prog)`` sets the pass's uniforms on each program variant before its first draw.
-        """
-        progs: dict[bool, moderngl.Program] = {}
-        items, boxes, cut_out = self._draw_list(config)
-        keep = boxes_visible(frustum_planes(clip), boxes) if self.culling else np.ones(len(items), bool)
-        keep &= shadow_casters(boxes, *sweep) if sweep is not None else True
-        draws, triangles = self.drawn.get(stage, (0, 0))
-        triangles += sum(it[0].triangles for it, k in zip(items, keep) if k)
-        self.drawn[stage] = (draws + int(keep.sum()), triangles)
-        eye = cam.view_to_world(view)[:3, 3] if view is not None else None
-        flush = gl_flush() if stage == "gbuffer" and self.flush_every > 0 else None  # shadows: no gain measured
-        for n, i in enumerate(draw_order(boxes, keep, cut_out, eye)):
-            if flush is not None and n and n % self.flush_every == 0:
-                flush()
-                self.flushes += 1
-            gmesh, mat_name, model, _ = items[i]
-            mat = self.scene.materials[mat_name]
-            masked = mat.is_masked
-            if cull_back:  # the other passes draw both faces: face culling is never on there
-                (self.ctx.disable if mat.double_sided else self.ctx.enable)(moderngl.CULL_FACE)
-            if masked not in progs:
-                progs[masked] = self.shaders.program(file, {**defines, "ALPHA_TEST": 1} if masked else defines)
-                setup(progs[masked])
-            prog = progs[masked]
-            m = _IDENTITY if model is None else model
-            # A mirroring pose (negative scale) flips the winding: keep its outside front-facing.
-            self.ctx.front_face = "cw" if model is not None and np.linalg.det(model[:3, :3]) < 0 else "ccw"
-            set_uniform(prog, "m_model", m)
-            tex = self.gpu.textures.get(mat_name)
-            if view is not None:
-                set_uniform(prog, "m_normal", cam.normal_matrix(view @ m))
-                set_uniform(prog, "u_albedo", tuple(mat.albedo))
-                set_uniform(prog, "u_emission", tuple(mat.emission))
-                set_uniform(prog, "u_has_texture", tex is not None)
-                glow = self.gpu.emission_textures.get(mat_name)
-                set_uniform(prog, "u_has_emission_map", glow is not None)
-                if glow is not None:
-                    glow.use(location=1)
-                    set_uniform(prog, "u_emission_map", 1)
-            if tex is not None and (view is not None or masked):
-                tex.use(location=0)
-                set_uniform(prog, "u_albedo_map", 0)
-            if masked:
-                set_uniform(prog, "u_alpha_cutoff", float(mat.alpha_cutoff))
-            gmesh.vao(prog).render(moderngl.TRIANGLES)
-        self.ctx.front_face = "ccw"
-        if cull_back:
-            self.ctx.disable(moderngl.CULL_FACE)
-
     def _gbuffer_pass(self, frame: "FrameView") -> None:
         ctx, config, view, proj = self.ctx, frame.config, frame.view, frame.proj
         if self.jitter != (0.0, 0.0):
@@ -320,10 +257,8 @@ class Renderer:
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable_only(moderngl.DEPTH_TEST)
-        def setup(prog):
-            set_uniform(prog, "m_proj", proj)
-            set_uniform(prog, "m_view", view)
-        self.draw_objects(config, "gbuffer.glsl", {}, setup, view, proj @ view, "gbuffer", not self.back_faces)
+        draw_objects(self, config, "gbuffer.glsl", {}, {"m_proj": proj, "m_view": view}, view, proj @ view, "gbuffer",
+                     not self.back_faces)
 
     def _screen_program(self, defines: dict) -> moderngl.Program:
         prog = self.shaders.program("direct.glsl", defines)

@@ -17,7 +17,7 @@ import moderngl
 import numpy as np
 
 from diviewer.gl.context import unbind_framebuffer
-from diviewer.gl.resources import set_uniform
+from diviewer.gl.draw import draw_objects
 from diviewer.gl.shadow_fit import fit_directional, point_faces, sun_footprint
 from diviewer.gl.shadows import DirectionalShadow, PointShadow
 from diviewer.scene.model import DirectionalLight, FrameConfig
@@ -41,11 +41,12 @@ def band_clip(m_light: np.ndarray, size: int, y0: int, rows: int) -> np.ndarray:
 class ShadowPass:
     """Each light's shadow map for a Renderer's frames (its pass named "shadows"): ``run(frame)`` leaves this
     frame's map per light in ``maps`` (`diviewer.gl.shadows`, each binding its lookup to a program; None: shadows
-    off)."""
+    off). It reads the renderer's state and draws through `diviewer.gl.draw`, never calling the renderer back; the
+    frame (the renderer's FrameView) brings the settings."""
 
-    def __init__(self, renderer):
+    def __init__(self, renderer, settings):
         self.renderer = renderer
-        self.face_size = max(renderer.settings.shadow_size // 2, 16)
+        self.face_size = max(settings.shadow_size // 2, 16)
         """A point light's cube face, texels a side (half the map size the renderer started with)."""
         self.maps: dict[str, DirectionalShadow | PointShadow | None] = {}
         """This frame's map per light (`diviewer.gl.shadows`; None entries: shadows off)."""
@@ -57,17 +58,17 @@ class ShadowPass:
         """Per sun at rest whose full map is being drawn in bands: the bands drawn so far."""
 
     # --- targets --------------------------------------------------------------------------------
-    def _target(self, light, size: int) -> tuple:
+    def _target(self, light, size: int, full: int) -> tuple:
         """The light's map of ``size`` and its framebuffer, made at its first use: a depth texture compared in
         hardware (sun, ``size`` texels a side), or a 3x2 atlas of cube faces holding distances (point). A sun keeps
-        two, the full size and the moving one; one of another size is released when a new one is made."""
+        two, the full size (``full``) and the moving one; one of another size is released when a new one is made."""
         sun = isinstance(light, DirectionalLight)
         key = (light.name, size if sun else 0)
         target = self._targets.get(key)
         if target is not None:
             return target
         r = self.renderer
-        keep = {key[1], r.settings.shadow_size, r.moving_shadow_size}
+        keep = {key[1], full, r.moving_shadow_size}
         for old in [k for k in self._targets if k[0] == light.name and ((k[1] == 0) == sun or k[1] not in keep)]:
             self._release(old)
         ctx = r.ctx
@@ -104,11 +105,11 @@ class ShadowPass:
             self._release(key)
 
     # --- the pass -------------------------------------------------------------------------------
-    def _key(self, config: FrameConfig, light, bounds: np.ndarray) -> tuple:
+    def _key(self, frame, light) -> tuple:
         """Everything a light's shadow map depends on: the light, each object's pose and the GPU mesh it draws
         (a mesh loaded again under the same name is a new one), the settings. Not the camera."""
-        objects = tuple((o, id(self.renderer.gpu.meshes.get(o.mesh))) for o in config.objects)
-        return (light, objects, tuple(np.asarray(bounds, float).ravel()), self.renderer.settings)
+        objects = tuple((o, id(self.renderer.gpu.meshes.get(o.mesh))) for o in frame.config.objects)
+        return (light, objects, tuple(np.asarray(frame.bounds, float).ravel()), frame.settings)
 
     def run(self, frame) -> None:
         """Each light's shadow map (none with shadows off), reused from an earlier frame when nothing it depends on
@@ -116,10 +117,10 @@ class ShadowPass:
         r = self.renderer
         maps = {}
         for light in frame.config.lights:
-            if not r.settings.shadows:
+            if not frame.settings.shadows:
                 maps[light.name] = None
                 continue
-            key, full = self._key(frame.config, light, frame.bounds), r.settings.shadow_size
+            key, full = self._key(frame, light), frame.settings.shadow_size
             cached = self.maps.get(light.name)
             rests = cached is not None and self._keys.get(light.name) == key
             if rests and not cached.pending(full):
@@ -142,7 +143,7 @@ class ShadowPass:
         """One band more of a resting sun's full map; the full map once its last band is drawn, until then the
         moving one (drawn again for this view if it holds only what shaded another, whole once the renderer's
         ``shadow_footprint`` is off)."""
-        r, full = self.renderer, self.renderer.settings.shadow_size
+        r, full = self.renderer, frame.settings.shadow_size
         bands = math.ceil(full / moving.size) ** 2  # the moving map is smaller: 4 at least
         done = self._bands.get(light.name, 0)
         drawn = self._draw(frame, light, full, False, band=band_rows(full, bands, done))
@@ -165,7 +166,7 @@ class ShadowPass:
         r, config, bounds = self.renderer, frame.config, frame.bounds
         ctx = r.ctx
         ctx.enable_only(moderngl.DEPTH_TEST)
-        kind, tex, fbo, _ = self._target(light, size)
+        kind, tex, fbo, _ = self._target(light, size, frame.settings.shadow_size)
         if kind == "dir":
             m_light, extent, depth_range = fit_directional(bounds, light.direction)
             clip = frame.proj @ frame.view
@@ -174,11 +175,10 @@ class ShadowPass:
             fbo.clear(depth=1.0, viewport=rows)
             cull, sweep, fbo.scissor = m_light, None, rows
             if footprint:
-                sweep, fbo.scissor = sun_footprint(clip, light, bounds, m_light, extent, size, r.settings)
+                sweep, fbo.scissor = sun_footprint(clip, light, bounds, m_light, extent, size, frame.settings)
             elif band is not None:
                 cull = band_clip(m_light, size, *band)
-            r.draw_objects(config, "shadow.glsl", {}, lambda prog: set_uniform(prog, "m_light", m_light), None,
-                           cull, "shadows", sweep=sweep)
+            draw_objects(r, config, "shadow.glsl", {}, {"m_light": m_light}, None, cull, "shadows", sweep=sweep)
             fbo.scissor = None
             return DirectionalShadow(tex, m_light, extent / size, depth_range, size, footprint, clip)
         faces = point_faces(light.position, bounds)
@@ -187,10 +187,7 @@ class ShadowPass:
         s = self.face_size
         for i, m in enumerate(faces):
             fbo.viewport = ((i % 3) * s, (i // 3) * s, s, s)
-
-            def setup(prog, m=m):
-                set_uniform(prog, "u_light_pos", tuple(light.position))
-                set_uniform(prog, "m_light", m)
-            r.draw_objects(config, "shadow.glsl", {"POINT_LIGHT": 1}, setup, None, m, "shadows")
+            draw_objects(r, config, "shadow.glsl", {"POINT_LIGHT": 1}, {"u_light_pos": tuple(light.position),
+                                                                         "m_light": m}, None, m, "shadows")
         fbo.viewport = (0, 0, 3 * s, 2 * s)
         return PointShadow(tex, faces, s)

@@ -11,8 +11,8 @@ this is for a model trained by hand::
 EVAL.json: `diviewer eval --model MODEL --model assets/models/SCENE.onnx --out EVAL.json` on the compact evaluation
 set (the card records the tone-mapped region scores of both, per split: ``evalset_compact``). A model that ships
 with an edited scene file (a new ``scene_hash``) cannot be scored on the old model's set, nor the old model on the
-new: ``--previous-eval`` then names the old model's JSON on the same frames (the set before
-`tools/restamp_scene_hash.py`), and ``--eval`` holds the new model's. The card and the ONNX
+new: ``--previous-eval`` then names the old model's JSON on the same frames (the set made from the old scene
+file), and ``--eval`` holds the new model's. The card and the ONNX
 metadata are written together (`diviewer.builder.shipfiles.write_model_card`); the run's curves.png and metrics.csv
 are copied beside them, and with ``--ladder-run`` every K's curves on one figure (SCENE_ladder_curves.png). The
 shipped card's recipe must be the scene's recipe file (tests/train/test_recipe.py).

@@ -239,8 +239,8 @@ def test_the_state_skips_only_unchanged_outputs_and_refuses_another_plan(tmp_pat
 
 
 def test_an_output_through_a_link_or_outside_the_work_folder_is_found_from_any_working_folder(tmp_path, monkeypatch):
-    # runs/sponza256/data links to runs/sponza/data (tools/sponza_chain.sh): its capture stage recorded the manifest
-    # by a path relative to the working folder, then looked for it under the work folder and ran again every time
+    # a work folder whose data/ links to another build's capture: the capture stage must find the manifest it
+    # recorded from any working folder, not look for it under the work folder and run again every time
     shared, work, elsewhere = tmp_path / "first" / "data", tmp_path / "second", tmp_path / "elsewhere"
     shared.mkdir(parents=True)
     work.mkdir()
@@ -623,8 +623,7 @@ def test_a_recipe_that_refines_its_capture_plans_the_capture_at_the_lower_count_
 
 
 def test_a_capture_folder_that_links_to_a_set_not_yet_made_is_refused_not_captured_through(tmp_path, capsys):
-    """tools/sponza_chain.sh links the 768-spp build's data/ to the 512-spp build's refined set before that set
-    exists: a run of the later build then must not capture at its refine_from spp through the link (hours, into the
+    """A build's data/ linked to another build's refined set before that set exists: a run of the later build then must not capture at its refine_from spp through the link (hours, into the
     other build's folder); the dry run says so, and the run stops on one line naming the link, having made nothing."""
     (tmp_path / "r.toml").write_text(_refining(TINY_RECIPE, 2, 8))
     work, later = tmp_path / "w", tmp_path / "other" / "data_2spp"

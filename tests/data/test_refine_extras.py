@@ -16,21 +16,30 @@ from diviewer.data.dataset import Dataset
 from diviewer.data.refine import extras_present, load_extras, refine
 from diviewer.data.refine_extras import read_job, render_extras, write_job
 from diviewer.errors import DiviewerError
-from tool_modules import load_tool
 
 TINY = dict(width=32, height=32, spp=4, max_depth=4)
 QUIET = dict(log=lambda *_: None)
 
 
-def test_a_job_file_that_is_not_one_is_refused_naming_it(tmp_path):
+def test_a_job_file_that_is_not_one_is_refused_naming_it(tmp_path, capsys):
     bad = tmp_path / "job.json.xz"
     bad.write_text("{}")
     with pytest.raises(DiviewerError, match="not a refinement job") as e:
         read_job(bad)
     assert str(bad) in str(e.value)
-    tool = load_tool("device_refine")
-    with pytest.raises(DiviewerError, match="--frames must be A:B"):
-        tool.frame_range("9:3")
+    assert main(["data", "render-extras", str(bad), "--out", str(tmp_path / "extras")]) == 2
+    assert "not a refinement job" in capsys.readouterr().err and not (tmp_path / "extras").exists()
+
+
+@pytest.mark.parametrize("frames", ["9:3", "3:3", "-1:4", "a:b", "4"])
+def test_refine_job_refuses_a_frame_range_that_is_none_before_any_work(tmp_path, capsys, frames):
+    """`data refine-job --frames` takes A:B with 0 <= A < B, refused in one line naming the option before the
+    dataset is even read (it does not exist here)."""
+    job = tmp_path / "job.json.xz"
+    assert main(["data", "refine-job", str(tmp_path / "none"), "--spp", "16", f"--frames={frames}",
+                 "--out", str(job)]) == 2
+    err = capsys.readouterr().err
+    assert "--frames" in err and "A:B" in err and not job.exists()
 
 
 @pytest.mark.mitsuba
@@ -38,14 +47,16 @@ def test_extras_rendered_elsewhere_refine_as_refine_does(gl_context, tmp_path, c
     src = tmp_path / "src"
     capture("cornell", src, CaptureSettings(frames=4, seed=1, **TINY), **QUIET)
     job = tmp_path / "job.json.xz"
-    assert write_job(src, 16, 1, 4, job) == 3  # frames 1..3 (index 0 is left to this machine)
+    assert main(["data", "refine-job", str(src), "--spp", "16", "--frames", "1:4", "--out", str(job)]) == 0
+    assert "job of 3 frames" in capsys.readouterr().out  # frames 1..3 (index 0 is left to this machine)
     j = read_job(job)
     assert j["source_hash"] == Dataset(src).hash and [f["index"] for f in j["frames"]] == [1, 2, 3]
     assert "frame_list" not in j["manifest"] and j["manifest"]["spp"] == 16
     extras = tmp_path / "extras"
     # Two shards; the second stops at a deadline already past: nothing begun, and a later run finishes it.
     assert render_extras(job, extras, (1, 2), **QUIET)["rendered"] == 1  # index 2 (the 1st of 2: index % 2 == 0)
-    assert render_extras(job, extras, (2, 2), deadline=0.0, **QUIET)["rendered"] == 0
+    assert main(["data", "render-extras", str(job), "--out", str(extras), "--shard", "2/2", "--deadline", "0"]) == 0
+    assert "done: 0 of 2 frames of the shard" in capsys.readouterr().out
     assert render_extras(job, extras, (2, 2), **QUIET) == {"rendered": 2, "present": 2, "frames": 2,
                                                           "seconds": pytest.approx(0, abs=600)}
     assert extras_present(extras) == {1, 2, 3}

@@ -197,44 +197,14 @@ def test_shipped_model_is_darker_without_light(cornell_frames, shipped):
         assert dark == 0.0 < lit
 
 
-def test_a_light_scaled_model_is_black_at_zero_light_and_linear_in_it(cornell_frames, tmp_path):
-    """Encoding 2 makes the model linear in the light by construction: at zero light exactly black, at 8x the
-    light exactly 8x the frame. Built from the shipped cornell generator (its weights rebuilt from its ONNX
-    file, exported lean in fp16 as encoding 2), on GL frames of cornell. The shipped encoding-1 model
-    hallucinates indirect light at zero light (6 % of the lit frame's mean for the K=8 of 2026-11-23): this
-    was a strict xfail on it."""
-    torch = pytest.importorskip("torch")
-    onnx = pytest.importorskip("onnx")
-    from tool_modules import load_tool
-
-    from diviewer.bench.onnx_tools import get_meta, set_meta
-    from diviewer.contract.encoding import Encoding
-    from diviewer.paths import models_dir
-    from diviewer.train.export import gi_module, onnx_bytes
-
-    scene, frames, _ = cornell_frames
-    old = onnx.load(str(models_dir() / "cornell.onnx"))
-    meta = get_meta(old)
-    # encoding 2, or the shipped model's own where it is newer (encoding 3 is linear in the light too)
-    enc = Encoding.from_dict({**meta["encoding"], "version": max(2, int(meta["encoding"]["version"]))})
-    netG = load_tool("reexport_lean").rebuild_generator(old, meta)
-    module = gi_module(netG, enc, {"target": meta["target"], "divide_albedo": meta["divide_albedo"]}, fp16=True)
-    h, w = frames[1.0].shape[:2]
-    camera = torch.from_numpy(NeuralGI.camera(scene.default.camera, w, h)[None]) if enc.world_inputs else None
-    model = onnx.load_from_string(onnx_bytes(module, torch.from_numpy(frames[1.0][None]), torch.ones(1), camera))
-    set_meta(model, {**meta, "encoding": enc.to_dict()})
-    onnx.save(model, str(tmp_path / "v2.onnx"))
-    net = NeuralGI(tmp_path / "v2.onnx", scene=scene)
-    assert net.light_scaled
-
-    def scale(k):
-        lights = tuple(dataclasses.replace(l, irradiance=l.irradiance * k) for l in scene.default.lights)
-        return net.light_scale(dataclasses.replace(scene.default, lights=lights))
-
-    cam = {"camera": NeuralGI.camera(scene.default.camera, w, h)} if net.world else {}
-    dark = net.run(frames[0.0], light_scale=scale(0.0), **cam)
-    lit, bright = (net.run(frames[k], light_scale=scale(k), **cam) for k in (1.0, 8.0))
-    assert scale(0.0) == 0.0 and np.all(dark == 0.0)
+def test_a_light_scaled_model_is_black_at_zero_light_and_linear_in_it(cornell_frames, shipped):
+    """Encodings 2 and up make the model linear in the light by construction: at zero light exactly black, at 8x
+    the light exactly 8x the frame. The shipped cornell model (encoding 3), on GL frames of cornell, with the
+    light scale and camera the viewer gives it."""
+    assert shipped.light_scaled and int(shipped.meta["encoding"]["version"]) >= 2
+    dark = _run_shipped(shipped, cornell_frames, 0.0)
+    lit, bright = (_run_shipped(shipped, cornell_frames, k) for k in (1.0, 8.0))
+    assert np.all(dark == 0.0)
     assert lit.mean() > 0 and np.all(np.isfinite(bright))
     np.testing.assert_allclose(bright, 8.0 * lit, rtol=1e-6, atol=0)
 

@@ -668,12 +668,12 @@ def test_single_sided_back_faces_leave_the_gbuffer_not_the_shadows(ctx):
 def test_sponza_draws_opaque_front_to_back_then_masked_and_changes_no_pixel(ctx, sponza, monkeypatch):
     """The G-buffer pass draws the opaque pieces nearest first and the alpha-masked ones last; the buffers are
     bit for bit those of the list's order."""
-    from diviewer.gl import culling, renderer
+    from diviewer.gl import culling, draw
 
     r = Renderer(ctx, sponza, 48, 48, RenderSettings(shadow_size=256))
     try:
         config = sponza.default
-        items, boxes, masked = r._draw_list(config)
+        items, boxes, masked = draw.frame_draw_list(r, config)
         keep = np.ones(len(items), bool)
         assert masked.tolist() == [sponza.materials[it[1]].is_masked for it in items]
         eye = cam.view_to_world(config.camera.view_matrix())[:3, 3]
@@ -684,7 +684,7 @@ def test_sponza_draws_opaque_front_to_back_then_masked_and_changes_no_pixel(ctx,
         assert dist == sorted(dist)
         assert culling.draw_order(boxes, keep, masked, None).tolist() == list(range(len(items)))  # no camera
         sorted_frame = r.frame(config)
-        monkeypatch.setattr(renderer, "draw_order", lambda boxes, keep, masked, eye: np.flatnonzero(keep))
+        monkeypatch.setattr(draw, "draw_order", lambda boxes, keep, masked, eye: np.flatnonzero(keep))
         listed = r.frame(config)
         for buf in sorted_frame:
             np.testing.assert_array_equal(sorted_frame[buf], listed[buf], err_msg=buf)

@@ -200,12 +200,12 @@ def test_refine_from_is_the_captures_lower_count_and_part_of_what_the_recipe_ask
 
 
 def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
-    """tools/sponza_chain.sh links the 64-spp build's capture (sponza_walk64.toml) into the first stop's build folder
-    (sponza_filtered128.toml), whose 128-spp set it links into the filtered recipe's (sponza_filtered.toml: the
-    shipped recipe with its truth filtered before training), whose 256-spp set the
-    512-spp build (sponza_walk512.toml) takes for its capture, and that one's refined set the 768-spp build
-    (sponza_walk768.toml): each must ask for the capture it is given (its settings at refine_from spp), or the capture
-    stage would refuse it; each trains and scores as the 64-spp recipe does, and exports with int8-stored weights."""
+    """Sponza's recipes refine one another's sets: the 64-spp build's capture (sponza_walk64.toml) is the first stop's
+    (sponza_filtered128.toml), whose 128-spp set the filtered recipe's (sponza_filtered.toml: the shipped recipe with
+    its truth filtered before training) refines, whose 256-spp set the 512-spp build (sponza_walk512.toml) takes for
+    its capture, and that one's refined set the 768-spp build (sponza_walk768.toml): each must ask for the capture it
+    is given (its settings at refine_from spp), or the capture stage would refuse it; each trains and scores as the
+    64-spp recipe does, and exports with int8-stored weights."""
     from diviewer.data.truth_filter import TruthFilter
     from diviewer.train.recipe import capture_settings, refine_from, truth_filter
 
@@ -256,31 +256,6 @@ def test_sponzas_refining_recipe_captures_what_the_64_spp_recipe_captured():
     assert ladder.export == refined.export and ladder.ladder == refined.ladder
 
 
-def test_each_link_of_the_sponza_chain_gives_a_build_the_set_its_recipe_refines():
-    """tools/sponza_chain.sh links each refining build's data/ to the set of the build before it (a capture's data/, or
-    a refinement's data_NNNspp/): the set must hold the truth that build's recipe refines from (`refine_from`), or the
-    build would refuse it hours later, or capture through the link; a recipe edited without its link (as the 512-spp
-    one was on 2026-12-01, from 64 to 256) fails here, not in the chain."""
-    import re
-
-    from diviewer.train.recipe import capture_settings, refine_from
-
-    root = Path(__file__).parents[2]
-    text = (root / "tools" / "sponza_chain.sh").read_text()
-    recipes = {var: load_recipe(root / path) for path, var in
-               re.findall(r'^cp (assets/recipes/[\w.]+\.toml) "\$(\w+)/sponza\.toml\.part"', text, flags=re.M)}
-    links = re.findall(r'ln -s "\$\(realpath -m "\$(\w+)/(data|data_\d+spp)"\)" "\$(\w+)/data"', text)
-    assert len(links) == 4 and len(recipes) == 5, (links, list(recipes))
-    for src, folder, dst in links:
-        given = capture_settings(recipes[src]).spp
-        if folder == "data":  # the capture's own folder: the spp it captured at, before any refinement
-            given = refine_from(recipes[src]) or given
-        else:  # a refined set: named by the spp its build refined to
-            assert folder == f"data_{given}spp", (src, folder)
-        assert refine_from(recipes[dst]) == given, (dst, src, folder)
-        assert capture_settings(recipes[dst], spp=given) == capture_settings(recipes[src], spp=given), (dst, src)
-
-
 def test_train_help_says_what_the_default_recipe_sets_beside_the_papers_defaults():
     """A plain `diviewer train` runs the default recipe, so its --help shows the recipe's value of each option the
     recipe sets (K, epochs, target...) beside TrainConfig's default, and lists every shipped recipe."""
@@ -295,17 +270,3 @@ def test_train_help_says_what_the_default_recipe_sets_beside_the_papers_defaults
     assert f"[the {DEFAULT_RECIPE} recipe: {given['target']}]" in helps["target"]
     assert "recipe:" not in helps["data"] and "recipe:" not in helps["resume"]
     assert all(name in helps["recipe"] for name in shipped_recipes())
-
-
-def test_the_sponza_chain_parses_and_builds_only_recipes_that_load():
-    """tools/sponza_chain.sh runs unattended over sessions: it must parse, and every recipe it copies into a work
-    folder must exist and load (a renamed recipe would stop the chain only when it reached that stage, hours later)."""
-    import re
-    import subprocess
-
-    chain = Path(__file__).parents[2] / "tools" / "sponza_chain.sh"
-    assert subprocess.run(["bash", "-n", str(chain)], capture_output=True).returncode == 0
-    named = set(re.findall(r"^cp (assets/recipes/[\w.]+\.toml) ", chain.read_text(), flags=re.M))
-    assert {"assets/recipes/sponza_walk64.toml", "assets/recipes/sponza_walk768.toml"} <= named
-    for path in named:
-        assert load_recipe(Path(__file__).parents[2] / path).scene == "sponza", path
