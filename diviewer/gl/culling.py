@@ -107,7 +107,8 @@ def shadow_casters(boxes: np.ndarray, camera_clip: np.ndarray, direction, bounds
 
 
 def draw_list(scene: Scene, config: FrameConfig, gpu, ctx) -> list[tuple]:
-    """(GPU mesh, material, model matrix or None for world space, world box) per draw, opaque first.
+    """(GPU mesh, material, model matrix or None for world space, world box, object name or None) per draw, opaque
+    first.
 
     Objects that the scene's ranges never move are merged per material and cut into chunks once (``gpu``, a
     resources.GpuScene, holds them); they are used while the frame holds all of them unchanged, and the
@@ -118,13 +119,13 @@ def draw_list(scene: Scene, config: FrameConfig, gpu, ctx) -> list[tuple]:
     items = []
     if len(static) > 1 and static_set <= set(config.objects):
         gpu.set_static(ctx, scene.meshes, static, key=scene)
-        items = [(m, material, None, m.bounds) for material, m in gpu.static]
+        items = [(m, material, None, m.bounds, None) for material, m in gpu.static]
         moving = [o for o in config.objects if o not in static_set]
     else:
         moving = config.objects
     for o in moving:
         gmesh, m = gpu.meshes[o.mesh], o.matrix()
-        items.append((gmesh, o.material, m, world_box(gmesh.bounds, m)))
+        items.append((gmesh, o.material, m, world_box(gmesh.bounds, m), o.name))
     items.sort(key=lambda it: scene.materials[it[1]].is_masked)  # opaque first: early depth test
     return items
 

@@ -17,6 +17,7 @@ from diviewer.contract.encoding import INPUT_NAMES
 from diviewer.gl.context import gl_flush, unbind_framebuffer
 from diviewer.gl.culling import boxes_visible, draw_list, draw_order, frustum_planes, shadow_casters
 from diviewer.gl.frame import Frame
+from diviewer.gl.motion import MotionVectors
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shadow_fit import RenderSettings, light_defines, light_uniforms
 from diviewer.gl.shadow_pass import ShadowPass
@@ -93,6 +94,10 @@ class Renderer:
         """Sub-pixel offset (pixels, x right, y up) of the G-buffer's image (``camera.jittered``; temporal
         upsampling's): pixel centre ``c`` shows what lies at ``c - jitter``. Lighting passes reconstruct positions
         through pixel centres, at the jittered depth."""
+        self.motion_vectors = False
+        """The G-buffer pass also draws the velocity target (gl/motion.py; temporal upsampling's): ``velocity``."""
+        self.motion: MotionVectors | None = None
+        """The velocity target and the previous frame's poses, made the first time ``motion_vectors`` is on."""
         self.shadow_pass = ShadowPass(self)
         """The shadow maps: drawn, kept, and this frame's lookups (``shadow_pass.maps``)."""
         self.passes = (("shadows", self.shadow_pass.run), ("gbuffer", self._gbuffer_pass),
@@ -148,6 +153,8 @@ class Renderer:
 
     def _release_targets(self) -> None:
         unbind_framebuffer(self.ctx)
+        if self.motion is not None:
+            self.motion.release()
         for t in self.textures.values():
             t.release()
         self._zbuffer.release()
@@ -243,13 +250,15 @@ class Renderer:
         return self._draw_cache[2]
 
     def draw_objects(self, config: FrameConfig, file: str, defines: dict, setup, view: np.ndarray | None,
-                     clip: np.ndarray, stage: str, cull_back: bool = False, sweep: tuple | None = None) -> None:
+                     clip: np.ndarray, stage: str, cull_back: bool = False, sweep: tuple | None = None,
+                     previous_model=None) -> None:
         """Draw the frame's objects inside the frustum of ``clip`` (world to clip space) with shaders/<file>;
         alpha-masked materials use its ALPHA_TEST variant; ``cull_back``: single-sided materials without their back
         faces; ``sweep``: `shadow_casters`' arguments after the boxes, to draw only those. Counts draws and triangles
         (before face culling) in ``drawn[stage]``. The G-buffer flushes every ``flush_every`` draws.
 
-        ``setup(prog)`` sets the pass's uniforms on each program variant before its first draw.
+        ``setup(prog)`` sets the pass's uniforms on each program variant before its first draw;
+        ``previous_model(name, model)``, where given, each draw's ``m_prev_model`` (`MotionVectors.previous_model`).
         """
         progs: dict[bool, moderngl.Program] = {}
         items, boxes, cut_out = self._draw_list(config)
@@ -264,7 +273,7 @@ class Renderer:
             if flush is not None and n and n % self.flush_every == 0:
                 flush()
                 self.flushes += 1
-            gmesh, mat_name, model, _ = items[i]
+            gmesh, mat_name, model, _, name = items[i]
             mat = self.scene.materials[mat_name]
             masked = mat.is_masked
             if cull_back:  # the other passes draw both faces: face culling is never on there
@@ -277,6 +286,8 @@ class Renderer:
             # A mirroring pose (negative scale) flips the winding: keep its outside front-facing.
             self.ctx.front_face = "cw" if model is not None and np.linalg.det(model[:3, :3]) < 0 else "ccw"
             set_uniform(prog, "m_model", m)
+            if previous_model is not None:
+                set_uniform(prog, "m_prev_model", previous_model(name, m))
             tex = self.gpu.textures.get(mat_name)
             if view is not None:
                 set_uniform(prog, "m_normal", cam.normal_matrix(view @ m))
@@ -307,13 +318,31 @@ class Renderer:
             self._emission_fbo.clear(0.0, 0.0, 0.0, 0.0)
         self._emission_zero = not emissive
         fbo = self._gbuffer_fbo if emissive else self._gbuffer_fbo_dark
+        defines, motion, motion_setup = {}, None, None
+        if self.motion_vectors:
+            motion = self.motion = self.motion or MotionVectors(ctx)
+            fbo = motion.framebuffer(fbo.color_attachments, self._zbuffer, emissive)
+            defines = {"VELOCITY": len(fbo.color_attachments) - 1}  # its location: after the G-buffer's targets
+            motion_setup = motion.begin(config, frame.view, frame.proj)
+        elif self.motion is not None:
+            self.motion.forget()
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable_only(moderngl.DEPTH_TEST)
         def setup(prog):
             set_uniform(prog, "m_proj", proj)
             set_uniform(prog, "m_view", view)
-        self.draw_objects(config, "gbuffer.glsl", {}, setup, view, proj @ view, "gbuffer", not self.back_faces)
+            if motion_setup is not None:
+                motion_setup(prog)
+        self.draw_objects(config, "gbuffer.glsl", defines, setup, view, proj @ view, "gbuffer", not self.back_faces,
+                          previous_model=motion and motion.previous_model)
+        if motion is not None:
+            motion.end()
+
+    @property
+    def velocity(self) -> moderngl.Texture | None:
+        """The last frame's velocity target (gl/motion.py), None where it was drawn without motion vectors."""
+        return self.motion.texture if self.motion_vectors and self.motion is not None else None
 
     def _screen_program(self, defines: dict) -> moderngl.Program:
         prog = self.shaders.program("direct.glsl", defines)

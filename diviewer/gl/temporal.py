@@ -105,11 +105,12 @@ class TemporalPass:
         self.reset()
 
     def resolve(self, current: moderngl.Texture, depth: moderngl.Texture, size: tuple[int, int],
-                jitter: tuple[float, float], view: np.ndarray, proj: np.ndarray, resting: bool = False
-                ) -> moderngl.Texture:
+                jitter: tuple[float, float], view: np.ndarray, proj: np.ndarray, resting: bool = False,
+                velocity: moderngl.Texture | None = None) -> moderngl.Texture:
         """Blend ``current`` (drawn with ``jitter``, its linear ``depth``) into the history at ``size``; returns
         the new history's radiance (rgb; alpha: its weight). ``view``, ``proj``: the frame's, unjittered;
-        ``resting``: nothing changed since the last frame (the history's weight may grow to an average)."""
+        ``resting``: nothing changed since the last frame (the history's weight may grow to an average);
+        ``velocity``: the frame's motion vectors (``Renderer.velocity``), which then reproject its surfaces."""
         self._ensure(size)
         out_color, out_depth, fbo = self._targets[self._index % 2]
         hist_color, hist_depth, _ = self._targets[(self._index + 1) % 2]
@@ -117,12 +118,14 @@ class TemporalPass:
         has = self._prev is not None
         inv_view = np.linalg.inv(view)
         prev_view, prev_proj = (self._prev[0], self._prev[1]) if has else (view, proj)
-        for unit, tex in enumerate((current, depth, hist_color, hist_depth)):
-            tex.use(location=unit)
+        for unit, tex in enumerate((current, depth, hist_color, hist_depth, velocity)):
+            if tex is not None:
+                tex.use(location=unit)
         # A frame at scale s adds about s^2 of weight per window pixel: the cap in motion counts frames, not samples.
         scale = min(current.width / size[0], 1.0)
         cap = s.rest_cycles * self.phases if resting else s.max_weight * scale * scale
         for name, value in (("u_current", 0), ("u_depth", 1), ("u_history", 2), ("u_history_depth", 3),
+                            ("u_velocity", 4), ("u_has_velocity", velocity is not None),
                             ("u_jitter", tuple(map(float, jitter))),
                             ("u_inv_focal", (1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1]))),
                             ("m_reproj", prev_proj @ prev_view @ inv_view), ("m_prev_view", prev_view @ inv_view),
