@@ -1,6 +1,6 @@
 """Motion vectors (gl/motion.py) on a headless EGL context: the velocity target against the reprojection computed
-here from the depth, the camera and the objects' poses; and a moving object resolved with them against the
-camera-only reprojection."""
+here from the depth, the camera and the objects' poses (tests/gl/test_temporal.py resolves a moving object with
+them)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,7 @@ import numpy as np
 import pytest
 
 from diviewer.gl.renderer import Renderer, RenderSettings
-from diviewer.gl.shaders import ShaderCache
-from diviewer.gl.temporal import TemporalPass, jitter_offset
-from diviewer.metrics import psnr, tonemap
+from diviewer.gl.temporal import jitter_offset
 from diviewer.scene import camera as cam
 from diviewer.scene import load_scene
 
@@ -142,52 +140,3 @@ def test_frames_without_temporal_upsampling_are_drawn_as_before(ctx, cornell):
             np.testing.assert_array_equal(again[name], plain[name], err_msg=name)
     finally:
         r.release()
-
-
-def _resolve_moving(ctx, scene, configs, out: int, scale: float, motion_vectors: bool) -> np.ndarray:
-    """The temporal upsampler's last frame over ``configs`` drawn at ``scale`` of an ``out`` x ``out`` window."""
-    shaders = ShaderCache(ctx)
-    size = round(out * scale)
-    r = Renderer(ctx, scene, size, size, RenderSettings(shadow_size=512))
-    t = TemporalPass(ctx, shaders)
-    r.motion_vectors = motion_vectors
-    try:
-        for config in configs:
-            r.jitter = t.jitter(scale)
-            r.render(config)
-            fv = r.frame_view
-            res = t.resolve(r.textures["direct"], r.textures["depth"], (out, out), r.jitter, fv.view, fv.proj,
-                            velocity=r.velocity)
-        return _read(res, 3)
-    finally:
-        t.release()
-        r.release()
-        shaders.release()
-
-
-def test_a_moving_object_resolved_with_motion_vectors_is_closer_to_the_scale_1_frame(ctx, cornell):
-    """The centre object slides and turns at constant speed over jittered frames drawn at half the window's size: on
-    its pixels, the resolve that follows it by its motion vectors stands closer to the unjittered scale-1 frame of the
-    last state than the one that reprojects by the camera alone (whose history there is the object's other place,
-    clamped, or the wall behind, dropped by the depth test)."""
-    out, frames = 64, 24
-    a = cornell.default
-    configs = [a.replace_object("center", position=(-0.5 + 0.04 * k, 0.75, 0.0), rotation=(20.0, 35.0 + 2.0 * k, 0.0))
-               for k in range(frames)]
-    full = Renderer(ctx, cornell, out, out, RenderSettings(shadow_size=512))
-    try:
-        full.render(configs[-1])
-        truth = _read(full.textures["direct"], 3)
-        albedo = _read(full.textures["albedo"], 3)
-    finally:
-        full.release()
-    on_object = np.all(np.abs(albedo - cornell.materials["object"].albedo) < 1e-6, axis=-1)
-    assert on_object.sum() > 100
-    gain = 2.0 ** float(cornell.exposure)
-    score, error = {}, {}
-    for arm in ("motion vectors", "camera only"):
-        img = tonemap(_resolve_moving(ctx, cornell, configs, out, 0.5, arm == "motion vectors")[on_object], gain)
-        score[arm] = psnr(img, tonemap(truth[on_object], gain))
-        error[arm] = float(np.abs(img - tonemap(truth[on_object], gain)).mean())
-    assert score["motion vectors"] > score["camera only"], score
-    assert error["motion vectors"] < error["camera only"], error
