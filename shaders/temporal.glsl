@@ -47,7 +47,8 @@ void main() {
     float z = texelFetch(u_depth, i, 0).r;
     float w = exp(-0.5 * dot(d, d) / (u_sigma * u_sigma));
     vec3 lo = vec3(1e30), hi = vec3(-1e30), m1 = vec3(0.0), m2 = vec3(0.0);
-    float z_lo = 1e30, z_hi = 0.0;
+    float z_lo = 1e30, z_hi = 0.0, z_front = 1e30;
+    ivec2 front = i;  // the neighbourhood's nearest surface
     for (int y = -1; y <= 1; ++y) {
         for (int x = -1; x <= 1; ++x) {
             ivec2 q = clamp(i + ivec2(x, y), ivec2(0), size - 1);
@@ -57,6 +58,10 @@ void main() {
             m1 += c;
             m2 += c * c;
             float zq = texelFetch(u_depth, q, 0).r;
+            if (zq > 0.0 && zq < z_front) {
+                front = q;
+                z_front = zq;
+            }
             z_lo = min(z_lo, zq);
             z_hi = max(z_hi, zq);
         }
@@ -74,8 +79,10 @@ void main() {
     bool ahead = clip.w > 0.0;
     // This point's change of depth since the history (previous - current).
     float change = z > 0.0 ? -(m_prev_view * pv).z - z : 0.0;
-    if (u_has_velocity && z > 0.0) {  // a surface: its own motion, the nearest sample's
-        vec4 mv = texelFetch(u_velocity, i, 0);
+    // A surface is reprojected by the motion vector of the nearest surface of its 3x3 neighbourhood (Karis 2014): the
+    // pixels along a moving object's edge follow the object and keep its history, clamped to their neighbourhood.
+    if (u_has_velocity && z > 0.0) {
+        vec4 mv = texelFetch(u_velocity, front, 0);
         prev_uv = v_uv + mv.xy;
         change = mv.z;
         ahead = true;
