@@ -136,15 +136,14 @@ def _resolve_moving(ctx, scene, configs, out: int, scale: float, motion_vectors:
 
 
 def test_a_moving_object_resolved_with_motion_vectors_is_closer_to_the_scale_1_frame(ctx):
-    """The centre object slides and turns at constant speed over jittered frames drawn at half the window's size: on
-    its pixels, the resolve that follows it by its motion vectors stands closer to the unjittered scale-1 frame of the
-    last state than the one that reprojects by the camera alone (whose history there is the object's other place,
-    clamped, or the wall behind, dropped by the depth test)."""
+    """The centre object slides at constant speed (about a window pixel a frame) over jittered frames drawn at half
+    the window's size: around it and on it, the resolve that follows it by its motion vectors stands closer to the
+    unjittered scale-1 frame of the last state than the one that reprojects by the camera alone (whose history there
+    is the object's other place, clamped, or the wall behind, dropped by the depth test)."""
     cornell = load_scene("cornell")
     out, frames = 64, 24
     a = cornell.default
-    configs = [a.replace_object("center", position=(-0.5 + 0.04 * k, 0.75, 0.0), rotation=(20.0, 35.0 + 2.0 * k, 0.0))
-               for k in range(frames)]
+    configs = [a.replace_object("center", position=(-0.5 + 0.04 * k, 0.75, 0.0)) for k in range(frames)]
     full = Renderer(ctx, cornell, out, out, RenderSettings(shadow_size=512))
     try:
         full.render(configs[-1])
@@ -154,11 +153,14 @@ def test_a_moving_object_resolved_with_motion_vectors_is_closer_to_the_scale_1_f
         full.release()
     on_object = np.all(np.abs(albedo - cornell.materials["object"].albedo) < 1e-6, axis=-1)
     assert on_object.sum() > 100
+    ys, xs = np.nonzero(on_object)
+    around = np.zeros_like(on_object)
+    around[max(ys.min() - 3, 0):ys.max() + 4, max(xs.min() - 3, 0):xs.max() + 4] = True
     gain = 2.0 ** float(cornell.exposure)
-    score, error = {}, {}
+    score = {}
     for arm in ("motion vectors", "camera only"):
-        img = tonemap(_resolve_moving(ctx, cornell, configs, out, 0.5, arm == "motion vectors")[on_object], gain)
-        score[arm] = psnr(img, tonemap(truth[on_object], gain))
-        error[arm] = float(np.abs(img - tonemap(truth[on_object], gain)).mean())
-    assert score["motion vectors"] > score["camera only"], score
-    assert error["motion vectors"] < error["camera only"], error
+        img = tonemap(_resolve_moving(ctx, cornell, configs, out, 0.5, arm == "motion vectors"), gain)
+        for region, mask in (("around", around), ("on", on_object)):
+            score[arm, region] = psnr(img[mask], tonemap(truth[mask], gain))
+    for region in ("around", "on"):
+        assert score["motion vectors", region] > score["camera only", region], score
