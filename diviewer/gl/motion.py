@@ -30,6 +30,8 @@ class MotionVectors:
         self._objects: tuple = (None, {})
         self._before: dict = {}
         self._now: tuple | None = None
+        self.drawn = False
+        """Whether the last frame drew the target (``texture`` holds its motion vectors)."""
 
     def framebuffer(self, targets: list[moderngl.Texture], zbuffer, emissive: bool) -> moderngl.Framebuffer:
         """The G-buffer's colour ``targets`` (depth, normal, albedo[, emission]) and the velocity target after them."""
@@ -64,12 +66,12 @@ class MotionVectors:
         return model if before is None or before == now else before.matrix()
 
     def end(self) -> None:
-        """This frame becomes the previous one."""
-        self._prev, self._now = self._now, None
+        """This frame, drawn, becomes the previous one."""
+        self._prev, self._now, self.drawn = self._now, None, True
 
     def forget(self) -> None:
-        """Drop the previous frame (the next frame drawn with motion vectors has none)."""
-        self._prev = None
+        """A frame drawn without the target: the next one drawn with it has no previous frame."""
+        self._prev, self.drawn = None, False
 
     def release(self) -> None:
         for fbo in self._fbos.values():

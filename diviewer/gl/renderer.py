@@ -342,7 +342,7 @@ class Renderer:
     @property
     def velocity(self) -> moderngl.Texture | None:
         """The last frame's velocity target (gl/motion.py), None where it was drawn without motion vectors."""
-        return self.motion.texture if self.motion_vectors and self.motion is not None else None
+        return self.motion.texture if self.motion is not None and self.motion.drawn else None
 
     def _screen_program(self, defines: dict) -> moderngl.Program:
         prog = self.shaders.program("direct.glsl", defines)

@@ -123,18 +123,33 @@ def test_an_object_new_since_the_last_frame_has_no_motion(ctx, cornell):
             assert np.abs(vel[..., :3]).max() == 0.0
 
 
-def test_frames_without_temporal_upsampling_are_drawn_as_before(ctx, cornell):
-    """Motion vectors change no other buffer and, turned off, leave no velocity target to read."""
-    config = cornell.default.replace_object("center", position=(0.2, 0.7, 0.0))
-    r = Renderer(ctx, cornell, SIZE, SIZE, RenderSettings(shadow_size=256))
+@pytest.mark.parametrize("emissive", [False, True])
+def test_frames_without_temporal_upsampling_are_drawn_as_before(ctx, cornell, emissive):
+    """Motion vectors change no other buffer, with or without an emitting material (the emission target, left out
+    of the G-buffer pass without one), and, turned off, leave no velocity target to read."""
+    scene = cornell
+    if emissive:
+        glow = dataclasses.replace(cornell.materials["object"], emission=(1.0, 0.5, 0.25))
+        scene = dataclasses.replace(cornell, materials={**cornell.materials, "object": glow})
+    a = scene.default
+    b = a.replace_object("center", position=(0.2, 0.7, 0.0))
+    r = Renderer(ctx, scene, SIZE, SIZE, RenderSettings(shadow_size=256))
+
+    def buffers(config):
+        r.render(config)
+        return {name: r.read(name) for name in ("depth", "normal", "albedo", "emission", "direct")}
     try:
-        plain = r.frame(config)
+        plain = buffers(b)
         assert r.velocity is None
         r.motion_vectors = True
-        with_mv = r.frame(config)
+        r.render(a)
+        with_mv = buffers(b)
+        moving = np.abs(_read(r.velocity)[..., :2]).max() * SIZE
         r.motion_vectors = False
-        again = r.frame(config)
+        again = buffers(b)
         assert r.velocity is None
+        assert moving > 1.0  # the object moved by pixels between a and b
+        assert (np.abs(plain["emission"]).max() > 0.0) == emissive
         for name in plain:
             np.testing.assert_array_equal(with_mv[name], plain[name], err_msg=name)
             np.testing.assert_array_equal(again[name], plain[name], err_msg=name)
