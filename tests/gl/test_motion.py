@@ -8,6 +8,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from diviewer.gl.renderer import Renderer, RenderSettings
 from diviewer.gl.temporal import jitter_offset
@@ -110,6 +112,37 @@ def test_a_moving_object_s_pixels_move_by_its_screen_space_motion(ctx, cornell, 
     assert np.abs(move[on_object]).max() * SIZE > 1.0
     np.testing.assert_allclose(vel[..., 2][on_object], depth_change[on_object], atol=2e-3)
     assert np.abs(vel[..., :3][covered & ~on_object]).max() == 0.0
+    frames.close()
+
+
+_offset = st.tuples(*[st.floats(-0.25, 0.25)] * 3)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(move=_offset, turn=st.tuples(*[st.floats(0.0, 360.0)] * 3), scale=st.floats(0.7, 1.3), eye=_offset)
+def test_any_pose_change_under_any_camera_move_is_reprojected(ctx, cornell, move, turn, scale, eye):
+    """The object moved, turned and scaled while the camera moved: each pixel's velocity and change of depth are
+    its surface point's, the object's pixels by both motions, the rest by the camera's alone."""
+    a = cornell.default
+    b = dataclasses.replace(a.replace_object("center", position=tuple(np.add((0.0, 0.75, 0.0), move)),
+                                             rotation=turn, scale=(scale,) * 3),
+                            camera=dataclasses.replace(a.camera, position=tuple(np.add(a.camera.position, eye))))
+    before, after = (next(o for o in c.objects if o.name == "center").matrix() for c in (a, b))
+    frames = _frames(ctx, cornell, [a, b])
+    r = next(frames)
+    prev = (r.frame_view.view, r.frame_view.proj)
+    r = next(frames)
+    vel = _read(r.velocity)
+    albedo = _read(r.textures["albedo"], 3)
+    on_object = np.all(np.abs(albedo - cornell.materials["object"].albedo) < 1e-6, axis=-1)
+    still, still_change, covered = _expected(r, *prev)
+    moved, moved_change, _ = _expected(r, *prev, lambda w: w @ (before @ np.linalg.inv(after)).T)
+    want = np.where(on_object[..., None], moved, still)
+    change = np.where(on_object, moved_change, still_change)
+    assert covered.mean() > 0.8
+    err = np.abs(vel[..., :2] - want)[covered] * SIZE
+    assert err.max() < TOL_PX + 1e-3 * np.abs(want[covered]).max() * SIZE, err.max()  # half floats: relative
+    np.testing.assert_allclose(vel[..., 2][covered], change[covered], atol=2e-3, rtol=2e-3)
     frames.close()
 
 
