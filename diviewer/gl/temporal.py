@@ -3,7 +3,8 @@
 Karis, "High-quality temporal supersampling" (SIGGRAPH 2014) and AMD FSR 2: each frame the G-buffer's projection
 moves by the next offset of a Halton(2, 3) sequence (``Renderer.jitter``); the resolve reprojects the history by the
 G-buffer's motion vectors where the frame has them (``Renderer.velocity``, gl/motion.py: each surface's motion from
-its object's previous pose and the previous camera, the jitter left out), else, and for the sky, by the depth and the
+its object's previous pose and the previous camera, the jitter left out; a pixel takes the nearest surface's of its
+3x3 neighbourhood, so that a moving object's edge keeps its history), else, and for the sky, by the depth and the
 camera's motion (the previous frame's view and projection); clamps it to the current frame's 3x3 neighbourhood colour
 box (YCoCg); drops it where the history's depth, moved back by the point's own change of depth, disagrees with the
 neighbourhood's (disocclusion); and blends in the current sample nearest each window pixel, weighted by its distance.
