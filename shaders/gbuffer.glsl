@@ -1,4 +1,5 @@
-// G-buffer: linear view-space depth, view-space normal (facing the camera), albedo, emission.
+// G-buffer: linear view-space depth, view-space normal (facing the camera), albedo, emission; with VELOCITY (the
+// velocity target's location) also the motion vectors (diviewer/gl/motion.py).
 #if defined VERTEX_SHADER
 
 in vec3 in_position;
@@ -13,6 +14,15 @@ uniform mat3 m_normal;   // inverse transpose of (m_view * m_model), upper 3x3
 out float v_depth;       // linear view-space depth (-z)
 out vec3 v_normal;       // view space
 out vec2 v_uv;
+#if defined VELOCITY
+uniform mat4 m_proj_unjittered;  // this frame's projection without the jitter
+uniform mat4 m_prev_model;       // the previous frame's, and its view and unjittered projection
+uniform mat4 m_prev_view;
+uniform mat4 m_prev_proj;
+out vec4 v_clip;                 // this frame's unjittered clip position
+out vec4 v_prev_clip;            // the previous frame's
+out float v_prev_depth;          // the previous frame's linear view depth
+#endif
 
 void main() {
     // Two matrix-vector products, not a matrix-matrix product per vertex (Sponza draws ~250k triangles).
@@ -21,6 +31,12 @@ void main() {
     v_normal = m_normal * in_normal;
     v_uv = in_uv;
     gl_Position = m_proj * p;
+#if defined VELOCITY
+    vec4 q = m_prev_view * (m_prev_model * vec4(in_position, 1.0));
+    v_clip = m_proj_unjittered * p;
+    v_prev_clip = m_prev_proj * q;
+    v_prev_depth = -q.z;
+#endif
 }
 
 #elif defined FRAGMENT_SHADER
@@ -28,6 +44,11 @@ void main() {
 in float v_depth;
 in vec3 v_normal;
 in vec2 v_uv;
+#if defined VELOCITY
+in vec4 v_clip;
+in vec4 v_prev_clip;
+in float v_prev_depth;
+#endif
 
 uniform vec3 u_albedo;
 uniform vec3 u_emission;
@@ -49,7 +70,13 @@ float mask_alpha(sampler2D tex, vec2 uv) {
 layout(location = 0) out float out_depth;
 layout(location = 1) out vec4 out_normal;
 layout(location = 2) out vec4 out_albedo;
+#if !defined VELOCITY || VELOCITY == 4
 layout(location = 3) out vec4 out_emission;
+#endif
+#if defined VELOCITY
+// rg: previous minus current texture coordinates (unjittered); b: previous minus current linear depth; a: 1.
+layout(location = VELOCITY) out vec4 out_velocity;
+#endif
 
 void main() {
     vec3 n = normalize(v_normal);
@@ -63,9 +90,16 @@ void main() {
     out_depth = v_depth;
     out_normal = vec4(n, 1.0);
     out_albedo = vec4(albedo, 1.0);
+#if !defined VELOCITY || VELOCITY == 4
     vec3 emission = u_emission;
     if (u_has_emission_map) emission *= texture(u_emission_map, v_uv).rgb;
     out_emission = vec4(emission, 1.0);
+#endif
+#if defined VELOCITY
+    // A point behind the previous camera had no place on its screen: an offset far outside it.
+    vec2 moved = v_prev_clip.w > 0.0 ? (v_prev_clip.xy / v_prev_clip.w - v_clip.xy / v_clip.w) * 0.5 : vec2(1e4);
+    out_velocity = vec4(moved, v_prev_depth - v_depth, 1.0);
+#endif
 }
 
 #endif

@@ -114,7 +114,8 @@ def static_objects(scene: Scene, config: FrameConfig) -> list | None:
 
 
 def draw_list(scene: Scene, config: FrameConfig, gpu, static: list | None) -> list[tuple]:
-    """(GPU mesh, material, model matrix or None for world space, world box) per draw, opaque first.
+    """(GPU mesh, material, model matrix or None for world space, world box, object name or None) per draw, opaque
+    first.
 
     The objects that the scene's ranges never move (``static``, `static_objects`) are drawn from their geometry
     merged per material and cut into chunks, which ``gpu`` (a resources.GpuScene) holds uploaded
@@ -123,13 +124,13 @@ def draw_list(scene: Scene, config: FrameConfig, gpu, static: list | None) -> li
     items = []
     if static is not None:
         static_set = set(static)
-        items = [(m, material, None, m.bounds) for material, m in gpu.static]
+        items = [(m, material, None, m.bounds, None) for material, m in gpu.static]
         moving = [o for o in config.objects if o not in static_set]
     else:
         moving = config.objects
     for o in moving:
         gmesh, m = gpu.meshes[o.mesh], o.matrix()
-        items.append((gmesh, o.material, m, world_box(gmesh.bounds, m)))
+        items.append((gmesh, o.material, m, world_box(gmesh.bounds, m), o.name))
     items.sort(key=lambda it: scene.materials[it[1]].is_masked)  # opaque first: early depth test
     return items
 

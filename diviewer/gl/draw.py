@@ -35,14 +35,16 @@ def frame_draw_list(r, config: FrameConfig) -> tuple:
 
 
 def draw_objects(r, config: FrameConfig, file: str, defines: dict, uniforms: dict, view: np.ndarray | None,
-                 clip: np.ndarray, stage: str, cull_back: bool = False, sweep: tuple | None = None) -> None:
+                 clip: np.ndarray, stage: str, cull_back: bool = False, sweep: tuple | None = None,
+                 previous_model=None) -> None:
     """Draw the frame's objects inside the frustum of ``clip`` (world to clip space) with shaders/<file>, renderer
     ``r``'s resources; alpha-masked materials use its ALPHA_TEST variant; ``cull_back``: single-sided materials
     without their back faces; ``sweep``: `shadow_casters`' arguments after the boxes, to draw only those. Counts
     draws and triangles (before face culling) in ``r.drawn[stage]``. The G-buffer flushes every ``r.flush_every``
     draws.
 
-    ``uniforms`` (name -> value) are the pass's, set on each program variant before its first draw.
+    ``uniforms`` (name -> value) are the pass's, set on each program variant before its first draw;
+    ``previous_model(name, model)``, where given, gives each draw's ``m_prev_model`` (`MotionVectors.previous_model`).
     """
     progs: dict[bool, moderngl.Program] = {}
     items, boxes, cut_out = frame_draw_list(r, config)
@@ -58,7 +60,7 @@ def draw_objects(r, config: FrameConfig, file: str, defines: dict, uniforms: dic
         if flush is not None and n and n % r.flush_every == 0:
             flush()
             r.flushes += 1
-        gmesh, mat_name, model, _ = items[i]
+        gmesh, mat_name, model, _, name = items[i]
         mat = materials[mat_name]
         masked = mat.is_masked
         if cull_back:  # the other passes draw both faces: face culling is never on there
@@ -72,6 +74,8 @@ def draw_objects(r, config: FrameConfig, file: str, defines: dict, uniforms: dic
         # A mirroring pose (negative scale) flips the winding: keep its outside front-facing.
         ctx.front_face = "cw" if model is not None and np.linalg.det(model[:3, :3]) < 0 else "ccw"
         set_uniform(prog, "m_model", m)
+        if previous_model is not None:
+            set_uniform(prog, "m_prev_model", previous_model(name, m))
         tex = gpu.textures.get(mat_name)
         if view is not None:
             set_uniform(prog, "m_normal", cam.normal_matrix(view @ m))

@@ -17,6 +17,7 @@ from diviewer.contract.encoding import INPUT_NAMES
 from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.draw import draw_objects
 from diviewer.gl.frame import NAMES, Frame
+from diviewer.gl.motion import MotionVectors
 from diviewer.gl.resources import GpuScene, set_uniform
 from diviewer.gl.shadow_fit import RenderSettings, light_defines, light_uniforms
 from diviewer.gl.shadow_pass import ShadowPass
@@ -95,6 +96,10 @@ class Renderer:
         """Sub-pixel offset (pixels, x right, y up) of the G-buffer's image (``camera.jittered``; temporal
         upsampling's): pixel centre ``c`` shows what lies at ``c - jitter``. Lighting passes reconstruct positions
         through pixel centres, at the jittered depth."""
+        self.motion_vectors = False
+        """The G-buffer pass also draws the velocity target (gl/motion.py; temporal upsampling's): ``velocity``."""
+        self.motion: MotionVectors | None = None
+        """The velocity target and the previous frame's poses, made the first time ``motion_vectors`` is on."""
         self.shadow_pass = ShadowPass(self, self.settings)
         """The shadow maps: drawn, kept, and this frame's lookups (``shadow_pass.maps``)."""
         self.passes = (("shadows", self.shadow_pass.run), ("gbuffer", self._gbuffer_pass),
@@ -150,6 +155,8 @@ class Renderer:
 
     def _release_targets(self) -> None:
         unbind_framebuffer(self.ctx)
+        if self.motion is not None:
+            self.motion.release()
         for t in self.textures.values():
             t.release()
         self._zbuffer.release()
@@ -254,11 +261,27 @@ class Renderer:
             self._emission_fbo.clear(0.0, 0.0, 0.0, 0.0)
         self._emission_zero = not emissive
         fbo = self._gbuffer_fbo if emissive else self._gbuffer_fbo_dark
+        defines, motion, motion_uniforms = {}, None, None
+        if self.motion_vectors:
+            motion = self.motion = self.motion or MotionVectors(ctx)
+            fbo = motion.framebuffer(fbo.color_attachments, self._zbuffer, emissive)
+            defines = {"VELOCITY": len(fbo.color_attachments) - 1}  # its location: after the G-buffer's targets
+            motion_uniforms = motion.begin(config, frame.view, frame.proj)
+        elif self.motion is not None:
+            self.motion.forget()
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable_only(moderngl.DEPTH_TEST)
-        draw_objects(self, config, "gbuffer.glsl", {}, {"m_proj": proj, "m_view": view}, view, proj @ view, "gbuffer",
-                     not self.back_faces)
+        uniforms = {"m_proj": proj, "m_view": view, **(motion_uniforms or {})}
+        draw_objects(self, config, "gbuffer.glsl", defines, uniforms, view, proj @ view, "gbuffer",
+                     not self.back_faces, previous_model=motion and motion.previous_model)
+        if motion is not None:
+            motion.end()
+
+    @property
+    def velocity(self) -> moderngl.Texture | None:
+        """The last frame's velocity target (gl/motion.py), None where it was drawn without motion vectors."""
+        return self.motion.texture if self.motion is not None and self.motion.drawn else None
 
     def _screen_program(self, defines: dict) -> moderngl.Program:
         prog = self.shaders.program("direct.glsl", defines)

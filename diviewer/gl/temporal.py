@@ -1,12 +1,14 @@
 """Temporal upsampling: jittered frames at the shading resolution accumulated at the window's (shaders/temporal.glsl).
 
 Karis, "High-quality temporal supersampling" (SIGGRAPH 2014) and AMD FSR 2: each frame the G-buffer's projection
-moves by the next offset of a Halton(2, 3) sequence (``Renderer.jitter``); the resolve reprojects the history by
-the G-buffer's depth and the camera's motion (the previous frame's view and projection), clamps it to the current
-frame's 3x3 neighbourhood colour box (YCoCg), drops it where the reprojected depth disagrees (disocclusion) and
-blends in the current sample nearest each window pixel, weighted by its distance. Objects that move are caught by
-the depth test and the colour clamp only (the G-buffer has no per-object motion). The output is a radiance texture
-at the window's size, which the display pass then shows.
+moves by the next offset of a Halton(2, 3) sequence (``Renderer.jitter``); the resolve reprojects the history by the
+G-buffer's motion vectors where the frame has them (``Renderer.velocity``, gl/motion.py: each surface's motion from
+its object's previous pose and the previous camera, the jitter left out; a pixel takes the nearest surface's of its
+3x3 neighbourhood, so that a moving object's edge keeps its history), else, and for the sky, by the depth and the
+camera's motion (the previous frame's view and projection); clamps it to the current frame's 3x3 neighbourhood colour
+box (YCoCg); drops it where the history's depth, moved back by the point's own change of depth, disagrees with the
+neighbourhood's (disocclusion); and blends in the current sample nearest each window pixel, weighted by its distance.
+The output is a radiance texture at the window's size, which the display pass then shows.
 """
 
 from __future__ import annotations
@@ -105,11 +107,12 @@ class TemporalPass:
         self.reset()
 
     def resolve(self, current: moderngl.Texture, depth: moderngl.Texture, size: tuple[int, int],
-                jitter: tuple[float, float], view: np.ndarray, proj: np.ndarray, resting: bool = False
-                ) -> moderngl.Texture:
+                jitter: tuple[float, float], view: np.ndarray, proj: np.ndarray, resting: bool = False,
+                velocity: moderngl.Texture | None = None) -> moderngl.Texture:
         """Blend ``current`` (drawn with ``jitter``, its linear ``depth``) into the history at ``size``; returns
         the new history's radiance (rgb; alpha: its weight). ``view``, ``proj``: the frame's, unjittered;
-        ``resting``: nothing changed since the last frame (the history's weight may grow to an average)."""
+        ``resting``: nothing changed since the last frame (the history's weight may grow to an average);
+        ``velocity``: the frame's motion vectors (``Renderer.velocity``), which then reproject its surfaces."""
         self._ensure(size)
         out_color, out_depth, fbo = self._targets[self._index % 2]
         hist_color, hist_depth, _ = self._targets[(self._index + 1) % 2]
@@ -117,12 +120,14 @@ class TemporalPass:
         has = self._prev is not None
         inv_view = np.linalg.inv(view)
         prev_view, prev_proj = (self._prev[0], self._prev[1]) if has else (view, proj)
-        for unit, tex in enumerate((current, depth, hist_color, hist_depth)):
-            tex.use(location=unit)
+        for unit, tex in enumerate((current, depth, hist_color, hist_depth, velocity)):
+            if tex is not None:
+                tex.use(location=unit)
         # A frame at scale s adds about s^2 of weight per window pixel: the cap in motion counts frames, not samples.
         scale = min(current.width / size[0], 1.0)
         cap = s.rest_cycles * self.phases if resting else s.max_weight * scale * scale
         for name, value in (("u_current", 0), ("u_depth", 1), ("u_history", 2), ("u_history_depth", 3),
+                            ("u_velocity", 4), ("u_has_velocity", velocity is not None),
                             ("u_jitter", tuple(map(float, jitter))),
                             ("u_inv_focal", (1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1]))),
                             ("m_reproj", prev_proj @ prev_view @ inv_view), ("m_prev_view", prev_view @ inv_view),

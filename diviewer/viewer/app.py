@@ -213,6 +213,7 @@ class Viewer:
         on = self.temporal is not None and self.state.view_mode == "final"
         on = on and (phase == "moving" or not self.scaler.enabled)
         self.renderer.jitter = self.temporal.jitter(self.render_size[0] / self.view_size[0]) if on else (0.0, 0.0)
+        self.renderer.motion_vectors = on
         if not on and self.temporal is not None:
             self.temporal.reset()
         return on
@@ -390,7 +391,7 @@ class Viewer:
             with self.timer.stage("temporal", gpu=True):
                 images[0] = Image(self.temporal.resolve(images[0].texture, r.buffer("depth"), self.view_size,
                                                         r.jitter, r.frame_view.view, r.frame_view.proj,
-                                                        resting=resting))
+                                                        resting=resting, velocity=r.velocity))
         return images, notes
 
     def _present(self, screen, fb: tuple[int, int], rect, images: list[Image], notes: list[str]) -> None:

@@ -1175,3 +1175,33 @@ def test_camera_moving_plays_the_path_and_is_refused_without_one(display, tmp_pa
                  "--camera-moving"]) == 2
     err = capsys.readouterr().err.strip()
     assert "--camera-moving" in err and "no camera path" in err and len(err.splitlines()) == 1
+
+
+def _motion_vector_session(tmp_path: Path) -> None:
+    import numpy as np
+
+    from diviewer.viewer.run import run_viewer
+
+    for temporal in (True, False):
+        seen = []
+
+        def look(v):
+            tex = v.renderer.velocity
+            seen.append(None if tex is None else
+                        np.abs(np.frombuffer(tex.read(), np.float16).reshape(-1, 4)[:, :2].astype(np.float32)).max())
+
+        script = [(f, lambda v, f=f: v.state.move_object("center", (-0.3 + 0.05 * f, 0.75, 0.0))) for f in range(4)]
+        script += [(f, look) for f in (2, 3)]  # the last frame's target, before this frame is drawn
+        run_viewer("cornell", frames=4, script=script,
+                   settings=_settings(size=(64, 64), render_scale=0.5, fixed_step=0.05, temporal=temporal))
+        if temporal:  # the object moved between the frames: its pixels carry that motion
+            assert len(seen) == 2 and all(s is not None and s > 0.005 for s in seen), seen
+        else:
+            assert seen == [None, None], seen
+
+
+@pytest.mark.slow
+def test_temporal_upsampling_draws_motion_vectors_and_frames_without_it_none(display, tmp_path):
+    """`--temporal on` has the G-buffer pass draw the velocity target the resolve reads (an object moving: not
+    zero); without it the renderer draws none."""
+    _in_window_process(_motion_vector_session, tmp_path)
