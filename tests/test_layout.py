@@ -266,8 +266,9 @@ DOCS_TESTS = {"test_docs_commands.py", "test_docs_examples.py", "test_results_pa
 """Tests of the docs, not of a module: the commands of the pages run (tests/test_docs_commands.py); the results page
 is what its data gives (tests/test_results_page.py, of tools/make_results.py)."""
 """Folders of tests/ that are suites across the package (run alone with their mark), not mirrors of a package."""
-WHOLE_TESTS = {"test_walks.py"}
-"""Tests of the package as a whole, not of one module: the frame and recipe walks through its modules."""
+WHOLE_TESTS = {"test_walks.py", "viewer/test_frame_walk.py"}
+"""Tests of the package as a whole, not of one module: the frame and recipe walks through its modules (the viewer's
+frame beside the viewer's tests, for their display fixture)."""
 
 
 def test_tests_mirror_the_package():
