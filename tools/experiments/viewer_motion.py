@@ -2,12 +2,14 @@
 dynamic resolution.
 
 Usage: xvfb-run -a python tools/experiments/viewer_motion.py [--scene cornell] [--size 384] [--frames 60]
-           [--motion light|fly-then-still] [--fly-frames 30]
+           [--motion light|fly-then-still|object] [--fly-frames 30] [--object center]
            [--fixed-step 0.0333] [--scale 0.4] [--arms scale1,scale2,plain,temporal,dynamic,dynamic_temporal,plain@S]
            --out OUT.json
 
 Each arm is one scripted `diviewer view` run with the light animated from the first frame (or the camera flying
-for ``--fly-frames`` frames, then resting: ``--motion fly-then-still``) and ``--fixed-step``
+for ``--fly-frames`` frames, then resting: ``--motion fly-then-still``; or the object ``--object`` sliding along x,
+0.02 units a frame from 0.5 left of where the scene puts it, under the still camera: ``--motion object``) and
+``--fixed-step``
 (the frame count drives the motion, so frame i shows the same state in every arm) that saves every frame's view
 (PNG, tone-mapped as shown). ``scale1`` is ``--render-scale 1`` (the reference); ``plain`` and ``temporal`` draw at
 ``--scale`` fixed, upscaled bilinearly or by the temporal upsampler; ``dynamic`` and ``dynamic_temporal`` are the
@@ -42,12 +44,18 @@ def _finite(x) -> float | None:
 
 
 def run_arm(scene: str, arm: str, size: int, frames: int, step: float, scale: float, folder: Path,
-            motion: str = "light", fly_frames: int = 30) -> dict:
+            motion: str = "light", fly_frames: int = 30, obj: str = "center") -> dict:
     fixed = arm.startswith("plain@")  # plain upscaling at the scale after the @
     changes = {"render_scale": float(arm[6:])} if fixed else {"render_scale": scale, **ARMS[arm]}
     settings = ViewerSettings(size=(size, size), vsync=False, model="auto", fixed_step=step, **changes)
     if motion == "light":
         script = [(0, lambda v: setattr(v.state, "animate_light", True))]
+    elif motion == "object":  # frame i shows the object 0.02 i units right of its start
+        def slide(i):
+            return lambda v: v.state.move_object(obj, np.add(start[0], (0.02 * i - 0.5, 0.0, 0.0)))
+        start = []
+        script = [(0, lambda v: start.append(v.state.object(obj).position))]
+        script += [(i, slide(i)) for i in range(frames)]
     else:  # the camera flies forward, then rests
         script = [(i, "fly", {"forward": 0.02, "dt": step}) for i in range(fly_frames)]
     script += [(i, "screenshot", {"path": folder / f"{arm}_{i:04d}.png"}) for i in range(frames)]
@@ -67,9 +75,10 @@ def main(argv=None) -> int:
     ap.add_argument("--scale", type=float, default=0.4)
     ap.add_argument("--arms", default="scale1,scale2,plain,temporal,dynamic,dynamic_temporal")
     ap.add_argument("--warmup", type=int, default=8, help="frames left out of the 'settled' summary")
-    ap.add_argument("--motion", default="light", choices=("light", "fly-then-still"),
+    ap.add_argument("--motion", default="light", choices=("light", "fly-then-still", "object"),
                     help="light: the light animated from the first frame; fly-then-still: the camera flies forward for "
-                         "--fly-frames frames, then the view rests")
+                         "--fly-frames frames, then the view rests; object: --object slides under the still camera")
+    ap.add_argument("--object", default="center", help="the object --motion object slides")
     ap.add_argument("--fly-frames", type=int, default=30)
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)
@@ -79,8 +88,9 @@ def main(argv=None) -> int:
     record = {"command": "python tools/experiments/viewer_motion.py " + " ".join(given),
               "scene": args.scene, "window": [args.size, args.size], "frames": args.frames,
               "fixed_step": args.fixed_step, "scale": args.scale,
-              "motion": "light animated (--light-moving)" if args.motion == "light" else
-                        f"camera flying forward for {args.fly_frames} frames, then still",
+              "motion": {"light": "light animated (--light-moving)",
+                         "fly-then-still": f"camera flying forward for {args.fly_frames} frames, then still",
+                         "object": f"object {args.object} sliding 0.02 units a frame along x, camera still"}[args.motion],
               "metric": "display PSNR (8-bit tone-mapped PNG) against the --render-scale 1 (vs_scale1) and 2 "
                         "(vs_scale2) frames of the same index",
               "arms": {}}
@@ -88,7 +98,7 @@ def main(argv=None) -> int:
         folder = Path(tmp)
         for arm in arms:
             record["arms"][arm] = run_arm(args.scene, arm, args.size, args.frames, args.fixed_step, args.scale, folder,
-                                          args.motion, args.fly_frames)
+                                          args.motion, args.fly_frames, args.object)
         for ref_arm in refs:
             ref = [read_png(folder / f"{ref_arm}_{i:04d}.png") / 255.0 for i in range(args.frames)]
             for arm in arms:
