@@ -494,3 +494,37 @@ def test_the_record_checks_catch_what_they_look_for():
         "issue 26", "session", "runs/` lost", "lease"]
     assert not RECORD_WORDS.search("a released model; the issues a user can cause")
     assert DATED_HEADING.findall("## The frame (2026-11-24)\ntext 2026-11-24\n## Speed\n") == ["## The frame (2026-11-24"]
+
+
+ASSET_RECORD_WORDS = re.compile(RECORD_WORDS.pattern + r"|\bissues?\b|\b[AH]100\b|\b\d{4}-\d{2}-\d{2}\b", re.I)
+"""What a shipped recipe or scene file, which users copy, never says: the manual's record words, any issue, a
+machine's name, a date."""
+TREE_PATH = re.compile(r"(?<![\w:./-])(?:docs|tools|assets|diviewer)/[\w./-]*\w")
+"""A path of this tree named in a file's text (``docs/build.md``); one inside a git revision
+(``70db0ad:tools/x.sh``) names the past and is not looked for."""
+
+
+def _asset_records(text: str) -> list[str]:
+    """The record words of `ASSET_RECORD_WORDS` in ``text``, and each tree path it names that does not exist."""
+    words = [m.group(0) for m in ASSET_RECORD_WORDS.finditer(text)]
+    missing = [m.group(0) for m in TREE_PATH.finditer(text) if not (ROOT / m.group(0)).exists()]
+    return words + [f"{p} does not exist" for p in missing]
+
+
+SHIPPED_TOML = sorted((ROOT / "assets").glob("recipes/*.toml")) + sorted((ROOT / "assets").glob("scenes/*.toml"))
+
+
+@pytest.mark.parametrize("path", SHIPPED_TOML, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_the_shipped_recipes_and_scenes_tell_no_records(path):
+    """A shipped recipe or scene file says what it builds and why, for a user who copies it: no dates, issues,
+    sessions or machines, and every docs/, tools/, assets/ or diviewer/ path it names is in the tree."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    found = [f"{path.relative_to(ROOT)}:{i}: {r}" for i, line in enumerate(lines, 1) for r in _asset_records(line)]
+    assert not found, "\n".join(found)
+
+
+def test_the_asset_record_check_catches_what_it_looks_for():
+    assert _asset_records("trained on the H100 lease of 2026-11-23 (issue 25; docs/sponza.md, docs/build.md)") == [
+        "H100", "lease", "2026-11-23", "issue 25", "docs/sponza.md does not exist"]
+    assert _asset_records("the script: `git show 70db0ad:tools/sponza_chain.sh`; tools/make_atrium.py") == []
+    assert _asset_records("(docs/data/sponza256_ladder/, assets/models/sponza_ladder.json)") == []
