@@ -316,7 +316,9 @@ class Scene:
     name: str
     path: Path | None
     file_hash: str
-    """sha256 of the scene file's bytes (models and datasets record it)."""
+    """The scene's identity (sha256; models and datasets record it): of its parsed TOML without what only shows it
+    (``[camera]``, ``[ranges]``, exposure, shadow size), and the bytes of every file the load reads; comments in the
+    scene file are not part of it."""
     meshes: dict[str, Mesh]
     materials: dict[str, Material]
     default: FrameConfig
