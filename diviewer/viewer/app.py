@@ -11,10 +11,10 @@ hold ``--target-fps``); the neural pass reduces them to the GI resolution (``gi_
 count at the window's shape, or a fraction of the shading size), runs the network (optionally one frame
 behind, on a worker thread), and upsamples its indirect light over the direct light; the display pass
 draws the view mode's image into the window (bilinear where it is upscaled), and the panel goes on top.
-Nothing here imports torch. The rooms: window.py, input.py (key table), panel.py, screenshots.py, sources.py (the
-view modes' textures), models.py, gi.py (the neural pass, the GI resolution), script.py, report.py (summary, stats
-JSON), state.py (no GL), recording.py (camera paths), scale.py (dynamic resolution), still.py (a still view
-refined), meter.py (auto exposure).
+Nothing here imports torch. The rooms: window.py, input.py (key table), panel.py and panel_view.py (what it shows,
+what it asks), screenshots.py, sources.py (the view modes' textures), models.py, gi.py (the neural pass, the GI
+resolution), script.py, report.py (summary, stats JSON), state.py (no GL), recording.py (camera paths), scale.py
+(dynamic resolution), still.py (a still view refined), meter.py (auto exposure).
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from diviewer.errors import DiviewerError
 from diviewer.gl.display import Image, Look, depth_range
 from diviewer.scene.model import Scene
 from diviewer.viewer.models import model_candidates
+from diviewer.viewer.panel_view import panel_view
 from diviewer.viewer.still import can_rest, still_key
 from diviewer.viewer.settings import BACKGROUND, ViewerSettings, check_render_scale, scale_settings
 from diviewer.viewer.view_modes import Unavailable, produce, view_mode
@@ -385,8 +386,6 @@ class Viewer:
 
     def _panel_view(self):
         """What the panel shows of the viewer this frame (``panel_view.PanelView``), once its images are drawn."""
-        from diviewer.viewer.panel_view import panel_view
-
         return panel_view(self.window, self.gi, self.scaler, self.still, self.reference, self.timer,
                           render_size=self.render_size, render_scale=self.render_scale, unavailable=self.unavailable,
                           candidates=self.candidates, gl_renderer=self.gl_renderer,
