@@ -10,9 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from diviewer.errors import DiviewerError
-from diviewer.viewer.models import GI_FRACTIONS
-
 Request = tuple[str, dict]
 """A viewer action the panel asks for: its name (one of ``script.SCRIPT_ACTIONS``) and its keyword arguments."""
 
@@ -43,7 +40,8 @@ class PanelView:
     candidates: tuple[Path, ...]
     """The scene's shipped models."""
     gi_sizes: tuple[tuple[str, tuple[int, int]], ...]
-    """(GI resolution asked for, the size it runs at) for each that the loaded model can run at."""
+    """(GI resolution asked for, the size it runs at) for each that the loaded model can run at
+    (``GIControl.offered``)."""
     gi_note: str
     """Why the GI runs at another shape than the window's, or is extrapolated (``GIControl.note``)."""
     neural: bool
@@ -69,20 +67,6 @@ class PanelView:
     """Whether GL stages are timed."""
 
 
-def gi_sizes(gi) -> tuple[tuple[str, tuple[int, int]], ...]:
-    """The GI resolutions the panel offers for ``gi``'s model (``gi``: a ``viewer.gi.GIControl``): the training rows
-    at the window's shape and each fraction of the shading size, those the model cannot run at left out."""
-    if gi.model is None:
-        return ()
-    out = []
-    for spec in ("model",) + GI_FRACTIONS:
-        try:
-            out.append((spec, tuple(gi.sizes(gi.model, spec)[0])))
-        except DiviewerError:
-            continue
-    return tuple(out)
-
-
 def panel_view(window, gi, scaler, still, reference, timer, *, render_size: tuple[int, int], render_scale: float,
                unavailable: dict[str, str], candidates, gl_renderer: str, reference_shown: bool) -> PanelView:
     """The frame's ``PanelView`` from the viewer's parts: ``window`` (``viewer.window.Window``), ``gi``
@@ -96,7 +80,7 @@ def panel_view(window, gi, scaler, still, reference, timer, *, render_size: tupl
         render_size=tuple(render_size), render_scale=float(render_scale), gi_size=tuple(gi.size),
         target_fps=float(scaler.settings.target_fps), motion=still.state, frame_counts=tuple(still.counts.items()),
         model_path=gi.model.path if gi.model is not None else None, candidates=tuple(candidates),
-        gi_sizes=gi_sizes(gi), gi_note=gi.note, neural=neural is not None,
+        gi_sizes=gi.offered(), gi_note=gi.note, neural=neural is not None,
         pipelined=neural is not None and neural.pipelined, latency_ms=neural.latency_ms if neural is not None else 0.0,
         inline_direct=neural is not None and neural.inline_direct, unavailable=tuple(unavailable.items()),
         reference_available=reference.available, reference_status=reference.status() if reference_shown else "",
