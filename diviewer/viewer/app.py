@@ -123,7 +123,7 @@ class Viewer:
         self.gi = GIControl(self.ctx, self.renderer, self.state, settings.gi_res, settings.gi, settings.provider)
         self.gi.view_size = self.view_size
         self.vxgi = VXGISlot(self.ctx, self.renderer, timer=self.timer)
-        """The VXGI pass, made the first time the VXGI view mode is shown."""
+        """Holds the VXGI pass, made the first time the VXGI view mode is shown (``sources.VXGISlot``)."""
         self.imgui_ctx = imgui.create_context()
         imgui.get_io().set_ini_filename(None)  # no imgui.ini in the user's working folder
         self.input = Input(self.state, self, self.glfw)
