@@ -11,10 +11,10 @@ hold ``--target-fps``); the neural pass reduces them to the GI resolution (``gi_
 count at the window's shape, or a fraction of the shading size), runs the network (optionally one frame
 behind, on a worker thread), and upsamples its indirect light over the direct light; the display pass
 draws the view mode's image into the window (bilinear where it is upscaled), and the panel goes on top.
-Nothing here imports torch. The rooms: window.py, input.py (key table), panel.py, screenshots.py, sources.py (the
-view modes' textures), models.py, gi.py (the neural pass, the GI resolution), script.py, report.py (summary, stats
-JSON), state.py (no GL), recording.py (camera paths), scale.py (dynamic resolution), still.py (a still view
-refined), meter.py (auto exposure).
+Nothing here imports torch. The rooms: window.py, input.py (key table), panel.py and panel_view.py (what it shows,
+what it asks), screenshots.py, sources.py (the view modes' textures), models.py, gi.py (the neural pass, the GI
+resolution), script.py, report.py (summary, stats JSON), state.py (no GL), recording.py (camera paths), scale.py
+(dynamic resolution), still.py (a still view refined), meter.py (auto exposure).
 """
 
 from __future__ import annotations
@@ -25,12 +25,14 @@ from pathlib import Path
 
 import moderngl
 
+from diviewer.errors import DiviewerError
 from diviewer.gl.display import Image, Look, depth_range
 from diviewer.scene.model import Scene
 from diviewer.viewer.models import model_candidates
+from diviewer.viewer.panel_view import panel_view
 from diviewer.viewer.still import can_rest, still_key
 from diviewer.viewer.settings import BACKGROUND, ViewerSettings, check_render_scale, scale_settings
-from diviewer.viewer.view_modes import Unavailable, view_mode
+from diviewer.viewer.view_modes import Unavailable, produce, view_mode
 
 STILL_WAIT_S = 1.0 / 120.0
 """How long a still view's frame waits for an input event before presenting the same image again."""
@@ -75,7 +77,7 @@ class Viewer:
         from diviewer.viewer.input import Input
         from diviewer.viewer.panel import Panel
         from diviewer.viewer.screenshots import Screenshots
-        from diviewer.viewer.sources import ReferenceTexture, black_texture
+        from diviewer.viewer.sources import ReferenceTexture, VXGISlot, black_texture
         from diviewer.viewer.meter import Meter
         from diviewer.viewer.scale import ScaleController, moving_map_size, render_size
         from diviewer.viewer.state import ViewerState
@@ -117,18 +119,17 @@ class Viewer:
         self.black = black_texture(self.ctx)
         self.reference_texture = ReferenceTexture(self.ctx, self.reference, settings.reference_max_size)
         self.shots = Screenshots(self.ctx)
-        self.shot_path = f"diviewer_{scene.name}.png"
         self._scene_revision = 0
         self.gi = GIControl(self.ctx, self.renderer, self.state, settings.gi_res, settings.gi, settings.provider)
         self.gi.view_size = self.view_size
-        self.vxgi = None
-        """The VXGI pass, made the first time the VXGI view mode is shown."""
+        self.vxgi = VXGISlot(self.ctx, self.renderer, timer=self.timer)
+        """Holds the VXGI pass, made the first time the VXGI view mode is shown (``sources.VXGISlot``)."""
         self.imgui_ctx = imgui.create_context()
         imgui.get_io().set_ini_filename(None)  # no imgui.ini in the user's working folder
         self.input = Input(self.state, self, self.glfw)
         self.gui = GlfwImgui(self.window.handle, handler=self.input)
         self.imgui_renderer = ImguiRenderer(self.ctx, self.shaders)
-        self.panel = Panel(self.state, self)
+        self.panel = Panel(self.state)
         s = self.window.ui_scale()
         if s > 1.05:  # a HiDPI screen whose framebuffer is not already larger than the window
             style = imgui.get_style()
@@ -200,13 +201,6 @@ class Viewer:
             self.renderer.moving_shadow_size = moving_map_size(self.settings.moving_shadow_size, want)
         self.drawn_scale = scale
 
-    @property
-    def refined_scale(self) -> float:
-        """The scale a still view is refined at: 1, or the dynamic-resolution ceiling above 1 (supersampled); a
-        fixed render scale stays."""
-        s = self.scaler
-        return max(1.0, s.settings.ceiling) if s.enabled else s.scale
-
     def _temporal_on(self, phase: str) -> bool:
         """Whether this frame goes through the temporal upsampler: the final view mode, while moving (a still
         view is refined at full scale instead), or at a fixed render scale (it then refines the still view)."""
@@ -238,15 +232,6 @@ class Viewer:
     def set_pipelined(self, on: bool) -> None:
         """Run inference one frame behind on a worker thread, or in the frame."""
         self.gi.set_pipelined(on)
-
-    @property
-    def timer_sync(self) -> bool:
-        """Whether stages are timed (the panel's checkbox)."""
-        return self.timer.enabled
-
-    @property
-    def timing_method(self) -> str:
-        return self.timer.method
 
     def set_timing(self, on: bool) -> None:
         """Time GL stages (by timer queries, or a GPU sync where the driver has none), or not at all."""
@@ -283,13 +268,20 @@ class Viewer:
         return self.shots.request_window(path)
 
     # --- drawing -----------------------------------------------------------------------------------
+    def _sources(self):
+        """This frame's ``sources.FrameImages``: what the view modes draw from."""
+        from diviewer.viewer.sources import FrameImages
+
+        return FrameImages(self.renderer, self.neural, self.state, self.reference_texture, self.render_size, self.vxgi)
+
     def _images(self, sources) -> tuple[list[Image], list[str]]:
         """The images the current view mode shows (running the neural pass if one needs it), and the
         reasons of those that cannot be produced (shown as black)."""
         images, notes = [], []
         for m in self.state.modes_shown():
             try:
-                images.append(sources.produce(m))
+                img = produce(m, sources)
+                images.append(Image(img.texture, img.flip, m.display))
                 self.modes_drawn.add(m.name)
                 self.unavailable.pop(m.name, None)
             except Unavailable as exc:
@@ -327,8 +319,6 @@ class Viewer:
 
     def frame(self) -> bool:
         """Poll events, advance, render and present one frame; False when the window should close."""
-        from diviewer.viewer.sources import FrameImages
-
         glfw, st = self.glfw, self.state
         start = time.perf_counter()
         dt = self.settings.fixed_step or (min(start - self._last_frame_start, 0.25)
@@ -357,7 +347,7 @@ class Viewer:
         phase = self.still.update(still_key(self), can_rest(self) and self._shown is not None)
         if phase == "moving" and last != "moving":
             self.scaler.resume()  # back at its scale; the first frames there reallocate targets
-        self._follow_window(self.scaler.scale if phase == "moving" else self.refined_scale)
+        self._follow_window(self.scaler.scale if phase == "moving" else self.scaler.refined)
         self.timer.reset()
         temporal = phase != "still" and self._temporal_on(phase)
         if phase != "still":
@@ -374,7 +364,7 @@ class Viewer:
         if phase == "still" and self._shown is not None:
             images, notes = self._shown  # the refined frame's images, unchanged since
         else:
-            images, notes = self._frame_images(FrameImages(self), temporal, resting=phase != "moving")
+            images, notes = self._frame_images(self._sources(), temporal, resting=phase != "moving")
             self._shown = (images, notes)
         if st.auto_exposure and images[0].kind == "radiance":
             st.meter(self.meter.read(images[0].texture))
@@ -394,6 +384,13 @@ class Viewer:
                                                         resting=resting, velocity=r.velocity))
         return images, notes
 
+    def _panel_view(self):
+        """What the panel shows of the viewer this frame (``panel_view.PanelView``), once its images are drawn."""
+        return panel_view(self.window, self.gi, self.scaler, self.still, self.reference, self.timer,
+                          render_size=self.render_size, render_scale=self.render_scale, unavailable=self.unavailable,
+                          candidates=self.candidates, gl_renderer=self.gl_renderer,
+                          reference_shown=any(m.name == "reference" for m in self.state.modes_shown()))
+
     def _present(self, screen, fb: tuple[int, int], rect, images: list[Image], notes: list[str]) -> None:
         """The view drawn into the window, the panel over it, the screenshots asked for, and the swap."""
         st, imgui = self.state, self.imgui
@@ -403,11 +400,16 @@ class Viewer:
         screen.use()
         with self.timer.stage("panel"):
             self.gui.new_frame()
-            if st.show_panel:
-                self.panel.draw()
-            self.panel.overlay(rect, notes)
+            view = self._panel_view()
+            requests = self.panel.draw(view) if st.show_panel else []
+            self.panel.overlay(rect, notes, view)
             imgui.render()
             self.imgui_renderer.render(imgui.get_draw_data())
+            for name, kwargs in requests:  # the panel's, once it has drawn: named actions (script.SCRIPT_ACTIONS)
+                try:
+                    getattr(self, name)(**kwargs)
+                except DiviewerError as exc:
+                    st.message = str(exc)
         if self.shots.pending_window:
             shown = self.window.read_pixels()  # the back buffer, as the swap will show it
             screen.use()
@@ -437,8 +439,7 @@ class Viewer:
             self.display.release()
             if self.temporal is not None:
                 self.temporal.release()
-            if self.vxgi is not None:
-                self.vxgi.release()
+            self.vxgi.release()
             self.timer.release()
             self.renderer.release()
             self.shaders.release()

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from diviewer.errors import DiviewerError
 from diviewer.gl.neural import GISettings
-from diviewer.viewer.models import gi_resolution, open_model, runtime_pads
+from diviewer.viewer.models import GI_FRACTIONS, gi_resolution, open_model, runtime_pads
 from diviewer.viewer.state import ViewerState
 
 
@@ -38,6 +38,7 @@ class GIControl:
         self.note = ""
         """Why the GI runs at another shape than the window's (a runtime that pads no shape), and whether that
         shape is one the model never saw (`runtime.NeuralGI.shape_note`), or empty."""
+        self._offered: tuple[tuple, tuple] = ((), ())  # (what they were computed for, the GI sizes offered)
 
     @property
     def render_size(self) -> tuple[int, int]:
@@ -57,6 +58,23 @@ class GIControl:
         if runtime_pads(model):
             return wanted, wanted
         return gi_resolution(gi_res, render_size, model.resolution, model.multiple, shape=shape), wanted
+
+    def offered(self) -> tuple[tuple[str, tuple[int, int]], ...]:
+        """(GI resolution, the size it runs at) for the training rows at the window's shape and each fraction of
+        the shading size that the model can run at (the panel's list; empty without a model)."""
+        if self.model is None:
+            return ()
+        key, (was, offered) = (self.model, self.render_size, self.view_size), self._offered
+        if was and was[0] is key[0] and was[1:] == key[1:]:
+            return offered
+        out = []
+        for spec in ("model",) + GI_FRACTIONS:
+            try:
+                out.append((spec, tuple(self.sizes(self.model, spec)[0])))
+            except DiviewerError:
+                continue
+        self._offered = (key, tuple(out))
+        return self._offered[1]
 
     def _size_for(self, model, gi_res: str, render_size: tuple[int, int]) -> tuple[int, int]:
         size, wanted = self.sizes(model, gi_res, render_size)

@@ -83,7 +83,7 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("+ / -", "exposure up / down half a stop", ("EQUAL", "KP_ADD", "MINUS", "KP_SUBTRACT"),
             lambda i, chord: i.state.set_exposure(i.state.exposure + (0.5 if chord in ("EQUAL", "KP_ADD") else -0.5))),
     Binding("F12 or Ctrl+S", "screenshot (PNG + frame JSON)", ("F12", "Ctrl+S"),
-            lambda i, _: i.actions.screenshot(i.actions.shot_path)),
+            lambda i, _: i.actions.screenshot(i.state.shot_path)),
     Binding("V", "vsync on / off", ("V",), lambda i, _: i.actions.set_vsync(not i.actions.window.vsync)),
     Binding("H or F1", "show / hide the panel", ("H", "F1"), _toggle_panel),
     Binding("Esc", "quit", ("ESCAPE",), lambda i, _: i.actions.window.request_close()),
@@ -107,7 +107,7 @@ def _split(chord: str) -> tuple[str, bool, bool]:
 
 class Input:
     """Applies GLFW events to the viewer: ``state`` (a ViewerState) and ``actions`` (the viewer: ``window``,
-    ``gui``, ``screenshot``, ``shot_path``, ``set_vsync``, ``pick_window_point``)."""
+    ``gui``, ``screenshot``, ``set_vsync``, ``pick_window_point``)."""
 
     def __init__(self, state, actions, glfw):
         self.state, self.actions, self.glfw = state, actions, glfw

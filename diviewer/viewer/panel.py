@@ -1,14 +1,14 @@
 """The imgui panel: view modes, lights, camera, objects, model, stats, screenshot and shortcuts.
 
-It reads and changes the viewer's state (a ViewerState) and asks the viewer for the rest through the
-``PanelActions`` it is given; it never imports the app.
+It reads and changes the viewer's state (a ViewerState); what it shows of the rest of the viewer comes as a
+``PanelView`` (a frozen snapshot the app builds each frame), and the viewer's actions it asks for are returned as
+requests (``panel_view.Request``) that the app applies after the panel has drawn. It never imports the app.
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Protocol
 
 from imgui_bundle import imgui
 
@@ -17,7 +17,8 @@ from diviewer.exposure import ExposureSettings
 from diviewer.gl.display import TONEMAPS
 from diviewer.scene.model import DirectionalLight
 from diviewer.viewer.input import SHORTCUTS
-from diviewer.viewer.models import GI_FRACTIONS, meta_lines
+from diviewer.viewer.models import meta_lines
+from diviewer.viewer.panel_view import PanelView, Request
 from diviewer.viewer.scale import MAX_SCALE
 from diviewer.viewer.state import ViewerState
 from diviewer.viewer.stats import STAGES
@@ -34,50 +35,25 @@ def _xyz(v) -> str:
     return "(" + ", ".join(f"{x:.2f}" for x in v) + ")"
 
 
-class PanelActions(Protocol):
-    """What the panel needs from the viewer beyond its state."""
-
-    window: Any
-    """``viewer.window.Window``: size, framebuffer size, vsync."""
-    gi_size: tuple[int, int]
-    render_size: tuple[int, int]
-    neural: Any
-    """The NeuralPass (GI size, pipelining, latency), or None."""
-    model: Any
-    """The loaded NeuralGI, or None."""
-    candidates: list[Path]
-    """The scene's shipped models."""
-    reference: Any
-    """The progressive path-traced reference (status, availability)."""
-    unavailable: dict[str, str]
-    """View modes that could not be drawn, and why."""
-    gl_renderer: str
-    still: Any
-    """``viewer.still.StillTracker``: the motion state and its frame counts."""
-    shot_path: str
-    timer_sync: bool
-    timing_method: str
-
-    def request_model(self, spec: str) -> None: ...
-    def set_gi_res(self, spec: str) -> tuple[int, int]: ...
-    def set_pipelined(self, on: bool) -> None: ...
-    def set_timing(self, on: bool) -> None: ...
-    def set_vsync(self, on: bool) -> None: ...
-    def screenshot(self, path: str | Path) -> Path: ...
-
-
 class Panel:
     """Draws the panel (``draw``) and the notes over the image (``overlay``) inside an imgui frame."""
 
-    def __init__(self, state: ViewerState, actions: PanelActions):
-        self.state, self.actions = state, actions
+    def __init__(self, state: ViewerState):
+        self.state = state
         self._mesh_path = ""
+        self.view: PanelView | None = None
+        """The viewer as this frame shows it (``draw``'s)."""
+        self._requests: list[Request] = []
 
-    def overlay(self, rect, notes: list[str]) -> None:
+    def _request(self, action: str, **kwargs) -> None:
+        """Ask for a viewer action (one of ``script.SCRIPT_ACTIONS``), applied by the app after the panel drew."""
+        self._requests.append((action, kwargs))
+
+    def overlay(self, rect, notes: list[str], view: PanelView) -> None:
         """Text at the image's bottom right, behind the panel: why an image is missing, what a split shows."""
         st = self.state
-        w, h = self.actions.window.size
-        fb_w, fb_h = self.actions.window.fb_size
+        w, h = view.window_size
+        fb_w, fb_h = view.fb_size
         sx = w / fb_w if fb_w else 1.0
         sy = h / fb_h if fb_h else 1.0
         right, bottom = (rect[0] + rect[2]) * sx, (fb_h - rect[1]) * sy
@@ -88,8 +64,8 @@ class Panel:
         elif mode.layout == "difference":
             lines.insert(0, f"|{view_mode(st.compare[0]).label} - {view_mode(st.compare[1]).label}| "
                             f"x{2.0 ** st.diff_gain_ev:g}")
-        if any(m.name == "reference" for m in st.modes_shown()) and self.actions.reference.latest() is not None:
-            lines.append(f"reference: {self.actions.reference.status()}")
+        if any(m.name == "reference" for m in st.modes_shown()) and view.reference_ready:
+            lines.append(f"reference: {view.reference_status}")
         if not lines:
             return
         dl = imgui.get_background_draw_list()  # under the panel, over the image
@@ -104,10 +80,11 @@ class Panel:
             dl.add_text(imgui.ImVec2(x, y), white, line)
             y += step
 
-    def draw(self) -> None:
-        """The panel window, its sections collapsible (View, Lights and Stats open at first)."""
-        st = self.state
-        _, h = self.actions.window.size
+    def draw(self, view: PanelView) -> list[Request]:
+        """The panel window, its sections collapsible (View, Lights and Stats open at first); returns the viewer
+        actions asked for, in order."""
+        st, self.view, self._requests = self.state, view, []
+        _, h = view.window_size
         imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
         imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, max(min(h - 16, 720), 60)),
                                    imgui.Cond_.first_use_ever)
@@ -115,17 +92,16 @@ class Panel:
         expanded, _ = imgui.begin("diviewer", None)
         if expanded:
             imgui.push_item_width(-150)
-            gw, gh = self.actions.gi_size
-            rw, rh = self.actions.render_size
-            imgui.text(f"{st.scene.name}  {rw}x{rh} (scale {self.actions.render_scale:.2f})  GI {gw}x{gh}  "
-                       f"{st.stats.fps:5.1f} fps  {self.actions.still.state}")
+            gw, gh = view.gi_size
+            rw, rh = view.render_size
+            imgui.text(f"{st.scene.name}  {rw}x{rh} (scale {view.render_scale:.2f})  GI {gw}x{gh}  "
+                       f"{st.stats.fps:5.1f} fps  {view.motion}")
             reasons = st.out_of_range()
             if reasons:
                 self._wrapped("outside what the model was trained on: " + "; ".join(reasons), WARN)
-            neural = self.actions.neural
-            if neural is not None and neural.pipelined:
-                imgui.text_colored(imgui.ImVec4(*DIM), f"GI one frame behind: {neural.latency_ms:.1f} ms old")
-            if self.actions.model is not None:
+            if view.pipelined:
+                imgui.text_colored(imgui.ImVec4(*DIM), f"GI one frame behind: {view.latency_ms:.1f} ms old")
+            if view.model_path is not None:
                 imgui.text(f"neural GI: {st.model_name} ({st.provider.replace('ExecutionProvider', '')})")
             else:
                 self._wrapped(f"no neural GI: {st.model_message}", WARN)
@@ -145,6 +121,7 @@ class Panel:
                     imgui.pop_id()
             imgui.pop_item_width()
         imgui.end()
+        return self._requests
 
     def _wrapped(self, text: str, color=None) -> None:
         """Text wrapped at the panel's edge, optionally coloured."""
@@ -193,21 +170,21 @@ class Panel:
         changed, on = imgui.checkbox("auto exposure (metered)", st.auto_exposure)
         if changed:
             st.set_auto_exposure(on)
-        fps = self.actions.scaler.settings.target_fps
-        changed, fps = imgui.slider_int("target fps (0 off)", int(round(fps)), 0, 120)
+        view = self.view
+        changed, fps = imgui.slider_int("target fps (0 off)", int(round(view.target_fps)), 0, 120)
         if changed:
-            self.actions.set_target_fps(fps)
-        changed, scale = imgui.slider_float("render scale", self.actions.render_scale, 0.25, MAX_SCALE, "%.2f")
+            self._request("set_target_fps", fps=fps)
+        changed, scale = imgui.slider_float("render scale", view.render_scale, 0.25, MAX_SCALE, "%.2f")
         if changed:
-            self.actions.set_render_scale(scale)
+            self._request("set_render_scale", scale=scale)
         chosen = self._combo("tone map", st.tonemap, [(t, t) for t in TONEMAPS])
         if chosen:
             st.set_tonemap(chosen)
-        for name, why in self.actions.unavailable.items():
+        for name, why in view.unavailable:
             if name != "reference" and any(m.name == name for m in st.modes_shown()):
                 self._wrapped(f"{view_mode(name).label}: {why}", WARN)
         if any(m.name == "reference" for m in st.modes_shown()):
-            self._wrapped(f"reference: {self.actions.reference.status()}", None if self.actions.reference.available else WARN)
+            self._wrapped(f"reference: {view.reference_status}", None if view.reference_available else WARN)
 
     def _panel_lights(self) -> None:
         st = self.state
@@ -339,37 +316,28 @@ class Panel:
             st.select_object(None)
 
     def _panel_model(self) -> None:
-        st = self.state
-        items = [("none", "none (direct light only)")] + [(str(p), p.name) for p in self.actions.candidates]
-        current = str(self.actions.model.path) if self.actions.model is not None else "none"
+        st, view = self.state, self.view
+        items = [("none", "none (direct light only)")] + [(str(p), p.name) for p in view.candidates]
+        current = str(view.model_path) if view.model_path is not None else "none"
         if current not in dict(items):
-            items.append((current, self.actions.model.path.name))
+            items.append((current, view.model_path.name))
         chosen = self._combo("model", current, items)
         if chosen:
-            self.actions.request_model(chosen)
-        if not self.actions.candidates:
+            self._request("request_model", spec=chosen)
+        if not view.candidates:
             imgui.text_disabled(f"no assets/models/{st.scene.name}*.onnx")
-        model = self.actions.model
-        if model is not None:
-            items = []
-            for spec in ("model",) + GI_FRACTIONS:
-                try:
-                    w, h = self.actions.gi.sizes(model, spec)[0]
-                except DiviewerError:
-                    continue
-                items.append((spec, f"{'training rows, window shape' if spec == 'model' else spec + ' of the shading size'}: "
-                                    f"{w}x{h}"))
+        if view.model_path is not None:
+            items = [(spec, f"{'training rows, window shape' if spec == 'model' else spec + ' of the shading size'}: "
+                            f"{w}x{h}") for spec, (w, h) in view.gi_sizes]
             chosen = self._combo("GI resolution", st.gi_res, items)
             if chosen:
-                self.actions.set_gi_res(chosen)
-            if self.actions.gi.note:
-                self._wrapped(self.actions.gi.note, WARN)
-            neural = self.actions.neural
-            changed, on = imgui.checkbox("inference one frame behind (worker thread)",
-                                         neural is not None and neural.pipelined)
+                self._request("set_gi_res", spec=chosen)
+            if view.gi_note:
+                self._wrapped(view.gi_note, WARN)
+            changed, on = imgui.checkbox("inference one frame behind (worker thread)", view.pipelined)
             if changed:
-                self.actions.set_pipelined(on)
-        if self.actions.model is not None and st.model_meta:
+                self._request("set_pipelined", on=on)
+        if view.model_path is not None and st.model_meta:
             imgui.text(f"provider: {st.provider}")
             if imgui.begin_table("meta", 2, imgui.TableFlags_.borders_inner_v):
                 for k, v in meta_lines(st.model_meta):
@@ -383,10 +351,10 @@ class Panel:
             self._wrapped(st.model_message, WARN)
 
     def _panel_stats(self) -> None:
-        st = self.state
+        st, view = self.state, self.view
         s = st.stats
-        imgui.text(f"frame {s.mean('frame'):6.2f} ms  ({s.fps:.1f} fps, vsync {'on' if self.actions.window.vsync else 'off'})")
-        imgui.text("frames " + ", ".join(f"{k} {n}" for k, n in self.actions.still.counts.items()))
+        imgui.text(f"frame {s.mean('frame'):6.2f} ms  ({s.fps:.1f} fps, vsync {'on' if view.vsync else 'off'})")
+        imgui.text("frames " + ", ".join(f"{k} {n}" for k, n in view.frame_counts))
         series = s.series("frame")
         if len(series) > 1:
             imgui.plot_lines("##frame", series, overlay_text="frame ms (last 5 s)", scale_min=0.0,
@@ -405,29 +373,29 @@ class Panel:
                 imgui.text(f"mean {s.mean(name):6.2f}  p95 {s.p95(name):6.2f}")
             imgui.end_table()
         inf = s.series("inference")
-        if self.actions.model is not None and len(inf) > 1:
+        if view.model_path is not None and len(inf) > 1:
             imgui.plot_lines("##inference", inf, overlay_text="inference ms", scale_min=0.0,
                              graph_size=imgui.ImVec2(-1, 40))
         imgui.text_disabled(f"provider: {st.provider or '-'}")
-        self._wrapped(f"GL: {self.actions.gl_renderer}", DIM)
-        imgui.text_disabled(f"GL stages: {self.actions.timing_method}")
-        neural = self.actions.neural
-        if neural is not None:
-            imgui.text_disabled("direct light: " + ("computed in pack and upsample" if neural.inline_direct
+        self._wrapped(f"GL: {view.gl_renderer}", DIM)
+        imgui.text_disabled(f"GL stages: {view.timing_method}")
+        if view.neural:
+            imgui.text_disabled("direct light: " + ("computed in pack and upsample" if view.inline_direct
                                                     else "direct pass"))
-        if neural is not None and neural.pipelined:
-            imgui.text(f"GI latency {neural.latency_ms:.1f} ms (one frame behind)")
-        changed, on = imgui.checkbox("per-stage timing", self.actions.timer_sync)
+        if view.pipelined:
+            imgui.text(f"GI latency {view.latency_ms:.1f} ms (one frame behind)")
+        changed, on = imgui.checkbox("per-stage timing", view.timer_sync)
         if changed:
-            self.actions.set_timing(on)
-        changed, on = imgui.checkbox("vsync (V)", self.actions.window.vsync)
+            self._request("set_timing", on=on)
+        changed, on = imgui.checkbox("vsync (V)", view.vsync)
         if changed:
-            self.actions.set_vsync(on)
+            self._request("set_vsync", on=on)
 
     def _panel_screenshot(self) -> None:
-        _, self.actions.shot_path = imgui.input_text("file", self.actions.shot_path)
+        st = self.state
+        _, st.shot_path = imgui.input_text("file", st.shot_path)
         if imgui.button("save (F12)"):
-            self.actions.screenshot(self.actions.shot_path)
+            self._request("screenshot", path=st.shot_path)
         self._wrapped("PNG of the view + the frame's JSON (diviewer render --config reads it)", DIM)
 
     def _panel_shortcuts(self) -> None:

@@ -43,7 +43,7 @@ def run_summary(viewer) -> dict:
 def motion(viewer) -> dict:
     """The motion state of the last frame (moving, refining, still: ``viewer.still``) and the frames in each."""
     return {"state": viewer.still.state, "frames": dict(viewer.still.counts), "refine": viewer.still.settings.refine,
-            "refined_scale": viewer.refined_scale}
+            "refined_scale": viewer.scaler.refined}
 
 
 def _settled(frames: list[dict[str, float]], scales: np.ndarray) -> dict:

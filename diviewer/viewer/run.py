@@ -38,7 +38,6 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
     from diviewer.scene import load_scene
     from diviewer.viewer.report import run_summary, write_stats
     from diviewer.viewer.script import apply_action, normalise_script
-    from diviewer.viewer.sources import FrameImages
 
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -72,7 +71,7 @@ def run_viewer(scene: str | Path | Scene = "cornell", model: str | Path | None =
             if viewer.frame_index == 0:
                 viewer.frame()
             # The state is the last frame's: save the images it showed (the temporal upsampler's, where it ran).
-            last = viewer._shown[0] if viewer._shown is not None else viewer._images(FrameImages(viewer))[0]
+            last = viewer._shown[0] if viewer._shown is not None else viewer._images(viewer._sources())[0]
             viewer._save_view(Path(screenshot).with_suffix(".png"), last)
         summary = run_summary(viewer)
         if stats is not None:

@@ -125,6 +125,11 @@ class ScaleController:
         return self.settings.target_fps > 0
 
     @property
+    def refined(self) -> float:
+        """The scale a still view is refined at: 1, or the ceiling above 1 (supersampled); a fixed scale stays."""
+        return max(1.0, self.settings.ceiling) if self.enabled else self.scale
+
+    @property
     def target_ms(self) -> float:
         return 1e3 / self.settings.target_fps if self.enabled else 0.0
 

@@ -8,9 +8,10 @@ from __future__ import annotations
 
 from diviewer.errors import DiviewerError
 
-SCRIPT_ACTIONS = ("resize", "screenshot", "window_screenshot", "set_model", "set_vsync", "pick_window_point",
-                  "set_gi_res", "set_pipelined", "set_timing", "set_render_scale", "set_target_fps")
-"""Viewer methods a script may call; any other name is looked up on the viewer's state."""
+SCRIPT_ACTIONS = ("resize", "screenshot", "window_screenshot", "set_model", "request_model", "set_vsync",
+                  "pick_window_point", "set_gi_res", "set_pipelined", "set_timing", "set_render_scale",
+                  "set_target_fps")
+"""Viewer methods a script (or the panel's requests) may call; any other name is looked up on the viewer's state."""
 
 
 def normalise_script(script) -> dict[int, list]:

@@ -84,6 +84,8 @@ class ViewerState:
         """The GI resolution asked for (``model``, a fraction of the window, WxH)."""
         self.stats = Stats()
         self.show_panel = True
+        self.shot_path = f"diviewer_{scene.name}.png"
+        """Where the panel's and F12's screenshots go."""
         self.message = ""
         """The last action's outcome for the panel (a loaded mesh, a saved screenshot, an error)."""
 

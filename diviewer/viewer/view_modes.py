@@ -97,6 +97,13 @@ def view_mode(name: str) -> ViewMode:
     raise DiviewerError(f"unknown view mode '{name}'; view modes: {', '.join(VIEW_MODE_NAMES)}", field="view mode")
 
 
+def produce(mode: ViewMode, sources: FrameSources) -> Any:
+    """The image of single-image ``mode`` from this frame's ``sources``; Unavailable propagates with the reason."""
+    if mode.produce is None:
+        raise DiviewerError(f"view mode '{mode.name}' combines two modes: produce those", field="view mode")
+    return mode.produce(sources)
+
+
 def single_modes() -> tuple[ViewMode, ...]:
     """The modes that show one image (those split screen and difference combine)."""
     return tuple(m for m in VIEW_MODES if m.layout == "single")

@@ -26,7 +26,7 @@ from diviewer.scene.picking import pixel_ray
 from diviewer.viewer.controls import FlyController, OrbitController, direction, yaw_pitch
 from diviewer.viewer.state import ViewerState
 from diviewer.viewer.stats import Stats
-from diviewer.viewer.view_modes import VIEW_MODE_NAMES, VIEW_MODES, single_modes, view_mode
+from diviewer.viewer.view_modes import VIEW_MODE_NAMES, VIEW_MODES, produce, single_modes, view_mode
 
 REQUIRE_GL = os.environ.get("DIVIEWER_REQUIRE_GL", "") not in ("", "0")
 
@@ -90,6 +90,10 @@ def test_view_mode_produces_from_its_sources():
     assert view_mode("reference").produce(s) == ("ref",)
     assert view_mode("net_output").produce(s) == ("net",)
     assert view_mode("vxgi").produce(s) == ("vxgi",)
+    # What the app calls: a single-image mode's image; the two-image layouts are drawn from their modes A and B.
+    assert produce(view_mode("normal"), s) == ("buffer", "normal") and produce(view_mode("final"), s) == ("final",)
+    with pytest.raises(DiviewerError, match="combines two modes"):
+        produce(view_mode("split"), s)
 
 
 def test_set_view_mode_and_compare(state):
