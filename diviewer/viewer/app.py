@@ -28,8 +28,10 @@ import moderngl
 from diviewer.errors import DiviewerError
 from diviewer.gl.display import Image, Look, depth_range
 from diviewer.scene.model import Scene
+from diviewer.viewer.input import Input, pick_window_point
 from diviewer.viewer.models import model_candidates
 from diviewer.viewer.panel_view import panel_view
+from diviewer.viewer.screenshots import Screenshots, view_record
 from diviewer.viewer.still import can_rest, still_key
 from diviewer.viewer.settings import BACKGROUND, ViewerSettings, check_render_scale, scale_settings
 from diviewer.viewer.view_modes import Unavailable, produce, view_mode
@@ -74,9 +76,7 @@ class Viewer:
         from diviewer.gl.shaders import ShaderCache
         from diviewer.viewer.gi import GIControl
         from diviewer.viewer.imgui_gl import GlfwImgui, ImguiRenderer
-        from diviewer.viewer.input import Input
         from diviewer.viewer.panel import Panel
-        from diviewer.viewer.screenshots import Screenshots
         from diviewer.viewer.sources import ReferenceTexture, VXGISlot, black_texture
         from diviewer.viewer.meter import Meter
         from diviewer.viewer.scale import ScaleController, moving_map_size, render_size
@@ -126,7 +126,8 @@ class Viewer:
         """Holds the VXGI pass, made the first time the VXGI view mode is shown (``sources.VXGISlot``)."""
         self.imgui_ctx = imgui.create_context()
         imgui.get_io().set_ini_filename(None)  # no imgui.ini in the user's working folder
-        self.input = Input(self.state, self, self.glfw)
+        self.input = Input(self.state, self.window, self.shots, self.glfw)
+        self.input.view_size = self.view_size
         self.gui = GlfwImgui(self.window.handle, handler=self.input)
         self.imgui_renderer = ImguiRenderer(self.ctx, self.shaders)
         self.panel = Panel(self.state)
@@ -194,7 +195,7 @@ class Viewer:
         scale = self.scaler.scale if scale is None else scale
         want = render_size((fb_w, fb_h), scale)
         if want != self.render_size or (fb_w, fb_h) != self.view_size:
-            self.view_size = (fb_w, fb_h)
+            self.view_size = self.input.view_size = (fb_w, fb_h)
             self.renderer.resize(*want)
             self.gi.follow_window(self.view_size)
             self._shown = None
@@ -253,10 +254,7 @@ class Viewer:
 
     def pick_window_point(self, x: float, y: float) -> str | None:
         """Select the object under window point (x, y) (screen units, y down)."""
-        point = self.window.to_image(x, y, self.view_size)
-        if point is None:
-            return self.state.select_object(None)
-        return self.state.pick(*point, *self.view_size)
+        return pick_window_point(self.state, self.window, x, y, self.view_size)
 
     def screenshot(self, path: str | Path) -> Path:
         """Save the view (without the panel) at the window's resolution (upscaled from the shading resolution)
@@ -305,15 +303,14 @@ class Viewer:
             self.upscale.clear(location=1)
 
     def _save_view(self, path: Path, images: list[Image]) -> Path:
-        from diviewer.viewer.screenshots import view_record
-
         st, size = self.state, self.view_size
         record = view_record(st, size, self.model.path if self.model is not None else None, self.gl_renderer,
                              gi_size=self.gi_size if self.neural is not None else None,
                              gi_settings=dataclasses.asdict(self.gi.settings) if self.neural is not None else None,
                              render_size=list(self.render_size), render_scale=self.render_scale,
                              out_of_range=st.out_of_range())
-        self.shots.save_view(path, size, lambda fbo, rect: self._draw_view(fbo, rect, images), record)
+        self._draw_view(self.shots.target(size), (0, 0, *size), images)
+        self.shots.save_view(path, record)
         st.message = f"saved {path} and {path.with_suffix('.json').name}"
         return path
 
@@ -400,6 +397,7 @@ class Viewer:
         screen.use()
         with self.timer.stage("panel"):
             self.gui.new_frame()
+            self.input.wants_keyboard, self.input.wants_mouse = self.gui.wants_keyboard, self.gui.wants_mouse
             view = self._panel_view()
             requests = self.panel.draw(view) if st.show_panel else []
             self.panel.overlay(rect, notes, view)

@@ -1,7 +1,8 @@
 """Keyboard and mouse: one table binds keys to actions, and the shortcut list (panel, README) is read from it.
 
 ``Input`` receives GLFW's events after imgui has seen them (``imgui_gl.GlfwImgui`` calls its ``on_*``)
-and applies them to the viewer's state, or to the viewer's own actions (screenshot, vsync, quit).
+and applies them to the viewer's state, the window (vsync, quit) and the screenshot queue; it never calls the app,
+which copies imgui's wishes (``wants_keyboard``, ``wants_mouse``) and the image's size (``view_size``) into it.
 """
 
 from __future__ import annotations
@@ -83,10 +84,10 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("+ / -", "exposure up / down half a stop", ("EQUAL", "KP_ADD", "MINUS", "KP_SUBTRACT"),
             lambda i, chord: i.state.set_exposure(i.state.exposure + (0.5 if chord in ("EQUAL", "KP_ADD") else -0.5))),
     Binding("F12 or Ctrl+S", "screenshot (PNG + frame JSON)", ("F12", "Ctrl+S"),
-            lambda i, _: i.actions.screenshot(i.state.shot_path)),
-    Binding("V", "vsync on / off", ("V",), lambda i, _: i.actions.set_vsync(not i.actions.window.vsync)),
+            lambda i, _: i.shots.request(i.state.shot_path)),
+    Binding("V", "vsync on / off", ("V",), lambda i, _: i.window.set_vsync(not i.window.vsync)),
     Binding("H or F1", "show / hide the panel", ("H", "F1"), _toggle_panel),
-    Binding("Esc", "quit", ("ESCAPE",), lambda i, _: i.actions.window.request_close()),
+    Binding("Esc", "quit", ("ESCAPE",), lambda i, _: i.window.request_close()),
 )
 """The controls, in the order the panel and the README list them."""
 
@@ -105,13 +106,25 @@ def _split(chord: str) -> tuple[str, bool, bool]:
     return key, "Ctrl" in mods, "Shift" in mods
 
 
-class Input:
-    """Applies GLFW events to the viewer: ``state`` (a ViewerState) and ``actions`` (the viewer: ``window``,
-    ``gui``, ``screenshot``, ``set_vsync``, ``pick_window_point``)."""
+def pick_window_point(state, window, x: float, y: float, view_size: tuple[int, int]) -> str | None:
+    """Select the object under window point (x, y) (screen units, y down) of the image shown at ``view_size``."""
+    point = window.to_image(x, y, view_size)
+    if point is None:
+        return state.select_object(None)
+    return state.pick(*point, *view_size)
 
-    def __init__(self, state, actions, glfw):
-        self.state, self.actions, self.glfw = state, actions, glfw
+
+class Input:
+    """Applies GLFW events to ``state`` (a ViewerState), ``window`` (``viewer.window.Window``) and ``shots`` (the
+    screenshot queue, ``viewer.screenshots.Screenshots``)."""
+
+    def __init__(self, state, window, shots, glfw):
+        self.state, self.window, self.shots, self.glfw = state, window, shots, glfw
         self.mouse = {"left": False, "right": False, "x": 0.0, "y": 0.0, "dragged": 0.0}
+        self.view_size = (1, 1)
+        """The framebuffer size the image is shown at (the app's ``view_size``), for picking."""
+        self.wants_keyboard = self.wants_mouse = False
+        """Whether imgui took the keyboard / the mouse in its last frame (the app copies them after each)."""
 
     def _matches(self, chord: str, key: int, ctrl: bool, shift: bool) -> bool:
         name, needs_ctrl, needs_shift = _split(chord)
@@ -139,7 +152,7 @@ class Input:
     # --- GLFW callbacks (after imgui) -------------------------------------------------------------
     def on_key(self, key: int, action: int, mods: int) -> None:
         glfw = self.glfw
-        if action not in (glfw.PRESS, glfw.REPEAT) or self.actions.gui.wants_keyboard:
+        if action not in (glfw.PRESS, glfw.REPEAT) or self.wants_keyboard:
             return
         hit = self.binding_for(key, mods)
         if hit is None:
@@ -154,14 +167,14 @@ class Input:
         if which is None:
             return
         if action == glfw.PRESS:
-            if self.actions.gui.wants_mouse:
+            if self.wants_mouse:
                 return
             m[which] = True
             m["dragged"] = 0.0
         elif action == glfw.RELEASE and m[which]:
             m[which] = False
             if which == "left" and m["dragged"] < CLICK_SLOP:
-                self.actions.pick_window_point(m["x"], m["y"])  # where on_cursor last saw the pointer
+                pick_window_point(self.state, self.window, m["x"], m["y"], self.view_size)  # where on_cursor saw it
 
     def on_cursor(self, x: float, y: float) -> None:
         m = self.mouse
@@ -175,13 +188,13 @@ class Input:
                 self.state.drag(dx, dy)
 
     def on_scroll(self, dx: float, dy: float) -> None:
-        if not self.actions.gui.wants_mouse:
+        if not self.wants_mouse:
             self.state.scroll(dy)
 
     def held_keys(self, dt: float) -> None:
         """WASD/QE movement for the keys held during the last ``dt`` seconds."""
-        glfw, window = self.glfw, self.actions.window
-        if self.actions.gui.wants_keyboard:
+        glfw, window = self.glfw, self.window
+        if self.wants_keyboard:
             return
         down = window.key_down
         if down(glfw.KEY_LEFT_CONTROL) or down(glfw.KEY_RIGHT_CONTROL):

@@ -8,7 +8,6 @@ plus the view settings.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
 from pathlib import Path
 
 import moderngl
@@ -19,9 +18,6 @@ from diviewer.gl.context import unbind_framebuffer
 from diviewer.gl.display import read_rgb8
 from diviewer.viewer.state import ViewerState
 from diviewer.viewer.view_modes import view_mode
-
-Draw = Callable[[moderngl.Framebuffer, tuple[int, int, int, int]], None]
-"""Draws into a framebuffer's rectangle (x, y, w, h from the bottom)."""
 
 
 def view_record(state: ViewerState, size: tuple[int, int], model_path: Path | None, gl_renderer: str,
@@ -61,14 +57,17 @@ class Screenshots:
         self.pending_window.append(path)
         return path
 
-    def save_view(self, path: Path, size: tuple[int, int], draw: Draw, record: dict) -> Path:
-        """Redraw the view at ``size`` offscreen and save it with ``record`` as the JSON beside it."""
+    def target(self, size: tuple[int, int]) -> moderngl.Framebuffer:
+        """The offscreen framebuffer of ``size`` the view is redrawn into before `save_view` saves it."""
         if self._target is None or self._target[0].size != size:
             self._release_target()
             tex = self.ctx.texture(size, 4)
             self._target = (tex, self.ctx.framebuffer([tex]))
-        _, fbo = self._target
-        draw(fbo, (0, 0, *size))
+        return self._target[1]
+
+    def save_view(self, path: Path, record: dict) -> Path:
+        """Save the view redrawn into `target` as PNG, with ``record`` as the JSON beside it."""
+        fbo = self._target[1]
         path.parent.mkdir(parents=True, exist_ok=True)
         imageio.write_png(path, read_rgb8(fbo))
         imageio.write_text(path.with_suffix(".json"), json.dumps(record, indent=2))
