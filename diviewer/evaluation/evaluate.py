@@ -6,8 +6,9 @@ validation: MSE, PSNR (peak 1) and SSIM on linear radiance, and the same on the 
 LDR-FLIP on the tone-mapped images, the checkerboard ratio over flat regions, and the equivalent sample
 count; beside the models, direct light alone, the noise floor (a second seed at the reference's spp)
 and the path tracer at each ladder count, per split. One tone map for every row of a frame (the evaluation set's
-exposure, or each frame's metered one or fixed stops: diviewer.evaluation.exposures), and region metrics (the object's pixels, those of them without direct light: diviewer.evaluation.scoring)
-with the share of frames in which each model scores below direct light. Every split is scored at each of its
+exposure, or each frame's metered one or fixed stops: diviewer.evaluation.exposures), and region metrics (the
+object's pixels, those of them without direct light: diviewer.evaluation.scoring) with the share of frames in which
+each model scores below direct light. Every split is scored at each of its
 shapes (centred crops, diviewer.evaluation.frames); a model the runtime refuses at a shape is reported as refused.
 The frames' checksums are verified first; a set changed after `diviewer evalset` rendered it (a step in its
 lineage: diviewer.data.lineage) is refused, and an incomplete one unless ``partial`` (which names the frames scored
