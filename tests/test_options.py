@@ -28,6 +28,8 @@ def _check(argv, gl_info=None):
     ["train", "--data", "d", "--out", "o", "--aspect-crops", "off"],
     ["data", "filter-truth", "d", "--out", "o", "--normal-power", "1024", "--range-sigma", "0"],
     ["build", "--scene", "cornell", "--budget", "0.5", "--ks", "8", "16"],
+    ["eval", "--model", "m.onnx", "--exposure", "metered"], ["eval", "--model", "m.onnx", "--exposure", "Scene"],
+    ["eval", "--model", "m.onnx", "--exposure", "-12.5"],
 ])
 def test_values_in_range_pass(argv):
     _check(argv)
@@ -43,6 +45,8 @@ def test_values_in_range_pass(argv):
     (["evalset", "--out", "o", "--window-widths", "170,170"], "--window-widths"),
     (["capture", "--out", "o", "--shard", "0/3"], "--shard"),
     (["train", "--data", "d", "--out", "o", "--aspect-crops", "2:1"], "--aspect-crops"),
+    (["eval", "--model", "m.onnx", "--exposure", "abc"], "--exposure"),  # scene, metered or render's stops
+    (["eval", "--model", "m.onnx", "--exposure", "41"], "--exposure"),
 ])
 def test_a_subcommands_own_rule_and_values_in_strings(argv, option):
     if option is None:
