@@ -83,6 +83,7 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
              out: Path | None = None, log=print, exposure: str | float = "scene") -> dict:
     """Score one model and direct light on a dataset's split; ``exposure``: `eval --exposure`
     (diviewer.evaluation.exposures)."""
+    mode = exposure_mode(exposure)  # refuses a bad value before any work
     if out is not None:
         check_output_file(out, "--out", protect=(model_path, Path(model_path).with_suffix(".json")))
     ds = Dataset(data_dir)
@@ -103,7 +104,6 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
     if not idx:
         raise DiviewerError(f"the dataset has no '{split}' frames", path=data_dir)
     direct = ds.slices["direct"]
-    mode = exposure_mode(exposure)  # refuses a bad value before any frame is read
     exposure, exposure_from = scene_exposure(ds.manifest["scene"], ds.manifest["scene_hash"],
                                              (np.array(np.load(ds.path(i), mmap_mode="r")[..., direct])
                                               for i in ds.indices("train")))
