@@ -172,6 +172,25 @@ class Crops:
         return v
 
 
+@dataclass(frozen=True)
+class EvalExposure:
+    """`eval --exposure`: ``scene``, ``metered`` or a number of stops as ``stops`` takes it (render's --exposure)."""
+
+    stops: Any
+
+    def describe(self) -> str:
+        return f"scene, metered or a number of stops ({self.stops.describe()})"
+
+    def check(self, v: Any) -> Any:
+        if str(v).strip().lower() in ("scene", "metered"):
+            return v
+        try:
+            self.stops.check(float(v))
+        except (Invalid, TypeError, ValueError):
+            raise Invalid(f"must be {self.describe()}") from None
+        return v
+
+
 _T = TRAIN_FIELDS
 _CORE = {
     "seed": SEED, "pt_seed": Int(0, 2**32 - 2), "frames": Int(1, 1_000_000), "spp": SPP, "max_depth": MAX_DEPTH,
@@ -201,9 +220,10 @@ OPTIONS: dict[str, Any] = {**_CORE, **_TRAIN, **_VIEW, **_BENCH, **_OTHERS}
 
 COMMAND_OPTIONS: dict[tuple[str, str], Any] = {
     ("bench", "res"): Int(16, MAX_SIZE), ("evalset", "res"): Size(lo=16),
+    ("eval", "exposure"): EvalExposure(_CORE["exposure"]),
 }
-"""Where one subcommand takes an option name more narrowly: bench's square sizes, an evaluation set's >= 16 px
-(SSIM's window is 11)."""
+"""Where one subcommand takes an option name otherwise: bench's square sizes, an evaluation set's >= 16 px
+(SSIM's window is 11), eval's exposure mode (scene, metered, or stops as render's)."""
 
 TEXT_OPTIONS: dict[str, str] = {
     "scene": "a shipped scene's name or a .toml path", "model": "a model file, auto or none",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given, strategies as st
 
 from diviewer.cli import build_parser
 from diviewer.errors import DiviewerError
@@ -28,6 +29,8 @@ def _check(argv, gl_info=None):
     ["train", "--data", "d", "--out", "o", "--aspect-crops", "off"],
     ["data", "filter-truth", "d", "--out", "o", "--normal-power", "1024", "--range-sigma", "0"],
     ["build", "--scene", "cornell", "--budget", "0.5", "--ks", "8", "16"],
+    ["eval", "--model", "m.onnx", "--exposure", "metered"], ["eval", "--model", "m.onnx", "--exposure", "Scene"],
+    ["eval", "--model", "m.onnx", "--exposure", "-12.5"],
 ])
 def test_values_in_range_pass(argv):
     _check(argv)
@@ -43,6 +46,8 @@ def test_values_in_range_pass(argv):
     (["evalset", "--out", "o", "--window-widths", "170,170"], "--window-widths"),
     (["capture", "--out", "o", "--shard", "0/3"], "--shard"),
     (["train", "--data", "d", "--out", "o", "--aspect-crops", "2:1"], "--aspect-crops"),
+    (["eval", "--model", "m.onnx", "--exposure", "abc"], "--exposure"),  # scene, metered or render's stops
+    (["eval", "--model", "m.onnx", "--exposure", "41"], "--exposure"),
 ])
 def test_a_subcommands_own_rule_and_values_in_strings(argv, option):
     if option is None:
@@ -75,3 +80,15 @@ def test_gl_limits_hook_bounds_sizes_by_a_contexts_limits():
     with pytest.raises(DiviewerError, match="--vxgi-grids"):
         _check(["bench", "--vxgi-grids", "64", "256"], small)
     assert GL_GUARANTEED["GL_MAX_TEXTURE_SIZE"] > OPTIONS["size"].hi
+
+
+@given(st.one_of(st.floats(-40.0, 40.0).map(repr), st.sampled_from(["scene", "metered", "METERED", " scene "])))
+def test_eval_exposure_takes_a_mode_or_renders_stops(value):
+    _check(["eval", "--model", "m.onnx", f"--exposure={value}"])
+
+
+@given(st.one_of(st.floats(max_value=-40.0, exclude_max=True), st.floats(min_value=40.0, exclude_min=True),
+                 st.sampled_from(["nan", "inf", "-inf", "", "auto", "1/2", "5EV"])).map(str))
+def test_eval_exposure_refuses_anything_else_naming_the_option(value):
+    with pytest.raises(DiviewerError, match="--exposure"):
+        _check(["eval", "--model", "m.onnx", f"--exposure={value}"])

@@ -18,14 +18,16 @@ def run(args: argparse.Namespace) -> int:
                             field="--evalset")
     if args.data is None:  # no --evalset: the scene's compact set shipped in assets/evalsets/
         evaluate_evalset(args.model, args.evalset, provider=args.provider, out=args.out, partial=args.partial,
-                         jobs=jobs(args))
+                         jobs=jobs(args), exposure=args.exposure)
         return 0
     if args.partial:
         raise DiviewerError("--partial applies to evaluation sets, not to --data", field="--partial")
     if len(args.model) == 1:
-        evaluate(args.model[0], args.data, split=args.split, provider=args.provider, out=args.out)
+        evaluate(args.model[0], args.data, split=args.split, provider=args.provider, out=args.out,
+                 exposure=args.exposure)
         return 0
-    results = [evaluate(m, args.data, split=args.split, provider=args.provider) for m in args.model]
+    results = [evaluate(m, args.data, split=args.split, provider=args.provider, exposure=args.exposure)
+               for m in args.model]
     if args.out is not None:
         from diviewer import imageio
 
@@ -67,4 +69,9 @@ def add_parser(sub) -> None:
     add_provider(p)
     add_out(p, "write the results as JSON (strict: no NaN/Infinity)", required=False)
     add_jobs(p)
+    add_number(p, "--exposure", type=str, default="scene",
+               help="the tone map's exposure for the tm metrics: scene (default: the evaluation set's one exposure), "
+                    "metered (each frame at the exposure the viewer's meter gives its path-traced truth, as a scene "
+                    "with auto_exposure is shown; an unlit frame keeps the scene's) or a number of stops for every "
+                    "frame")
     p.set_defaults(func=run)

@@ -5,9 +5,10 @@ validation: MSE, PSNR (peak 1) and SSIM on linear radiance, and the same on the 
 (diviewer.metrics.tonemap). On an evaluation set (diviewer.evaluation.evalset) also: HDR-FLIP on linear radiance,
 LDR-FLIP on the tone-mapped images, the checkerboard ratio over flat regions, and the equivalent sample
 count; beside the models, direct light alone, the noise floor (a second seed at the reference's spp)
-and the path tracer at each ladder count, per split. One tone map (the evaluation set's exposure)
-for every row, and region metrics (the object's pixels, those of them without direct light: diviewer.evaluation.scoring)
-with the share of frames in which each model scores below direct light. Every split is scored at each of its
+and the path tracer at each ladder count, per split. One tone map for every row of a frame (the evaluation set's
+exposure, or each frame's metered one or fixed stops: diviewer.evaluation.exposures), and region metrics (the
+object's pixels, those of them without direct light: diviewer.evaluation.scoring) with the share of frames in which
+each model scores below direct light. Every split is scored at each of its
 shapes (centred crops, diviewer.evaluation.frames); a model the runtime refuses at a shape is reported as refused.
 The frames' checksums are verified first; a set changed after `diviewer evalset` rendered it (a step in its
 lineage: diviewer.data.lineage) is refused, and an incomplete one unless ``partial`` (which names the frames scored
@@ -32,6 +33,8 @@ from diviewer.data.dataset import Dataset
 from diviewer.data.lineage import refuse_derived_evalset
 from diviewer.data.scales import dataset_scene
 from diviewer.errors import DiviewerError
+from diviewer.evaluation.exposures import (COMPACT_LADDER, FrameExposures, data_legend, exposure_mode, legend,
+                                           scene_exposure, split_legend)
 from diviewer.evaluation.frames import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
 from diviewer.evaluation.scoring import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer, aggregate, below_direct, done,
                                 equivalent, ladder_methods, per_frame, pooled_bias, score, score_frame,
@@ -44,7 +47,8 @@ from diviewer.evaluation.truthmargin import FILTERED_MARGIN, MARGIN_DB, model_tr
 SSIM_MIN = 11
 """SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
 __all__ = ["EQUIVALENT_BY", "EVAL_KEYS", "KEYS", "aggregate", "equivalent", "evaluate", "evaluate_evalset",
-           "pooled_bias", "run_model", "score", "score_frame", "stored_inputs", "stored_scene", "strict_json"]
+           "pooled_bias", "run_model", "scene_exposure", "score", "score_frame", "stored_inputs", "stored_scene",
+           "strict_json"]
 
 
 def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | None = None,
@@ -75,23 +79,11 @@ def stored_inputs(net: NeuralGI, scene, entry: dict, frame: dict[str, np.ndarray
     return c.inputs()
 
 
-def scene_exposure(scene_name: str, scene_hash: str, direct_frames) -> tuple[float, str]:
-    """The scene's tone-map exposure: the shipped evaluation set's (same scene file), else fitted on the
-    given GL direct-light frames (deterministic); never a model's."""
-    from diviewer.data.dataset import read_manifest
-    from diviewer.contract.encoding import fit_exposure
-
-    path = default_evalset(scene_name)
-    if (path / "manifest.json").is_file():
-        m = read_manifest(path)
-        if m.get("scene_hash") == scene_hash:
-            return float(m["evalset"]["tonemap"]["exposure"]), f"the scene's evaluation set ({path})"
-    return float(fit_exposure(list(direct_frames))), ("fitted on the dataset's train split GL direct light, as "
-                                                      "training fits it (no shipped evaluation set of this scene)")
-
-
 def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: str | None = None,
-             out: Path | None = None, log=print) -> dict:
+             out: Path | None = None, log=print, exposure: str | float = "scene") -> dict:
+    """Score one model and direct light on a dataset's split; ``exposure``: `eval --exposure`
+    (diviewer.evaluation.exposures)."""
+    mode = exposure_mode(exposure)  # refuses a bad value before any work
     if out is not None:
         check_output_file(out, "--out", protect=(model_path, Path(model_path).with_suffix(".json")))
     ds = Dataset(data_dir)
@@ -115,6 +107,7 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
     exposure, exposure_from = scene_exposure(ds.manifest["scene"], ds.manifest["scene_hash"],
                                              (np.array(np.load(ds.path(i), mmap_mode="r")[..., direct])
                                               for i in ds.indices("train")))
+    exposures = FrameExposures(mode, exposure)
     rows, times, black = {"neural": [], "direct": []}, [], []
     scene = stored_scene(ds, [model])
     for i in idx:
@@ -124,21 +117,24 @@ def evaluate(model_path: Path, data_dir: Path, split: str = "test", provider: st
         t0 = time.perf_counter()
         y = run_model(model, f, **stored_inputs(model, scene, ds.entry(i), f))
         times.append((time.perf_counter() - t0) * 1e3)
-        rows["neural"].append(score(y, f["pt"], exposure))
-        rows["direct"].append(score(f["direct"], f["pt"], exposure))
+        x = exposures.factor(f["pt"])  # one exposure for the frame's every row
+        rows["neural"].append(score(y, f["pt"], x))
+        rows["direct"].append(score(f["direct"], f["pt"], x))
     summary = {
         "model": str(model_path), "data": str(data_dir), "split": split, "frames": len(idx),
         "scene": ds.manifest["scene"], "reference_spp": ds.manifest["spp"], "provider": model.provider,
         "edge_guard": model.edge_guard, "K": model.meta["K"], "target": model.meta["target"],
         "precision": model.meta["precision"],
-        "tonemap": {"exposure": exposure, "from": exposure_from},
+        "tonemap": {"exposure": exposure, "from": exposure_from}, "exposure": exposures.record(),
         "inference_ms": {"median": float(np.median(times)), "p95": float(np.percentile(times, 95))},
         "black_reference_frames": black,
         "methods": {m: {k: {"mean": float(np.mean([r[k] for r in rs])), "std": float(np.std([r[k] for r in rs]))}
                         for k in KEYS} for m, rs in rows.items()},
     }
+    if (used := exposures.split_record()) is not None:
+        summary["exposure"].update(used)
     log(f"{summary['scene']} {split} split, {len(idx)} frames, against path tracing at {summary['reference_spp']} spp; "
-        f"tone map exposure {exposure:.4g} ({exposure_from})")
+        f"tone map exposure {exposure:.4g} ({exposure_from}){data_legend(summary['exposure'])}")
     log(f"{'method':<34} {'PSNR':>7} {'SSIM':>7} {'PSNR tm':>8} {'SSIM tm':>8}")
     for m, label in (("neural", _model_label(model.meta, Path(model_path))), ("direct", "direct light only")):
         s = summary["methods"][m]
@@ -185,12 +181,15 @@ def check_frames(ev: EvalFrames, partial: bool, log=print) -> list:
 
 
 def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, provider: str | None = None,
-                     out: Path | None = None, log=print, partial: bool = False, jobs: int = 1) -> dict:
+                     out: Path | None = None, log=print, partial: bool = False, jobs: int = 1,
+                     exposure: str | float = "scene") -> dict:
     """Score models, direct light, the noise floor and the path-tracer ladder on an evaluation set, per split
     and shape, with region metrics; ``evalset_dir`` None: the shipped compact set of the models' scene.
-    ``jobs``: processes the images are scored in (``scoring.Scorer``); the models run here."""
+    ``jobs``: processes the images are scored in (``scoring.Scorer``); the models run here. ``exposure``: `eval
+    --exposure` (diviewer.evaluation.exposures): 'scene', 'metered' or stops."""
     from diviewer.console import progress_bar
 
+    mode = exposure_mode(exposure)  # refuses a bad value before any model is read
     nets = [NeuralGI(p, provider=provider) for p in model_paths]
     if evalset_dir is None:
         if not nets:
@@ -209,6 +208,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
     problems = check_frames(ev, partial, log)
     area = area_direct_of(ev, {n.direct_samples for n in nets} - {1})
     exposure = ev.exposure
+    exposures = FrameExposures(mode, exposure)
     info = ev.info
     ladder_spp = [int(n) for n in info["ladder_spp"]]
     ladder = ladder_methods(ev)
@@ -220,7 +220,9 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
               "flip": {"flip_hdr": "HDR-FLIP on linear radiance (negative values clamped to 0)",
                        "flip_ldr": "LDR-FLIP on the tone-mapped images"},
               "equivalent_spp_by": EQUIVALENT_BY[0], "left_out": ev.left_out(), "not_scored": {},
-              "regions_left_out": info.get("regions_left_out"), "splits": {}}
+              "regions_left_out": info.get("regions_left_out"), "exposure": exposures.record(), "splits": {}}
+    if not ev.ladder_images() and mode != "scene":  # its stored ladder scores are at the scene's exposure
+        result["ladder_left_out"] = COMPACT_LADDER
     for split, why in result["left_out"].items():
         log(f"split {split} left out: {why}")
     splits = ev.splits()
@@ -229,7 +231,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
         result.update(partial_record(ev, problems, present))
     progress = progress_bar(sum(len(present[s]) * len(sh) for s, sh in splits.items()), "eval", "frame")
     with Scorer(jobs) as scorer:
-        _score_splits(ev, splits, present, result, models, images, exposure, ladder_spp, progress, partial, area,
+        _score_splits(ev, splits, present, result, models, images, exposures, ladder_spp, progress, partial, area,
                       scorer, log)
     progress.close()
     for line in format_tables(result):
@@ -250,7 +252,7 @@ def partial_record(ev: EvalFrames, problems: list, present: dict[str, list[int]]
                                   for p in problems]}
 
 
-def _score_splits(ev, splits, present, result, models, images, exposure, ladder_spp, progress, partial, area, scorer,
+def _score_splits(ev, splits, present, result, models, images, exposures, ladder_spp, progress, partial, area, scorer,
                   log) -> None:
     for split, shapes in splits.items():
         idx = present[split]
@@ -260,7 +262,7 @@ def _score_splits(ev, splits, present, result, models, images, exposure, ladder_
             continue
         for shape in shapes:
             key = split_key(split, shape, shapes)
-            result["splits"][key] = _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp,
+            result["splits"][key] = _score_split(ev, key, split, shape, idx, models, images, exposures, ladder_spp,
                                                  progress, partial, area, scorer)
 
 
@@ -299,10 +301,13 @@ def model_input(net, f: dict, frame: dict, area: dict, index: int, width: int) -
     return crop_frame({**frame, "direct": area[net.direct_samples][index]}, width)
 
 
-def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_spp, progress, partial, area,
-                 scorer: Scorer) -> dict:
+def _score_split(ev, key, split, shape, idx, models, images, exposures: FrameExposures, ladder_spp, progress,
+                 partial, area, scorer: Scorer) -> dict:
     rows = {k: [] for k in (*models, *images)}
-    if not ev.ladder_images():
+    # A compact set's stored ladder scores are at the scene's exposure: used only there.
+    stored_ladder = not ev.ladder_images() and exposures.mode == "scene"
+    regions_at = None if exposures.mode == "scene" else ev.exposure  # the same pixels in every mode
+    if stored_ladder:
         rows.update({m: [] for m in ev.ladder_rows(idx[0], key)})
     times, refused, flat = {k: [] for k in models}, {}, 0
     scene = stored_scene(ev, models.values())  # what each frame's conditioning needs
@@ -312,6 +317,7 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
         f = crop_frame(frame, shape[0])
         mask = flat_mask(f["depth"], f["normal"], f["albedo"], f["direct"])  # flat and no shadow edge
         flat += int(mask.sum())
+        exposure = exposures.factor(f["pt"])  # the frame's one exposure, for its every row
         mine = []
         for name, net in models.items():
             if name in refused:
@@ -324,10 +330,10 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
                 refused[name] = str(exc)
                 continue
             times[name].append((time.perf_counter() - t0) * 1e3)
-            mine.append((name, scorer.submit(y, f, exposure, mask)))
+            mine.append((name, scorer.submit(y, f, exposure, mask, regions_at)))
         for name, ch in images.items():
-            mine.append((name, scorer.submit(f[ch], f, exposure, mask)))
-        if not ev.ladder_images():
+            mine.append((name, scorer.submit(f[ch], f, exposure, mask, regions_at)))
+        if stored_ladder:
             mine.extend((name, done(row)) for name, row in ev.ladder_rows(i, key).items())
         pending.append(mine)
     for mine in pending:
@@ -335,9 +341,9 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
             rows[name].append(future.result())
         progress.update()
     methods = {k: aggregate(r) for k, r in rows.items() if r}
-    ladder = [methods[f"pt_spp{n}"] for n in ladder_spp]
+    ladder = [methods[f"pt_spp{n}"] for n in ladder_spp if f"pt_spp{n}" in methods]
     for name, m in methods.items():
-        m["equivalent_spp"] = equivalent(m, ladder_spp, ladder)
+        m["equivalent_spp"] = equivalent(m, ladder_spp, ladder) if ladder else dict.fromkeys(EQUIVALENT_BY)
         if name in models or name == "direct":
             m["per_frame"] = per_frame(list(idx), rows[name])
         if name in models:
@@ -348,7 +354,7 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
                      below_direct=below_direct(rows[name], rows["direct"]),
                      inference_ms={"median": float(np.median(times[name]))})
             spp = model_truth_spp(net.meta)
-            if spp and len(rows[name]) == len(idx) and rows["noise_floor"]:  # its training truth over it
+            if spp and ladder and len(rows[name]) == len(idx) and rows["noise_floor"]:  # its training truth over it
                 m["truth_margin"] = truth_margin(rows[name], rows["noise_floor"],
                                                  {n: rows[f"pt_spp{n}"] for n in ladder_spp}, spp)
             elif filt := ((net.meta.get("recipe") or {}).get("capture") or {}).get("truth_filter"):
@@ -362,6 +368,8 @@ def _score_split(ev, key, split, shape, idx, models, images, exposure, ladder_sp
     out = {"split": split, "shape": list(shape), "frames": len(idx), "flat_pixels_per_frame": flat / len(idx),
            "methods": methods, "refused": {name: {"label": _model_label(models[name].meta, models[name].path),
                                                   "reason": why} for name, why in refused.items()}}
+    if (used := exposures.split_record()) is not None:
+        out["exposure"] = used
     if partial:
         out["frames_scored"] = list(idx)
     return out
@@ -374,8 +382,9 @@ def _cell(m: dict, key: str, fmt: str) -> str:
 
 def format_tables(result: dict) -> list[str]:
     """The per-split tables for people."""
-    lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; tm = tone-mapped at exposure "
-             f"{result['tonemap_exposure']:.3g} (the scene's); eq. spp: the path tracer's samples that score as well",
+    eq = "none (no ladder: see ladder_left_out)" if "ladder_left_out" in result else \
+        "the path tracer's samples that score as well"
+    lines = [f"{result['scene']}: against path tracing at {result['reference_spp']} spp; {legend(result)}; eq. spp: {eq}",
              "object / unlit / lit / shade: PSNR tm / SSIM tm over those pixels; < direct: share of frames below direct "
              "light alone; every column: docs/evaluation.md (\"Reading diviewer eval's table\")"]
     if "frames_scored" in result:  # eval --partial: which frames the figures below are of
@@ -390,7 +399,7 @@ def format_tables(result: dict) -> list[str]:
         lines.append(f"object regions: left out ({result['regions_left_out']})")
     for split, r in result["splits"].items():
         lines.append("")
-        lines.append(f"{split} ({r['frames']} frames at {r['shape'][0]}x{r['shape'][1]})"
+        lines.append(f"{split} ({r['frames']} frames at {r['shape'][0]}x{r['shape'][1]})" + split_legend(r)
                      + (f"; frames scored: {', '.join(map(str, r['frames_scored']))}" if "frames_scored" in r else ""))
         lines.append(f"{'method':<34} {'PSNR':>6} {'SSIM':>6} {'PSNR tm':>7} {'SSIM tm':>7} {'FLIP-HDR':>8} "
                      f"{'FLIP-LDR':>8} {'eq. spp':>8} {'checker':>7} {'stride':>6} {'bias':>7} {'indirect':>8} "

@@ -74,13 +74,14 @@ def regions(frame: dict[str, np.ndarray], exposure: float) -> dict[str, np.ndarr
 
 
 def score_frame_regions(image: np.ndarray, frame: dict[str, np.ndarray], exposure: float,
-                        mask: np.ndarray) -> dict:
+                        mask: np.ndarray, region_exposure: float | None = None) -> dict:
     """``score_frame`` against ``frame["pt"]``, plus the region metrics and each region's pixel count, and, where the
     frame has its G-buffer's albedo and depth, the grid-locked pattern in its shade (``stride_shade``:
-    `diviewer.metrics.stride_pattern`, None with too little shade to read)."""
+    `diviewer.metrics.stride_pattern`, None with too little shade to read). ``region_exposure``: the exposure the
+    regions are drawn at where it is not the tone map's (`eval --exposure`: the scene's, in every mode)."""
     s = score_frame(image, frame["pt"], exposure, mask, frame["direct"])
     a, b = tonemap(image, exposure), tonemap(frame["pt"], exposure)
-    parts = regions(frame, exposure)
+    parts = regions(frame, exposure if region_exposure is None else region_exposure)
     for name, m in parts.items():
         s[f"psnr_tm_{name}"], s[f"ssim_tm_{name}"] = masked_psnr(a, b, m), masked_ssim(a, b, m)
         s[f"pixels_{name}"] = int(m.sum())
@@ -143,12 +144,14 @@ class Scorer:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 
-    def submit(self, image: np.ndarray, frame: dict[str, np.ndarray], exposure: float, mask: np.ndarray) -> Future:
-        """``score_frame_regions(image, frame, exposure, mask)``, now or in a worker; its future."""
+    def submit(self, image: np.ndarray, frame: dict[str, np.ndarray], exposure: float, mask: np.ndarray,
+               region_exposure: float | None = None) -> Future:
+        """``score_frame_regions(image, frame, exposure, mask, region_exposure)``, now or in a worker; its future."""
         frame = {k: frame[k] for k in SCORED_CHANNELS if k in frame}
         if self._pool is None:
-            return done(score_frame_regions(image, frame, exposure, mask))
-        return self._pool.submit(score_frame_regions, np.asarray(image), frame, float(exposure), mask)
+            return done(score_frame_regions(image, frame, exposure, mask, region_exposure))
+        return self._pool.submit(score_frame_regions, np.asarray(image), frame, float(exposure), mask,
+                                 None if region_exposure is None else float(region_exposure))
 
 
 def pooled_bias(rows: list[dict], key: str = "sum") -> float | None:
