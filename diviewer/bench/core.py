@@ -70,12 +70,9 @@ class BenchSettings:
                                 field="--frames")
         if any(r < 16 or r % 2 for r in self.resolutions):
             raise DiviewerError(f"resolutions must be even and >= 16, got {self.resolutions}", field="--res")
-        from diviewer.viewer.scale import MAX_SCALE
+        from diviewer.bench.scales import check_render_scales
 
-        bad = [s for s in self.render_scales if not 0.0 < s <= MAX_SCALE]
-        if bad:
-            raise DiviewerError(f"render scales must be in (0, {MAX_SCALE:g}] (shaded pixels per window pixel per "
-                                f"side), got {bad}", field="--render-scales")
+        check_render_scales(self.render_scales, self.resolutions)
         if self.vxgi_trace_scale < 1:
             raise DiviewerError(f"must be >= 1, got {self.vxgi_trace_scale}", field="--vxgi-trace-scale")
         if self.temporal_max_spp is not None and self.temporal_max_spp < 1:

@@ -19,6 +19,22 @@ from diviewer.bench.runner import GlBench, per_split, read_final
 TRUTH = "vs_truth"
 
 
+def check_render_scales(scales, resolutions) -> None:
+    """Scales the viewer draws at (0 < s <= 2), each shading no more than the size cap at every ``resolutions``."""
+    from diviewer.errors import DiviewerError
+    from diviewer.fieldspec import MAX_SIZE
+    from diviewer.viewer.scale import MAX_SCALE
+
+    bad = [s for s in scales if not 0.0 < s <= MAX_SCALE]
+    if bad:
+        raise DiviewerError(f"render scales must be in (0, {MAX_SCALE:g}] (shaded pixels per window pixel per "
+                            f"side), got {bad}", field="--render-scales")
+    big = [(r, s) for r in resolutions for s in scales if round(r * s) > MAX_SIZE]
+    if big:
+        raise DiviewerError(f"{big[0][1]:g} x --res {big[0][0]} shades more than {MAX_SIZE} px a side; give a "
+                            f"smaller scale or --res", field="--render-scales")
+
+
 def shading_side(window: int, scale: float) -> int:
     """The viewer's shading side at ``scale`` of a square window (`diviewer.viewer.scale.render_size`)."""
     from diviewer.viewer.scale import render_size

@@ -113,6 +113,15 @@ def test_a_render_scale_is_taken_in_0_to_2_and_refused_elsewhere_naming_the_opti
     assert exc.value.field == "--render-scales"
 
 
+def test_a_scale_that_shades_beyond_the_size_cap_is_refused():
+    from diviewer.fieldspec import MAX_SIZE
+
+    with pytest.raises(DiviewerError) as exc:
+        BenchSettings(resolutions=(MAX_SIZE,), render_scales=(1.0, 1.5)).check()
+    assert exc.value.field == "--render-scales" and "1.5" in str(exc.value)
+    BenchSettings(resolutions=(MAX_SIZE,), render_scales=(0.5, 1.0)).check()
+
+
 @pytest.mark.parametrize("value", ["0", "2.5", "-0.5", "nan"])
 def test_bench_refuses_a_bad_render_scale_before_any_work(value, capsys):
     from diviewer.cli import main
