@@ -207,11 +207,12 @@ _VIEW = {"fps": Float(1e-3, 1000.0, lo_open=True), "fixed_step": Float(1e-6, 10.
          "tolerance": Float(0.0, 100.0), "target_fps": Float(0.0, 1000.0), "render_scale": Float(0.0, MAX_SCALE, lo_open=True),
          "scale_floor": Float(0.0, 1.0, lo_open=True), "scale_ceiling": Float(1.0, MAX_SCALE)}
 _BENCH = {"warmup": Int(0, 10_000), "untrained_k": K, "gi_steps": Int(1, 16), "eval_frames": Int(1, 100_000),
-          "pt_frames": Int(1, 10_000), "vxgi_grids": Int(16, 256, power_of_two=True)}
+          "pt_frames": Int(1, 10_000), "vxgi_grids": Int(16, 256, power_of_two=True),
+          "render_scales": Float(0.0, MAX_SCALE, lo_open=True)}
 _OTHERS = {"budget": Float(0.0, 100_000.0, lo_open=True), "ks": Int(1, MAX_LADDER_K), "frames_per_split": Int(1, 100_000),
            "ladder": Numbers(Ints(SPP, max_len=64, increasing=True)),
            "window_widths": Numbers(Ints(Int(16, MAX_SIZE), max_len=64, distinct=True)),
-           "aspect_crops": Crops(), "frame_range": FrameRange(), "deadline": Float(0.0, 1e12),
+           "aspect_crops": Crops(), "frame_range": FrameRange(), "deadline": Float(0.0, 4102444800.0),  # a Unix time before 2100
            **TRUTH_FILTER}
 
 OPTIONS: dict[str, Any] = {**_CORE, **_TRAIN, **_VIEW, **_BENCH, **_OTHERS}

@@ -38,6 +38,9 @@ class BenchSettings:
     """VXGI traces one pixel per block of this side, then upsamples (the pass's default; 1: full resolution)."""
     gi_steps: tuple[int, ...] = (2,)
     """GI below frame resolution: frame / step, for each step the model's size multiple allows."""
+    render_scales: tuple[float, ...] = ()
+    """The viewer's render scales (dynamic resolution) to time and score at each resolution as a window
+    (diviewer.bench.scales); empty: none."""
     evalset: str | None = None
     """The scene's evaluation set (diviewer evalset); default its compact set, assets/evalsets/<scene>."""
     eval_frames: int | None = None
@@ -67,6 +70,9 @@ class BenchSettings:
                                 field="--frames")
         if any(r < 16 or r % 2 for r in self.resolutions):
             raise DiviewerError(f"resolutions must be even and >= 16, got {self.resolutions}", field="--res")
+        from diviewer.bench.scales import check_render_scales
+
+        check_render_scales(self.render_scales, self.resolutions)
         if self.vxgi_trace_scale < 1:
             raise DiviewerError(f"must be >= 1, got {self.vxgi_trace_scale}", field="--vxgi-trace-scale")
         if self.temporal_max_spp is not None and self.temporal_max_spp < 1:
@@ -186,6 +192,7 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
     _check_extras(plot_out)
     from diviewer.bench import report
     from diviewer.bench.runner import GlBench, gl_timing_mode, temporal_rows, time_path_tracer
+    from diviewer.bench.scales import scale_rows, table as scale_table
     from diviewer.gl.context import headless_context
     from diviewer.contract.runtime import NeuralGI
     from diviewer.scene import load_scene, sample_config
@@ -222,11 +229,15 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
                 gb.release()
         accuracy = _accuracy(ctx, mode, settings, scene, ds, variants, net_of, notes, log)
         temporal = temporal_rows(ctx, settings, scene, ds, variants, net_of, mode, notes, log)
+        scales = scale_rows(ctx, mode, settings, scene, ds, variants, net_of, configs, notes, log) \
+            if settings.render_scales else None
     pt = _path_tracer_timing(settings, scene, ds, configs, notes, log, time_path_tracer)
     rows.extend(pt["rows"])
     result = report.assemble(settings, scene, rows, accuracy, temporal, pt, env, notes,
                              seconds=time.perf_counter() - t_start)
-    for line in report.table(result) + bare_ratio_lines(result["rows"]):
+    if scales is not None:
+        result["render_scales"] = scales
+    for line in report.table(result) + bare_ratio_lines(result["rows"]) + (scale_table(scales) if scales else []):
         log(line)
     if json_out is not None:
         from diviewer import imageio

@@ -106,7 +106,7 @@ def table(result: dict) -> list[str]:
 def check_path_options(args) -> None:
     """Options `bench --path` does not take, refused before any work."""
     for flag, given in (("--plot", args.plot), ("--evalset", args.evalset), ("--calib-data", args.calib_data),
-                        ("--quick", args.quick)):
+                        ("--quick", args.quick), ("--render-scales", getattr(args, "render_scales", None))):
         if given:
             raise DiviewerError("does not apply to --path (a path is timed frame by frame; no accuracy table)",
                                 field=flag)

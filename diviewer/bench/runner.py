@@ -55,10 +55,17 @@ class GlBench:
     width: int
     height: int
     mode: str
+    window: tuple[int, int] | None = None
+    """The target's size (the viewer's window) where the frame is shaded at another (a render scale): the display
+    pass magnifies (or averages) it bilinearly, as the viewer does; None: the shading size."""
+    moving_shadow_size: int | None = None
+    """A moving sun's map size in the timed frames; None: `MOVING_SHADOW_SIZE`."""
     renderer: object = field(init=False)
     timer: StageTimer = field(init=False)
 
     def __post_init__(self):
+        import moderngl
+
         from diviewer.gl.context import stage_timer
         from diviewer.gl.display import DisplayPass
         from diviewer.gl.renderer import Renderer
@@ -66,8 +73,22 @@ class GlBench:
         self.timer = stage_timer(self.ctx, sync=self.mode == "sync", queries=self.mode == "query")
         self.renderer = Renderer(self.ctx, self.scene, self.width, self.height, timer=self.timer)
         self.display = DisplayPass(self.ctx, self.renderer.shaders)
-        self.target_tex = self.ctx.texture((self.width, self.height), 4)
+        size = tuple(self.window or (self.width, self.height))
+        self.target_tex = self.ctx.texture(size, 4)
         self.target = self.ctx.framebuffer([self.target_tex])
+        self.upscale = None if size == (self.width, self.height) else self.ctx.sampler(
+            filter=(moderngl.LINEAR, moderngl.LINEAR), repeat_x=False, repeat_y=False)
+
+    def present(self, tex, flip_y: bool = False, exposure: float = 0.0, tonemap: str | None = None) -> None:
+        """The display pass from ``tex`` to the target: tone-mapped 8-bit, bilinear where the sizes differ (the
+        viewer's upscale sampler over the display's texture unit)."""
+        from diviewer.gl.display import DEFAULT_TONEMAP
+
+        if self.upscale is not None:
+            self.upscale.use(location=0)
+        self.display.run(tex, self.target, exposure, tonemap or DEFAULT_TONEMAP, flip_y=flip_y)
+        if self.upscale is not None:
+            self.upscale.clear(location=0)
 
     def run(self, configs, warmup: int, method, direct: bool = True) -> dict:
         """Time ``method(config) -> (texture, flip_y)`` (called after the renderer's passes) over ``configs``;
@@ -76,7 +97,7 @@ class GlBench:
         it; every image scored for accuracy is drawn with the full map."""
         from diviewer.gl.shadow_fit import MOVING_SHADOW_SIZE
 
-        self.renderer.moving_shadow_size = MOVING_SHADOW_SIZE
+        self.renderer.moving_shadow_size = self.moving_shadow_size or MOVING_SHADOW_SIZE
         try:
             return self._run(configs, warmup, method, direct)
         finally:
@@ -90,7 +111,7 @@ class GlBench:
             self.renderer.render(config, direct=direct)
             tex, flip = method(config)
             with self.timer.stage("composite", gpu=True):
-                self.display.run(tex, self.target, flip_y=flip)
+                self.present(tex, flip_y=flip)
             self.ctx.finish()
             ms = (time.perf_counter() - t0) * 1e3
             if i >= warmup:
@@ -102,12 +123,13 @@ class GlBench:
     def time_direct(self, configs, warmup: int) -> dict:
         return self.run(configs, warmup, lambda c: (self.renderer.textures["direct"], False))
 
-    def time_model(self, net, configs, warmup: int, step: int = 1, lean: bool = True) -> dict:
+    def time_model(self, net, configs, warmup: int, step: int = 1, lean: bool = True,
+                   gi_size: tuple[int, int] | None = None) -> dict:
         """The viewer's neural frame: pack at the GI resolution (frame / step), infer, upload, the joint
         bilateral upsample over the frame's direct light (diviewer.gl.neural), composite; the direct light
         computed inline as the viewer does where the frame allows (NeuralPass.inline_direct); on the model's
-        lean path where it has one and ``lean`` (GISettings.lean)."""
-        neural = self.neural_pass(net, step, lean)
+        lean path where it has one and ``lean`` (GISettings.lean); ``gi_size`` replaces frame / step."""
+        neural = self.neural_pass(net, step, lean, gi_size)
         try:
             def frame(config):
                 neural.run(**neural.inputs_for(self.scene, config))
@@ -148,10 +170,10 @@ class GlBench:
             vx.release()
             self.timer.reset()
 
-    def neural_pass(self, net, step: int = 1, lean: bool = True):
+    def neural_pass(self, net, step: int = 1, lean: bool = True, gi_size: tuple[int, int] | None = None):
         from diviewer.gl.neural import GISettings, NeuralPass
 
-        return NeuralPass(self.ctx, self.renderer, net, gi_size=(self.width // step, self.height // step),
+        return NeuralPass(self.ctx, self.renderer, net, gi_size=gi_size or (self.width // step, self.height // step),
                           settings=GISettings(lean=lean))
 
     def buffers(self, config) -> np.ndarray:
@@ -167,6 +189,8 @@ class GlBench:
         unbind_framebuffer(self.ctx)
         self.target.release()
         self.target_tex.release()
+        if self.upscale is not None:
+            self.upscale.release()
         self.display.release()
         self.renderer.release()
         self.timer.release()
@@ -202,6 +226,16 @@ def read_final(tex) -> np.ndarray:
     return np.ascontiguousarray(np.flipud(raw), dtype=np.float32)
 
 
+def per_split(ds, idx: list[int], frames_per_split: int | None) -> list[int]:
+    """The first ``frames_per_split`` of ``idx`` in each of the evaluation set's splits (None: all of them)."""
+    if frames_per_split is None:
+        return list(idx)
+    by_split: dict[str, list[int]] = {}
+    for i in idx:
+        by_split.setdefault(ds.entry(i)["split"], []).append(i)
+    return [i for s in by_split.values() for i in s[:frames_per_split]]
+
+
 def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, frames_per_split: int | None,
                   gl: GlBench | None = None, log=print, vxgi: dict | None = None) -> dict:
     """Every method's pooled metrics over the evaluation set's frames ``idx`` cropped to ``shape``
@@ -231,11 +265,7 @@ def score_evalset(ds, idx: list[int], shape: tuple[int, int], models: dict, fram
     ladder_spp = [int(n) for n in info["ladder_spp"]]
     channels = {"direct": "direct", "noise_floor": info["second_seed_channel"],
                 **(ladder_methods(ds) if ds.ladder_images() else {})}
-    if frames_per_split is not None:
-        by_split: dict[str, list[int]] = {}
-        for i in idx:
-            by_split.setdefault(ds.entry(i)["split"], []).append(i)
-        idx = [i for s in by_split.values() for i in s[:frames_per_split]]
+    idx = per_split(ds, idx, frames_per_split)
     splits = ds.splits()
     vxgi = vxgi or {}
     rows = {k: [] for k in (*models, *vxgi, *channels, *([] if ds.ladder_images() else ladder_methods(ds)))}

@@ -22,6 +22,9 @@ def add_parser(sub) -> None:
                help="base widths of untrained generators for the cost curve (default 8 16 32 64 128)")
     add_number(p, "--gi-steps", nargs="*", default=None,
                help="GI at 1/step of the frame resolution where the model allows (default 2)")
+    add_number(p, "--render-scales", type=float, nargs="+", default=None,
+               help="the viewer's render scales (dynamic resolution; 0 < S <= 2) to time and score against scale 1 "
+                    "at each --res as the window (default none)")
     p.add_argument("--evalset", type=Path, default=None,
                    help="evaluation set (default the scene's compact set, assets/evalsets/<scene>)")
     add_number(p, "--eval-frames", default=None, help="frames per split scored (default all)")
@@ -54,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
              "resolutions": tuple(args.res) if args.res else None, "frames": args.frames, "warmup": args.warmup,
              "untrained_k": tuple(args.untrained_k) if args.untrained_k is not None else None,
              "gi_steps": tuple(args.gi_steps) if args.gi_steps is not None else None,
+             "render_scales": tuple(args.render_scales) if args.render_scales else None,
              "evalset": str(args.evalset) if args.evalset else None, "eval_frames": args.eval_frames,
              "calib_data": str(args.calib_data) if args.calib_data else None, "provider": args.provider,
              "timing": args.timing, "pt_frames": args.pt_frames,

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from diviewer.errors import DiviewerError
 from diviewer.gl.neural import GISettings
-from diviewer.viewer.models import GI_FRACTIONS, gi_resolution, open_model, runtime_pads
+from diviewer.viewer.models import GI_FRACTIONS, gi_sizes, open_model
 from diviewer.viewer.state import ViewerState
 
 
@@ -53,11 +53,7 @@ class GIControl:
         """(the GI size the runtime will run, the size asked for) for ``gi_res`` at ``render_size`` (default:
         the renderer's); they differ where the runtime cannot pad the asked shape to the model's stride."""
         render_size = render_size or self.render_size
-        shape = self.view_size or render_size
-        wanted = gi_resolution(gi_res, render_size, model.resolution, model.multiple, pads=True, shape=shape)
-        if runtime_pads(model):
-            return wanted, wanted
-        return gi_resolution(gi_res, render_size, model.resolution, model.multiple, shape=shape), wanted
+        return gi_sizes(model, gi_res, render_size, self.view_size or render_size)
 
     def offered(self) -> tuple[tuple[str, tuple[int, int]], ...]:
         """(GI resolution, the size it runs at) for the training rows at the window's shape and each fraction of

@@ -140,6 +140,15 @@ def gi_resolution(spec: str, window: tuple[int, int], trained: tuple[int, int], 
     return w, h
 
 
+def gi_sizes(model, spec: str, render_size: tuple[int, int], shape: tuple[int, int]) -> tuple[tuple, tuple]:
+    """(the GI size the runtime runs ``model`` at, the size ``spec`` asks for) at the shading size ``render_size``
+    of a window of ``shape``; they differ where the runtime cannot pad the asked shape to the model's stride."""
+    wanted = gi_resolution(spec, render_size, model.resolution, model.multiple, pads=True, shape=shape)
+    if runtime_pads(model):
+        return wanted, wanted
+    return gi_resolution(spec, render_size, model.resolution, model.multiple, shape=shape), wanted
+
+
 def meta_lines(meta: dict) -> list[tuple[str, str]]:
     """The model card as (key, value) rows for the panel."""
     rows = []
