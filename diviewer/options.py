@@ -212,7 +212,8 @@ _BENCH = {"warmup": Int(0, 10_000), "untrained_k": K, "gi_steps": Int(1, 16), "e
 _OTHERS = {"budget": Float(0.0, 100_000.0, lo_open=True), "ks": Int(1, MAX_LADDER_K), "frames_per_split": Int(1, 100_000),
            "ladder": Numbers(Ints(SPP, max_len=64, increasing=True)),
            "window_widths": Numbers(Ints(Int(16, MAX_SIZE), max_len=64, distinct=True)),
-           "aspect_crops": Crops(), "frame_range": FrameRange(), "deadline": Float(0.0, 4102444800.0),  # a Unix time before 2100
+           "aspect_crops": Crops(), "frame_range": FrameRange(),
+           "deadline": Float(0.0, 4102444800.0),  # a Unix time before 2100
            **TRUTH_FILTER}
 
 OPTIONS: dict[str, Any] = {**_CORE, **_TRAIN, **_VIEW, **_BENCH, **_OTHERS}
