@@ -30,7 +30,7 @@ def test_a_changed_figure_changes_the_page(tmp_path, monkeypatch):
     """A score moved in a card's evaluation reaches the page and the README, and --check then reports it."""
     root = tmp_path / "tree"
     for rel in ["README.md", "docs/results.md", "assets/models", *(
-            p for s in make_results.SOURCES.values() for p in (s["eval"], s["bench"]))]:
+            p for s in make_results.SOURCES.values() for p in (s["eval"], s["bench"], s["shown"][0]))]:
         src, dst = make_results.ROOT / rel, root / rel
         dst.parent.mkdir(parents=True, exist_ok=True)
         (shutil.copytree if src.is_dir() else shutil.copy)(src, dst)

@@ -28,11 +28,15 @@ RECORD_COMMIT = "c48f1bc"
 
 SOURCES = {
     "cornell": {"eval": "docs/data/cornell_v3/eval_full_k16half_96frames.json", "method": "cornell_k16",
-                "bench": "docs/data/timings_2026-11-29d/bench_cornell.json"},
+                "bench": "docs/data/timings_2026-11-29d/bench_cornell.json",
+                "shown": ("docs/data/eval_exposure/cornell_shown.json", "--exposure=0", "its fixed exposure, 0 EV")},
     "sponza": {"eval": "docs/data/sponza256_ladder/eval_full_ladder.json", "method": "sponza_k16",
-               "bench": "docs/data/timings_2026-12-02/bench_sponza.json"},
+               "bench": "docs/data/timings_2026-12-02/bench_sponza.json",
+               "shown": ("docs/data/eval_exposure/sponza_metered.json", "--exposure metered",
+                         "each frame's metered exposure")},
 }
-"""Per shipped scene: its model's full-set evaluation (and the method's key in it) and its benchmark."""
+"""Per shipped scene: its model's full-set evaluation (and the method's key in it), its benchmark, and its compact
+set scored at the exposure the viewer shows it at (the JSON, eval's option, how the viewer exposes the scene)."""
 
 SPLITS = {"unseen_configs": "new configurations (scene camera)", "unseen_objects": "unseen objects",
           "moved_camera": "moved camera (held-out regions / path)", "window_shapes_170x128": "4:3 window",
@@ -82,7 +86,8 @@ def shipped(scene: str) -> dict:
     row = next(r for r in bench["rows"] if r["kind"] == "neural" and r["label"] == f"{scene} K={card['K']} fp32"
                and r["resolution"] == [128, 128] and r["gi_resolution"] == [128, 128])
     first = ev["splits"]["unseen_configs"]
-    return {"card": card, "eval": ev, "bench": bench, "row": row, "src": src,
+    shown = load(src["shown"][0])
+    return {"card": card, "eval": ev, "bench": bench, "row": row, "src": src, "shown": shown,
             "mb": (ROOT / model).stat().st_size / 1e6,
             "psnr": mean(first, src["method"], "psnr_tm"), "direct": mean(first, "direct", "psnr_tm")}
 
@@ -94,6 +99,10 @@ def headline(scenes: dict) -> list[str]:
                + " | ".join(f"**{db(s['psnr'])} dB**" for s in scenes.values()) + " |")
     out.append("| direct light alone, the same frames | "
                + " | ".join(f"{db(s['direct'])} dB" for s in scenes.values()) + " |")
+    out.append("| the model at the exposure the viewer shows each frame at (compact set; in brackets, the path tracer's noise "
+               "there) | " + " | ".join(
+                   f"{db(mean(sp, s['card']['scene'], 'psnr_tm'))} dB ({db(mean(sp, 'noise_floor', 'psnr_tm'))} dB)"
+                   for s in scenes.values() for sp in [s["shown"]["splits"]["unseen_configs"]]) + " |")
     envs = [s["bench"]["environment"] for s in scenes.values()]
     cores = "/".join(sorted({str(e["cpu_count"]) for e in envs}))
     gl = "software GL" if all(e["gl_renderer"].startswith("llvmpipe") for e in envs) else "GL: " + ", ".join(
@@ -178,6 +187,24 @@ def page(scenes: dict) -> str:
         out += ["", f"#### The K ladder of {name}", ""]
         out += ladder_table(card)
         out.append("")
+    evs = [e for s in scenes.values() for sp in s["shown"]["splits"].values() if "ev_min" in sp.get("exposure", {})
+           for e in (sp["exposure"]["ev_min"], sp["exposure"]["ev_max"])]
+    out += ["## At the exposure the viewer shows", ""] + wrap(
+        "The tone-mapped figures above are at each evaluation set's one exposure, fitted to its lit direct light. The "
+        "viewer shows cornell at its scene's fixed exposure, about that one, but meters each frame of Sponza (auto "
+        f"exposure): its frames are shown {min(evs):+.1f} to {max(evs):+.1f} stops bright, and their shade, dark at "
+        "the set's exposure, fills the screen. The shipped compact sets scored so (`diviewer eval --model "
+        "assets/models/SCENE.onnx --exposure ...`; the noise floor is a second 1024-spp render of the truth, the best "
+        "any model can score there):") + ["", "| scene | exposure | split | model | direct light | noise floor |",
+                                          "| --- | --- | --- | --- | --- | --- |"]
+    for name, s in scenes.items():
+        rel, option, how = s["src"]["shown"]
+        where = f"{how}: `{option}` ([JSON]({Path(rel).relative_to('docs').as_posix()}))"
+        for key, split in s["shown"]["splits"].items():
+            cells = [db(mean(split, m, "psnr_tm")) for m in (s["card"]["scene"], "direct", "noise_floor")]
+            out.append(f"| {name} | {where} | {SPLITS.get(key, key)} | " + " | ".join(f"{c} dB" for c in cells) + " |")
+            name = where = ""
+    out += [""]
     out += ["## Speed", "",
             "`diviewer bench --scene S --res 128 256` per shipped scene: every method timed on the same frames,",
             "scored at the scene camera on the compact evaluation set. \"x path tracer\" is the path tracer's time at",
