@@ -90,13 +90,10 @@ def test_under_a_moving_camera_the_velocity_is_the_camera_reprojection(ctx, corn
         prev = (r.frame_view.view, r.frame_view.proj)
 
 
-@pytest.mark.parametrize("change", [{"position": (0.15, 0.8, 0.1)}, {"rotation": (20.0, 50.0, 10.0)},
-                                    {"scale": (1.2, 1.0, 0.9)}])
-def test_a_moving_object_s_pixels_move_by_its_screen_space_motion(ctx, cornell, change):
-    """Under a still camera the object's pixels (found by its albedo) carry its motion, projected from its two
-    poses; every other pixel none."""
-    a = cornell.default
-    b = a.replace_object("center", **change)
+def _object_moved(ctx, cornell, a, b):
+    """Frames of configurations ``a`` then ``b``: the renderer after ``b``, ``a``'s view and projection, ``b``'s
+    velocity, the pixels of the centre object (by its albedo), its model matrix's change (world to world), and the
+    frames (close them when done with the renderer)."""
     before, after = (next(o for o in c.objects if o.name == "center").matrix() for c in (a, b))
     frames = _frames(ctx, cornell, [a, b])
     r = next(frames)
@@ -105,7 +102,18 @@ def test_a_moving_object_s_pixels_move_by_its_screen_space_motion(ctx, cornell, 
     vel = _read(r.velocity)
     albedo = _read(r.textures["albedo"], 3)
     on_object = np.all(np.abs(albedo - cornell.materials["object"].albedo) < 1e-6, axis=-1)
-    move, depth_change, covered = _expected(r, *prev, lambda w: w @ (before @ np.linalg.inv(after)).T)
+    return r, prev, vel, on_object, before @ np.linalg.inv(after), frames
+
+
+@pytest.mark.parametrize("change", [{"position": (0.15, 0.8, 0.1)}, {"rotation": (20.0, 50.0, 10.0)},
+                                    {"scale": (1.2, 1.0, 0.9)}])
+def test_a_moving_object_s_pixels_move_by_its_screen_space_motion(ctx, cornell, change):
+    """Under a still camera the object's pixels (found by its albedo) carry its motion, projected from its two
+    poses; every other pixel none."""
+    a = cornell.default
+    b = a.replace_object("center", **change)
+    r, prev, vel, on_object, change_of_pose, frames = _object_moved(ctx, cornell, a, b)
+    move, depth_change, covered = _expected(r, *prev, lambda w: w @ change_of_pose.T)
     assert on_object.sum() > 50
     err = np.abs(vel[..., :2] - move)[on_object] * SIZE
     assert err.max() < TOL_PX, err.max()
@@ -127,16 +135,9 @@ def test_any_pose_change_under_any_camera_move_is_reprojected(ctx, cornell, move
     b = dataclasses.replace(a.replace_object("center", position=tuple(np.add((0.0, 0.75, 0.0), move)),
                                              rotation=turn, scale=(scale,) * 3),
                             camera=dataclasses.replace(a.camera, position=tuple(np.add(a.camera.position, eye))))
-    before, after = (next(o for o in c.objects if o.name == "center").matrix() for c in (a, b))
-    frames = _frames(ctx, cornell, [a, b])
-    r = next(frames)
-    prev = (r.frame_view.view, r.frame_view.proj)
-    r = next(frames)
-    vel = _read(r.velocity)
-    albedo = _read(r.textures["albedo"], 3)
-    on_object = np.all(np.abs(albedo - cornell.materials["object"].albedo) < 1e-6, axis=-1)
+    r, prev, vel, on_object, change_of_pose, frames = _object_moved(ctx, cornell, a, b)
     still, still_change, covered = _expected(r, *prev)
-    moved, moved_change, _ = _expected(r, *prev, lambda w: w @ (before @ np.linalg.inv(after)).T)
+    moved, moved_change, _ = _expected(r, *prev, lambda w: w @ change_of_pose.T)
     want = np.where(on_object[..., None], moved, still)
     change = np.where(on_object, moved_change, still_change)
     assert covered.mean() > 0.8
