@@ -72,10 +72,6 @@ class StillTracker:
         self.counts[state] += 1
         return state
 
-    def invalidate(self) -> None:
-        """Draw the next frame as moving (something outside the key changed: targets reallocated, a reload)."""
-        self._first = True
-
 
 def still_key(viewer) -> tuple:  # viewer: a viewer.app.Viewer
     """What decides the image (``StillTracker``'s key): the frame, the meshes, the window, the view mode, the
