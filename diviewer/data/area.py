@@ -31,7 +31,8 @@ def direct_samples(manifest: dict) -> int:
 
 
 def area_manifest(src: Dataset, samples: int) -> dict:
-    """The source's manifest with the ``direct_area`` record."""
+    """The source's manifest with the ``direct_area`` record and the step in its ``lineage``."""
+    from diviewer.data.lineage import with_step
     from diviewer.gl.area import check_samples
 
     check_samples(samples, "--samples")
@@ -47,20 +48,20 @@ def area_manifest(src: Dataset, samples: int) -> dict:
     m["direct_area"] = {"samples": samples, "from_hash": src.hash,
                         "how": "GL direct light at samples x the size, each pixel the mean of its block"}
     m["direct_area_from"] = str(src.root)
-    return m
+    return with_step(src, m, "area-direct", {"samples": samples})
 
 
 def area_direct(src_dir: Path, out: Path, samples: int, log=print, partial: bool = False) -> dict:
     """Write ``src_dir``'s frames (verified first; ``partial``: an incomplete source's present ones) with the area's
     direct light into ``out``; returns a summary."""
-    from diviewer.data.lineage import derivation_source, verified_frames, with_step
+    from diviewer.data.lineage import derivation_source, verified_frames
     from diviewer.data.refine import derive_frames, source_scene
     from diviewer.gl.area import AreaDirect
     from diviewer.gl.context import headless_context
     from diviewer.scene.loader import config_from_dict
 
     src = derivation_source(src_dir, out, "area-direct")
-    manifest = with_step(src, area_manifest(src, samples), "area-direct", {"samples": samples})
+    manifest = area_manifest(src, samples)
     frames = verified_frames(src, "area-direct", partial, log)
     scene = source_scene(src, manifest, "derive")
     s = src.slices["direct"]

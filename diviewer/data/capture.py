@@ -77,14 +77,22 @@ def parse_shard(text: str | None) -> tuple[int, int]:
     return k, n
 
 
+def split_counts(fractions, frames: int) -> list[int]:
+    """Frames per split (train, val, test) of ``frames`` split by ``fractions``: each its floor, the rest to train
+    (`plan_frames` plans them; a recipe's check refuses a split left empty)."""
+    total = sum(fractions)
+    counts = [int(f / total * frames) for f in fractions]
+    counts[0] += frames - sum(counts)
+    return counts
+
+
 def plan_frames(scene: Scene, settings: CaptureSettings) -> list[dict]:
     """Every frame's index, split, seed and configuration: a pure function of scene and settings."""
     n = settings.frames
     fr = np.asarray(settings.split_fractions, dtype=np.float64)
     if fr.shape != (3,) or np.any(fr < 0) or fr.sum() <= 0:
         raise DiviewerError(f"split fractions must be 3 non-negative numbers, got {settings.split_fractions}")
-    counts = np.floor(fr / fr.sum() * n).astype(int)
-    counts[0] += n - counts.sum()
+    counts = split_counts([float(f) for f in fr], n)
     order = np.random.default_rng([settings.seed, 0x5EED]).permutation(n)
     split_of = np.empty(n, dtype=object)
     start = 0

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from diviewer.data.dataset import ABSENT, Dataset, read_manifest, sha256_file
+from diviewer.data.dataset import ABSENT, Dataset, sha256_file
+from diviewer.data.evalset_format import is_evalset
 from diviewer.errors import DiviewerError
 
 OPERATIONS = {"refine": "refined", "area-direct": "direct_area", "filter-truth": "truth_filter"}
@@ -89,22 +90,20 @@ def derivation_source(src_dir: Path, out: Path, operation: str) -> Dataset:
     """The source of ``operation`` (`OPERATIONS`) into ``out``, refused before any work, in one line naming the file and
     the field, where it is an evaluation set, its lineage holds a step the operation cannot carry (`CARRIES`), or it
     is the output. Its frames are verified by `verified_frames`."""
-    src_dir = Path(src_dir)
-    where = src_dir / "manifest.json"
-    manifest = read_manifest(src_dir)
-    if "compact" in manifest or manifest.get("kind") == "evalset":
+    src = Dataset(src_dir)
+    where = src.root / "manifest.json"
+    if "compact" in src.manifest or is_evalset(src):
         raise DiviewerError(f"an evaluation set is not a source for `diviewer data {operation}`: `diviewer eval` "
                             f"scores against its frames, and a derived copy would carry its name with "
                             f"{CHANGES[operation].split(' (')[0]}; derive from a capture (`diviewer capture`)",
                             path=where, field="kind")
-    for step in lineage(manifest, where):
+    for step in lineage(src.manifest, where):
         if step["operation"] not in CARRIES[operation]:
             what = CHANGES.get(step["operation"], f"a step this diviewer does not know ('{step['operation']}')")
             came = (step.get("source") or {}).get("path")
             raise DiviewerError(f"its lineage holds {what}, which `diviewer data {operation}` cannot carry; derive "
                                 f"from the dataset before that step" + (f" ({came})" if came else ""),
                                 path=where, field="lineage")
-    src = Dataset(src_dir)
     if out.exists() and src.root.resolve() == Path(out).resolve():
         raise DiviewerError(f"{src_dir} is both the source and the output", field="--out")
     return src

@@ -54,7 +54,8 @@ def refine_seed(frame_seed: int, source_spp: int) -> int:
 
 
 def refined_manifest(src: Dataset, spp: int) -> dict:
-    """The source's manifest with the new sample count and the ``refined`` record."""
+    """The source's manifest with the new sample count, the ``refined`` record and the step in its ``lineage``
+    (`diviewer.data.lineage.with_step`): `refine` and the extras' job (`refine_extras.write_job`) write the same."""
     m = json.loads(json.dumps(src.manifest))
     if m.get("gt") != "pt":
         raise DiviewerError(f"only a path-traced dataset can be refined (its ground truth is '{m.get('gt')}')",
@@ -73,7 +74,7 @@ def refined_manifest(src: Dataset, spp: int) -> dict:
     m["spp"] = spp
     if isinstance(m.get("settings"), dict):
         m["settings"]["spp"] = spp
-    return m
+    return with_step(src, m, "refine", {"spp": spp, "from_spp": old})
 
 
 def source_scene(src: Dataset, manifest: dict, verb: str):
@@ -131,7 +132,7 @@ def refine(src_dir: Path, out: Path, spp: int, shard: tuple[int, int] = (1, 1), 
     from diviewer.scene.loader import config_from_dict
 
     src = derivation_source(src_dir, out, "refine")
-    manifest = with_step(src, refined_manifest(src, spp), "refine", {"spp": spp, "from_spp": src.manifest.get("spp")})
+    manifest = refined_manifest(src, spp)
     frames = verified_frames(src, "refine", partial, log)
     scene = source_scene(src, manifest, "refine")
     k, n = shard

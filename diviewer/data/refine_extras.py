@@ -36,7 +36,7 @@ import numpy as np
 from diviewer import imageio
 from diviewer.console import progress_bar
 from diviewer.data.dataset import frame_name, write_checked
-from diviewer.data.lineage import derivation_source, verified_frames, with_step
+from diviewer.data.lineage import derivation_source, verified_frames
 from diviewer.data.refine import CHANNELS, extras_problem, refine_seed, refined_manifest
 from diviewer.errors import DiviewerError
 
@@ -48,7 +48,7 @@ def write_job(src_dir: Path, spp: int, first: int, stop: int, out: Path) -> int:
     """The job of refining ``src_dir`` to ``spp`` for its present frames with ``first <= index < stop``, written
     atomically to ``out``; returns the number of frames in it."""
     src = derivation_source(src_dir, out, "refine")  # verified as `refine` will: a job for a refused source is none
-    manifest = with_step(src, refined_manifest(src, spp), "refine", {"spp": spp, "from_spp": src.manifest.get("spp")})
+    manifest = refined_manifest(src, spp)
     manifest.pop("frame_list", None)
     frames = [{"index": f["index"], "seed": f["seed"], "config": f["config"]}
               for f in verified_frames(src, "refine", partial=True, log=lambda *_: None) if first <= f["index"] < stop]

@@ -177,8 +177,10 @@ def filter_truth(pt: np.ndarray, pt_direct: np.ndarray, albedo: np.ndarray, norm
 
 
 def truth_filter_manifest(src, settings: TruthFilter) -> dict:
-    """The source's manifest with the ``truth_filter`` record (refused for a truth filtered already, or not path
-    traced)."""
+    """The source's manifest with the ``truth_filter`` record and the step in its ``lineage`` (refused for a truth
+    filtered already, or not path traced)."""
+    from diviewer.data.lineage import with_step
+
     m = json.loads(json.dumps(src.manifest))
     where = src.root / "manifest.json"
     if m.get("gt") != "pt":
@@ -193,20 +195,20 @@ def truth_filter_manifest(src, settings: TruthFilter) -> dict:
     m["truth_filter"] = {**settings.record(), "from_hash": src.hash,
                          "how": HOW + (HOW_RANGE if settings.range_sigma else "")}
     m["truth_filter_from"] = str(src.root)
-    return m
+    return with_step(src, m, "filter-truth", settings.record())
 
 
 def filter_dataset(src_dir: Path, out: Path, settings: TruthFilter = TruthFilter(), log=print,
                    partial: bool = False) -> dict:
     """Write ``src_dir``'s frames (verified first; ``partial``: an incomplete source's present ones) with their truth
     filtered into ``out``; returns a summary (``filtered``: the frames written now)."""
-    from diviewer.data.lineage import derivation_source, verified_frames, with_step
+    from diviewer.data.lineage import derivation_source, verified_frames
     from diviewer.data.refine import derive_frames, source_scene
     from diviewer.scene.loader import config_from_dict
 
     settings.check(options=True)
     src = derivation_source(src_dir, out, "filter-truth")
-    manifest = with_step(src, truth_filter_manifest(src, settings), "filter-truth", settings.record())
+    manifest = truth_filter_manifest(src, settings)
     frames = verified_frames(src, "filter-truth", partial, log)
     scene = source_scene(src, manifest, "filter")
     sl = src.slices

@@ -178,22 +178,18 @@ def _attributes(d: Doc, reader: _Reader, prim: dict, where: str):
     draco = d.table(prim, "extensions", f"{where}.extensions").get(DRACO)
     if draco is not None and DRACO not in d.doc.get("extensionsRequired", []) and not gltf_draco.available():
         draco = None  # not required: the accessors hold an uncompressed copy, read below
+    decoded, idx = {}, None
     if draco is not None:
         decoded, faces = gltf_draco.decode(d, reader.buffers, draco, where)
-        names = set(attrs) | set(decoded)
-
-        def get(name, types, components, normalized=()):
-            if name in decoded:
-                return decoded[name].astype(np.float64 if name != "POSITION" else np.float32)
-            return reader.accessor(attrs[name], f"{where}.attributes.{name}", types, components, normalized)
-        return names, get, faces.ravel()
-    idx = None
-    if "indices" in prim:
+        idx = faces.ravel()
+    elif "indices" in prim:
         idx = reader.accessor(prim["indices"], f"{where}.indices", ("SCALAR",), UNSIGNED).ravel()
 
     def get(name, types, components, normalized=()):
+        if name in decoded:
+            return decoded[name].astype(np.float64 if name != "POSITION" else np.float32)
         return reader.accessor(attrs[name], f"{where}.attributes.{name}", types, components, normalized)
-    return set(attrs), get, idx
+    return set(attrs) | set(decoded), get, idx
 
 
 def _primitive(d: Doc, reader: _Reader, prim, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:

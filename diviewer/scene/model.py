@@ -348,15 +348,12 @@ class Scene:
         try:
             cached = self._bounds_cache.get(config.objects)
         except TypeError:  # an unhashable pose (a list): computed each time
-            return self._objects_bounds(config.objects)
+            return objects_bounds(self.meshes, config.objects)
         if cached is None:
             if len(self._bounds_cache) >= 64:
                 self._bounds_cache.clear()
-            cached = self._bounds_cache[config.objects] = self._objects_bounds(config.objects)
+            cached = self._bounds_cache[config.objects] = objects_bounds(self.meshes, config.objects)
         return cached.copy()
-
-    def _objects_bounds(self, objects) -> np.ndarray:
-        return objects_bounds(self.meshes, objects)
 
 
 def objects_bounds(meshes: dict, objects) -> np.ndarray:

@@ -24,13 +24,9 @@ def pixel_ray(camera: Camera, x: float, y: float, width: int, height: int) -> tu
     return np.asarray(camera.position, dtype=np.float64), d / np.linalg.norm(d)
 
 
-def _ray_triangles(origin: np.ndarray, d: np.ndarray, tri: np.ndarray) -> float:
-    """Nearest positive ray parameter hitting any triangle of ``tri`` (M, 3, 3), or inf (Moller-Trumbore)."""
-    return ray_triangles_hit(origin, d, tri)[0]
-
-
 def ray_triangles_hit(origin: np.ndarray, d: np.ndarray, tri: np.ndarray) -> tuple[float, int]:
-    """(nearest positive ray parameter, index of the triangle hit) over ``tri`` (M, 3, 3), or (inf, -1)."""
+    """(nearest positive ray parameter, index of the triangle hit) over ``tri`` (M, 3, 3), or (inf, -1)
+    (Moller-Trumbore)."""
     v0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     p = np.cross(d, e2)
     det = np.einsum("ij,ij->i", e1, p)
@@ -69,7 +65,7 @@ def pick_object(scene: Scene, config: FrameConfig, origin, direction) -> tuple[s
         d = inv[:3, :3] @ d_w
         if not _ray_box(o, d, mesh.bounds.astype(np.float64)):
             continue
-        t = _ray_triangles(o, d, mesh.vertices.astype(np.float64)[mesh.faces])
+        t, _ = ray_triangles_hit(o, d, mesh.vertices.astype(np.float64)[mesh.faces])
         if t < math.inf and (best is None or t < best[1]):
             best = (obj.name, t)
     return best

@@ -10,15 +10,20 @@ _reads: contextvars.ContextVar[list | None] = contextvars.ContextVar("diviewer_s
 
 
 @contextlib.contextmanager
+def _collecting(var: contextvars.ContextVar):
+    """A fresh list set as ``var``'s value for the block, yielded; the value before is put back after."""
+    found: list = []
+    token = var.set(found)
+    try:
+        yield found
+    finally:
+        var.reset(token)
+
+
 def recording_reads():
     """Collect every file a scene load reads (glTF, buffers, textures, mesh files) into the yielded list,
     cache hits included: the scene's identity hash covers them (diviewer.scene.identity.scene_identity)."""
-    files: list[Path] = []
-    token = _reads.set(files)
-    try:
-        yield files
-    finally:
-        _reads.reset(token)
+    return _collecting(_reads)
 
 
 def note_read(*files: Path) -> None:
@@ -36,15 +41,9 @@ class SceneWarning(UserWarning):
 _warnings: contextvars.ContextVar[list | None] = contextvars.ContextVar("diviewer_scene_warnings", default=None)
 
 
-@contextlib.contextmanager
 def recording_warnings():
     """Collect the warnings a scene load notes (`note_warning`) into the yielded list (the Scene keeps them)."""
-    found: list[str] = []
-    token = _warnings.set(found)
-    try:
-        yield found
-    finally:
-        _warnings.reset(token)
+    return _collecting(_warnings)
 
 
 def note_warning(*messages: str) -> None:

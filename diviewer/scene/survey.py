@@ -41,17 +41,16 @@ class OpenSpaceSettings:
     slab along a wall (the largest box by volume alone is often one)."""
 
 
-def world_triangles(scene: Scene, config=None) -> tuple[np.ndarray, list[str]]:
-    """(T, 3, 3) float64 world-space triangles of a frame's objects and, per object, its material (in order)."""
-    config = config or scene.default
-    tris, mats = [], []
-    for o in config.objects:
-        mesh = scene.meshes[o.mesh]
-        m = o.matrix()
-        v = mesh.vertices.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
-        tris.append(v[mesh.faces])
-        mats.append(o.material)
-    return (np.concatenate(tris) if tris else np.zeros((0, 3, 3))), mats
+def _placed_triangles(scene: Scene, o) -> np.ndarray:
+    """(T, 3, 3) float64 world-space triangles of one placed object."""
+    mesh, m = scene.meshes[o.mesh], o.matrix()
+    return (mesh.vertices.astype(np.float64) @ m[:3, :3].T + m[:3, 3])[mesh.faces]
+
+
+def world_triangles(scene: Scene, config=None) -> np.ndarray:
+    """(T, 3, 3) float64 world-space triangles of a frame's objects, in order."""
+    tris = [_placed_triangles(scene, o) for o in (config or scene.default).objects]
+    return np.concatenate(tris) if tris else np.zeros((0, 3, 3))
 
 
 def _areas(tri: np.ndarray) -> np.ndarray:
@@ -65,9 +64,7 @@ def emissive_area(scene: Scene, config=None) -> dict[str, float]:
     for o in config.objects:
         mat = scene.materials[o.material]
         if mat.is_emissive:
-            mesh, m = scene.meshes[o.mesh], o.matrix()
-            v = mesh.vertices.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
-            out[o.material] = out.get(o.material, 0.0) + float(_areas(v[mesh.faces]).sum())
+            out[o.material] = out.get(o.material, 0.0) + float(_areas(_placed_triangles(scene, o)).sum())
     return out
 
 
@@ -102,7 +99,7 @@ def open_cells(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings()):
 
     lo, hi = scene.bounds()
     dims, size = _grid(lo, hi, settings.cells)
-    tri, _ = world_triangles(scene)
+    tri = world_triangles(scene)
     occ = _occupied(tri, lo, dims, size, settings)
     free = ~occ
     # Pockets of free cells the outside (a one-cell border around the grid) cannot reach: rooms or solids.
@@ -208,7 +205,7 @@ def survey(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings(), near
     from diviewer.scene.gltf import DEFAULT_MATERIAL
 
     lo, hi = scene.bounds()
-    tri, _ = world_triangles(scene)
+    triangles = sum(len(scene.meshes[o.mesh].faces) for o in scene.default.objects)  # counted: open_cells places them
     used: dict[str, int] = {}
     for o in scene.default.objects:
         used[o.material] = used.get(o.material, 0) + 1
@@ -232,7 +229,7 @@ def survey(scene: Scene, settings: OpenSpaceSettings = OpenSpaceSettings(), near
     emit = emissive_area(scene)
     return {"scene": scene.name, "file": str(scene.path) if scene.path else None,
             "bounds": {"min": _r(lo), "max": _r(hi), "size": _r(hi - lo)},
-            "triangles": int(len(tri)), "meshes": len(scene.meshes), "objects": len(scene.default.objects),
+            "triangles": int(triangles), "meshes": len(scene.meshes), "objects": len(scene.default.objects),
             "materials": materials, "textures": textures, "lights": lights,
             "emissive": {"area_m2": _r(sum(emit.values())), "materials": {k: _r(v) for k, v in emit.items()}},
             "ambient": _r(scene.ambient), "warnings": list(scene.warnings),

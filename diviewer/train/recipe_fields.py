@@ -97,17 +97,10 @@ def check_recipe_tables(data: dict[str, Any], path: Path, not_train: tuple[str, 
     return out
 
 
-def split_counts(fractions, frames: int) -> list[int]:
-    """Frames per split (train, val, test) that a capture of ``frames`` plans (`diviewer.data.capture.plan_frames`'s
-    rule: each its floor, the rest to train)."""
-    total = sum(fractions)
-    counts = [int(f / total * frames) for f in fractions]
-    counts[0] += frames - sum(counts)
-    return counts
-
-
 def _check_capture(cap: dict[str, Any], path: Path) -> None:
     """``cap``: the [capture] table over CaptureSettings' defaults."""
+    from diviewer.data.capture import split_counts
+
     fr = cap["split_fractions"]
     if abs(sum(fr) - 1.0) > 1e-6:
         raise DiviewerError(f"must add up to 1 (train, val, test), got {list(fr)} (sum {sum(fr):g})", path=path,

@@ -206,6 +206,8 @@ def run_conditioning(enc: Encoding, ds: Dataset, train_idx: list[int], with_val:
     configuration over the whole stored frame, stacked in the order of the frames' arrays as ((cameras, lights) of
     train, (cameras, lights) of val): (N, CAMERA_PARAMS) and (N, 3 L) float32, None where the encoding takes none
     (and val's (None, None) without ``with_val``). The light scales come before the encoding (`run_light_scales`)."""
+    if not (enc.world_inputs or enc.light_inputs):  # encodings 1 and 2: no frame's conditioning is kept
+        return (None, None), (None, None)
     from diviewer.contract.conditioning import conditioning, needs_scene, stacked
     from diviewer.data.scales import dataset_scene
 
