@@ -334,14 +334,13 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None
         "storage": "per frame and channel group: float16 split into high and low bytes (uint8 .npy), LZMA zip",
         "ladder": "scores per frame and shape (diviewer.evaluation.evaluate.score_frame on the full set's float32 frames); "
                   "its images are not stored", "full_frames": len(src.frames)}
-    from diviewer.evaluation.scoring import strict_json
-    from diviewer.outputs import staged
+    from diviewer.outputs import dumps_rows, staged
 
     with staged() as stage:  # both files or neither: an interrupted write leaves the folder as it was
         with zipfile.ZipFile(stage(out / COMPACT_FILE), "w", compression=zipfile.ZIP_LZMA) as z:
             for name, blob in blobs.items():
                 z.writestr(name, blob)
-        stage(out / "manifest.json").write_text(strict_json(share_object_lists(manifest)))
+        stage(out / "manifest.json").write_text(dumps_rows(share_object_lists(manifest)))
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     log(f"compact evaluation set: {len(chosen)} frames ({frames_per_split} per split of "
         f"{', '.join(splits)}) in {out}, {size / 2**20:.2f} MB")
