@@ -17,8 +17,8 @@ from diviewer import imageio
 from diviewer.builder.actuals import keep_actuals
 from diviewer.builder.pace import measured_pace, missing_link
 from diviewer.builder.plan import RUN_ONLY, Plan, describe
-from diviewer.builder.scores import QUALITY, evalset_psnr_tm, evalset_scores
-from diviewer.builder.shipfiles import write_ladder_curves, write_model_card  # noqa: F401 (diviewer.ship.ladder)
+from diviewer.builder.scores import evalset_psnr_tm, evalset_scores, means_on_test_split
+from diviewer.builder.shipfiles import write_ladder_curves, write_model_card
 from diviewer.builder.state import BuildState
 from diviewer.data.dataset import sha256_file
 from diviewer.console import overall, progress_bar
@@ -330,8 +330,8 @@ def _export(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path]
     export(plan.run_dir(k) / "best.ckpt", model, export_settings(plan.recipe), log=log)
     test = model.with_name(f"{model.stem}_test.json")
     summary = evaluate(model, plan.data, split="test", out=test, log=log)
-    row = {m: {q: summary["methods"][m][q]["mean"] for q in QUALITY} for m in ("neural", "direct")}
-    return [model, model.with_suffix(".json"), test], {"test_split": row, "frames": summary["frames"]}
+    return [model, model.with_suffix(".json"), test], {"test_split": means_on_test_split(summary),
+                                                       "frames": summary["frames"]}
 
 
 def _evaluate(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
