@@ -259,31 +259,15 @@ def label_tiles(tiles: list[np.ndarray], labels) -> np.ndarray:
 
 def write_video(video: Path, pngs: list[Path], fps: float) -> None:
     """An H.264 mp4 of the PNGs at ``fps`` (sides padded to even numbers, as yuv420p needs), written under a temporary
-    name beside ``video`` and renamed into place."""
-    import tempfile
-
+    name beside ``video`` and renamed into place (`diviewer.imageio.atomic_path`)."""
     import imageio.v2 as iio
 
-    from diviewer.imageio import read_png
+    from diviewer.imageio import atomic_path, read_png
 
-    video.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{video.stem}.", suffix=".mp4", dir=video.parent)
-    os.close(fd)
-    try:
-        with iio.get_writer(tmp, format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p", quality=8,
+    with atomic_path(video) as tmp:
+        with iio.get_writer(str(tmp), format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p", quality=8,
                             macro_block_size=1, ffmpeg_log_level="error") as writer:
             for png in pngs:
                 image = read_png(png)
                 pad = ((0, image.shape[0] % 2), (0, image.shape[1] % 2), (0, 0))
                 writer.append_data(np.pad(image, pad, mode="edge"))
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, video)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
