@@ -184,9 +184,7 @@ def _render_frames(scene, path, out: Path, todo: list[int], settings: dict, meth
                 if settings["exposure"] is None:  # metered once, on the first frame drawn, then kept
                     from diviewer.render import display_exposure
 
-                    settings["exposure"] = display_exposure(scene, {"direct": images.get("direct"),
-                                                                    **({"neural": images["neural"]}
-                                                                       if "neural" in images else {})}, None)[0]
+                    settings["exposure"] = display_exposure(scene, images, None)[0]  # the neural image's, else direct
                     write_text(out / "path_render.json", dumps(settings, indent=1))
                 _write_frame(out, i, t, scene, config, images, methods, compositor, settings,
                              {"gl_renderer": describe(ctx), "render_settings": settings_dict(render_settings), **info})
