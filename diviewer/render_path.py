@@ -176,6 +176,7 @@ def _render_frames(scene, path, out: Path, todo: list[int], settings: dict, meth
         check_render_size(ctx, width, height, "--res")
         renderer = Renderer(ctx, scene, width, height, render_settings)
         compositor = DisplayPass(ctx, renderer.shaders)
+        made = {"gl_renderer": describe(ctx), "render_settings": settings_dict(render_settings)}  # every frame's
         try:
             for i in todo:
                 t = settings["times"][i]
@@ -186,8 +187,7 @@ def _render_frames(scene, path, out: Path, todo: list[int], settings: dict, meth
 
                     settings["exposure"] = display_exposure(scene, images, None)[0]  # the neural image's, else direct
                     write_text(out / "path_render.json", dumps(settings, indent=1))
-                _write_frame(out, i, t, scene, config, images, methods, compositor, settings,
-                             {"gl_renderer": describe(ctx), "render_settings": settings_dict(render_settings), **info})
+                _write_frame(out, i, t, scene, config, images, methods, compositor, settings, {**made, **info})
                 bar.update(1)
         finally:
             compositor.release()
