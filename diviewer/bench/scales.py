@@ -173,17 +173,22 @@ def scale_rows(ctx, mode, settings, scene, ds, variants, net_of, configs, notes,
     for res in settings.resolutions:
         log(f"render scales at a {res}x{res} window: {' '.join(f'{s:g}' for s in scales)} "
             f"({len(views)} views scored against scale 1)")
-        ref, evs = _frames(ctx, scene, mode, net, res, 1.0, views, None)
-        for s in scales:
-            sf = ScaledFrames(ctx, scene, mode, net, res, s)
-            try:
-                timing = sf.time(configs, settings.warmup)
-                shown = ref if s == 1.0 else sf.images(views, evs)[0]
-            finally:
-                sf.release()
-            rows.append({"scale": s, "resolution": [res, res], "shading_resolution": [sf.side, sf.side],
-                         "gi_resolution": list(sf.gi_size) if sf.gi_size else None, "timing": timing,
-                         "vs_scale1": _psnrs(shown, ref), TRUTH: truth.get(s)})
+        one = ScaledFrames(ctx, scene, mode, net, res, 1.0)  # the reference frames, and scale 1's row
+        try:
+            ref, evs = one.images(views, None)
+            for s in scales:
+                sf = one if s == 1.0 else ScaledFrames(ctx, scene, mode, net, res, s)
+                try:
+                    timing = sf.time(configs, settings.warmup)
+                    shown = ref if sf is one else sf.images(views, evs)[0]
+                finally:
+                    if sf is not one:
+                        sf.release()
+                rows.append({"scale": s, "resolution": [res, res], "shading_resolution": [sf.side, sf.side],
+                             "gi_resolution": list(sf.gi_size) if sf.gi_size else None, "timing": timing,
+                             "vs_scale1": _psnrs(shown, ref), TRUTH: truth.get(s)})
+        finally:
+            one.release()
     return {"model": v["source"] if v is not None else None, "precision": v["precision"] if v is not None else None,
             "views": described, "frames": [int(i) for i in idx],
             "metric": "display PSNR (dB) of the 8-bit frame at the window size (the default tone curve at the "
