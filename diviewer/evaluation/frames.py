@@ -345,10 +345,3 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None
     log(f"compact evaluation set: {len(chosen)} frames ({frames_per_split} per split of "
         f"{', '.join(splits)}) in {out}, {size / 2**20:.2f} MB")
     return {"frames": len(chosen), "bytes": size}
-
-
-def summary_line(ev: EvalFrames) -> str:
-    kind = "compact " if ev.compact else ""
-    return (f"{kind}evaluation set {ev.root}: {ev.manifest['scene']}, {len(ev.frames)} frames, truth "
-            f"{ev.manifest['spp']} spp, tone map exposure {ev.exposure:.4g} (the scene's, from the set's manifest)")
-
