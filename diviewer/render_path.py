@@ -102,8 +102,7 @@ def render_path(scene_name: str, path_file: Path, out: Path, *, frames: int | No
                 "tonemap": tonemap or DEFAULT_TONEMAP, "exr": bool(exr), "exposure": exposure}
     settings = _resume_settings(out / "path_render.json", settings)
     todo = [i for i in range(len(times)) if not _frame_done(out, i, times[i], (width, height), len(methods))]
-    bar = progress_bar(len(times), "render", "frame")
-    bar.update(len(times) - len(todo))
+    bar = progress_bar(len(times), "render", "frame", initial=len(times) - len(todo))  # a resumed run starts there
     try:
         if todo:
             _render_frames(scene, path, out, todo, settings, methods, net, bar)
