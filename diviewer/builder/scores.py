@@ -6,6 +6,10 @@ from __future__ import annotations
 from diviewer.errors import DiviewerError
 
 QUALITY = ("psnr", "ssim", "psnr_tm", "ssim_tm")
+PICK_MEASURE = "evalset_psnr_tm"
+"""What the pick compares: each K's tone-mapped PSNR over every frame of the evaluation set (>= 1024 spp), as
+`diviewer bench` does. Not the capture's test split: its truth has the capture's spp (64 for cornell and Sponza),
+whose own noise (~36 dB tone-mapped on cornell) caps what it can tell apart; models near that floor read alike."""
 
 
 def evalset_scores(ev: dict, key: str, qualities: tuple[str, ...] = QUALITY) -> dict[str, dict]:

@@ -22,8 +22,7 @@ from pathlib import Path
 
 from diviewer import imageio
 from diviewer.bench.frontier import smallest_sufficient_k
-from diviewer.builder.pipeline import PICK_MEASURE
-from diviewer.builder.scores import QUALITY, evalset_psnr_tm, evalset_scores, means_on_test_split
+from diviewer.builder.scores import PICK_MEASURE, QUALITY, evalset_psnr_tm, evalset_scores, means_on_test_split
 from diviewer.builder.shipfiles import write_model_card
 from diviewer.errors import DiviewerError
 
