@@ -50,11 +50,10 @@ class LogProgress:
     """tqdm's interface (update, set_postfix_str, close, n, total) as plain lines for a log: no carriage return, no
     escape code. ``initial``: units already done before (a resumed job), counted in the percentage, not the rate."""
 
-    def __init__(self, total: int, desc: str, unit: str, stream, initial: int = 0, interval: float = LOG_INTERVAL):
+    def __init__(self, total: int, desc: str, unit: str, stream, initial: int = 0):
         self.total, self.desc, self.unit, self.stream = total, desc, unit, stream
         self.n = self.initial = initial
         self.postfix = ""
-        self.interval = interval
         self.start = self.last = time.monotonic()
         self.closed = False
         self.line(force=True)
@@ -69,9 +68,9 @@ class LogProgress:
         self.line()
 
     def line(self, force: bool = False) -> None:
-        """Write the progress line, at most once every ``interval`` seconds unless ``force``."""
+        """Write the progress line, at most once every `LOG_INTERVAL` seconds unless ``force``."""
         now = time.monotonic()
-        if not force and now - self.last < self.interval:
+        if not force and now - self.last < LOG_INTERVAL:
             return
         self.last = now
         self.stream.write(self.text(now) + "\n")

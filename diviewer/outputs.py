@@ -128,7 +128,8 @@ def _build_owner(path: Path) -> str | None:
         if state is None or str(folder) in _BUILDING.get() or os.path.realpath(folder) in _BUILDING.get():
             continue
         inside = parts[len(parts) - depth:]
-        recorded = "/".join(inside) in _build_outputs(state) or str(path.absolute()) in _build_outputs(state)
+        outputs = _build_outputs(state)
+        recorded = "/".join(inside) in outputs or str(path.absolute()) in outputs
         if recorded or (depth == 1 and inside[0] in BUILD_FILES) or (depth == 2 and inside[0] == "models"):
             return f"a file of the build {_shown(folder, path)} ({FOLDER_WRITERS['build']} wrote it)"
     return None

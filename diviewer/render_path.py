@@ -102,8 +102,7 @@ def render_path(scene_name: str, path_file: Path, out: Path, *, frames: int | No
                 "tonemap": tonemap or DEFAULT_TONEMAP, "exr": bool(exr), "exposure": exposure}
     settings = _resume_settings(out / "path_render.json", settings)
     todo = [i for i in range(len(times)) if not _frame_done(out, i, times[i], (width, height), len(methods))]
-    bar = progress_bar(len(times), "render", "frame")
-    bar.update(len(times) - len(todo))
+    bar = progress_bar(len(times), "render", "frame", initial=len(times) - len(todo))  # a resumed run starts there
     try:
         if todo:
             _render_frames(scene, path, out, todo, settings, methods, net, bar)
@@ -176,6 +175,7 @@ def _render_frames(scene, path, out: Path, todo: list[int], settings: dict, meth
         check_render_size(ctx, width, height, "--res")
         renderer = Renderer(ctx, scene, width, height, render_settings)
         compositor = DisplayPass(ctx, renderer.shaders)
+        made = {"gl_renderer": describe(ctx), "render_settings": settings_dict(render_settings)}  # every frame's
         try:
             for i in todo:
                 t = settings["times"][i]
@@ -184,12 +184,9 @@ def _render_frames(scene, path, out: Path, todo: list[int], settings: dict, meth
                 if settings["exposure"] is None:  # metered once, on the first frame drawn, then kept
                     from diviewer.render import display_exposure
 
-                    settings["exposure"] = display_exposure(scene, {"direct": images.get("direct"),
-                                                                    **({"neural": images["neural"]}
-                                                                       if "neural" in images else {})}, None)[0]
+                    settings["exposure"] = display_exposure(scene, images, None)[0]  # the neural image's, else direct
                     write_text(out / "path_render.json", dumps(settings, indent=1))
-                _write_frame(out, i, t, scene, config, images, methods, compositor, settings,
-                             {"gl_renderer": describe(ctx), "render_settings": settings_dict(render_settings), **info})
+                _write_frame(out, i, t, scene, config, images, methods, compositor, settings, {**made, **info})
                 bar.update(1)
         finally:
             compositor.release()
@@ -259,31 +256,15 @@ def label_tiles(tiles: list[np.ndarray], labels) -> np.ndarray:
 
 def write_video(video: Path, pngs: list[Path], fps: float) -> None:
     """An H.264 mp4 of the PNGs at ``fps`` (sides padded to even numbers, as yuv420p needs), written under a temporary
-    name beside ``video`` and renamed into place."""
-    import tempfile
-
+    name beside ``video`` and renamed into place (`diviewer.imageio.atomic_path`)."""
     import imageio.v2 as iio
 
-    from diviewer.imageio import read_png
+    from diviewer.imageio import atomic_path, read_png
 
-    video.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{video.stem}.", suffix=".mp4", dir=video.parent)
-    os.close(fd)
-    try:
-        with iio.get_writer(tmp, format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p", quality=8,
+    with atomic_path(video) as tmp:
+        with iio.get_writer(str(tmp), format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p", quality=8,
                             macro_block_size=1, ffmpeg_log_level="error") as writer:
             for png in pngs:
                 image = read_png(png)
                 pad = ((0, image.shape[0] % 2), (0, image.shape[1] % 2), (0, 0))
                 writer.append_data(np.pad(image, pad, mode="edge"))
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, video)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask

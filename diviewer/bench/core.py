@@ -240,10 +240,9 @@ def run_bench(settings: BenchSettings, json_out: Path | None = None, plot_out: P
     for line in report.table(result) + bare_ratio_lines(result["rows"]) + (scale_table(scales) if scales else []):
         log(line)
     if json_out is not None:
-        from diviewer import imageio
-        from diviewer.evaluation.evaluate import strict_json
+        from diviewer.outputs import write_json
 
-        imageio.write_text(json_out, strict_json(result))
+        write_json(json_out, result)
     if plot_out is not None:
         report.plot(result, plot_out)
     tmp_dir.cleanup()

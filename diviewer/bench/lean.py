@@ -120,10 +120,9 @@ def main(argv: list[str] | None = None) -> int:
               f"lean {r['lean_over_bare'] or nan:.2f} x bare, {r['lean_over_bare_padded'] or nan:.2f} x bare padded; "
               f"graph {r['graph_over_bare']:.2f} x bare, {r['graph_over_bare_padded']:.2f} x bare padded")
     if args.json is not None:
-        from diviewer import imageio
-        from diviewer.evaluation.evaluate import strict_json
+        from diviewer.outputs import write_json
 
-        imageio.write_text(args.json, strict_json(result))
+        write_json(args.json, result)
     return 0
 
 

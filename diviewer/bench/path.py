@@ -73,10 +73,9 @@ def run_path_bench(settings, path_file: Path, json_out: Path | None = None, log=
     for line in table(result):
         log(line)
     if json_out is not None:
-        from diviewer import imageio
-        from diviewer.evaluation.evaluate import strict_json
+        from diviewer.outputs import write_json
 
-        imageio.write_text(json_out, strict_json(result))
+        write_json(json_out, result)
     return result
 
 

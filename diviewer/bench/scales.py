@@ -69,32 +69,34 @@ class ScaledFrames:
             return self.gb.time_direct(configs, warmup)
         return self.gb.time_model(self.net, configs, warmup, gi_size=self.gi_size)
 
-    def images(self, configs, exposures: list[float] | None) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Each configuration's displayed frame (H, W, 3) uint8 at the window size, shown at ``exposures`` (None:
-        the scene's, or metered on this frame where the scene asks for auto exposure), and the HDR frames at the
-        shading size, top row first."""
+    def images(self, configs, exposures: list[float] | None) -> tuple[list[np.ndarray], list[float]]:
+        """Each configuration's displayed frame (H, W, 3) uint8 at the window size, top row first, and the exposure
+        it was shown at: ``exposures``, or where None the scene's, metered on the frame's HDR image at the shading
+        size where the scene asks for auto exposure (`display_ev`)."""
         from diviewer.gl.display import read_rgb8
 
         neural = self.gb.neural_pass(self.net, gi_size=self.gi_size) if self.net is not None else None
-        shown, hdr = [], []
+        shown, evs = [], []
         try:
             for k, config in enumerate(configs):
                 self.gb.renderer.render(config, direct=neural is None)
                 if neural is not None:
                     neural.run(**neural.inputs_for(self.scene, config))
                     tex = neural.composite()
-                    hdr.append(read_final(tex))
                 else:
                     tex = self.gb.renderer.textures["direct"]
-                    hdr.append(self.gb.renderer.read("direct"))
-                ev = exposures[k] if exposures is not None else display_ev(self.scene, hdr[-1])
-                self.gb.present(tex, exposure=ev)
+                if exposures is not None:
+                    evs.append(exposures[k])
+                else:
+                    hdr = read_final(tex) if neural is not None else self.gb.renderer.read("direct")
+                    evs.append(display_ev(self.scene, hdr))
+                self.gb.present(tex, exposure=evs[-1])
                 shown.append(read_rgb8(self.gb.target))
         finally:
             if neural is not None:
                 neural.release()
             self.gb.timer.reset()
-        return shown, hdr
+        return shown, evs
 
     def release(self) -> None:
         self.gb.release()
@@ -146,8 +148,7 @@ def _truth(ctx, scene, mode, net, ds, idx, views, scales, log) -> dict:
     log(f"render scales against the path-traced truth at {side}x{side} ({len(idx)} frames)")
     sf = ScaledFrames(ctx, scene, mode, net, side, 1.0)
     try:
-        ref, ref_hdr = sf.images(views, None)
-        evs = [display_ev(scene, h) for h in ref_hdr]  # the truth through the same display pass
+        ref, evs = sf.images(views, None)  # the truth through the same display pass, at these exposures
         truth = [sf.gb.display.to_ldr(crop_frame(ds.load(i), side)["pt"], ev) for i, ev in zip(idx, evs)]
     finally:
         sf.release()
@@ -172,18 +173,22 @@ def scale_rows(ctx, mode, settings, scene, ds, variants, net_of, configs, notes,
     for res in settings.resolutions:
         log(f"render scales at a {res}x{res} window: {' '.join(f'{s:g}' for s in scales)} "
             f"({len(views)} views scored against scale 1)")
-        ref, ref_hdr = _frames(ctx, scene, mode, net, res, 1.0, views, None)
-        evs = [display_ev(scene, h) for h in ref_hdr]
-        for s in scales:
-            sf = ScaledFrames(ctx, scene, mode, net, res, s)
-            try:
-                timing = sf.time(configs, settings.warmup)
-                shown = ref if s == 1.0 else sf.images(views, evs)[0]
-            finally:
-                sf.release()
-            rows.append({"scale": s, "resolution": [res, res], "shading_resolution": [sf.side, sf.side],
-                         "gi_resolution": list(sf.gi_size) if sf.gi_size else None, "timing": timing,
-                         "vs_scale1": _psnrs(shown, ref), TRUTH: truth.get(s)})
+        one = ScaledFrames(ctx, scene, mode, net, res, 1.0)  # the reference frames, and scale 1's row
+        try:
+            ref, evs = one.images(views, None)
+            for s in scales:
+                sf = one if s == 1.0 else ScaledFrames(ctx, scene, mode, net, res, s)
+                try:
+                    timing = sf.time(configs, settings.warmup)
+                    shown = ref if sf is one else sf.images(views, evs)[0]
+                finally:
+                    if sf is not one:
+                        sf.release()
+                rows.append({"scale": s, "resolution": [res, res], "shading_resolution": [sf.side, sf.side],
+                             "gi_resolution": list(sf.gi_size) if sf.gi_size else None, "timing": timing,
+                             "vs_scale1": _psnrs(shown, ref), TRUTH: truth.get(s)})
+        finally:
+            one.release()
     return {"model": v["source"] if v is not None else None, "precision": v["precision"] if v is not None else None,
             "views": described, "frames": [int(i) for i in idx],
             "metric": "display PSNR (dB) of the 8-bit frame at the window size (the default tone curve at the "

@@ -25,8 +25,6 @@ ACTUALS_FILE = "costs_actual.json"
 SPP_LOW, SPP_HIGH = 2, 8
 """The two sample counts the path tracer is timed at, each after a first frame that compiles its kernels: the slope is
 the seconds a sample, the rest a frame's fixed cost."""
-SCALED_STAGES = ("capture", "refine", "evalset")
-"""The stages whose cost is the scene's path tracing (and GL): what a calibration scales."""
 
 
 @dataclass(frozen=True)

@@ -17,8 +17,8 @@ from diviewer import imageio
 from diviewer.builder.actuals import keep_actuals
 from diviewer.builder.pace import measured_pace, missing_link
 from diviewer.builder.plan import RUN_ONLY, Plan, describe
-from diviewer.builder.scores import QUALITY, evalset_psnr_tm, evalset_scores
-from diviewer.builder.shipfiles import write_ladder_curves, write_model_card  # noqa: F401 (diviewer.ship.ladder)
+from diviewer.builder.scores import PICK_MEASURE, evalset_psnr_tm, evalset_scores, means_on_test_split
+from diviewer.builder.shipfiles import write_ladder_curves, write_model_card
 from diviewer.builder.state import BuildState
 from diviewer.data.dataset import sha256_file
 from diviewer.console import overall, progress_bar
@@ -330,8 +330,8 @@ def _export(plan: Plan, state: BuildState, log, k: int, **_) -> tuple[list[Path]
     export(plan.run_dir(k) / "best.ckpt", model, export_settings(plan.recipe), log=log)
     test = model.with_name(f"{model.stem}_test.json")
     summary = evaluate(model, plan.data, split="test", out=test, log=log)
-    row = {m: {q: summary["methods"][m][q]["mean"] for q in QUALITY} for m in ("neural", "direct")}
-    return [model, model.with_suffix(".json"), test], {"test_split": row, "frames": summary["frames"]}
+    return [model, model.with_suffix(".json"), test], {"test_split": means_on_test_split(summary),
+                                                       "frames": summary["frames"]}
 
 
 def _evaluate(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict]:
@@ -341,12 +341,6 @@ def _evaluate(plan: Plan, state: BuildState, log, **_) -> tuple[list[Path], dict
     out = plan.work / "evalset_eval.json"
     evaluate_evalset([plan.model(k) for k in plan.ks], plan.evalset_dir, out=out, log=log, jobs=default_jobs())
     return [out], {}
-
-
-PICK_MEASURE = "evalset_psnr_tm"
-"""What the pick compares: each K's tone-mapped PSNR over every frame of the evaluation set (>= 1024 spp), as
-`diviewer bench` does. Not the capture's test split: its truth has the capture's spp (64 for cornell and Sponza),
-whose own noise (~36 dB tone-mapped on cornell) caps what it can tell apart; models near that floor read alike."""
 
 
 def pick_within(rows: list[dict], tolerance_db: float, max_mb: float | None, recipe: Path | None = None):

@@ -257,7 +257,7 @@ def given_evalset_settings(path: Path, recipe_settings, scene: str):
     if ev.manifest.get("kind") != "evalset":
         raise DiviewerError("not an evaluation set (a training capture?)", path=path / "manifest.json", field="kind")
     check_evalset_scene(ev, load_scene(scene), scene)
-    absent = _absent(ev)
+    absent = ev.absent()
     if absent:
         raise DiviewerError(f"the evaluation set is incomplete: {len(ev.frames) - len(absent)} of {len(ev.frames)} "
                             f"frames present (frame {absent[0]} absent); finish it with the `diviewer evalset` command "
@@ -268,23 +268,6 @@ def given_evalset_settings(path: Path, recipe_settings, scene: str):
         given["frames_per_split"] = ev.manifest["compact"]["frames_per_split"]
     fields = {f.name for f in dataclasses.fields(recipe_settings)}
     return dataclasses.replace(recipe_settings, **{k: v for k, v in given.items() if k in fields})
-
-
-def _absent(ev) -> list[int]:
-    """The frames of an evaluation set (an EvalFrames) that are not there; their checksums are verified when the
-    set is scored."""
-    if not ev.compact:
-        return [f["index"] for f in ev.frames if ev.ds.check_frame(f["index"], verify_checksum=False) is not None]
-    import zipfile
-
-    from diviewer.evaluation.frames import COMPACT_FILE
-
-    try:
-        with zipfile.ZipFile(ev.root / COMPACT_FILE) as z:
-            names = set(z.namelist())
-    except (OSError, zipfile.BadZipFile):
-        names = set()
-    return [f["index"] for f in ev.frames if not {f"{f['index']:06d}.hi.npy", f"{f['index']:06d}.lo.npy"} <= names]
 
 
 def check_evalset_scene(ev, scene, given_as: str) -> None:

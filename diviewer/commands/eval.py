@@ -11,7 +11,7 @@ from diviewer.errors import DiviewerError
 
 def run(args: argparse.Namespace) -> int:
     """Score the models on an evaluation set (default the shipped compact one) or on a dataset's split."""
-    from diviewer.evaluation.evaluate import evaluate, evaluate_evalset, strict_json
+    from diviewer.evaluation.evaluate import evaluate, evaluate_evalset
 
     if args.evalset is not None and args.data is not None:
         raise DiviewerError("give an evaluation set (--evalset DIR) or a dataset split (--data DIR), not both",
@@ -29,9 +29,9 @@ def run(args: argparse.Namespace) -> int:
     results = [evaluate(m, args.data, split=args.split, provider=args.provider, exposure=args.exposure)
                for m in args.model]
     if args.out is not None:
-        from diviewer import imageio
+        from diviewer.outputs import write_json
 
-        imageio.write_text(args.out, strict_json({"results": results}))
+        write_json(args.out, {"results": results})
     return 0
 
 

@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from diviewer import imageio
 from diviewer.contract.conditioning import conditioning, needs_scene
 from diviewer.data.area import direct_samples
 from diviewer.data.dataset import Dataset
@@ -37,8 +36,7 @@ from diviewer.evaluation.exposures import (COMPACT_LADDER, FrameExposures, data_
                                            scene_exposure, split_legend)
 from diviewer.evaluation.frames import ABSENT, EvalFrames, crop_frame, default_evalset, split_key
 from diviewer.evaluation.scoring import (EQUIVALENT_BY, EVAL_KEYS, KEYS, REGIONS, Scorer, aggregate, below_direct, done,
-                                equivalent, ladder_methods, per_frame, pooled_bias, score, score_frame,
-                                strict_json)
+                                equivalent, ladder_methods, per_frame, pooled_bias, score, score_frame)
 from diviewer.metrics import flat_mask
 from diviewer.outputs import check_output_file, write_json
 from diviewer.contract.runtime import NeuralGI, pack_buffers
@@ -47,8 +45,7 @@ from diviewer.evaluation.truthmargin import FILTERED_MARGIN, MARGIN_DB, model_tr
 SSIM_MIN = 11
 """SSIM's window (diviewer.metrics): smaller frames cannot be scored."""
 __all__ = ["EQUIVALENT_BY", "EVAL_KEYS", "KEYS", "aggregate", "equivalent", "evaluate", "evaluate_evalset",
-           "pooled_bias", "run_model", "scene_exposure", "score", "score_frame", "stored_inputs", "stored_scene",
-           "strict_json"]
+           "pooled_bias", "run_model", "scene_exposure", "score", "score_frame", "stored_inputs", "stored_scene"]
 
 
 def run_model(net: NeuralGI, frame: dict[str, np.ndarray], light_scale: float | None = None,
@@ -237,7 +234,7 @@ def evaluate_evalset(model_paths: list[Path], evalset_dir: Path | None = None, p
     for line in format_tables(result):
         log(line)
     if out is not None:
-        imageio.write_text(out, strict_json(result))
+        write_json(out, result)
     return result
 
 

@@ -174,6 +174,19 @@ class EvalFrames:
                 out.append(FrameProblem(f["index"], "non-finite values"))
         return out
 
+    def absent(self) -> list[int]:
+        """The listed frames that are not there, found without reading them (a dataset's frames checked without
+        their checksums, a compact set's by its zip's names); `problems` verifies the rest."""
+        if not self.compact:
+            return [f["index"] for f in self.frames
+                    if self.ds.check_frame(f["index"], verify_checksum=False) is not None]
+        try:
+            with zipfile.ZipFile(self.root / COMPACT_FILE) as z:
+                names = set(z.namelist())
+        except (OSError, zipfile.BadZipFile):
+            names = set()
+        return [f["index"] for f in self.frames if not set(_zip_names(f["index"])) <= names]
+
     def present(self, split: str, problems: list[FrameProblem]) -> list[int]:
         bad = {p.index for p in problems}
         return [f["index"] for f in self.frames if f["split"] == split and f["index"] not in bad]
@@ -198,18 +211,23 @@ class EvalFrames:
             if not path.is_file():
                 raise FileNotFoundError(path)
             self._zip = zipfile.ZipFile(path)
-        name = f"{index:06d}"
+        hi_name, lo_name = _zip_names(index)
         try:
-            hi = np.load(io.BytesIO(self._zip.read(f"{name}.hi.npy")))
-            lo = np.load(io.BytesIO(self._zip.read(f"{name}.lo.npy")))
+            hi = np.load(io.BytesIO(self._zip.read(hi_name)))
+            lo = np.load(io.BytesIO(self._zip.read(lo_name)))
         except KeyError:
-            raise FileNotFoundError(f"{path}:{name}") from None
+            raise FileNotFoundError(f"{path}:{index:06d}") from None
         if hi.shape != lo.shape or hi.dtype != np.uint8 or lo.dtype != np.uint8:
             raise ValueError("high and low bytes differ in shape or type")
         return ((hi.astype(np.uint16) << 8) | lo).view(COMPACT_DTYPE)
 
 
 # --- the compact set ----------------------------------------------------------------------------------------------
+
+def _zip_names(index: int) -> tuple[str, str]:
+    """A compact set's members holding frame ``index``: its float16 values' high bytes and low bytes."""
+    return f"{index:06d}.hi.npy", f"{index:06d}.lo.npy"
+
 
 def _bytes_npy(a: np.ndarray) -> bytes:
     buf = io.BytesIO()
@@ -309,8 +327,9 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None
                     raise DiviewerError(f"frame {i}: values beyond float16's range; the compact set cannot hold it",
                                         path=full_dir)
                 u = arr16.view(np.uint16)
-                blobs[f"{i:06d}.hi.npy"] = _bytes_npy((u >> 8).astype(np.uint8))
-                blobs[f"{i:06d}.lo.npy"] = _bytes_npy((u & 0xFF).astype(np.uint8))
+                hi_name, lo_name = _zip_names(i)
+                blobs[hi_name] = _bytes_npy((u >> 8).astype(np.uint8))
+                blobs[lo_name] = _bytes_npy((u & 0xFF).astype(np.uint8))
                 scores = {}
                 for shape in shapes:
                     g = crop_frame(f, shape[0])
@@ -334,22 +353,14 @@ def write_compact(full_dir: Path, out: Path, frames_per_split: int | None = None
         "storage": "per frame and channel group: float16 split into high and low bytes (uint8 .npy), LZMA zip",
         "ladder": "scores per frame and shape (diviewer.evaluation.evaluate.score_frame on the full set's float32 frames); "
                   "its images are not stored", "full_frames": len(src.frames)}
-    from diviewer.evaluation.scoring import strict_json
-    from diviewer.outputs import staged
+    from diviewer.outputs import dumps_rows, staged
 
     with staged() as stage:  # both files or neither: an interrupted write leaves the folder as it was
         with zipfile.ZipFile(stage(out / COMPACT_FILE), "w", compression=zipfile.ZIP_LZMA) as z:
             for name, blob in blobs.items():
                 z.writestr(name, blob)
-        stage(out / "manifest.json").write_text(strict_json(share_object_lists(manifest)))
+        stage(out / "manifest.json").write_text(dumps_rows(share_object_lists(manifest)))
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     log(f"compact evaluation set: {len(chosen)} frames ({frames_per_split} per split of "
         f"{', '.join(splits)}) in {out}, {size / 2**20:.2f} MB")
     return {"frames": len(chosen), "bytes": size}
-
-
-def summary_line(ev: EvalFrames) -> str:
-    kind = "compact " if ev.compact else ""
-    return (f"{kind}evaluation set {ev.root}: {ev.manifest['scene']}, {len(ev.frames)} frames, truth "
-            f"{ev.manifest['spp']} spp, tone map exposure {ev.exposure:.4g} (the scene's, from the set's manifest)")
-

@@ -22,7 +22,6 @@ import numpy as np
 
 from diviewer.metrics import (LUMA, equivalent_spp, flip, highpass_power, masked_psnr, masked_ssim, mse,
                               power_ratio, psnr, psnr_error, ssim, stride_pattern, tonemap)
-from diviewer.outputs import dumps_rows
 
 KEYS = ("mse", "psnr", "ssim", "mse_tm", "psnr_tm", "ssim_tm")
 EVAL_KEYS = KEYS + ("flip_hdr", "flip_ldr")
@@ -234,9 +233,3 @@ def ladder_methods(ev) -> dict[str, str]:
     """The path tracer's rows an evaluation set (diviewer.evaluation.frames.EvalFrames) holds: method -> channel."""
     info = ev.info
     return {f"pt_spp{int(n)}": ch for n, ch in zip(info["ladder_spp"], info["ladder_channels"])}
-
-
-def strict_json(obj) -> str:
-    """JSON without NaN or Infinity (a perfect PSNR, a ratio over a perfectly smooth reference): they become null.
-    Laid out by rows (diviewer.outputs.dumps_rows): one line per frame's record."""
-    return dumps_rows(obj)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from diviewer.builder.pipeline import write_model_card
+from diviewer.builder.shipfiles import write_model_card
 from diviewer.errors import DiviewerError
 from diviewer.contract.runtime import read_metadata
 from diviewer.ship.model import split_scores

@@ -9,7 +9,7 @@ EVAL.json: `diviewer eval --model ...` on the evaluation set (the rule's figure:
 frame of the set, >= 1024 spp); TEST.json: `diviewer eval --data CAPTURE --split test --model ...` (the capture's
 test split, recorded beside it: its truth has the capture's spp, too noisy to part models near its floor; see
 docs/build.md). The rule is the bench's and `diviewer build`'s (`diviewer.bench.frontier.smallest_sufficient_k`
-on `diviewer.builder.pipeline.evalset_psnr_tm`): the smallest K within the tolerance of the best. With --ship,
+on `diviewer.builder.scores.evalset_psnr_tm`): the smallest K within the tolerance of the best. With --ship,
 SCENE_ladder.json is written there and the shipped SCENE.onnx's card (its JSON and its ONNX metadata alike,
 `diviewer.builder.shipfiles.write_model_card`) gets the verdict; the chosen K must be the one shipped (this tool
 records a ladder, it does not swap models).
@@ -22,7 +22,8 @@ from pathlib import Path
 
 from diviewer import imageio
 from diviewer.bench.frontier import smallest_sufficient_k
-from diviewer.builder.pipeline import PICK_MEASURE, QUALITY, evalset_psnr_tm, write_model_card
+from diviewer.builder.scores import PICK_MEASURE, QUALITY, evalset_psnr_tm, evalset_scores, means_on_test_split
+from diviewer.builder.shipfiles import write_model_card
 from diviewer.errors import DiviewerError
 
 
@@ -45,10 +46,8 @@ def ladder(scene: str, test: dict, ev: dict, models: dict[int, Path], tol: float
         rows.append({"K": k, "model": str(path), "steps": card.get("steps"), "bytes": path.stat().st_size,
                      "test_split": {"frames": t["frames"], "reference_spp": t.get("reference_spp"),
                                     "inference_ms": t.get("inference_ms"),
-                                    **{m: {q: t["methods"][m][q]["mean"] for q in QUALITY} for m in ("neural", "direct")}},
-                     "evalset": {s: {**{q: r["methods"][key][q]["mean"] for q in (*QUALITY, "psnr_tm_object_unlit")
-                                        if q in r["methods"][key]}, "frames": r["frames"]}
-                                 for s, r in ev["splits"].items()}})
+                                    **means_on_test_split(t)},
+                     "evalset": evalset_scores(ev, key, (*QUALITY, "psnr_tm_object_unlit"))})
         rows[-1]["evalset_psnr_tm"] = evalset_psnr_tm(rows[-1]["evalset"])
     pick = smallest_sufficient_k({r["K"]: r["evalset_psnr_tm"] for r in rows}, tol)
     frames = sum(s["frames"] for s in rows[0]["evalset"].values())
