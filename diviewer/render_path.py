@@ -184,7 +184,8 @@ def _render_frames(scene, path, out: Path, todo: list[int], settings: dict, meth
                 if settings["exposure"] is None:  # metered once, on the first frame drawn, then kept
                     from diviewer.render import display_exposure
 
-                    settings["exposure"] = display_exposure(scene, images, None)[0]  # the neural image's, else direct
+                    # the neural image's, else direct, with the highlights kept for the chosen tone curve
+                    settings["exposure"] = display_exposure(scene, images, None, settings["tonemap"])[0]
                     write_text(out / "path_render.json", dumps(settings, indent=1))
                 _write_frame(out, i, t, scene, config, images, methods, compositor, settings, {**made, **info})
                 bar.update(1)
